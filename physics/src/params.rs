@@ -1,0 +1,228 @@
+//! Physical and sampling parameters of a transient imaging setup.
+//!
+//! Every quantity carries its unit in its name: `_per_cm` for attenuation
+//! coefficients, `_cm` for lengths, `_ps` for times.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{ParamError, finite, non_negative, positive};
+
+/// Optical properties and thickness of the homogeneous scattering slab.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Medium {
+    /// Absorption coefficient mu_a (1/cm).
+    pub mu_a_per_cm: f64,
+    /// Scattering coefficient mu_s (1/cm).
+    pub mu_s_per_cm: f64,
+    /// Scattering anisotropy g (mean cosine of the scattering angle), in [-1, 1].
+    pub g: f64,
+    /// Refractive index n; light travels at c/n in the medium.
+    pub refractive_index: f64,
+    /// Slab thickness z0 between object and sensor (cm).
+    pub thickness_cm: f64,
+}
+
+/// The sensor plane: a square-pixel grid behind the slab.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Sensor {
+    /// Horizontal field of view (cm); the pixel pitch is `fov_cm / width_px`.
+    pub fov_cm: f64,
+    /// Image width in pixels.
+    pub width_px: usize,
+    /// Image height in pixels.
+    pub height_px: usize,
+}
+
+impl Sensor {
+    /// Side length of one square pixel (cm).
+    pub fn pixel_pitch_cm(&self) -> f64 {
+        self.fov_cm / self.width_px as f64
+    }
+}
+
+/// Uniform time bins `[start + k width, start + (k+1) width)`, k = 0..count.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TimeBins {
+    /// Start of the first bin, relative to the laser pulse hitting the object (ps).
+    pub start_ps: f64,
+    /// Width of every bin (ps).
+    pub width_ps: f64,
+    /// Number of bins.
+    pub count: usize,
+}
+
+impl TimeBins {
+    /// Start and end (ps) of bin `k`.
+    pub fn edges_ps(&self, k: usize) -> (f64, f64) {
+        let t0 = self.start_ps + k as f64 * self.width_ps;
+        (t0, t0 + self.width_ps)
+    }
+
+    /// End of the last bin (ps).
+    pub fn end_ps(&self) -> f64 {
+        self.start_ps + self.count as f64 * self.width_ps
+    }
+}
+
+/// Everything needed to build the ST-PSF kernel stack of an experiment.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Setup {
+    /// The scattering slab.
+    pub medium: Medium,
+    /// The sensor grid.
+    pub sensor: Sensor,
+    /// The time binning.
+    pub bins: TimeBins,
+    /// Light budget: the discretised ST-PSF is scaled to carry this many
+    /// photons in total over all bins (before any bin is dropped).
+    pub total_photons: f64,
+    /// Bins whose expected photon total (kernel mass) is below this are
+    /// dropped as carrying no information; 0 keeps every bin.
+    pub min_bin_photons: f64,
+}
+
+/// Named parameter sets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Preset {
+    /// The paper's simulation: human-skin-like slab of 3 cm, 50 cm field of
+    /// view at 256 x 256, 30 bins of 4 ps from 0 to 120 ps, 450 photons.
+    Paper,
+}
+
+impl Preset {
+    /// All presets, for help texts.
+    pub const ALL: [Preset; 1] = [Preset::Paper];
+
+    /// The preset's name as used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Paper => "paper",
+        }
+    }
+
+    /// The parameter set.
+    pub fn setup(self) -> Setup {
+        match self {
+            Preset::Paper => Setup {
+                medium: Medium {
+                    mu_a_per_cm: 1.0,
+                    mu_s_per_cm: 5.0,
+                    g: 0.99,
+                    refractive_index: 1.4,
+                    thickness_cm: 3.0,
+                },
+                sensor: Sensor {
+                    fov_cm: 50.0,
+                    width_px: 256,
+                    height_px: 256,
+                },
+                bins: TimeBins {
+                    start_ps: 0.0,
+                    width_ps: 4.0,
+                    count: 30,
+                },
+                total_photons: 450.0,
+                min_bin_photons: 1.0,
+            },
+        }
+    }
+}
+
+impl Medium {
+    /// Checks every field; the error names the first invalid one.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        non_negative("mu_a_per_cm", self.mu_a_per_cm)?;
+        non_negative("mu_s_per_cm", self.mu_s_per_cm)?;
+        finite("g", self.g)?;
+        if !(-1.0..=1.0).contains(&self.g) {
+            return Err(ParamError::new(
+                "g",
+                self.g,
+                "anisotropy must lie in [-1, 1]",
+            ));
+        }
+        positive("refractive_index", self.refractive_index)?;
+        non_negative("thickness_cm", self.thickness_cm)?;
+        let attenuation = self.mu_a_per_cm + (1.0 - self.g) * self.mu_s_per_cm;
+        if attenuation <= 0.0 || !attenuation.is_finite() {
+            let (field, value) = if self.mu_a_per_cm == 0.0 && self.g >= 1.0 {
+                ("g", self.g)
+            } else {
+                ("mu_a_per_cm", self.mu_a_per_cm)
+            };
+            return Err(ParamError::new(
+                field,
+                value,
+                format!(
+                    "mu_a + (1 - g) mu_s = {attenuation} must be positive and finite, \
+                     otherwise the diffusion coefficient D = 1/(3 (mu_a + (1 - g) mu_s)) is infinite"
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl Sensor {
+    /// Checks every field; the error names the first invalid one.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        positive("fov_cm", self.fov_cm)?;
+        if self.width_px == 0 {
+            return Err(ParamError::new(
+                "width_px",
+                0,
+                "image needs at least one column",
+            ));
+        }
+        if self.height_px == 0 {
+            return Err(ParamError::new(
+                "height_px",
+                0,
+                "image needs at least one row",
+            ));
+        }
+        const MAX_SIDE: usize = 1 << 15;
+        if self.width_px > MAX_SIDE || self.height_px > MAX_SIDE {
+            return Err(ParamError::new(
+                "width_px",
+                format!("{}x{}", self.width_px, self.height_px),
+                format!("each side must be at most {MAX_SIDE} pixels"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl TimeBins {
+    /// Checks every field; the error names the first invalid one.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        finite("start_ps", self.start_ps)?;
+        positive("width_ps", self.width_ps)?;
+        if self.count == 0 {
+            return Err(ParamError::new("bins", 0, "need at least one time bin"));
+        }
+        const MAX_BINS: usize = 4096;
+        if self.count > MAX_BINS {
+            return Err(ParamError::new(
+                "bins",
+                self.count,
+                format!("at most {MAX_BINS} time bins are supported"),
+            ));
+        }
+        finite("start_ps + bins * width_ps", self.end_ps())?;
+        Ok(())
+    }
+}
+
+impl Setup {
+    /// Checks every field; the error names the first invalid one.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        self.medium.validate()?;
+        self.sensor.validate()?;
+        self.bins.validate()?;
+        positive("photons", self.total_photons)?;
+        non_negative("min_bin_photons", self.min_bin_photons)?;
+        Ok(())
+    }
+}
