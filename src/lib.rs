@@ -1,1 +1,22 @@
+//! scatterscope: time-resolved imaging through scattering media.
+//!
+//! Data flows one way: a source (simulation, device or recorded file)
+//! produces photon tags, tags are binned into a transient stack, the stack
+//! is reconstructed, and the result is reported.
+//!
+//! - [`scene`]: test objects (built-in patterns or image files).
+//! - [`forward`]: ST-PSF convolution and Poisson sampling.
+//! - [`stack`]: the K x H x W transient stack with its metadata, and its
+//!   OpenEXR / .npy files and PNG previews.
+//! - [`config`]: physics parameters from presets, TOML files and flags.
+//!
+//! The physics itself lives in the `scatterscope-physics` crate, re-exported
+//! as [`physics`].
 
+pub mod config;
+pub mod fft2;
+pub mod forward;
+pub mod scene;
+pub mod stack;
+
+pub use scatterscope_physics as physics;

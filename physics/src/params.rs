@@ -81,6 +81,10 @@ pub struct Setup {
     pub min_bin_photons: f64,
 }
 
+/// Largest light budget accepted; Poisson sampling of larger means is not
+/// supported and the values would exceed exact f32 counts long before.
+pub const MAX_TOTAL_PHOTONS: f64 = 1e15;
+
 /// Named parameter sets.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -222,6 +226,13 @@ impl Setup {
         self.sensor.validate()?;
         self.bins.validate()?;
         positive("photons", self.total_photons)?;
+        if self.total_photons > MAX_TOTAL_PHOTONS {
+            return Err(ParamError::new(
+                "photons",
+                self.total_photons,
+                format!("at most {MAX_TOTAL_PHOTONS:e} photons (Poisson sampling limit)"),
+            ));
+        }
         non_negative("min_bin_photons", self.min_bin_photons)?;
         Ok(())
     }

@@ -1,0 +1,289 @@
+//! Physics parameters from a preset, a TOML file and command-line flags.
+//!
+//! Precedence: flags over the TOML file over the preset. The TOML keys are
+//! the flag names with `_` for `-` (`mu_a`, `mu_s`, `g`, `n`, `thickness`,
+//! `fov`, `size`, `bin_width`, `t_start`, `bins`, `photons`,
+//! `min_bin_photons`, `preset`). Lengths and times take plain numbers in the
+//! documented unit (cm, ps) or strings with a unit (`"30mm"`, `"0.004ns"`).
+
+use std::path::{Path, PathBuf};
+
+use scatterscope_physics::{Preset, Setup};
+use serde::Deserialize;
+
+/// Parses a time with an optional unit (`fs`, `ps`, `ns`, `us`); plain numbers are ps.
+pub fn parse_ps(s: &str) -> Result<f64, String> {
+    parse_unit(
+        s,
+        &[("fs", 1e-3), ("ps", 1.0), ("ns", 1e3), ("us", 1e6)],
+        "ps",
+    )
+}
+
+/// Parses a length with an optional unit (`um`, `mm`, `cm`, `m`); plain numbers are cm.
+pub fn parse_cm(s: &str) -> Result<f64, String> {
+    parse_unit(
+        s,
+        &[("um", 1e-4), ("mm", 0.1), ("cm", 1.0), ("m", 100.0)],
+        "cm",
+    )
+}
+
+fn parse_unit(s: &str, units: &[(&str, f64)], default: &str) -> Result<f64, String> {
+    let t = s.trim();
+    let split = t
+        .find(|c: char| c.is_ascii_alphabetic() && c != 'e' && c != 'E')
+        .unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let value: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number with an optional unit"))?;
+    let unit = unit.trim();
+    if unit.is_empty() {
+        return Ok(value);
+    }
+    units
+        .iter()
+        .find(|(u, _)| *u == unit)
+        .map(|(_, f)| value * f)
+        .ok_or_else(|| {
+            let names: Vec<_> = units.iter().map(|(u, _)| *u).collect();
+            format!(
+                "unknown unit `{unit}` in `{s}` (use {}; default {default})",
+                names.join(", ")
+            )
+        })
+}
+
+/// A number, or a string with a unit.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+enum Quantity {
+    Number(f64),
+    Text(String),
+}
+
+/// Overrides read from a TOML file; every key is optional.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileOverrides {
+    preset: Option<String>,
+    mu_a: Option<f64>,
+    mu_s: Option<f64>,
+    g: Option<f64>,
+    n: Option<f64>,
+    thickness: Option<Quantity>,
+    fov: Option<Quantity>,
+    size: Option<usize>,
+    bin_width: Option<Quantity>,
+    t_start: Option<Quantity>,
+    bins: Option<usize>,
+    photons: Option<f64>,
+    min_bin_photons: Option<f64>,
+}
+
+/// Physics flags shared by every command that needs an ST-PSF.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct PhysicsArgs {
+    /// Parameter set to start from (`paper`: the paper's skin-like 3 cm slab,
+    /// 50 cm field, 256x256, 30 bins of 4 ps, 450 photons).
+    #[arg(long, value_name = "NAME", value_parser = parse_preset)]
+    pub preset: Option<Preset>,
+    /// TOML file with any of the keys below (flags override it).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Absorption coefficient mu_a in 1/cm.
+    #[arg(long, value_name = "1/CM")]
+    pub mu_a: Option<f64>,
+    /// Scattering coefficient mu_s in 1/cm.
+    #[arg(long, value_name = "1/CM")]
+    pub mu_s: Option<f64>,
+    /// Scattering anisotropy g in [-1, 1] (0.9-0.99 for tissue).
+    #[arg(long, value_name = "G", allow_negative_numbers = true)]
+    pub g: Option<f64>,
+    /// Refractive index of the medium (light speed is c/n).
+    #[arg(long, value_name = "N")]
+    pub n: Option<f64>,
+    /// Slab thickness z0 between object and sensor (default unit cm; e.g. 30mm).
+    #[arg(long, value_name = "LENGTH", value_parser = parse_cm)]
+    pub thickness: Option<f64>,
+    /// Horizontal field of view (default unit cm).
+    #[arg(long, value_name = "LENGTH", value_parser = parse_cm)]
+    pub fov: Option<f64>,
+    /// Image side in pixels (square images).
+    #[arg(long, value_name = "PIXELS")]
+    pub size: Option<usize>,
+    /// Time-bin width (default unit ps; e.g. 4ps, 0.004ns).
+    #[arg(long, value_name = "TIME", value_parser = parse_ps)]
+    pub bin_width: Option<f64>,
+    /// Start of the first bin after the pulse reaches the object (default unit ps).
+    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    pub t_start: Option<f64>,
+    /// Number of time bins.
+    #[arg(long, value_name = "COUNT")]
+    pub bins: Option<usize>,
+    /// Light budget: expected photons in the whole ST-PSF over all bins.
+    #[arg(long, value_name = "COUNT")]
+    pub photons: Option<f64>,
+    /// Drop bins whose ST-PSF carries fewer expected photons (0 keeps all).
+    #[arg(long, value_name = "COUNT")]
+    pub min_bin_photons: Option<f64>,
+}
+
+/// A configuration problem, naming the file or flag and the value.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The TOML file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The TOML file has a syntax error, an unknown key or a bad value.
+    #[error("{path}: {reason}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The resulting parameters are not physical.
+    #[error(transparent)]
+    Param(#[from] scatterscope_physics::ParamError),
+}
+
+impl PhysicsArgs {
+    /// Resolves preset, file and flags into a validated setup.
+    pub fn resolve(&self) -> Result<Setup, ConfigError> {
+        let file = match &self.config {
+            Some(path) => Some((path.as_path(), read_file(path)?)),
+            None => None,
+        };
+        let file_preset = match &file {
+            Some((path, f)) => match &f.preset {
+                Some(name) => Some(parse_preset(name).map_err(|reason| invalid(path, reason))?),
+                None => None,
+            },
+            None => None,
+        };
+        let preset = self.preset.or(file_preset).unwrap_or(Preset::Paper);
+        let mut s = preset.setup();
+        if let Some((path, f)) = &file {
+            apply_file(&mut s, path, f)?;
+        }
+        self.apply_flags(&mut s);
+        s.validate()?;
+        Ok(s)
+    }
+
+    fn apply_flags(&self, s: &mut Setup) {
+        let m = &mut s.medium;
+        set(&mut m.mu_a_per_cm, self.mu_a);
+        set(&mut m.mu_s_per_cm, self.mu_s);
+        set(&mut m.g, self.g);
+        set(&mut m.refractive_index, self.n);
+        set(&mut m.thickness_cm, self.thickness);
+        set(&mut s.sensor.fov_cm, self.fov);
+        if let Some(size) = self.size {
+            s.sensor.width_px = size;
+            s.sensor.height_px = size;
+        }
+        set(&mut s.bins.width_ps, self.bin_width);
+        set(&mut s.bins.start_ps, self.t_start);
+        set(&mut s.bins.count, self.bins);
+        set(&mut s.total_photons, self.photons);
+        set(&mut s.min_bin_photons, self.min_bin_photons);
+    }
+}
+
+fn set<T>(dst: &mut T, v: Option<T>) {
+    if let Some(v) = v {
+        *dst = v;
+    }
+}
+
+/// Parses a preset name as the CLI and TOML files spell it.
+pub fn parse_preset(name: &str) -> Result<Preset, String> {
+    Preset::ALL
+        .into_iter()
+        .find(|p| p.name() == name)
+        .ok_or_else(|| {
+            let known: Vec<_> = Preset::ALL.iter().map(|p| p.name()).collect();
+            format!("unknown preset `{name}` (known: {})", known.join(", "))
+        })
+}
+
+fn invalid(path: &Path, reason: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid {
+        path: path.to_owned(),
+        reason: reason.into(),
+    }
+}
+
+fn read_file(path: &Path) -> Result<FileOverrides, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    toml::from_str(&text).map_err(|e| invalid(path, e.to_string()))
+}
+
+fn apply_file(s: &mut Setup, path: &Path, f: &FileOverrides) -> Result<(), ConfigError> {
+    let q = |key: &str, v: &Option<Quantity>, parse: fn(&str) -> Result<f64, String>| {
+        v.as_ref()
+            .map(|q| match q {
+                Quantity::Number(x) => Ok(*x),
+                Quantity::Text(t) => {
+                    parse(t).map_err(|e| invalid(path, format!("key `{key}`: {e}")))
+                }
+            })
+            .transpose()
+    };
+    let m = &mut s.medium;
+    set(&mut m.mu_a_per_cm, f.mu_a);
+    set(&mut m.mu_s_per_cm, f.mu_s);
+    set(&mut m.g, f.g);
+    set(&mut m.refractive_index, f.n);
+    set(&mut m.thickness_cm, q("thickness", &f.thickness, parse_cm)?);
+    set(&mut s.sensor.fov_cm, q("fov", &f.fov, parse_cm)?);
+    if let Some(size) = f.size {
+        s.sensor.width_px = size;
+        s.sensor.height_px = size;
+    }
+    set(
+        &mut s.bins.width_ps,
+        q("bin_width", &f.bin_width, parse_ps)?,
+    );
+    set(&mut s.bins.start_ps, q("t_start", &f.t_start, parse_ps)?);
+    set(&mut s.bins.count, f.bins);
+    set(&mut s.total_photons, f.photons);
+    set(&mut s.min_bin_photons, f.min_bin_photons);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units() {
+        assert_eq!(parse_ps("4"), Ok(4.0));
+        assert_eq!(parse_ps("4ps"), Ok(4.0));
+        assert_eq!(parse_ps("0.004 ns"), Ok(4.0));
+        assert_eq!(parse_ps("1e-3ns"), Ok(1.0));
+        assert_eq!(parse_cm("30mm"), Ok(3.0));
+        assert!(
+            parse_ps("4 parsecs")
+                .unwrap_err()
+                .contains("unknown unit `parsecs`")
+        );
+        assert!(
+            parse_cm("abc")
+                .unwrap_err()
+                .contains("`abc` is not a number")
+        );
+    }
+}

@@ -1,0 +1,128 @@
+//! Loading an image file as a scene.
+
+use std::path::{Path, PathBuf};
+
+use exr::prelude::{FlatSamples, ReadChannels, ReadLayers};
+use image::imageops::{FilterType, resize};
+use image::{ImageBuffer, Luma};
+use ndarray::Array2;
+
+/// Why an image file could not be used as a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneLoadError {
+    /// The file could not be opened or decoded.
+    #[error("{path}: cannot read image: {reason}")]
+    Decode {
+        /// The file.
+        path: PathBuf,
+        /// Decoder message.
+        reason: String,
+    },
+    /// The file decoded but its content is unusable.
+    #[error("{path}: {reason}")]
+    Content {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, with the value.
+        reason: String,
+    },
+}
+
+/// Loads a PNG, JPEG or EXR file as grayscale in [0, 1], resized to
+/// `height` x `width` (Lanczos-3, clamped after resampling). EXR data is
+/// scaled by its maximum when that exceeds 1.
+pub fn load_grayscale(
+    path: &Path,
+    height: usize,
+    width: usize,
+) -> Result<Array2<f64>, SceneLoadError> {
+    let decode = |reason: String| SceneLoadError::Decode {
+        path: path.to_owned(),
+        reason,
+    };
+    let is_exr = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    let mut gray: ImageBuffer<Luma<f32>, Vec<f32>> = if is_exr {
+        read_exr_luminance(path).map_err(decode)?
+    } else {
+        image::open(path)
+            .map_err(|e| decode(e.to_string()))?
+            .to_luma32f()
+    };
+    if let Some(bad) = gray.pixels().position(|p| !p.0[0].is_finite()) {
+        let (w, _) = gray.dimensions();
+        return Err(SceneLoadError::Content {
+            path: path.to_owned(),
+            reason: format!(
+                "pixel (row {}, column {}) is {}; scenes must be finite",
+                bad as u32 / w,
+                bad as u32 % w,
+                gray.as_raw()[bad]
+            ),
+        });
+    }
+    let max = gray.pixels().fold(0.0f32, |m, p| m.max(p.0[0]));
+    if max > 1.0 {
+        gray.pixels_mut().for_each(|p| p.0[0] /= max);
+    }
+    let resized = if gray.dimensions() == (width as u32, height as u32) {
+        gray
+    } else {
+        resize(&gray, width as u32, height as u32, FilterType::Lanczos3)
+    };
+    Ok(Array2::from_shape_fn((height, width), |(r, c)| {
+        f64::from(resized.get_pixel(c as u32, r as u32).0[0]).clamp(0.0, 1.0)
+    }))
+}
+
+/// Luminance of the first layer of an EXR file: `Y`, Rec. 709 luminance of
+/// `R`, `G`, `B`, or its only channel.
+fn read_exr_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, String> {
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| e.to_string())?;
+    let layer = &image.layer_data;
+    let size = layer.size;
+    let find = |name: &str| {
+        layer
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name == *name)
+            .map(|c| samples_f32(&c.sample_data))
+    };
+    let values: Vec<f32> = if let Some(y) = find("Y") {
+        y
+    } else if let (Some(r), Some(g), Some(b)) = (find("R"), find("G"), find("B")) {
+        r.iter()
+            .zip(&g)
+            .zip(&b)
+            .map(|((r, g), b)| 0.2126 * r + 0.7152 * g + 0.0722 * b)
+            .collect()
+    } else if layer.channel_data.list.len() == 1 {
+        samples_f32(&layer.channel_data.list[0].sample_data)
+    } else {
+        let names: Vec<String> = layer
+            .channel_data
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect();
+        return Err(format!(
+            "no Y or R, G, B channel and more than one channel ({})",
+            names.join(", ")
+        ));
+    };
+    ImageBuffer::from_raw(size.0 as u32, size.1 as u32, values)
+        .ok_or_else(|| "channel size does not match the layer size".to_string())
+}
+
+fn samples_f32(s: &FlatSamples) -> Vec<f32> {
+    s.values_as_f32().collect()
+}

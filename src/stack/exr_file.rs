@@ -1,0 +1,171 @@
+//! OpenEXR stack files.
+//!
+//! One layer named `stack`, one `f32` channel per bin named `t000`, `t001`,
+//! ... (bin order), ZIP-compressed (lossless). Header attributes that any EXR
+//! tool shows: `valueKind`, `binStartPs` (first bin), `binWidthPs`,
+//! `pixelPitchCm` and, when known, `muAPerCm`, `muSPerCm`, `anisotropyG`,
+//! `refractiveIndex`, `thicknessCm`. The complete metadata, including every
+//! bin start and the dropped bins, is the JSON text attribute `scatterscope`;
+//! it is what this reader trusts.
+
+use std::path::Path;
+
+use exr::prelude::{
+    AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer, LayerAttributes,
+    ReadChannels, ReadLayers, SmallVec, Text, WritableImage,
+};
+use ndarray::{Array3, Axis};
+
+use super::{Stack, StackError, StackMeta};
+
+/// Name of the attribute holding the JSON metadata.
+pub const META_ATTRIBUTE: &str = "scatterscope";
+
+/// Channel name of bin `k`.
+pub fn channel_name(k: usize) -> String {
+    format!("t{k:03}")
+}
+
+/// Writes `stack` to `path`.
+pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
+    let (k, h, w) = stack.data.dim();
+    if k == 0 || h == 0 || w == 0 {
+        return Err(StackError::format(
+            path,
+            format!("cannot write an empty {k} x {h} x {w} stack"),
+        ));
+    }
+    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = stack
+        .data
+        .axis_iter(Axis(0))
+        .enumerate()
+        .map(|(i, img)| {
+            AnyChannel::new(
+                channel_name(i).as_str(),
+                FlatSamples::F32(img.iter().copied().collect()),
+            )
+        })
+        .collect();
+    let meta = &stack.meta;
+    let json = serde_json::to_string(meta).expect("metadata serialises");
+    let text = |s: &str| {
+        Text::new_or_none(s).ok_or_else(|| {
+            StackError::format(path, "metadata contains characters EXR text cannot hold")
+        })
+    };
+    let mut attrs = LayerAttributes::named("stack");
+    let mut put = |name: &str, value: AttributeValue| {
+        attrs.other.insert(Text::from(name), value);
+    };
+    put(META_ATTRIBUTE, AttributeValue::Text(text(&json)?));
+    put("valueKind", AttributeValue::Text(text(meta.kind.name())?));
+    put("binStartPs", AttributeValue::F64(meta.bin_starts_ps[0]));
+    put("binWidthPs", AttributeValue::F64(meta.bin_width_ps));
+    put("pixelPitchCm", AttributeValue::F64(meta.pixel_pitch_cm));
+    if let Some(setup) = &meta.setup {
+        let m = &setup.medium;
+        put("muAPerCm", AttributeValue::F64(m.mu_a_per_cm));
+        put("muSPerCm", AttributeValue::F64(m.mu_s_per_cm));
+        put("anisotropyG", AttributeValue::F64(m.g));
+        put("refractiveIndex", AttributeValue::F64(m.refractive_index));
+        put("thicknessCm", AttributeValue::F64(m.thickness_cm));
+    }
+    let layer = Layer::new(
+        (w, h),
+        attrs,
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels),
+    );
+    Image::from_layer(layer)
+        .write()
+        .to_file(path)
+        .map_err(|e| exr_error(path, e))
+}
+
+/// Reads a stack written by [`write`] (or by any tool that follows the same
+/// channel names and metadata attribute).
+pub fn read(path: &Path) -> Result<Stack, StackError> {
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| exr_error(path, e))?;
+    let layer = image.layer_data;
+    let meta_text = match layer.attributes.other.get(&Text::from(META_ATTRIBUTE)) {
+        Some(AttributeValue::Text(t)) => t.to_string(),
+        Some(other) => {
+            return Err(StackError::format(
+                path,
+                format!("attribute `{META_ATTRIBUTE}` is {other:?}, expected JSON text"),
+            ));
+        }
+        None => {
+            return Err(StackError::format(
+                path,
+                format!("no `{META_ATTRIBUTE}` metadata attribute: not a scatterscope stack"),
+            ));
+        }
+    };
+    let meta: StackMeta = serde_json::from_str(&meta_text)
+        .map_err(|e| StackError::format(path, format!("attribute `{META_ATTRIBUTE}`: {e}")))?;
+    let mut bins: Vec<(usize, Vec<f32>)> = Vec::new();
+    for ch in &layer.channel_data.list {
+        let name = ch.name.to_string();
+        let index = name
+            .strip_prefix('t')
+            .and_then(|n| n.parse::<usize>().ok())
+            .ok_or_else(|| {
+                StackError::format(path, format!("channel `{name}` is not a time bin (tNNN)"))
+            })?;
+        let values: Vec<f32> = match &ch.sample_data {
+            FlatSamples::F32(v) => v.clone(),
+            other => other.values_as_f32().collect(),
+        };
+        bins.push((index, values));
+    }
+    bins.sort_by_key(|(i, _)| *i);
+    for (expect, (got, _)) in bins.iter().enumerate() {
+        if *got != expect {
+            return Err(StackError::format(
+                path,
+                format!(
+                    "time-bin channels are not contiguous: expected {}, found t{got:03}",
+                    channel_name(expect)
+                ),
+            ));
+        }
+    }
+    let (w, h) = (layer.size.0, layer.size.1);
+    let mut data = Array3::<f32>::zeros((bins.len(), h, w));
+    for (mut dst, (_, values)) in data.axis_iter_mut(Axis(0)).zip(bins) {
+        dst.iter_mut().zip(values).for_each(|(d, v)| *d = v);
+    }
+    Ok(Stack { data, meta })
+}
+
+fn exr_error(path: &Path, e: exr::error::Error) -> StackError {
+    match e {
+        exr::error::Error::Io(io) => StackError::io(path, io),
+        other => StackError::format(path, format!("OpenEXR: {other}")),
+    }
+}
+
+/// Writes a single image as a one-channel (`Y`) EXR, e.g. a truth image;
+/// `scatterscope simulate --scene FILE.exr` reads it back.
+pub fn write_image(img: ndarray::ArrayView2<f32>, path: &Path) -> Result<(), StackError> {
+    let (h, w) = img.dim();
+    let channel = AnyChannel::new("Y", FlatSamples::F32(img.iter().copied().collect()));
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::named("image"),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(vec![channel])),
+    );
+    Image::from_layer(layer)
+        .write()
+        .to_file(path)
+        .map_err(|e| exr_error(path, e))
+}

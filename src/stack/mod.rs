@@ -1,0 +1,218 @@
+//! The transient stack: K time bins of H x W images plus the metadata that
+//! every later stage needs (binning, pixel pitch, physics, provenance).
+//!
+//! Files: OpenEXR ([`exr_file`], one `f32` channel per bin) and `.npy` with a
+//! JSON sidecar ([`npy_file`]); PNG contact sheets for a quick look
+//! ([`preview`]).
+
+pub mod exr_file;
+pub mod npy_file;
+pub mod preview;
+
+use std::path::{Path, PathBuf};
+
+use ndarray::{Array3, ArrayView2, Axis, s};
+use scatterscope_physics::{Sampling, Setup};
+use serde::{Deserialize, Serialize};
+
+/// Version of the metadata layout written to files.
+pub const META_VERSION: u32 = 1;
+
+/// What the stack's values are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ValueKind {
+    /// Measured or sampled photon counts (non-negative integers).
+    Counts,
+    /// Noise-free expected photon counts.
+    ExpectedCounts,
+    /// ST-PSF kernels: expected counts from a unit object pixel, centred.
+    Kernel,
+}
+
+impl ValueKind {
+    /// Name as stored in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            ValueKind::Counts => "counts",
+            ValueKind::ExpectedCounts => "expected_counts",
+            ValueKind::Kernel => "kernel",
+        }
+    }
+}
+
+/// A time bin left out of the stack, and why it was safe to leave out.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DroppedBin {
+    /// Bin start (ps).
+    pub start_ps: f64,
+    /// Expected photons the ST-PSF puts in the bin (below the threshold).
+    pub photons: f64,
+}
+
+/// Everything about a stack except its values.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StackMeta {
+    /// Layout version of this record.
+    pub version: u32,
+    /// What the values are.
+    pub kind: ValueKind,
+    /// Start of each bin in the stack (ps), one per bin, increasing.
+    pub bin_starts_ps: Vec<f64>,
+    /// Width of every bin (ps).
+    pub bin_width_ps: f64,
+    /// Side of a square pixel in the object plane (cm).
+    pub pixel_pitch_cm: f64,
+    /// Physics the stack was simulated with (or is to be reconstructed with).
+    pub setup: Option<Setup>,
+    /// How the ST-PSF was discretised, for simulated stacks.
+    pub sampling: Option<Sampling>,
+    /// Bins of the setup that are not in the stack.
+    pub dropped_bins: Vec<DroppedBin>,
+    /// Values that FFT round-off made negative and were set to 0.
+    pub clamped_negative: u64,
+    /// Seed of the Poisson sampler, for simulated counts.
+    pub seed: Option<u64>,
+    /// Where the stack came from (command, scene, file).
+    pub source: String,
+}
+
+/// A K x H x W stack of `f32` values with its metadata.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stack {
+    /// Values, indexed (bin, row, column).
+    pub data: Array3<f32>,
+    /// Metadata travelling with the values.
+    pub meta: StackMeta,
+}
+
+/// Errors reading or writing stack files.
+#[derive(Debug, thiserror::Error)]
+pub enum StackError {
+    /// Operating-system level failure.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The file is not a valid stack; says which field and value.
+    #[error("{path}: {reason}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl StackError {
+    pub(crate) fn format(path: &Path, reason: impl Into<String>) -> Self {
+        StackError::Format {
+            path: path.to_owned(),
+            reason: reason.into(),
+        }
+    }
+
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        StackError::Io {
+            path: path.to_owned(),
+            source,
+        }
+    }
+}
+
+impl Stack {
+    /// Number of bins K.
+    pub fn bins(&self) -> usize {
+        self.data.shape()[0]
+    }
+
+    /// Image of bin `k`.
+    pub fn bin(&self, k: usize) -> ArrayView2<'_, f32> {
+        self.data.slice(s![k, .., ..])
+    }
+
+    /// Sum over all bins and pixels.
+    pub fn total(&self) -> f64 {
+        self.data.iter().map(|&v| f64::from(v)).sum()
+    }
+
+    /// Checks that values and metadata agree and that no value is NaN or
+    /// infinite (or negative, for counts); the error names the bin and pixel.
+    pub fn validate(&self, path: &Path) -> Result<(), StackError> {
+        let k = self.bins();
+        if self.meta.bin_starts_ps.len() != k {
+            return Err(StackError::format(
+                path,
+                format!(
+                    "bin_starts_ps has {} entries but the stack has {k} bins",
+                    self.meta.bin_starts_ps.len()
+                ),
+            ));
+        }
+        if !(self.meta.bin_width_ps > 0.0 && self.meta.bin_width_ps.is_finite()) {
+            return Err(StackError::format(
+                path,
+                format!("bin_width_ps = {} must be positive", self.meta.bin_width_ps),
+            ));
+        }
+        if !(self.meta.pixel_pitch_cm > 0.0 && self.meta.pixel_pitch_cm.is_finite()) {
+            return Err(StackError::format(
+                path,
+                format!(
+                    "pixel_pitch_cm = {} must be positive",
+                    self.meta.pixel_pitch_cm
+                ),
+            ));
+        }
+        for (b, img) in self.data.axis_iter(Axis(0)).enumerate() {
+            for ((r, c), &v) in img.indexed_iter() {
+                let negative_count = v < 0.0 && self.meta.kind != ValueKind::Kernel;
+                if !v.is_finite() || negative_count {
+                    return Err(StackError::format(
+                        path,
+                        format!(
+                            "bin {b} (t{b:03}), row {r}, column {c}: value {v} is not a finite non-negative number"
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the stack; the format follows the extension (`.exr` or `.npy`).
+    pub fn save(&self, path: &Path) -> Result<(), StackError> {
+        match extension(path).as_deref() {
+            Some("exr") => exr_file::write(self, path),
+            Some("npy") => npy_file::write(self, path),
+            _ => Err(StackError::format(
+                path,
+                "unknown stack format: use a .exr or .npy file name",
+            )),
+        }
+    }
+
+    /// Reads and validates a stack; the format follows the extension.
+    pub fn load(path: &Path) -> Result<Self, StackError> {
+        let stack = match extension(path).as_deref() {
+            Some("exr") => exr_file::read(path)?,
+            Some("npy") => npy_file::read(path)?,
+            _ => {
+                return Err(StackError::format(
+                    path,
+                    "unknown stack format: use a .exr or .npy file name",
+                ));
+            }
+        };
+        stack.validate(path)?;
+        Ok(stack)
+    }
+}
+
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+}

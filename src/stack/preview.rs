@@ -1,0 +1,89 @@
+//! PNG previews: single images and contact sheets of all bins.
+
+use std::path::Path;
+
+use image::{GrayImage, Luma};
+use ndarray::{ArrayView2, Axis};
+
+use super::{Stack, StackError};
+use crate::scene::font;
+
+/// How contact-sheet tiles are scaled to 8 bits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SheetScale {
+    /// One scale for all bins: brightness compares across time.
+    Shared,
+    /// Each bin scaled to its own maximum: structure of dim bins is visible.
+    PerBin,
+}
+
+const GAP: u32 = 2;
+const LABEL_H: u32 = font::GLYPH_HEIGHT as u32 + 3;
+
+/// Writes one image as an 8-bit PNG, scaled so that `max` is white
+/// (the image's own maximum when `max` is `None`).
+pub fn write_image(img: ArrayView2<f64>, max: Option<f64>, path: &Path) -> Result<(), StackError> {
+    let (h, w) = img.dim();
+    let top = max.unwrap_or_else(|| img.iter().fold(0.0f64, |m, &v| m.max(v)));
+    let mut out = GrayImage::new(w as u32, h as u32);
+    for ((r, c), &v) in img.indexed_iter() {
+        out.put_pixel(c as u32, r as u32, Luma([to_u8(v, top)]));
+    }
+    out.save(path)
+        .map_err(|e| StackError::format(path, format!("writing PNG: {e}")))
+}
+
+/// Writes all bins of `stack` as a grid of labelled tiles (label: bin start in ps).
+pub fn write_contact_sheet(
+    stack: &Stack,
+    scale: SheetScale,
+    path: &Path,
+) -> Result<(), StackError> {
+    let (k, h, w) = stack.data.dim();
+    let cols = (k as f64).sqrt().ceil().max(1.0) as u32;
+    let rows = (k as u32).div_ceil(cols).max(1);
+    let tile_w = w as u32 + GAP;
+    let tile_h = h as u32 + LABEL_H + GAP;
+    let mut sheet = GrayImage::from_pixel(cols * tile_w + GAP, rows * tile_h + GAP, Luma([40]));
+    let global = stack.data.iter().fold(0.0f32, |m, &v| m.max(v));
+    for (i, img) in stack.data.axis_iter(Axis(0)).enumerate() {
+        let top = match scale {
+            SheetScale::Shared => global,
+            SheetScale::PerBin => img.iter().fold(0.0f32, |m, &v| m.max(v)),
+        };
+        let (x0, y0) = (
+            GAP + (i as u32 % cols) * tile_w,
+            GAP + (i as u32 / cols) * tile_h,
+        );
+        let label = format!("{:.0}PS", stack.meta.bin_starts_ps[i]);
+        draw_label(&mut sheet, x0, y0 + 1, &label);
+        for ((r, c), &v) in img.indexed_iter() {
+            let px = to_u8(f64::from(v), f64::from(top));
+            sheet.put_pixel(x0 + c as u32, y0 + LABEL_H + r as u32, Luma([px]));
+        }
+    }
+    sheet
+        .save(path)
+        .map_err(|e| StackError::format(path, format!("writing PNG: {e}")))
+}
+
+fn to_u8(v: f64, top: f64) -> u8 {
+    if top > 0.0 && v.is_finite() {
+        (v / top * 255.0).round().clamp(0.0, 255.0) as u8
+    } else {
+        0
+    }
+}
+
+fn draw_label(img: &mut GrayImage, x0: u32, y0: u32, text: &str) {
+    for (i, ch) in text.chars().enumerate() {
+        for row in 0..font::GLYPH_HEIGHT {
+            for col in 0..font::GLYPH_WIDTH {
+                let (x, y) = (x0 + (i * 6 + col) as u32, y0 + row as u32);
+                if font::pixel(ch, col, row) && x < img.width() && y < img.height() {
+                    img.put_pixel(x, y, Luma([255]));
+                }
+            }
+        }
+    }
+}
