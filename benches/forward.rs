@@ -1,1 +1,32 @@
-fn main() {}
+//! PSF generation and the forward model on the paper preset (256 x 256, 20 kept bins).
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use scatterscope::forward::{ForwardModel, poisson_counts};
+use scatterscope::physics::{KernelStack, Preset, Sampling};
+use scatterscope::scene::Scene;
+
+fn benches(c: &mut Criterion) {
+    let setup = Preset::Paper.setup();
+    c.bench_function("psf_integrated_paper", |b| {
+        b.iter(|| KernelStack::build(&setup, Sampling::Integrated).unwrap())
+    });
+    c.bench_function("psf_point_paper", |b| {
+        b.iter(|| KernelStack::build(&setup, Sampling::Point).unwrap())
+    });
+    let kernels = KernelStack::build(&setup, Sampling::Integrated).unwrap();
+    c.bench_function("kernel_spectra_256x256x20", |b| {
+        b.iter(|| ForwardModel::new(&kernels))
+    });
+    let model = ForwardModel::new(&kernels);
+    let truth = Scene::Usaf.render(256, 256).unwrap();
+    c.bench_function("forward_expected_256x256x20", |b| {
+        b.iter(|| model.expected(truth.view()))
+    });
+    let expected = model.expected(truth.view()).counts;
+    c.bench_function("poisson_256x256x20", |b| {
+        b.iter(|| poisson_counts(&expected, 1))
+    });
+}
+
+criterion_group!(forward, benches);
+criterion_main!(forward);

@@ -94,28 +94,28 @@ pub struct PhysicsArgs {
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// Absorption coefficient mu_a in 1/cm.
-    #[arg(long, value_name = "1/CM")]
+    #[arg(long, value_name = "1/CM", allow_negative_numbers = true)]
     pub mu_a: Option<f64>,
     /// Scattering coefficient mu_s in 1/cm.
-    #[arg(long, value_name = "1/CM")]
+    #[arg(long, value_name = "1/CM", allow_negative_numbers = true)]
     pub mu_s: Option<f64>,
     /// Scattering anisotropy g in [-1, 1] (0.9-0.99 for tissue).
     #[arg(long, value_name = "G", allow_negative_numbers = true)]
     pub g: Option<f64>,
     /// Refractive index of the medium (light speed is c/n).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
     pub n: Option<f64>,
     /// Slab thickness z0 between object and sensor (default unit cm; e.g. 30mm).
-    #[arg(long, value_name = "LENGTH", value_parser = parse_cm)]
+    #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
     pub thickness: Option<f64>,
     /// Horizontal field of view (default unit cm).
-    #[arg(long, value_name = "LENGTH", value_parser = parse_cm)]
+    #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
     pub fov: Option<f64>,
     /// Image side in pixels (square images).
     #[arg(long, value_name = "PIXELS")]
     pub size: Option<usize>,
     /// Time-bin width (default unit ps; e.g. 4ps, 0.004ns).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps)]
+    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     pub bin_width: Option<f64>,
     /// Start of the first bin after the pulse reaches the object (default unit ps).
     #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
@@ -124,10 +124,10 @@ pub struct PhysicsArgs {
     #[arg(long, value_name = "COUNT")]
     pub bins: Option<usize>,
     /// Light budget: expected photons in the whole ST-PSF over all bins.
-    #[arg(long, value_name = "COUNT")]
+    #[arg(long, value_name = "COUNT", allow_negative_numbers = true)]
     pub photons: Option<f64>,
     /// Drop bins whose ST-PSF carries fewer expected photons (0 keeps all).
-    #[arg(long, value_name = "COUNT")]
+    #[arg(long, value_name = "COUNT", allow_negative_numbers = true)]
     pub min_bin_photons: Option<f64>,
 }
 
@@ -151,8 +151,15 @@ pub enum ConfigError {
         reason: String,
     },
     /// The resulting parameters are not physical.
-    #[error(transparent)]
-    Param(#[from] scatterscope_physics::ParamError),
+    #[error("{source} (set it with --{flag} or `{key}` in a --config file)")]
+    Param {
+        /// The physics crate's error, naming the field and value.
+        source: scatterscope_physics::ParamError,
+        /// The command-line flag that sets the field.
+        flag: &'static str,
+        /// The TOML key that sets the field.
+        key: &'static str,
+    },
 }
 
 impl PhysicsArgs {
@@ -175,7 +182,10 @@ impl PhysicsArgs {
             apply_file(&mut s, path, f)?;
         }
         self.apply_flags(&mut s);
-        s.validate()?;
+        s.validate().map_err(|source| {
+            let (flag, key) = flag_and_key(source.field);
+            ConfigError::Param { source, flag, key }
+        })?;
         Ok(s)
     }
 
@@ -196,6 +206,24 @@ impl PhysicsArgs {
         set(&mut s.bins.count, self.bins);
         set(&mut s.total_photons, self.photons);
         set(&mut s.min_bin_photons, self.min_bin_photons);
+    }
+}
+
+/// The flag and TOML key that set a [`Setup`] field.
+fn flag_and_key(field: &str) -> (&'static str, &'static str) {
+    match field {
+        "mu_a_per_cm" => ("mu-a", "mu_a"),
+        "mu_s_per_cm" => ("mu-s", "mu_s"),
+        "g" => ("g", "g"),
+        "refractive_index" => ("n", "n"),
+        "thickness_cm" => ("thickness", "thickness"),
+        "fov_cm" => ("fov", "fov"),
+        "width_px" | "height_px" => ("size", "size"),
+        "width_ps" => ("bin-width", "bin_width"),
+        "start_ps" => ("t-start", "t_start"),
+        "min_bin_photons" => ("min-bin-photons", "min_bin_photons"),
+        "photons" => ("photons", "photons"),
+        _ => ("bins", "bins"),
     }
 }
 
@@ -267,6 +295,39 @@ fn apply_file(s: &mut Setup, path: &Path, f: &FileOverrides) -> Result<(), Confi
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn precedence_is_flags_over_file_over_preset() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("lab.toml");
+        std::fs::write(&path, "mu_s = 7.5\nthickness = \"20mm\"\nbin_width = 2\n").unwrap();
+        let args = PhysicsArgs {
+            config: Some(path.clone()),
+            bin_width: Some(8.0),
+            ..Default::default()
+        };
+        let s = args.resolve().unwrap();
+        assert_eq!(s.medium.mu_s_per_cm, 7.5);
+        assert_eq!(s.medium.thickness_cm, 2.0);
+        assert_eq!(s.bins.width_ps, 8.0);
+        assert_eq!(s.medium.mu_a_per_cm, 1.0); // from the preset
+        std::fs::write(&path, "mu_z = 1\n").unwrap();
+        let e = args.resolve().unwrap_err().to_string();
+        assert!(e.contains("lab.toml") && e.contains("mu_z"), "{e}");
+    }
+
+    #[test]
+    fn invalid_values_name_field_flag_and_key() {
+        let args = PhysicsArgs {
+            mu_a: Some(-1.0),
+            ..Default::default()
+        };
+        let e = args.resolve().unwrap_err().to_string();
+        assert!(
+            e.contains("invalid mu_a_per_cm = -1") && e.contains("--mu-a") && e.contains("`mu_a`"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn units() {

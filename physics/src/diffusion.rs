@@ -54,7 +54,7 @@ impl Diffusion {
     ///
     /// Returns `-inf` for `t <= 0` (causality) and for non-finite `t`.
     pub fn log_temporal_density(&self, t_ps: f64) -> f64 {
-        if !(t_ps > 0.0) || !t_ps.is_finite() {
+        if t_ps.is_nan() || t_ps <= 0.0 || t_ps.is_infinite() {
             return f64::NEG_INFINITY;
         }
         let four_dct = 4.0 * self.dc_cm2_per_ps() * t_ps;
@@ -105,7 +105,7 @@ impl Diffusion {
 /// Fraction of a unit-mass 1-D Gaussian `exp(-x^2/s^2) / (sqrt(pi) s)` that
 /// falls in `[x0, x1]`, computed without cancellation in the tails.
 pub fn gaussian_interval_fraction(x0: f64, x1: f64, s: f64) -> f64 {
-    if !(s > 0.0) {
+    if s.is_nan() || s <= 0.0 {
         // A delta at 0: all of it when 0 is inside the half-open cell.
         return if x0 <= 0.0 && 0.0 < x1 { 1.0 } else { 0.0 };
     }

@@ -259,7 +259,8 @@ fn bins_before_any_arrival_are_an_error() {
 
 #[test]
 fn invalid_parameters_name_the_field() {
-    let cases: Vec<(Box<dyn Fn(&mut Setup)>, &str)> = vec![
+    type Mutation = Box<dyn Fn(&mut Setup)>;
+    let cases: Vec<(Mutation, &str)> = vec![
         (Box::new(|s| s.medium.mu_a_per_cm = -1.0), "mu_a_per_cm"),
         (Box::new(|s| s.medium.mu_s_per_cm = f64::NAN), "mu_s_per_cm"),
         (

@@ -1,0 +1,167 @@
+//! The `scatterscope` binary end to end: files written, numbers printed,
+//! errors worded for a lab user.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use scatterscope::stack::{Stack, ValueKind};
+
+fn scatterscope(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args(args)
+        .output()
+        .expect("binary runs")
+}
+
+fn text(o: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn psf_paper_preset_writes_stack_table_and_warnings() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let o = scatterscope(&["psf", "--preset", "paper", "--out", out]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("warning [weak-scattering]"), "{stderr}");
+    assert!(stderr.contains("left out: 10 bin(s)"), "{stderr}");
+    assert!(stdout.contains("run time: integrated"), "{stdout}");
+    let csv = std::fs::read_to_string(dir.path().join("psf_bins.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 31);
+    assert_eq!(csv.lines().filter(|l| l.contains(",true,")).count(), 20);
+    let psf = Stack::load(&dir.path().join("psf.exr")).unwrap();
+    assert_eq!(psf.bins(), 20);
+    assert_eq!(psf.meta.kind, ValueKind::Kernel);
+    assert_eq!(psf.meta.bin_starts_ps[0], 40.0);
+    assert_eq!(psf.meta.dropped_bins.len(), 10);
+    assert!(
+        (psf.total() - 450.0 + psf.meta.dropped_bins.iter().map(|d| d.photons).sum::<f64>()).abs()
+            < 1e-3
+    );
+    assert!(dir.path().join("psf_sheet.png").exists());
+}
+
+#[test]
+fn simulate_writes_reproducible_stacks_in_both_formats() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |sub: &str| {
+        let out = dir.path().join(sub);
+        let o = scatterscope(&[
+            "simulate",
+            "--scene",
+            "disks",
+            "--size",
+            "64",
+            "--fov",
+            "12.5",
+            "--seed",
+            "3",
+            "--npy",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", text(&o).1);
+        out
+    };
+    let (a, b) = (run("a"), run("b"));
+    for f in [
+        "truth.exr",
+        "truth.png",
+        "expected.exr",
+        "expected.png",
+        "counts.exr",
+        "counts.png",
+        "counts.npy",
+        "counts.json",
+    ] {
+        assert!(a.join(f).exists(), "{f} missing");
+    }
+    let counts = Stack::load(&a.join("counts.exr")).unwrap();
+    assert_eq!(counts, Stack::load(&a.join("counts.npy")).unwrap());
+    assert_eq!(
+        counts,
+        Stack::load(&b.join("counts.exr")).unwrap(),
+        "same seed, same counts"
+    );
+    assert_eq!(counts.meta.seed, Some(3));
+    assert_eq!(counts.meta.kind, ValueKind::Counts);
+    assert!(counts.data.iter().all(|v| v.fract() == 0.0 && *v >= 0.0));
+    let expected = Stack::load(&a.join("expected.exr")).unwrap();
+    // Poisson totals agree with the expectation within 5 standard deviations.
+    let (e, c) = (expected.total(), counts.total());
+    assert!((c - e).abs() < 5.0 * e.sqrt(), "{c} vs {e}");
+}
+
+fn fails_with(args: &[&str], needles: &[&str]) {
+    let o = scatterscope(args);
+    let (_, stderr) = text(&o);
+    assert!(!o.status.success(), "{args:?} should fail");
+    for n in needles {
+        assert!(stderr.contains(n), "{args:?}: missing `{n}` in: {stderr}");
+    }
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
+fn bad_input_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o");
+    let out = out.to_str().unwrap();
+    fails_with(
+        &["simulate", "--mu-a", "-1", "--out", out],
+        &["invalid mu_a_per_cm = -1", "--mu-a"],
+    );
+    fails_with(
+        &["simulate", "--bins", "0", "--out", out],
+        &["invalid bins = 0"],
+    );
+    fails_with(
+        &["simulate", "--g", "1", "--mu-a", "0", "--out", out],
+        &["invalid g = 1", "D = 1/(3"],
+    );
+    fails_with(
+        &["psf", "--bin-width", "4parsecs", "--out", out],
+        &["unknown unit `parsecs`"],
+    );
+    fails_with(
+        &[
+            "simulate",
+            "--scene",
+            "no-such-scene.png",
+            "--size",
+            "32",
+            "--out",
+            out,
+        ],
+        &["no-such-scene.png"],
+    );
+    let cfg = dir.path().join("bad.toml");
+    std::fs::write(&cfg, "thickness = \"3 furlongs\"\n").unwrap();
+    fails_with(
+        &["psf", "--config", cfg.to_str().unwrap(), "--out", out],
+        &["bad.toml", "thickness", "furlongs"],
+    );
+    fails_with(
+        &["psf", "--t-start", "-100", "--bins", "10", "--out", out],
+        &["carries no photons"],
+    );
+}
+
+#[test]
+fn help_explains_units() {
+    let o = scatterscope(&["simulate", "--help"]);
+    let (stdout, _) = text(&o);
+    for needle in [
+        "--mu-a <1/CM>",
+        "Time-bin width (default unit ps",
+        "--seed",
+        "usaf",
+    ] {
+        assert!(stdout.contains(needle), "missing {needle}: {stdout}");
+    }
+    assert!(Path::new(env!("CARGO_BIN_EXE_scatterscope")).exists());
+}

@@ -1,0 +1,213 @@
+//! Stack file round trips and error messages.
+
+use std::path::Path;
+
+use ndarray::Array3;
+use scatterscope::physics::{Preset, Sampling};
+use scatterscope::stack::{DroppedBin, META_VERSION, Stack, StackMeta, ValueKind};
+
+fn sample_stack(kind: ValueKind) -> Stack {
+    let data = Array3::from_shape_fn((3, 5, 7), |(k, r, c)| match kind {
+        ValueKind::Counts => ((k * 31 + r * 7 + c) % 13) as f32,
+        _ => (k as f32 + 1.0) * 0.1 + r as f32 * 1e-3 + c as f32 * 1.7e-7,
+    });
+    Stack {
+        data,
+        meta: StackMeta {
+            version: META_VERSION,
+            kind,
+            bin_starts_ps: vec![40.0, 44.0, 48.0],
+            bin_width_ps: 4.0,
+            pixel_pitch_cm: 50.0 / 256.0,
+            setup: Some(Preset::Paper.setup()),
+            sampling: Some(Sampling::Integrated),
+            dropped_bins: vec![DroppedBin {
+                start_ps: 36.0,
+                photons: 0.956,
+            }],
+            clamped_negative: 3,
+            seed: Some(42),
+            source: "test".into(),
+        },
+    }
+}
+
+#[test]
+fn exr_round_trip_is_exact() {
+    let dir = tempfile::tempdir().unwrap();
+    for kind in [
+        ValueKind::Counts,
+        ValueKind::ExpectedCounts,
+        ValueKind::Kernel,
+    ] {
+        let s = sample_stack(kind);
+        let path = dir.path().join("s.exr");
+        s.save(&path).unwrap();
+        assert_eq!(Stack::load(&path).unwrap(), s);
+    }
+}
+
+#[test]
+fn exr_has_named_channels_and_plain_attributes() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.exr");
+    sample_stack(ValueKind::Counts).save(&path).unwrap();
+    let meta = exr::meta::MetaData::read_from_file(&path, false).unwrap();
+    let header = &meta.headers[0];
+    let names: Vec<String> = header
+        .channels
+        .list
+        .iter()
+        .map(|c| c.name.to_string())
+        .collect();
+    assert_eq!(names, ["t000", "t001", "t002"]);
+    let attr = |n: &str| {
+        header
+            .own_attributes
+            .other
+            .get(&exr::prelude::Text::from(n))
+            .cloned()
+    };
+    assert_eq!(
+        attr("binWidthPs"),
+        Some(exr::meta::attribute::AttributeValue::F64(4.0))
+    );
+    assert_eq!(
+        attr("binStartPs"),
+        Some(exr::meta::attribute::AttributeValue::F64(40.0))
+    );
+    assert_eq!(
+        attr("thicknessCm"),
+        Some(exr::meta::attribute::AttributeValue::F64(3.0))
+    );
+}
+
+#[test]
+fn npy_round_trip_is_exact_for_floats_and_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    for kind in [ValueKind::Counts, ValueKind::ExpectedCounts] {
+        let s = sample_stack(kind);
+        let path = dir.path().join("s.npy");
+        s.save(&path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let header = String::from_utf8_lossy(&bytes[..128]).to_string();
+        let want = if kind == ValueKind::Counts {
+            "'<u4'"
+        } else {
+            "'<f4'"
+        };
+        assert!(header.contains(want), "{header}");
+        assert!(header.contains("(3, 5, 7)"), "{header}");
+        assert_eq!(Stack::load(&path).unwrap(), s);
+    }
+}
+
+/// A .npy file built byte by byte from the format description, independent
+/// of the writer under test.
+fn handmade_npy(path: &Path, descr: &str, shape: (usize, usize, usize), payload: &[u8]) {
+    let mut header = format!(
+        "{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}, {}, {}), }}",
+        shape.0, shape.1, shape.2
+    );
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend((header.len() as u16).to_le_bytes());
+    bytes.extend(header.as_bytes());
+    bytes.extend(payload);
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn npy_reads_float64_and_uint16_from_other_writers() {
+    let dir = tempfile::tempdir().unwrap();
+    let meta = sample_stack(ValueKind::Counts).meta;
+    let path = dir.path().join("f8.npy");
+    let values: Vec<f64> = (0..105).map(|i| i as f64 * 0.5).collect();
+    let payload: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+    handmade_npy(&path, "<f8", (3, 5, 7), &payload);
+    std::fs::write(
+        dir.path().join("f8.json"),
+        serde_json::to_string(&meta).unwrap(),
+    )
+    .unwrap();
+    let s = Stack::load(&path).unwrap();
+    assert_eq!(s.data[[2, 4, 6]], 52.0);
+    assert_eq!(s.data[[0, 0, 1]], 0.5);
+
+    let path = dir.path().join("u2.npy");
+    let payload: Vec<u8> = (0..105u16).flat_map(|v| v.to_le_bytes()).collect();
+    handmade_npy(&path, "<u2", (3, 5, 7), &payload);
+    std::fs::write(
+        dir.path().join("u2.json"),
+        serde_json::to_string(&meta).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(Stack::load(&path).unwrap().data[[1, 0, 0]], 35.0);
+
+    let path = dir.path().join("i2.npy");
+    handmade_npy(&path, "<i2", (3, 5, 7), &payload);
+    std::fs::write(
+        dir.path().join("i2.json"),
+        serde_json::to_string(&meta).unwrap(),
+    )
+    .unwrap();
+    let e = Stack::load(&path).unwrap_err().to_string();
+    assert!(e.contains("i2.npy") && e.contains("dtype `<i2`"), "{e}");
+}
+
+#[test]
+fn bad_files_give_errors_naming_file_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    // Missing sidecar.
+    let path = dir.path().join("lonely.npy");
+    sample_stack(ValueKind::Counts).save(&path).unwrap();
+    std::fs::remove_file(dir.path().join("lonely.json")).unwrap();
+    let e = Stack::load(&path).unwrap_err().to_string();
+    assert!(e.contains("lonely.json"), "{e}");
+    // Not a .npy at all.
+    let path = dir.path().join("junk.npy");
+    std::fs::write(&path, b"hello world, not numpy").unwrap();
+    std::fs::write(
+        dir.path().join("junk.json"),
+        serde_json::to_string(&sample_stack(ValueKind::Counts).meta).unwrap(),
+    )
+    .unwrap();
+    let e = Stack::load(&path).unwrap_err().to_string();
+    assert!(e.contains("junk.npy") && e.contains("NUMPY"), "{e}");
+    // NaN in the data.
+    let mut s = sample_stack(ValueKind::ExpectedCounts);
+    s.data[[1, 2, 3]] = f32::NAN;
+    let path = dir.path().join("nan.exr");
+    s.save(&path).unwrap();
+    let e = Stack::load(&path).unwrap_err().to_string();
+    assert!(
+        e.contains("nan.exr") && e.contains("bin 1 (t001), row 2, column 3"),
+        "{e}"
+    );
+    // Metadata that disagrees with the data.
+    let mut s = sample_stack(ValueKind::Counts);
+    s.meta.bin_starts_ps.pop();
+    let path = dir.path().join("short.exr");
+    s.save(&path).unwrap();
+    let e = Stack::load(&path).unwrap_err().to_string();
+    assert!(
+        e.contains("bin_starts_ps has 2 entries but the stack has 3 bins"),
+        "{e}"
+    );
+    // Truncated EXR.
+    let path = dir.path().join("cut.exr");
+    sample_stack(ValueKind::Counts).save(&path).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    let e = Stack::load(&path).unwrap_err().to_string();
+    assert!(e.contains("cut.exr"), "{e}");
+    // Unknown extension.
+    let e = sample_stack(ValueKind::Counts)
+        .save(&dir.path().join("s.tif"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("s.tif") && e.contains(".exr or .npy"), "{e}");
+}
