@@ -139,8 +139,8 @@ impl Stack {
         self.data.iter().map(|&v| f64::from(v)).sum()
     }
 
-    /// Checks that values and metadata agree and that no value is NaN or
-    /// infinite (or negative, for counts); the error names the bin and pixel.
+    /// Checks that values and metadata agree and that every value is a
+    /// finite non-negative number; the error names the bin and pixel.
     pub fn validate(&self, path: &Path) -> Result<(), StackError> {
         let k = self.bins();
         if self.meta.bin_starts_ps.len() != k {
@@ -169,8 +169,7 @@ impl Stack {
         }
         for (b, img) in self.data.axis_iter(Axis(0)).enumerate() {
             for ((r, c), &v) in img.indexed_iter() {
-                let negative_count = v < 0.0 && self.meta.kind != ValueKind::Kernel;
-                if !v.is_finite() || negative_count {
+                if !v.is_finite() || v < 0.0 {
                     return Err(StackError::format(
                         path,
                         format!(
