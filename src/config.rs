@@ -165,6 +165,13 @@ pub enum ConfigError {
 impl PhysicsArgs {
     /// Resolves preset, file and flags into a validated setup.
     pub fn resolve(&self) -> Result<Setup, ConfigError> {
+        self.resolve_over(None)
+    }
+
+    /// Like [`Self::resolve`], starting from `base` (e.g. a stack's recorded
+    /// physics) instead of the default preset; an explicit `--preset` or a
+    /// preset in the file still wins over `base`.
+    pub fn resolve_over(&self, base: Option<Setup>) -> Result<Setup, ConfigError> {
         let file = match &self.config {
             Some(path) => Some((path.as_path(), read_file(path)?)),
             None => None,
@@ -176,8 +183,11 @@ impl PhysicsArgs {
             },
             None => None,
         };
-        let preset = self.preset.or(file_preset).unwrap_or(Preset::Paper);
-        let mut s = preset.setup();
+        let mut s = match (self.preset.or(file_preset), base) {
+            (Some(p), _) => p.setup(),
+            (None, Some(b)) => b,
+            (None, None) => Preset::Paper.setup(),
+        };
         if let Some((path, f)) = &file {
             apply_file(&mut s, path, f)?;
         }

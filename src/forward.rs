@@ -36,13 +36,18 @@ pub struct Expected {
 impl ForwardModel {
     /// Transforms every kept kernel once.
     pub fn new(kernels: &KernelStack) -> Self {
+        let all: Vec<usize> = (0..kernels.len()).collect();
+        Self::with_bins(kernels, &all)
+    }
+
+    /// Transforms only the kept kernels listed in `bins` (stack order), e.g.
+    /// the bins present in a measured stack.
+    pub fn with_bins(kernels: &KernelStack, bins: &[usize]) -> Self {
         let (_, h, w) = kernels.kernels.dim();
         let fft = Fft2::new(h, w);
-        let spectra = kernels
-            .kernels
-            .axis_iter(Axis(0))
-            .into_par_iter()
-            .map(|k| fft.forward(&origin_centred(k)))
+        let spectra = bins
+            .par_iter()
+            .map(|&k| fft.forward(&origin_centred(kernels.kernel(k))))
             .collect();
         Self {
             fft,
@@ -55,6 +60,16 @@ impl ForwardModel {
     /// Number of time bins.
     pub fn bins(&self) -> usize {
         self.spectra.len()
+    }
+
+    /// The cached spectrum of kept bin `k` (layout of [`Fft2`]).
+    pub fn spectrum(&self, k: usize) -> &[Complex64] {
+        &self.spectra[k]
+    }
+
+    /// The planned transform the spectra belong to.
+    pub fn fft(&self) -> &Fft2 {
+        &self.fft
     }
 
     /// Image shape (H, W).

@@ -165,3 +165,155 @@ fn help_explains_units() {
     }
     assert!(Path::new(env!("CARGO_BIN_EXE_scatterscope")).exists());
 }
+
+#[test]
+fn reconstruct_a_simulated_stack_with_every_method() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    let o = scatterscope(&[
+        "simulate",
+        "--scene",
+        "disks",
+        "--size",
+        "32",
+        "--fov",
+        "6.25",
+        "--out",
+        sim.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    let stack = sim.join("counts.exr");
+    let truth = sim.join("truth.exr");
+    for (method, bin) in [
+        ("pnp", None),
+        ("pnp-slice", Some("10")),
+        ("rl", Some("10")),
+        ("rl-sum", None),
+        ("raw", None),
+    ] {
+        let out = dir.path().join(method);
+        let mut args = vec![
+            "reconstruct",
+            stack.to_str().unwrap(),
+            "--method",
+            method,
+            "--truth",
+            truth.to_str().unwrap(),
+            "--rl-iters",
+            "20",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if let Some(b) = bin {
+            args.extend(["--bin", b]);
+        }
+        let o = scatterscope(&args);
+        let (stdout, stderr) = text(&o);
+        assert!(o.status.success(), "{method}: {stderr}");
+        assert!(stdout.contains("output PSNR"), "{method}: {stdout}");
+        for f in [
+            "reconstruction.exr",
+            "reconstruction.png",
+            "trace.csv",
+            "trace.json",
+        ] {
+            assert!(out.join(f).exists(), "{method}: {f} missing");
+        }
+        let csv = std::fs::read_to_string(out.join("trace.csv")).unwrap();
+        assert!(csv.starts_with("method,iteration,wall_s,objective"));
+        assert!(csv.lines().count() >= 2);
+    }
+    let o = scatterscope(&[
+        "reconstruct",
+        stack.to_str().unwrap(),
+        "--method",
+        "rl",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).1.contains("needs --bin K"), "{}", text(&o).1);
+    // The recorded physics can be overridden, and a mismatch is explained.
+    let o = scatterscope(&[
+        "reconstruct",
+        stack.to_str().unwrap(),
+        "--bin-width",
+        "8",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).1.contains("4 ps wide but the physics uses 8 ps"),
+        "{}",
+        text(&o).1
+    );
+}
+
+#[test]
+fn reconstruct_rejects_non_finite_stacks() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    let o = scatterscope(&[
+        "simulate",
+        "--size",
+        "16",
+        "--fov",
+        "3.125",
+        "--out",
+        sim.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    let mut s = Stack::load(&sim.join("counts.exr")).unwrap();
+    s.data[[3, 4, 5]] = f32::INFINITY;
+    let bad = dir.path().join("bad.exr");
+    s.save(&bad).unwrap();
+    fails_with(
+        &[
+            "reconstruct",
+            bad.to_str().unwrap(),
+            "--out",
+            dir.path().to_str().unwrap(),
+        ],
+        &["bad.exr", "bin 3 (t003), row 4, column 5", "inf"],
+    );
+}
+
+#[test]
+fn report_writes_tables_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let o = scatterscope(&[
+        "report",
+        "--scene",
+        "disks",
+        "--size",
+        "32",
+        "--fov",
+        "6.25",
+        "--slice-step",
+        "7",
+        "--rl-iters",
+        "30",
+        "--out",
+        out,
+    ]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stdout.contains("| disks | pnp |") && stdout.contains("margin (dB)"),
+        "{stdout}"
+    );
+    for f in [
+        "summary.md",
+        "summary.csv",
+        "disks/fig4_psnr_per_bin.png",
+        "disks/error_vs_time.png",
+        "disks/per_bin.csv",
+        "disks/trace_pnp.csv",
+    ] {
+        assert!(dir.path().join(f).exists(), "{f} missing");
+    }
+    let per_bin = std::fs::read_to_string(dir.path().join("disks/per_bin.csv")).unwrap();
+    assert_eq!(per_bin.lines().count(), 1 + 3, "bins 0, 7, 14 of 20");
+}

@@ -198,6 +198,11 @@ impl KernelStack {
         self.kernels.slice(s![i, .., ..])
     }
 
+    /// Position in the kernel stack of the setup's bin `index`, if kept.
+    pub fn position_of_bin(&self, index: usize) -> Option<usize> {
+        self.kept_bins().position(|b| b.index == index)
+    }
+
     /// Number of kept bins.
     pub fn len(&self) -> usize {
         self.kernels.shape()[0]

@@ -2,6 +2,9 @@
 
 mod physics_summary;
 mod psf;
+mod recon_args;
+mod reconstruct;
+mod report;
 mod simulate;
 
 use clap::{Parser, Subcommand};
@@ -11,7 +14,8 @@ use clap::{Parser, Subcommand};
 /// Light from an object behind a scattering slab (tissue, fog) reaches a
 /// time-resolving sensor spread in space and time. scatterscope models that
 /// blur with the diffusion approximation (the ST-PSF), simulates photon-count
-/// stacks, and writes them as OpenEXR/.npy with PNG previews.
+/// stacks, writes them as OpenEXR/.npy with PNG previews, and reconstructs the
+/// object with Poisson Plug-and-Play ADMM or Richardson-Lucy.
 #[derive(Debug, Parser)]
 #[command(name = "scatterscope", version, about, long_about)]
 struct Cli {
@@ -23,11 +27,15 @@ struct Cli {
 enum Command {
     Psf(psf::PsfArgs),
     Simulate(simulate::SimulateArgs),
+    Reconstruct(reconstruct::ReconstructArgs),
+    Report(report::ReportArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Psf(args) => psf::run(&args),
         Command::Simulate(args) => simulate::run(&args),
+        Command::Reconstruct(args) => reconstruct::run(&args),
+        Command::Report(args) => report::run(&args),
     }
 }

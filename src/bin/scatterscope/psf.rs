@@ -61,8 +61,9 @@ pub fn run(args: &PsfArgs) -> anyhow::Result<()> {
     );
     let mut worst: (f64, usize) = (0.0, 0);
     for b in &chosen.bins {
-        let diff = kept_position(&integrated, b.index)
-            .zip(kept_position(&point, b.index))
+        let diff = integrated
+            .position_of_bin(b.index)
+            .zip(point.position_of_bin(b.index))
             .map(|(i, p)| relative_l1(integrated.kernel(i), point.kernel(p)));
         if let Some(d) = diff.filter(|d| *d > worst.0) {
             worst = (d, b.index);
@@ -132,13 +133,6 @@ pub fn run(args: &PsfArgs) -> anyhow::Result<()> {
         args.out.display()
     );
     Ok(())
-}
-
-fn kept_position(k: &KernelStack, index: usize) -> Option<usize> {
-    k.bins
-        .iter()
-        .filter(|b| b.kept)
-        .position(|b| b.index == index)
 }
 
 fn relative_l1(a: ArrayView2<f64>, b: ArrayView2<f64>) -> f64 {

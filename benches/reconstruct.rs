@@ -1,0 +1,58 @@
+//! The reconstruction's hot path on the paper preset (256 x 256, 20 bins):
+//! one likelihood value + gradient against the FFTs it needs alone, and one
+//! full (shortened) reconstruction.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use ndarray::parallel::prelude::*;
+use rustfft::num_complex::Complex64;
+use scatterscope::denoise::tv::TotalVariation;
+use scatterscope::forward::{ForwardModel, poisson_counts};
+use scatterscope::physics::{KernelStack, Preset, Sampling};
+use scatterscope::reconstruct::likelihood::PoissonLikelihood;
+use scatterscope::reconstruct::pnp::{PnpOptions, StopRule, pnp_admm};
+use scatterscope::scene::Scene;
+
+fn benches(c: &mut Criterion) {
+    let setup = Preset::Paper.setup();
+    let kernels = KernelStack::build(&setup, Sampling::Integrated).unwrap();
+    let model = ForwardModel::new(&kernels);
+    let truth = Scene::Text.render(256, 256).unwrap();
+    let counts = poisson_counts(&model.expected(truth.view()).counts, 1);
+    let bins: Vec<usize> = (0..kernels.len()).collect();
+    let lik = PoissonLikelihood::new(&model, &counts, &bins, 1e-10);
+    let o: Vec<f64> = truth.iter().map(|v| 0.5 * v + 0.2).collect();
+    c.bench_function("likelihood_gradient_256x256x20", |b| {
+        b.iter(|| lik.evaluate(&o))
+    });
+    // The same 42 transforms with the same parallel structure and nothing else.
+    let fft = model.fft();
+    c.bench_function("likelihood_ffts_only_256x256x20", |b| {
+        b.iter(|| {
+            let spec = fft.forward(&o);
+            let parts: Vec<Vec<Complex64>> = bins
+                .par_iter()
+                .map(|_| fft.forward(&fft.inverse(spec.clone())))
+                .collect();
+            let mut acc = vec![Complex64::default(); fft.spectrum_len()];
+            for p in &parts {
+                acc.iter_mut().zip(p).for_each(|(a, s)| *a += s);
+            }
+            fft.inverse(acc)
+        })
+    });
+    let opts = PnpOptions {
+        max_iters: 10,
+        stop: StopRule::Iterations,
+        ..Default::default()
+    };
+    let tv = TotalVariation::default();
+    let mut group = c.benchmark_group("reconstruction");
+    group.sample_size(10);
+    group.bench_function("pnp_tv_256x256x20_10_iterations", |b| {
+        b.iter(|| pnp_admm(&model, &counts, &bins, &tv, &opts, None, |_| {}).unwrap())
+    });
+    group.finish();
+}
+
+criterion_group!(reconstruct, benches);
+criterion_main!(reconstruct);

@@ -1,0 +1,110 @@
+//! Reconstruction settings shared by `reconstruct` and `report`.
+
+use scatterscope::denoise::tv::TotalVariation;
+use scatterscope::denoise::{Denoiser, Identity};
+use scatterscope::reconstruct::method::MethodOptions;
+use scatterscope::reconstruct::pnp::{PnpOptions, StopRule};
+
+/// The prior plugged into PnP-ADMM.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DenoiserChoice {
+    /// Total variation (Chambolle), weight = gain * sigma.
+    Tv,
+    /// No prior.
+    Identity,
+}
+
+/// Flags of the reconstruction algorithms.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ReconArgs {
+    /// Prior for PnP-ADMM.
+    #[arg(long, value_enum, default_value = "tv")]
+    pub denoiser: DenoiserChoice,
+    /// TV weight per unit of the denoiser's noise sigma.
+    #[arg(long, default_value_t = 1.0)]
+    pub tv_gain: f64,
+    /// ADMM: initial penalty lambda_0.
+    #[arg(long, default_value_t = 1.0)]
+    pub lambda0: f64,
+    /// ADMM: lambda grows by this factor per iteration.
+    #[arg(long, default_value_t = 1.1)]
+    pub lambda_step: f64,
+    /// ADMM: regularisation weight beta; the denoiser gets sigma^2 = beta / lambda.
+    #[arg(long, default_value_t = 0.25)]
+    pub beta: f64,
+    /// ADMM iteration cap.
+    #[arg(long, default_value_t = 60)]
+    pub max_iters: usize,
+    /// ADMM stopping rule besides the cap and residual tolerances:
+    /// discrepancy (data-driven, no truth needed) or iterations (cap only).
+    #[arg(long, value_enum, default_value = "discrepancy")]
+    pub stop: StopRule,
+    /// Iterations without a deviance decrease before the discrepancy rule stops.
+    #[arg(long, default_value_t = 3)]
+    pub patience: usize,
+    /// ADMM primal and dual residual tolerance (RMS per pixel).
+    #[arg(long, default_value_t = 1e-4)]
+    pub residual_tol: f64,
+    /// L-BFGS iterations per o-update.
+    #[arg(long, default_value_t = 20)]
+    pub lbfgs_iters: u64,
+    /// L-BFGS gradient-norm tolerance.
+    #[arg(long, default_value_t = 1e-8)]
+    pub lbfgs_tol: f64,
+    /// Switch point of the surrogate logarithm (Eq. 16).
+    #[arg(long, default_value_t = 1e-10)]
+    pub eps: f64,
+    /// Richardson-Lucy iterations.
+    #[arg(long, default_value_t = 200)]
+    pub rl_iters: usize,
+}
+
+impl ReconArgs {
+    /// The chosen denoiser.
+    pub fn denoiser(&self) -> Box<dyn Denoiser> {
+        match self.denoiser {
+            DenoiserChoice::Tv => Box::new(TotalVariation {
+                gain: self.tv_gain,
+                ..Default::default()
+            }),
+            DenoiserChoice::Identity => Box::new(Identity),
+        }
+    }
+
+    /// The method settings, checked.
+    pub fn options(&self) -> anyhow::Result<MethodOptions> {
+        let positive = |name: &str, v: f64| {
+            anyhow::ensure!(
+                v > 0.0 && v.is_finite(),
+                "--{name} = {v} must be a positive number"
+            );
+            Ok(())
+        };
+        positive("lambda0", self.lambda0)?;
+        positive("beta", self.beta)?;
+        positive("eps", self.eps)?;
+        positive("tv-gain", self.tv_gain)?;
+        anyhow::ensure!(
+            self.lambda_step >= 1.0 && self.lambda_step.is_finite(),
+            "--lambda-step = {} must be at least 1",
+            self.lambda_step
+        );
+        Ok(MethodOptions {
+            pnp: PnpOptions {
+                lambda0: self.lambda0,
+                lambda_step: self.lambda_step,
+                beta: self.beta,
+                max_iters: self.max_iters,
+                primal_tol: self.residual_tol,
+                dual_tol: self.residual_tol,
+                stop: self.stop,
+                patience: self.patience,
+                lbfgs_iters: self.lbfgs_iters,
+                lbfgs_memory: 7,
+                lbfgs_grad_tol: self.lbfgs_tol,
+                eps: self.eps,
+            },
+            rl_iters: self.rl_iters,
+        })
+    }
+}

@@ -1,0 +1,134 @@
+//! `scatterscope reconstruct`: recover the object from a stack.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use scatterscope::config::PhysicsArgs;
+use scatterscope::physics::{Preset, Sampling};
+use scatterscope::reconstruct::method::{Method, run_method};
+use scatterscope::reconstruct::problem::Problem;
+use scatterscope::scene::Scene;
+use scatterscope::stack::Stack;
+use scatterscope::stack::exr_file;
+use scatterscope::stack::preview::write_image;
+
+use crate::recon_args::ReconArgs;
+
+/// Reconstruct the object from a transient stack (.exr or .npy).
+///
+/// Physics comes from the stack's metadata; flags or --config override it
+/// (stacks without physics, e.g. from `bin`, need them). Writes
+/// reconstruction.{exr,png} and the per-iteration trace as trace.{csv,json}.
+#[derive(Debug, clap::Args)]
+pub struct ReconstructArgs {
+    /// The stack file.
+    stack: PathBuf,
+    /// Method: pnp (whole stack), pnp-slice, rl (one bin), rl-sum, raw.
+    #[arg(long, value_enum, default_value = "pnp")]
+    method: Method,
+    /// Bin (0-based, in stack order) for single-bin methods and raw.
+    #[arg(long)]
+    bin: Option<usize>,
+    /// Truth image (PNG/JPEG/EXR) to report PSNR and SSIM against.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    #[command(flatten)]
+    recon: ReconArgs,
+    #[command(flatten)]
+    physics: PhysicsArgs,
+    /// Output directory (created if missing).
+    #[arg(long, default_value = "out/reconstruct")]
+    out: PathBuf,
+}
+
+pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
+    let stack = Stack::load(&args.stack)?;
+    let setup = args.physics.resolve_over(stack.meta.setup)?;
+    if stack.meta.setup.is_none() && args.physics.preset.is_none() && args.physics.config.is_none()
+    {
+        eprintln!(
+            "note: {} records no physics; using the {} preset with your flags",
+            args.stack.display(),
+            Preset::Paper.name()
+        );
+    }
+    let sampling = stack.meta.sampling.unwrap_or(Sampling::Integrated);
+    let problem = Problem::new(&stack, &setup, sampling)
+        .with_context(|| format!("matching {} with its physics", args.stack.display()))?;
+    let (_, h, w) = stack.data.dim();
+    let truth = match &args.truth {
+        Some(p) => Some(Scene::File(p.clone()).render(h, w)?),
+        None => None,
+    };
+    let opts = args.recon.options()?;
+    let denoiser = args.recon.denoiser();
+    let bar = ProgressBar::new_spinner();
+    bar.set_style(ProgressStyle::with_template("{spinner} {elapsed} {msg}").expect("template"));
+    let result = run_method(
+        &problem,
+        args.method,
+        args.bin,
+        denoiser.as_ref(),
+        &opts,
+        truth.as_ref().map(|t| t.view()),
+        |row| {
+            let score = row
+                .psnr
+                .map_or(String::new(), |p| format!(", PSNR {p:.2} dB"));
+            bar.set_message(format!(
+                "{} iteration {}{score}",
+                args.method.name(),
+                row.iteration
+            ));
+            bar.tick();
+        },
+    )?;
+    bar.finish_and_clear();
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating output directory {}", args.out.display()))?;
+    let image = &result.image;
+    exr_file::write_image(
+        image.mapv(|v| v as f32).view(),
+        &args.out.join("reconstruction.exr"),
+    )?;
+    let top = image.iter().fold(1.0f64, |m, &v| m.max(v));
+    write_image(
+        image.view(),
+        Some(top),
+        &args.out.join("reconstruction.png"),
+    )?;
+    result
+        .trace
+        .write(&args.out, "trace")
+        .with_context(|| format!("writing the trace to {}", args.out.display()))?;
+    let last = result.trace.rows.last();
+    println!(
+        "{}{}: {} iterations in {:.2} s",
+        args.method.name(),
+        result
+            .trace
+            .prior
+            .as_ref()
+            .map_or(String::new(), |p| format!(" with prior {p}")),
+        last.map_or(0, |r| r.iteration),
+        last.map_or(0.0, |r| r.wall_s)
+    );
+    for note in &result.trace.notes {
+        println!("  {note}");
+    }
+    if let (Some(t), Some(best)) = (&truth, result.trace.best_psnr()) {
+        println!(
+            "  output PSNR {:.2} dB, SSIM {:.4}; best iteration by truth: {} ({:.2} dB)",
+            scatterscope::metrics::psnr(image.view(), t.view()),
+            scatterscope::metrics::ssim(image.view(), t.view()),
+            best.iteration,
+            best.psnr.unwrap_or(f64::NAN)
+        );
+    }
+    println!(
+        "wrote {}/{{reconstruction.exr, reconstruction.png, trace.csv, trace.json}}",
+        args.out.display()
+    );
+    Ok(())
+}

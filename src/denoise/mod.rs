@@ -1,0 +1,51 @@
+//! Gaussian denoisers used as Plug-and-Play priors.
+//!
+//! A [`Denoiser`] works on images in [0, 1] with a noise standard deviation
+//! on that scale. [`denoise_scaled`] maps an arbitrary image into that range
+//! and the noise level with it, and maps the result back.
+
+pub mod tv;
+
+use ndarray::{Array2, ArrayView2};
+
+/// A Gaussian denoiser: image in [0, 1] and noise sigma -> denoised image.
+pub trait Denoiser: Sync {
+    /// Short name for traces and reports (e.g. `tv(gain=1)`).
+    fn name(&self) -> String;
+
+    /// Denoises `img` (values nominally in [0, 1]) corrupted by white
+    /// Gaussian noise of standard deviation `sigma` on the same scale.
+    fn denoise_unit(&self, img: ArrayView2<f64>, sigma: f64) -> Array2<f64>;
+}
+
+/// The identity: no prior (ADMM then reduces to a damped likelihood ascent).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Identity;
+
+impl Denoiser for Identity {
+    fn name(&self) -> String {
+        "identity".into()
+    }
+
+    fn denoise_unit(&self, img: ArrayView2<f64>, _sigma: f64) -> Array2<f64> {
+        img.to_owned()
+    }
+}
+
+/// Denoises `img` of any range: it is shifted and scaled to [0, 1] by its
+/// minimum and maximum, `sigma` is scaled by the same factor, and the result
+/// is mapped back. A constant image is returned unchanged.
+pub fn denoise_scaled(d: &dyn Denoiser, img: ArrayView2<f64>, sigma: f64) -> Array2<f64> {
+    let (lo, hi) = img
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let range = hi - lo;
+    if range.is_nan() || range <= f64::EPSILON * hi.abs().max(1.0) {
+        return img.to_owned();
+    }
+    let unit = img.mapv(|v| (v - lo) / range);
+    d.denoise_unit(unit.view(), sigma / range)
+        .mapv(|v| v * range + lo)
+}

@@ -1,0 +1,121 @@
+//! The reconstruction methods by name, as the CLI and the report run them.
+
+use ndarray::ArrayView2;
+
+use super::pnp::{PnpOptions, pnp_admm};
+use super::problem::Problem;
+use super::raw::raw_scaled;
+use super::richardson_lucy::richardson_lucy;
+use super::trace::TraceRow;
+use super::{ReconstructError, Reconstruction};
+use crate::denoise::Denoiser;
+
+/// A reconstruction method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    /// Poisson PnP-ADMM on the whole stack (the paper's method).
+    Pnp,
+    /// PnP-ADMM on one bin (Algorithm 1 with K = 1).
+    PnpSlice,
+    /// Richardson-Lucy on one bin.
+    Rl,
+    /// Richardson-Lucy on the time-summed stack with the time-summed kernel.
+    RlSum,
+    /// Counts divided by kernel mass (one bin, or the sum without --bin).
+    Raw,
+}
+
+impl Method {
+    /// Name as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Pnp => "pnp",
+            Method::PnpSlice => "pnp-slice",
+            Method::Rl => "rl",
+            Method::RlSum => "rl-sum",
+            Method::Raw => "raw",
+        }
+    }
+
+    /// Whether the method works on a single bin.
+    pub fn needs_bin(self) -> bool {
+        matches!(self, Method::PnpSlice | Method::Rl)
+    }
+}
+
+/// Settings of every method.
+#[derive(Debug, Clone, Copy)]
+pub struct MethodOptions {
+    /// PnP-ADMM settings.
+    pub pnp: PnpOptions,
+    /// Richardson-Lucy iterations.
+    pub rl_iters: usize,
+}
+
+/// Runs `method` on `problem`; `bin` selects the bin of single-bin methods
+/// (and of `raw`, which otherwise sums all bins).
+pub fn run_method(
+    problem: &Problem,
+    method: Method,
+    bin: Option<usize>,
+    denoiser: &dyn Denoiser,
+    opts: &MethodOptions,
+    truth: Option<ArrayView2<f64>>,
+    on_iter: impl FnMut(&TraceRow),
+) -> Result<Reconstruction, ReconstructError> {
+    let k = problem.counts.shape()[0];
+    if let Some(b) = bin.filter(|&b| b >= k) {
+        return Err(ReconstructError::Shape(format!(
+            "bin {b} does not exist: the stack has bins 0 to {}",
+            k - 1
+        )));
+    }
+    let single = |method: Method| {
+        bin.ok_or_else(|| {
+            ReconstructError::Shape(format!("method {} needs --bin K", method.name()))
+        })
+    };
+    let all = problem.all_bins();
+    let model = &problem.model;
+    match method {
+        Method::Pnp => pnp_admm(
+            model,
+            &problem.counts,
+            &all,
+            denoiser,
+            &opts.pnp,
+            truth,
+            on_iter,
+        ),
+        Method::PnpSlice => {
+            let b = single(method)?;
+            pnp_admm(
+                model,
+                &problem.single_bin(b),
+                &[b],
+                denoiser,
+                &opts.pnp,
+                truth,
+                on_iter,
+            )
+        }
+        Method::Rl => {
+            let b = single(method)?;
+            richardson_lucy(
+                model,
+                &problem.single_bin(b),
+                &[b],
+                opts.rl_iters,
+                truth,
+                on_iter,
+            )
+        }
+        Method::RlSum => {
+            richardson_lucy(model, &problem.counts, &all, opts.rl_iters, truth, on_iter)
+        }
+        Method::Raw => match bin {
+            Some(b) => raw_scaled(model, &problem.single_bin(b), &[b], truth),
+            None => raw_scaled(model, &problem.counts, &all, truth),
+        },
+    }
+}

@@ -1,0 +1,118 @@
+//! Reconstruction of the object from a transient stack.
+//!
+//! - [`pnp`]: Poisson Plug-and-Play ADMM (Algorithm 1) on the whole stack or
+//!   on one bin, with a data-driven stopping rule ([`discrepancy`]).
+//! - [`richardson_lucy`]: the classical baseline, on one bin or on the
+//!   time-summed stack.
+//! - [`raw`]: counts divided by kernel mass, for reference.
+//!
+//! Every method returns the image and a per-iteration [`trace::Trace`].
+
+pub mod discrepancy;
+pub mod likelihood;
+pub mod method;
+pub mod operator;
+pub mod pnp;
+pub mod problem;
+pub mod raw;
+pub mod richardson_lucy;
+pub mod trace;
+
+use ndarray::{Array2, Array3, ArrayView2, Axis};
+
+use crate::metrics;
+use trace::{Trace, TraceRow};
+
+/// Why a reconstruction cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum ReconstructError {
+    /// A count is NaN, infinite or negative.
+    #[error(
+        "counts: bin {bin}, row {row}, column {col} is {value}; counts must be finite and >= 0"
+    )]
+    InvalidCount {
+        /// Bin index in the stack.
+        bin: usize,
+        /// Row.
+        row: usize,
+        /// Column.
+        col: usize,
+        /// The offending value.
+        value: f64,
+    },
+    /// Stack and kernels do not fit together.
+    #[error("{0}")]
+    Shape(String),
+    /// The optimiser reported an error.
+    #[error("L-BFGS o-update: {0}")]
+    Optimiser(String),
+    /// A non-finite value appeared in the estimate.
+    #[error("{method}: the estimate became non-finite at iteration {iteration}")]
+    NonFinite {
+        /// Method name.
+        method: String,
+        /// Iteration at which it happened.
+        iteration: usize,
+    },
+}
+
+/// A reconstructed image and how it was obtained.
+#[derive(Debug, Clone)]
+pub struct Reconstruction {
+    /// The estimate of the object, finite and >= 0.
+    pub image: Array2<f64>,
+    /// Per-iteration trace.
+    pub trace: Trace,
+}
+
+/// Rejects counts that are not finite non-negative numbers.
+pub fn validate_counts(counts: &Array3<f64>) -> Result<(), ReconstructError> {
+    for (bin, img) in counts.axis_iter(Axis(0)).enumerate() {
+        if let Some(((row, col), &value)) = img
+            .indexed_iter()
+            .find(|(_, v)| !v.is_finite() || **v < 0.0)
+        {
+            return Err(ReconstructError::InvalidCount {
+                bin,
+                row,
+                col,
+                value,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Least-squares flat object for the data: total counts over (mass x pixels).
+pub fn flat_level(total_counts: f64, mass: f64, pixels: usize) -> f64 {
+    if mass > 0.0 {
+        total_counts / (mass * pixels as f64)
+    } else {
+        0.0
+    }
+}
+
+/// Fills the truth-dependent columns of a trace row, scoring the estimate
+/// clamped to >= 0 as every method outputs it.
+pub(crate) fn score(row: &mut TraceRow, estimate: ArrayView2<f64>, truth: Option<ArrayView2<f64>>) {
+    if let Some(t) = truth {
+        let clamped = estimate.mapv(|v| v.max(0.0));
+        row.psnr = Some(metrics::psnr(clamped.view(), t));
+        row.ssim = Some(metrics::ssim(clamped.view(), t));
+    }
+}
+
+/// Clamps an estimate to >= 0, failing on any non-finite value.
+pub(crate) fn finish(
+    image: Array2<f64>,
+    method: &str,
+    iteration: usize,
+) -> Result<Array2<f64>, ReconstructError> {
+    if image.iter().any(|v| !v.is_finite()) {
+        return Err(ReconstructError::NonFinite {
+            method: method.into(),
+            iteration,
+        });
+    }
+    Ok(image.mapv(|v| v.max(0.0)))
+}

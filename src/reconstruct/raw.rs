@@ -1,0 +1,32 @@
+//! Raw reference: counts divided by the kernel mass (no deblurring).
+
+use ndarray::{Array3, ArrayView2, Axis};
+
+use super::operator::Convolution;
+use super::trace::{Trace, TraceRow};
+use super::{ReconstructError, Reconstruction, finish, score, validate_counts};
+use crate::forward::ForwardModel;
+
+/// Sum of the counts of `bins` divided by their kernel mass: the object
+/// estimate a perfectly sharp PSF would give.
+pub fn raw_scaled(
+    model: &ForwardModel,
+    counts: &Array3<f64>,
+    bins: &[usize],
+    truth: Option<ArrayView2<f64>>,
+) -> Result<Reconstruction, ReconstructError> {
+    validate_counts(counts)?;
+    let mass = Convolution::from_bins(model, bins).mass();
+    let image = counts
+        .sum_axis(Axis(0))
+        .mapv(|m| if mass > 0.0 { m / mass } else { 0.0 });
+    let image = finish(image, "raw", 0)?;
+    let mut trace = Trace::new(if bins.len() == 1 { "raw" } else { "raw-sum" });
+    let mut row = TraceRow::default();
+    score(&mut row, image.view(), truth);
+    trace.rows.push(row);
+    trace.notes.push(format!(
+        "kernel mass {mass:.4} photons per unit object pixel"
+    ));
+    Ok(Reconstruction { image, trace })
+}

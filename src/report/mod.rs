@@ -1,0 +1,351 @@
+//! The `report`: every method on simulated scenes, against the truth.
+//!
+//! Per scene: a table of PSNR / SSIM / wall time per method, the paper's
+//! Fig. 4 analogue (PSNR per time bin of raw, RL and PnP on that bin, with
+//! the full-stack results as lines) and error-against-run-time curves.
+
+pub mod plot;
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::denoise::Denoiser;
+use crate::forward::{ForwardModel, poisson_counts};
+use crate::physics::{KernelStack, Sampling, Setup};
+use crate::reconstruct::method::{Method, MethodOptions, run_method};
+use crate::reconstruct::problem::Problem;
+use crate::reconstruct::trace::Trace;
+use crate::reconstruct::{ReconstructError, Reconstruction};
+use crate::scene::Scene;
+use crate::stack::preview::write_image;
+use plot::Series;
+
+/// One method's result on one scene.
+#[derive(Debug, Clone, Serialize)]
+pub struct MethodScore {
+    /// Scene name.
+    pub scene: String,
+    /// Method label (e.g. `pnp`, `rl (best bin 96 ps)`).
+    pub method: String,
+    /// Prior, for PnP.
+    pub prior: Option<String>,
+    /// PSNR of the output (dB).
+    pub psnr: f64,
+    /// SSIM of the output.
+    pub ssim: f64,
+    /// Wall time (s).
+    pub wall_s: f64,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Best PSNR over the iterations, chosen with the truth (dB).
+    pub oracle_psnr: f64,
+    /// Iteration of that best PSNR.
+    pub oracle_iteration: usize,
+}
+
+/// Scores of the single-bin methods on one bin.
+#[derive(Debug, Clone, Serialize)]
+pub struct BinScore {
+    /// Bin start (ps).
+    pub start_ps: f64,
+    /// Raw counts / kernel mass.
+    pub raw_psnr: f64,
+    /// Richardson-Lucy, output of the last iteration.
+    pub rl_psnr: f64,
+    /// Richardson-Lucy, best iteration by truth.
+    pub rl_oracle_psnr: f64,
+    /// PnP-ADMM on the bin.
+    pub pnp_psnr: f64,
+}
+
+/// Everything measured on one scene.
+pub struct SceneReport {
+    /// Scene name.
+    pub scene: String,
+    /// Whole-stack methods and the best single-bin results.
+    pub scores: Vec<MethodScore>,
+    /// Per-bin scores (Fig. 4).
+    pub bins: Vec<BinScore>,
+    /// Traces of the whole-stack methods and the best bins.
+    pub traces: Vec<Trace>,
+}
+
+/// Runs every method on `scene` simulated with `setup`, writing images,
+/// traces and plots into `dir`. `slice_step` picks every n-th bin for the
+/// single-bin methods. `progress` receives a line per finished method.
+#[allow(clippy::too_many_arguments)]
+pub fn run_scene(
+    scene: &Scene,
+    setup: &Setup,
+    seed: u64,
+    denoiser: &dyn Denoiser,
+    opts: &MethodOptions,
+    slice_step: usize,
+    dir: &Path,
+    mut progress: impl FnMut(&str),
+) -> Result<SceneReport, ReportError> {
+    let kernels = KernelStack::build(setup, Sampling::Integrated)?;
+    let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
+    let truth = scene.render(h, w)?;
+    let model = ForwardModel::new(&kernels);
+    let expected = model.expected(truth.view());
+    let counts = poisson_counts(&expected.counts, seed);
+    let problem = Problem {
+        model,
+        counts,
+        bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
+        setup: *setup,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| ReportError::Io(dir.display().to_string(), e))?;
+    let name = scene.name();
+    write_image(truth.view(), Some(1.0), &dir.join("truth.png"))?;
+    let run = |method: Method, bin: Option<usize>| -> Result<Reconstruction, ReportError> {
+        Ok(run_method(
+            &problem,
+            method,
+            bin,
+            denoiser,
+            opts,
+            Some(truth.view()),
+            |_| {},
+        )?)
+    };
+    let score = |label: String, r: &Reconstruction| {
+        let last = r.trace.rows.last().expect("every method records a row");
+        let best = r.trace.best_psnr().expect("truth is known");
+        MethodScore {
+            scene: name.clone(),
+            method: label,
+            prior: r.trace.prior.clone(),
+            psnr: crate::metrics::psnr(r.image.view(), truth.view()),
+            ssim: crate::metrics::ssim(r.image.view(), truth.view()),
+            wall_s: last.wall_s,
+            iterations: last.iteration,
+            oracle_psnr: best.psnr.unwrap_or(f64::NAN),
+            oracle_iteration: best.iteration,
+        }
+    };
+    let mut scores = Vec::new();
+    let mut traces = Vec::new();
+    let save = |r: &Reconstruction, file: &str| -> Result<(), ReportError> {
+        let top = r.image.iter().fold(1.0f64, |m, &v| m.max(v));
+        write_image(r.image.view(), Some(top), &dir.join(format!("{file}.png")))?;
+        r.trace
+            .write(dir, &format!("trace_{file}"))
+            .map_err(|e| ReportError::Io(dir.display().to_string(), e))
+    };
+    for method in [Method::Pnp, Method::RlSum, Method::Raw] {
+        let r = run(method, None)?;
+        let label = if method == Method::Raw {
+            "raw-sum"
+        } else {
+            method.name()
+        };
+        save(&r, label)?;
+        progress(&format!("{name}: {label} done"));
+        scores.push(score(label.into(), &r));
+        traces.push(r.trace);
+    }
+    let mut bins = Vec::new();
+    let mut best_slices: [Option<(f64, MethodScore, Reconstruction)>; 2] = [None, None];
+    for k in (0..problem.counts.shape()[0]).step_by(slice_step.max(1)) {
+        let start = problem.bin_starts_ps[k];
+        let raw = run(Method::Raw, Some(k))?;
+        let rl = run(Method::Rl, Some(k))?;
+        let pnp = run(Method::PnpSlice, Some(k))?;
+        let raw_s = score(format!("raw (bin {start} ps)"), &raw);
+        let rl_s = score(format!("rl (bin {start} ps)"), &rl);
+        let pnp_s = score(format!("pnp-slice (bin {start} ps)"), &pnp);
+        bins.push(BinScore {
+            start_ps: start,
+            raw_psnr: raw_s.psnr,
+            rl_psnr: rl_s.psnr,
+            rl_oracle_psnr: rl_s.oracle_psnr,
+            pnp_psnr: pnp_s.psnr,
+        });
+        progress(&format!("{name}: bin {start} ps done"));
+        for (slot, (s, r)) in best_slices.iter_mut().zip([(rl_s, rl), (pnp_s, pnp)]) {
+            // RL is ranked by its best iteration, PnP by its output.
+            let key = if r.trace.method == "rl" {
+                s.oracle_psnr
+            } else {
+                s.psnr
+            };
+            if slot.as_ref().is_none_or(|(best, _, _)| key > *best) {
+                *slot = Some((key, s, r));
+            }
+        }
+    }
+    for (file, (_, s, r)) in ["rl-best-bin", "pnp-slice-best-bin"]
+        .iter()
+        .zip(best_slices.into_iter().flatten())
+    {
+        save(&r, file)?;
+        scores.push(s);
+        traces.push(r.trace);
+    }
+    write_scene_files(dir, &name, &scores, &bins, &traces)?;
+    Ok(SceneReport {
+        scene: name,
+        scores,
+        bins,
+        traces,
+    })
+}
+
+fn write_scene_files(
+    dir: &Path,
+    name: &str,
+    scores: &[MethodScore],
+    bins: &[BinScore],
+    traces: &[Trace],
+) -> Result<(), ReportError> {
+    let mut csv = String::from("start_ps,raw_psnr,rl_psnr,rl_oracle_psnr,pnp_slice_psnr\n");
+    for b in bins {
+        writeln!(
+            csv,
+            "{},{:.4},{:.4},{:.4},{:.4}",
+            b.start_ps, b.raw_psnr, b.rl_psnr, b.rl_oracle_psnr, b.pnp_psnr
+        )
+        .expect("String");
+    }
+    let path = dir.join("per_bin.csv");
+    std::fs::write(&path, csv).map_err(|e| ReportError::Io(path.display().to_string(), e))?;
+    let per_bin = |f: fn(&BinScore) -> f64, label: &str| Series {
+        label: label.into(),
+        points: bins.iter().map(|b| (b.start_ps, f(b))).collect(),
+    };
+    let (x0, x1) = (
+        bins.first().map_or(0.0, |b| b.start_ps),
+        bins.last().map_or(1.0, |b| b.start_ps),
+    );
+    let full = |label: &str| {
+        scores.iter().find(|s| s.method == label).map(|s| Series {
+            label: format!("{label} (all bins)"),
+            points: vec![(x0, s.psnr), (x1, s.psnr)],
+        })
+    };
+    let lines: Vec<Series> = ["raw-sum", "rl-sum", "pnp"]
+        .iter()
+        .filter_map(|l| full(l))
+        .collect();
+    plot::chart(
+        &dir.join("fig4_psnr_per_bin.png"),
+        &format!("{name}: PSNR per time bin (points: that bin only; lines: all bins)"),
+        "bin start (ps)",
+        "PSNR (dB)",
+        &[
+            per_bin(|b| b.raw_psnr, "raw"),
+            per_bin(|b| b.rl_oracle_psnr, "RL (best iteration)"),
+            per_bin(|b| b.pnp_psnr, "PnP-ADMM"),
+        ],
+        &lines,
+        false,
+    )
+    .map_err(ReportError::Plot)?;
+    let curves: Vec<Series> = traces
+        .iter()
+        .filter(|t| t.rows.len() > 1)
+        .map(|t| Series {
+            label: t.method.clone(),
+            points: t
+                .rows
+                .iter()
+                .filter(|r| r.wall_s > 0.0)
+                .filter_map(|r| r.psnr.map(|p| (r.wall_s, p)))
+                .collect(),
+        })
+        .collect();
+    plot::chart(
+        &dir.join("error_vs_time.png"),
+        &format!("{name}: PSNR against wall time"),
+        "wall time (s)",
+        "PSNR (dB)",
+        &[],
+        &curves,
+        true,
+    )
+    .map_err(ReportError::Plot)
+}
+
+/// Markdown table of all scenes with the margins of full-stack PnP over the
+/// best baseline (baselines at their best iteration chosen with the truth).
+pub fn summary_markdown(reports: &[SceneReport]) -> String {
+    let mut md = String::from(
+        "| scene | method | PSNR (dB) | SSIM | wall (s) | iterations | best PSNR by truth (dB) @ iteration |\n|---|---|---|---|---|---|---|\n",
+    );
+    for r in reports {
+        for s in &r.scores {
+            writeln!(
+                md,
+                "| {} | {} | {:.2} | {:.4} | {:.2} | {} | {:.2} @ {} |",
+                s.scene,
+                s.method,
+                s.psnr,
+                s.ssim,
+                s.wall_s,
+                s.iterations,
+                s.oracle_psnr,
+                s.oracle_iteration
+            )
+            .expect("String");
+        }
+    }
+    md.push_str("\n| scene | PnP (data-driven stop) | best baseline (best iteration) | margin (dB) | PnP best by truth | stop rule loss (dB) |\n|---|---|---|---|---|---|\n");
+    for r in reports {
+        let Some(pnp) = r.scores.iter().find(|s| s.method == "pnp") else {
+            continue;
+        };
+        let best = r
+            .scores
+            .iter()
+            .filter(|s| s.method != "pnp")
+            .max_by(|a, b| {
+                a.oracle_psnr
+                    .max(a.psnr)
+                    .total_cmp(&b.oracle_psnr.max(b.psnr))
+            });
+        if let Some(b) = best {
+            let base = b.oracle_psnr.max(b.psnr);
+            writeln!(
+                md,
+                "| {} | {:.2} | {} {:.2} | {:+.2} | {:.2} @ {} | {:.2} |",
+                r.scene,
+                pnp.psnr,
+                b.method,
+                base,
+                pnp.psnr - base,
+                pnp.oracle_psnr,
+                pnp.oracle_iteration,
+                pnp.oracle_psnr - pnp.psnr
+            )
+            .expect("String");
+        }
+    }
+    md
+}
+
+/// Why a report could not be produced.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// Invalid physics.
+    #[error(transparent)]
+    Param(#[from] crate::physics::ParamError),
+    /// A scene could not be rendered.
+    #[error(transparent)]
+    Scene(#[from] crate::scene::SceneLoadError),
+    /// A reconstruction failed.
+    #[error(transparent)]
+    Reconstruct(#[from] ReconstructError),
+    /// An image could not be written.
+    #[error(transparent)]
+    Stack(#[from] crate::stack::StackError),
+    /// A file could not be written.
+    #[error("{0}: {1}")]
+    Io(String, std::io::Error),
+    /// A plot could not be drawn.
+    #[error("plot: {0}")]
+    Plot(String),
+}

@@ -1,0 +1,262 @@
+//! Reconstruction: data term against independent formulas, baselines'
+//! invariants, and stability on extreme inputs.
+
+use ndarray::{Array2, Array3, Axis};
+use scatterscope::denoise::Identity;
+use scatterscope::denoise::tv::TotalVariation;
+use scatterscope::forward::{ForwardModel, poisson_counts};
+use scatterscope::physics::{KernelStack, Preset, Sampling, Setup, TimeBins};
+use scatterscope::reconstruct::likelihood::{PoissonLikelihood, SurrogateLog};
+use scatterscope::reconstruct::operator::Convolution;
+use scatterscope::reconstruct::pnp::{PnpOptions, pnp_admm};
+use scatterscope::reconstruct::richardson_lucy::richardson_lucy;
+use scatterscope::reconstruct::{ReconstructError, validate_counts};
+use scatterscope::scene::Scene;
+
+fn setup(size: usize) -> Setup {
+    let mut s = Preset::Paper.setup();
+    s.sensor.width_px = size;
+    s.sensor.height_px = size;
+    s.sensor.fov_cm = 50.0 * size as f64 / 256.0;
+    s
+}
+
+struct Case {
+    model: ForwardModel,
+    truth: Array2<f64>,
+    counts: Array3<f64>,
+    bins: Vec<usize>,
+}
+
+fn case(size: usize, scene: &str, seed: u64) -> Case {
+    let k = KernelStack::build(&setup(size), Sampling::Integrated).unwrap();
+    let model = ForwardModel::new(&k);
+    let truth = Scene::parse(scene).render(size, size).unwrap();
+    let counts = poisson_counts(&model.expected(truth.view()).counts, seed);
+    let bins = (0..k.len()).collect();
+    Case {
+        model,
+        truth,
+        counts,
+        bins,
+    }
+}
+
+/// L(o) computed the plain way: every bin convolved, every pixel summed.
+fn naive_value(c: &Case, o: &[f64], eps: f64) -> f64 {
+    let kappa = SurrogateLog::new(eps);
+    let mut total = 0.0;
+    for (img, &k) in c.counts.axis_iter(Axis(0)).zip(&c.bins) {
+        let y = Convolution::from_bins(&c.model, &[k]).apply(o);
+        for (yj, &m) in y.iter().zip(img.iter()) {
+            total += yj - m * kappa.value(*yj);
+        }
+    }
+    total
+}
+
+#[test]
+fn likelihood_matches_naive_sum_and_finite_differences() {
+    let mut c = case(24, "disks", 1);
+    // Make one bin all zeros: it must be skipped yet still counted.
+    c.counts.index_axis_mut(Axis(0), 0).fill(0.0);
+    let eps = 1e-3;
+    let lik = PoissonLikelihood::new(&c.model, &c.counts, &c.bins, eps);
+    assert_eq!(lik.skipped_bins(), 1);
+    assert_eq!(lik.ffts_per_gradient(), 2 + 2 * (c.bins.len() - 1));
+    let n = 24 * 24;
+    // A point with some pixels deep in the surrogate region (tiny and negative o).
+    let o: Vec<f64> = (0..n)
+        .map(|i| {
+            if i % 7 == 0 {
+                -1e-3
+            } else {
+                0.05 + (i % 5) as f64 * 0.1
+            }
+        })
+        .collect();
+    let e = lik.evaluate(&o);
+    let naive = naive_value(&c, &o, eps);
+    assert!(
+        (e.value - naive).abs() < 1e-9 * naive.abs(),
+        "{} vs {naive}",
+        e.value
+    );
+    for j in [0, 3, 100, 301, n - 1] {
+        let h = 1e-6;
+        let mut p = o.clone();
+        p[j] += h;
+        let mut m = o.clone();
+        m[j] -= h;
+        let fd = (lik.evaluate(&p).value - lik.evaluate(&m).value) / (2.0 * h);
+        assert!(
+            (fd - e.gradient[j]).abs() < 1e-4 * e.gradient[j].abs().max(1.0),
+            "pixel {j}: {fd} vs {}",
+            e.gradient[j]
+        );
+    }
+}
+
+#[test]
+fn richardson_lucy_conserves_counts_and_improves_on_raw() {
+    let c = case(32, "disks", 2);
+    let total: f64 = c.counts.sum();
+    let op = Convolution::from_bins(&c.model, &c.bins);
+    let r = richardson_lucy(
+        &c.model,
+        &c.counts,
+        &c.bins,
+        30,
+        Some(c.truth.view()),
+        |_| {},
+    )
+    .unwrap();
+    // RL keeps sum(H o) = sum(m) after every step (H^T 1 = mass).
+    assert!((r.image.sum() * op.mass() - total).abs() < 1e-8 * total);
+    assert_eq!(r.trace.rows.len(), 30);
+    let first = r.trace.rows[0].psnr.unwrap();
+    let best = r.trace.best_psnr().unwrap().psnr.unwrap();
+    assert!(best > first + 0.5, "RL did not improve: {first} -> {best}");
+}
+
+#[test]
+fn pnp_on_the_stack_beats_richardson_lucy_on_the_sum() {
+    let c = case(48, "disks", 3);
+    let tv = TotalVariation::default();
+    let pnp = pnp_admm(
+        &c.model,
+        &c.counts,
+        &c.bins,
+        &tv,
+        &PnpOptions::default(),
+        Some(c.truth.view()),
+        |_| {},
+    )
+    .unwrap();
+    let rl = richardson_lucy(
+        &c.model,
+        &c.counts,
+        &c.bins,
+        200,
+        Some(c.truth.view()),
+        |_| {},
+    )
+    .unwrap();
+    let p = scatterscope::metrics::psnr(pnp.image.view(), c.truth.view());
+    let best_rl = rl.trace.best_psnr().unwrap().psnr.unwrap();
+    assert!(p > best_rl, "pnp {p} dB vs best RL {best_rl} dB");
+    assert!(pnp.trace.notes.iter().any(|n| n.starts_with("stopped:")));
+    assert_eq!(pnp.trace.prior.as_deref(), Some("tv(gain=1)"));
+}
+
+fn finite_non_negative(a: &Array2<f64>) -> bool {
+    a.iter().all(|v| v.is_finite() && *v >= 0.0)
+}
+
+#[test]
+fn extreme_inputs_give_finite_images() {
+    let c = case(24, "text", 4);
+    let tv = TotalVariation::default();
+    let opts = PnpOptions {
+        max_iters: 8,
+        ..Default::default()
+    };
+    let run = |counts: &Array3<f64>, opts: &PnpOptions| {
+        pnp_admm(&c.model, counts, &c.bins, &tv, opts, None, |_| {}).unwrap()
+    };
+    // All-zero stack: the estimate is exactly 0 and no iteration runs.
+    let zeros = Array3::zeros(c.counts.dim());
+    let r = run(&zeros, &opts);
+    assert!(r.image.iter().all(|v| *v == 0.0));
+    assert!(r.trace.notes.iter().any(|n| n.contains("no photons")));
+    let rl = richardson_lucy(&c.model, &zeros, &c.bins, 5, None, |_| {}).unwrap();
+    assert!(rl.image.iter().all(|v| *v == 0.0));
+    // A single photon.
+    let mut one = Array3::zeros(c.counts.dim());
+    one[[5, 12, 12]] = 1.0;
+    assert!(finite_non_negative(&run(&one, &opts).image));
+    assert!(finite_non_negative(
+        &richardson_lucy(&c.model, &one, &c.bins, 20, None, |_| {})
+            .unwrap()
+            .image
+    ));
+    // 1e9 photons per pixel.
+    let bright = c.counts.mapv(|m| m * 1e9 / 20.0);
+    assert!(finite_non_negative(&run(&bright, &opts).image));
+    // Huge lambda: the o-update is pinned to v - u.
+    let stiff = PnpOptions {
+        lambda0: 1e12,
+        ..opts
+    };
+    assert!(finite_non_negative(&run(&c.counts, &stiff).image));
+    // Identity prior.
+    let r = pnp_admm(&c.model, &c.counts, &c.bins, &Identity, &opts, None, |_| {}).unwrap();
+    assert!(finite_non_negative(&r.image));
+}
+
+#[test]
+fn nearly_delta_kernel_recovers_the_object() {
+    // No slab, first picoseconds: the kernel is almost a delta.
+    let mut s = setup(32);
+    s.medium.thickness_cm = 0.0;
+    s.bins = TimeBins {
+        start_ps: 0.0,
+        width_ps: 0.01,
+        count: 4,
+    };
+    s.total_photons = 4e4;
+    let k = KernelStack::build(&s, Sampling::Integrated).unwrap();
+    let model = ForwardModel::new(&k);
+    let truth = Scene::Disks.render(32, 32).unwrap();
+    let counts = poisson_counts(&model.expected(truth.view()).counts, 9);
+    let bins: Vec<usize> = (0..k.len()).collect();
+    let r = pnp_admm(
+        &model,
+        &counts,
+        &bins,
+        &TotalVariation::default(),
+        &PnpOptions::default(),
+        Some(truth.view()),
+        |_| {},
+    )
+    .unwrap();
+    let p = scatterscope::metrics::psnr(r.image.view(), truth.view());
+    assert!(p > 25.0, "{p} dB");
+}
+
+#[test]
+fn nan_and_negative_counts_are_rejected_with_position() {
+    let c = case(16, "disks", 5);
+    let mut bad = c.counts.clone();
+    bad[[2, 3, 4]] = f64::NAN;
+    let e = validate_counts(&bad).unwrap_err();
+    assert!(matches!(
+        e,
+        ReconstructError::InvalidCount {
+            bin: 2,
+            row: 3,
+            col: 4,
+            ..
+        }
+    ));
+    assert!(
+        e.to_string().contains("bin 2, row 3, column 4 is NaN"),
+        "{e}"
+    );
+    bad[[2, 3, 4]] = f64::INFINITY;
+    let tv = TotalVariation::default();
+    assert!(
+        pnp_admm(
+            &c.model,
+            &bad,
+            &c.bins,
+            &tv,
+            &PnpOptions::default(),
+            None,
+            |_| {}
+        )
+        .is_err()
+    );
+    bad[[2, 3, 4]] = -1.0;
+    assert!(richardson_lucy(&c.model, &bad, &c.bins, 3, None, |_| {}).is_err());
+}
