@@ -25,5 +25,6 @@ pub mod reconstruct;
 pub mod report;
 pub mod scene;
 pub mod stack;
+pub mod tags;
 
 pub use scatterscope_physics as physics;

@@ -82,7 +82,7 @@ mod tests {
         let t = Array2::from_shape_fn((32, 32), |(r, c)| ((r / 4 + c / 4) % 2) as f64);
         assert!((ssim(t.view(), t.view()) - 1.0).abs() < 1e-12);
         let noisy = Array2::from_shape_fn((32, 32), |(r, c)| {
-            t[[r, c]] + 0.2 * (((r * 7 + c * 13) % 5) as f64 - 2.0) / 2.0
+            t[[r, c]] + 0.6 * (((r * 7 + c * 13) % 5) as f64 - 2.0) / 2.0
         });
         let s = ssim(noisy.view(), t.view());
         assert!(s < 0.9 && s > 0.0, "{s}");

@@ -317,3 +317,140 @@ fn report_writes_tables_and_plots() {
     let per_bin = std::fs::read_to_string(dir.path().join("disks/per_bin.csv")).unwrap();
     assert_eq!(per_bin.lines().count(), 1 + 3, "bins 0, 7, 14 of 20");
 }
+
+#[test]
+fn info_and_bin_on_recorded_files() {
+    use scatterscope::tags::Tag;
+    use scatterscope::tags::picoquant::Imaging;
+    use scatterscope::tags::picoquant::records::RecordType;
+    use scatterscope::tags::picoquant::writer::{PtuWriter, WriterHeader};
+    let dir = tempfile::tempdir().unwrap();
+    // A 2 x 2 image, 3 photons per pixel at micro time 5 (bin 1 of 4 ps bins at 4 ps resolution... 20 ps).
+    let img = Imaging {
+        pixels_x: 2,
+        pixels_y: 2,
+        line_start: 1,
+        line_stop: 2,
+        frame: 0,
+        bidirectional: false,
+    };
+    let h = WriterHeader {
+        resolution_s: 4e-12,
+        sync_rate_hz: 80e6,
+        device: "TestHarp".into(),
+        imaging: Some(img),
+    };
+    let file = dir.path().join("flim.ptu");
+    let mut w = PtuWriter::create(&file, RecordType::GenericT3, &h).unwrap();
+    let mut t = 0;
+    for _line in 0..2 {
+        w.write_tag(Tag::Marker {
+            bits: 1,
+            macro_time: t,
+        })
+        .unwrap();
+        for x in 0..2 {
+            for _ in 0..3 {
+                w.write_tag(Tag::Photon {
+                    channel: 0,
+                    macro_time: t + 10 + x * 20,
+                    micro_time: 5,
+                })
+                .unwrap();
+            }
+        }
+        w.write_tag(Tag::Marker {
+            bits: 2,
+            macro_time: t + 40,
+        })
+        .unwrap();
+        t += 100;
+    }
+    w.finish().unwrap();
+    let o = scatterscope(&["info", file.to_str().unwrap()]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stdout.contains("Generic T3") && stdout.contains("image: 2 x 2 pixels"),
+        "{stdout}"
+    );
+    let out = dir.path().join("bin");
+    let o = scatterscope(&[
+        "bin",
+        file.to_str().unwrap(),
+        "--bin-width",
+        "8ps",
+        "--bins",
+        "4",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stdout.contains("12 photons, 12 binned"), "{stdout}");
+    let stack = Stack::load(&out.join("stack.exr")).unwrap();
+    assert_eq!(stack.data.dim(), (4, 2, 2));
+    // micro time 5 x 4 ps = 20 ps falls in the 16-24 ps bin.
+    for r in 0..2 {
+        for c in 0..2 {
+            assert_eq!(stack.data[[2, r, c]], 3.0);
+        }
+    }
+    assert_eq!(stack.meta.bin_starts_ps, vec![0.0, 8.0, 16.0, 24.0]);
+    // T2 files cannot be binned by micro time.
+    let t2 = dir.path().join("t2.ptu");
+    let mut w = PtuWriter::create(&t2, RecordType::GenericT2, &h).unwrap();
+    w.write_tag(Tag::Photon {
+        channel: 1,
+        macro_time: 5,
+        micro_time: 0,
+    })
+    .unwrap();
+    w.finish().unwrap();
+    fails_with(
+        &["bin", t2.to_str().unwrap(), "--out", out.to_str().unwrap()],
+        &["t2.ptu", "binning needs a T3 file"],
+    );
+    fails_with(
+        &["info", dir.path().join("missing.ptu").to_str().unwrap()],
+        &["missing.ptu"],
+    );
+
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/picoquant-sample-data/hydraharp/v20_t3.ptu");
+    if !sample.exists() {
+        eprintln!(
+            "skipping the sample-file part: {} not present",
+            sample.display()
+        );
+        return;
+    }
+    let o = scatterscope(&[
+        "bin",
+        sample.to_str().unwrap(),
+        "--channel",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stdout.contains("77883 photons") && stdout.contains("45012 on other channels"),
+        "{stdout}"
+    );
+    let stack = Stack::load(&out.join("stack.exr")).unwrap();
+    assert_eq!(stack.data.dim().1, 1);
+    // Default binning covers the whole sync period at the TCSPC resolution.
+    assert_eq!(stack.meta.bin_width_ps, 64.0);
+    let binned = stdout
+        .split(" binned")
+        .next()
+        .unwrap()
+        .rsplit(", ")
+        .next()
+        .unwrap()
+        .parse::<f64>()
+        .unwrap();
+    assert_eq!(stack.total(), binned);
+}

@@ -146,7 +146,7 @@ fn pnp_on_the_stack_beats_richardson_lucy_on_the_sum() {
     let best_rl = rl.trace.best_psnr().unwrap().psnr.unwrap();
     assert!(p > best_rl, "pnp {p} dB vs best RL {best_rl} dB");
     assert!(pnp.trace.notes.iter().any(|n| n.starts_with("stopped:")));
-    assert_eq!(pnp.trace.prior.as_deref(), Some("tv(gain=1)"));
+    assert_eq!(pnp.trace.prior.as_deref(), Some("tv(gain=0.5)"));
 }
 
 fn finite_non_negative(a: &Array2<f64>) -> bool {

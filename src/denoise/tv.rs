@@ -25,7 +25,7 @@ pub struct TotalVariation {
 impl Default for TotalVariation {
     fn default() -> Self {
         Self {
-            gain: 1.0,
+            gain: 0.5,
             max_iters: 200,
             tol: 1e-4,
         }

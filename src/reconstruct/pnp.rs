@@ -15,18 +15,17 @@
 //! Output: `v`, the iterate the prior has seen; at convergence `o = v`.
 //!
 //! Stopping: an iteration cap, primal and dual residual tolerances, and by
-//! default a data-driven rule on the Poisson deviance `D(v)` of the output
-//! iterate against the deviance `E` that Poisson noise alone produces
-//! ([`super::discrepancy`]). As sigma keeps shrinking, ADMM eventually fits
-//! noise and the image degrades. Along the run `D(v)` first falls; on some
-//! scenes it drops below `E` (the discrepancy principle is met) and later
-//! rises above it again. The rule returns the last iterate with `D <= E`,
-//! stopping as soon as `D` climbs back above `E`; on scenes where `D` never
-//! reaches `E` it stops once `D` has not decreased for `patience` iterations
-//! and returns the iterate with the smallest `D`. Measured against the best
-//! iteration chosen with the truth on the built-in scenes (BENCHMARKS.md),
-//! this costs 0.0-0.2 dB, where stopping at the first `D <= E` (the classical
-//! principle) or at the smallest `D` loses up to 4.9 dB on smooth scenes.
+//! default a rule that needs no truth, built on the Poisson deviance `D(v)`
+//! of the output iterate ([`super::discrepancy`]). As sigma keeps shrinking,
+//! ADMM eventually fits noise and the image degrades; `D(v)` first falls
+//! while the iterate gains detail the data supports, then levels off or
+//! rises. The rule stops once `D(v)` has not decreased for `patience`
+//! iterations and returns the iterate with the smallest `D(v)`. The trace
+//! also records the deviance `E` that Poisson noise alone would produce;
+//! stopping where `D` first reaches `E` (the classical discrepancy
+//! principle) was measured too and stops too early on some scenes (0.7 dB
+//! lost on the Siemens star). How close the rule comes to the best
+//! iteration chosen with the truth is measured in BENCHMARKS.md.
 
 use std::sync::Mutex;
 use std::time::Instant;
@@ -46,8 +45,8 @@ use crate::forward::ForwardModel;
 /// When ADMM stops, besides the iteration cap and residual tolerances.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum StopRule {
-    /// Poisson discrepancy principle (needs no truth).
-    Discrepancy,
+    /// Smallest Poisson deviance of the output, with patience (needs no truth).
+    Deviance,
     /// Only the iteration cap and the residual tolerances.
     Iterations,
 }
@@ -90,7 +89,7 @@ impl Default for PnpOptions {
             max_iters: 60,
             primal_tol: 1e-4,
             dual_tol: 1e-4,
-            stop: StopRule::Discrepancy,
+            stop: StopRule::Deviance,
             patience: 3,
             lbfgs_iters: 20,
             lbfgs_memory: 7,
@@ -238,10 +237,8 @@ pub fn pnp_admm(
     trace.rows.push(row0);
     let mut stopped = format!("iteration cap {}", opts.max_iters);
     let mut budget_hits = 0usize;
-    // Smallest deviance seen, and the last iterate with D <= E, each with
-    // its deviance and iteration.
+    // Smallest deviance seen, with its iteration and iterate.
     let mut smallest: Option<(f64, usize, Array2<f64>)> = None;
-    let mut consistent: Option<(f64, usize, Array2<f64>)> = None;
     for it in 1..=opts.max_iters {
         let z: Vec<f64> = v.iter().zip(&u).map(|(vj, uj)| vj - uj).collect();
         let best = Mutex::new(None);
@@ -306,22 +303,14 @@ pub fn pnp_admm(
         on_iter(&row);
         trace.rows.push(row);
         lambda *= opts.lambda_step;
-        if opts.stop == StopRule::Discrepancy {
+        if opts.stop == StopRule::Deviance {
             if smallest.as_ref().is_none_or(|(d, _, _)| dev < *d) {
                 smallest = Some((dev, it, v.clone()));
             }
-            if dev <= expected {
-                consistent = Some((dev, it, v.clone()));
-            } else if let Some((d, at, _)) = &consistent {
+            let (best_dev, best_it, _) = smallest.as_ref().expect("set above");
+            if it - best_it >= opts.patience {
                 stopped = format!(
-                    "deviance rose above the Poisson noise level ({dev:.1} > {expected:.1}) at iteration {it}; returning iteration {at}, the last within it (deviance {d:.1})"
-                );
-                break;
-            } else if let Some((d, at, _)) = &smallest
-                && it - at >= opts.patience
-            {
-                stopped = format!(
-                    "deviance has not decreased for {} iterations and never reached the noise level ({expected:.1}); returning iteration {at} (deviance {d:.1})",
+                    "deviance has not decreased for {} iterations; returning iteration {best_it} (deviance {best_dev:.1}, {expected:.1} expected from Poisson noise)",
                     opts.patience
                 );
                 break;
@@ -339,7 +328,7 @@ pub fn pnp_admm(
             evaluation_budget(opts)
         ));
     }
-    let (output, iteration) = match consistent.or(smallest) {
+    let (output, iteration) = match smallest {
         Some((_, it, img)) => (img, it),
         None => (v, trace.rows.len() - 1),
     };

@@ -6,6 +6,7 @@ mod recon_args;
 mod reconstruct;
 mod report;
 mod simulate;
+mod tags_cmd;
 
 use clap::{Parser, Subcommand};
 
@@ -29,6 +30,8 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     Reconstruct(reconstruct::ReconstructArgs),
     Report(report::ReportArgs),
+    Info(tags_cmd::InfoArgs),
+    Bin(tags_cmd::BinArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -37,5 +40,7 @@ fn main() -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(&args),
         Command::Reconstruct(args) => reconstruct::run(&args),
         Command::Report(args) => report::run(&args),
+        Command::Info(args) => tags_cmd::info(&args),
+        Command::Bin(args) => tags_cmd::bin(&args),
     }
 }

@@ -21,7 +21,7 @@ pub struct ReconArgs {
     #[arg(long, value_enum, default_value = "tv")]
     pub denoiser: DenoiserChoice,
     /// TV weight per unit of the denoiser's noise sigma.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 0.5)]
     pub tv_gain: f64,
     /// ADMM: initial penalty lambda_0.
     #[arg(long, default_value_t = 1.0)]
@@ -36,10 +36,11 @@ pub struct ReconArgs {
     #[arg(long, default_value_t = 60)]
     pub max_iters: usize,
     /// ADMM stopping rule besides the cap and residual tolerances:
-    /// discrepancy (data-driven, no truth needed) or iterations (cap only).
-    #[arg(long, value_enum, default_value = "discrepancy")]
+    /// deviance (stop when the Poisson deviance of the output stops falling;
+    /// no truth needed) or iterations (cap only).
+    #[arg(long, value_enum, default_value = "deviance")]
     pub stop: StopRule,
-    /// Iterations without a deviance decrease before the discrepancy rule stops.
+    /// Iterations without a deviance decrease before the deviance rule stops.
     #[arg(long, default_value_t = 3)]
     pub patience: usize,
     /// ADMM primal and dual residual tolerance (RMS per pixel).

@@ -1,0 +1,300 @@
+//! `scatterscope info` and `scatterscope bin`: recorded time-tag files.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use scatterscope::stack::preview::{SheetScale, write_contact_sheet};
+use scatterscope::stack::{META_VERSION, Stack, StackMeta, ValueKind};
+use scatterscope::tags::Tag;
+use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
+use scatterscope::tags::picoquant::records::Decoder;
+use scatterscope::tags::picoquant::{self, Container, FileInfo, TtrError};
+
+/// Show what a PicoQuant file (PTU, HT3, HT2) holds.
+///
+/// Prints the header (device, record type, resolutions, sync rate, record
+/// counts, imaging tags) and, from one pass over the records, photons per
+/// channel, markers, overflows and the measured duration.
+#[derive(Debug, clap::Args)]
+pub struct InfoArgs {
+    /// The file.
+    file: PathBuf,
+}
+
+/// Bin a T3 file into a transient stack (counts per micro-time bin and pixel).
+///
+/// Single-pixel files give a 1 x 1 stack; --pixels channel makes each input
+/// channel a pixel (SPAD arrays); imaging files (Measurement_SubMode 3) are
+/// binned into their scanned image from the line and frame markers.
+#[derive(Debug, clap::Args)]
+pub struct BinArgs {
+    /// The file.
+    file: PathBuf,
+    /// Bin width (default unit ps; default: the file's TCSPC resolution).
+    #[arg(long, value_parser = scatterscope::config::parse_ps)]
+    bin_width: Option<f64>,
+    /// Start of the first bin after the sync (default unit ps).
+    #[arg(long, default_value = "0", value_parser = scatterscope::config::parse_ps)]
+    t_start: f64,
+    /// Number of bins (default: enough to cover one sync period).
+    #[arg(long)]
+    bins: Option<usize>,
+    /// Keep only photons of this input channel (as numbered in the records).
+    #[arg(long)]
+    channel: Option<u8>,
+    /// Pixel mapping: auto (image for imaging files, else single), single, channel.
+    #[arg(long, default_value = "auto")]
+    pixels: String,
+    /// Frames of imaging files: sum, all (one stack per frame) or a frame number.
+    #[arg(long, default_value = "sum")]
+    frames: String,
+    /// Bin the complete records of a cut file instead of failing.
+    #[arg(long)]
+    allow_truncated: bool,
+    /// Output directory (created if missing).
+    #[arg(long, default_value = "out/bin")]
+    out: PathBuf,
+}
+
+pub fn info(args: &InfoArgs) -> anyhow::Result<()> {
+    let (info, mut reader) = picoquant::open(&args.file)?;
+    print_header(&info);
+    let mut decoder = Decoder::new(info.record_type);
+    let mut photons: BTreeMap<u8, u64> = BTreeMap::new();
+    let (mut markers, mut syncs, mut overflows, mut last) = (0u64, 0u64, 0u64, 0u64);
+    let mut chunk = Vec::new();
+    let outcome = loop {
+        match reader.next_chunk(&mut chunk) {
+            Ok(true) => {}
+            Ok(false) => break Ok(()),
+            Err(e) => break Err(e),
+        }
+        for &rec in &chunk {
+            match decoder.decode(rec) {
+                None => overflows += 1,
+                Some(Tag::Photon {
+                    channel,
+                    macro_time,
+                    ..
+                }) => {
+                    *photons.entry(channel).or_default() += 1;
+                    last = macro_time;
+                }
+                Some(Tag::Marker { macro_time, .. }) => {
+                    markers += 1;
+                    last = macro_time;
+                }
+                Some(Tag::Sync { macro_time }) => {
+                    syncs += 1;
+                    last = macro_time;
+                }
+            }
+        }
+    };
+    println!("photons per channel: {photons:?}");
+    println!("markers: {markers}, syncs: {syncs}, overflow records: {overflows}");
+    println!(
+        "measured duration: {:.6} s (last event)",
+        last as f64 * info.macro_unit_s
+    );
+    if let Err(e) = outcome {
+        println!("warning: {e}");
+    }
+    Ok(())
+}
+
+fn print_header(info: &FileInfo) {
+    let container = match &info.container {
+        Container::Ptu(v) => format!("PTU {v}"),
+        Container::HydraHarpLegacy(v) => format!("HydraHarp HT3/HT2 {v}"),
+    };
+    println!("file: {}", info.path.display());
+    println!("container: {container}; device: {}", info.device);
+    println!(
+        "record type: {} (0x{:08X})",
+        info.record_type.name(),
+        info.record_type.code()
+    );
+    println!(
+        "resolution: {:.3} ps; macro unit: {:.6e} s{}",
+        info.resolution_s * 1e12,
+        info.macro_unit_s,
+        info.sync_rate_hz
+            .map_or(String::new(), |r| format!("; sync rate {r} Hz"))
+    );
+    println!(
+        "records: {} announced, {} present{}",
+        info.records_announced,
+        info.records_present,
+        if info.trailing_bytes > 0 {
+            format!(", {} trailing bytes", info.trailing_bytes)
+        } else {
+            String::new()
+        }
+    );
+    if let Some(d) = info.acquisition_time_s() {
+        println!("acquisition time set: {d} s");
+    }
+    if let Some(d) = info.stopped_after_s() {
+        println!("stopped after: {d} s");
+    }
+    println!("measurement sub mode: {}", info.sub_mode);
+    if let Some(img) = &info.imaging {
+        println!(
+            "image: {} x {} pixels, line start mask {}, line stop mask {}, frame mask {}, bidirectional {}",
+            img.pixels_x, img.pixels_y, img.line_start, img.line_stop, img.frame, img.bidirectional
+        );
+    }
+}
+
+fn parse_frames(s: &str) -> anyhow::Result<FrameSelect> {
+    Ok(match s {
+        "sum" => FrameSelect::Sum,
+        "all" => FrameSelect::All,
+        n => FrameSelect::One(
+            n.parse()
+                .with_context(|| format!("--frames {n}: use sum, all or a frame number"))?,
+        ),
+    })
+}
+
+pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
+    let (info, mut reader) = picoquant::open(&args.file)?;
+    anyhow::ensure!(
+        info.record_type.is_t3(),
+        "{}: {} records carry no micro time; binning needs a T3 file",
+        args.file.display(),
+        info.record_type.name()
+    );
+    let res_ps = info.resolution_s * 1e12;
+    let width_ps = args.bin_width.unwrap_or(res_ps);
+    anyhow::ensure!(
+        width_ps > 0.0 && width_ps.is_finite(),
+        "--bin-width {width_ps} ps must be positive"
+    );
+    let bins = match args.bins {
+        Some(b) => b,
+        None => ((info.macro_unit_s * 1e12 - args.t_start) / width_ps)
+            .ceil()
+            .max(1.0) as usize,
+    };
+    anyhow::ensure!(
+        (1..=65_536).contains(&bins),
+        "--bins {bins}: use 1 to 65536 bins"
+    );
+    let map = match (args.pixels.as_str(), info.imaging) {
+        ("auto", Some(img)) => PixelMap::Scan(img),
+        ("auto" | "single", _) => PixelMap::Single,
+        ("channel", _) => PixelMap::Channel { width: 64 },
+        (other, _) => anyhow::bail!("--pixels {other}: use auto, single or channel"),
+    };
+    let frames = parse_frames(&args.frames)?;
+    let window = TimeWindow {
+        start: args.t_start / res_ps,
+        width: width_ps / res_ps,
+        bins,
+    };
+    let mut binner = Binner::new(window, map, args.channel, frames);
+    let mut decoder = Decoder::new(info.record_type);
+    let start = Instant::now();
+    let mut chunk = Vec::new();
+    let mut truncated = None;
+    loop {
+        match reader.next_chunk(&mut chunk) {
+            Ok(true) => chunk.iter().for_each(|&r| binner.push(decoder.decode(r))),
+            Ok(false) => break,
+            Err(e @ TtrError::Truncated { .. }) if args.allow_truncated => {
+                truncated = Some(e.to_string());
+                break;
+            }
+            Err(e) => {
+                return Err(anyhow::anyhow!(
+                    "{}: {e} (pass --allow-truncated to bin the complete records)",
+                    args.file.display()
+                ));
+            }
+        }
+    }
+    let elapsed = start.elapsed().as_secs_f64();
+    let (stacks, acc) = binner.finish();
+    let stacks: Vec<_> = if let PixelMap::Channel { .. } = map {
+        // Trim the channel row to the highest channel that saw a photon.
+        let used = stacks[0]
+            .axis_iter(ndarray::Axis(2))
+            .rposition(|c| c.iter().any(|&v| v > 0))
+            .map_or(1, |p| p + 1);
+        stacks
+            .iter()
+            .map(|s| s.slice(ndarray::s![.., .., ..used]).to_owned())
+            .collect()
+    } else {
+        stacks
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating output directory {}", args.out.display()))?;
+    let many = stacks.len() > 1;
+    for (f, counts) in stacks.iter().enumerate() {
+        let stack = Stack {
+            data: counts.mapv(|c| c as f32),
+            meta: StackMeta {
+                version: META_VERSION,
+                kind: ValueKind::Counts,
+                bin_starts_ps: (0..bins)
+                    .map(|k| args.t_start + k as f64 * width_ps)
+                    .collect(),
+                bin_width_ps: width_ps,
+                // Object-plane pitch is not in the file; reconstruction takes
+                // the field of view from --fov.
+                pixel_pitch_cm: 1.0,
+                setup: None,
+                sampling: None,
+                dropped_bins: Vec::new(),
+                clamped_negative: 0,
+                seed: None,
+                source: format!(
+                    "scatterscope bin {} ({}, {})",
+                    args.file.display(),
+                    info.device,
+                    info.record_type.name()
+                ),
+            },
+        };
+        let stem = if many {
+            format!("stack_f{f:03}")
+        } else {
+            "stack".into()
+        };
+        stack.save(&args.out.join(format!("{stem}.exr")))?;
+        write_contact_sheet(
+            &stack,
+            SheetScale::Shared,
+            &args.out.join(format!("{stem}.png")),
+        )?;
+    }
+    println!(
+        "{} records in {:.3} s ({:.0} M records/s): {} photons, {} binned, {} outside the time window, {} on other channels, {} outside the image; {} markers, {} frames",
+        acc.records,
+        elapsed,
+        acc.records as f64 / elapsed.max(1e-9) / 1e6,
+        acc.received,
+        acc.binned,
+        acc.outside_window,
+        acc.other_channel,
+        acc.outside_image,
+        acc.markers,
+        acc.frames
+    );
+    if let Some(t) = truncated {
+        println!("warning: {t}");
+    }
+    let (_, h, w) = stacks[0].dim();
+    println!(
+        "wrote {} stack(s) of {bins} x {h} x {w} ({width_ps} ps bins from {} ps) to {}",
+        stacks.len(),
+        args.t_start,
+        args.out.display()
+    );
+    Ok(())
+}

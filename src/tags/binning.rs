@@ -1,0 +1,298 @@
+//! Tags -> transient stack: histogram photons by micro time into K bins per
+//! pixel, where the pixel is fixed (single-pixel files), the input channel
+//! (SPAD arrays), or the scan position between line markers (FLIM images).
+//!
+//! Every photon is accounted for: binned, outside the time window, on
+//! another channel, outside the image (before the first line, beyond the
+//! last line or pixel), and the counts balance.
+
+use ndarray::Array3;
+
+use super::Tag;
+use super::picoquant::Imaging;
+
+/// How photons map to pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PixelMap {
+    /// Every photon in one pixel (1 x 1 image).
+    Single,
+    /// The input channel is the pixel index of a `width`-wide row of pixels.
+    Channel {
+        /// Number of pixels (channels 0..width).
+        width: usize,
+    },
+    /// Scanned image from line/frame markers.
+    Scan(Imaging),
+}
+
+/// Which frames of a scanned image to keep.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameSelect {
+    /// Sum all frames into one stack.
+    Sum,
+    /// Keep every frame as its own stack.
+    All,
+    /// Keep only frame `n` (0-based).
+    One(usize),
+}
+
+/// Micro-time binning: `bins` bins of `width` micro-time units from `start`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimeWindow {
+    /// First bin start (micro-time units, may be fractional).
+    pub start: f64,
+    /// Bin width (micro-time units).
+    pub width: f64,
+    /// Number of bins.
+    pub bins: usize,
+}
+
+/// Photon bookkeeping; `received = binned + outside_window + other_channel
+/// + outside_image`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Accounting {
+    /// Records decoded (overflows included).
+    pub records: u64,
+    /// Photon records.
+    pub received: u64,
+    /// Photons in a stack bin.
+    pub binned: u64,
+    /// Photons whose micro time falls outside the window.
+    pub outside_window: u64,
+    /// Photons on channels that were not selected.
+    pub other_channel: u64,
+    /// Photons outside the image (before the first line, between lines,
+    /// beyond the last line or frame).
+    pub outside_image: u64,
+    /// Marker records.
+    pub markers: u64,
+    /// Frames seen (scanned images).
+    pub frames: u64,
+}
+
+impl Accounting {
+    /// Whether every photon is in exactly one category.
+    pub fn balances(&self) -> bool {
+        self.received == self.binned + self.outside_window + self.other_channel + self.outside_image
+    }
+}
+
+/// Micro times covered by the lookup table: every T3 format's range (15 bits).
+const MICRO_LUT_LEN: usize = 1 << 15;
+/// Lookup-table entry of a micro time outside the window.
+const OUTSIDE: u16 = u16::MAX;
+
+/// Builds stacks from a stream of tags.
+pub struct Binner {
+    window: TimeWindow,
+    /// Bin of every possible micro time; a table lookup instead of a
+    /// floating-point division per photon (the decode + bin loop is the
+    /// throughput-critical path, see BENCHMARKS.md).
+    micro_lut: Vec<u16>,
+    map: PixelMap,
+    channel: Option<u8>,
+    frames: FrameSelect,
+    /// (bins, rows, columns) of every stack.
+    shape: (usize, usize, usize),
+    /// Flat row-major counts of each kept frame (one when summing).
+    stacks: Vec<Vec<u32>>,
+    accounting: Accounting,
+    scan: ScanState,
+}
+
+#[derive(Default)]
+struct ScanState {
+    frame: usize,
+    line: usize,
+    lines_in_frame: usize,
+    line_start: Option<u64>,
+    /// (macro time, micro bin) of photons of the open line.
+    pending: Vec<(u64, usize)>,
+}
+
+impl Binner {
+    /// A binner with the given window, pixel map, optional channel filter
+    /// and frame selection.
+    pub fn new(
+        window: TimeWindow,
+        map: PixelMap,
+        channel: Option<u8>,
+        frames: FrameSelect,
+    ) -> Self {
+        // More bins than a u16 can name: no table, the division path runs.
+        let lut_len = if window.bins < usize::from(OUTSIDE) {
+            MICRO_LUT_LEN
+        } else {
+            0
+        };
+        let micro_lut = (0..lut_len)
+            .map(|m| {
+                let x = (m as f64 - window.start) / window.width;
+                if x >= 0.0 && x < window.bins as f64 {
+                    x as u16
+                } else {
+                    OUTSIDE
+                }
+            })
+            .collect();
+        let shape = match map {
+            PixelMap::Single => (window.bins, 1, 1),
+            PixelMap::Channel { width } => (window.bins, 1, width),
+            PixelMap::Scan(img) => (window.bins, img.pixels_y, img.pixels_x),
+        };
+        Self {
+            window,
+            micro_lut,
+            map,
+            channel,
+            frames,
+            shape,
+            stacks: Vec::new(),
+            accounting: Accounting::default(),
+            scan: ScanState::default(),
+        }
+    }
+
+    fn stack_for_frame(&mut self, frame: usize) -> Option<&mut Vec<u32>> {
+        let index = match self.frames {
+            FrameSelect::Sum => 0,
+            FrameSelect::All => frame,
+            FrameSelect::One(n) if n == frame => 0,
+            FrameSelect::One(_) => return None,
+        };
+        if index >= self.stacks.len() {
+            let (k, h, w) = self.shape;
+            self.stacks.resize_with(index + 1, || vec![0; k * h * w]);
+        }
+        Some(&mut self.stacks[index])
+    }
+
+    #[inline]
+    fn micro_bin(&self, micro: u32) -> Option<usize> {
+        match self.micro_lut.get(micro as usize) {
+            Some(&OUTSIDE) => None,
+            Some(&b) => Some(usize::from(b)),
+            None => {
+                let x = (f64::from(micro) - self.window.start) / self.window.width;
+                (x >= 0.0 && x < self.window.bins as f64).then_some(x as usize)
+            }
+        }
+    }
+
+    /// Feeds one decoded record's tag (`None` for overflow records).
+    #[inline]
+    pub fn push(&mut self, tag: Option<Tag>) {
+        self.accounting.records += 1;
+        match tag {
+            None | Some(Tag::Sync { .. }) => {}
+            Some(Tag::Photon {
+                channel,
+                macro_time,
+                micro_time,
+            }) => {
+                self.accounting.received += 1;
+                if self.channel.is_some_and(|c| c != channel) {
+                    self.accounting.other_channel += 1;
+                    return;
+                }
+                let Some(bin) = self.micro_bin(micro_time) else {
+                    self.accounting.outside_window += 1;
+                    return;
+                };
+                match self.map {
+                    PixelMap::Single => self.bin_at(0, bin, 0, 0),
+                    PixelMap::Channel { width } => {
+                        if usize::from(channel) < width {
+                            self.bin_at(0, bin, 0, usize::from(channel));
+                        } else {
+                            self.accounting.outside_image += 1;
+                        }
+                    }
+                    PixelMap::Scan(_) => {
+                        if self.scan.line_start.is_some() {
+                            self.scan.pending.push((macro_time, bin));
+                        } else {
+                            self.accounting.outside_image += 1;
+                        }
+                    }
+                }
+            }
+            Some(Tag::Marker { bits, macro_time }) => {
+                self.accounting.markers += 1;
+                if let PixelMap::Scan(img) = self.map {
+                    self.scan_marker(img, bits, macro_time);
+                }
+            }
+        }
+    }
+
+    #[inline]
+    fn bin_at(&mut self, frame: usize, bin: usize, row: usize, col: usize) {
+        let (_, h, w) = self.shape;
+        match self.stack_for_frame(frame) {
+            Some(stack) => {
+                stack[(bin * h + row) * w + col] += 1;
+                self.accounting.binned += 1;
+            }
+            None => self.accounting.outside_image += 1,
+        }
+    }
+
+    fn scan_marker(&mut self, img: Imaging, bits: u8, t: u64) {
+        if bits & img.line_start != 0 {
+            // A start without a stop: photons of the unfinished line are lost.
+            self.accounting.outside_image += self.scan.pending.len() as u64;
+            self.scan.pending.clear();
+            self.scan.line_start = Some(t);
+        }
+        if bits & img.line_stop != 0
+            && let Some(start) = self.scan.line_start.take()
+        {
+            let pending = std::mem::take(&mut self.scan.pending);
+            let duration = t.saturating_sub(start).max(1) as f64;
+            let row = self.scan.line;
+            let reverse = img.bidirectional && row % 2 == 1;
+            for (pt, bin) in pending {
+                let x = (pt.saturating_sub(start) as f64 / duration * img.pixels_x as f64) as usize;
+                if row < img.pixels_y && x < img.pixels_x {
+                    let col = if reverse { img.pixels_x - 1 - x } else { x };
+                    self.bin_at(self.scan.frame, bin, row, col);
+                } else {
+                    self.accounting.outside_image += 1;
+                }
+            }
+            self.scan.line += 1;
+            self.scan.lines_in_frame += 1;
+        }
+        if img.frame != 0 && bits & img.frame != 0 {
+            // Frame markers precede their lines in some software and follow
+            // them in other (SymPhoTime): a frame ends at a frame marker only
+            // if it has lines, so neither convention loses or splits a frame.
+            if self.scan.lines_in_frame > 0 {
+                self.scan.frame += 1;
+                self.accounting.frames += 1;
+            }
+            self.scan.line = 0;
+            self.scan.lines_in_frame = 0;
+        }
+    }
+
+    /// Ends the stream: photons of an unfinished line count as outside the
+    /// image; a last frame with lines counts as a frame.
+    pub fn finish(mut self) -> (Vec<Array3<u32>>, Accounting) {
+        self.accounting.outside_image += self.scan.pending.len() as u64;
+        if self.scan.lines_in_frame > 0 {
+            self.accounting.frames += 1;
+        }
+        if self.stacks.is_empty() {
+            let (k, h, w) = self.shape;
+            self.stacks.push(vec![0; k * h * w]);
+        }
+        let stacks = self
+            .stacks
+            .into_iter()
+            .map(|s| Array3::from_shape_vec(self.shape, s).expect("stack length matches its shape"))
+            .collect();
+        (stacks, self.accounting)
+    }
+}

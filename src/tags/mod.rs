@@ -1,0 +1,40 @@
+//! Photon time tags: the events every source (recorded file, device)
+//! produces before they are binned into a stack.
+//!
+//! - [`picoquant`]: PicoQuant PTU and legacy HT3 files.
+//! - [`binning`]: tags -> K x H x W transient stack (single pixel, pixel
+//!   per channel, or scanned images from line/frame markers).
+
+pub mod binning;
+pub mod picoquant;
+
+/// One decoded event.
+///
+/// T3 files: `macro_time` counts sync (laser) periods and `micro_time` is
+/// the delay after the sync in units of the file's TCSPC resolution.
+/// T2 files: `macro_time` is the absolute time in units of the global
+/// resolution and `micro_time` is 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tag {
+    /// A detected photon on input `channel` (numbered as in the record).
+    Photon {
+        /// Input channel as stored in the record.
+        channel: u8,
+        /// Overflow-corrected macro time.
+        macro_time: u64,
+        /// Micro time (T3) or 0 (T2).
+        micro_time: u32,
+    },
+    /// External marker bits (bit 0 = marker 1), e.g. scanner line clocks.
+    Marker {
+        /// Marker bits set in this record.
+        bits: u8,
+        /// Overflow-corrected macro time.
+        macro_time: u64,
+    },
+    /// A sync event, recorded as an event only in T2 files.
+    Sync {
+        /// Overflow-corrected macro time.
+        macro_time: u64,
+    },
+}

@@ -1,0 +1,180 @@
+//! Legacy HydraHarp HT3/HT2 files: a fixed binary header (text part,
+//! measurement part, hardware part, one block per input channel, input
+//! rates, time-tagging part, image header) followed by 32-bit records.
+//! Layout checked against PicoQuant's sample files: records start exactly
+//! where the header says, and header size plus `nRecords x 4` is the file
+//! size.
+
+use std::io::Read;
+
+use super::TtrError;
+use super::records::RecordType;
+
+/// What the legacy header tells.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LegacyHeader {
+    /// `FormatVersion`, e.g. `2.0`.
+    pub version: String,
+    /// Acquisition software and version.
+    pub creator: String,
+    /// Hardware identifier, e.g. `HydraHarp 400`.
+    pub hardware: String,
+    /// Record type implied by format version and measurement mode.
+    pub record_type: RecordType,
+    /// TCSPC resolution (ps).
+    pub resolution_ps: f64,
+    /// Base resolution of T2 time tags (ps).
+    pub base_resolution_ps: f64,
+    /// Sync rate (Hz).
+    pub sync_rate_hz: f64,
+    /// Input channels present.
+    pub channels: u32,
+    /// Records the header announces.
+    pub records: u64,
+    /// Offset of the first record.
+    pub data_offset: u64,
+}
+
+struct Cursor<'a> {
+    r: &'a mut dyn Read,
+    offset: u64,
+}
+
+impl Cursor<'_> {
+    fn bytes(&mut self, n: usize, what: &str) -> Result<Vec<u8>, TtrError> {
+        let mut buf = vec![0u8; n];
+        self.r.read_exact(&mut buf).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                TtrError::header(
+                    self.offset,
+                    format!("file ends inside the header field {what}"),
+                )
+            } else {
+                TtrError::Io(e)
+            }
+        })?;
+        self.offset += n as u64;
+        Ok(buf)
+    }
+    fn text(&mut self, n: usize, what: &str) -> Result<String, TtrError> {
+        let b = self.bytes(n, what)?;
+        let end = b.iter().position(|&c| c == 0).unwrap_or(n);
+        Ok(b[..end]
+            .iter()
+            .map(|&c| c as char)
+            .collect::<String>()
+            .trim()
+            .to_string())
+    }
+    fn i32(&mut self, what: &str) -> Result<i32, TtrError> {
+        Ok(i32::from_le_bytes(
+            self.bytes(4, what)?.try_into().expect("4 bytes"),
+        ))
+    }
+    fn f64(&mut self, what: &str) -> Result<f64, TtrError> {
+        Ok(f64::from_le_bytes(
+            self.bytes(8, what)?.try_into().expect("8 bytes"),
+        ))
+    }
+    fn i64(&mut self, what: &str) -> Result<i64, TtrError> {
+        Ok(i64::from_le_bytes(
+            self.bytes(8, what)?.try_into().expect("8 bytes"),
+        ))
+    }
+    fn skip(&mut self, n: usize, what: &str) -> Result<(), TtrError> {
+        self.bytes(n, what).map(|_| ())
+    }
+}
+
+/// Parses a HydraHarp HT3/HT2 header (versions 1.0 and 2.0).
+pub fn parse_hydraharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
+    let mut c = Cursor { r, offset: 0 };
+    let ident = c.text(16, "Ident")?;
+    if ident != "HydraHarp" {
+        return Err(TtrError::header(
+            0,
+            format!("Ident is {ident:?}, expected \"HydraHarp\""),
+        ));
+    }
+    let version = c.text(6, "FormatVersion")?;
+    let creator_name = c.text(18, "CreatorName")?;
+    let creator_version = c.text(12, "CreatorVersion")?;
+    c.skip(18 + 2 + 256, "FileTime, CRLF and Comment")?;
+    let _curves = c.i32("NumberOfCurves")?;
+    let bits = c.i32("BitsPerRecord")?;
+    if bits != 32 {
+        return Err(TtrError::header(
+            c.offset - 4,
+            format!("BitsPerRecord = {bits}, expected 32"),
+        ));
+    }
+    let _active = c.i32("ActiveCurve")?;
+    let mode_offset = c.offset;
+    let mode = c.i32("MeasurementMode")?;
+    c.skip(8, "SubMode and Binning")?;
+    let resolution_ps = c.f64("Resolution")?;
+    // Offset .. DispCountsTo (10 ints), DispCurves (8 x 2 ints), Params
+    // (3 x 3 floats), Repeat fields (4 ints), ScriptName (20 bytes).
+    c.skip(40 + 64 + 36 + 16 + 20, "display and repeat settings")?;
+    let hardware = c.text(16, "HardwareIdent")?;
+    c.skip(8 + 4, "HardwarePartNo and HardwareSerial")?;
+    let _modules = c.i32("nModulesPresent")?;
+    c.skip(80, "ModuleInfo")?;
+    let base_resolution_ps = c.f64("BaseResolution")?;
+    c.skip(8, "InputsEnabled")?;
+    let channels_offset = c.offset;
+    let channels = c.i32("InpChansPresent")?;
+    if !(1..=64).contains(&channels) {
+        return Err(TtrError::header(
+            channels_offset,
+            format!("InpChansPresent = {channels} is not plausible"),
+        ));
+    }
+    // RefClockSource, ExtDevices, MarkerSettings, SyncDivider, SyncCFDLevel,
+    // SyncCFDZeroCross, SyncOffset; then 4 ints per channel and one input
+    // rate per channel.
+    c.skip(28 + 20 * channels as usize, "channel settings and rates")?;
+    let sync_rate = c.i32("SyncRate")?;
+    c.skip(8, "StopAfter and StopReason")?;
+    let img_offset = c.offset;
+    let img_ints = c.i32("ImgHdrSize")?;
+    if !(0..=1 << 20).contains(&img_ints) {
+        return Err(TtrError::header(
+            img_offset,
+            format!("ImgHdrSize = {img_ints} is not plausible"),
+        ));
+    }
+    let records_offset = c.offset;
+    let records = c.i64("nRecords")?;
+    let records = u64::try_from(records).map_err(|_| {
+        TtrError::header(records_offset, format!("nRecords = {records} is negative"))
+    })?;
+    c.skip(4 * img_ints as usize, "ImgHdr")?;
+    let v2 = version.starts_with('2');
+    let record_type = match (mode, v2) {
+        (3, false) => RecordType::HydraHarpV1T3,
+        (2, false) => RecordType::HydraHarpV1T2,
+        (3, true) => RecordType::HydraHarpV2T3,
+        (2, true) => RecordType::HydraHarpV2T2,
+        _ => {
+            return Err(TtrError::header(
+                mode_offset,
+                format!(
+                    "MeasurementMode = {mode} with FormatVersion {version} is not a time-tagging mode"
+                ),
+            ));
+        }
+    };
+    Ok(LegacyHeader {
+        version,
+        creator: format!("{creator_name} {creator_version}"),
+        hardware,
+        record_type,
+        resolution_ps,
+        base_resolution_ps,
+        sync_rate_hz: f64::from(sync_rate),
+        channels: channels as u32,
+        records,
+        data_offset: c.offset,
+    })
+}

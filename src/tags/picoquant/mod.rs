@@ -1,0 +1,367 @@
+//! PicoQuant time-tagged files: PTU (any record type) and legacy HT3/HT2.
+//!
+//! [`open`] reads the header into a [`FileInfo`] and returns a
+//! [`RecordReader`] that streams the 32-bit records in fixed-size chunks
+//! (constant memory for files larger than memory).
+
+pub mod legacy;
+pub mod ptu;
+pub mod records;
+pub mod writer;
+
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+use ptu::{HeaderTag, TagLookup};
+use records::RecordType;
+
+/// Why a file cannot be read; the file is named by [`FileError`].
+#[derive(Debug, thiserror::Error)]
+pub enum TtrError {
+    /// Operating-system error.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// A header field is missing or wrong.
+    #[error("header at byte {offset}: {reason}")]
+    Header {
+        /// Byte offset of the field.
+        offset: u64,
+        /// What is wrong, with the value.
+        reason: String,
+    },
+    /// A valid file of a kind this reader does not handle.
+    #[error("{0}")]
+    Unsupported(String),
+    /// The file ends before the records the header announces.
+    #[error(
+        "file is cut: read {read} of {expected} records ({trailing} trailing bytes of a partial record)"
+    )]
+    Truncated {
+        /// Complete records read.
+        read: u64,
+        /// Records the header announces.
+        expected: u64,
+        /// Bytes after the last complete record.
+        trailing: u64,
+    },
+}
+
+impl TtrError {
+    pub(crate) fn header(offset: u64, reason: impl Into<String>) -> Self {
+        TtrError::Header {
+            offset,
+            reason: reason.into(),
+        }
+    }
+}
+
+/// A [`TtrError`] with the file it concerns.
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {error}")]
+pub struct FileError {
+    /// The file.
+    pub path: PathBuf,
+    /// What went wrong.
+    pub error: TtrError,
+}
+
+/// Container format of a file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Container {
+    /// Tagged PTU header with its version string.
+    Ptu(String),
+    /// Legacy HydraHarp HT3/HT2 header with its format version.
+    HydraHarpLegacy(String),
+}
+
+/// Scanned-image (FLIM) description from `ImgHdr_*` tags.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Imaging {
+    /// Pixels per line.
+    pub pixels_x: usize,
+    /// Lines per frame.
+    pub pixels_y: usize,
+    /// Marker mask of the line start (1 << (bit - 1)).
+    pub line_start: u8,
+    /// Marker mask of the line stop.
+    pub line_stop: u8,
+    /// Marker mask of the frame clock (0 when absent).
+    pub frame: u8,
+    /// Lines alternate direction.
+    pub bidirectional: bool,
+}
+
+/// Everything the header says, in one place.
+#[derive(Debug, Clone)]
+pub struct FileInfo {
+    /// The file.
+    pub path: PathBuf,
+    /// Container format.
+    pub container: Container,
+    /// Record type.
+    pub record_type: RecordType,
+    /// Device name.
+    pub device: String,
+    /// Unit of micro times (T3) or of time tags (T2), seconds.
+    pub resolution_s: f64,
+    /// Unit of macro times: the sync period (T3) or the time-tag unit (T2), seconds.
+    pub macro_unit_s: f64,
+    /// Sync rate (Hz), when recorded.
+    pub sync_rate_hz: Option<f64>,
+    /// Records the header announces (0 in the header: taken from the size).
+    pub records_announced: u64,
+    /// Complete records present in the file.
+    pub records_present: u64,
+    /// Bytes after the last complete record.
+    pub trailing_bytes: u64,
+    /// Offset of the first record.
+    pub data_offset: u64,
+    /// `Measurement_SubMode` (3 = image).
+    pub sub_mode: i64,
+    /// Image scan description, for imaging files.
+    pub imaging: Option<Imaging>,
+    /// All PTU tags (empty for legacy files).
+    pub tags: Vec<HeaderTag>,
+}
+
+impl FileInfo {
+    /// Acquisition time set in the software (s), when recorded.
+    pub fn acquisition_time_s(&self) -> Option<f64> {
+        self.tags
+            .float("MeasDesc_AcquisitionTime")
+            .map(|ms| ms * 1e-3)
+    }
+
+    /// Time after which the measurement actually stopped (s), when recorded.
+    pub fn stopped_after_s(&self) -> Option<f64> {
+        self.tags.float("TTResult_StopAfter").map(|ms| ms * 1e-3)
+    }
+}
+
+/// Streams records in chunks.
+pub struct RecordReader {
+    reader: BufReader<File>,
+    remaining: u64,
+    read: u64,
+    info_announced: u64,
+    trailing: u64,
+}
+
+/// Records per chunk (4 MiB).
+pub const CHUNK_RECORDS: usize = 1 << 20;
+
+impl RecordReader {
+    /// Reads the next chunk of records into `out` (cleared first); returns
+    /// false at the end. A file cut before the announced count ends with
+    /// [`TtrError::Truncated`] after its last complete record was returned.
+    pub fn next_chunk(&mut self, out: &mut Vec<u32>) -> Result<bool, TtrError> {
+        out.clear();
+        if self.remaining == 0 {
+            if self.read < self.info_announced {
+                return Err(TtrError::Truncated {
+                    read: self.read,
+                    expected: self.info_announced,
+                    trailing: self.trailing,
+                });
+            }
+            return Ok(false);
+        }
+        let n = (self.remaining as usize).min(CHUNK_RECORDS);
+        // Read straight into the u32 buffer: one copy from the page cache.
+        out.resize(n, 0);
+        self.reader
+            .read_exact(bytemuck::cast_slice_mut(out.as_mut_slice()))?;
+        if cfg!(target_endian = "big") {
+            out.iter_mut().for_each(|r| *r = u32::from_le(*r));
+        }
+        self.remaining -= n as u64;
+        self.read += n as u64;
+        Ok(true)
+    }
+}
+
+/// Opens a PTU, HT3 or HT2 file: header parsed, reader at the first record.
+pub fn open(path: &Path) -> Result<(FileInfo, RecordReader), FileError> {
+    open_inner(path).map_err(|error| FileError {
+        path: path.to_owned(),
+        error,
+    })
+}
+
+fn open_inner(path: &Path) -> Result<(FileInfo, RecordReader), TtrError> {
+    let mut file = File::open(path)?;
+    let size = file.metadata()?.len();
+    let mut magic = [0u8; 16];
+    let got = file.read(&mut magic)?;
+    file.seek(SeekFrom::Start(0))?;
+    let mut reader = BufReader::with_capacity(1 << 20, file);
+    let mut info = if got >= 8 && &magic[..8] == ptu::MAGIC {
+        from_ptu(path, &mut reader)?
+    } else if magic.starts_with(b"HydraHarp") {
+        from_legacy(path, &mut reader)?
+    } else if magic.starts_with(b"PicoHarp") || magic.starts_with(b"TimeHarp") {
+        return Err(TtrError::Unsupported(format!(
+            "legacy {} files (PT3/THD) are not supported yet; export the data as PTU",
+            String::from_utf8_lossy(&magic[..8]).trim_end_matches('\0')
+        )));
+    } else {
+        return Err(TtrError::header(
+            0,
+            "not a PicoQuant file: no PQTTTR or HydraHarp magic",
+        ));
+    };
+    let body = size.saturating_sub(info.data_offset);
+    info.records_present = body / 4;
+    info.trailing_bytes = body % 4;
+    if info.records_announced == 0 {
+        info.records_announced = info.records_present;
+    }
+    let records = info.records_present.min(info.records_announced);
+    let rr = RecordReader {
+        reader,
+        remaining: records,
+        read: 0,
+        info_announced: info.records_announced,
+        trailing: info.trailing_bytes,
+    };
+    Ok((info, rr))
+}
+
+fn from_ptu(path: &Path, r: &mut impl Read) -> Result<FileInfo, TtrError> {
+    let (version, tags, offset) = ptu::parse(r)?;
+    let code = tags.int("TTResultFormat_TTTRRecType").ok_or_else(|| {
+        TtrError::header(
+            offset,
+            "no TTResultFormat_TTTRRecType tag (not a TTTR file)",
+        )
+    })?;
+    let record_type = RecordType::from_code(code as u32).ok_or_else(|| {
+        TtrError::Unsupported(format!(
+            "record type 0x{code:08X} is not a supported TTTR format"
+        ))
+    })?;
+    let positive = |name: &str| {
+        tags.float(name)
+            .filter(|v| *v > 0.0 && v.is_finite())
+            .ok_or_else(|| {
+                TtrError::header(offset, format!("tag {name} is missing or not positive"))
+            })
+    };
+    // PicoQuant software stores the resolution from a 32-bit float
+    // (64 ps arrives as 6.3999999744e-11 s): keep the 7 significant digits
+    // a float carries, so bin widths and starts come out as round numbers.
+    let resolution_s = float32_digits(positive("MeasDesc_Resolution")?);
+    let sync_rate = tags.float("TTResult_SyncRate").filter(|v| *v > 0.0);
+    let macro_unit_s = if record_type.is_t3() {
+        match tags.float("MeasDesc_GlobalResolution").filter(|v| *v > 0.0) {
+            Some(g) => g,
+            None => {
+                1.0 / sync_rate.ok_or_else(|| {
+                    TtrError::header(
+                        offset,
+                        "T3 file without MeasDesc_GlobalResolution or TTResult_SyncRate",
+                    )
+                })?
+            }
+        }
+    } else {
+        tags.float("MeasDesc_GlobalResolution")
+            .filter(|v| *v > 0.0)
+            .unwrap_or(resolution_s)
+    };
+    let announced = tags.int("TTResult_NumberOfRecords").unwrap_or(0);
+    let sub_mode = tags.int("Measurement_SubMode").unwrap_or(0);
+    let imaging = if sub_mode == 3 {
+        let int = |n: &str| {
+            tags.int(n)
+                .ok_or_else(|| TtrError::header(offset, format!("imaging file without tag {n}")))
+        };
+        let mask = |n: &str| -> Result<u8, TtrError> {
+            let bit = int(n)?;
+            if !(1..=4).contains(&bit) {
+                return Err(TtrError::header(
+                    offset,
+                    format!("tag {n} = {bit}: marker bits are 1 to 4"),
+                ));
+            }
+            Ok(1u8 << (bit - 1))
+        };
+        let size = |n: &str| -> Result<usize, TtrError> {
+            let v = int(n)?;
+            usize::try_from(v)
+                .ok()
+                .filter(|&v| (1..=1 << 16).contains(&v))
+                .ok_or_else(|| {
+                    TtrError::header(
+                        offset,
+                        format!("tag {n} = {v} is not a plausible image size"),
+                    )
+                })
+        };
+        Some(Imaging {
+            pixels_x: size("ImgHdr_PixX")?,
+            pixels_y: size("ImgHdr_PixY")?,
+            line_start: mask("ImgHdr_LineStart")?,
+            line_stop: mask("ImgHdr_LineStop")?,
+            frame: if tags.value("ImgHdr_Frame").is_some() {
+                mask("ImgHdr_Frame")?
+            } else {
+                0
+            },
+            bidirectional: tags.int("ImgHdr_BiDirect").unwrap_or(0) != 0,
+        })
+    } else {
+        None
+    };
+    Ok(FileInfo {
+        path: path.to_owned(),
+        container: Container::Ptu(version),
+        record_type,
+        device: tags.text("HW_Type").unwrap_or("unknown").to_string(),
+        resolution_s,
+        macro_unit_s,
+        sync_rate_hz: sync_rate,
+        records_announced: u64::try_from(announced).unwrap_or(0),
+        records_present: 0,
+        trailing_bytes: 0,
+        data_offset: offset,
+        sub_mode,
+        imaging,
+        tags,
+    })
+}
+
+/// `v` rounded to 7 significant digits.
+fn float32_digits(v: f64) -> f64 {
+    format!("{v:.6e}").parse().unwrap_or(v)
+}
+
+fn from_legacy(path: &Path, r: &mut impl Read) -> Result<FileInfo, TtrError> {
+    let h = legacy::parse_hydraharp(r)?;
+    let t3 = h.record_type.is_t3();
+    Ok(FileInfo {
+        path: path.to_owned(),
+        container: Container::HydraHarpLegacy(h.version),
+        record_type: h.record_type,
+        device: h.hardware,
+        resolution_s: if t3 {
+            h.resolution_ps
+        } else {
+            h.base_resolution_ps
+        } * 1e-12,
+        macro_unit_s: if t3 && h.sync_rate_hz > 0.0 {
+            1.0 / h.sync_rate_hz
+        } else {
+            h.base_resolution_ps * 1e-12
+        },
+        sync_rate_hz: (h.sync_rate_hz > 0.0).then_some(h.sync_rate_hz),
+        records_announced: h.records,
+        records_present: 0,
+        trailing_bytes: 0,
+        data_offset: h.data_offset,
+        sub_mode: 0,
+        imaging: None,
+        tags: Vec::new(),
+    })
+}

@@ -1,0 +1,306 @@
+//! Writes PTU files with known content: used by tests to build files of
+//! every record type and edge case, and by anyone who wants to hand
+//! simulated tags to PicoQuant-compatible tools.
+
+use std::fs::File;
+use std::io::{self, BufWriter, Seek, SeekFrom, Write};
+use std::path::Path;
+
+use super::Imaging;
+use super::ptu::{self, ty};
+use super::records::{
+    HYDRAHARP_V1_T2_WRAP, PICOHARP_T2_WRAP, PICOHARP_T3_WRAP, RecordType, WIDE_T2_WRAP,
+    WIDE_T3_WRAP,
+};
+use crate::tags::Tag;
+
+/// Header content of a written file.
+#[derive(Debug, Clone)]
+pub struct WriterHeader {
+    /// Micro-time (T3) or time-tag (T2) unit, seconds.
+    pub resolution_s: f64,
+    /// Sync rate (Hz); the sync period is the T3 macro unit.
+    pub sync_rate_hz: f64,
+    /// Device name for `HW_Type`.
+    pub device: String,
+    /// Scan description; makes the file an imaging file (sub mode 3).
+    pub imaging: Option<Imaging>,
+}
+
+/// Streams tags into a PTU file, inserting overflow records as needed.
+pub struct PtuWriter {
+    out: BufWriter<File>,
+    record_type: RecordType,
+    base: u64,
+    records: u64,
+    count_offset: u64,
+}
+
+fn invalid(msg: String) -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidInput, msg)
+}
+
+impl PtuWriter {
+    /// Creates `path` and writes the header.
+    pub fn create(path: &Path, record_type: RecordType, h: &WriterHeader) -> io::Result<Self> {
+        let mut out = BufWriter::new(File::create(path)?);
+        out.write_all(ptu::MAGIC)?;
+        out.write_all(b"1.0.00\0\0")?;
+        let mut pos = 16u64;
+        let mut tag = |out: &mut BufWriter<File>,
+                       ident: &str,
+                       typ: u32,
+                       value: [u8; 8],
+                       payload: &[u8]|
+         -> io::Result<u64> {
+            let mut name = [0u8; 32];
+            name[..ident.len()].copy_from_slice(ident.as_bytes());
+            out.write_all(&name)?;
+            out.write_all(&(-1i32).to_le_bytes())?;
+            out.write_all(&typ.to_le_bytes())?;
+            let value_at = pos + 40;
+            out.write_all(&value)?;
+            out.write_all(payload)?;
+            pos += 48 + payload.len() as u64;
+            Ok(value_at)
+        };
+        let int = |v: i64| v.to_le_bytes();
+        let float = |v: f64| v.to_le_bytes();
+        // Odd-length string payload: readers must not assume 8-byte alignment.
+        let device = h.device.as_bytes();
+        tag(
+            &mut out,
+            "HW_Type",
+            ty::ANSI_STRING,
+            int(device.len() as i64 + 1),
+            &[device, b"\0"].concat(),
+        )?;
+        tag(
+            &mut out,
+            "TTResultFormat_TTTRRecType",
+            ty::INT8,
+            int(i64::from(record_type.code())),
+            &[],
+        )?;
+        tag(
+            &mut out,
+            "MeasDesc_Resolution",
+            ty::FLOAT8,
+            float(h.resolution_s),
+            &[],
+        )?;
+        let global = if record_type.is_t3() {
+            1.0 / h.sync_rate_hz
+        } else {
+            h.resolution_s
+        };
+        tag(
+            &mut out,
+            "MeasDesc_GlobalResolution",
+            ty::FLOAT8,
+            float(global),
+            &[],
+        )?;
+        tag(
+            &mut out,
+            "TTResult_SyncRate",
+            ty::INT8,
+            int(h.sync_rate_hz.round() as i64),
+            &[],
+        )?;
+        tag(
+            &mut out,
+            "Measurement_SubMode",
+            ty::INT8,
+            int(if h.imaging.is_some() { 3 } else { 0 }),
+            &[],
+        )?;
+        if let Some(img) = &h.imaging {
+            let bit = |mask: u8| i64::from(mask.trailing_zeros() + 1);
+            tag(
+                &mut out,
+                "ImgHdr_PixX",
+                ty::INT8,
+                int(img.pixels_x as i64),
+                &[],
+            )?;
+            tag(
+                &mut out,
+                "ImgHdr_PixY",
+                ty::INT8,
+                int(img.pixels_y as i64),
+                &[],
+            )?;
+            tag(
+                &mut out,
+                "ImgHdr_LineStart",
+                ty::INT8,
+                int(bit(img.line_start)),
+                &[],
+            )?;
+            tag(
+                &mut out,
+                "ImgHdr_LineStop",
+                ty::INT8,
+                int(bit(img.line_stop)),
+                &[],
+            )?;
+            if img.frame != 0 {
+                tag(&mut out, "ImgHdr_Frame", ty::INT8, int(bit(img.frame)), &[])?;
+            }
+            tag(
+                &mut out,
+                "ImgHdr_BiDirect",
+                ty::BOOL8,
+                int(i64::from(img.bidirectional)),
+                &[],
+            )?;
+        }
+        let count_offset = tag(&mut out, "TTResult_NumberOfRecords", ty::INT8, int(0), &[])?;
+        tag(&mut out, "Header_End", ty::EMPTY8, int(0), &[])?;
+        Ok(Self {
+            out,
+            record_type,
+            base: 0,
+            records: 0,
+            count_offset,
+        })
+    }
+
+    /// Writes one raw record (for malformed-file tests).
+    pub fn write_raw(&mut self, rec: u32) -> io::Result<()> {
+        self.records += 1;
+        self.out.write_all(&rec.to_le_bytes())
+    }
+
+    fn advance_to(&mut self, time: u64) -> io::Result<u64> {
+        if time < self.base {
+            return Err(invalid(format!(
+                "time {time} is before the previous record's time base {}",
+                self.base
+            )));
+        }
+        let special = |ch: u32| (1u32 << 31) | (ch << 25);
+        loop {
+            let delta = time - self.base;
+            match self.record_type {
+                RecordType::PicoHarpT3 if delta >= PICOHARP_T3_WRAP => {
+                    self.write_raw(15 << 28)?;
+                    self.base += PICOHARP_T3_WRAP;
+                }
+                RecordType::PicoHarpT2 if delta >= PICOHARP_T2_WRAP => {
+                    self.write_raw(15 << 28)?;
+                    self.base += PICOHARP_T2_WRAP;
+                }
+                RecordType::HydraHarpV1T3 if delta >= WIDE_T3_WRAP => {
+                    self.write_raw(special(63) | 1)?;
+                    self.base += WIDE_T3_WRAP;
+                }
+                RecordType::HydraHarpV1T2 if delta >= HYDRAHARP_V1_T2_WRAP => {
+                    self.write_raw(special(63))?;
+                    self.base += HYDRAHARP_V1_T2_WRAP;
+                }
+                t if t.is_t3()
+                    && !matches!(t, RecordType::PicoHarpT3 | RecordType::HydraHarpV1T3)
+                    && delta >= WIDE_T3_WRAP =>
+                {
+                    let n = (delta / WIDE_T3_WRAP).min(1023);
+                    self.write_raw(special(63) | n as u32)?;
+                    self.base += n * WIDE_T3_WRAP;
+                }
+                t if !t.is_t3()
+                    && !matches!(t, RecordType::PicoHarpT2 | RecordType::HydraHarpV1T2)
+                    && delta >= WIDE_T2_WRAP =>
+                {
+                    let n = (delta / WIDE_T2_WRAP).min((1 << 25) - 1);
+                    self.write_raw(special(63) | n as u32)?;
+                    self.base += n * WIDE_T2_WRAP;
+                }
+                _ => return Ok(delta),
+            }
+        }
+    }
+
+    /// Writes one tag; tags must come in non-decreasing macro time.
+    pub fn write_tag(&mut self, tag: Tag) -> io::Result<()> {
+        let rt = self.record_type;
+        let pico = matches!(rt, RecordType::PicoHarpT3 | RecordType::PicoHarpT2);
+        let rec = match tag {
+            Tag::Photon {
+                channel,
+                macro_time,
+                micro_time,
+            } => {
+                let max_channel = if pico { 14 } else { 62 };
+                if channel > max_channel {
+                    return Err(invalid(format!(
+                        "channel {channel} exceeds {max_channel} for {}",
+                        rt.name()
+                    )));
+                }
+                let max_micro = match rt {
+                    RecordType::PicoHarpT3 => 0xFFF,
+                    t if t.is_t3() => 0x7FFF,
+                    _ => 0,
+                };
+                if micro_time > max_micro {
+                    return Err(invalid(format!(
+                        "micro time {micro_time} exceeds {max_micro} for {}",
+                        rt.name()
+                    )));
+                }
+                let d = self.advance_to(macro_time)? as u32;
+                let ch = u32::from(channel);
+                match rt {
+                    RecordType::PicoHarpT3 => (ch << 28) | (micro_time << 16) | d,
+                    RecordType::PicoHarpT2 => (ch << 28) | d,
+                    t if t.is_t3() => (ch << 25) | (micro_time << 10) | d,
+                    _ => (ch << 25) | d,
+                }
+            }
+            Tag::Marker { bits, macro_time } => {
+                if bits == 0 || bits > 15 {
+                    return Err(invalid(format!("marker bits {bits} must be 1 to 15")));
+                }
+                let b = u32::from(bits);
+                match rt {
+                    RecordType::PicoHarpT3 => {
+                        let d = self.advance_to(macro_time)? as u32;
+                        (15 << 28) | (b << 16) | d
+                    }
+                    RecordType::PicoHarpT2 => {
+                        // The low 4 time bits carry the markers.
+                        let d = self.advance_to(macro_time)? as u32;
+                        (15 << 28) | (d & !0xF) | b
+                    }
+                    _ => {
+                        let d = self.advance_to(macro_time)? as u32;
+                        (1 << 31) | (b << 25) | d
+                    }
+                }
+            }
+            Tag::Sync { macro_time } => {
+                if rt.is_t3() || pico {
+                    return Err(invalid(format!(
+                        "{} records have no sync events",
+                        rt.name()
+                    )));
+                }
+                let d = self.advance_to(macro_time)? as u32;
+                1 << 31 | d
+            }
+        };
+        self.write_raw(rec)
+    }
+
+    /// Patches the record count into the header and closes the file;
+    /// returns the number of records written.
+    pub fn finish(mut self) -> io::Result<u64> {
+        self.out.flush()?;
+        let mut file = self.out.into_inner().map_err(|e| e.into_error())?;
+        file.seek(SeekFrom::Start(self.count_offset))?;
+        file.write_all(&(self.records as i64).to_le_bytes())?;
+        file.sync_all()?;
+        Ok(self.records)
+    }
+}

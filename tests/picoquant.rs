@@ -1,0 +1,395 @@
+//! PicoQuant readers: real sample files (when ../shared is present), files
+//! written with known content for every record type, and malformed input.
+
+use std::path::{Path, PathBuf};
+
+use scatterscope::tags::Tag;
+use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
+use scatterscope::tags::picoquant::records::{Decoder, RecordType};
+use scatterscope::tags::picoquant::writer::{PtuWriter, WriterHeader};
+use scatterscope::tags::picoquant::{self, Imaging, TtrError};
+
+fn sample(rel: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/picoquant-sample-data")
+        .join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!(
+            "skipping: {} not present (the shared sample data ships only beside the project repository)",
+            p.display()
+        );
+        None
+    }
+}
+
+/// Decodes every record; returns tags and the reader's final result.
+fn decode_all(path: &Path) -> (picoquant::FileInfo, Vec<Tag>, Result<(), TtrError>) {
+    let (info, mut reader) = picoquant::open(path).unwrap();
+    let mut d = Decoder::new(info.record_type);
+    let mut tags = Vec::new();
+    let mut chunk = Vec::new();
+    let end = loop {
+        match reader.next_chunk(&mut chunk) {
+            Ok(true) => tags.extend(chunk.iter().filter_map(|&r| d.decode(r))),
+            Ok(false) => break Ok(()),
+            Err(e) => break Err(e),
+        }
+    };
+    (info, tags, end)
+}
+
+fn macro_time(t: &Tag) -> u64 {
+    match *t {
+        Tag::Photon { macro_time, .. }
+        | Tag::Marker { macro_time, .. }
+        | Tag::Sync { macro_time } => macro_time,
+    }
+}
+
+#[test]
+fn real_ptu_files_decode_completely_with_monotonic_times() {
+    for (rel, rt) in [
+        ("hydraharp/v10_t3.ptu", RecordType::HydraHarpV1T3),
+        ("hydraharp/v20_t3.ptu", RecordType::HydraHarpV2T3),
+        ("hydraharp/v20_t2.ptu", RecordType::HydraHarpV2T2),
+        ("picoharp/v30_t2.ptu", RecordType::PicoHarpT2),
+    ] {
+        let Some(path) = sample(rel) else { return };
+        let (info, tags, end) = decode_all(&path);
+        end.unwrap();
+        assert_eq!(info.record_type, rt, "{rel}");
+        assert_eq!(info.records_present, info.records_announced, "{rel}");
+        assert_eq!(info.trailing_bytes, 0);
+        // Overflow-corrected times never go backwards (records are in time order).
+        assert!(
+            tags.windows(2)
+                .all(|w| macro_time(&w[0]) <= macro_time(&w[1])),
+            "{rel}: time went backwards"
+        );
+        // The last event lies just before the recorded stop time: overflow
+        // handling is right over the whole file.
+        let last = macro_time(tags.last().unwrap()) as f64 * info.macro_unit_s;
+        let stop = info.stopped_after_s().unwrap();
+        assert!(
+            (last - stop).abs() < 0.01 * stop + 0.01 && last <= stop + 1e-3,
+            "{rel}: last event {last} s, stopped after {stop} s"
+        );
+    }
+}
+
+#[test]
+fn first_records_match_the_published_layout_by_hand() {
+    let Some(path) = sample("hydraharp/v20_t3.ptu") else {
+        return;
+    };
+    let bytes = std::fs::read(&path).unwrap();
+    let (info, tags, _) = decode_all(&path);
+    let raw = |i: usize| {
+        let o = info.data_offset as usize + 4 * i;
+        u32::from_le_bytes(bytes[o..o + 4].try_into().unwrap())
+    };
+    // HydraHarp T3 by hand: bit 31 special, 30..25 channel, 24..10 dtime, 9..0 nsync.
+    let mut overflow = 0u64;
+    let mut expected = Vec::new();
+    for i in 0..200 {
+        let r = raw(i);
+        let (special, channel, dtime, nsync) = (
+            r >> 31,
+            (r >> 25) & 63,
+            (r >> 10) & 0x7FFF,
+            u64::from(r & 1023),
+        );
+        if special == 1 && channel == 63 {
+            overflow += 1024 * if nsync == 0 { 1 } else { nsync };
+        } else if special == 0 {
+            expected.push(Tag::Photon {
+                channel: channel as u8,
+                macro_time: overflow + nsync,
+                micro_time: dtime,
+            });
+        }
+    }
+    let photons: Vec<Tag> = tags
+        .into_iter()
+        .filter(|t| matches!(t, Tag::Photon { .. }))
+        .take(expected.len())
+        .collect();
+    assert_eq!(photons, expected);
+    // Per-channel photon counts of the whole file.
+    let (_, all, _) = decode_all(&path);
+    let count = |c: u8| {
+        all.iter()
+            .filter(|t| matches!(t, Tag::Photon { channel, .. } if *channel == c))
+            .count()
+    };
+    assert_eq!((count(0), count(1)), (45012, 32871));
+}
+
+#[test]
+fn legacy_ht3_files_decode_and_cut_files_say_how_much_was_read() {
+    if let Some(path) = sample("hydraharp/v20.ht3") {
+        let (info, tags, end) = decode_all(&path);
+        end.unwrap();
+        assert_eq!(info.record_type, RecordType::HydraHarpV2T3);
+        assert_eq!(
+            (info.records_announced, info.records_present),
+            (53606, 53606)
+        );
+        assert!((info.resolution_s - 16e-12).abs() < 1e-18);
+        assert!(
+            tags.windows(2)
+                .all(|w| macro_time(&w[0]) <= macro_time(&w[1]))
+        );
+    }
+    if let Some(path) = sample("hydraharp/v10.ht3") {
+        // The sample is an excerpt of a longer measurement.
+        let (info, tags, end) = decode_all(&path);
+        assert_eq!(info.record_type, RecordType::HydraHarpV1T3);
+        assert!(!tags.is_empty());
+        let e = end.unwrap_err().to_string();
+        assert!(e.contains("read 1050 of 72463591 records"), "{e}");
+    }
+}
+
+fn header() -> WriterHeader {
+    WriterHeader {
+        resolution_s: 4e-12,
+        sync_rate_hz: 80e6,
+        device: "TestHarp".into(),
+        imaging: None,
+    }
+}
+
+fn write(path: &Path, rt: RecordType, h: &WriterHeader, tags: &[Tag]) -> u64 {
+    let mut w = PtuWriter::create(path, rt, h).unwrap();
+    for t in tags {
+        w.write_tag(*t).unwrap();
+    }
+    w.finish().unwrap()
+}
+
+#[test]
+fn every_record_type_round_trips_through_the_writer() {
+    let dir = tempfile::tempdir().unwrap();
+    for rt in RecordType::ALL {
+        let pico = matches!(rt, RecordType::PicoHarpT3 | RecordType::PicoHarpT2);
+        let max_micro = match rt {
+            RecordType::PicoHarpT3 => 4095,
+            t if t.is_t3() => 32767,
+            _ => 0,
+        };
+        let mut tags = Vec::new();
+        let mut t = 0u64;
+        for i in 0..2000u64 {
+            // Gaps from 0 to far beyond every wrap period, some exactly on it.
+            t += match i % 7 {
+                0 => 0,
+                1 => 1,
+                2 => 1023,
+                3 => 1024,
+                4 => 65_536,
+                5 => 210_698_240,
+                _ => 3 * 33_554_432 + 5,
+            };
+            let tag = match i % 5 {
+                0 if !pico || rt.is_t3() => Tag::Marker {
+                    bits: (i % 15 + 1) as u8,
+                    macro_time: t,
+                },
+                1 if !rt.is_t3() && !pico => Tag::Sync { macro_time: t },
+                _ => Tag::Photon {
+                    channel: (i % if pico { 15 } else { 63 }) as u8,
+                    macro_time: t,
+                    micro_time: (i * 37 % (max_micro + 1)) as u32,
+                },
+            };
+            tags.push(tag);
+        }
+        // Overflow at the very end: the last record is an overflow.
+        let path = dir.path().join(format!("{:08x}.ptu", rt.code()));
+        let mut w = PtuWriter::create(&path, rt, &header()).unwrap();
+        for tag in &tags {
+            w.write_tag(*tag).unwrap();
+        }
+        let extra = if pico {
+            15 << 28
+        } else {
+            (1 << 31) | (63 << 25) | 1
+        };
+        w.write_raw(extra).unwrap();
+        let n = w.finish().unwrap();
+        let (info, decoded, end) = decode_all(&path);
+        end.unwrap();
+        assert_eq!(info.record_type, rt);
+        assert_eq!(info.records_announced, n);
+        assert_eq!(decoded, tags, "{}", rt.name());
+    }
+}
+
+#[test]
+fn malformed_files_give_errors_with_offsets_not_panics() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.ptu");
+    let tags: Vec<Tag> = (0..100)
+        .map(|i| Tag::Photon {
+            channel: 1,
+            macro_time: i * 10,
+            micro_time: 7,
+        })
+        .collect();
+    write(&good, RecordType::GenericT3, &header(), &tags);
+    let bytes = std::fs::read(&good).unwrap();
+    let check = |name: &str, data: &[u8], needle: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, data).unwrap();
+        let msg = match picoquant::open(&p) {
+            Err(e) => e.to_string(),
+            Ok(_) => {
+                let (_, _, end) = decode_all(&p);
+                end.expect_err(name).to_string()
+            }
+        };
+        assert!(msg.contains(needle), "{name}: {msg}");
+    };
+    // Cut mid-record: says how many complete records were read.
+    check(
+        "cut.ptu",
+        &bytes[..bytes.len() - 6],
+        "read 98 of 100 records (2 trailing bytes",
+    );
+    check(
+        "magic.ptu",
+        b"PQXXXR\0\0 something else",
+        "not a PicoQuant file",
+    );
+    check("header-cut.ptu", &bytes[..200], "file ends inside");
+    // An absurd string length in the first tag (HW_Type payload length).
+    let mut absurd = bytes.clone();
+    absurd[16 + 40..16 + 48].copy_from_slice(&i64::MAX.to_le_bytes());
+    check("absurd.ptu", &absurd, "payload length");
+    let mut typ = bytes.clone();
+    typ[16 + 36..16 + 40].copy_from_slice(&0x1234_5678u32.to_le_bytes());
+    check("type.ptu", &typ, "unknown type code 0x12345678");
+    // Random bytes after a valid magic never panic.
+    for seed in 0..200u32 {
+        let mut junk = [&b"PQTTTR\0\0"[..], b"1.0.00\0\0"].concat();
+        junk.extend((0..300u32).map(|i| {
+            (i.wrapping_mul(2_654_435_761)
+                .wrapping_add(seed.wrapping_mul(40_503))
+                >> 13) as u8
+        }));
+        let p = dir.path().join("junk.ptu");
+        std::fs::write(&p, &junk).unwrap();
+        let _ = picoquant::open(&p).map(|_| decode_all(&p));
+    }
+}
+
+#[test]
+fn zero_record_count_falls_back_to_the_file_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("zero.ptu");
+    let tags: Vec<Tag> = (0..10)
+        .map(|i| Tag::Photon {
+            channel: 0,
+            macro_time: i,
+            micro_time: 1,
+        })
+        .collect();
+    let mut w = PtuWriter::create(&p, RecordType::PicoHarpT3, &header()).unwrap();
+    for t in &tags {
+        w.write_tag(*t).unwrap();
+    }
+    drop(w); // never finished: the count stays 0
+    let (info, decoded, end) = decode_all(&p);
+    end.unwrap();
+    assert_eq!(info.records_announced, 10);
+    assert_eq!(decoded, tags);
+}
+
+#[test]
+fn scanned_images_bin_photons_into_their_pixels_and_keep_every_frame() {
+    let img = Imaging {
+        pixels_x: 4,
+        pixels_y: 3,
+        line_start: 1,
+        line_stop: 2,
+        frame: 4,
+        bidirectional: true,
+    };
+    let mut tags = Vec::new();
+    let mut t = 1000u64;
+    let mut expected = ndarray::Array3::<u32>::zeros((2, 3, 4));
+    for frame in 0..2 {
+        for line in 0..3 {
+            tags.push(Tag::Marker {
+                bits: 1,
+                macro_time: t,
+            });
+            for x in 0..4u64 {
+                // frame + 1 photons in pixel x, 100 syncs per pixel.
+                for _ in 0..=frame {
+                    tags.push(Tag::Photon {
+                        channel: 0,
+                        macro_time: t + x * 100 + 50,
+                        micro_time: 10,
+                    });
+                }
+                let col = if line % 2 == 1 { 3 - x } else { x } as usize;
+                expected[[frame, line, col]] += frame as u32 + 1;
+            }
+            // A marker coinciding with a photon time, and an empty gap.
+            tags.push(Tag::Marker {
+                bits: 2,
+                macro_time: t + 400,
+            });
+            tags.push(Tag::Photon {
+                channel: 0,
+                macro_time: t + 450,
+                micro_time: 10,
+            }); // between lines
+            t += 1000;
+        }
+        // SymPhoTime style: the frame marker follows the lines of its frame.
+        tags.push(Tag::Marker {
+            bits: 4,
+            macro_time: t,
+        });
+        t += 10;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("img.ptu");
+    let h = WriterHeader {
+        imaging: Some(img),
+        ..header()
+    };
+    write(&p, RecordType::PicoHarpT3, &h, &tags);
+    let (info, decoded, _) = decode_all(&p);
+    assert_eq!(info.imaging, Some(img));
+    let window = TimeWindow {
+        start: 0.0,
+        width: 16.0,
+        bins: 2,
+    };
+    let mut b = Binner::new(window, PixelMap::Scan(img), None, FrameSelect::All);
+    for t in decoded {
+        b.push(Some(t));
+    }
+    let (stacks, acc) = b.finish();
+    assert_eq!(stacks.len(), 2, "both frames kept");
+    assert_eq!(acc.frames, 2);
+    for f in 0..2 {
+        for r in 0..3 {
+            for c in 0..4 {
+                assert_eq!(
+                    stacks[f][[0, r, c]],
+                    expected[[f, r, c]],
+                    "frame {f} row {r} col {c}"
+                );
+            }
+        }
+    }
+    assert!(acc.balances(), "{acc:?}");
+    assert_eq!(acc.outside_image, 6, "one photon between lines per line");
+}
