@@ -166,22 +166,31 @@ fn help_explains_units() {
     assert!(Path::new(env!("CARGO_BIN_EXE_scatterscope")).exists());
 }
 
-#[test]
-fn reconstruct_a_simulated_stack_with_every_method() {
-    let dir = tempfile::tempdir().unwrap();
-    let sim = dir.path().join("sim");
+/// Simulates the disks scene at `size` pixels with the paper's pixel pitch
+/// into `dir/sim`.
+fn simulate_small(dir: &Path, size: usize) -> std::path::PathBuf {
+    let sim = dir.join("sim");
+    let fov = (50.0 * size as f64 / 256.0).to_string();
+    let size = size.to_string();
     let o = scatterscope(&[
         "simulate",
         "--scene",
         "disks",
         "--size",
-        "32",
+        &size,
         "--fov",
-        "6.25",
+        &fov,
         "--out",
         sim.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", text(&o).1);
+    sim
+}
+
+#[test]
+fn reconstruct_a_simulated_stack_with_every_method() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = simulate_small(dir.path(), 32);
     let stack = sim.join("counts.exr");
     let truth = sim.join("truth.exr");
     for (method, bin) in [
@@ -253,17 +262,7 @@ fn reconstruct_a_simulated_stack_with_every_method() {
 #[test]
 fn reconstruct_rejects_non_finite_stacks() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = dir.path().join("sim");
-    let o = scatterscope(&[
-        "simulate",
-        "--size",
-        "16",
-        "--fov",
-        "3.125",
-        "--out",
-        sim.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o).1);
+    let sim = simulate_small(dir.path(), 16);
     let mut s = Stack::load(&sim.join("counts.exr")).unwrap();
     s.data[[3, 4, 5]] = f32::INFINITY;
     let bad = dir.path().join("bad.exr");

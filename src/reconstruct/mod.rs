@@ -102,6 +102,23 @@ pub(crate) fn score(row: &mut TraceRow, estimate: ArrayView2<f64>, truth: Option
     }
 }
 
+/// The result for data without a single photon: the estimate is 0 and no
+/// iteration can change it.
+pub(crate) fn no_photons(
+    mut trace: Trace,
+    shape: (usize, usize),
+    truth: Option<ArrayView2<f64>>,
+) -> Reconstruction {
+    trace.notes.push(
+        "no photons: the maximum-likelihood object is 0 and no iteration can change it".into(),
+    );
+    let image = Array2::zeros(shape);
+    let mut row = TraceRow::default();
+    score(&mut row, image.view(), truth);
+    trace.rows.push(row);
+    Reconstruction { image, trace }
+}
+
 /// Clamps an estimate to >= 0, failing on any non-finite value.
 pub(crate) fn finish(
     image: Array2<f64>,

@@ -38,7 +38,9 @@ use ndarray::{Array2, Array3, ArrayView2};
 use super::discrepancy::ExpectedDeviance;
 use super::likelihood::PoissonLikelihood;
 use super::trace::{Trace, TraceRow};
-use super::{ReconstructError, Reconstruction, finish, flat_level, score, validate_counts};
+use super::{
+    ReconstructError, Reconstruction, finish, flat_level, no_photons, score, validate_counts,
+};
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::forward::ForwardModel;
 
@@ -215,14 +217,7 @@ pub fn pnp_admm(
     let total: f64 = counts.sum();
     let flat = flat_level(total, likelihood.total_mass(), n);
     if total == 0.0 {
-        trace
-            .notes
-            .push("no photons: the maximum-likelihood object is 0; nothing to iterate".into());
-        let image = Array2::zeros((h, w));
-        let mut row = TraceRow::default();
-        score(&mut row, image.view(), truth);
-        trace.rows.push(row);
-        return Ok(Reconstruction { image, trace });
+        return Ok(no_photons(trace, (h, w), truth));
     }
     let deviance = ExpectedDeviance::default();
     let mut o = vec![flat; n];

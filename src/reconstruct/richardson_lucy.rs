@@ -7,7 +7,9 @@ use ndarray::{Array2, Array3, ArrayView2, Axis};
 
 use super::operator::Convolution;
 use super::trace::{Trace, TraceRow};
-use super::{ReconstructError, Reconstruction, finish, flat_level, score, validate_counts};
+use super::{
+    ReconstructError, Reconstruction, finish, flat_level, no_photons, score, validate_counts,
+};
 use crate::forward::ForwardModel;
 
 /// Guard of the RL denominator, relative to the mean count.
@@ -34,17 +36,10 @@ pub fn richardson_lucy(
     let total: f64 = m.iter().sum();
     let mass = op.mass();
     let mut trace = Trace::new(method);
-    let mut o = vec![flat_level(total, mass, n); n];
     if total == 0.0 || mass <= 0.0 {
-        trace
-            .notes
-            .push("no photons: the estimate is 0 and no iteration can change it".into());
-        let image = Array2::zeros((h, w));
-        let mut row = TraceRow::default();
-        score(&mut row, image.view(), truth);
-        trace.rows.push(row);
-        return Ok(Reconstruction { image, trace });
+        return Ok(no_photons(trace, (h, w), truth));
     }
+    let mut o = vec![flat_level(total, mass, n); n];
     let guard = DENOMINATOR_GUARD * total / n as f64;
     trace.notes.push(format!(
         "denominator guarded at {guard:.3e} ({DENOMINATOR_GUARD:e} x mean count); 4 FFTs per iteration"

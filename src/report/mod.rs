@@ -327,6 +327,30 @@ pub fn summary_markdown(reports: &[SceneReport]) -> String {
     md
 }
 
+/// CSV of every method's scores on every scene.
+pub fn summary_csv(reports: &[SceneReport]) -> String {
+    let mut csv = String::from(
+        "scene,method,prior,psnr,ssim,wall_s,iterations,oracle_psnr,oracle_iteration\n",
+    );
+    for s in reports.iter().flat_map(|r| &r.scores) {
+        writeln!(
+            csv,
+            "{},{},{},{:.4},{:.5},{:.4},{},{:.4},{}",
+            s.scene,
+            s.method,
+            s.prior.clone().unwrap_or_default(),
+            s.psnr,
+            s.ssim,
+            s.wall_s,
+            s.iterations,
+            s.oracle_psnr,
+            s.oracle_iteration
+        )
+        .expect("String");
+    }
+    csv
+}
+
 /// Why a report could not be produced.
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use exr::prelude::{FlatSamples, ReadChannels, ReadLayers};
+use exr::prelude::FlatSamples;
 use image::imageops::{FilterType, resize};
 use image::{ImageBuffer, Luma};
 use ndarray::Array2;
@@ -79,15 +79,7 @@ pub fn load_grayscale(
 /// Luminance of the first layer of an EXR file: `Y`, Rec. 709 luminance of
 /// `R`, `G`, `B`, or its only channel.
 fn read_exr_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, String> {
-    let image = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .map_err(|e| e.to_string())?;
-    let layer = &image.layer_data;
+    let layer = crate::stack::exr_file::read_first_layer(path).map_err(|e| e.to_string())?;
     let size = layer.size;
     let find = |name: &str| {
         layer

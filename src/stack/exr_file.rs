@@ -82,18 +82,24 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
         .map_err(|e| exr_error(path, e))
 }
 
-/// Reads a stack written by [`write`] (or by any tool that follows the same
-/// channel names and metadata attribute).
-pub fn read(path: &Path) -> Result<Stack, StackError> {
-    let image = exr::prelude::read()
+/// The first valid layer of an EXR file with all its channels and attributes.
+pub(crate) fn read_first_layer(
+    path: &Path,
+) -> Result<Layer<AnyChannels<FlatSamples>>, exr::error::Error> {
+    Ok(exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)
-        .map_err(|e| exr_error(path, e))?;
-    let layer = image.layer_data;
+        .from_file(path)?
+        .layer_data)
+}
+
+/// Reads a stack written by [`write`] (or by any tool that follows the same
+/// channel names and metadata attribute).
+pub fn read(path: &Path) -> Result<Stack, StackError> {
+    let layer = read_first_layer(path).map_err(|e| exr_error(path, e))?;
     let meta_text = match layer.attributes.other.get(&Text::from(META_ATTRIBUTE)) {
         Some(AttributeValue::Text(t)) => t.to_string(),
         Some(other) => {

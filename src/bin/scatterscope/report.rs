@@ -1,12 +1,11 @@
 //! `scatterscope report`: every method on simulated scenes, against the truth.
 
-use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::config::PhysicsArgs;
-use scatterscope::report::{run_scene, summary_markdown};
+use scatterscope::report::{run_scene, summary_csv, summary_markdown};
 use scatterscope::scene::Scene;
 
 use crate::recon_args::ReconArgs;
@@ -72,28 +71,8 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
     let md = summary_markdown(&reports);
-    let mut csv = String::from(
-        "scene,method,prior,psnr,ssim,wall_s,iterations,oracle_psnr,oracle_iteration\n",
-    );
-    for r in &reports {
-        for s in &r.scores {
-            writeln!(
-                csv,
-                "{},{},{},{:.4},{:.5},{:.4},{},{:.4},{}",
-                s.scene,
-                s.method,
-                s.prior.clone().unwrap_or_default(),
-                s.psnr,
-                s.ssim,
-                s.wall_s,
-                s.iterations,
-                s.oracle_psnr,
-                s.oracle_iteration
-            )?;
-        }
-    }
     std::fs::write(args.out.join("summary.md"), &md)?;
-    std::fs::write(args.out.join("summary.csv"), csv)?;
+    std::fs::write(args.out.join("summary.csv"), summary_csv(&reports))?;
     println!("{md}");
     println!(
         "wrote {}/summary.{{md,csv}} and one folder per scene",
