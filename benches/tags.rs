@@ -47,7 +47,7 @@ fn bin_file(path: &Path) -> u64 {
     let mut decoder = Decoder::new(info.record_type);
     let mut chunk = Vec::new();
     while reader.next_chunk(&mut chunk).unwrap() {
-        chunk.iter().for_each(|&r| binner.push(decoder.decode(r)));
+        decoder.decode_all(&chunk, |t| binner.push(t));
     }
     binner.finish().1.binned
 }

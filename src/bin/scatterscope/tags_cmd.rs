@@ -203,7 +203,7 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
     let mut truncated = None;
     loop {
         match reader.next_chunk(&mut chunk) {
-            Ok(true) => chunk.iter().for_each(|&r| binner.push(decoder.decode(r))),
+            Ok(true) => decoder.decode_all(&chunk, |t| binner.push(t)),
             Ok(false) => break,
             Err(e @ TtrError::Truncated { .. }) if args.allow_truncated => {
                 truncated = Some(e.to_string());

@@ -171,7 +171,42 @@ impl Decoder {
     /// return `None`.
     #[inline]
     pub fn decode(&mut self, rec: u32) -> Option<Tag> {
+        self.decode_as(self.layout, rec)
+    }
+
+    /// Decodes `records` in order, handing each result to `f`. The layout
+    /// is matched once per chunk, not per record: each arm is a loop the
+    /// compiler specialises (the decode + bin hot path, see BENCHMARKS.md).
+    #[inline]
+    pub fn decode_all(&mut self, records: &[u32], mut f: impl FnMut(Option<Tag>)) {
+        macro_rules! run {
+            ($layout:expr) => {
+                for &r in records {
+                    f(self.decode_as($layout, r));
+                }
+            };
+        }
         match self.layout {
+            Layout::PicoHarpT3 => run!(Layout::PicoHarpT3),
+            Layout::PicoHarpT2 => run!(Layout::PicoHarpT2),
+            Layout::WideT3 {
+                single_overflow: true,
+            } => run!(Layout::WideT3 {
+                single_overflow: true
+            }),
+            Layout::WideT3 {
+                single_overflow: false,
+            } => run!(Layout::WideT3 {
+                single_overflow: false
+            }),
+            Layout::WideT2 { v1: true } => run!(Layout::WideT2 { v1: true }),
+            Layout::WideT2 { v1: false } => run!(Layout::WideT2 { v1: false }),
+        }
+    }
+
+    #[inline(always)]
+    fn decode_as(&mut self, layout: Layout, rec: u32) -> Option<Tag> {
+        match layout {
             Layout::PicoHarpT3 => {
                 let nsync = u64::from(rec & 0xFFFF);
                 let dtime = (rec >> 16) & 0xFFF;
