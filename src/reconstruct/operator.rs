@@ -34,24 +34,22 @@ impl Convolution {
 
     /// `H x` (2 FFTs).
     pub fn apply(&self, x: &[f64]) -> Vec<f64> {
+        self.filter(x, |k| k)
+    }
+
+    /// `H^T r`: correlation, the conjugate spectrum (2 FFTs).
+    pub fn adjoint(&self, r: &[f64]) -> Vec<f64> {
+        self.filter(r, |k| k.conj())
+    }
+
+    /// Multiplies the spectrum of `x` by `kernel(spectrum)` pointwise.
+    fn filter(&self, x: &[f64], kernel: impl Fn(Complex64) -> Complex64) -> Vec<f64> {
         let prod = self
             .fft
             .forward(x)
             .iter()
             .zip(&self.spectrum)
-            .map(|(a, b)| a * b)
-            .collect();
-        self.fft.inverse(prod)
-    }
-
-    /// `H^T r`: correlation, the conjugate spectrum (2 FFTs).
-    pub fn adjoint(&self, r: &[f64]) -> Vec<f64> {
-        let prod = self
-            .fft
-            .forward(r)
-            .iter()
-            .zip(&self.spectrum)
-            .map(|(a, b)| a * b.conj())
+            .map(|(a, &b)| a * kernel(b))
             .collect();
         self.fft.inverse(prod)
     }
