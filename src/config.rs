@@ -189,7 +189,7 @@ impl PhysicsArgs {
             (None, None) => Preset::Paper.setup(),
         };
         if let Some((path, f)) = &file {
-            apply_file(&mut s, path, f)?;
+            file_as_flags(path, f)?.apply_flags(&mut s);
         }
         self.apply_flags(&mut s);
         s.validate().map_err(|source| {
@@ -269,7 +269,9 @@ fn read_file(path: &Path) -> Result<FileOverrides, ConfigError> {
     toml::from_str(&text).map_err(|e| invalid(path, e.to_string()))
 }
 
-fn apply_file(s: &mut Setup, path: &Path, f: &FileOverrides) -> Result<(), ConfigError> {
+/// The file's overrides as the flag values they stand for, units resolved,
+/// so that file and flags are applied by the same code.
+fn file_as_flags(path: &Path, f: &FileOverrides) -> Result<PhysicsArgs, ConfigError> {
     let q = |key: &str, v: &Option<Quantity>, parse: fn(&str) -> Result<f64, String>| {
         v.as_ref()
             .map(|q| match q {
@@ -280,26 +282,22 @@ fn apply_file(s: &mut Setup, path: &Path, f: &FileOverrides) -> Result<(), Confi
             })
             .transpose()
     };
-    let m = &mut s.medium;
-    set(&mut m.mu_a_per_cm, f.mu_a);
-    set(&mut m.mu_s_per_cm, f.mu_s);
-    set(&mut m.g, f.g);
-    set(&mut m.refractive_index, f.n);
-    set(&mut m.thickness_cm, q("thickness", &f.thickness, parse_cm)?);
-    set(&mut s.sensor.fov_cm, q("fov", &f.fov, parse_cm)?);
-    if let Some(size) = f.size {
-        s.sensor.width_px = size;
-        s.sensor.height_px = size;
-    }
-    set(
-        &mut s.bins.width_ps,
-        q("bin_width", &f.bin_width, parse_ps)?,
-    );
-    set(&mut s.bins.start_ps, q("t_start", &f.t_start, parse_ps)?);
-    set(&mut s.bins.count, f.bins);
-    set(&mut s.total_photons, f.photons);
-    set(&mut s.min_bin_photons, f.min_bin_photons);
-    Ok(())
+    Ok(PhysicsArgs {
+        preset: None,
+        config: None,
+        mu_a: f.mu_a,
+        mu_s: f.mu_s,
+        g: f.g,
+        n: f.n,
+        thickness: q("thickness", &f.thickness, parse_cm)?,
+        fov: q("fov", &f.fov, parse_cm)?,
+        size: f.size,
+        bin_width: q("bin_width", &f.bin_width, parse_ps)?,
+        t_start: q("t_start", &f.t_start, parse_ps)?,
+        bins: f.bins,
+        photons: f.photons,
+        min_bin_photons: f.min_bin_photons,
+    })
 }
 
 #[cfg(test)]
