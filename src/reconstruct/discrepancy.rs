@@ -24,8 +24,16 @@ const TABLE_LO: f64 = 1e-8;
 const TABLE_HI: f64 = 400.0;
 const TABLE_N: usize = 4000;
 
-impl Default for ExpectedDeviance {
-    fn default() -> Self {
+impl ExpectedDeviance {
+    /// The table, built once per process (about 4000 Poisson sums) and
+    /// shared by every reconstruction.
+    pub fn shared() -> &'static Self {
+        static TABLE: std::sync::LazyLock<ExpectedDeviance> =
+            std::sync::LazyLock::new(ExpectedDeviance::build);
+        &TABLE
+    }
+
+    fn build() -> Self {
         let (log_lo, log_hi) = (TABLE_LO.ln(), TABLE_HI.ln());
         let step = (log_hi - log_lo) / (TABLE_N - 1) as f64;
         let table = (0..TABLE_N)
@@ -113,7 +121,7 @@ mod tests {
 
     #[test]
     fn expected_deviance_limits_and_monte_carlo() {
-        let f = ExpectedDeviance::default();
+        let f = ExpectedDeviance::shared();
         assert!((f.per_point(1000.0) - 1.0).abs() < 1e-3);
         assert!((f.per_point(100.0) - exact(100.0)).abs() < 1e-5);
         assert!(f.per_point(0.01) < 0.2 && f.per_point(0.0) == 0.0);

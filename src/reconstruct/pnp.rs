@@ -223,7 +223,7 @@ pub fn pnp_admm(
     if total == 0.0 {
         return Ok(no_photons(trace, (h, w), truth));
     }
-    let deviance = ExpectedDeviance::default();
+    let deviance = ExpectedDeviance::shared();
     let mut o = vec![flat; n];
     let mut v = Array2::from_elem((h, w), flat);
     let mut u = Array2::<f64>::zeros((h, w));
