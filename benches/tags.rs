@@ -27,7 +27,7 @@ fn make_file(path: &Path) {
         state ^= state << 17;
         t += state % 40; // about one photon per 20 syncs: overflows every ~50 records
         w.write_tag(Tag::Photon {
-            channel: (state >> 40) as u8 % 4,
+            channel: (state >> 40) as u16 % 4,
             macro_time: t,
             micro_time: (state >> 20) as u32 % 3125,
         })

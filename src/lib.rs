@@ -16,6 +16,7 @@
 //! The physics itself lives in the `scatterscope-physics` crate, re-exported
 //! as [`physics`].
 
+pub mod acquire;
 pub mod config;
 pub mod denoise;
 pub mod fft2;

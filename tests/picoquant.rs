@@ -105,7 +105,7 @@ fn first_records_match_the_published_layout_by_hand() {
             overflow += 1024 * if nsync == 0 { 1 } else { nsync };
         } else if special == 0 {
             expected.push(Tag::Photon {
-                channel: channel as u8,
+                channel: channel as u16,
                 macro_time: overflow + nsync,
                 micro_time: dtime,
             });
@@ -121,7 +121,7 @@ fn first_records_match_the_published_layout_by_hand() {
     let (_, all, _) = decode_all(&path);
     let count = |c: u8| {
         all.iter()
-            .filter(|t| matches!(t, Tag::Photon { channel, .. } if *channel == c))
+            .filter(|t| matches!(t, Tag::Photon { channel, .. } if *channel == u16::from(c)))
             .count()
     };
     assert_eq!((count(0), count(1)), (45012, 32871));
@@ -200,7 +200,7 @@ fn every_record_type_round_trips_through_the_writer() {
                 },
                 1 if !rt.is_t3() && !pico => Tag::Sync { macro_time: t },
                 _ => Tag::Photon {
-                    channel: (i % if pico { 15 } else { 63 }) as u8,
+                    channel: (i % if pico { 15 } else { 63 }) as u16,
                     macro_time: t,
                     micro_time: (i * 37 % (max_micro + 1)) as u32,
                 },

@@ -1,6 +1,26 @@
-//! Host side of acquisition: transports (USB, serial) that carry the
-//! `firmware-protocol` byte stream, device discovery, and the streaming
-//! pipeline that decodes tags and bins them into transient stacks.
+//! Host side of acquisition: transports that carry the `firmware-protocol`
+//! byte stream, device discovery, the control client, and the streaming
+//! pipeline that turns received bytes into checked event batches with exact
+//! loss accounting.
+//!
+//! - [`link`]: the byte-pipe traits every transport implements.
+//! - [`serial`]: serial ports and USB-CDC devices (`serialport`).
+//! - [`usb`]: USB bulk endpoints (`nusb`; `rusb` behind the `rusb` feature),
+//!   with several transfers in flight.
+//! - [`discovery`]: lists serial ports and known USB time taggers.
+//! - [`client`]: request/response control (identify, configure, start, stop).
+//! - [`pipeline`]: reader thread -> frame decoder -> batch checks -> consumer,
+//!   on bounded channels, and its [`pipeline::LinkAccounting`].
+//! - [`raw`]: the project's raw tag file (lossless recording of batches).
+
+pub mod client;
+pub mod discovery;
+pub mod link;
+pub mod pipeline;
+pub mod raw;
+pub mod serial;
+pub mod usb;
 
 /// Protocol version this host implementation speaks.
 pub use firmware_protocol::PROTOCOL_VERSION;
+pub use link::{ByteReader, ByteWriter, Link, LinkError};

@@ -16,6 +16,10 @@ pub struct Problem {
     pub bin_starts_ps: Vec<f64>,
     /// The physics used.
     pub setup: Setup,
+    /// Stack bins left out because the ST-PSF puts no light in them (before
+    /// the first photons can arrive): their start (ps) and the counts they
+    /// held (dark counts, background).
+    pub left_out: Vec<(f64, f64)>,
 }
 
 /// Why a stack and a physics setup do not fit together.
@@ -67,22 +71,39 @@ impl Problem {
                 let matches = index >= 0.0
                     && (index as usize) < setup.bins.count
                     && (setup.bins.edges_ps(index as usize).0 - start).abs() <= 1e-6 * width;
-                matches
-                    .then(|| kernels.position_of_bin(index as usize))
-                    .flatten()
-                    .ok_or_else(|| {
-                        ProblemError::Mismatch(format!(
-                            "stack bin {i} starts at {start} ps, which is not a bin of the physics ({} x {width} ps from {} ps) that receives photons",
-                            setup.bins.count, setup.bins.start_ps
-                        ))
-                    })
+                if matches {
+                    Ok(kernels.position_of_bin(index as usize))
+                } else {
+                    Err(ProblemError::Mismatch(format!(
+                        "stack bin {i} starts at {start} ps, which is not a bin of the physics ({} x {width} ps from {} ps)",
+                        setup.bins.count, setup.bins.start_ps
+                    )))
+                }
             })
             .collect::<Result<Vec<_>, _>>()?;
+        let kept: Vec<usize> = (0..positions.len()).filter(|&i| positions[i].is_some()).collect();
+        if kept.is_empty() {
+            return Err(ProblemError::Mismatch(format!(
+                "the ST-PSF puts no light in any of the stack's {} bins ({} to {} ps)",
+                positions.len(),
+                stack.meta.bin_starts_ps.first().copied().unwrap_or(0.0),
+                stack.meta.bin_starts_ps.last().copied().unwrap_or(0.0) + width
+            )));
+        }
+        let left_out = (0..positions.len())
+            .filter(|&i| positions[i].is_none())
+            .map(|i| {
+                let counts = stack.data.index_axis(ndarray::Axis(0), i).iter().map(|&v| f64::from(v)).sum();
+                (stack.meta.bin_starts_ps[i], counts)
+            })
+            .collect();
+        let kernel_positions: Vec<usize> = kept.iter().map(|&i| positions[i].expect("kept")).collect();
         Ok(Self {
-            model: ForwardModel::with_bins(&kernels, &positions),
-            counts: stack.data.mapv(f64::from),
-            bin_starts_ps: stack.meta.bin_starts_ps.clone(),
+            model: ForwardModel::with_bins(&kernels, &kernel_positions),
+            counts: stack.data.select(ndarray::Axis(0), &kept).mapv(f64::from),
+            bin_starts_ps: kept.iter().map(|&i| stack.meta.bin_starts_ps[i]).collect(),
             setup: *setup,
+            left_out,
         })
     }
 

@@ -97,6 +97,7 @@ pub fn run_scene(
         counts,
         bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
         setup: *setup,
+        left_out: Vec::new(),
     };
     std::fs::create_dir_all(dir).map_err(|e| ReportError::Io(dir.display().to_string(), e))?;
     let name = scene.name();

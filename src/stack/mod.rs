@@ -75,6 +75,10 @@ pub struct StackMeta {
     pub seed: Option<u64>,
     /// Where the stack came from (command, scene, file).
     pub source: String,
+    /// For measured stacks: the device, its configuration, the time window
+    /// and the photon accounting of the acquisition.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub acquisition: Option<serde_json::Value>,
 }
 
 /// A K x H x W stack of `f32` values with its metadata.

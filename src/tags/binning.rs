@@ -23,6 +23,27 @@ pub enum PixelMap {
     },
     /// Scanned image from line/frame markers.
     Scan(Imaging),
+    /// The channel is a row-major pixel index on a sensor `sensor_width`
+    /// pixels wide (live SPAD-array data); only the region `roi` is kept.
+    Sensor {
+        /// Columns of the whole sensor.
+        sensor_width: usize,
+        /// The region binned.
+        roi: Region,
+    },
+}
+
+/// A rectangle of pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Region {
+    /// First column.
+    pub x: usize,
+    /// First row.
+    pub y: usize,
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
 }
 
 /// Which frames of a scanned image to keep.
@@ -90,7 +111,7 @@ pub struct Binner {
     /// throughput-critical path, see BENCHMARKS.md).
     micro_lut: Vec<u16>,
     map: PixelMap,
-    channel: Option<u8>,
+    channel: Option<u16>,
     frames: FrameSelect,
     /// (bins, rows, columns) of every stack.
     shape: (usize, usize, usize),
@@ -116,7 +137,7 @@ impl Binner {
     pub fn new(
         window: TimeWindow,
         map: PixelMap,
-        channel: Option<u8>,
+        channel: Option<u16>,
         frames: FrameSelect,
     ) -> Self {
         // More bins than a u16 can name: no table, the division path runs.
@@ -139,6 +160,7 @@ impl Binner {
             PixelMap::Single => (window.bins, 1, 1),
             PixelMap::Channel { width } => (window.bins, 1, width),
             PixelMap::Scan(img) => (window.bins, img.pixels_y, img.pixels_x),
+            PixelMap::Sensor { roi, .. } => (window.bins, roi.height, roi.width),
         };
         Self {
             window,
@@ -204,6 +226,15 @@ impl Binner {
                     PixelMap::Channel { width } => {
                         if usize::from(channel) < width {
                             self.bin_at(0, bin, 0, usize::from(channel));
+                        } else {
+                            self.accounting.outside_image += 1;
+                        }
+                    }
+                    PixelMap::Sensor { sensor_width, roi } => {
+                        let p = usize::from(channel);
+                        let (x, y) = (p % sensor_width, p / sensor_width);
+                        if x >= roi.x && y >= roi.y && x - roi.x < roi.width && y - roi.y < roi.height {
+                            self.bin_at(0, bin, y - roi.y, x - roi.x);
                         } else {
                             self.accounting.outside_image += 1;
                         }
@@ -275,6 +306,11 @@ impl Binner {
             self.scan.line = 0;
             self.scan.lines_in_frame = 0;
         }
+    }
+
+    /// Counts so far.
+    pub fn accounting(&self) -> Accounting {
+        self.accounting
     }
 
     /// Ends the stream: photons of an unfinished line count as outside the

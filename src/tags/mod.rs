@@ -2,11 +2,13 @@
 //! produces before they are binned into a stack.
 //!
 //! - [`picoquant`]: PicoQuant PTU and legacy HT3 files.
+//! - [`raw`]: the project's own raw tag files from live acquisition.
 //! - [`binning`]: tags -> K x H x W transient stack (single pixel, pixel
 //!   per channel, or scanned images from line/frame markers).
 
 pub mod binning;
 pub mod picoquant;
+pub mod raw;
 
 /// One decoded event.
 ///
@@ -19,7 +21,7 @@ pub enum Tag {
     /// A detected photon on input `channel` (numbered as in the record).
     Photon {
         /// Input channel as stored in the record.
-        channel: u8,
+        channel: u16,
         /// Overflow-corrected macro time.
         macro_time: u64,
         /// Micro time (T3) or 0 (T2).

@@ -1,5 +1,6 @@
 //! The `scatterscope` command-line tool.
 
+mod acquire;
 mod physics_summary;
 mod psf;
 mod recon_args;
@@ -32,6 +33,8 @@ enum Command {
     Report(report::ReportArgs),
     Info(tags_cmd::InfoArgs),
     Bin(tags_cmd::BinArgs),
+    Acquire(acquire::AcquireArgs),
+    Devices(acquire::DevicesArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -42,5 +45,7 @@ fn main() -> anyhow::Result<()> {
         Command::Report(args) => report::run(&args),
         Command::Info(args) => tags_cmd::info(&args),
         Command::Bin(args) => tags_cmd::bin(&args),
+        Command::Acquire(args) => acquire::run(&args),
+        Command::Devices(args) => acquire::devices(&args),
     }
 }

@@ -56,6 +56,15 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     let sampling = stack.meta.sampling.unwrap_or(Sampling::Integrated);
     let problem = Problem::new(&stack, &setup, sampling)
         .with_context(|| format!("matching {} with its physics", args.stack.display()))?;
+    if !problem.left_out.is_empty() {
+        let counts: f64 = problem.left_out.iter().map(|(_, c)| c).sum();
+        println!(
+            "left out {} bins ({} ps to {} ps) where the ST-PSF puts no light; they held {counts} counts",
+            problem.left_out.len(),
+            problem.left_out[0].0,
+            problem.left_out[problem.left_out.len() - 1].0 + stack.meta.bin_width_ps
+        );
+    }
     let (_, h, w) = stack.data.dim();
     let truth = match &args.truth {
         Some(p) => Some(Scene::File(p.clone()).render(h, w)?),

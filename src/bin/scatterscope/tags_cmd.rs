@@ -43,7 +43,7 @@ pub struct BinArgs {
     bins: Option<usize>,
     /// Keep only photons of this input channel (as numbered in the records).
     #[arg(long)]
-    channel: Option<u8>,
+    channel: Option<u16>,
     /// Pixel mapping: auto (image for imaging files, else single), single, channel.
     #[arg(long, default_value = "auto")]
     pixels: String,
@@ -62,7 +62,7 @@ pub fn info(args: &InfoArgs) -> anyhow::Result<()> {
     let (info, mut reader) = picoquant::open(&args.file)?;
     print_header(&info);
     let mut decoder = Decoder::new(info.record_type);
-    let mut photons: BTreeMap<u8, u64> = BTreeMap::new();
+    let mut photons: BTreeMap<u16, u64> = BTreeMap::new();
     let (mut markers, mut syncs, mut overflows, mut last) = (0u64, 0u64, 0u64, 0u64);
     let mut chunk = Vec::new();
     let outcome = loop {
@@ -259,6 +259,7 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
                     info.device,
                     info.record_type.name()
                 ),
+                acquisition: None,
             },
         };
         let stem = if many {

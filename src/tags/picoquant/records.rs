@@ -222,7 +222,7 @@ impl Decoder {
                     });
                 }
                 Some(Tag::Photon {
-                    channel,
+                    channel: u16::from(channel),
                     macro_time: self.base.saturating_add(nsync),
                     micro_time: dtime,
                 })
@@ -242,7 +242,7 @@ impl Decoder {
                     });
                 }
                 Some(Tag::Photon {
-                    channel,
+                    channel: u16::from(channel),
                     macro_time: self.base.saturating_add(time),
                     micro_time: 0,
                 })
@@ -266,7 +266,7 @@ impl Decoder {
                     });
                 }
                 Some(Tag::Photon {
-                    channel,
+                    channel: u16::from(channel),
                     macro_time: self.base.saturating_add(nsync),
                     micro_time: (rec >> 10) & 0x7FFF,
                 })
@@ -294,7 +294,7 @@ impl Decoder {
                     });
                 }
                 Some(Tag::Photon {
-                    channel,
+                    channel: u16::from(channel),
                     macro_time: self.base.saturating_add(time),
                     micro_time: 0,
                 })

@@ -1,0 +1,199 @@
+//! The project's raw tag file: a lossless recording of a live acquisition.
+//!
+//! ```text
+//! "SSTAGS01"                      8-byte magic
+//! header length L                 u32 LE
+//! header                          L bytes of JSON (RawHeader)
+//! frames                          event batches exactly as on the wire
+//!                                 (firmware-protocol frames of kind 03)
+//! end frame                       a response frame Stopped(Totals), id 0xFFFF
+//! ```
+//!
+//! Every batch is written and flushed as it arrives, so a crash loses at
+//! most the batch being written; a reader recognises the cut (no end frame,
+//! an incomplete last frame) and says so. The frames keep their CRCs, so a
+//! damaged file is detected too.
+
+use std::fs::File;
+use std::io::{BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+use firmware_protocol::{
+    Config, FrameKind, Identity, Response, ResponseFrame, Totals, encode_frame, to_payload,
+};
+use serde::{Deserialize, Serialize};
+
+/// First bytes of every raw tag file.
+pub const MAGIC: &[u8; 8] = b"SSTAGS01";
+/// Largest header accepted when reading (a damaged length is not an
+/// allocation request).
+pub const MAX_HEADER: u32 = 1 << 20;
+
+/// What the file's JSON header records.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RawHeader {
+    /// Format version (1).
+    pub format_version: u32,
+    /// The link the data came from.
+    pub link: String,
+    /// Device model.
+    pub model: String,
+    /// Device serial number.
+    pub serial: String,
+    /// Sensor columns.
+    pub pixels_x: u16,
+    /// Sensor rows.
+    pub pixels_y: u16,
+    /// Micro-time unit of the records, femtoseconds.
+    pub resolution_fs: u32,
+    /// Laser sync period, femtoseconds.
+    pub sync_period_fs: u64,
+    /// Sync divider applied by the device.
+    pub sync_divider: u16,
+    /// Micro-time window applied by the device (0 = whole period).
+    pub time_window: u32,
+    /// Software that wrote the file.
+    pub software: String,
+}
+
+impl RawHeader {
+    /// The header of a recording from `identity` configured with `config`.
+    pub fn new(link: &str, identity: &Identity, config: &Config, software: &str) -> Self {
+        Self {
+            format_version: 1,
+            link: link.to_string(),
+            model: identity.model.clone(),
+            serial: identity.serial.clone(),
+            pixels_x: identity.pixels_x,
+            pixels_y: identity.pixels_y,
+            resolution_fs: config.resolution_fs,
+            sync_period_fs: identity.sync_period_fs * u64::from(config.sync_divider.max(1)),
+            sync_divider: config.sync_divider,
+            time_window: config.time_window,
+            software: software.to_string(),
+        }
+    }
+}
+
+/// Errors of raw files, naming the file.
+#[derive(Debug, thiserror::Error)]
+pub enum RawError {
+    /// Operating-system error.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// Not a raw tag file, or a damaged header.
+    #[error("{path}: {reason}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// Appends batches to a raw tag file, flushing after each.
+pub struct RawWriter {
+    path: PathBuf,
+    out: BufWriter<File>,
+    frame: Vec<u8>,
+    /// First write error; later writes are skipped and the error reported
+    /// at [`RawWriter::finish`].
+    error: Option<std::io::Error>,
+    batches: u64,
+}
+
+impl RawWriter {
+    /// Creates the file and writes the header.
+    pub fn create(path: &Path, header: &RawHeader) -> Result<Self, RawError> {
+        let io = |source| RawError::Io { path: path.to_path_buf(), source };
+        let file = File::create(path).map_err(io)?;
+        let mut out = BufWriter::with_capacity(1 << 17, file);
+        let json = serde_json::to_vec(header).expect("header serialises");
+        out.write_all(MAGIC).map_err(io)?;
+        out.write_all(&(json.len() as u32).to_le_bytes()).map_err(io)?;
+        out.write_all(&json).map_err(io)?;
+        out.flush().map_err(io)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            out,
+            frame: Vec::new(),
+            error: None,
+            batches: 0,
+        })
+    }
+
+    /// Appends one batch payload as a frame and flushes it.
+    pub fn write_batch(&mut self, payload: &[u8]) {
+        if self.error.is_some() {
+            return;
+        }
+        self.frame.clear();
+        encode_frame(FrameKind::Events, payload, &mut self.frame).expect("batch payloads fit a frame");
+        let r = self.out.write_all(&self.frame).and_then(|()| self.out.flush());
+        match r {
+            Ok(()) => self.batches += 1,
+            Err(e) => self.error = Some(e),
+        }
+    }
+
+    /// Batches written.
+    pub fn batches(&self) -> u64 {
+        self.batches
+    }
+
+    /// Writes the end frame (the device's totals when known) and closes.
+    pub fn finish(mut self, totals: Option<Totals>) -> Result<PathBuf, RawError> {
+        if let Some(e) = self.error.take() {
+            return Err(RawError::Io { path: self.path, source: e });
+        }
+        let io = |path: &Path, source| RawError::Io { path: path.to_path_buf(), source };
+        if let Some(t) = totals {
+            let payload = to_payload(&ResponseFrame { id: 0xFFFF, response: Response::Stopped(t) })
+                .expect("totals encode");
+            self.frame.clear();
+            encode_frame(FrameKind::Response, &payload, &mut self.frame).expect("small frame");
+            self.out.write_all(&self.frame).map_err(|e| io(&self.path, e))?;
+        }
+        self.out.flush().map_err(|e| io(&self.path, e))?;
+        self.out.get_ref().sync_all().map_err(|e| io(&self.path, e))?;
+        Ok(self.path)
+    }
+}
+
+/// Reads the magic and header of a raw tag file; the reader is left at
+/// the first frame.
+pub fn read_header(path: &Path, input: &mut impl Read) -> Result<(RawHeader, u64), RawError> {
+    let fmt = |reason: String| RawError::Format { path: path.to_path_buf(), reason };
+    let mut magic = [0u8; 8];
+    input
+        .read_exact(&mut magic)
+        .map_err(|_| fmt("shorter than the 8-byte magic; not a scatterscope raw tag file".into()))?;
+    if &magic != MAGIC {
+        return Err(fmt(format!(
+            "magic {:?} is not {:?}; not a scatterscope raw tag file",
+            String::from_utf8_lossy(&magic),
+            String::from_utf8_lossy(MAGIC)
+        )));
+    }
+    let mut len = [0u8; 4];
+    input.read_exact(&mut len).map_err(|_| fmt("file ends inside the header length".into()))?;
+    let len = u32::from_le_bytes(len);
+    if len > MAX_HEADER {
+        return Err(fmt(format!("header length {len} bytes at byte 8 exceeds {MAX_HEADER}")));
+    }
+    let mut json = vec![0u8; len as usize];
+    input
+        .read_exact(&mut json)
+        .map_err(|_| fmt(format!("file ends inside the {len}-byte header")))?;
+    let header: RawHeader =
+        serde_json::from_slice(&json).map_err(|e| fmt(format!("header JSON: {e}")))?;
+    if header.format_version != 1 {
+        return Err(fmt(format!("format_version {} is not 1", header.format_version)));
+    }
+    Ok((header, 12 + u64::from(len)))
+}

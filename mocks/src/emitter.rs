@@ -1,0 +1,168 @@
+//! Photons sampled from the ST-PSF of a scene.
+//!
+//! A photon's source pixel is drawn with probability proportional to the
+//! scene's intensity, its time bin and lateral offset jointly from the
+//! ST-PSF kernels (their relative masses are the physics), its arrival time
+//! uniformly within that bin. The detected pixel is the source pixel plus
+//! the offset; photons that land off the sensor are not detected. Arrival
+//! times form a Poisson process at the configured rate; dark counts add
+//! uniformly distributed pixels and times.
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Exp, weighted::WeightedAliasIndex};
+use scatterscope_physics::KernelStack;
+
+/// What to emit, besides the scene and its kernels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EmitterOptions {
+    /// Detected signal photons per second (before losses at the sensor edge).
+    pub rate_hz: f64,
+    /// Dark counts per second over the whole sensor.
+    pub dark_rate_hz: f64,
+    /// Laser sync period, picoseconds.
+    pub sync_period_ps: f64,
+    /// Delay of time zero of the ST-PSF after the sync (cables,
+    /// electronics), picoseconds; the host calibrates it away with t0.
+    pub t0_delay_ps: f64,
+    /// RNG seed.
+    pub seed: u64,
+}
+
+impl Default for EmitterOptions {
+    fn default() -> Self {
+        Self {
+            rate_hz: 2e6,
+            dark_rate_hz: 0.0,
+            sync_period_ps: 12_500.0,
+            t0_delay_ps: 0.0,
+            seed: 0,
+        }
+    }
+}
+
+/// A photon as the sensor sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Detection {
+    /// Row-major pixel index.
+    pub pixel: u32,
+    /// Arrival after the sync, picoseconds.
+    pub delay_ps: f64,
+    /// Laser-sync count.
+    pub sync: u64,
+    /// A dark count rather than a signal photon.
+    pub dark: bool,
+}
+
+/// Samples detections; deterministic for a seed.
+pub struct Emitter {
+    width: usize,
+    height: usize,
+    source: WeightedAliasIndex<f64>,
+    kernel: WeightedAliasIndex<f64>,
+    /// (start, width) in ps of each kept kernel.
+    bins: Vec<(f64, f64)>,
+    options: EmitterOptions,
+    gap: Exp<f64>,
+    dark_fraction: f64,
+    rng: ChaCha8Rng,
+    time_s: f64,
+}
+
+/// Why an emitter cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum EmitterError {
+    /// Scene and kernels disagree, or a value is out of range.
+    #[error("mock emitter: {0}")]
+    Invalid(String),
+}
+
+impl Emitter {
+    /// An emitter for `scene` (row-major, `kernels`' sensor size, non-negative).
+    pub fn new(scene: &[f64], kernels: &KernelStack, options: EmitterOptions) -> Result<Self, EmitterError> {
+        let (k, h, w) = kernels.kernels.dim();
+        if scene.len() != h * w {
+            return Err(EmitterError::Invalid(format!(
+                "scene has {} pixels, the sensor {}x{} = {}",
+                scene.len(),
+                w,
+                h,
+                h * w
+            )));
+        }
+        if k == 0 {
+            return Err(EmitterError::Invalid("the ST-PSF has no kept time bin".into()));
+        }
+        let bad = |what: &str, v: f64| EmitterError::Invalid(format!("{what} = {v} is out of range"));
+        let total_rate = options.rate_hz + options.dark_rate_hz;
+        if !(options.rate_hz >= 0.0 && options.dark_rate_hz >= 0.0 && total_rate > 0.0 && total_rate.is_finite()) {
+            return Err(bad("rate_hz + dark_rate_hz", total_rate));
+        }
+        if !(options.sync_period_ps > 0.0 && options.sync_period_ps.is_finite()) {
+            return Err(bad("sync_period_ps", options.sync_period_ps));
+        }
+        let source = WeightedAliasIndex::new(scene.iter().map(|&v| if v.is_finite() { v.max(0.0) } else { 0.0 }).collect())
+            .map_err(|e| EmitterError::Invalid(format!("scene weights: {e}")))?;
+        let kernel = WeightedAliasIndex::new(kernels.kernels.iter().map(|&v| v.max(0.0)).collect())
+            .map_err(|e| EmitterError::Invalid(format!("kernel weights: {e}")))?;
+        let bins = kernels
+            .kept_bins()
+            .map(|b| (b.start_ps, b.end_ps - b.start_ps))
+            .collect();
+        Ok(Self {
+            width: w,
+            height: h,
+            source,
+            kernel,
+            bins,
+            gap: Exp::new(total_rate).map_err(|e| EmitterError::Invalid(e.to_string()))?,
+            dark_fraction: options.dark_rate_hz / total_rate,
+            rng: ChaCha8Rng::seed_from_u64(options.seed),
+            options,
+            time_s: 0.0,
+        })
+    }
+
+    /// Emission time of the last detection, seconds since start.
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Sensor size (width, height).
+    pub fn sensor(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// The next detection (photons landing off the sensor are skipped; they
+    /// are never detected).
+    pub fn next_detection(&mut self) -> Detection {
+        loop {
+            self.time_s += self.gap.sample(&mut self.rng);
+            let sync = (self.time_s * 1e12 / self.options.sync_period_ps) as u64;
+            if self.rng.random::<f64>() < self.dark_fraction {
+                let pixel = self.rng.random_range(0..self.width * self.height) as u32;
+                let delay_ps = self.rng.random::<f64>() * self.options.sync_period_ps;
+                return Detection { pixel, delay_ps, sync, dark: true };
+            }
+            let src = self.source.sample(&mut self.rng);
+            let entry = self.kernel.sample(&mut self.rng);
+            let plane = self.width * self.height;
+            let (bin, offset) = (entry / plane, entry % plane);
+            let dy = (offset / self.width) as isize - (self.height / 2) as isize;
+            let dx = (offset % self.width) as isize - (self.width / 2) as isize;
+            let y = (src / self.width) as isize + dy;
+            let x = (src % self.width) as isize + dx;
+            if y < 0 || x < 0 || y >= self.height as isize || x >= self.width as isize {
+                continue;
+            }
+            let (start, width) = self.bins[bin];
+            let delay_ps = self.options.t0_delay_ps + start + self.rng.random::<f64>() * width;
+            return Detection {
+                pixel: (y as usize * self.width + x as usize) as u32,
+                delay_ps,
+                sync,
+                dark: false,
+            };
+        }
+    }
+}

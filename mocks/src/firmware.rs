@@ -1,0 +1,546 @@
+//! The emulated firmware: answers requests, turns detections into event
+//! records through a bounded FIFO (overflow becomes a lost record, as in a
+//! real device), batches them, injects faults on request, and keeps the
+//! true counts so tests can check the host's accounting exactly.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use firmware_protocol::batch::MAX_RECORDS;
+use firmware_protocol::{
+    BatchEncoder, Config, DeviceError, Event, FrameDecoder, FrameKind, Identity, PROTOCOL_VERSION,
+    Request, RequestFrame, Response, ResponseFrame, Status, Totals, encode_frame, from_payload,
+    to_payload,
+};
+
+use crate::emitter::Emitter;
+use crate::{DevicePort, PortClosed};
+
+/// Response id of messages the device sends on its own.
+pub const UNSOLICITED_ID: u16 = 0xFFFF;
+
+/// Faults to inject, each every n-th event batch (0 = never).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Faults {
+    /// Remove 5 bytes from the middle of the frame.
+    pub drop_bytes_every: u32,
+    /// Flip one bit in the middle of the frame.
+    pub corrupt_every: u32,
+    /// Send the batch twice.
+    pub duplicate_every: u32,
+    /// Hold the batch back and send it after the next one.
+    pub reorder_every: u32,
+    /// Overflow the FIFO: drop the next `overflow_photons` detections.
+    pub overflow_every: u32,
+    /// Photons dropped per overflow.
+    pub overflow_photons: u64,
+    /// Close the link after this many batches (0 = never), mid-stream.
+    pub disconnect_after: u32,
+}
+
+/// Everything about the emulated device.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MockOptions {
+    /// Model string in Identify.
+    pub model: String,
+    /// Serial number.
+    pub serial: String,
+    /// TDC resolution, femtoseconds.
+    pub tdc_resolution_fs: u32,
+    /// FIFO capacity, records.
+    pub fifo_capacity: usize,
+    /// Pace detections in real time at the emitter's rate (`false`: as
+    /// fast as the link takes them, never overflowing).
+    pub real_time: bool,
+    /// Stop by itself after this many detections (0 = never).
+    pub max_photons: u64,
+    /// Close an event batch after this long even if not full.
+    pub batch_interval: Duration,
+    /// Faults to inject.
+    pub faults: Faults,
+}
+
+impl Default for MockOptions {
+    fn default() -> Self {
+        Self {
+            model: "scatterscope mock time tagger".into(),
+            serial: "MOCK-0001".into(),
+            tdc_resolution_fs: 1000,
+            fifo_capacity: 1 << 20,
+            real_time: true,
+            max_photons: 0,
+            batch_interval: Duration::from_millis(5),
+            faults: Faults::default(),
+        }
+    }
+}
+
+/// The true counts of the emulated device, for checking the host.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Truth {
+    /// Photons detected in the window and ROI (sent or dropped).
+    pub photons_detected: u64,
+    /// Dark counts among them.
+    pub dark_counts: u64,
+    /// Detections the device's time window or ROI excluded (never recorded).
+    pub photons_excluded: u64,
+    /// Photons dropped by FIFO overflow.
+    pub photons_lost_fifo: u64,
+    /// Photon records in batches handed to the link.
+    pub photons_sent: u64,
+    /// Distinct batches handed to the link.
+    pub batches_sent: u32,
+    /// Batches damaged on purpose (dropped bytes, flipped bit).
+    pub batches_damaged: u32,
+    /// Photon records in damaged batches.
+    pub photons_damaged: u64,
+    /// Batches sent twice.
+    pub batches_duplicated: u32,
+    /// Batches sent late.
+    pub batches_reordered: u32,
+    /// Photon records in batches never sent (disconnect).
+    pub photons_unsent: u64,
+    /// The device closed the link on purpose.
+    pub disconnected: bool,
+}
+
+/// A running emulated device.
+pub struct MockHandle {
+    truth: Arc<Mutex<Truth>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl MockHandle {
+    /// The true counts so far.
+    pub fn truth(&self) -> Truth {
+        *self.truth.lock().expect("truth lock")
+    }
+
+    /// Waits for the device thread to end (it ends when the host closes the
+    /// link) and returns the final counts.
+    pub fn join(mut self) -> Truth {
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        self.truth()
+    }
+}
+
+/// The emulated device, before it runs.
+pub struct MockDevice {
+    options: MockOptions,
+    emitter: Emitter,
+    sync_period_fs: u64,
+}
+
+impl MockDevice {
+    /// A device emitting from `emitter`.
+    pub fn new(options: MockOptions, emitter: Emitter, sync_period_ps: f64) -> Self {
+        Self {
+            options,
+            emitter,
+            sync_period_fs: (sync_period_ps * 1000.0).round() as u64,
+        }
+    }
+
+    /// What Identify answers.
+    pub fn identity(&self) -> Identity {
+        let (w, h) = self.emitter.sensor();
+        Identity {
+            model: self.options.model.clone(),
+            serial: self.options.serial.clone(),
+            firmware: [0, 1, 0],
+            protocol_version: PROTOCOL_VERSION,
+            pixels_x: w as u16,
+            pixels_y: h as u16,
+            channels: (w * h) as u16,
+            tdc_resolution_fs: self.options.tdc_resolution_fs,
+            sync_period_fs: self.sync_period_fs,
+        }
+    }
+
+    /// Runs the firmware on `port` in its own thread.
+    pub fn spawn(self, port: Box<dyn DevicePort>) -> MockHandle {
+        let truth = Arc::new(Mutex::new(Truth::default()));
+        let t = truth.clone();
+        let thread = std::thread::Builder::new()
+            .name("mock-firmware".into())
+            .spawn(move || {
+                let mut fw = Firmware::new(self, port, t);
+                // The loop ends when the host closes the link.
+                let _ = fw.run();
+            })
+            .expect("spawning the mock firmware thread");
+        MockHandle { truth, thread: Some(thread) }
+    }
+}
+
+struct Firmware {
+    device: MockDevice,
+    identity: Identity,
+    port: Box<dyn DevicePort>,
+    truth: Arc<Mutex<Truth>>,
+    config: Option<Config>,
+    running: bool,
+    started: Instant,
+    exposure: Option<Duration>,
+    fifo: VecDeque<Event>,
+    pending_lost: u64,
+    encoder: BatchEncoder,
+    batch_opened: Instant,
+    /// Frames waiting for room in the link.
+    outbox: VecDeque<Vec<u8>>,
+    held_back: Option<Vec<u8>>,
+    overflow_left: u64,
+    request_errors: u32,
+    requests: FrameDecoder,
+    local: Truth,
+    /// Emitter time at Start, seconds.
+    emit_origin: f64,
+}
+
+impl Firmware {
+    fn new(device: MockDevice, port: Box<dyn DevicePort>, truth: Arc<Mutex<Truth>>) -> Self {
+        let identity = device.identity();
+        Self {
+            device,
+            identity,
+            port,
+            truth,
+            config: None,
+            running: false,
+            started: Instant::now(),
+            exposure: None,
+            fifo: VecDeque::new(),
+            pending_lost: 0,
+            encoder: BatchEncoder::new(),
+            batch_opened: Instant::now(),
+            outbox: VecDeque::new(),
+            held_back: None,
+            overflow_left: 0,
+            request_errors: 0,
+            requests: FrameDecoder::new(),
+            local: Truth::default(),
+            emit_origin: 0.0,
+        }
+    }
+
+    fn publish(&self) {
+        *self.truth.lock().expect("truth lock") = self.local;
+    }
+
+    fn run(&mut self) -> Result<(), PortClosed> {
+        loop {
+            // While streaming, poll the host quickly; idle, wait longer.
+            let wait = if self.running || !self.outbox.is_empty() {
+                Duration::ZERO
+            } else {
+                Duration::from_millis(20)
+            };
+            if let Some(bytes) = self.port.recv(wait)? {
+                self.requests.push(&bytes);
+                let mut frames = Vec::new();
+                while let Some(f) = self.requests.next_frame() {
+                    frames.push((f.kind, f.payload.to_vec()));
+                }
+                for (kind, payload) in frames {
+                    if kind == FrameKind::Request {
+                        self.handle(&payload)?;
+                    }
+                }
+            }
+            if self.running {
+                self.acquire();
+            }
+            self.flush_outbox()?;
+            self.publish();
+            if self.local.disconnected && self.outbox.is_empty() {
+                return Err(PortClosed);
+            }
+            if self.running && !self.outbox.is_empty() {
+                // The link is full: let the host catch up.
+                std::thread::sleep(Duration::from_micros(200));
+            }
+        }
+    }
+
+    fn respond(&mut self, id: u16, response: Response) -> Result<(), PortClosed> {
+        let payload = to_payload(&ResponseFrame { id, response }).expect("responses encode");
+        let mut frame = Vec::new();
+        encode_frame(FrameKind::Response, &payload, &mut frame).expect("responses are small");
+        self.outbox.push_back(frame);
+        Ok(())
+    }
+
+    fn handle(&mut self, payload: &[u8]) -> Result<(), PortClosed> {
+        let Ok(RequestFrame { id, request }) = from_payload::<RequestFrame>(payload) else {
+            self.request_errors += 1;
+            return self.respond(UNSOLICITED_ID, Response::Error(DeviceError::Malformed));
+        };
+        let response = match request {
+            Request::Identify => Response::Identity(self.identity.clone()),
+            Request::Configure(_) if self.running => Response::Error(DeviceError::Busy),
+            Request::Configure(c) => match self.validate(c) {
+                Ok(c) => {
+                    self.config = Some(c.clone());
+                    Response::Configured(c)
+                }
+                Err(e) => Response::Error(e),
+            },
+            Request::Start => {
+                if self.config.is_none() {
+                    self.config = Some(self.validate(default_config(&self.identity)).expect("default config is valid"));
+                }
+                self.start();
+                Response::Started
+            }
+            Request::Stop => {
+                if self.running {
+                    self.stop();
+                }
+                Response::Stopped(self.totals())
+            }
+            Request::Status => Response::Status(Status {
+                running: self.running,
+                totals: self.totals(),
+                fifo_fill: self.fifo.len() as u32,
+                fifo_capacity: self.device.options.fifo_capacity as u32,
+                request_errors: self.request_errors,
+            }),
+        };
+        self.respond(id, response)
+    }
+
+    fn validate(&self, c: Config) -> Result<Config, DeviceError> {
+        let invalid = |field: &str, reason: String| DeviceError::InvalidConfig { field: field.into(), reason };
+        let tdc = self.identity.tdc_resolution_fs;
+        if c.resolution_fs == 0 || c.resolution_fs % tdc != 0 {
+            return Err(invalid(
+                "resolution_fs",
+                format!("{} fs is not a positive multiple of the TDC resolution {tdc} fs", c.resolution_fs),
+            ));
+        }
+        if c.sync_divider == 0 {
+            return Err(invalid("sync_divider", "0; must be at least 1".into()));
+        }
+        let period_units = self.identity.sync_period_fs * u64::from(c.sync_divider) / u64::from(c.resolution_fs);
+        if period_units > u64::from(firmware_protocol::record::MAX_MICRO) {
+            return Err(invalid(
+                "resolution_fs",
+                format!(
+                    "{} fs makes the {} fs sync period {period_units} units, beyond the 20-bit micro time",
+                    c.resolution_fs, self.identity.sync_period_fs
+                ),
+            ));
+        }
+        if let Some(r) = c.roi {
+            let (w, h) = (u32::from(self.identity.pixels_x), u32::from(self.identity.pixels_y));
+            if r.width == 0 || r.height == 0 || u32::from(r.x) + u32::from(r.width) > w || u32::from(r.y) + u32::from(r.height) > h {
+                return Err(invalid("roi", format!("{}x{} at ({}, {}) is not inside the {w}x{h} sensor", r.width, r.height, r.x, r.y)));
+            }
+        }
+        Ok(c)
+    }
+
+    fn totals(&self) -> Totals {
+        Totals {
+            batches: self.local.batches_sent,
+            photons_sent: self.local.photons_sent,
+            photons_lost: self.local.photons_lost_fifo,
+        }
+    }
+
+    fn start(&mut self) {
+        self.running = true;
+        self.started = Instant::now();
+        let c = self.config.as_ref().expect("configured before start");
+        self.exposure = (c.exposure_ms > 0).then(|| Duration::from_millis(u64::from(c.exposure_ms)));
+        self.encoder = BatchEncoder::new();
+        self.batch_opened = Instant::now();
+        self.fifo.clear();
+        self.pending_lost = 0;
+        self.local = Truth::default();
+        self.emitter_reset();
+    }
+
+    fn emitter_reset(&mut self) {
+        // Detections continue from the emitter's current state; times are
+        // counted from Start.
+        self.emit_origin = self.device.emitter.time_s();
+    }
+
+    fn stop(&mut self) {
+        self.running = false;
+        while !self.fifo.is_empty() || self.pending_lost > 0 {
+            self.drain_fifo(true);
+        }
+        if !self.encoder.is_empty() {
+            self.close_batch();
+        }
+        if let Some(held) = self.held_back.take() {
+            self.outbox.push_back(held);
+        }
+    }
+
+    /// Detections due by now go into the FIFO; the FIFO goes into batches.
+    fn acquire(&mut self) {
+        let opts = &self.device.options;
+        let elapsed = self.started.elapsed();
+        let cap = opts.fifo_capacity;
+        let mut budget = 1 << 16;
+        let config = self.config.clone().expect("running implies configured");
+        let res = u64::from(config.resolution_fs);
+        let divider = u64::from(config.sync_divider.max(1));
+        let window = u64::from(config.time_window);
+        let width = u64::from(self.identity.pixels_x);
+        let period_units = (self.identity.sync_period_fs * divider / res).max(1);
+        while budget > 0 {
+            if opts.max_photons > 0 && self.local.photons_detected >= opts.max_photons {
+                break;
+            }
+            let room = self.fifo.len() + usize::from(self.pending_lost > 0) < cap;
+            if !opts.real_time && !room {
+                break;
+            }
+            if opts.real_time && self.device.emitter.time_s() - self.emit_origin > elapsed.as_secs_f64() {
+                break;
+            }
+            budget -= 1;
+            let d = self.device.emitter.next_detection();
+            let tdc = self.identity.tdc_resolution_fs as u64;
+            let delay_fs = (d.delay_ps * 1000.0) as u64;
+            // Arrivals after a full period belong to the next sync.
+            let micro = ((delay_fs / tdc * tdc) / res) % period_units;
+            let (x, y) = (u64::from(d.pixel) % width, u64::from(d.pixel) / width);
+            let in_roi = config.roi.is_none_or(|r| {
+                x >= u64::from(r.x) && x < u64::from(r.x) + u64::from(r.width) && y >= u64::from(r.y) && y < u64::from(r.y) + u64::from(r.height)
+            });
+            if (window > 0 && micro >= window) || !in_roi {
+                self.local.photons_excluded += 1;
+                continue;
+            }
+            self.local.photons_detected += 1;
+            self.local.dark_counts += u64::from(d.dark);
+            if self.overflow_left > 0 || !room {
+                self.overflow_left = self.overflow_left.saturating_sub(1);
+                self.pending_lost += 1;
+                self.local.photons_lost_fifo += 1;
+                continue;
+            }
+            if self.pending_lost > 0 {
+                self.fifo.push_back(Event::Lost { count: self.pending_lost });
+                self.pending_lost = 0;
+            }
+            self.fifo.push_back(Event::Photon {
+                pixel: d.pixel as u16,
+                micro: micro as u32,
+                sync: d.sync / divider,
+            });
+        }
+        let exposure_over = self.exposure.is_some_and(|e| elapsed >= e);
+        let quota_met = opts.max_photons > 0 && self.local.photons_detected >= opts.max_photons;
+        self.drain_fifo(false);
+        if exposure_over || quota_met {
+            self.stop();
+            let totals = self.totals();
+            let _ = self.respond(UNSOLICITED_ID, Response::Stopped(totals));
+        }
+    }
+
+    /// Moves FIFO records into the open batch while the link has room;
+    /// closes batches when full or old (`all`: regardless of the link).
+    fn drain_fifo(&mut self, all: bool) {
+        if self.pending_lost > 0 && (all || self.fifo.len() < self.device.options.fifo_capacity) {
+            self.fifo.push_back(Event::Lost { count: self.pending_lost });
+            self.pending_lost = 0;
+        }
+        while all || self.outbox.len() < 4 {
+            let Some(e) = self.fifo.pop_front() else { break };
+            if !self.encoder.has_room(2) {
+                self.close_batch();
+            }
+            self.encoder.push(e).expect("device events are in time order and in range");
+        }
+        if !self.encoder.is_empty()
+            && (self.encoder.len() + 2 > MAX_RECORDS || self.batch_opened.elapsed() >= self.device.options.batch_interval)
+        {
+            self.close_batch();
+        }
+    }
+
+    fn close_batch(&mut self) {
+        let photons_before = self.encoder.photons();
+        let mut payload = Vec::new();
+        let header = self.encoder.finish_batch(&mut payload);
+        self.batch_opened = Instant::now();
+        let photons = photons_before - header.photon_offset;
+        let mut frame = Vec::with_capacity(payload.len() + 12);
+        encode_frame(FrameKind::Events, &payload, &mut frame).expect("batches fit a frame");
+        let f = self.device.options.faults.clone();
+        let n = header.seq + 1;
+        let every = |k: u32| k > 0 && n % k == 0;
+        if f.disconnect_after > 0 && n > f.disconnect_after {
+            // The cable is pulled: this batch and everything after is gone.
+            self.local.photons_unsent += photons;
+            self.local.disconnected = true;
+            self.running = false;
+            return;
+        }
+        self.local.batches_sent += 1;
+        self.local.photons_sent += photons;
+        if every(f.overflow_every) {
+            self.overflow_left += f.overflow_photons;
+        }
+        if every(f.drop_bytes_every) {
+            let mid = frame.len() / 2;
+            frame.drain(mid..mid + 5);
+            self.damaged(photons);
+        } else if every(f.corrupt_every) {
+            let mid = frame.len() / 2;
+            frame[mid] ^= 0x10;
+            self.damaged(photons);
+        }
+        if every(f.duplicate_every) {
+            self.local.batches_duplicated += 1;
+            self.outbox.push_back(frame.clone());
+        }
+        if every(f.reorder_every) && self.held_back.is_none() {
+            self.local.batches_reordered += 1;
+            self.held_back = Some(frame);
+            return;
+        }
+        self.outbox.push_back(frame);
+        if let Some(held) = self.held_back.take() {
+            self.outbox.push_back(held);
+        }
+    }
+
+    fn damaged(&mut self, photons: u64) {
+        self.local.batches_damaged += 1;
+        self.local.photons_damaged += photons;
+    }
+
+    fn flush_outbox(&mut self) -> Result<(), PortClosed> {
+        while let Some(frame) = self.outbox.front() {
+            if !self.port.send(frame)? {
+                break;
+            }
+            self.outbox.pop_front();
+        }
+        Ok(())
+    }
+}
+
+/// The configuration a Start without Configure uses: TDC resolution, whole
+/// period, full sensor, no exposure limit.
+pub fn default_config(identity: &Identity) -> Config {
+    Config {
+        sync_divider: 1,
+        resolution_fs: identity.tdc_resolution_fs,
+        time_window: 0,
+        roi: None,
+        exposure_ms: 0,
+    }
+}

@@ -1,0 +1,149 @@
+//! Devices by name: `mock` (in-process USB), `mock-serial` (a real
+//! pseudo-terminal), `serial:PATH`, `usb:VID:PID[:SERIAL]`.
+
+use std::str::FromStr;
+
+use ndarray::Array2;
+use scatterscope_drivers::usb::UsbSelector;
+use scatterscope_drivers::{Link, LinkError};
+use scatterscope_mocks::emitter::EmitterError;
+use scatterscope_mocks::{Emitter, EmitterOptions, MockDevice, MockHandle, MockOptions};
+
+use crate::physics::KernelStack;
+
+/// IN-endpoint buffer of the in-process USB mock, in 512-byte packets.
+const MOCK_USB_BUFFER_PACKETS: usize = 1024;
+
+/// A device address as given to `--device`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DeviceSpec {
+    /// The mock time tagger on an in-process USB transport.
+    Mock,
+    /// The mock time tagger behind a pseudo-terminal, opened as a serial port.
+    MockSerial,
+    /// A serial port (USB-CDC time tagger).
+    Serial(String),
+    /// A USB time tagger.
+    Usb(UsbSelector),
+}
+
+impl FromStr for DeviceSpec {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "mock" => Ok(Self::Mock),
+            "mock-serial" => Ok(Self::MockSerial),
+            _ => {
+                if let Some(path) = s.strip_prefix("serial:") {
+                    if path.is_empty() {
+                        return Err("`serial:` needs a port path, e.g. serial:/dev/ttyACM0".into());
+                    }
+                    Ok(Self::Serial(path.to_string()))
+                } else if let Some(rest) = s.strip_prefix("usb:") {
+                    rest.parse().map(Self::Usb)
+                } else {
+                    Err(format!(
+                        "unknown device `{s}`: use mock, mock-serial, serial:PATH or usb:VID:PID[:SERIAL] (see `scatterscope devices`)"
+                    ))
+                }
+            }
+        }
+    }
+}
+
+impl DeviceSpec {
+    /// Whether this names a mock device.
+    pub fn is_mock(&self) -> bool {
+        matches!(self, Self::Mock | Self::MockSerial)
+    }
+}
+
+/// What a mock device emits.
+pub struct MockSetup {
+    /// Scene intensity on the sensor grid.
+    pub scene: Array2<f64>,
+    /// ST-PSF kernels of the medium.
+    pub kernels: KernelStack,
+    /// Rates, sync period, delay, seed.
+    pub emitter: EmitterOptions,
+    /// Device behaviour (FIFO, pacing, faults).
+    pub device: MockOptions,
+}
+
+/// An opened link, and the mock behind it if any.
+pub struct OpenedDevice {
+    /// The transport.
+    pub link: Link,
+    /// The emulated device (its true counts), for mocks.
+    pub mock: Option<MockHandle>,
+}
+
+/// Why a device cannot be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// Transport failure.
+    #[error(transparent)]
+    Link(#[from] LinkError),
+    /// The mock's scene or physics is unusable.
+    #[error(transparent)]
+    Mock(#[from] EmitterError),
+    /// A mock was asked for without its set-up.
+    #[error("{0}")]
+    Usage(String),
+    /// The pseudo-terminal could not be created.
+    #[error("creating the mock's pseudo-terminal: {0}")]
+    Pty(std::io::Error),
+}
+
+/// Opens `spec`; mocks are started from `mock` (required for them).
+pub fn open_device(spec: &DeviceSpec, mock: Option<MockSetup>) -> Result<OpenedDevice, OpenError> {
+    let start_mock = |m: MockSetup| -> Result<MockDevice, OpenError> {
+        let scene: Vec<f64> = m.scene.iter().copied().collect();
+        let period = m.emitter.sync_period_ps;
+        let emitter = Emitter::new(&scene, &m.kernels, m.emitter)?;
+        Ok(MockDevice::new(m.device, emitter, period))
+    };
+    let need = || OpenError::Usage("a mock device needs a scene and physics".into());
+    match spec {
+        DeviceSpec::Mock => {
+            let device = start_mock(mock.ok_or_else(need)?)?;
+            let (port, ep_in, ep_out) = scatterscope_mocks::usb::endpoints(MOCK_USB_BUFFER_PACKETS);
+            let handle = device.spawn(Box::new(port));
+            let link = scatterscope_drivers::usb::link(
+                "mock (in-process USB)".into(),
+                Box::new(ep_in),
+                Box::new(ep_out),
+            );
+            Ok(OpenedDevice { link, mock: Some(handle) })
+        }
+        DeviceSpec::MockSerial => {
+            let device = start_mock(mock.ok_or_else(need)?)?;
+            let (port, path) = scatterscope_mocks::pty::open().map_err(OpenError::Pty)?;
+            let handle = device.spawn(Box::new(port));
+            let mut link = scatterscope_drivers::serial::open(
+                &path.to_string_lossy(),
+                scatterscope_drivers::serial::DEFAULT_BAUD,
+            )?;
+            link.description = format!("mock-serial ({})", path.display());
+            Ok(OpenedDevice { link, mock: Some(handle) })
+        }
+        DeviceSpec::Serial(path) => Ok(OpenedDevice {
+            link: scatterscope_drivers::serial::open(path, scatterscope_drivers::serial::DEFAULT_BAUD)?,
+            mock: None,
+        }),
+        DeviceSpec::Usb(sel) => {
+            #[cfg(feature = "rusb")]
+            if std::env::var_os("SCATTERSCOPE_USB_BACKEND").is_some_and(|v| v == "rusb") {
+                return Ok(OpenedDevice {
+                    link: scatterscope_drivers::usb::open_rusb(sel)?,
+                    mock: None,
+                });
+            }
+            Ok(OpenedDevice {
+                link: scatterscope_drivers::usb::open_nusb(sel)?,
+                mock: None,
+            })
+        }
+    }
+}
