@@ -380,6 +380,8 @@ impl Firmware {
             self.close_batch();
         }
         if let Some(held) = self.held_back.take() {
+            // Nothing came after it: it goes out in order after all.
+            self.local.batches_reordered -= 1;
             self.outbox.push_back(held);
         }
     }

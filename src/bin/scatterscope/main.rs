@@ -35,10 +35,51 @@ enum Command {
     Bin(tags_cmd::BinArgs),
     Acquire(acquire::AcquireArgs),
     Devices(acquire::DevicesArgs),
+    Demo(DemoArgs),
+}
+
+/// End-to-end demo on the mock device, no hardware needed.
+///
+/// Runs `acquire --device mock --out OUT/acquire` (the USAF chart behind
+/// the paper's slab, 2 s at 2 million photons/s) and then `reconstruct
+/// OUT/acquire/stack.exr --truth OUT/acquire/truth.exr --out
+/// OUT/reconstruct`: the same code paths as the two commands.
+#[derive(Debug, clap::Args)]
+struct DemoArgs {
+    /// Output directory.
+    #[arg(long, default_value = "out/demo")]
+    out: std::path::PathBuf,
+}
+
+fn demo(args: &DemoArgs) -> anyhow::Result<()> {
+    let acq = args.out.join("acquire");
+    let rec = args.out.join("reconstruct");
+    let steps: [Vec<std::ffi::OsString>; 2] = [
+        vec!["acquire".into(), "--device".into(), "mock".into(), "--out".into(), acq.clone().into()],
+        vec![
+            "reconstruct".into(),
+            acq.join("stack.exr").into(),
+            "--truth".into(),
+            acq.join("truth.exr").into(),
+            "--out".into(),
+            rec.into(),
+        ],
+    ];
+    for step in steps {
+        let line: Vec<_> = step.iter().map(|s| s.to_string_lossy().into_owned()).collect();
+        println!("== scatterscope {}", line.join(" "));
+        let cli = Cli::try_parse_from(std::iter::once("scatterscope".into()).chain(step))?;
+        dispatch(cli.command)?;
+    }
+    Ok(())
 }
 
 fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+    dispatch(Cli::parse().command)
+}
+
+fn dispatch(command: Command) -> anyhow::Result<()> {
+    match command {
         Command::Psf(args) => psf::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Reconstruct(args) => reconstruct::run(&args),
@@ -47,5 +88,6 @@ fn main() -> anyhow::Result<()> {
         Command::Bin(args) => tags_cmd::bin(&args),
         Command::Acquire(args) => acquire::run(&args),
         Command::Devices(args) => acquire::devices(&args),
+        Command::Demo(args) => demo(&args),
     }
 }

@@ -11,6 +11,7 @@ use scatterscope::tags::Tag;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
 use scatterscope::tags::picoquant::records::Decoder;
 use scatterscope::tags::picoquant::{self, Container, FileInfo, TtrError};
+use scatterscope::tags::raw::{bin_batch, is_raw_file, read_raw};
 
 /// Show what a PicoQuant file (PTU, HT3, HT2) holds.
 ///
@@ -59,6 +60,9 @@ pub struct BinArgs {
 }
 
 pub fn info(args: &InfoArgs) -> anyhow::Result<()> {
+    if is_raw_file(&args.file) {
+        return info_raw(args);
+    }
     let (info, mut reader) = picoquant::open(&args.file)?;
     print_header(&info);
     let mut decoder = Decoder::new(info.record_type);
@@ -161,6 +165,9 @@ fn parse_frames(s: &str) -> anyhow::Result<FrameSelect> {
 }
 
 pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
+    if is_raw_file(&args.file) {
+        return bin_raw(args);
+    }
     let (info, mut reader) = picoquant::open(&args.file)?;
     anyhow::ensure!(
         info.record_type.is_t3(),
@@ -297,5 +304,123 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
         args.t_start,
         args.out.display()
     );
+    Ok(())
+}
+
+/// `info` of the project's raw tag files.
+fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
+    let mut photons = 0u64;
+    let mut markers = 0u64;
+    let mut last_sync = 0u64;
+    let summary = read_raw(&args.file, |batch| {
+        for e in batch.events().flatten() {
+            match e {
+                firmware_protocol::Event::Photon { sync, .. } => {
+                    photons += 1;
+                    last_sync = last_sync.max(sync);
+                }
+                firmware_protocol::Event::Marker { sync, .. } => {
+                    markers += 1;
+                    last_sync = last_sync.max(sync);
+                }
+                firmware_protocol::Event::Lost { .. } => {}
+            }
+        }
+    })?;
+    let h = &summary.header;
+    println!("file: {}", args.file.display());
+    println!("container: scatterscope raw tags v{}; written by {}", h.format_version, h.software);
+    println!("device: {} {} via {}", h.model, h.serial, h.link);
+    println!(
+        "sensor: {} x {} pixels; micro-time unit {} fs; sync period {} fs (divider {})",
+        h.pixels_x, h.pixels_y, h.resolution_fs, h.sync_period_fs, h.sync_divider
+    );
+    println!(
+        "batches: {}; photons: {photons}; markers: {markers}; lost in the device: {}; invalid records: {}",
+        summary.batches,
+        summary.counts.lost_in_device,
+        summary.counts.invalid_records
+    );
+    println!(
+        "measured duration: {:.6} s (last event)",
+        last_sync as f64 * h.sync_period_fs as f64 * 1e-15
+    );
+    match summary.totals {
+        Some(t) => println!(
+            "device totals: {} batches, {} photons sent, {} lost in the device{}",
+            t.batches,
+            t.photons_sent,
+            t.photons_lost,
+            if t.photons_sent == photons { "" } else { " (the file misses some: lost in transit)" }
+        ),
+        None => println!("warning: no end frame: the recording was cut (crash or disconnect)"),
+    }
+    if summary.bytes_skipped > 0 {
+        println!("warning: {} bytes did not form valid frames (damage or a cut last batch)", summary.bytes_skipped);
+    }
+    Ok(())
+}
+
+/// `bin` of the project's raw tag files: the whole sensor, micro time from
+/// the sync.
+fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
+    let (header, _) = {
+        let mut f = std::fs::File::open(&args.file).with_context(|| format!("opening {}", args.file.display()))?;
+        scatterscope_drivers::raw::read_header(&args.file, &mut f)?
+    };
+    let res_ps = f64::from(header.resolution_fs) / 1000.0;
+    let width_ps = args.bin_width.unwrap_or(res_ps);
+    let steps = width_ps / res_ps;
+    anyhow::ensure!(
+        width_ps > 0.0 && (steps - steps.round()).abs() < 1e-6,
+        "--bin-width {width_ps} ps is not a positive multiple of the file's {res_ps} ps micro-time unit"
+    );
+    let bins = args
+        .bins
+        .unwrap_or(((header.sync_period_fs as f64 / 1000.0 - args.t_start) / width_ps).ceil().max(1.0) as usize);
+    anyhow::ensure!((1..=65_535).contains(&bins), "--bins {bins}: use 1 to 65535 bins");
+    let (w, h) = (usize::from(header.pixels_x), usize::from(header.pixels_y));
+    anyhow::ensure!(w > 0 && h > 0, "{}: header sensor size {w} x {h} is empty", args.file.display());
+    let window = TimeWindow { start: args.t_start / res_ps, width: steps.round(), bins };
+    let map = PixelMap::Sensor {
+        sensor_width: w,
+        roi: scatterscope::tags::binning::Region { x: 0, y: 0, width: w, height: h },
+    };
+    let mut binner = Binner::new(window, map, args.channel, FrameSelect::Sum);
+    let start = Instant::now();
+    let mut counts = scatterscope::tags::raw::BatchCounts::default();
+    let summary = read_raw(&args.file, |batch| counts += bin_batch(batch, &mut binner))?;
+    let elapsed = start.elapsed().as_secs_f64();
+    let (mut stacks, acc) = binner.finish();
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating output directory {}", args.out.display()))?;
+    let stack = Stack {
+        data: stacks.swap_remove(0).mapv(|c| c as f32),
+        meta: StackMeta {
+            version: META_VERSION,
+            kind: ValueKind::Counts,
+            bin_starts_ps: (0..bins).map(|k| args.t_start + k as f64 * width_ps).collect(),
+            bin_width_ps: width_ps,
+            pixel_pitch_cm: 1.0,
+            setup: None,
+            sampling: None,
+            dropped_bins: Vec::new(),
+            clamped_negative: 0,
+            seed: None,
+            source: format!("scatterscope bin {} ({} {})", args.file.display(), header.model, header.serial),
+            acquisition: Some(serde_json::json!({ "raw_header": header, "totals_in_file": summary.totals.is_some() })),
+        },
+    };
+    let path = args.out.join("stack.exr");
+    stack.save(&path)?;
+    write_contact_sheet(&stack, SheetScale::Shared, &args.out.join("stack.png"))?;
+    println!(
+        "{} records in {:.3} s: {} photons, {} binned, {} outside the window, {} lost in the device, {} invalid",
+        acc.records, elapsed, acc.received, acc.binned, acc.outside_window, counts.lost_in_device, counts.invalid_records
+    );
+    if summary.totals.is_none() {
+        println!("warning: no end frame: the recording was cut (crash or disconnect)");
+    }
+    println!("wrote {}", path.display());
     Ok(())
 }
