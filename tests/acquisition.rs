@@ -9,7 +9,9 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use ndarray::{Array3, Axis};
-use scatterscope::acquire::{DeviceSpec, MockSetup, Outcome, Plan, StopReason, acquire, open_device};
+use scatterscope::acquire::{
+    DeviceSpec, MockSetup, Outcome, Plan, StopReason, acquire, open_device,
+};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup};
 use scatterscope::scene::Scene;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, Region, TimeWindow};
@@ -70,14 +72,24 @@ fn run(spec: DeviceSpec, m: MockSetup, plan: &Plan) -> (Outcome, Truth) {
 #[test]
 fn usb_mock_stack_balances_and_agrees_with_the_forward_model() {
     let n = 300_000;
-    let (out, truth) = run(DeviceSpec::Mock, mock(1, n, Faults::default(), 0.0), &plan(0.0));
+    let (out, truth) = run(
+        DeviceSpec::Mock,
+        mock(1, n, Faults::default(), 0.0),
+        &plan(0.0),
+    );
     let acc = out.accounting;
     assert_eq!(out.stop, StopReason::DeviceStopped);
     assert!(acc.balances(), "{}", acc.table());
     assert_eq!(acc.detected, Some(n));
     assert_eq!(truth.photons_detected, n);
-    assert_eq!((acc.received, acc.lost_in_device, acc.lost_in_transit), (n, 0, 0));
-    assert_eq!(out.counts.iter().map(|&c| u64::from(c)).sum::<u64>(), acc.binned);
+    assert_eq!(
+        (acc.received, acc.lost_in_device, acc.lost_in_transit),
+        (n, 0, 0)
+    );
+    assert_eq!(
+        out.counts.iter().map(|&c| u64::from(c)).sum::<u64>(),
+        acc.binned
+    );
 
     // Independent check of the sampler (alias sampling of the ST-PSF per
     // photon): a direct linear convolution of the scene with each kernel,
@@ -96,7 +108,10 @@ fn usb_mock_stack_balances_and_agrees_with_the_forward_model() {
                 continue;
             }
             for ((ky, kx), &kv) in kernel.indexed_iter() {
-                let (y, x) = ((sy + ky) as isize - (h / 2) as isize, (sx + kx) as isize - (w / 2) as isize);
+                let (y, x) = (
+                    (sy + ky) as isize - (h / 2) as isize,
+                    (sx + kx) as isize - (w / 2) as isize,
+                );
                 if y >= 0 && x >= 0 && (y as usize) < h && (x as usize) < w {
                     plane[(y as usize, x as usize)] += o * kv;
                 }
@@ -106,12 +121,24 @@ fn usb_mock_stack_balances_and_agrees_with_the_forward_model() {
     let scale = acc.binned as f64 / expected.sum();
     for (pos, &k) in kept.iter().enumerate() {
         let e = expected.index_axis(Axis(0), pos).sum() * scale;
-        let o = out.counts.index_axis(Axis(0), k).iter().map(|&c| f64::from(c)).sum::<f64>();
-        assert!((o - e).abs() < 5.0 * e.sqrt() + 1.0, "bin {k}: {o} photons, expected {e:.1}");
+        let o = out
+            .counts
+            .index_axis(Axis(0), k)
+            .iter()
+            .map(|&c| f64::from(c))
+            .sum::<f64>();
+        assert!(
+            (o - e).abs() < 5.0 * e.sqrt() + 1.0,
+            "bin {k}: {o} photons, expected {e:.1}"
+        );
     }
     for k in 0..s.bins.count {
         if !kept.contains(&k) {
-            assert_eq!(out.counts.index_axis(Axis(0), k).sum(), 0, "bin {k} carries no light");
+            assert_eq!(
+                out.counts.index_axis(Axis(0), k).sum(),
+                0,
+                "bin {k} carries no light"
+            );
         }
     }
     // Time-summed image: Pearson chi-square per pixel close to 1.
@@ -125,29 +152,63 @@ fn usb_mock_stack_balances_and_agrees_with_the_forward_model() {
         }
     }
     let per_dof = chi2 / f64::from(dof);
-    assert!(dof > 3000 && per_dof < 1.15 && per_dof > 0.85, "chi2/dof {per_dof} over {dof} pixels");
+    assert!(
+        dof > 3000 && per_dof < 1.15 && per_dof > 0.85,
+        "chi2/dof {per_dof} over {dof} pixels"
+    );
 }
 
 #[test]
 fn usb_and_serial_transports_deliver_the_same_photons() {
     let p = plan(0.0);
-    let (usb, _) = run(DeviceSpec::Mock, mock(7, 40_000, Faults::default(), 0.0), &p);
-    let (pty, truth) = run(DeviceSpec::MockSerial, mock(7, 40_000, Faults::default(), 0.0), &p);
+    let (usb, _) = run(
+        DeviceSpec::Mock,
+        mock(7, 40_000, Faults::default(), 0.0),
+        &p,
+    );
+    let (pty, truth) = run(
+        DeviceSpec::MockSerial,
+        mock(7, 40_000, Faults::default(), 0.0),
+        &p,
+    );
     assert!(pty.link.starts_with("mock-serial (/dev/"), "{}", pty.link);
     assert!(pty.accounting.balances() && pty.accounting.detected == Some(40_000));
     assert_eq!(truth.photons_sent, 40_000);
-    assert_eq!(usb.counts, pty.counts, "same seed, same photons, whatever the transport");
-    let (other, _) = run(DeviceSpec::Mock, mock(8, 40_000, Faults::default(), 0.0), &p);
+    assert_eq!(
+        usb.counts, pty.counts,
+        "same seed, same photons, whatever the transport"
+    );
+    let (other, _) = run(
+        DeviceSpec::Mock,
+        mock(8, 40_000, Faults::default(), 0.0),
+        &p,
+    );
     assert_ne!(usb.counts, other.counts, "another seed gives other photons");
 }
 
 #[test]
 fn t0_calibration_undoes_the_instrument_delay() {
-    let (plain, _) = run(DeviceSpec::Mock, mock(3, 30_000, Faults::default(), 0.0), &plan(0.0));
-    let (delayed, _) = run(DeviceSpec::Mock, mock(3, 30_000, Faults::default(), 300.0), &plan(300.0));
+    let (plain, _) = run(
+        DeviceSpec::Mock,
+        mock(3, 30_000, Faults::default(), 0.0),
+        &plan(0.0),
+    );
+    let (delayed, _) = run(
+        DeviceSpec::Mock,
+        mock(3, 30_000, Faults::default(), 300.0),
+        &plan(300.0),
+    );
     assert_eq!(plain.counts, delayed.counts);
-    let (uncalibrated, _) = run(DeviceSpec::Mock, mock(3, 30_000, Faults::default(), 300.0), &plan(0.0));
-    assert!(uncalibrated.accounting.outside_window > 25_000, "{}", uncalibrated.accounting.table());
+    let (uncalibrated, _) = run(
+        DeviceSpec::Mock,
+        mock(3, 30_000, Faults::default(), 300.0),
+        &plan(0.0),
+    );
+    assert!(
+        uncalibrated.accounting.outside_window > 25_000,
+        "{}",
+        uncalibrated.accounting.table()
+    );
 }
 
 /// Runs with one fault and checks the host's counts against the mock's truth.
@@ -163,38 +224,74 @@ fn check_fault(faults: Faults) -> (Outcome, Truth) {
     assert!(acc.transit_exact, "{ctx}");
     assert_eq!(acc.lost_in_transit, truth.photons_damaged, "{ctx}");
     assert_eq!(acc.batches_lost, u64::from(truth.batches_damaged), "{ctx}");
-    assert_eq!(acc.batches_duplicate, u64::from(truth.batches_duplicated), "{ctx}");
-    assert_eq!(acc.batches_out_of_order, u64::from(truth.batches_reordered), "{ctx}");
+    assert_eq!(
+        acc.batches_duplicate,
+        u64::from(truth.batches_duplicated),
+        "{ctx}"
+    );
+    assert_eq!(
+        acc.batches_out_of_order,
+        u64::from(truth.batches_reordered),
+        "{ctx}"
+    );
     assert_eq!(acc.lost_in_device, truth.photons_lost_fifo, "{ctx}");
-    assert_eq!(acc.received, truth.photons_sent - truth.photons_damaged, "{ctx}");
-    assert_eq!(out.counts.iter().map(|&c| u64::from(c)).sum::<u64>(), acc.binned, "{ctx}");
+    assert_eq!(
+        acc.received,
+        truth.photons_sent - truth.photons_damaged,
+        "{ctx}"
+    );
+    assert_eq!(
+        out.counts.iter().map(|&c| u64::from(c)).sum::<u64>(),
+        acc.binned,
+        "{ctx}"
+    );
     (out, truth)
 }
 
 #[test]
 fn corrupted_frames_are_rejected_and_their_photons_counted() {
-    let (out, truth) = check_fault(Faults { corrupt_every: 3, ..Faults::default() });
+    let (out, truth) = check_fault(Faults {
+        corrupt_every: 3,
+        ..Faults::default()
+    });
     assert!(truth.batches_damaged >= 4 && out.accounting.crc_errors > 0);
 }
 
 #[test]
 fn dropped_bytes_are_resynchronised_and_counted() {
-    let (out, truth) = check_fault(Faults { drop_bytes_every: 4, ..Faults::default() });
+    let (out, truth) = check_fault(Faults {
+        drop_bytes_every: 4,
+        ..Faults::default()
+    });
     assert!(truth.batches_damaged >= 3 && out.accounting.bytes_skipped > 0);
 }
 
 #[test]
 fn duplicated_batches_are_binned_once() {
-    let (clean, _) = run(DeviceSpec::Mock, mock(5, 120_000, Faults::default(), 0.0), &plan(0.0));
-    let (out, truth) = check_fault(Faults { duplicate_every: 3, ..Faults::default() });
+    let (clean, _) = run(
+        DeviceSpec::Mock,
+        mock(5, 120_000, Faults::default(), 0.0),
+        &plan(0.0),
+    );
+    let (out, truth) = check_fault(Faults {
+        duplicate_every: 3,
+        ..Faults::default()
+    });
     assert!(truth.batches_duplicated >= 4);
     assert_eq!(out.counts, clean.counts);
 }
 
 #[test]
 fn reordered_batches_are_all_kept() {
-    let (clean, _) = run(DeviceSpec::Mock, mock(5, 120_000, Faults::default(), 0.0), &plan(0.0));
-    let (out, truth) = check_fault(Faults { reorder_every: 3, ..Faults::default() });
+    let (clean, _) = run(
+        DeviceSpec::Mock,
+        mock(5, 120_000, Faults::default(), 0.0),
+        &plan(0.0),
+    );
+    let (out, truth) = check_fault(Faults {
+        reorder_every: 3,
+        ..Faults::default()
+    });
     assert!(truth.batches_reordered >= 4);
     assert_eq!(out.counts, clean.counts);
 }
@@ -208,14 +305,24 @@ fn device_fifo_overflow_is_reported_exactly() {
     });
     assert!(truth.photons_lost_fifo >= 3 * 777, "{truth:?}");
     assert_eq!(truth.photons_lost_fifo % 777, 0);
-    assert_eq!(out.accounting.received + out.accounting.lost_in_device, 120_000);
+    assert_eq!(
+        out.accounting.received + out.accounting.lost_in_device,
+        120_000
+    );
 }
 
 #[test]
 fn a_disconnect_mid_stream_ends_cleanly_with_a_lower_bound() {
-    let faults = Faults { disconnect_after: 5, ..Faults::default() };
+    let faults = Faults {
+        disconnect_after: 5,
+        ..Faults::default()
+    };
     let (out, truth) = run(DeviceSpec::Mock, mock(5, 500_000, faults, 0.0), &plan(0.0));
-    assert!(matches!(out.stop, StopReason::Disconnected(_)), "{:?}", out.stop);
+    assert!(
+        matches!(out.stop, StopReason::Disconnected(_)),
+        "{:?}",
+        out.stop
+    );
     let acc = out.accounting;
     assert!(truth.disconnected && truth.batches_sent == 5);
     assert_eq!(acc.detected, None);
@@ -256,10 +363,19 @@ fn a_slow_host_makes_the_device_fifo_overflow_and_says_so() {
 
 fn bin_raw_file(path: &Path) -> (Array3<u32>, scatterscope::tags::raw::RawSummary) {
     let s = setup();
-    let window = TimeWindow { start: 0.0, width: s.bins.width_ps, bins: s.bins.count };
+    let window = TimeWindow {
+        start: 0.0,
+        width: s.bins.width_ps,
+        bins: s.bins.count,
+    };
     let map = PixelMap::Sensor {
         sensor_width: 64,
-        roi: Region { x: 0, y: 0, width: 64, height: 64 },
+        roi: Region {
+            x: 0,
+            y: 0,
+            width: 64,
+            height: 64,
+        },
     };
     let mut binner = Binner::new(window, map, None, FrameSelect::Sum);
     let summary = read_raw(path, |b| {
@@ -275,7 +391,11 @@ fn raw_recordings_round_trip_and_survive_a_cut() {
     let path = dir.path().join("tags.sstags");
     let mut p = plan(0.0);
     p.raw = Some(path.clone());
-    let (out, _) = run(DeviceSpec::Mock, mock(11, 100_000, Faults::default(), 0.0), &p);
+    let (out, _) = run(
+        DeviceSpec::Mock,
+        mock(11, 100_000, Faults::default(), 0.0),
+        &p,
+    );
     assert_eq!(out.raw.as_deref(), Some(path.as_path()));
     let (counts, summary) = bin_raw_file(&path);
     assert_eq!(counts, out.counts);
@@ -317,10 +437,24 @@ fn t0_from_a_reference_recording_is_its_peak() {
         sync_period_fs: 12_500_000,
     };
     let config = scatterscope_mocks::firmware::default_config(&identity);
-    let mut w = RawWriter::create(&path, &RawHeader::new("test", &identity, &config, "test")).unwrap();
+    let mut w =
+        RawWriter::create(&path, &RawHeader::new("test", &identity, &config, "test")).unwrap();
     let mut enc = firmware_protocol::BatchEncoder::new();
-    for (i, micro) in [(0u64, 100u32), (1, 617), (2, 617), (3, 617), (4, 900), (5, 617), (6, 100)] {
-        enc.push(firmware_protocol::Event::Photon { pixel: 0, micro, sync: i }).unwrap();
+    for (i, micro) in [
+        (0u64, 100u32),
+        (1, 617),
+        (2, 617),
+        (3, 617),
+        (4, 900),
+        (5, 617),
+        (6, 100),
+    ] {
+        enc.push(firmware_protocol::Event::Photon {
+            pixel: 0,
+            micro,
+            sync: i,
+        })
+        .unwrap();
     }
     let mut payload = Vec::new();
     enc.finish_batch(&mut payload);
@@ -336,31 +470,70 @@ fn plans_that_do_not_fit_the_device_are_refused_by_name() {
     p.bin_width_ps = 4.5;
     p.resolution_fs = Some(1000);
     let opened = open_device(&DeviceSpec::Mock, Some(mock(1, 10, Faults::default(), 0.0))).unwrap();
-    let err = acquire(opened.link, &p, &AtomicBool::new(false), |_| {}).unwrap_err().to_string();
-    assert!(err.contains("--bin-width 4.5") && err.contains("1 ps"), "{err}");
+    let err = acquire(opened.link, &p, &AtomicBool::new(false), |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("--bin-width 4.5") && err.contains("1 ps"),
+        "{err}"
+    );
 
     let mut p = plan(0.0);
-    p.roi = Some(Region { x: 60, y: 0, width: 10, height: 10 });
+    p.roi = Some(Region {
+        x: 60,
+        y: 0,
+        width: 10,
+        height: 10,
+    });
     let opened = open_device(&DeviceSpec::Mock, Some(mock(1, 10, Faults::default(), 0.0))).unwrap();
-    let err = acquire(opened.link, &p, &AtomicBool::new(false), |_| {}).unwrap_err().to_string();
-    assert!(err.contains("--roi 10x10 at (60, 0)") && err.contains("64x64"), "{err}");
+    let err = acquire(opened.link, &p, &AtomicBool::new(false), |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("--roi 10x10 at (60, 0)") && err.contains("64x64"),
+        "{err}"
+    );
 
     // The device refuses a resolution that is not a multiple of its TDC.
     let mut p = plan(0.0);
     p.resolution_fs = Some(1500);
     let opened = open_device(&DeviceSpec::Mock, Some(mock(1, 10, Faults::default(), 0.0))).unwrap();
-    let err = acquire(opened.link, &p, &AtomicBool::new(false), |_| {}).unwrap_err().to_string();
-    assert!(err.contains("resolution_fs") && err.contains("1500"), "{err}");
+    let err = acquire(opened.link, &p, &AtomicBool::new(false), |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("resolution_fs") && err.contains("1500"),
+        "{err}"
+    );
 }
 
 #[test]
 fn a_region_of_interest_bins_its_pixels_and_counts_the_rest() {
     let mut p = plan(0.0);
-    p.roi = Some(Region { x: 16, y: 8, width: 32, height: 24 });
-    let (roi, _) = run(DeviceSpec::Mock, mock(2, 50_000, Faults::default(), 0.0), &p);
-    let (full, _) = run(DeviceSpec::Mock, mock(2, 50_000, Faults::default(), 0.0), &plan(0.0));
+    p.roi = Some(Region {
+        x: 16,
+        y: 8,
+        width: 32,
+        height: 24,
+    });
+    let (roi, _) = run(
+        DeviceSpec::Mock,
+        mock(2, 50_000, Faults::default(), 0.0),
+        &p,
+    );
+    let (full, _) = run(
+        DeviceSpec::Mock,
+        mock(2, 50_000, Faults::default(), 0.0),
+        &plan(0.0),
+    );
     assert_eq!(roi.counts.dim(), (30, 24, 32));
-    assert_eq!(roi.counts, full.counts.slice(ndarray::s![.., 8..32, 16..48]).to_owned());
+    assert_eq!(
+        roi.counts,
+        full.counts.slice(ndarray::s![.., 8..32, 16..48]).to_owned()
+    );
     assert!(roi.accounting.balances());
-    assert_eq!(roi.accounting.outside_roi, 50_000 - roi.accounting.binned - roi.accounting.outside_window);
+    assert_eq!(
+        roi.accounting.outside_roi,
+        50_000 - roi.accounting.binned - roi.accounting.outside_window
+    );
 }

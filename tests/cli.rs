@@ -466,7 +466,10 @@ fn devices_lists_the_mocks_without_hardware() {
         .iter()
         .map(|d| d["address"].as_str().unwrap())
         .collect();
-    assert!(addresses.ends_with(&["mock", "mock-serial"]), "{addresses:?}");
+    assert!(
+        addresses.ends_with(&["mock", "mock-serial"]),
+        "{addresses:?}"
+    );
 }
 
 #[test]
@@ -475,42 +478,80 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
     let out = dir.path().join("acq");
     let raw = dir.path().join("tags.sstags");
     let o = scatterscope(&[
-        "acquire", "--device", "mock-serial", "--scene", "disks", "--size", "64", "--fov", "12.5cm", "--unpaced",
-        "--max-photons", "200000", "--raw", raw.to_str().unwrap(), "--out", out.to_str().unwrap(),
+        "acquire",
+        "--device",
+        "mock-serial",
+        "--scene",
+        "disks",
+        "--size",
+        "64",
+        "--fov",
+        "12.5cm",
+        "--unpaced",
+        "--max-photons",
+        "200000",
+        "--raw",
+        raw.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
     ]);
     let (stdout, stderr) = text(&o);
     assert!(o.status.success(), "{stdout}\n{stderr}");
-    assert!(stdout.contains("balance: every photon accounted for"), "{stdout}");
+    assert!(
+        stdout.contains("balance: every photon accounted for"),
+        "{stdout}"
+    );
     assert!(stdout.contains("10 of 30 bins are empty"), "{stdout}");
     let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap())
+            .unwrap();
     assert_eq!(json["accounting"]["received"], 200_000);
     assert_eq!(json["accounting"]["binned"], 200_000);
     assert_eq!(json["stop"], "device_stopped");
     let stack = Stack::load(&out.join("stack.exr")).unwrap();
     assert_eq!(stack.data.dim(), (30, 64, 64));
     assert_eq!(stack.total(), 200_000.0);
-    assert_eq!(stack.meta.acquisition.as_ref().unwrap()["accounting"]["received"], 200_000);
+    assert_eq!(
+        stack.meta.acquisition.as_ref().unwrap()["accounting"]["received"],
+        200_000
+    );
 
     // The raw recording holds the same photons.
     let o = scatterscope(&["info", raw.to_str().unwrap()]);
     let (stdout, stderr) = text(&o);
     assert!(o.status.success(), "{stderr}");
-    assert!(stdout.contains("photons: 200000") && stdout.contains("200000 photons sent"), "{stdout}");
+    assert!(
+        stdout.contains("photons: 200000") && stdout.contains("200000 photons sent"),
+        "{stdout}"
+    );
     let binned = dir.path().join("bin");
     let o = scatterscope(&[
-        "bin", raw.to_str().unwrap(), "--bin-width", "4ps", "--bins", "30", "--out", binned.to_str().unwrap(),
+        "bin",
+        raw.to_str().unwrap(),
+        "--bin-width",
+        "4ps",
+        "--bins",
+        "30",
+        "--out",
+        binned.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", text(&o).1);
-    assert_eq!(Stack::load(&binned.join("stack.exr")).unwrap().data, stack.data);
+    assert_eq!(
+        Stack::load(&binned.join("stack.exr")).unwrap().data,
+        stack.data
+    );
 
     // The acquired stack carries its physics: reconstruct needs no flags,
     // and recovers the disks (17.8 dB measured; Richardson-Lucy on the
     // time sum reaches 13.1 dB at its default iterations).
     let rec = dir.path().join("rec");
     let o = scatterscope(&[
-        "reconstruct", out.join("stack.exr").to_str().unwrap(), "--truth", out.join("truth.exr").to_str().unwrap(),
-        "--out", rec.to_str().unwrap(),
+        "reconstruct",
+        out.join("stack.exr").to_str().unwrap(),
+        "--truth",
+        out.join("truth.exr").to_str().unwrap(),
+        "--out",
+        rec.to_str().unwrap(),
     ]);
     let (stdout, stderr) = text(&o);
     assert!(o.status.success(), "{stderr}");
@@ -530,31 +571,55 @@ fn acquire_stops_cleanly_on_ctrl_c() {
     let raw = dir.path().join("tags.sstags");
     let child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
         .args([
-            "acquire", "--device", "mock", "--size", "64", "--fov", "12.5cm", "--duration", "0", "--raw",
-            raw.to_str().unwrap(), "--out", out.to_str().unwrap(),
+            "acquire",
+            "--device",
+            "mock",
+            "--size",
+            "64",
+            "--fov",
+            "12.5cm",
+            "--duration",
+            "0",
+            "--raw",
+            raw.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
         ])
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(1500));
-    nix::sys::signal::kill(nix::unistd::Pid::from_raw(child.id() as i32), nix::sys::signal::Signal::SIGINT)
-        .unwrap();
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGINT,
+    )
+    .unwrap();
     let o = child.wait_with_output().unwrap();
     let (stdout, stderr) = text(&o);
     assert!(o.status.success(), "{stdout}\n{stderr}");
     let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap())
+            .unwrap();
     assert_eq!(json["stop"], "interrupted", "{json}");
     let received = json["accounting"]["received"].as_u64().unwrap();
     assert!(received > 100_000, "{json}");
-    assert_eq!(json["device_totals"]["photons_sent"].as_u64(), Some(received));
+    assert_eq!(
+        json["device_totals"]["photons_sent"].as_u64(),
+        Some(received)
+    );
     let stack = Stack::load(&out.join("stack.exr")).unwrap();
-    assert_eq!(stack.total() as u64, json["accounting"]["binned"].as_u64().unwrap());
+    assert_eq!(
+        stack.total() as u64,
+        json["accounting"]["binned"].as_u64().unwrap()
+    );
     // The raw file is complete: it ends with the device's totals.
     let o = scatterscope(&["info", raw.to_str().unwrap()]);
     let (stdout, _) = text(&o);
-    assert!(stdout.contains(&format!("{received} photons sent")), "{stdout}");
+    assert!(
+        stdout.contains(&format!("{received} photons sent")),
+        "{stdout}"
+    );
     assert!(!stdout.contains("warning"), "{stdout}");
 }
 
@@ -563,31 +628,78 @@ fn acquire_reports_injected_faults_and_a_disconnect() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("acq");
     let o = scatterscope(&[
-        "acquire", "--size", "64", "--fov", "12.5cm", "--unpaced", "--max-photons", "300000", "--faults",
-        "corrupt=5,duplicate=7", "--out", out.to_str().unwrap(),
+        "acquire",
+        "--size",
+        "64",
+        "--fov",
+        "12.5cm",
+        "--unpaced",
+        "--max-photons",
+        "300000",
+        "--faults",
+        "corrupt=5,duplicate=7",
+        "--out",
+        out.to_str().unwrap(),
     ]);
     let (stdout, stderr) = text(&o);
     assert!(o.status.success(), "{stdout}\n{stderr}");
-    assert!(stdout.contains("balance: every photon accounted for"), "{stdout}");
+    assert!(
+        stdout.contains("balance: every photon accounted for"),
+        "{stdout}"
+    );
     let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap()).unwrap();
-    assert!(json["accounting"]["lost_in_transit"].as_u64().unwrap() > 0, "{json}");
-    assert!(json["accounting"]["batches_duplicate"].as_u64().unwrap() > 0, "{json}");
+        serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap())
+            .unwrap();
+    assert!(
+        json["accounting"]["lost_in_transit"].as_u64().unwrap() > 0,
+        "{json}"
+    );
+    assert!(
+        json["accounting"]["batches_duplicate"].as_u64().unwrap() > 0,
+        "{json}"
+    );
 
     let o = scatterscope(&[
-        "acquire", "--size", "64", "--fov", "12.5cm", "--unpaced", "--faults", "disconnect=3", "--out",
+        "acquire",
+        "--size",
+        "64",
+        "--fov",
+        "12.5cm",
+        "--unpaced",
+        "--faults",
+        "disconnect=3",
+        "--out",
         out.to_str().unwrap(),
     ]);
     let (stdout, stderr) = text(&o);
     assert!(!o.status.success());
     assert!(stderr.contains("the device disconnected"), "{stderr}");
-    assert!(stdout.contains("lost in transit") && stdout.contains(">= "), "{stdout}");
-    assert!(Stack::load(&out.join("stack.exr")).is_ok(), "the photons before the disconnect are kept");
+    assert!(
+        stdout.contains("lost in transit") && stdout.contains(">= "),
+        "{stdout}"
+    );
+    assert!(
+        Stack::load(&out.join("stack.exr")).is_ok(),
+        "the photons before the disconnect are kept"
+    );
 
-    fails_with(&["acquire", "--device", "usb:zz:1"], &["usb:zz:1", "vendor id `zz`"]);
-    fails_with(&["acquire", "--device", "serial:/dev/does-not-exist", "--out", out.to_str().unwrap()], &[
-        "/dev/does-not-exist",
-    ]);
-    fails_with(&["acquire", "--faults", "melt=3"], &["unknown fault `melt`"]);
+    fails_with(
+        &["acquire", "--device", "usb:zz:1"],
+        &["usb:zz:1", "vendor id `zz`"],
+    );
+    fails_with(
+        &[
+            "acquire",
+            "--device",
+            "serial:/dev/does-not-exist",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &["/dev/does-not-exist"],
+    );
+    fails_with(
+        &["acquire", "--faults", "melt=3"],
+        &["unknown fault `melt`"],
+    );
     fails_with(&["acquire", "--roi", "1,2,3"], &["X,Y,WIDTH,HEIGHT"]);
 }

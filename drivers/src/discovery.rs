@@ -33,7 +33,10 @@ pub fn serial_ports() -> Vec<DeviceEntry> {
                     u.pid,
                     u.manufacturer.as_deref().unwrap_or(""),
                     u.product.as_deref().unwrap_or(""),
-                    u.serial_number.as_deref().map(|s| format!(" (serial {s})")).unwrap_or_default()
+                    u.serial_number
+                        .as_deref()
+                        .map(|s| format!(" (serial {s})"))
+                        .unwrap_or_default()
                 ),
                 serialport::SerialPortType::PciPort => "PCI serial port".into(),
                 serialport::SerialPortType::BluetoothPort => "Bluetooth serial port".into(),
@@ -60,7 +63,10 @@ pub fn usb_devices() -> Vec<DeviceEntry> {
             let (_, _, name) = KNOWN_USB_IDS
                 .iter()
                 .find(|(v, p, _)| *v == d.vendor_id() && *p == d.product_id())?;
-            let serial = d.serial_number().map(|s| format!(":{s}")).unwrap_or_default();
+            let serial = d
+                .serial_number()
+                .map(|s| format!(":{s}"))
+                .unwrap_or_default();
             Some(DeviceEntry {
                 address: format!("usb:{:04x}:{:04x}{serial}", d.vendor_id(), d.product_id()),
                 description: (*name).to_string(),

@@ -38,6 +38,8 @@ pub struct Link {
 
 impl std::fmt::Debug for Link {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Link").field("description", &self.description).finish()
+        f.debug_struct("Link")
+            .field("description", &self.description)
+            .finish()
     }
 }

@@ -95,7 +95,9 @@ impl LinkAccounting {
             },
             None => TransitLoss {
                 batches: 0,
-                photons: self.photons_sent_at_least.saturating_sub(self.photons_received),
+                photons: self
+                    .photons_sent_at_least
+                    .saturating_sub(self.photons_received),
                 exact: false,
             },
         }
@@ -199,7 +201,11 @@ pub fn start_on(link: Link, queue_depth: usize) -> (Pipeline, Box<dyn crate::Byt
     (Pipeline::start(reader, queue_depth), writer)
 }
 
-fn read_loop(mut reader: Box<dyn ByteReader>, tx: Sender<Result<Vec<u8>, LinkError>>, shutdown: &AtomicBool) {
+fn read_loop(
+    mut reader: Box<dyn ByteReader>,
+    tx: Sender<Result<Vec<u8>, LinkError>>,
+    shutdown: &AtomicBool,
+) {
     while !shutdown.load(Ordering::Relaxed) {
         match reader.read_chunk(READ_POLL) {
             Ok(None) => {}
@@ -273,66 +279,65 @@ fn decode_loop(
                 Vec::new()
             }
         };
-        decoder.push(&chunk);
         let mut deliveries = Vec::new();
         {
             let mut acc = accounting.lock().expect("accounting lock");
+            let acc = &mut *acc;
             acc.bytes += chunk.len() as u64;
-            while let Some(frame) = decoder.next_frame() {
-                match frame.kind {
-                    FrameKind::Events => {
-                        let Ok(batch) = EventBatch::parse(frame.payload) else {
-                            acc.batches_malformed += 1;
-                            continue;
-                        };
-                        match seqs.accept(batch.header.seq) {
-                            SeqVerdict::Duplicate => {
-                                acc.batches_duplicate += 1;
-                                continue;
-                            }
-                            SeqVerdict::New { out_of_order } => {
-                                acc.batches_out_of_order += u64::from(out_of_order);
-                            }
+            decoder.push_with(&chunk, |frame| match frame.kind {
+                FrameKind::Events => {
+                    let Ok(batch) = EventBatch::parse(frame.payload) else {
+                        acc.batches_malformed += 1;
+                        return;
+                    };
+                    match seqs.accept(batch.header.seq) {
+                        SeqVerdict::Duplicate => {
+                            acc.batches_duplicate += 1;
+                            return;
                         }
-                        let (mut photons, mut lost, mut invalid) = (0u64, 0u64, 0u64);
-                        for r in batch.raw_records() {
-                            match Record::decode(r) {
-                                Ok(Record::Photon { .. }) => photons += 1,
-                                Ok(Record::Lost { count }) => lost += count,
-                                Ok(_) => {}
-                                Err(_) => invalid += 1,
-                            }
+                        SeqVerdict::New { out_of_order } => {
+                            acc.batches_out_of_order += u64::from(out_of_order);
                         }
-                        acc.batches_accepted += 1;
-                        acc.photons_received += photons;
-                        acc.photons_lost_in_device += lost;
-                        acc.invalid_records += invalid;
-                        acc.photons_sent_at_least =
-                            acc.photons_sent_at_least.max(batch.header.photon_offset + photons);
-                        let payload = Arc::new(frame.payload.to_vec());
-                        if let Some(w) = raw.lock().expect("raw lock").as_mut() {
-                            w.write_batch(&payload);
-                        }
-                        deliveries.push(Delivery::Batch(AcceptedBatch {
-                            payload,
-                            seq: batch.header.seq,
-                            photons,
-                            lost_in_device: lost,
-                        }));
                     }
-                    FrameKind::Response => match from_payload::<ResponseFrame>(frame.payload) {
-                        Ok(r) => {
-                            if matches!(r.response, Response::Started) {
-                                // A new run numbers its batches from 0.
-                                seqs = SeqTracker::default();
-                            }
-                            deliveries.push(Delivery::Response(r));
+                    let (mut photons, mut lost, mut invalid) = (0u64, 0u64, 0u64);
+                    for r in batch.raw_records() {
+                        match Record::decode(r) {
+                            Ok(Record::Photon { .. }) => photons += 1,
+                            Ok(Record::Lost { count }) => lost += count,
+                            Ok(_) => {}
+                            Err(_) => invalid += 1,
                         }
-                        Err(_) => acc.stray_responses += 1,
-                    },
-                    FrameKind::Request => acc.stray_responses += 1,
+                    }
+                    acc.batches_accepted += 1;
+                    acc.photons_received += photons;
+                    acc.photons_lost_in_device += lost;
+                    acc.invalid_records += invalid;
+                    acc.photons_sent_at_least = acc
+                        .photons_sent_at_least
+                        .max(batch.header.photon_offset + photons);
+                    let payload = Arc::new(frame.payload.to_vec());
+                    if let Some(w) = raw.lock().expect("raw lock").as_mut() {
+                        w.write_batch(&payload);
+                    }
+                    deliveries.push(Delivery::Batch(AcceptedBatch {
+                        payload,
+                        seq: batch.header.seq,
+                        photons,
+                        lost_in_device: lost,
+                    }));
                 }
-            }
+                FrameKind::Response => match from_payload::<ResponseFrame>(frame.payload) {
+                    Ok(r) => {
+                        if matches!(r.response, Response::Started) {
+                            // A new run numbers its batches from 0.
+                            seqs = SeqTracker::default();
+                        }
+                        deliveries.push(Delivery::Response(r));
+                    }
+                    Err(_) => acc.stray_responses += 1,
+                },
+                FrameKind::Request => acc.stray_responses += 1,
+            });
             let s = decoder.stats();
             acc.bytes_skipped = s.bytes_skipped;
             acc.crc_errors = s.crc_errors;

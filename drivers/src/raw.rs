@@ -110,12 +110,16 @@ pub struct RawWriter {
 impl RawWriter {
     /// Creates the file and writes the header.
     pub fn create(path: &Path, header: &RawHeader) -> Result<Self, RawError> {
-        let io = |source| RawError::Io { path: path.to_path_buf(), source };
+        let io = |source| RawError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
         let file = File::create(path).map_err(io)?;
         let mut out = BufWriter::with_capacity(1 << 17, file);
         let json = serde_json::to_vec(header).expect("header serialises");
         out.write_all(MAGIC).map_err(io)?;
-        out.write_all(&(json.len() as u32).to_le_bytes()).map_err(io)?;
+        out.write_all(&(json.len() as u32).to_le_bytes())
+            .map_err(io)?;
         out.write_all(&json).map_err(io)?;
         out.flush().map_err(io)?;
         Ok(Self {
@@ -133,8 +137,12 @@ impl RawWriter {
             return;
         }
         self.frame.clear();
-        encode_frame(FrameKind::Events, payload, &mut self.frame).expect("batch payloads fit a frame");
-        let r = self.out.write_all(&self.frame).and_then(|()| self.out.flush());
+        encode_frame(FrameKind::Events, payload, &mut self.frame)
+            .expect("batch payloads fit a frame");
+        let r = self
+            .out
+            .write_all(&self.frame)
+            .and_then(|()| self.out.flush());
         match r {
             Ok(()) => self.batches += 1,
             Err(e) => self.error = Some(e),
@@ -149,18 +157,32 @@ impl RawWriter {
     /// Writes the end frame (the device's totals when known) and closes.
     pub fn finish(mut self, totals: Option<Totals>) -> Result<PathBuf, RawError> {
         if let Some(e) = self.error.take() {
-            return Err(RawError::Io { path: self.path, source: e });
+            return Err(RawError::Io {
+                path: self.path,
+                source: e,
+            });
         }
-        let io = |path: &Path, source| RawError::Io { path: path.to_path_buf(), source };
+        let io = |path: &Path, source| RawError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
         if let Some(t) = totals {
-            let payload = to_payload(&ResponseFrame { id: 0xFFFF, response: Response::Stopped(t) })
-                .expect("totals encode");
+            let payload = to_payload(&ResponseFrame {
+                id: 0xFFFF,
+                response: Response::Stopped(t),
+            })
+            .expect("totals encode");
             self.frame.clear();
             encode_frame(FrameKind::Response, &payload, &mut self.frame).expect("small frame");
-            self.out.write_all(&self.frame).map_err(|e| io(&self.path, e))?;
+            self.out
+                .write_all(&self.frame)
+                .map_err(|e| io(&self.path, e))?;
         }
         self.out.flush().map_err(|e| io(&self.path, e))?;
-        self.out.get_ref().sync_all().map_err(|e| io(&self.path, e))?;
+        self.out
+            .get_ref()
+            .sync_all()
+            .map_err(|e| io(&self.path, e))?;
         Ok(self.path)
     }
 }
@@ -168,11 +190,14 @@ impl RawWriter {
 /// Reads the magic and header of a raw tag file; the reader is left at
 /// the first frame.
 pub fn read_header(path: &Path, input: &mut impl Read) -> Result<(RawHeader, u64), RawError> {
-    let fmt = |reason: String| RawError::Format { path: path.to_path_buf(), reason };
+    let fmt = |reason: String| RawError::Format {
+        path: path.to_path_buf(),
+        reason,
+    };
     let mut magic = [0u8; 8];
-    input
-        .read_exact(&mut magic)
-        .map_err(|_| fmt("shorter than the 8-byte magic; not a scatterscope raw tag file".into()))?;
+    input.read_exact(&mut magic).map_err(|_| {
+        fmt("shorter than the 8-byte magic; not a scatterscope raw tag file".into())
+    })?;
     if &magic != MAGIC {
         return Err(fmt(format!(
             "magic {:?} is not {:?}; not a scatterscope raw tag file",
@@ -181,10 +206,14 @@ pub fn read_header(path: &Path, input: &mut impl Read) -> Result<(RawHeader, u64
         )));
     }
     let mut len = [0u8; 4];
-    input.read_exact(&mut len).map_err(|_| fmt("file ends inside the header length".into()))?;
+    input
+        .read_exact(&mut len)
+        .map_err(|_| fmt("file ends inside the header length".into()))?;
     let len = u32::from_le_bytes(len);
     if len > MAX_HEADER {
-        return Err(fmt(format!("header length {len} bytes at byte 8 exceeds {MAX_HEADER}")));
+        return Err(fmt(format!(
+            "header length {len} bytes at byte 8 exceeds {MAX_HEADER}"
+        )));
     }
     let mut json = vec![0u8; len as usize];
     input
@@ -193,7 +222,10 @@ pub fn read_header(path: &Path, input: &mut impl Read) -> Result<(RawHeader, u64
     let header: RawHeader =
         serde_json::from_slice(&json).map_err(|e| fmt(format!("header JSON: {e}")))?;
     if header.format_version != 1 {
-        return Err(fmt(format!("format_version {} is not 1", header.format_version)));
+        return Err(fmt(format!(
+            "format_version {} is not 1",
+            header.format_version
+        )));
     }
     Ok((header, 12 + u64::from(len)))
 }

@@ -24,7 +24,10 @@ pub fn open(path: &str, baud: u32) -> Result<Link, LinkError> {
         .map_err(|e| LinkError::Io(format!("cloning serial port {path}: {e}")))?;
     Ok(Link {
         description: format!("serial:{path}"),
-        reader: Box::new(SerialReader { port, buf: vec![0; 1 << 16] }),
+        reader: Box::new(SerialReader {
+            port,
+            buf: vec![0; 1 << 16],
+        }),
         writer: Box::new(SerialWriter { port: writer }),
     })
 }
@@ -44,8 +47,12 @@ impl ByteReader for SerialReader {
             // BrokenPipe.
             Ok(0) => Err(LinkError::Disconnected("serial port closed".into())),
             Ok(n) => Ok(Some(self.buf[..n].to_vec())),
-            Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => Ok(None),
-            Err(e) if e.kind() == ErrorKind::BrokenPipe => Err(LinkError::Disconnected(e.to_string())),
+            Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {
+                Ok(None)
+            }
+            Err(e) if e.kind() == ErrorKind::BrokenPipe => {
+                Err(LinkError::Disconnected(e.to_string()))
+            }
             Err(e) => Err(LinkError::Io(e.to_string())),
         }
     }

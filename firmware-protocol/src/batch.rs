@@ -43,8 +43,13 @@ pub enum BatchError {
 impl core::fmt::Display for BatchError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            BatchError::Short(n) => write!(f, "event batch of {n} bytes is shorter than its {HEADER_LEN}-byte header"),
-            BatchError::Ragged(n) => write!(f, "event batch records take {n} bytes, not a multiple of 8"),
+            BatchError::Short(n) => write!(
+                f,
+                "event batch of {n} bytes is shorter than its {HEADER_LEN}-byte header"
+            ),
+            BatchError::Ragged(n) => {
+                write!(f, "event batch records take {n} bytes, not a multiple of 8")
+            }
         }
     }
 }
@@ -64,7 +69,7 @@ impl<'a> EventBatch<'a> {
             return Err(BatchError::Short(payload.len()));
         }
         let records = &payload[HEADER_LEN..];
-        if records.len() % 8 != 0 {
+        if !records.len().is_multiple_of(8) {
             return Err(BatchError::Ragged(records.len()));
         }
         let u64_at = |i: usize| {
@@ -90,6 +95,11 @@ impl<'a> EventBatch<'a> {
         self.records.is_empty()
     }
 
+    /// The records as bytes (8 per record, little-endian).
+    pub fn record_bytes(&self) -> &'a [u8] {
+        self.records
+    }
+
     /// The raw records.
     pub fn raw_records(&self) -> impl Iterator<Item = u64> + 'a {
         self.records
@@ -101,27 +111,28 @@ impl<'a> EventBatch<'a> {
     /// returned. An invalid record yields an error and decoding goes on.
     pub fn events(&self) -> impl Iterator<Item = Result<Event, RecordError>> + 'a {
         let mut base = self.header.sync_base;
-        self.raw_records().filter_map(move |raw| match Record::decode(raw) {
-            Ok(Record::Photon {
-                pixel,
-                micro,
-                sync_offset,
-            }) => Some(Ok(Event::Photon {
-                pixel,
-                micro,
-                sync: base.wrapping_add(u64::from(sync_offset)),
-            })),
-            Ok(Record::Wrap { count }) => {
-                base = base.wrapping_add(u64::from(count) << SYNC_BITS);
-                None
-            }
-            Ok(Record::Marker { bits, sync_offset }) => Some(Ok(Event::Marker {
-                bits,
-                sync: base.wrapping_add(u64::from(sync_offset)),
-            })),
-            Ok(Record::Lost { count }) => Some(Ok(Event::Lost { count })),
-            Err(e) => Some(Err(e)),
-        })
+        self.raw_records()
+            .filter_map(move |raw| match Record::decode(raw) {
+                Ok(Record::Photon {
+                    pixel,
+                    micro,
+                    sync_offset,
+                }) => Some(Ok(Event::Photon {
+                    pixel,
+                    micro,
+                    sync: base.wrapping_add(u64::from(sync_offset)),
+                })),
+                Ok(Record::Wrap { count }) => {
+                    base = base.wrapping_add(u64::from(count) << SYNC_BITS);
+                    None
+                }
+                Ok(Record::Marker { bits, sync_offset }) => Some(Ok(Event::Marker {
+                    bits,
+                    sync: base.wrapping_add(u64::from(sync_offset)),
+                })),
+                Ok(Record::Lost { count }) => Some(Ok(Event::Lost { count })),
+                Err(e) => Some(Err(e)),
+            })
     }
 }
 
@@ -191,12 +202,20 @@ impl BatchEncoder {
 
     fn advance_to(&mut self, sync: u64) -> Result<u32, EncodeError> {
         if sync < self.base {
-            return Err(EncodeError::SyncBackwards { sync, base: self.base });
+            return Err(EncodeError::SyncBackwards {
+                sync,
+                base: self.base,
+            });
         }
         let mut delta = sync - self.base;
         while delta >> SYNC_BITS != 0 {
             let wraps = (delta >> SYNC_BITS).min(u64::from(u32::MAX));
-            self.records.push(Record::Wrap { count: wraps as u32 }.encode());
+            self.records.push(
+                Record::Wrap {
+                    count: wraps as u32,
+                }
+                .encode(),
+            );
             self.base += wraps << SYNC_BITS;
             delta = sync - self.base;
         }
@@ -224,7 +243,8 @@ impl BatchEncoder {
             }
             Event::Marker { bits, sync } => {
                 let sync_offset = self.advance_to(sync)?;
-                self.records.push(Record::Marker { bits, sync_offset }.encode());
+                self.records
+                    .push(Record::Marker { bits, sync_offset }.encode());
             }
             Event::Lost { mut count } => {
                 while count > 0 {

@@ -60,7 +60,12 @@ pub struct RecordError {
 
 impl core::fmt::Display for RecordError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(f, "invalid event record {:#018x} (type {})", self.raw, self.raw >> 60)
+        write!(
+            f,
+            "invalid event record {:#018x} (type {})",
+            self.raw,
+            self.raw >> 60
+        )
     }
 }
 

@@ -151,6 +151,48 @@ proptest! {
     }
 
     #[test]
+    fn in_place_decoding_matches_buffered_decoding(
+        payloads in prop::collection::vec(prop::collection::vec(any::<u8>(), 0..400), 1..12),
+        garbage in prop::collection::vec(prop::collection::vec(any::<u8>(), 0..30), 12),
+        flips in prop::collection::vec(any::<usize>(), 0..3),
+        split in 1usize..700,
+    ) {
+        let mut wire = Vec::new();
+        for (p, g) in payloads.iter().zip(&garbage) {
+            wire.extend_from_slice(g);
+            encode_frame(FrameKind::Events, p, &mut wire).unwrap();
+        }
+        for f in flips {
+            let i = f % wire.len();
+            wire[i] ^= 0x40;
+        }
+        let mut a = FrameDecoder::new();
+        let mut from_a = Vec::new();
+        let mut b = FrameDecoder::new();
+        let mut from_b = Vec::new();
+        for chunk in wire.chunks(split) {
+            a.push(chunk);
+            while let Some(f) = a.next_frame() {
+                from_a.push(f.payload.to_vec());
+            }
+            b.push_with(chunk, |f| from_b.push(f.payload.to_vec()));
+        }
+        a.end_stream();
+        while let Some(f) = a.next_frame() {
+            from_a.push(f.payload.to_vec());
+        }
+        b.end_stream();
+        b.push_with(&[], |f| from_b.push(f.payload.to_vec()));
+        prop_assert_eq!(from_a, from_b);
+        prop_assert_eq!(a.stats(), b.stats());
+    }
+
+    #[test]
+    fn hardware_and_table_crc_agree(bytes in prop::collection::vec(any::<u8>(), 0..5000)) {
+        prop_assert_eq!(firmware_protocol::frame::crc32c(&bytes), firmware_protocol::frame::CRC.checksum(&bytes));
+    }
+
+    #[test]
     fn records_round_trip(raw in any::<u64>()) {
         if let Ok(r) = Record::decode(raw) {
             prop_assert_eq!(r.encode(), raw);
@@ -214,10 +256,19 @@ fn a_flipped_bit_is_caught_and_the_next_frame_survives() {
 fn encoder_refuses_out_of_range_events() {
     let mut enc = BatchEncoder::new();
     assert_eq!(
-        enc.push(Event::Photon { pixel: 0, micro: MAX_MICRO + 1, sync: 0 }),
+        enc.push(Event::Photon {
+            pixel: 0,
+            micro: MAX_MICRO + 1,
+            sync: 0
+        }),
         Err(EncodeError::MicroTooLarge(MAX_MICRO + 1))
     );
-    enc.push(Event::Photon { pixel: 0, micro: 0, sync: 1 << 30 }).unwrap();
+    enc.push(Event::Photon {
+        pixel: 0,
+        micro: 0,
+        sync: 1 << 30,
+    })
+    .unwrap();
     assert!(matches!(
         enc.push(Event::Marker { bits: 1, sync: 5 }),
         Err(EncodeError::SyncBackwards { sync: 5, .. })

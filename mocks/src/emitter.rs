@@ -79,7 +79,11 @@ pub enum EmitterError {
 
 impl Emitter {
     /// An emitter for `scene` (row-major, `kernels`' sensor size, non-negative).
-    pub fn new(scene: &[f64], kernels: &KernelStack, options: EmitterOptions) -> Result<Self, EmitterError> {
+    pub fn new(
+        scene: &[f64],
+        kernels: &KernelStack,
+        options: EmitterOptions,
+    ) -> Result<Self, EmitterError> {
         let (k, h, w) = kernels.kernels.dim();
         if scene.len() != h * w {
             return Err(EmitterError::Invalid(format!(
@@ -91,18 +95,30 @@ impl Emitter {
             )));
         }
         if k == 0 {
-            return Err(EmitterError::Invalid("the ST-PSF has no kept time bin".into()));
+            return Err(EmitterError::Invalid(
+                "the ST-PSF has no kept time bin".into(),
+            ));
         }
-        let bad = |what: &str, v: f64| EmitterError::Invalid(format!("{what} = {v} is out of range"));
+        let bad =
+            |what: &str, v: f64| EmitterError::Invalid(format!("{what} = {v} is out of range"));
         let total_rate = options.rate_hz + options.dark_rate_hz;
-        if !(options.rate_hz >= 0.0 && options.dark_rate_hz >= 0.0 && total_rate > 0.0 && total_rate.is_finite()) {
+        if !(options.rate_hz >= 0.0
+            && options.dark_rate_hz >= 0.0
+            && total_rate > 0.0
+            && total_rate.is_finite())
+        {
             return Err(bad("rate_hz + dark_rate_hz", total_rate));
         }
         if !(options.sync_period_ps > 0.0 && options.sync_period_ps.is_finite()) {
             return Err(bad("sync_period_ps", options.sync_period_ps));
         }
-        let source = WeightedAliasIndex::new(scene.iter().map(|&v| if v.is_finite() { v.max(0.0) } else { 0.0 }).collect())
-            .map_err(|e| EmitterError::Invalid(format!("scene weights: {e}")))?;
+        let source = WeightedAliasIndex::new(
+            scene
+                .iter()
+                .map(|&v| if v.is_finite() { v.max(0.0) } else { 0.0 })
+                .collect(),
+        )
+        .map_err(|e| EmitterError::Invalid(format!("scene weights: {e}")))?;
         let kernel = WeightedAliasIndex::new(kernels.kernels.iter().map(|&v| v.max(0.0)).collect())
             .map_err(|e| EmitterError::Invalid(format!("kernel weights: {e}")))?;
         let bins = kernels
@@ -142,7 +158,12 @@ impl Emitter {
             if self.rng.random::<f64>() < self.dark_fraction {
                 let pixel = self.rng.random_range(0..self.width * self.height) as u32;
                 let delay_ps = self.rng.random::<f64>() * self.options.sync_period_ps;
-                return Detection { pixel, delay_ps, sync, dark: true };
+                return Detection {
+                    pixel,
+                    delay_ps,
+                    sync,
+                    dark: true,
+                };
             }
             let src = self.source.sample(&mut self.rng);
             let entry = self.kernel.sample(&mut self.rng);

@@ -173,7 +173,10 @@ impl MockDevice {
                 let _ = fw.run();
             })
             .expect("spawning the mock firmware thread");
-        MockHandle { truth, thread: Some(thread) }
+        MockHandle {
+            truth,
+            thread: Some(thread),
+        }
     }
 }
 
@@ -291,7 +294,10 @@ impl Firmware {
             },
             Request::Start => {
                 if self.config.is_none() {
-                    self.config = Some(self.validate(default_config(&self.identity)).expect("default config is valid"));
+                    self.config = Some(
+                        self.validate(default_config(&self.identity))
+                            .expect("default config is valid"),
+                    );
                 }
                 self.start();
                 Response::Started
@@ -314,18 +320,25 @@ impl Firmware {
     }
 
     fn validate(&self, c: Config) -> Result<Config, DeviceError> {
-        let invalid = |field: &str, reason: String| DeviceError::InvalidConfig { field: field.into(), reason };
+        let invalid = |field: &str, reason: String| DeviceError::InvalidConfig {
+            field: field.into(),
+            reason,
+        };
         let tdc = self.identity.tdc_resolution_fs;
-        if c.resolution_fs == 0 || c.resolution_fs % tdc != 0 {
+        if c.resolution_fs == 0 || !c.resolution_fs.is_multiple_of(tdc) {
             return Err(invalid(
                 "resolution_fs",
-                format!("{} fs is not a positive multiple of the TDC resolution {tdc} fs", c.resolution_fs),
+                format!(
+                    "{} fs is not a positive multiple of the TDC resolution {tdc} fs",
+                    c.resolution_fs
+                ),
             ));
         }
         if c.sync_divider == 0 {
             return Err(invalid("sync_divider", "0; must be at least 1".into()));
         }
-        let period_units = self.identity.sync_period_fs * u64::from(c.sync_divider) / u64::from(c.resolution_fs);
+        let period_units =
+            self.identity.sync_period_fs * u64::from(c.sync_divider) / u64::from(c.resolution_fs);
         if period_units > u64::from(firmware_protocol::record::MAX_MICRO) {
             return Err(invalid(
                 "resolution_fs",
@@ -336,9 +349,22 @@ impl Firmware {
             ));
         }
         if let Some(r) = c.roi {
-            let (w, h) = (u32::from(self.identity.pixels_x), u32::from(self.identity.pixels_y));
-            if r.width == 0 || r.height == 0 || u32::from(r.x) + u32::from(r.width) > w || u32::from(r.y) + u32::from(r.height) > h {
-                return Err(invalid("roi", format!("{}x{} at ({}, {}) is not inside the {w}x{h} sensor", r.width, r.height, r.x, r.y)));
+            let (w, h) = (
+                u32::from(self.identity.pixels_x),
+                u32::from(self.identity.pixels_y),
+            );
+            if r.width == 0
+                || r.height == 0
+                || u32::from(r.x) + u32::from(r.width) > w
+                || u32::from(r.y) + u32::from(r.height) > h
+            {
+                return Err(invalid(
+                    "roi",
+                    format!(
+                        "{}x{} at ({}, {}) is not inside the {w}x{h} sensor",
+                        r.width, r.height, r.x, r.y
+                    ),
+                ));
             }
         }
         Ok(c)
@@ -356,7 +382,8 @@ impl Firmware {
         self.running = true;
         self.started = Instant::now();
         let c = self.config.as_ref().expect("configured before start");
-        self.exposure = (c.exposure_ms > 0).then(|| Duration::from_millis(u64::from(c.exposure_ms)));
+        self.exposure =
+            (c.exposure_ms > 0).then(|| Duration::from_millis(u64::from(c.exposure_ms)));
         self.encoder = BatchEncoder::new();
         self.batch_opened = Instant::now();
         self.fifo.clear();
@@ -406,7 +433,9 @@ impl Firmware {
             if !opts.real_time && !room {
                 break;
             }
-            if opts.real_time && self.device.emitter.time_s() - self.emit_origin > elapsed.as_secs_f64() {
+            if opts.real_time
+                && self.device.emitter.time_s() - self.emit_origin > elapsed.as_secs_f64()
+            {
                 break;
             }
             budget -= 1;
@@ -417,7 +446,10 @@ impl Firmware {
             let micro = ((delay_fs / tdc * tdc) / res) % period_units;
             let (x, y) = (u64::from(d.pixel) % width, u64::from(d.pixel) / width);
             let in_roi = config.roi.is_none_or(|r| {
-                x >= u64::from(r.x) && x < u64::from(r.x) + u64::from(r.width) && y >= u64::from(r.y) && y < u64::from(r.y) + u64::from(r.height)
+                x >= u64::from(r.x)
+                    && x < u64::from(r.x) + u64::from(r.width)
+                    && y >= u64::from(r.y)
+                    && y < u64::from(r.y) + u64::from(r.height)
             });
             if (window > 0 && micro >= window) || !in_roi {
                 self.local.photons_excluded += 1;
@@ -432,7 +464,9 @@ impl Firmware {
                 continue;
             }
             if self.pending_lost > 0 {
-                self.fifo.push_back(Event::Lost { count: self.pending_lost });
+                self.fifo.push_back(Event::Lost {
+                    count: self.pending_lost,
+                });
                 self.pending_lost = 0;
             }
             self.fifo.push_back(Event::Photon {
@@ -455,18 +489,25 @@ impl Firmware {
     /// closes batches when full or old (`all`: regardless of the link).
     fn drain_fifo(&mut self, all: bool) {
         if self.pending_lost > 0 && (all || self.fifo.len() < self.device.options.fifo_capacity) {
-            self.fifo.push_back(Event::Lost { count: self.pending_lost });
+            self.fifo.push_back(Event::Lost {
+                count: self.pending_lost,
+            });
             self.pending_lost = 0;
         }
         while all || self.outbox.len() < 4 {
-            let Some(e) = self.fifo.pop_front() else { break };
+            let Some(e) = self.fifo.pop_front() else {
+                break;
+            };
             if !self.encoder.has_room(2) {
                 self.close_batch();
             }
-            self.encoder.push(e).expect("device events are in time order and in range");
+            self.encoder
+                .push(e)
+                .expect("device events are in time order and in range");
         }
         if !self.encoder.is_empty()
-            && (self.encoder.len() + 2 > MAX_RECORDS || self.batch_opened.elapsed() >= self.device.options.batch_interval)
+            && (self.encoder.len() + 2 > MAX_RECORDS
+                || self.batch_opened.elapsed() >= self.device.options.batch_interval)
         {
             self.close_batch();
         }
@@ -482,7 +523,7 @@ impl Firmware {
         encode_frame(FrameKind::Events, &payload, &mut frame).expect("batches fit a frame");
         let f = self.device.options.faults.clone();
         let n = header.seq + 1;
-        let every = |k: u32| k > 0 && n % k == 0;
+        let every = |k: u32| k > 0 && n.is_multiple_of(k);
         if f.disconnect_after > 0 && n > f.disconnect_after {
             // The cable is pulled: this batch and everything after is gone.
             self.local.photons_unsent += photons;

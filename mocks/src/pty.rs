@@ -25,9 +25,11 @@ pub struct PtyDevicePort {
 /// host opens.
 pub fn open() -> std::io::Result<(PtyDevicePort, PathBuf)> {
     let pty = nix::pty::openpty(None, None).map_err(std::io::Error::from)?;
-    let flags = nix::fcntl::fcntl(pty.master.as_fd(), nix::fcntl::FcntlArg::F_GETFL).map_err(std::io::Error::from)?;
+    let flags = nix::fcntl::fcntl(pty.master.as_fd(), nix::fcntl::FcntlArg::F_GETFL)
+        .map_err(std::io::Error::from)?;
     let flags = nix::fcntl::OFlag::from_bits_truncate(flags) | nix::fcntl::OFlag::O_NONBLOCK;
-    nix::fcntl::fcntl(pty.master.as_fd(), nix::fcntl::FcntlArg::F_SETFL(flags)).map_err(std::io::Error::from)?;
+    nix::fcntl::fcntl(pty.master.as_fd(), nix::fcntl::FcntlArg::F_SETFL(flags))
+        .map_err(std::io::Error::from)?;
     let path = nix::unistd::ttyname(pty.slave.as_fd()).map_err(std::io::Error::from)?;
     // Raw mode now, so nothing the device writes before the host opens the
     // port is echoed or translated.
@@ -70,7 +72,9 @@ impl DevicePort for PtyDevicePort {
                 self.slave = None;
                 Ok(Some(self.buf[..n].to_vec()))
             }
-            Err(e) if e.kind() == ErrorKind::Interrupted || e.kind() == ErrorKind::WouldBlock => Ok(None),
+            Err(e) if e.kind() == ErrorKind::Interrupted || e.kind() == ErrorKind::WouldBlock => {
+                Ok(None)
+            }
             Err(_) => Err(PortClosed),
         }
     }
@@ -82,10 +86,14 @@ impl DevicePort for PtyDevicePort {
         while !rest.is_empty() {
             match self.master.write(rest) {
                 Ok(n) => rest = &rest[n..],
-                Err(e) if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::Interrupted => {
+                Err(e)
+                    if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::Interrupted =>
+                {
                     let mut fds = [PollFd::new(self.master.as_fd(), PollFlags::POLLOUT)];
                     let r = poll(&mut fds, PollTimeout::from(50u16));
-                    let hup = fds[0].revents().is_some_and(|r| r.contains(PollFlags::POLLHUP));
+                    let hup = fds[0]
+                        .revents()
+                        .is_some_and(|r| r.contains(PollFlags::POLLHUP));
                     if r.is_err() || (hup && self.slave.is_none()) {
                         return Err(PortClosed);
                     }

@@ -23,7 +23,10 @@ pub fn endpoints(buffer_packets: usize) -> (UsbDevicePort, UsbHostIn, UsbHostOut
     let (out_tx, out_rx) = unbounded();
     (
         UsbDevicePort { in_tx, out_rx },
-        UsbHostIn { rx: in_rx, requested: VecDeque::new() },
+        UsbHostIn {
+            rx: in_rx,
+            requested: VecDeque::new(),
+        },
         UsbHostOut { tx: out_tx },
     )
 }
@@ -61,15 +64,20 @@ impl DevicePort for UsbDevicePort {
         }
         // Full packets, then a short one (zero-length if the write is a
         // multiple of the packet size).
-        let mut chunks = bytes.chunks(MAX_PACKET).map(<[u8]>::to_vec).collect::<Vec<_>>();
-        if bytes.len() % MAX_PACKET == 0 {
+        let mut chunks = bytes
+            .chunks(MAX_PACKET)
+            .map(<[u8]>::to_vec)
+            .collect::<Vec<_>>();
+        if bytes.len().is_multiple_of(MAX_PACKET) {
             chunks.push(Vec::new());
         }
         for c in chunks {
             match self.in_tx.try_send(c) {
                 Ok(()) => {}
                 Err(TrySendError::Disconnected(_)) => return Err(PortClosed),
-                Err(TrySendError::Full(_)) => unreachable!("room was checked and only this thread sends"),
+                Err(TrySendError::Full(_)) => {
+                    unreachable!("room was checked and only this thread sends")
+                }
             }
         }
         Ok(true)
@@ -103,7 +111,7 @@ impl BulkIn for UsbHostIn {
         };
         let mut data = first;
         // The device queues whole writes, so the rest of this one is there.
-        while data.len() % MAX_PACKET == 0 && !data.is_empty() && data.len() < len {
+        while data.len().is_multiple_of(MAX_PACKET) && !data.is_empty() && data.len() < len {
             match self.rx.recv() {
                 Ok(p) => {
                     let short = p.len() < MAX_PACKET;
@@ -127,6 +135,8 @@ pub struct UsbHostOut {
 
 impl BulkOut for UsbHostOut {
     fn write(&mut self, data: &[u8]) -> Result<(), TransferError> {
-        self.tx.send(data.to_vec()).map_err(|_| TransferError::Disconnected)
+        self.tx
+            .send(data.to_vec())
+            .map_err(|_| TransferError::Disconnected)
     }
 }

@@ -80,8 +80,14 @@ impl AcquisitionAccounting {
         line("  outside the ROI", self.outside_roi.to_string());
         line("batches received", self.batches_received.to_string());
         line("batches lost or damaged", self.batches_lost.to_string());
-        line("batches duplicated (dropped)", self.batches_duplicate.to_string());
-        line("batches out of order", self.batches_out_of_order.to_string());
+        line(
+            "batches duplicated (dropped)",
+            self.batches_duplicate.to_string(),
+        );
+        line(
+            "batches out of order",
+            self.batches_out_of_order.to_string(),
+        );
         line("bytes skipped (resync)", self.bytes_skipped.to_string());
         line("frames failing checks", self.crc_errors.to_string());
         line("invalid records", self.invalid_records.to_string());

@@ -25,7 +25,12 @@ pub fn t0_from_reference(path: &Path) -> Result<f64, AcquireError> {
         }
     })
     .map_err(AcquireError::Raw)?;
-    let Some((peak, _)) = hist.iter().enumerate().filter(|(_, c)| **c > 0).max_by_key(|(_, c)| **c) else {
+    let Some((peak, _)) = hist
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| **c > 0)
+        .max_by_key(|(_, c)| **c)
+    else {
         return Err(AcquireError::Plan(format!(
             "{}: the reference recording holds no photons, so it gives no t0",
             path.display()

@@ -115,7 +115,10 @@ pub fn open_device(spec: &DeviceSpec, mock: Option<MockSetup>) -> Result<OpenedD
                 Box::new(ep_in),
                 Box::new(ep_out),
             );
-            Ok(OpenedDevice { link, mock: Some(handle) })
+            Ok(OpenedDevice {
+                link,
+                mock: Some(handle),
+            })
         }
         DeviceSpec::MockSerial => {
             let device = start_mock(mock.ok_or_else(need)?)?;
@@ -126,10 +129,16 @@ pub fn open_device(spec: &DeviceSpec, mock: Option<MockSetup>) -> Result<OpenedD
                 scatterscope_drivers::serial::DEFAULT_BAUD,
             )?;
             link.description = format!("mock-serial ({})", path.display());
-            Ok(OpenedDevice { link, mock: Some(handle) })
+            Ok(OpenedDevice {
+                link,
+                mock: Some(handle),
+            })
         }
         DeviceSpec::Serial(path) => Ok(OpenedDevice {
-            link: scatterscope_drivers::serial::open(path, scatterscope_drivers::serial::DEFAULT_BAUD)?,
+            link: scatterscope_drivers::serial::open(
+                path,
+                scatterscope_drivers::serial::DEFAULT_BAUD,
+            )?,
             mock: None,
         }),
         DeviceSpec::Usb(sel) => {

@@ -238,7 +238,11 @@ fn binner_binned(binner: &Binner) -> u64 {
 
 /// The binner for `plan` on this device: checks the window against the
 /// micro-time unit and the ROI against the sensor.
-fn make_binner(plan: &Plan, identity: &Identity, config: &Config) -> Result<(Binner, (f64, f64)), AcquireError> {
+fn make_binner(
+    plan: &Plan,
+    identity: &Identity,
+    config: &Config,
+) -> Result<(Binner, (f64, f64)), AcquireError> {
     if identity.protocol_version != PROTOCOL_VERSION {
         return Err(AcquireError::Plan(format!(
             "device protocol {} differs from the host's {PROTOCOL_VERSION}",
@@ -247,18 +251,36 @@ fn make_binner(plan: &Plan, identity: &Identity, config: &Config) -> Result<(Bin
     }
     let res_ps = f64::from(config.resolution_fs) / 1000.0;
     let steps = plan.bin_width_ps / res_ps;
-    if !(plan.bin_width_ps > 0.0) || (steps - steps.round()).abs() > 1e-6 || steps.round() < 1.0 {
+    let whole =
+        plan.bin_width_ps > 0.0 && (steps - steps.round()).abs() <= 1e-6 && steps.round() >= 1.0;
+    if !whole {
         return Err(AcquireError::Plan(format!(
             "--bin-width {} ps is not a positive multiple of the device's {res_ps} ps micro-time unit; bins would hold unequal numbers of TDC steps",
             plan.bin_width_ps
         )));
     }
     if plan.bins == 0 || plan.bins > 65_535 {
-        return Err(AcquireError::Plan(format!("--bins {}: use 1 to 65535 bins", plan.bins)));
+        return Err(AcquireError::Plan(format!(
+            "--bins {}: use 1 to 65535 bins",
+            plan.bins
+        )));
     }
-    let (w, h) = (usize::from(identity.pixels_x), usize::from(identity.pixels_y));
-    let roi = plan.roi.unwrap_or(Region { x: 0, y: 0, width: w, height: h });
-    if roi.width == 0 || roi.height == 0 || roi.x + roi.width > w || roi.y + roi.height > h || w == 0 {
+    let (w, h) = (
+        usize::from(identity.pixels_x),
+        usize::from(identity.pixels_y),
+    );
+    let roi = plan.roi.unwrap_or(Region {
+        x: 0,
+        y: 0,
+        width: w,
+        height: h,
+    });
+    if roi.width == 0
+        || roi.height == 0
+        || roi.x + roi.width > w
+        || roi.y + roi.height > h
+        || w == 0
+    {
         return Err(AcquireError::Plan(format!(
             "--roi {}x{} at ({}, {}) is not inside the device's {w}x{h} sensor",
             roi.width, roi.height, roi.x, roi.y
@@ -270,6 +292,12 @@ fn make_binner(plan: &Plan, identity: &Identity, config: &Config) -> Result<(Bin
         width: steps.round(),
         bins: plan.bins,
     };
-    let map = PixelMap::Sensor { sensor_width: w, roi };
-    Ok((Binner::new(window, map, None, FrameSelect::Sum), (start_ps, plan.bin_width_ps)))
+    let map = PixelMap::Sensor {
+        sensor_width: w,
+        roi,
+    };
+    Ok((
+        Binner::new(window, map, None, FrameSelect::Sum),
+        (start_ps, plan.bin_width_ps),
+    ))
 }

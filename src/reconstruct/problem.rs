@@ -81,7 +81,9 @@ impl Problem {
                 }
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let kept: Vec<usize> = (0..positions.len()).filter(|&i| positions[i].is_some()).collect();
+        let kept: Vec<usize> = (0..positions.len())
+            .filter(|&i| positions[i].is_some())
+            .collect();
         if kept.is_empty() {
             return Err(ProblemError::Mismatch(format!(
                 "the ST-PSF puts no light in any of the stack's {} bins ({} to {} ps)",
@@ -93,11 +95,17 @@ impl Problem {
         let left_out = (0..positions.len())
             .filter(|&i| positions[i].is_none())
             .map(|i| {
-                let counts = stack.data.index_axis(ndarray::Axis(0), i).iter().map(|&v| f64::from(v)).sum();
+                let counts = stack
+                    .data
+                    .index_axis(ndarray::Axis(0), i)
+                    .iter()
+                    .map(|&v| f64::from(v))
+                    .sum();
                 (stack.meta.bin_starts_ps[i], counts)
             })
             .collect();
-        let kernel_positions: Vec<usize> = kept.iter().map(|&i| positions[i].expect("kept")).collect();
+        let kernel_positions: Vec<usize> =
+            kept.iter().map(|&i| positions[i].expect("kept")).collect();
         Ok(Self {
             model: ForwardModel::with_bins(&kernels, &kernel_positions),
             counts: stack.data.select(ndarray::Axis(0), &kept).mapv(f64::from),

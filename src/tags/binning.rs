@@ -119,7 +119,16 @@ pub struct Binner {
     stacks: Vec<Vec<u32>>,
     accounting: Accounting,
     scan: ScanState,
+    /// For [`PixelMap::Sensor`]: flat stack pixel of every sensor pixel,
+    /// or [`OUTSIDE_ROI`]; one table lookup per photon instead of a
+    /// division and four comparisons (see BENCHMARKS.md, acquisition).
+    pixel_lut: Vec<u32>,
+    /// Scratch space of [`Binner::push_sensor_photons`].
+    offsets: Vec<u32>,
 }
+
+/// Pixel-table entry of a sensor pixel outside the region of interest.
+const OUTSIDE_ROI: u32 = u32::MAX;
 
 #[derive(Default)]
 struct ScanState {
@@ -162,6 +171,19 @@ impl Binner {
             PixelMap::Scan(img) => (window.bins, img.pixels_y, img.pixels_x),
             PixelMap::Sensor { roi, .. } => (window.bins, roi.height, roi.width),
         };
+        let pixel_lut = match map {
+            PixelMap::Sensor { sensor_width, roi } if sensor_width > 0 => (0..1usize << 16)
+                .map(|p| {
+                    let (x, y) = (p % sensor_width, p / sensor_width);
+                    if x >= roi.x && y >= roi.y && x - roi.x < roi.width && y - roi.y < roi.height {
+                        ((y - roi.y) * roi.width + (x - roi.x)) as u32
+                    } else {
+                        OUTSIDE_ROI
+                    }
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
         Self {
             window,
             micro_lut,
@@ -172,6 +194,8 @@ impl Binner {
             stacks: Vec::new(),
             accounting: Accounting::default(),
             scan: ScanState::default(),
+            pixel_lut,
+            offsets: Vec::new(),
         }
     }
 
@@ -230,15 +254,7 @@ impl Binner {
                             self.accounting.outside_image += 1;
                         }
                     }
-                    PixelMap::Sensor { sensor_width, roi } => {
-                        let p = usize::from(channel);
-                        let (x, y) = (p % sensor_width, p / sensor_width);
-                        if x >= roi.x && y >= roi.y && x - roi.x < roi.width && y - roi.y < roi.height {
-                            self.bin_at(0, bin, y - roi.y, x - roi.x);
-                        } else {
-                            self.accounting.outside_image += 1;
-                        }
-                    }
+                    PixelMap::Sensor { .. } => self.bin_sensor_pixel(bin, channel),
                     PixelMap::Scan(_) => {
                         if self.scan.line_start.is_some() {
                             self.scan.pending.push((macro_time, bin));
@@ -255,6 +271,81 @@ impl Binner {
                 }
             }
         }
+    }
+
+    /// Whether this is a [`PixelMap::Sensor`] binner without a channel
+    /// filter, for which [`Binner::push_sensor_photons`] applies.
+    pub fn is_sensor(&self) -> bool {
+        matches!(self.map, PixelMap::Sensor { .. })
+            && self.channel.is_none()
+            && !self.pixel_lut.is_empty()
+    }
+
+    /// Bins `(pixel, micro time)` photons of a [`PixelMap::Sensor`] map
+    /// (the live-acquisition hot path). All photons are first turned into
+    /// stack offsets (table lookups, cache-resident), then the stack is
+    /// incremented in one tight loop: with little work between the random
+    /// increments the CPU keeps many cache misses in flight. Measured 15x
+    /// faster than binning photon by photon (see BENCHMARKS.md).
+    pub fn push_sensor_photons(&mut self, photons: impl Iterator<Item = (u16, u32)>) {
+        debug_assert!(self.is_sensor());
+        let (k, h, w) = self.shape;
+        let plane = h * w;
+        let mut offsets = std::mem::take(&mut self.offsets);
+        offsets.clear();
+        let (mut n, mut outside_window, mut outside_roi) = (0u64, 0u64, 0u64);
+        for (pixel, micro) in photons {
+            n += 1;
+            let Some(bin) = self.micro_bin(micro) else {
+                outside_window += 1;
+                continue;
+            };
+            let flat = self.pixel_lut[usize::from(pixel)];
+            if flat == OUTSIDE_ROI {
+                outside_roi += 1;
+                continue;
+            }
+            offsets.push((bin * plane) as u32 + flat);
+        }
+        if self.stacks.is_empty() {
+            self.stacks.push(vec![0; k * plane]);
+        }
+        let stack = &mut self.stacks[0];
+        for &o in offsets.iter() {
+            stack[o as usize] += 1;
+        }
+        self.accounting.records += n;
+        self.accounting.received += n;
+        self.accounting.binned += offsets.len() as u64;
+        self.accounting.outside_window += outside_window;
+        self.accounting.outside_image += outside_roi;
+        self.offsets = offsets;
+    }
+
+    /// Counts marker records that need no other handling (sensor maps).
+    pub fn count_markers(&mut self, n: u64) {
+        self.accounting.records += n;
+        self.accounting.markers += n;
+    }
+
+    /// Bins a photon of a [`PixelMap::Sensor`] map.
+    #[inline]
+    fn bin_sensor_pixel(&mut self, bin: usize, pixel: u16) {
+        let flat = self
+            .pixel_lut
+            .get(usize::from(pixel))
+            .copied()
+            .unwrap_or(OUTSIDE_ROI);
+        if flat == OUTSIDE_ROI {
+            self.accounting.outside_image += 1;
+            return;
+        }
+        let (_, h, w) = self.shape;
+        if self.stacks.is_empty() {
+            self.stacks.push(vec![0; self.shape.0 * h * w]);
+        }
+        self.stacks[0][bin * h * w + flat as usize] += 1;
+        self.accounting.binned += 1;
     }
 
     #[inline]

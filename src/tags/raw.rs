@@ -8,7 +8,9 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use firmware_protocol::record::Record;
-use firmware_protocol::{EventBatch, FrameDecoder, FrameKind, Response, ResponseFrame, Totals, from_payload};
+use firmware_protocol::{
+    EventBatch, FrameDecoder, FrameKind, Response, ResponseFrame, Totals, from_payload,
+};
 pub use scatterscope_drivers::raw::{MAGIC, RawHeader};
 use scatterscope_drivers::raw::{RawError, read_header};
 
@@ -41,10 +43,33 @@ impl std::ops::AddAssign for BatchCounts {
 /// wraps applied to a running base, no intermediate event list.
 pub fn bin_batch(batch: &EventBatch<'_>, binner: &mut Binner) -> BatchCounts {
     let mut counts = BatchCounts::default();
+    if binner.is_sensor() {
+        // Photons in bulk (see `Binner::push_sensor_photons`); the rare
+        // other records are handled on the way.
+        let mut markers = 0;
+        let photons = batch.record_bytes().chunks_exact(8).filter_map(|c| {
+            let raw = u64::from_le_bytes(c.try_into().expect("8-byte chunk"));
+            match Record::decode(raw) {
+                Ok(Record::Photon { pixel, micro, .. }) => return Some((pixel, micro)),
+                Ok(Record::Marker { .. }) => markers += 1,
+                Ok(Record::Wrap { .. }) => {}
+                Ok(Record::Lost { count }) => counts.lost_in_device += count,
+                Err(_) => counts.invalid_records += 1,
+            }
+            None
+        });
+        binner.push_sensor_photons(photons);
+        binner.count_markers(markers);
+        return counts;
+    }
     let mut base = batch.header.sync_base;
     for raw in batch.raw_records() {
         match Record::decode(raw) {
-            Ok(Record::Photon { pixel, micro, sync_offset }) => binner.push(Some(Tag::Photon {
+            Ok(Record::Photon {
+                pixel,
+                micro,
+                sync_offset,
+            }) => binner.push(Some(Tag::Photon {
                 channel: pixel,
                 macro_time: base + u64::from(sync_offset),
                 micro_time: micro,
@@ -53,7 +78,9 @@ pub fn bin_batch(batch: &EventBatch<'_>, binner: &mut Binner) -> BatchCounts {
                 bits,
                 macro_time: base + u64::from(sync_offset),
             })),
-            Ok(Record::Wrap { count }) => base += u64::from(count) << firmware_protocol::record::SYNC_BITS,
+            Ok(Record::Wrap { count }) => {
+                base += u64::from(count) << firmware_protocol::record::SYNC_BITS
+            }
             Ok(Record::Lost { count }) => counts.lost_in_device += count,
             Err(_) => counts.invalid_records += 1,
         }
@@ -83,8 +110,14 @@ pub struct RawSummary {
 }
 
 /// Reads a raw tag file, feeding every batch to `on_batch`.
-pub fn read_raw(path: &Path, mut on_batch: impl FnMut(&EventBatch<'_>)) -> Result<RawSummary, RawError> {
-    let io = |source| RawError::Io { path: path.to_path_buf(), source };
+pub fn read_raw(
+    path: &Path,
+    mut on_batch: impl FnMut(&EventBatch<'_>),
+) -> Result<RawSummary, RawError> {
+    let io = |source| RawError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
     let mut file = File::open(path).map_err(io)?;
     let (header, _) = read_header(path, &mut file)?;
     let mut decoder = FrameDecoder::new();
@@ -103,24 +136,25 @@ pub fn read_raw(path: &Path, mut on_batch: impl FnMut(&EventBatch<'_>)) -> Resul
         if n == 0 {
             decoder.end_stream();
         }
-        decoder.push(&buf[..n]);
-        while let Some(frame) = decoder.next_frame() {
-            match frame.kind {
-                FrameKind::Events => match EventBatch::parse(frame.payload) {
-                    Ok(b) => {
-                        summary.batches += 1;
-                        on_batch(&b);
-                    }
-                    Err(_) => summary.malformed_batches += 1,
-                },
-                FrameKind::Response => {
-                    if let Ok(ResponseFrame { response: Response::Stopped(t), .. }) = from_payload(frame.payload) {
-                        summary.totals = Some(t);
-                    }
+        decoder.push_with(&buf[..n], |frame| match frame.kind {
+            FrameKind::Events => match EventBatch::parse(frame.payload) {
+                Ok(b) => {
+                    summary.batches += 1;
+                    on_batch(&b);
                 }
-                FrameKind::Request => {}
+                Err(_) => summary.malformed_batches += 1,
+            },
+            FrameKind::Response => {
+                if let Ok(ResponseFrame {
+                    response: Response::Stopped(t),
+                    ..
+                }) = from_payload(frame.payload)
+                {
+                    summary.totals = Some(t);
+                }
             }
-        }
+            FrameKind::Request => {}
+        });
         if n == 0 {
             break;
         }
@@ -132,5 +166,8 @@ pub fn read_raw(path: &Path, mut on_batch: impl FnMut(&EventBatch<'_>)) -> Resul
 /// Whether `path` starts with the raw tag file magic.
 pub fn is_raw_file(path: &Path) -> bool {
     let mut magic = [0u8; 8];
-    File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && &magic == MAGIC
+    File::open(path)
+        .and_then(|mut f| f.read_exact(&mut magic))
+        .is_ok()
+        && &magic == MAGIC
 }

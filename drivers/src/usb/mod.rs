@@ -55,7 +55,10 @@ pub trait BulkOut: Send {
 pub fn link(description: String, ep_in: Box<dyn BulkIn>, ep_out: Box<dyn BulkOut>) -> Link {
     Link {
         description,
-        reader: Box::new(UsbReader { ep: ep_in, ready: VecDeque::new() }),
+        reader: Box::new(UsbReader {
+            ep: ep_in,
+            ready: VecDeque::new(),
+        }),
         writer: Box::new(UsbWriter { ep: ep_out }),
     }
 }
@@ -80,7 +83,9 @@ impl ByteReader for UsbReader {
             Some(Err(TransferError::Disconnected)) => {
                 Err(LinkError::Disconnected("USB device disconnected".into()))
             }
-            Some(Err(TransferError::Failed(e))) => Err(LinkError::Io(format!("USB IN transfer: {e}"))),
+            Some(Err(TransferError::Failed(e))) => {
+                Err(LinkError::Io(format!("USB IN transfer: {e}")))
+            }
         }
     }
 }
@@ -92,7 +97,9 @@ struct UsbWriter {
 impl ByteWriter for UsbWriter {
     fn write_all(&mut self, bytes: &[u8]) -> Result<(), LinkError> {
         self.ep.write(bytes).map_err(|e| match e {
-            TransferError::Disconnected => LinkError::Disconnected("USB device disconnected".into()),
+            TransferError::Disconnected => {
+                LinkError::Disconnected("USB device disconnected".into())
+            }
             TransferError::Failed(e) => LinkError::Io(format!("USB OUT transfer: {e}")),
         })
     }
@@ -126,7 +133,9 @@ impl std::str::FromStr for UsbSelector {
     fn from_str(s: &str) -> Result<Self, String> {
         let mut parts = s.splitn(3, ':');
         let hex = |p: Option<&str>, what: &str| {
-            let p = p.ok_or_else(|| format!("`{s}`: missing {what} (expected VID:PID[:SERIAL] in hex)"))?;
+            let p = p.ok_or_else(|| {
+                format!("`{s}`: missing {what} (expected VID:PID[:SERIAL] in hex)")
+            })?;
             u16::from_str_radix(p.trim_start_matches("0x"), 16)
                 .map_err(|_| format!("`{s}`: {what} `{p}` is not a 16-bit hexadecimal number"))
         };

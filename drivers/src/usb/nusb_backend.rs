@@ -22,11 +22,17 @@ pub fn open_nusb(sel: &UsbSelector) -> Result<Link, LinkError> {
         .find(|d| {
             d.vendor_id() == sel.vendor_id
                 && d.product_id() == sel.product_id
-                && sel.serial.as_deref().is_none_or(|s| d.serial_number() == Some(s))
+                && sel
+                    .serial
+                    .as_deref()
+                    .is_none_or(|s| d.serial_number() == Some(s))
         })
         .ok_or_else(|| LinkError::Io(format!("{sel}: no such USB device is connected")))?;
     let device = info.open().wait().map_err(|e| io("opening", e))?;
-    let interface = device.claim_interface(0).wait().map_err(|e| io("claiming interface 0", e))?;
+    let interface = device
+        .claim_interface(0)
+        .wait()
+        .map_err(|e| io("claiming interface 0", e))?;
     let (mut addr_in, mut addr_out) = (None, None);
     if let Some(desc) = interface.descriptor() {
         for ep in desc.endpoints() {
@@ -39,10 +45,16 @@ pub fn open_nusb(sel: &UsbSelector) -> Result<Link, LinkError> {
         }
     }
     let (Some(addr_in), Some(addr_out)) = (addr_in, addr_out) else {
-        return Err(LinkError::Io(format!("{sel}: interface 0 has no bulk IN/OUT endpoint pair")));
+        return Err(LinkError::Io(format!(
+            "{sel}: interface 0 has no bulk IN/OUT endpoint pair"
+        )));
     };
-    let ep_in = interface.endpoint::<Bulk, In>(addr_in).map_err(|e| io("bulk IN endpoint", e))?;
-    let ep_out = interface.endpoint::<Bulk, Out>(addr_out).map_err(|e| io("bulk OUT endpoint", e))?;
+    let ep_in = interface
+        .endpoint::<Bulk, In>(addr_in)
+        .map_err(|e| io("bulk IN endpoint", e))?;
+    let ep_out = interface
+        .endpoint::<Bulk, Out>(addr_out)
+        .map_err(|e| io("bulk OUT endpoint", e))?;
     Ok(link(
         sel.to_string(),
         Box::new(NusbIn(ep_in)),

@@ -16,18 +16,24 @@ pub fn open_rusb(sel: &UsbSelector) -> Result<Link, LinkError> {
     let ctx = rusb::Context::new().map_err(|e| io("starting libusb", e))?;
     let devices = ctx.devices().map_err(|e| io("listing USB devices", e))?;
     for device in devices.iter() {
-        let Ok(desc) = device.device_descriptor() else { continue };
+        let Ok(desc) = device.device_descriptor() else {
+            continue;
+        };
         if desc.vendor_id() != sel.vendor_id || desc.product_id() != sel.product_id {
             continue;
         }
         let handle = device.open().map_err(|e| io("opening", e))?;
         if let Some(want) = &sel.serial {
-            let got = handle.read_serial_number_string_ascii(&desc).unwrap_or_default();
+            let got = handle
+                .read_serial_number_string_ascii(&desc)
+                .unwrap_or_default();
             if &got != want {
                 continue;
             }
         }
-        let config = device.active_config_descriptor().map_err(|e| io("configuration", e))?;
+        let config = device
+            .active_config_descriptor()
+            .map_err(|e| io("configuration", e))?;
         let (mut ep_in, mut ep_out) = (None, None);
         if let Some(intf) = config.interfaces().find(|i| i.number() == 0)
             && let Some(alt) = intf.descriptors().next()
@@ -42,17 +48,27 @@ pub fn open_rusb(sel: &UsbSelector) -> Result<Link, LinkError> {
             }
         }
         let (Some(ep_in), Some(ep_out)) = (ep_in, ep_out) else {
-            return Err(LinkError::Io(format!("{sel}: interface 0 has no bulk IN/OUT endpoint pair")));
+            return Err(LinkError::Io(format!(
+                "{sel}: interface 0 has no bulk IN/OUT endpoint pair"
+            )));
         };
-        handle.claim_interface(0).map_err(|e| io("claiming interface 0", e))?;
+        handle
+            .claim_interface(0)
+            .map_err(|e| io("claiming interface 0", e))?;
         let handle = std::sync::Arc::new(handle);
         return Ok(link(
             format!("{sel} (libusb)"),
-            Box::new(RusbIn { handle: handle.clone(), ep: ep_in, queued: 0 }),
+            Box::new(RusbIn {
+                handle: handle.clone(),
+                ep: ep_in,
+                queued: 0,
+            }),
             Box::new(RusbOut { handle, ep: ep_out }),
         ));
     }
-    Err(LinkError::Io(format!("{sel}: no such USB device is connected")))
+    Err(LinkError::Io(format!(
+        "{sel}: no such USB device is connected"
+    )))
 }
 
 fn transfer_error(e: rusb::Error) -> TransferError {

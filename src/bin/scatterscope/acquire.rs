@@ -116,8 +116,15 @@ fn parse_roi(s: &str) -> Result<Region, String> {
         .collect::<Result<_, _>>()
         .map_err(|_| format!("`{s}`: expected X,Y,WIDTH,HEIGHT as whole pixels"))?;
     match v[..] {
-        [x, y, width, height] if width > 0 && height > 0 => Ok(Region { x, y, width, height }),
-        _ => Err(format!("`{s}`: expected X,Y,WIDTH,HEIGHT with a non-empty size")),
+        [x, y, width, height] if width > 0 && height > 0 => Ok(Region {
+            x,
+            y,
+            width,
+            height,
+        }),
+        _ => Err(format!(
+            "`{s}`: expected X,Y,WIDTH,HEIGHT with a non-empty size"
+        )),
     }
 }
 
@@ -127,7 +134,10 @@ fn parse_faults(s: &str) -> Result<Faults, String> {
         let (name, value) = item
             .split_once('=')
             .ok_or_else(|| format!("fault `{item}`: expected NAME=N"))?;
-        let n = |v: &str| v.parse::<u32>().map_err(|_| format!("fault `{item}`: `{v}` is not a count"));
+        let n = |v: &str| {
+            v.parse::<u32>()
+                .map_err(|_| format!("fault `{item}`: `{v}` is not a count"))
+        };
         match name {
             "corrupt" => f.corrupt_every = n(value)?,
             "drop-bytes" => f.drop_bytes_every = n(value)?,
@@ -209,13 +219,16 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     {
         let stop = stop.clone();
         // A second Ctrl-C while stopping is ignored: the files must close.
-        ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
+        ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
+            .context("installing the Ctrl-C handler")?;
     }
     // For a mock the scene is known, so the stack's light budget can be set
     // such that reconstructions come out in the scene's units (comparable
     // with its truth image); (expected counts at the preset budget, scene).
     let mock_reference = mock.as_ref().map(|m| {
-        let expected = ForwardModel::new(&m.kernels).expected(m.scene.view()).counts;
+        let expected = ForwardModel::new(&m.kernels)
+            .expected(m.scene.view())
+            .counts;
         (expected, m.scene.clone())
     });
     let opened = open_device(&args.device, mock)?;
@@ -223,13 +236,18 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         Some(d) => ProgressBar::new(d.as_millis() as u64).with_style(
             ProgressStyle::with_template("{bar:30} {elapsed}/{duration} {msg}").expect("template"),
         ),
-        None => ProgressBar::new_spinner()
-            .with_style(ProgressStyle::with_template("{spinner} {elapsed} {msg}").expect("template")),
+        None => ProgressBar::new_spinner().with_style(
+            ProgressStyle::with_template("{spinner} {elapsed} {msg}").expect("template"),
+        ),
     };
     let mut last = (Duration::ZERO, 0u64);
     let outcome = acquire(opened.link, &plan, &stop, |p| {
         let dt = (p.elapsed - last.0).as_secs_f64();
-        let rate = if dt > 0.0 { (p.received - last.1) as f64 / dt } else { 0.0 };
+        let rate = if dt > 0.0 {
+            (p.received - last.1) as f64 / dt
+        } else {
+            0.0
+        };
         last = (p.elapsed, p.received);
         bar.set_position(p.elapsed.as_millis() as u64);
         bar.set_message(format!(
@@ -245,16 +263,26 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     let truth = opened.mock.map(|m| m.truth());
 
     let acc = &outcome.accounting;
-    let roi = args.roi.unwrap_or(Region { x: 0, y: 0, width: w, height: h });
+    let roi = args.roi.unwrap_or(Region {
+        x: 0,
+        y: 0,
+        width: w,
+        height: h,
+    });
     let mut stack_setup = setup;
     stack_setup.sensor.width_px = roi.width;
     stack_setup.sensor.height_px = roi.height;
     stack_setup.sensor.fov_cm = setup.sensor.fov_cm * roi.width as f64 / w as f64;
     if let (Some((expected, _)), Some(t)) = (&mock_reference, truth) {
         let e0: f64 = expected
-            .slice(ndarray::s![.., roi.y..roi.y + roi.height, roi.x..roi.x + roi.width])
+            .slice(ndarray::s![
+                ..,
+                roi.y..roi.y + roi.height,
+                roi.x..roi.x + roi.width
+            ])
             .sum();
-        let signal = acc.binned as f64 * (1.0 - t.dark_counts as f64 / t.photons_detected.max(1) as f64);
+        let signal =
+            acc.binned as f64 * (1.0 - t.dark_counts as f64 / t.photons_detected.max(1) as f64);
         if e0 > 0.0 && signal > 0.0 {
             stack_setup.total_photons = setup.total_photons * signal / e0;
             println!(
@@ -296,7 +324,9 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         meta: StackMeta {
             version: META_VERSION,
             kind: ValueKind::Counts,
-            bin_starts_ps: (0..plan.bins).map(|k| plan.t_start_ps + k as f64 * plan.bin_width_ps).collect(),
+            bin_starts_ps: (0..plan.bins)
+                .map(|k| plan.t_start_ps + k as f64 * plan.bin_width_ps)
+                .collect(),
             bin_width_ps: plan.bin_width_ps,
             pixel_pitch_cm: stack_setup.sensor.pixel_pitch_cm(),
             setup: Some(stack_setup),
@@ -311,8 +341,11 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     stack.save(&args.out.join("stack.exr"))?;
     write_contact_sheet(&stack, SheetScale::Shared, &args.out.join("stack.png"))?;
     let json_path = args.out.join("acquisition.json");
-    std::fs::write(&json_path, serde_json::to_string_pretty(&acquisition)? + "\n")
-        .with_context(|| format!("writing {}", json_path.display()))?;
+    std::fs::write(
+        &json_path,
+        serde_json::to_string_pretty(&acquisition)? + "\n",
+    )
+    .with_context(|| format!("writing {}", json_path.display()))?;
 
     let secs = outcome.elapsed.as_secs_f64().max(1e-9);
     println!(
@@ -339,7 +372,12 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         .filter(|&k| stack.bin(k).iter().all(|&v| v == 0.0))
         .collect();
     if !empty.is_empty() {
-        println!("  {} of {} bins are empty (bins {:?})", empty.len(), stack.bins(), empty);
+        println!(
+            "  {} of {} bins are empty (bins {:?})",
+            empty.len(),
+            stack.bins(),
+            empty
+        );
     }
     println!("wrote {}", args.out.join("stack.exr").display());
     if let Some(raw) = &outcome.raw {
@@ -351,10 +389,16 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
             acc.received,
             args.out.display()
         ),
-        StopReason::NoStopAnswer => anyhow::bail!("the device did not confirm Stop; its totals are unknown"),
+        StopReason::NoStopAnswer => {
+            anyhow::bail!("the device did not confirm Stop; its totals are unknown")
+        }
         _ => {}
     }
-    anyhow::ensure!(acc.balances(), "photon accounting does not balance:\n{}", acc.table());
+    anyhow::ensure!(
+        acc.balances(),
+        "photon accounting does not balance:\n{}",
+        acc.table()
+    );
     Ok(())
 }
 

@@ -55,7 +55,13 @@ fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let acq = args.out.join("acquire");
     let rec = args.out.join("reconstruct");
     let steps: [Vec<std::ffi::OsString>; 2] = [
-        vec!["acquire".into(), "--device".into(), "mock".into(), "--out".into(), acq.clone().into()],
+        vec![
+            "acquire".into(),
+            "--device".into(),
+            "mock".into(),
+            "--out".into(),
+            acq.clone().into(),
+        ],
         vec![
             "reconstruct".into(),
             acq.join("stack.exr").into(),
@@ -66,7 +72,10 @@ fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         ],
     ];
     for step in steps {
-        let line: Vec<_> = step.iter().map(|s| s.to_string_lossy().into_owned()).collect();
+        let line: Vec<_> = step
+            .iter()
+            .map(|s| s.to_string_lossy().into_owned())
+            .collect();
         println!("== scatterscope {}", line.join(" "));
         let cli = Cli::try_parse_from(std::iter::once("scatterscope".into()).chain(step))?;
         dispatch(cli.command)?;

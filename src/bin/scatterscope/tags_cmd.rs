@@ -329,7 +329,10 @@ fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
     })?;
     let h = &summary.header;
     println!("file: {}", args.file.display());
-    println!("container: scatterscope raw tags v{}; written by {}", h.format_version, h.software);
+    println!(
+        "container: scatterscope raw tags v{}; written by {}",
+        h.format_version, h.software
+    );
     println!("device: {} {} via {}", h.model, h.serial, h.link);
     println!(
         "sensor: {} x {} pixels; micro-time unit {} fs; sync period {} fs (divider {})",
@@ -337,9 +340,7 @@ fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
     );
     println!(
         "batches: {}; photons: {photons}; markers: {markers}; lost in the device: {}; invalid records: {}",
-        summary.batches,
-        summary.counts.lost_in_device,
-        summary.counts.invalid_records
+        summary.batches, summary.counts.lost_in_device, summary.counts.invalid_records
     );
     println!(
         "measured duration: {:.6} s (last event)",
@@ -351,12 +352,19 @@ fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
             t.batches,
             t.photons_sent,
             t.photons_lost,
-            if t.photons_sent == photons { "" } else { " (the file misses some: lost in transit)" }
+            if t.photons_sent == photons {
+                ""
+            } else {
+                " (the file misses some: lost in transit)"
+            }
         ),
         None => println!("warning: no end frame: the recording was cut (crash or disconnect)"),
     }
     if summary.bytes_skipped > 0 {
-        println!("warning: {} bytes did not form valid frames (damage or a cut last batch)", summary.bytes_skipped);
+        println!(
+            "warning: {} bytes did not form valid frames (damage or a cut last batch)",
+            summary.bytes_skipped
+        );
     }
     Ok(())
 }
@@ -365,7 +373,8 @@ fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
 /// the sync.
 fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
     let (header, _) = {
-        let mut f = std::fs::File::open(&args.file).with_context(|| format!("opening {}", args.file.display()))?;
+        let mut f = std::fs::File::open(&args.file)
+            .with_context(|| format!("opening {}", args.file.display()))?;
         scatterscope_drivers::raw::read_header(&args.file, &mut f)?
     };
     let res_ps = f64::from(header.resolution_fs) / 1000.0;
@@ -375,16 +384,34 @@ fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
         width_ps > 0.0 && (steps - steps.round()).abs() < 1e-6,
         "--bin-width {width_ps} ps is not a positive multiple of the file's {res_ps} ps micro-time unit"
     );
-    let bins = args
-        .bins
-        .unwrap_or(((header.sync_period_fs as f64 / 1000.0 - args.t_start) / width_ps).ceil().max(1.0) as usize);
-    anyhow::ensure!((1..=65_535).contains(&bins), "--bins {bins}: use 1 to 65535 bins");
+    let bins = args.bins.unwrap_or(
+        ((header.sync_period_fs as f64 / 1000.0 - args.t_start) / width_ps)
+            .ceil()
+            .max(1.0) as usize,
+    );
+    anyhow::ensure!(
+        (1..=65_535).contains(&bins),
+        "--bins {bins}: use 1 to 65535 bins"
+    );
     let (w, h) = (usize::from(header.pixels_x), usize::from(header.pixels_y));
-    anyhow::ensure!(w > 0 && h > 0, "{}: header sensor size {w} x {h} is empty", args.file.display());
-    let window = TimeWindow { start: args.t_start / res_ps, width: steps.round(), bins };
+    anyhow::ensure!(
+        w > 0 && h > 0,
+        "{}: header sensor size {w} x {h} is empty",
+        args.file.display()
+    );
+    let window = TimeWindow {
+        start: args.t_start / res_ps,
+        width: steps.round(),
+        bins,
+    };
     let map = PixelMap::Sensor {
         sensor_width: w,
-        roi: scatterscope::tags::binning::Region { x: 0, y: 0, width: w, height: h },
+        roi: scatterscope::tags::binning::Region {
+            x: 0,
+            y: 0,
+            width: w,
+            height: h,
+        },
     };
     let mut binner = Binner::new(window, map, args.channel, FrameSelect::Sum);
     let start = Instant::now();
@@ -399,7 +426,9 @@ fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
         meta: StackMeta {
             version: META_VERSION,
             kind: ValueKind::Counts,
-            bin_starts_ps: (0..bins).map(|k| args.t_start + k as f64 * width_ps).collect(),
+            bin_starts_ps: (0..bins)
+                .map(|k| args.t_start + k as f64 * width_ps)
+                .collect(),
             bin_width_ps: width_ps,
             pixel_pitch_cm: 1.0,
             setup: None,
@@ -407,8 +436,15 @@ fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
             dropped_bins: Vec::new(),
             clamped_negative: 0,
             seed: None,
-            source: format!("scatterscope bin {} ({} {})", args.file.display(), header.model, header.serial),
-            acquisition: Some(serde_json::json!({ "raw_header": header, "totals_in_file": summary.totals.is_some() })),
+            source: format!(
+                "scatterscope bin {} ({} {})",
+                args.file.display(),
+                header.model,
+                header.serial
+            ),
+            acquisition: Some(
+                serde_json::json!({ "raw_header": header, "totals_in_file": summary.totals.is_some() }),
+            ),
         },
     };
     let path = args.out.join("stack.exr");
@@ -416,7 +452,13 @@ fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
     write_contact_sheet(&stack, SheetScale::Shared, &args.out.join("stack.png"))?;
     println!(
         "{} records in {:.3} s: {} photons, {} binned, {} outside the window, {} lost in the device, {} invalid",
-        acc.records, elapsed, acc.received, acc.binned, acc.outside_window, counts.lost_in_device, counts.invalid_records
+        acc.records,
+        elapsed,
+        acc.received,
+        acc.binned,
+        acc.outside_window,
+        counts.lost_in_device,
+        counts.invalid_records
     );
     if summary.totals.is_none() {
         println!("warning: no end frame: the recording was cut (crash or disconnect)");

@@ -1,0 +1,174 @@
+//! Live-acquisition throughput: decode + bin of the project's own event
+//! records from memory (frames with CRC checks, and records alone), and the
+//! sustained end-to-end rate of the mock device over the in-process USB
+//! transport and over a pseudo-terminal (unpaced: as fast as the host takes
+//! photons).
+
+use std::sync::atomic::AtomicBool;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use firmware_protocol::{BatchEncoder, Event, EventBatch, FrameDecoder, FrameKind, encode_frame};
+use scatterscope::acquire::{DeviceSpec, MockSetup, Plan, acquire, open_device};
+use scatterscope::physics::{KernelStack, Preset, Sampling};
+use scatterscope::scene::Scene;
+use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, Region, TimeWindow};
+use scatterscope::tags::raw::bin_batch;
+use scatterscope_mocks::{EmitterOptions, MockOptions};
+
+const EVENTS: u64 = 20_000_000;
+
+/// A stream of full batches: 256 x 256 pixels, 1 ps micro times within the
+/// 120 ps the paper's bins cover, about one photon per 20 syncs (wraps now
+/// and then).
+fn wire_stream() -> Vec<u8> {
+    let mut enc = BatchEncoder::new();
+    let mut wire = Vec::with_capacity(EVENTS as usize * 8 + (1 << 20));
+    let mut payload = Vec::new();
+    let (mut sync, mut state) = (0u64, 0x9E37_79B9_7F4A_7C15u64);
+    for _ in 0..EVENTS {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        sync += state % 40;
+        if !enc.has_room(2) {
+            payload.clear();
+            enc.finish_batch(&mut payload);
+            encode_frame(FrameKind::Events, &payload, &mut wire).unwrap();
+        }
+        enc.push(Event::Photon {
+            pixel: (state >> 24) as u16,
+            micro: (state >> 44) as u32 % 120,
+            sync,
+        })
+        .unwrap();
+    }
+    payload.clear();
+    enc.finish_batch(&mut payload);
+    encode_frame(FrameKind::Events, &payload, &mut wire).unwrap();
+    wire
+}
+
+fn binner() -> Binner {
+    // The paper's binning: 30 bins of 4 ps (a 7.9 MB stack).
+    let window = TimeWindow {
+        start: 0.0,
+        width: 4.0,
+        bins: 30,
+    };
+    let map = PixelMap::Sensor {
+        sensor_width: 256,
+        roi: Region {
+            x: 0,
+            y: 0,
+            width: 256,
+            height: 256,
+        },
+    };
+    Binner::new(window, map, None, FrameSelect::Sum)
+}
+
+fn mock_setup() -> MockSetup {
+    let setup = Preset::Paper.setup();
+    MockSetup {
+        scene: Scene::parse("usaf").render(256, 256).unwrap(),
+        kernels: KernelStack::build(&setup, Sampling::Integrated).unwrap(),
+        emitter: EmitterOptions::default(),
+        device: MockOptions {
+            real_time: false,
+            max_photons: 4_000_000,
+            ..MockOptions::default()
+        },
+    }
+}
+
+fn run_mock(spec: &DeviceSpec) -> u64 {
+    let setup = Preset::Paper.setup();
+    let plan = Plan {
+        t_start_ps: 0.0,
+        bin_width_ps: setup.bins.width_ps,
+        bins: setup.bins.count,
+        t0_ps: 0.0,
+        roi: None,
+        duration: None,
+        resolution_fs: None,
+        raw: None,
+        software: "bench".into(),
+    };
+    let opened = open_device(spec, Some(mock_setup())).unwrap();
+    let out = acquire(opened.link, &plan, &AtomicBool::new(false), |_| {}).unwrap();
+    assert!(out.accounting.balances() && out.accounting.lost_in_device == 0);
+    out.accounting.binned
+}
+
+fn benches(c: &mut Criterion) {
+    let wire = wire_stream();
+    let mut g = c.benchmark_group("acquire");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(EVENTS));
+    g.bench_function("decode_bin_frames_from_memory", |b| {
+        b.iter(|| {
+            let mut dec = FrameDecoder::new();
+            let mut bin = binner();
+            // Chunks as a USB reader delivers them.
+            for chunk in wire.chunks(1 << 16) {
+                dec.push_with(chunk, |f| {
+                    bin_batch(&EventBatch::parse(f.payload).unwrap(), &mut bin);
+                });
+            }
+            bin.finish().1.binned
+        })
+    });
+    let mut payloads = Vec::new();
+    let mut dec = FrameDecoder::new();
+    dec.push(&wire);
+    while let Some(f) = dec.next_frame() {
+        payloads.push(f.payload.to_vec());
+    }
+    g.bench_function("bin_checked_batches_from_memory", |b| {
+        b.iter(|| {
+            let mut bin = binner();
+            for p in &payloads {
+                bin_batch(&EventBatch::parse(p).unwrap(), &mut bin);
+            }
+            bin.finish().1.binned
+        })
+    });
+    g.throughput(Throughput::Bytes(wire.len() as u64));
+    // The memory-bandwidth reference: one streaming read of the records.
+    g.bench_function("sum_of_the_stream_words", |b| {
+        b.iter(|| {
+            wire.chunks_exact(8)
+                .map(|c| u64::from_le_bytes(c.try_into().unwrap()))
+                .fold(0u64, u64::wrapping_add)
+        })
+    });
+    g.bench_function("crc32c_table_of_the_stream", |b| {
+        b.iter(|| firmware_protocol::frame::CRC.checksum(&wire))
+    });
+    g.bench_function("crc32c_hardware_of_the_stream", |b| {
+        b.iter(|| firmware_protocol::frame::crc32c(&wire))
+    });
+    g.throughput(Throughput::Elements(4_000_000));
+    // The mock's own cost: drawing the photons, nothing sent.
+    g.bench_function("mock_emitter_alone", |b| {
+        let m = mock_setup();
+        let scene: Vec<f64> = m.scene.iter().copied().collect();
+        b.iter(|| {
+            let mut e =
+                scatterscope_mocks::Emitter::new(&scene, &m.kernels, m.emitter.clone()).unwrap();
+            (0..4_000_000)
+                .map(|_| u64::from(e.next_detection().pixel))
+                .sum::<u64>()
+        })
+    });
+    g.bench_function("mock_usb_end_to_end", |b| {
+        b.iter(|| run_mock(&DeviceSpec::Mock))
+    });
+    g.bench_function("mock_serial_end_to_end", |b| {
+        b.iter(|| run_mock(&DeviceSpec::MockSerial))
+    });
+    g.finish();
+}
+
+criterion_group!(acquire_benches, benches);
+criterion_main!(acquire_benches);
