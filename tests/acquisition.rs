@@ -334,13 +334,14 @@ fn a_disconnect_mid_stream_ends_cleanly_with_a_lower_bound() {
 
 #[test]
 fn a_slow_host_makes_the_device_fifo_overflow_and_says_so() {
-    // Real-time device, small FIFO: a consumer that stalls for 1.5 s lets
-    // the pipeline and the device FIFO fill; the device drops photons and
-    // says how many.
+    // Real-time device, small FIFO, small batches: a consumer that stalls
+    // for 1.5 s lets the pipeline (256 batches), the USB buffer and the
+    // device FIFO fill; the device drops photons and says how many.
     let mut m = mock(9, 0, Faults::default(), 0.0);
     m.device.real_time = true;
     m.device.fifo_capacity = 20_000;
-    m.emitter.rate_hz = 3e6;
+    m.device.batch_interval = Duration::ZERO;
+    m.emitter.rate_hz = 1e6;
     let mut p = plan(0.0);
     p.duration = Some(Duration::from_millis(2500));
     let opened = open_device(&DeviceSpec::Mock, Some(m)).unwrap();
