@@ -538,3 +538,36 @@ fn a_region_of_interest_bins_its_pixels_and_counts_the_rest() {
         50_000 - roi.accounting.binned - roi.accounting.outside_window
     );
 }
+
+#[test]
+fn afterpulses_and_dark_counts_arrive_at_their_rates() {
+    let n = 200_000;
+    let mut m = mock(4, n, Faults::default(), 0.0);
+    m.emitter.afterpulse_probability = 0.05;
+    m.emitter.dark_rate_hz = 0.1 * m.emitter.rate_hz;
+    let (out, truth) = run(DeviceSpec::Mock, m, &plan(0.0));
+    assert!(out.accounting.balances() && out.accounting.detected == Some(n));
+    // Every detection (signal or dark) is followed by an afterpulse with
+    // probability p: afterpulses / primaries = p (5 sigma).
+    let primaries = (n - truth.afterpulses) as f64;
+    let expect = 0.05 * primaries;
+    assert!(
+        (truth.afterpulses as f64 - expect).abs() < 5.0 * expect.sqrt(),
+        "{truth:?}"
+    );
+    // Dark counts: a tenth of the signal rate, which includes the photons
+    // that the medium spreads off the sensor.
+    let dark = (primaries + truth.photons_off_sensor as f64) / 11.0;
+    assert!(
+        (truth.dark_counts as f64 - dark).abs() < 5.0 * dark.sqrt(),
+        "{truth:?}"
+    );
+    // Dark counts and afterpulses spread over the whole sync period: most
+    // land outside the 120 ps window.
+    let outside = out.accounting.outside_window as f64;
+    assert!(
+        outside > 0.9 * (truth.dark_counts + truth.afterpulses) as f64 * 0.98,
+        "{}",
+        out.accounting.table()
+    );
+}

@@ -20,6 +20,11 @@ pub struct EmitterOptions {
     pub rate_hz: f64,
     /// Dark counts per second over the whole sensor.
     pub dark_rate_hz: f64,
+    /// Probability that a detection is followed by an afterpulse in the
+    /// same pixel (0: off, the default).
+    pub afterpulse_probability: f64,
+    /// Mean delay of an afterpulse after its detection (exponential), ps.
+    pub afterpulse_delay_ps: f64,
     /// Laser sync period, picoseconds.
     pub sync_period_ps: f64,
     /// Delay of time zero of the ST-PSF after the sync (cables,
@@ -34,6 +39,8 @@ impl Default for EmitterOptions {
         Self {
             rate_hz: 2e6,
             dark_rate_hz: 0.0,
+            afterpulse_probability: 0.0,
+            afterpulse_delay_ps: 50_000.0,
             sync_period_ps: 12_500.0,
             t0_delay_ps: 0.0,
             seed: 0,
@@ -50,8 +57,19 @@ pub struct Detection {
     pub delay_ps: f64,
     /// Laser-sync count.
     pub sync: u64,
-    /// A dark count rather than a signal photon.
-    pub dark: bool,
+    /// What produced it.
+    pub origin: Origin,
+}
+
+/// What produced a detection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Origin {
+    /// A photon from the scene through the medium.
+    Signal,
+    /// A dark count.
+    Dark,
+    /// An afterpulse of an earlier detection in the same pixel.
+    Afterpulse,
 }
 
 /// Samples detections; deterministic for a seed.
@@ -67,6 +85,9 @@ pub struct Emitter {
     dark_fraction: f64,
     rng: ChaCha8Rng,
     time_s: f64,
+    /// Afterpulses due later: (time s, pixel), earliest last.
+    afterpulses: Vec<(f64, u32)>,
+    off_sensor: u64,
 }
 
 /// Why an emitter cannot be built.
@@ -112,6 +133,15 @@ impl Emitter {
         if !(options.sync_period_ps > 0.0 && options.sync_period_ps.is_finite()) {
             return Err(bad("sync_period_ps", options.sync_period_ps));
         }
+        if !(0.0..1.0).contains(&options.afterpulse_probability) {
+            return Err(bad(
+                "afterpulse_probability",
+                options.afterpulse_probability,
+            ));
+        }
+        if !(options.afterpulse_delay_ps > 0.0 && options.afterpulse_delay_ps.is_finite()) {
+            return Err(bad("afterpulse_delay_ps", options.afterpulse_delay_ps));
+        }
         let source = WeightedAliasIndex::new(
             scene
                 .iter()
@@ -136,12 +166,19 @@ impl Emitter {
             rng: ChaCha8Rng::seed_from_u64(options.seed),
             options,
             time_s: 0.0,
+            afterpulses: Vec::new(),
+            off_sensor: 0,
         })
     }
 
     /// Emission time of the last detection, seconds since start.
     pub fn time_s(&self) -> f64 {
         self.time_s
+    }
+
+    /// Signal photons so far that landed off the sensor (never detected).
+    pub fn off_sensor(&self) -> u64 {
+        self.off_sensor
     }
 
     /// Sensor size (width, height).
@@ -152,8 +189,42 @@ impl Emitter {
     /// The next detection (photons landing off the sensor are skipped; they
     /// are never detected).
     pub fn next_detection(&mut self) -> Detection {
+        let d = self.next_primary();
+        if self.options.afterpulse_probability > 0.0
+            && self.rng.random::<f64>() < self.options.afterpulse_probability
+        {
+            let delay = -self.rng.random::<f64>().max(f64::MIN_POSITIVE).ln()
+                * self.options.afterpulse_delay_ps;
+            let at = self.time_s + (d.delay_ps + delay) * 1e-12;
+            let i = self.afterpulses.partition_point(|&(t, _)| t > at);
+            self.afterpulses.insert(i, (at, d.pixel));
+        }
+        d
+    }
+
+    /// A detection at `time` seconds in `pixel`.
+    fn at(&self, time: f64, pixel: u32, origin: Origin) -> Detection {
+        let period_s = self.options.sync_period_ps * 1e-12;
+        let sync = (time / period_s) as u64;
+        Detection {
+            pixel,
+            delay_ps: (time - sync as f64 * period_s) * 1e12,
+            sync,
+            origin,
+        }
+    }
+
+    fn next_primary(&mut self) -> Detection {
         loop {
-            self.time_s += self.gap.sample(&mut self.rng);
+            let next = self.time_s + self.gap.sample(&mut self.rng);
+            if let Some(&(t, pixel)) = self.afterpulses.last()
+                && t <= next
+            {
+                self.afterpulses.pop();
+                // Never before what was already emitted: sync counts only grow.
+                return self.at(t.max(self.time_s), pixel, Origin::Afterpulse);
+            }
+            self.time_s = next;
             let sync = (self.time_s * 1e12 / self.options.sync_period_ps) as u64;
             if self.rng.random::<f64>() < self.dark_fraction {
                 let pixel = self.rng.random_range(0..self.width * self.height) as u32;
@@ -162,7 +233,7 @@ impl Emitter {
                     pixel,
                     delay_ps,
                     sync,
-                    dark: true,
+                    origin: Origin::Dark,
                 };
             }
             let src = self.source.sample(&mut self.rng);
@@ -174,6 +245,7 @@ impl Emitter {
             let y = (src / self.width) as isize + dy;
             let x = (src % self.width) as isize + dx;
             if y < 0 || x < 0 || y >= self.height as isize || x >= self.width as isize {
+                self.off_sensor += 1;
                 continue;
             }
             let (start, width) = self.bins[bin];
@@ -182,7 +254,7 @@ impl Emitter {
                 pixel: (y as usize * self.width + x as usize) as u32,
                 delay_ps,
                 sync,
-                dark: false,
+                origin: Origin::Signal,
             };
         }
     }

@@ -15,7 +15,7 @@ use firmware_protocol::{
     to_payload,
 };
 
-use crate::emitter::Emitter;
+use crate::emitter::{Emitter, Origin};
 use crate::{DevicePort, PortClosed};
 
 /// Response id of messages the device sends on its own.
@@ -84,6 +84,10 @@ pub struct Truth {
     pub photons_detected: u64,
     /// Dark counts among them.
     pub dark_counts: u64,
+    /// Afterpulses among them.
+    pub afterpulses: u64,
+    /// Signal photons that landed off the sensor since Start (never detected).
+    pub photons_off_sensor: u64,
     /// Detections the device's time window or ROI excluded (never recorded).
     pub photons_excluded: u64,
     /// Photons dropped by FIFO overflow.
@@ -202,6 +206,8 @@ struct Firmware {
     local: Truth,
     /// Emitter time at Start, seconds.
     emit_origin: f64,
+    /// Emitter's off-sensor count at Start.
+    off_sensor_origin: u64,
 }
 
 impl Firmware {
@@ -227,10 +233,12 @@ impl Firmware {
             requests: FrameDecoder::new(),
             local: Truth::default(),
             emit_origin: 0.0,
+            off_sensor_origin: 0,
         }
     }
 
-    fn publish(&self) {
+    fn publish(&mut self) {
+        self.local.photons_off_sensor = self.device.emitter.off_sensor() - self.off_sensor_origin;
         *self.truth.lock().expect("truth lock") = self.local;
     }
 
@@ -396,6 +404,7 @@ impl Firmware {
         // Detections continue from the emitter's current state; times are
         // counted from Start.
         self.emit_origin = self.device.emitter.time_s();
+        self.off_sensor_origin = self.device.emitter.off_sensor();
     }
 
     fn stop(&mut self) {
@@ -456,7 +465,8 @@ impl Firmware {
                 continue;
             }
             self.local.photons_detected += 1;
-            self.local.dark_counts += u64::from(d.dark);
+            self.local.dark_counts += u64::from(d.origin == Origin::Dark);
+            self.local.afterpulses += u64::from(d.origin == Origin::Afterpulse);
             if self.overflow_left > 0 || !room {
                 self.overflow_left = self.overflow_left.saturating_sub(1);
                 self.pending_lost += 1;

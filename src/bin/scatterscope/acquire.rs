@@ -65,6 +65,10 @@ pub struct AcquireArgs {
     /// Mock: dark counts per second over the sensor.
     #[arg(long, default_value_t = 0.0)]
     dark_rate: f64,
+    /// Mock: probability that a detection is followed by an afterpulse
+    /// (mean delay 50 ns) in the same pixel; 0 turns after-pulsing off.
+    #[arg(long, default_value_t = 0.0)]
+    afterpulse: f64,
     /// Mock: random seed (same seed, same photons).
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -182,6 +186,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
             emitter: EmitterOptions {
                 rate_hz: args.rate,
                 dark_rate_hz: args.dark_rate,
+                afterpulse_probability: args.afterpulse,
                 t0_delay_ps: args.mock_delay,
                 seed: args.seed,
                 ..EmitterOptions::default()
@@ -364,8 +369,13 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     print!("{}", acc.table());
     if let Some(t) = truth {
         println!(
-            "  mock truth: detected {}, lost in FIFO {}, damaged in transit {}, never sent {}",
-            t.photons_detected, t.photons_lost_fifo, t.photons_damaged, t.photons_unsent
+            "  mock truth: detected {} ({} dark, {} afterpulses), lost in FIFO {}, damaged in transit {}, never sent {}",
+            t.photons_detected,
+            t.dark_counts,
+            t.afterpulses,
+            t.photons_lost_fifo,
+            t.photons_damaged,
+            t.photons_unsent
         );
     }
     let empty: Vec<usize> = (0..stack.bins())

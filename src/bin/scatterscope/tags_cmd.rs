@@ -243,31 +243,15 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
         .with_context(|| format!("creating output directory {}", args.out.display()))?;
     let many = stacks.len() > 1;
     for (f, counts) in stacks.iter().enumerate() {
+        let source = format!(
+            "scatterscope bin {} ({}, {})",
+            args.file.display(),
+            info.device,
+            info.record_type.name()
+        );
         let stack = Stack {
             data: counts.mapv(|c| c as f32),
-            meta: StackMeta {
-                version: META_VERSION,
-                kind: ValueKind::Counts,
-                bin_starts_ps: (0..bins)
-                    .map(|k| args.t_start + k as f64 * width_ps)
-                    .collect(),
-                bin_width_ps: width_ps,
-                // Object-plane pitch is not in the file; reconstruction takes
-                // the field of view from --fov.
-                pixel_pitch_cm: 1.0,
-                setup: None,
-                sampling: None,
-                dropped_bins: Vec::new(),
-                clamped_negative: 0,
-                seed: None,
-                source: format!(
-                    "scatterscope bin {} ({}, {})",
-                    args.file.display(),
-                    info.device,
-                    info.record_type.name()
-                ),
-                acquisition: None,
-            },
+            meta: counts_meta(bins, args.t_start, width_ps, source, None),
         };
         let stem = if many {
             format!("stack_f{f:03}")
@@ -421,31 +405,17 @@ fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
     let (mut stacks, acc) = binner.finish();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output directory {}", args.out.display()))?;
+    let source = format!(
+        "scatterscope bin {} ({} {})",
+        args.file.display(),
+        header.model,
+        header.serial
+    );
+    let acquisition =
+        serde_json::json!({ "raw_header": header, "totals_in_file": summary.totals.is_some() });
     let stack = Stack {
         data: stacks.swap_remove(0).mapv(|c| c as f32),
-        meta: StackMeta {
-            version: META_VERSION,
-            kind: ValueKind::Counts,
-            bin_starts_ps: (0..bins)
-                .map(|k| args.t_start + k as f64 * width_ps)
-                .collect(),
-            bin_width_ps: width_ps,
-            pixel_pitch_cm: 1.0,
-            setup: None,
-            sampling: None,
-            dropped_bins: Vec::new(),
-            clamped_negative: 0,
-            seed: None,
-            source: format!(
-                "scatterscope bin {} ({} {})",
-                args.file.display(),
-                header.model,
-                header.serial
-            ),
-            acquisition: Some(
-                serde_json::json!({ "raw_header": header, "totals_in_file": summary.totals.is_some() }),
-            ),
-        },
+        meta: counts_meta(bins, args.t_start, width_ps, source, Some(acquisition)),
     };
     let path = args.out.join("stack.exr");
     stack.save(&path)?;
@@ -465,4 +435,30 @@ fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
     }
     println!("wrote {}", path.display());
     Ok(())
+}
+
+/// Metadata of a stack of binned counts: `bins` bins of `width_ps` from
+/// `t_start`. The object-plane pitch is not in tag files; reconstruction
+/// takes the field of view from --fov.
+fn counts_meta(
+    bins: usize,
+    t_start: f64,
+    width_ps: f64,
+    source: String,
+    acquisition: Option<serde_json::Value>,
+) -> StackMeta {
+    StackMeta {
+        version: META_VERSION,
+        kind: ValueKind::Counts,
+        bin_starts_ps: (0..bins).map(|k| t_start + k as f64 * width_ps).collect(),
+        bin_width_ps: width_ps,
+        pixel_pitch_cm: 1.0,
+        setup: None,
+        sampling: None,
+        dropped_bins: Vec::new(),
+        clamped_negative: 0,
+        seed: None,
+        source,
+        acquisition,
+    }
 }
