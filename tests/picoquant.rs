@@ -393,3 +393,155 @@ fn scanned_images_bin_photons_into_their_pixels_and_keep_every_frame() {
     assert!(acc.balances(), "{acc:?}");
     assert_eq!(acc.outside_image, 6, "one photon between lines per line");
 }
+
+/// A PicoHarp 300 PT3 file (format 2.0) laid out field by field as in
+/// PicoQuant's C file-access demo: text header, binary header, one board
+/// header with router settings, TTTR header, image header, records.
+fn write_pt3(path: &Path, mode: i32, img_ints: usize, records: &[u32], announced: i32) {
+    let mut b = Vec::new();
+    let text = |b: &mut Vec<u8>, s: &str, n: usize| {
+        let mut f = s.as_bytes().to_vec();
+        f.resize(n, 0);
+        b.extend_from_slice(&f);
+    };
+    let int = |b: &mut Vec<u8>, v: i32| b.extend_from_slice(&v.to_le_bytes());
+    text(&mut b, "PicoHarp 300", 16);
+    text(&mut b, "2.0", 6);
+    text(&mut b, "PicoHarp Software", 18);
+    text(&mut b, "2.3.0.0", 12);
+    text(&mut b, "22/11/26 10:00:00", 18);
+    text(&mut b, "\r\n", 2);
+    text(&mut b, "test file", 256);
+    // Curves, BitsPerRecord, RoutingChannels, NumberOfBoards, ActiveCurve,
+    // MeasMode, SubMode, RangeNo, Offset, Tacq, StopAt, StopOnOvfl,
+    // Restart, DispLinLog, DispTimeFrom, DispTimeTo, DispCountFrom,
+    // DispCountTo.
+    for v in [0, 32, 4, 1, 0, mode, 0, 0, 0, 1000, 0, 0, 0, 0, 0, 0, 0, 0] {
+        int(&mut b, v);
+    }
+    b.extend_from_slice(&[0u8; 64 + 36 + 16]); // DispCurves, Params, Repeat*
+    text(&mut b, "", 20); // ScriptName
+    text(&mut b, "PicoHarp 300", 16);
+    text(&mut b, "2.0", 8);
+    for v in [1_000_123, 8, 10, 50, 10, 50] {
+        int(&mut b, v); // serial, SyncDivider, CFD settings
+    }
+    b.extend_from_slice(&0.016f32.to_le_bytes()); // Resolution, ns
+    b.extend_from_slice(&[0u8; 26 * 4]); // router model, enabled, 4 x 6 channel ints
+    for v in [
+        0,
+        0,
+        0,
+        40_000_000,
+        1000,
+        1000,
+        0,
+        announced,
+        img_ints as i32,
+    ] {
+        int(&mut b, v); // ExtDevices .. Records, ImgHdrSize
+    }
+    b.extend(std::iter::repeat_n(0u8, 4 * img_ints));
+    assert_eq!(
+        b.len(),
+        728 + 4 * img_ints,
+        "the PT3 2.0 header is 728 bytes + image header"
+    );
+    for r in records {
+        b.extend_from_slice(&r.to_le_bytes());
+    }
+    std::fs::write(path, b).unwrap();
+}
+
+#[test]
+fn legacy_pt3_files_decode_with_their_header_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.pt3");
+    // PicoHarp T3 records: channel 4 bits, dtime 12, nsync 16; channel 15
+    // with markers 0 is an overflow of 65536 syncs.
+    let rec = |ch: u32, dtime: u32, nsync: u32| (ch << 28) | (dtime << 16) | nsync;
+    let records = [
+        rec(1, 100, 5),
+        rec(2, 4095, 65_535),
+        rec(15, 0, 0),
+        rec(1, 7, 3),
+        rec(15, 2, 9),
+    ];
+    write_pt3(&path, 3, 2, &records, records.len() as i32);
+    let (info, tags, end) = decode_all(&path);
+    end.unwrap();
+    assert_eq!(info.record_type, RecordType::PicoHarpT3);
+    assert_eq!(info.data_offset, 736);
+    assert_eq!(info.records_present, 5);
+    assert!(
+        (info.resolution_s - 16e-12).abs() < 1e-18,
+        "{}",
+        info.resolution_s
+    );
+    assert_eq!(info.sync_rate_hz, Some(40e6));
+    assert_eq!(info.device, "PicoHarp 300");
+    assert_eq!(
+        tags,
+        vec![
+            Tag::Photon {
+                channel: 1,
+                macro_time: 5,
+                micro_time: 100
+            },
+            Tag::Photon {
+                channel: 2,
+                macro_time: 65_535,
+                micro_time: 4095
+            },
+            Tag::Photon {
+                channel: 1,
+                macro_time: 65_536 + 3,
+                micro_time: 7
+            },
+            Tag::Marker {
+                bits: 2,
+                macro_time: 65_536 + 9
+            },
+        ]
+    );
+
+    // T2 mode, and a header that announces more records than present.
+    let t2 = dir.path().join("m.pt2");
+    write_pt3(&t2, 2, 0, &[(1 << 28) | 1234], 3);
+    let (info, _, end) = decode_all(&t2);
+    assert_eq!(info.record_type, RecordType::PicoHarpT2);
+    assert!((info.macro_unit_s - 4e-12).abs() < 1e-20);
+    assert!(
+        matches!(
+            end,
+            Err(TtrError::Truncated {
+                read: 1,
+                expected: 3,
+                ..
+            })
+        ),
+        "{end:?}"
+    );
+
+    // Not time-tagging: a clear error naming the field and value.
+    let hist = dir.path().join("h.pt3");
+    write_pt3(&hist, 0, 0, &[], 0);
+    let err = picoquant::open(&hist)
+        .err()
+        .expect("a histogram file is refused")
+        .to_string();
+    assert!(
+        err.contains("h.pt3") && err.contains("MeasMode = 0"),
+        "{err}"
+    );
+
+    // Every cut inside the header is an error naming the field, not a panic.
+    let bytes = std::fs::read(&path).unwrap();
+    for cut in (0..736).step_by(7) {
+        let short = dir.path().join("cut.pt3");
+        std::fs::write(&short, &bytes[..cut]).unwrap();
+        if let Ok((info, _)) = picoquant::open(&short) {
+            panic!("a header cut at {cut} bytes opened: {info:?}");
+        }
+    }
+}

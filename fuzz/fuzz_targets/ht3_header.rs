@@ -1,7 +1,8 @@
-//! Arbitrary bytes into the legacy HydraHarp header parser.
+//! Arbitrary bytes into the legacy HydraHarp and PicoHarp header parsers.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     let _ = scatterscope::tags::picoquant::legacy::parse_hydraharp(&mut &data[..]);
+    let _ = scatterscope::tags::picoquant::legacy::parse_picoharp(&mut &data[..]);
 });

@@ -113,6 +113,7 @@ fn print_header(info: &FileInfo) {
     let container = match &info.container {
         Container::Ptu(v) => format!("PTU {v}"),
         Container::HydraHarpLegacy(v) => format!("HydraHarp HT3/HT2 {v}"),
+        Container::PicoHarpLegacy(v) => format!("PicoHarp PT3/PT2 {v}"),
     };
     println!("file: {}", info.path.display());
     println!("container: {container}; device: {}", info.device);

@@ -1,9 +1,10 @@
-//! Legacy HydraHarp HT3/HT2 files: a fixed binary header (text part,
-//! measurement part, hardware part, one block per input channel, input
-//! rates, time-tagging part, image header) followed by 32-bit records.
-//! Layout checked against PicoQuant's sample files: records start exactly
-//! where the header says, and header size plus `nRecords x 4` is the file
-//! size.
+//! Legacy HydraHarp HT3/HT2 and PicoHarp PT3/PT2 files: a fixed binary
+//! header (text part, measurement part, hardware part, time-tagging part,
+//! image header) followed by 32-bit records. The HydraHarp layout is
+//! checked against PicoQuant's sample files: records start exactly where
+//! the header says, and header size plus `nRecords x 4` is the file size.
+//! The PicoHarp layout (format version 2.0) follows PicoQuant's published
+//! file-access demos; no sample file was at hand to check it against.
 
 use std::io::Read;
 
@@ -68,6 +69,11 @@ impl Cursor<'_> {
     }
     fn i32(&mut self, what: &str) -> Result<i32, TtrError> {
         Ok(i32::from_le_bytes(
+            self.bytes(4, what)?.try_into().expect("4 bytes"),
+        ))
+    }
+    fn f32(&mut self, what: &str) -> Result<f32, TtrError> {
+        Ok(f32::from_le_bytes(
             self.bytes(4, what)?.try_into().expect("4 bytes"),
         ))
     }
@@ -175,6 +181,106 @@ pub fn parse_hydraharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
         sync_rate_hz: f64::from(sync_rate),
         channels: channels as u32,
         records,
+        data_offset: c.offset,
+    })
+}
+
+/// Time-tag unit of PicoHarp 300 T2 records (ps).
+const PICOHARP_T2_UNIT_PS: f64 = 4.0;
+
+/// Parses a PicoHarp 300 PT3/PT2 header (format version 2.0).
+pub fn parse_picoharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
+    let mut c = Cursor { r, offset: 0 };
+    let ident = c.text(16, "Ident")?;
+    if ident != "PicoHarp 300" {
+        return Err(TtrError::header(
+            0,
+            format!("Ident is {ident:?}, expected \"PicoHarp 300\""),
+        ));
+    }
+    let version = c.text(6, "FormatVersion")?;
+    if version != "2.0" {
+        return Err(TtrError::Unsupported(format!(
+            "PicoHarp file format version {version:?}; only 2.0 is supported (export the data as PTU)"
+        )));
+    }
+    let creator_name = c.text(18, "CreatorName")?;
+    let creator_version = c.text(12, "CreatorVersion")?;
+    c.skip(18 + 2 + 256, "FileTime, CRLF and CommentField")?;
+    let _curves = c.i32("Curves")?;
+    let bits = c.i32("BitsPerRecord")?;
+    if bits != 32 {
+        return Err(TtrError::header(
+            c.offset - 4,
+            format!("BitsPerRecord = {bits}, expected 32"),
+        ));
+    }
+    let _routing = c.i32("RoutingChannels")?;
+    let boards_offset = c.offset;
+    let boards = c.i32("NumberOfBoards")?;
+    if boards != 1 {
+        return Err(TtrError::header(
+            boards_offset,
+            format!("NumberOfBoards = {boards}, expected 1"),
+        ));
+    }
+    let _active = c.i32("ActiveCurve")?;
+    let mode_offset = c.offset;
+    let mode = c.i32("MeasMode")?;
+    // SubMode .. DispCountTo (12 ints), DispCurves (8 x 2 ints), Params
+    // (3 x 3 floats), Repeat fields (4 ints), ScriptName (20 bytes).
+    c.skip(48 + 64 + 36 + 16 + 20, "display and repeat settings")?;
+    let hardware = c.text(16, "HardwareIdent")?;
+    c.skip(8, "HardwareVersion")?;
+    // HardwareSerial, SyncDivider, CFD settings of both inputs.
+    c.skip(24, "HardwareSerial, SyncDivider and CFD settings")?;
+    let res_offset = c.offset;
+    let resolution_ns = c.f32("Resolution")?;
+    if !(resolution_ns > 0.0 && resolution_ns.is_finite()) {
+        return Err(TtrError::header(
+            res_offset,
+            format!("Resolution = {resolution_ns} ns is not positive"),
+        ));
+    }
+    // RouterModelCode, RouterEnabled, 4 router channels x 6 ints.
+    c.skip(8 + 96, "router settings")?;
+    c.skip(12, "ExtDevices and reserved fields")?;
+    let sync_rate = c.i32("CntRate0")?;
+    c.skip(12, "CntRate1, StopAfter and StopReason")?;
+    let records_offset = c.offset;
+    let records = c.i32("Records")?;
+    let records = u32::try_from(records).map_err(|_| {
+        TtrError::header(records_offset, format!("Records = {records} is negative"))
+    })?;
+    let img_offset = c.offset;
+    let img_ints = c.i32("ImgHdrSize")?;
+    if !(0..=1 << 20).contains(&img_ints) {
+        return Err(TtrError::header(
+            img_offset,
+            format!("ImgHdrSize = {img_ints} is not plausible"),
+        ));
+    }
+    c.skip(4 * img_ints as usize, "ImgHdr")?;
+    let record_type = match mode {
+        3 => RecordType::PicoHarpT3,
+        2 => RecordType::PicoHarpT2,
+        _ => {
+            return Err(TtrError::header(
+                mode_offset,
+                format!("MeasMode = {mode} is not a time-tagging mode (2 = T2, 3 = T3)"),
+            ));
+        }
+    };
+    Ok(LegacyHeader {
+        version,
+        creator: format!("{creator_name} {creator_version}"),
+        hardware,
+        record_type,
+        resolution_ps: f64::from(resolution_ns) * 1e3,
+        base_resolution_ps: PICOHARP_T2_UNIT_PS,
+        sync_rate_hz: f64::from(sync_rate),
+        channels: 1,
+        records: u64::from(records),
         data_offset: c.offset,
     })
 }

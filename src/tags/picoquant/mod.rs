@@ -1,4 +1,5 @@
-//! PicoQuant time-tagged files: PTU (any record type) and legacy HT3/HT2.
+//! PicoQuant time-tagged files: PTU (any record type), legacy HT3/HT2 and
+//! PT3/PT2.
 //!
 //! [`open`] reads the header into a [`FileInfo`] and returns a
 //! [`RecordReader`] that streams the 32-bit records in fixed-size chunks
@@ -73,6 +74,8 @@ pub enum Container {
     Ptu(String),
     /// Legacy HydraHarp HT3/HT2 header with its format version.
     HydraHarpLegacy(String),
+    /// Legacy PicoHarp PT3/PT2 header with its format version.
+    PicoHarpLegacy(String),
 }
 
 /// Scanned-image (FLIM) description from `ImgHdr_*` tags.
@@ -181,7 +184,7 @@ impl RecordReader {
     }
 }
 
-/// Opens a PTU, HT3 or HT2 file: header parsed, reader at the first record.
+/// Opens a PTU, HT3/HT2 or PT3/PT2 file: header parsed, reader at the first record.
 pub fn open(path: &Path) -> Result<(FileInfo, RecordReader), FileError> {
     open_inner(path).map_err(|error| FileError {
         path: path.to_owned(),
@@ -199,12 +202,13 @@ fn open_inner(path: &Path) -> Result<(FileInfo, RecordReader), TtrError> {
     let mut info = if got >= 8 && &magic[..8] == ptu::MAGIC {
         from_ptu(path, &mut reader)?
     } else if magic.starts_with(b"HydraHarp") {
-        from_legacy(path, &mut reader)?
-    } else if magic.starts_with(b"PicoHarp") || magic.starts_with(b"TimeHarp") {
-        return Err(TtrError::Unsupported(format!(
-            "legacy {} files (PT3/THD) are not supported yet; export the data as PTU",
-            String::from_utf8_lossy(&magic[..8]).trim_end_matches('\0')
-        )));
+        from_legacy(path, legacy::parse_hydraharp(&mut reader)?)
+    } else if magic.starts_with(b"PicoHarp 300") {
+        from_legacy(path, legacy::parse_picoharp(&mut reader)?)
+    } else if magic.starts_with(b"TimeHarp") {
+        return Err(TtrError::Unsupported(
+            "legacy TimeHarp files (THD/T3R) are not supported; export the data as PTU".into(),
+        ));
     } else {
         return Err(TtrError::header(
             0,
@@ -337,12 +341,15 @@ fn float32_digits(v: f64) -> f64 {
     format!("{v:.6e}").parse().unwrap_or(v)
 }
 
-fn from_legacy(path: &Path, r: &mut impl Read) -> Result<FileInfo, TtrError> {
-    let h = legacy::parse_hydraharp(r)?;
+fn from_legacy(path: &Path, h: legacy::LegacyHeader) -> FileInfo {
     let t3 = h.record_type.is_t3();
-    Ok(FileInfo {
+    let container = match h.record_type {
+        RecordType::PicoHarpT3 | RecordType::PicoHarpT2 => Container::PicoHarpLegacy(h.version),
+        _ => Container::HydraHarpLegacy(h.version),
+    };
+    FileInfo {
         path: path.to_owned(),
-        container: Container::HydraHarpLegacy(h.version),
+        container,
         record_type: h.record_type,
         device: h.hardware,
         resolution_s: if t3 {
@@ -363,5 +370,5 @@ fn from_legacy(path: &Path, r: &mut impl Read) -> Result<FileInfo, TtrError> {
         sub_mode: 0,
         imaging: None,
         tags: Vec::new(),
-    })
+    }
 }
