@@ -199,6 +199,7 @@ impl Binner {
         }
     }
 
+    #[inline(always)]
     fn stack_for_frame(&mut self, frame: usize) -> Option<&mut Vec<u32>> {
         let index = match self.frames {
             FrameSelect::Sum => 0,
@@ -213,7 +214,7 @@ impl Binner {
         Some(&mut self.stacks[index])
     }
 
-    #[inline]
+    #[inline(always)]
     fn micro_bin(&self, micro: u32) -> Option<usize> {
         match self.micro_lut.get(micro as usize) {
             Some(&OUTSIDE) => None,
@@ -223,6 +224,65 @@ impl Binner {
                 (x >= 0.0 && x < self.window.bins as f64).then_some(x as usize)
             }
         }
+    }
+
+    /// Runs `feed` with a sink that bins tags like [`Binner::push`], but
+    /// with the counters in local variables and the stack borrowed once, so
+    /// the per-record loop keeps them in registers (the decode + bin hot
+    /// path of recorded files, see BENCHMARKS.md). Scanned images, and
+    /// frame selections that exclude frame 0, go through `push` unchanged.
+    pub fn bulk<R>(&mut self, feed: impl FnOnce(&mut BulkSink<'_>) -> R) -> R {
+        let fast = !matches!(self.map, PixelMap::Scan(_)) && self.stack_for_frame(0).is_some();
+        if !fast {
+            let mut sink = BulkSink {
+                fast: None,
+                slow: Some(self),
+            };
+            return feed(&mut sink);
+        }
+        let (_, h, w) = self.shape;
+        let Self {
+            window,
+            micro_lut,
+            map,
+            channel,
+            stacks,
+            accounting,
+            pixel_lut,
+            ..
+        } = self;
+        let mut sink = BulkSink {
+            fast: Some(FastSink {
+                window: *window,
+                micro_lut,
+                pixel_lut,
+                map: *map,
+                channel: *channel,
+                plane: h * w,
+                width: w,
+                stack: &mut stacks[0],
+                acc: *accounting,
+                other_records: 0,
+            }),
+            slow: None,
+        };
+        let received_before = accounting.received;
+        let r = feed(&mut sink);
+        if let Some(f) = sink.fast {
+            // The hot loop counts photons and the exceptions only; records
+            // and binned photons follow from them.
+            let mut acc = f.acc;
+            let photons = acc.received - received_before;
+            let binned_before = accounting.binned;
+            let excluded = (acc.other_channel - accounting.other_channel)
+                + (acc.outside_window - accounting.outside_window)
+                + (acc.outside_image - accounting.outside_image);
+            acc.binned = binned_before + photons - excluded;
+            acc.records =
+                accounting.records + photons + (acc.markers - accounting.markers) + f.other_records;
+            *accounting = acc;
+        }
+        r
     }
 
     /// Feeds one decoded record's tag (`None` for overflow records).
@@ -348,7 +408,9 @@ impl Binner {
         self.accounting.binned += 1;
     }
 
-    #[inline]
+    // Always inlined: as a call it cost half the decode + bin time of
+    // `scatterscope bin` (perf, BENCHMARKS.md).
+    #[inline(always)]
     fn bin_at(&mut self, frame: usize, bin: usize, row: usize, col: usize) {
         let (_, h, w) = self.shape;
         match self.stack_for_frame(frame) {
@@ -421,5 +483,89 @@ impl Binner {
             .map(|s| Array3::from_shape_vec(self.shape, s).expect("stack length matches its shape"))
             .collect();
         (stacks, self.accounting)
+    }
+}
+
+/// The sink of [`Binner::bulk`].
+pub struct BulkSink<'a> {
+    fast: Option<FastSink<'a>>,
+    slow: Option<&'a mut Binner>,
+}
+
+struct FastSink<'a> {
+    window: TimeWindow,
+    micro_lut: &'a [u16],
+    pixel_lut: &'a [u32],
+    map: PixelMap,
+    channel: Option<u16>,
+    plane: usize,
+    width: usize,
+    stack: &'a mut [u32],
+    acc: Accounting,
+    /// Records that are neither photons nor markers (overflows, syncs).
+    other_records: u64,
+}
+
+impl BulkSink<'_> {
+    /// Bins one decoded record's tag (`None` for overflow records).
+    #[inline(always)]
+    pub fn push(&mut self, tag: Option<Tag>) {
+        match (&mut self.fast, &mut self.slow) {
+            (Some(f), _) => f.push(tag),
+            (None, Some(b)) => b.push(tag),
+            (None, None) => unreachable!("a sink is fast or slow"),
+        }
+    }
+}
+
+impl FastSink<'_> {
+    #[inline(always)]
+    fn push(&mut self, tag: Option<Tag>) {
+        match tag {
+            None | Some(Tag::Sync { .. }) => self.other_records += 1,
+            Some(Tag::Marker { .. }) => self.acc.markers += 1,
+            Some(Tag::Photon {
+                channel,
+                micro_time,
+                ..
+            }) => {
+                self.acc.received += 1;
+                if self.channel.is_some_and(|c| c != channel) {
+                    self.acc.other_channel += 1;
+                    return;
+                }
+                let bin = match self.micro_lut.get(micro_time as usize) {
+                    Some(&OUTSIDE) => None,
+                    Some(&b) => Some(usize::from(b)),
+                    None => {
+                        let x = (f64::from(micro_time) - self.window.start) / self.window.width;
+                        (x >= 0.0 && x < self.window.bins as f64).then_some(x as usize)
+                    }
+                };
+                let Some(bin) = bin else {
+                    self.acc.outside_window += 1;
+                    return;
+                };
+                let pixel = match self.map {
+                    PixelMap::Single => 0,
+                    PixelMap::Channel { width } if usize::from(channel) < width => {
+                        usize::from(channel)
+                    }
+                    PixelMap::Sensor { .. } => match self.pixel_lut.get(usize::from(channel)) {
+                        Some(&p) if p != OUTSIDE_ROI => p as usize,
+                        _ => {
+                            self.acc.outside_image += 1;
+                            return;
+                        }
+                    },
+                    _ => {
+                        self.acc.outside_image += 1;
+                        return;
+                    }
+                };
+                debug_assert!(pixel < self.plane && self.width > 0);
+                self.stack[bin * self.plane + pixel] += 1;
+            }
+        }
     }
 }

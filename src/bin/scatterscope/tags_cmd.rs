@@ -211,7 +211,7 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
     let mut truncated = None;
     loop {
         match reader.next_chunk(&mut chunk) {
-            Ok(true) => decoder.decode_all(&chunk, |t| binner.push(t)),
+            Ok(true) => binner.bulk(|sink| decoder.decode_all(&chunk, sink)),
             Ok(false) => break,
             Err(e @ TtrError::Truncated { .. }) if args.allow_truncated => {
                 truncated = Some(e.to_string());

@@ -158,6 +158,28 @@ pub struct Decoder {
     base: u64,
 }
 
+/// Where [`Decoder::decode_all`] puts each record's tag: any
+/// `FnMut(Option<Tag>)`, or a [`crate::tags::binning::BulkSink`], whose
+/// `push` is then inlined into the per-layout loop.
+pub trait TagSink {
+    /// Takes one record's tag (`None` for overflow records).
+    fn push(&mut self, tag: Option<Tag>);
+}
+
+impl<F: FnMut(Option<Tag>)> TagSink for F {
+    #[inline(always)]
+    fn push(&mut self, tag: Option<Tag>) {
+        self(tag)
+    }
+}
+
+impl TagSink for &mut crate::tags::binning::BulkSink<'_> {
+    #[inline(always)]
+    fn push(&mut self, tag: Option<Tag>) {
+        crate::tags::binning::BulkSink::push(self, tag)
+    }
+}
+
 impl Decoder {
     /// A decoder for `record_type` starting at time 0.
     pub fn new(record_type: RecordType) -> Self {
@@ -178,11 +200,11 @@ impl Decoder {
     /// is matched once per chunk, not per record: each arm is a loop the
     /// compiler specialises (the decode + bin hot path, see BENCHMARKS.md).
     #[inline]
-    pub fn decode_all(&mut self, records: &[u32], mut f: impl FnMut(Option<Tag>)) {
+    pub fn decode_all(&mut self, records: &[u32], mut sink: impl TagSink) {
         macro_rules! run {
             ($layout:expr) => {
                 for &r in records {
-                    f(self.decode_as($layout, r));
+                    sink.push(self.decode_as($layout, r));
                 }
             };
         }
