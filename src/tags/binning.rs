@@ -216,14 +216,7 @@ impl Binner {
 
     #[inline(always)]
     fn micro_bin(&self, micro: u32) -> Option<usize> {
-        match self.micro_lut.get(micro as usize) {
-            Some(&OUTSIDE) => None,
-            Some(&b) => Some(usize::from(b)),
-            None => {
-                let x = (f64::from(micro) - self.window.start) / self.window.width;
-                (x >= 0.0 && x < self.window.bins as f64).then_some(x as usize)
-            }
-        }
+        lookup_bin(&self.micro_lut, &self.window, micro)
     }
 
     /// Runs `feed` with a sink that bins tags like [`Binner::push`], but
@@ -486,6 +479,19 @@ impl Binner {
     }
 }
 
+/// The bin of a micro time: from the lookup table, or by division beyond it.
+#[inline(always)]
+fn lookup_bin(micro_lut: &[u16], window: &TimeWindow, micro: u32) -> Option<usize> {
+    match micro_lut.get(micro as usize) {
+        Some(&OUTSIDE) => None,
+        Some(&b) => Some(usize::from(b)),
+        None => {
+            let x = (f64::from(micro) - window.start) / window.width;
+            (x >= 0.0 && x < window.bins as f64).then_some(x as usize)
+        }
+    }
+}
+
 /// The sink of [`Binner::bulk`].
 pub struct BulkSink<'a> {
     fast: Option<FastSink<'a>>,
@@ -534,15 +540,7 @@ impl FastSink<'_> {
                     self.acc.other_channel += 1;
                     return;
                 }
-                let bin = match self.micro_lut.get(micro_time as usize) {
-                    Some(&OUTSIDE) => None,
-                    Some(&b) => Some(usize::from(b)),
-                    None => {
-                        let x = (f64::from(micro_time) - self.window.start) / self.window.width;
-                        (x >= 0.0 && x < self.window.bins as f64).then_some(x as usize)
-                    }
-                };
-                let Some(bin) = bin else {
+                let Some(bin) = lookup_bin(self.micro_lut, &self.window, micro_time) else {
                     self.acc.outside_window += 1;
                     return;
                 };

@@ -92,6 +92,28 @@ impl Cursor<'_> {
     }
 }
 
+/// The text part after the 16-byte ident: format version and creator
+/// (name and version); file time, CRLF and comment are skipped.
+fn text_part(c: &mut Cursor<'_>) -> Result<(String, String), TtrError> {
+    let version = c.text(6, "FormatVersion")?;
+    let creator_name = c.text(18, "CreatorName")?;
+    let creator_version = c.text(12, "CreatorVersion")?;
+    c.skip(18 + 2 + 256, "FileTime, CRLF and Comment")?;
+    Ok((version, format!("{creator_name} {creator_version}")))
+}
+
+/// Reads `BitsPerRecord`, which must be 32.
+fn bits_per_record(c: &mut Cursor<'_>) -> Result<(), TtrError> {
+    let bits = c.i32("BitsPerRecord")?;
+    if bits != 32 {
+        return Err(TtrError::header(
+            c.offset - 4,
+            format!("BitsPerRecord = {bits}, expected 32"),
+        ));
+    }
+    Ok(())
+}
+
 /// Parses a HydraHarp HT3/HT2 header (versions 1.0 and 2.0).
 pub fn parse_hydraharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
     let mut c = Cursor { r, offset: 0 };
@@ -102,18 +124,9 @@ pub fn parse_hydraharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
             format!("Ident is {ident:?}, expected \"HydraHarp\""),
         ));
     }
-    let version = c.text(6, "FormatVersion")?;
-    let creator_name = c.text(18, "CreatorName")?;
-    let creator_version = c.text(12, "CreatorVersion")?;
-    c.skip(18 + 2 + 256, "FileTime, CRLF and Comment")?;
+    let (version, creator) = text_part(&mut c)?;
     let _curves = c.i32("NumberOfCurves")?;
-    let bits = c.i32("BitsPerRecord")?;
-    if bits != 32 {
-        return Err(TtrError::header(
-            c.offset - 4,
-            format!("BitsPerRecord = {bits}, expected 32"),
-        ));
-    }
+    bits_per_record(&mut c)?;
     let _active = c.i32("ActiveCurve")?;
     let mode_offset = c.offset;
     let mode = c.i32("MeasurementMode")?;
@@ -173,7 +186,7 @@ pub fn parse_hydraharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
     };
     Ok(LegacyHeader {
         version,
-        creator: format!("{creator_name} {creator_version}"),
+        creator,
         hardware,
         record_type,
         resolution_ps,
@@ -198,23 +211,14 @@ pub fn parse_picoharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
             format!("Ident is {ident:?}, expected \"PicoHarp 300\""),
         ));
     }
-    let version = c.text(6, "FormatVersion")?;
+    let (version, creator) = text_part(&mut c)?;
     if version != "2.0" {
         return Err(TtrError::Unsupported(format!(
             "PicoHarp file format version {version:?}; only 2.0 is supported (export the data as PTU)"
         )));
     }
-    let creator_name = c.text(18, "CreatorName")?;
-    let creator_version = c.text(12, "CreatorVersion")?;
-    c.skip(18 + 2 + 256, "FileTime, CRLF and CommentField")?;
     let _curves = c.i32("Curves")?;
-    let bits = c.i32("BitsPerRecord")?;
-    if bits != 32 {
-        return Err(TtrError::header(
-            c.offset - 4,
-            format!("BitsPerRecord = {bits}, expected 32"),
-        ));
-    }
+    bits_per_record(&mut c)?;
     let _routing = c.i32("RoutingChannels")?;
     let boards_offset = c.offset;
     let boards = c.i32("NumberOfBoards")?;
@@ -273,7 +277,7 @@ pub fn parse_picoharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
     };
     Ok(LegacyHeader {
         version,
-        creator: format!("{creator_name} {creator_version}"),
+        creator,
         hardware,
         record_type,
         resolution_ps: f64::from(resolution_ns) * 1e3,
