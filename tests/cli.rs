@@ -710,3 +710,99 @@ fn acquire_reports_injected_faults_and_a_disconnect() {
     );
     fails_with(&["acquire", "--roi", "1,2,3"], &["X,Y,WIDTH,HEIGHT"]);
 }
+
+#[test]
+fn denoise_improves_a_noisy_chart_and_names_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let clean = dir.path().join("chart.png");
+    let chart = scatterscope::scene::Scene::parse("usaf")
+        .render(96, 96)
+        .unwrap();
+    scatterscope::stack::preview::write_image(chart.view(), Some(1.0), &clean).unwrap();
+    let psnrs = |stdout: &str| -> Vec<f64> {
+        stdout
+            .lines()
+            .filter_map(|l| l.split("PSNR ").nth(1)?.split(' ').next()?.parse().ok())
+            .collect()
+    };
+    let out = dir.path().join("tv.npy");
+    let o = scatterscope(&[
+        "denoise",
+        clean.to_str().unwrap(),
+        "--sigma",
+        "25/255",
+        "--add-noise",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    let p = psnrs(&stdout);
+    // Noise of sigma 25/255 alone is about 20.2 dB; TV must beat it clearly.
+    assert!(
+        p.len() == 2 && (p[0] - 20.2).abs() < 0.5 && p[1] > p[0] + 3.0,
+        "{stdout}"
+    );
+    assert!(stdout.contains("tv(gain=0.5)"), "{stdout}");
+
+    // The identity changes nothing: its output read back is the input.
+    let o = scatterscope(&[
+        "denoise",
+        clean.to_str().unwrap(),
+        "--sigma",
+        "0.1",
+        "--denoiser",
+        "identity",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    let back = scatterscope(&[
+        "denoise",
+        out.to_str().unwrap(),
+        "--sigma",
+        "0.1",
+        "--denoiser",
+        "identity",
+        "--out",
+        dir.path().join("again.exr").to_str().unwrap(),
+    ]);
+    assert!(back.status.success(), "{}", text(&back).1);
+    use ndarray_npy::ReadNpyExt;
+    let read: ndarray::Array2<f32> =
+        ndarray::Array2::read_npy(std::fs::File::open(&out).unwrap()).unwrap();
+    let max_diff = read
+        .iter()
+        .zip(chart.iter())
+        .map(|(&a, &b)| (f64::from(a) - (b * 255.0).round() / 255.0).abs())
+        .fold(0.0, f64::max);
+    assert!(max_diff < 1e-6, "{max_diff}");
+
+    fails_with(
+        &[
+            "denoise",
+            clean.to_str().unwrap(),
+            "--sigma",
+            "x",
+            "--out",
+            "o.png",
+        ],
+        &["`x`"],
+    );
+    fails_with(
+        &[
+            "denoise",
+            clean.to_str().unwrap(),
+            "--sigma",
+            "0.1",
+            "--out",
+            dir.path().join("o.tif").to_str().unwrap(),
+        ],
+        &["o.tif", "unknown extension `tif`"],
+    );
+    fails_with(
+        &["denoise", "missing.png", "--sigma", "0.1", "--out", "o.png"],
+        &["missing.png"],
+    );
+}

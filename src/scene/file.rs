@@ -28,14 +28,18 @@ pub enum SceneLoadError {
     },
 }
 
-/// Loads a PNG, JPEG or EXR file as grayscale in [0, 1], resized to
-/// `height` x `width` (Lanczos-3, clamped after resampling). EXR data is
-/// scaled by its maximum when that exceeds 1.
-pub fn load_grayscale(
-    path: &Path,
-    height: usize,
-    width: usize,
-) -> Result<Array2<f64>, SceneLoadError> {
+/// Loads a PNG or JPEG file as grayscale in [0, 1], or an EXR file's
+/// luminance with its own values, at the file's size.
+pub fn load_native(path: &Path) -> Result<Array2<f64>, SceneLoadError> {
+    let gray = decode_luminance(path)?;
+    let (w, h) = gray.dimensions();
+    Ok(Array2::from_shape_fn((h as usize, w as usize), |(r, c)| {
+        f64::from(gray.get_pixel(c as u32, r as u32).0[0])
+    }))
+}
+
+/// The file's luminance, every value finite.
+fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, SceneLoadError> {
     let decode = |reason: String| SceneLoadError::Decode {
         path: path.to_owned(),
         reason,
@@ -43,7 +47,7 @@ pub fn load_grayscale(
     let is_exr = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
-    let mut gray: ImageBuffer<Luma<f32>, Vec<f32>> = if is_exr {
+    let gray: ImageBuffer<Luma<f32>, Vec<f32>> = if is_exr {
         read_exr_luminance(path).map_err(decode)?
     } else {
         image::open(path)
@@ -55,13 +59,25 @@ pub fn load_grayscale(
         return Err(SceneLoadError::Content {
             path: path.to_owned(),
             reason: format!(
-                "pixel (row {}, column {}) is {}; scenes must be finite",
+                "pixel (row {}, column {}) is {}; images must be finite",
                 bad as u32 / w,
                 bad as u32 % w,
                 gray.as_raw()[bad]
             ),
         });
     }
+    Ok(gray)
+}
+
+/// Loads a PNG, JPEG or EXR file as grayscale in [0, 1], resized to
+/// `height` x `width` (Lanczos-3, clamped after resampling). EXR data is
+/// scaled by its maximum when that exceeds 1.
+pub fn load_grayscale(
+    path: &Path,
+    height: usize,
+    width: usize,
+) -> Result<Array2<f64>, SceneLoadError> {
+    let mut gray = decode_luminance(path)?;
     let max = gray.pixels().fold(0.0f32, |m, p| m.max(p.0[0]));
     if max > 1.0 {
         gray.pixels_mut().for_each(|p| p.0[0] /= max);

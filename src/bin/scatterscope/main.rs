@@ -1,6 +1,7 @@
 //! The `scatterscope` command-line tool.
 
 mod acquire;
+mod denoise;
 mod physics_summary;
 mod psf;
 mod recon_args;
@@ -35,6 +36,7 @@ enum Command {
     Bin(tags_cmd::BinArgs),
     Acquire(acquire::AcquireArgs),
     Devices(acquire::DevicesArgs),
+    Denoise(denoise::DenoiseArgs),
     Demo(DemoArgs),
 }
 
@@ -97,6 +99,7 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Bin(args) => tags_cmd::bin(&args),
         Command::Acquire(args) => acquire::run(&args),
         Command::Devices(args) => acquire::devices(&args),
+        Command::Denoise(args) => denoise::run(&args),
         Command::Demo(args) => demo(&args),
     }
 }

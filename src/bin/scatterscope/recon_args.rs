@@ -14,15 +14,40 @@ pub enum DenoiserChoice {
     Identity,
 }
 
-/// Flags of the reconstruction algorithms.
+/// The denoiser and its settings (`reconstruct`, `report`, `denoise`).
 #[derive(Debug, Clone, clap::Args)]
-pub struct ReconArgs {
-    /// Prior for PnP-ADMM.
+pub struct PriorArgs {
+    /// Prior for PnP-ADMM (the denoiser).
     #[arg(long, value_enum, default_value = "tv")]
     pub denoiser: DenoiserChoice,
     /// TV weight per unit of the denoiser's noise sigma.
     #[arg(long, default_value_t = 0.5)]
     pub tv_gain: f64,
+}
+
+impl PriorArgs {
+    /// The chosen denoiser, its settings checked.
+    pub fn denoiser(&self) -> anyhow::Result<Box<dyn Denoiser>> {
+        anyhow::ensure!(
+            self.tv_gain > 0.0 && self.tv_gain.is_finite(),
+            "--tv-gain = {} must be a positive number",
+            self.tv_gain
+        );
+        Ok(match self.denoiser {
+            DenoiserChoice::Tv => Box::new(TotalVariation {
+                gain: self.tv_gain,
+                ..Default::default()
+            }),
+            DenoiserChoice::Identity => Box::new(Identity),
+        })
+    }
+}
+
+/// Flags of the reconstruction algorithms.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ReconArgs {
+    #[command(flatten)]
+    pub prior: PriorArgs,
     /// ADMM: initial penalty lambda_0.
     #[arg(long, default_value_t = 1.0)]
     pub lambda0: f64,
@@ -61,17 +86,6 @@ pub struct ReconArgs {
 }
 
 impl ReconArgs {
-    /// The chosen denoiser.
-    pub fn denoiser(&self) -> Box<dyn Denoiser> {
-        match self.denoiser {
-            DenoiserChoice::Tv => Box::new(TotalVariation {
-                gain: self.tv_gain,
-                ..Default::default()
-            }),
-            DenoiserChoice::Identity => Box::new(Identity),
-        }
-    }
-
     /// The method settings, checked.
     pub fn options(&self) -> anyhow::Result<MethodOptions> {
         let positive = |name: &str, v: f64| {
@@ -84,7 +98,6 @@ impl ReconArgs {
         positive("lambda0", self.lambda0)?;
         positive("beta", self.beta)?;
         positive("eps", self.eps)?;
-        positive("tv-gain", self.tv_gain)?;
         anyhow::ensure!(
             self.lambda_step >= 1.0 && self.lambda_step.is_finite(),
             "--lambda-step = {} must be at least 1",

@@ -71,7 +71,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         None => None,
     };
     let opts = args.recon.options()?;
-    let denoiser = args.recon.denoiser();
+    let denoiser = args.recon.prior.denoiser()?;
     let bar = ProgressBar::new_spinner();
     bar.set_style(ProgressStyle::with_template("{spinner} {elapsed} {msg}").expect("template"));
     let result = run_method(

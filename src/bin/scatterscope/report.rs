@@ -40,7 +40,7 @@ pub struct ReportArgs {
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let setup = args.physics.resolve()?;
     let opts = args.recon.options()?;
-    let denoiser = args.recon.denoiser();
+    let denoiser = args.recon.prior.denoiser()?;
     let names: Vec<String> = if args.scenes.is_empty() {
         Scene::BUILT_IN.iter().map(|s| s.to_string()).collect()
     } else {
