@@ -33,12 +33,6 @@ const REORDER_WINDOW: usize = 1024;
 pub struct AcceptedBatch {
     /// The batch payload (header + records).
     pub payload: Arc<Vec<u8>>,
-    /// Its sequence number.
-    pub seq: u32,
-    /// Photon records it holds.
-    pub photons: u64,
-    /// Photons the device reported lost (lost records) in it.
-    pub lost_in_device: u64,
 }
 
 /// What the link delivered, counted by the decoder thread.
@@ -62,8 +56,6 @@ pub struct LinkAccounting {
     pub photons_received: u64,
     /// Photons the device reported dropped (lost records).
     pub photons_lost_in_device: u64,
-    /// Records with a reserved type or stray bits (skipped).
-    pub invalid_records: u64,
     /// Responses nobody waited for, or that did not decode.
     pub stray_responses: u64,
     /// Largest `photon_offset + photons` of any accepted batch: the device
@@ -299,19 +291,17 @@ fn decode_loop(
                             acc.batches_out_of_order += u64::from(out_of_order);
                         }
                     }
-                    let (mut photons, mut lost, mut invalid) = (0u64, 0u64, 0u64);
+                    let (mut photons, mut lost) = (0u64, 0u64);
                     for r in batch.raw_records() {
                         match Record::decode(r) {
                             Ok(Record::Photon { .. }) => photons += 1,
                             Ok(Record::Lost { count }) => lost += count,
-                            Ok(_) => {}
-                            Err(_) => invalid += 1,
+                            _ => {}
                         }
                     }
                     acc.batches_accepted += 1;
                     acc.photons_received += photons;
                     acc.photons_lost_in_device += lost;
-                    acc.invalid_records += invalid;
                     acc.photons_sent_at_least = acc
                         .photons_sent_at_least
                         .max(batch.header.photon_offset + photons);
@@ -319,12 +309,7 @@ fn decode_loop(
                     if let Some(w) = raw.lock().expect("raw lock").as_mut() {
                         w.write_batch(&payload);
                     }
-                    deliveries.push(Delivery::Batch(AcceptedBatch {
-                        payload,
-                        seq: batch.header.seq,
-                        photons,
-                        lost_in_device: lost,
-                    }));
+                    deliveries.push(Delivery::Batch(AcceptedBatch { payload }));
                 }
                 FrameKind::Response => match from_payload::<ResponseFrame>(frame.payload) {
                     Ok(r) => {

@@ -258,7 +258,7 @@ impl Firmware {
                 }
                 for (kind, payload) in frames {
                     if kind == FrameKind::Request {
-                        self.handle(&payload)?;
+                        self.handle(&payload);
                     }
                 }
             }
@@ -277,15 +277,15 @@ impl Firmware {
         }
     }
 
-    fn respond(&mut self, id: u16, response: Response) -> Result<(), PortClosed> {
+    /// Queues a response frame (sent with the batches, in order).
+    fn respond(&mut self, id: u16, response: Response) {
         let payload = to_payload(&ResponseFrame { id, response }).expect("responses encode");
         let mut frame = Vec::new();
         encode_frame(FrameKind::Response, &payload, &mut frame).expect("responses are small");
         self.outbox.push_back(frame);
-        Ok(())
     }
 
-    fn handle(&mut self, payload: &[u8]) -> Result<(), PortClosed> {
+    fn handle(&mut self, payload: &[u8]) {
         let Ok(RequestFrame { id, request }) = from_payload::<RequestFrame>(payload) else {
             self.request_errors += 1;
             return self.respond(UNSOLICITED_ID, Response::Error(DeviceError::Malformed));
@@ -397,12 +397,8 @@ impl Firmware {
         self.fifo.clear();
         self.pending_lost = 0;
         self.local = Truth::default();
-        self.emitter_reset();
-    }
-
-    fn emitter_reset(&mut self) {
-        // Detections continue from the emitter's current state; times are
-        // counted from Start.
+        // Detections continue from the emitter's current state; times and
+        // off-sensor losses are counted from Start.
         self.emit_origin = self.device.emitter.time_s();
         self.off_sensor_origin = self.device.emitter.off_sensor();
     }
@@ -491,7 +487,7 @@ impl Firmware {
         if exposure_over || quota_met {
             self.stop();
             let totals = self.totals();
-            let _ = self.respond(UNSOLICITED_ID, Response::Stopped(totals));
+            self.respond(UNSOLICITED_ID, Response::Stopped(totals));
         }
     }
 

@@ -8,10 +8,10 @@ use std::time::{Duration, Instant};
 
 use firmware_protocol::{Config, EventBatch, Identity, Request, Response, Totals};
 use ndarray::Array3;
+use scatterscope_drivers::Link;
 use scatterscope_drivers::client::{ClientError, Device};
 use scatterscope_drivers::pipeline::Delivery;
 use scatterscope_drivers::raw::{RawError, RawHeader, RawWriter};
-use scatterscope_drivers::{Link, PROTOCOL_VERSION};
 use serde::Serialize;
 
 use super::accounting::AcquisitionAccounting;
@@ -186,7 +186,7 @@ pub fn acquire(
             progress(&Progress {
                 elapsed: started.elapsed(),
                 received: acc.photons_received,
-                binned: binner_binned(&binner),
+                binned: binner.accounting().binned,
                 lost_in_device: acc.photons_lost_in_device,
                 damaged_frames: acc.crc_errors,
             });
@@ -232,10 +232,6 @@ pub fn acquire(
     })
 }
 
-fn binner_binned(binner: &Binner) -> u64 {
-    binner.accounting().binned
-}
-
 /// The binner for `plan` on this device: checks the window against the
 /// micro-time unit and the ROI against the sensor.
 fn make_binner(
@@ -243,12 +239,6 @@ fn make_binner(
     identity: &Identity,
     config: &Config,
 ) -> Result<(Binner, (f64, f64)), AcquireError> {
-    if identity.protocol_version != PROTOCOL_VERSION {
-        return Err(AcquireError::Plan(format!(
-            "device protocol {} differs from the host's {PROTOCOL_VERSION}",
-            identity.protocol_version
-        )));
-    }
     let res_ps = f64::from(config.resolution_fs) / 1000.0;
     let steps = plan.bin_width_ps / res_ps;
     let whole =
