@@ -52,6 +52,18 @@ impl FromStr for DeviceSpec {
     }
 }
 
+impl std::fmt::Display for DeviceSpec {
+    /// The address as `--device` takes it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Mock => write!(f, "mock"),
+            Self::MockSerial => write!(f, "mock-serial"),
+            Self::Serial(p) => write!(f, "serial:{p}"),
+            Self::Usb(sel) => write!(f, "{sel}"),
+        }
+    }
+}
+
 impl DeviceSpec {
     /// Whether this names a mock device.
     pub fn is_mock(&self) -> bool {

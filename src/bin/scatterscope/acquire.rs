@@ -263,7 +263,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
             p.damaged_frames
         ));
     })
-    .with_context(|| format!("acquiring from {}", args.device_name()))?;
+    .with_context(|| format!("acquiring from {}", args.device))?;
     bar.finish_and_clear();
     let truth = opened.mock.map(|m| m.truth());
 
@@ -339,7 +339,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
             dropped_bins: Vec::new(),
             clamped_negative: 0,
             seed: args.device.is_mock().then_some(args.seed),
-            source: format!("scatterscope acquire --device {}", args.device_name()),
+            source: format!("scatterscope acquire --device {}", args.device),
             acquisition: Some(acquisition.clone()),
         },
     };
@@ -410,17 +410,6 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         acc.table()
     );
     Ok(())
-}
-
-impl AcquireArgs {
-    fn device_name(&self) -> String {
-        match &self.device {
-            DeviceSpec::Mock => "mock".into(),
-            DeviceSpec::MockSerial => "mock-serial".into(),
-            DeviceSpec::Serial(p) => format!("serial:{p}"),
-            DeviceSpec::Usb(sel) => sel.to_string(),
-        }
-    }
 }
 
 /// List the devices `acquire --device` can open.

@@ -92,9 +92,16 @@ impl Cursor<'_> {
     }
 }
 
-/// The text part after the 16-byte ident: format version and creator
-/// (name and version); file time, CRLF and comment are skipped.
-fn text_part(c: &mut Cursor<'_>) -> Result<(String, String), TtrError> {
+/// The text part: the 16-byte ident (must be `ident`), then format version
+/// and creator (name and version); file time, CRLF and comment are skipped.
+fn text_part(c: &mut Cursor<'_>, ident: &str) -> Result<(String, String), TtrError> {
+    let found = c.text(16, "Ident")?;
+    if found != ident {
+        return Err(TtrError::header(
+            0,
+            format!("Ident is {found:?}, expected {ident:?}"),
+        ));
+    }
     let version = c.text(6, "FormatVersion")?;
     let creator_name = c.text(18, "CreatorName")?;
     let creator_version = c.text(12, "CreatorVersion")?;
@@ -117,14 +124,7 @@ fn bits_per_record(c: &mut Cursor<'_>) -> Result<(), TtrError> {
 /// Parses a HydraHarp HT3/HT2 header (versions 1.0 and 2.0).
 pub fn parse_hydraharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
     let mut c = Cursor { r, offset: 0 };
-    let ident = c.text(16, "Ident")?;
-    if ident != "HydraHarp" {
-        return Err(TtrError::header(
-            0,
-            format!("Ident is {ident:?}, expected \"HydraHarp\""),
-        ));
-    }
-    let (version, creator) = text_part(&mut c)?;
+    let (version, creator) = text_part(&mut c, "HydraHarp")?;
     let _curves = c.i32("NumberOfCurves")?;
     bits_per_record(&mut c)?;
     let _active = c.i32("ActiveCurve")?;
@@ -204,14 +204,7 @@ const PICOHARP_T2_UNIT_PS: f64 = 4.0;
 /// Parses a PicoHarp 300 PT3/PT2 header (format version 2.0).
 pub fn parse_picoharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
     let mut c = Cursor { r, offset: 0 };
-    let ident = c.text(16, "Ident")?;
-    if ident != "PicoHarp 300" {
-        return Err(TtrError::header(
-            0,
-            format!("Ident is {ident:?}, expected \"PicoHarp 300\""),
-        ));
-    }
-    let (version, creator) = text_part(&mut c)?;
+    let (version, creator) = text_part(&mut c, "PicoHarp 300")?;
     if version != "2.0" {
         return Err(TtrError::Unsupported(format!(
             "PicoHarp file format version {version:?}; only 2.0 is supported (export the data as PTU)"
