@@ -6,9 +6,18 @@ use std::process::{Command, Output};
 
 use scatterscope::stack::{Stack, ValueKind};
 
+/// Runs the binary with no weights from the user's environment: no
+/// weights variable and an empty data directory, so the prior is the
+/// embedded one unless a test says otherwise.
 fn scatterscope(args: &[&str]) -> Output {
+    scatterscope_with_data_dir(args, Path::new("/nonexistent/scatterscope-test-data"))
+}
+
+fn scatterscope_with_data_dir(args: &[&str], data_dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_scatterscope"))
         .args(args)
+        .env_remove("SCATTERSCOPE_FFDNET_WEIGHTS")
+        .env("SCATTERSCOPE_DATA_DIR", data_dir)
         .output()
         .expect("binary runs")
 }
@@ -726,25 +735,40 @@ fn denoise_improves_a_noisy_chart_and_names_bad_input() {
             .collect()
     };
     let out = dir.path().join("tv.npy");
-    let o = scatterscope(&[
-        "denoise",
-        clean.to_str().unwrap(),
-        "--sigma",
-        "25/255",
-        "--add-noise",
-        "3",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    let (stdout, stderr) = text(&o);
-    assert!(o.status.success(), "{stderr}");
-    let p = psnrs(&stdout);
+    let run = |prior: &str| {
+        let o = scatterscope(&[
+            "denoise",
+            clean.to_str().unwrap(),
+            "--sigma",
+            "25/255",
+            "--add-noise",
+            "3",
+            "--denoiser",
+            prior,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let (stdout, stderr) = text(&o);
+        assert!(o.status.success(), "{stderr}");
+        (psnrs(&stdout), stdout)
+    };
+    let (tv, stdout) = run("tv");
     // Noise of sigma 25/255 alone is about 20.2 dB; TV must beat it clearly.
     assert!(
-        p.len() == 2 && (p[0] - 20.2).abs() < 0.5 && p[1] > p[0] + 3.0,
+        tv.len() == 2 && (tv[0] - 20.2).abs() < 0.5 && tv[1] > tv[0] + 3.0,
         "{stdout}"
     );
     assert!(stdout.contains("tv(gain=0.5)"), "{stdout}");
+    // The learned prior (embedded weights) on the same noise: also clearly
+    // better than the noise (on piecewise-constant charts TV is about as
+    // good; natural images are where it wins, see BENCHMARKS.md).
+    let (learned, stdout) = run("ffdnet");
+    assert!(stdout.contains("ffdnet(embedded, "), "{stdout}");
+    assert_eq!(learned[0], tv[0], "same noise");
+    assert!(
+        learned[1] > learned[0] + 3.0,
+        "ffdnet {learned:?} vs tv {tv:?}"
+    );
 
     // The identity changes nothing: its output read back is the input.
     let o = scatterscope(&[
@@ -805,4 +829,153 @@ fn denoise_improves_a_noisy_chart_and_names_bad_input() {
         &["denoise", "missing.png", "--sigma", "0.1", "--out", "o.png"],
         &["missing.png"],
     );
+}
+
+#[test]
+fn weights_import_show_and_priority() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    // Nothing imported: the embedded weights.
+    let o = scatterscope_with_data_dir(&["weights", "show"], &data);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stdout.contains("prior: ffdnet(embedded, "), "{stdout}");
+    assert!(
+        stdout.contains("source: scatterscope training/train_ffdnet.py"),
+        "{stdout}"
+    );
+
+    // A file that is not weights: the error names it, and nothing is written.
+    let junk = dir.path().join("junk.pth");
+    std::fs::write(&junk, b"not a pickle").unwrap();
+    let o = scatterscope_with_data_dir(&["weights", "import", junk.to_str().unwrap()], &data);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).1.contains("junk.pth: pickle at byte"),
+        "{}",
+        text(&o).1
+    );
+    assert!(!data.exists());
+    // An explicit weight file that fails validation is an error, not a fallback.
+    let o = scatterscope_with_data_dir(&["weights", "show", junk.to_str().unwrap()], &data);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).1.contains("junk.pth: not a safetensors file"),
+        "{}",
+        text(&o).1
+    );
+
+    let pth = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/ffdnet/ffdnet_weights_gray.pth");
+    if !pth.is_file() {
+        eprintln!(
+            "skipping the import part: {} not present (scripts/fetch_ffdnet_weights.sh fetches it)",
+            pth.display()
+        );
+        return;
+    }
+    let o = scatterscope_with_data_dir(&["weights", "import", pth.to_str().unwrap()], &data);
+    assert!(o.status.success(), "{}", text(&o).1);
+    assert!(data.join("ffdnet-gray.safetensors").is_file());
+    // Imported weights now come before the embedded ones...
+    let o = scatterscope_with_data_dir(&["weights", "show"], &data);
+    let stdout = text(&o).0;
+    assert!(stdout.contains("prior: ffdnet(imported "), "{stdout}");
+    assert!(stdout.contains("15 layers, 64 channels"), "{stdout}");
+    // ...and an explicit --weights before both.
+    let embedded =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/ffdnet-gray-small.safetensors");
+    let img = dir.path().join("img.png");
+    let chart = scatterscope::scene::Scene::parse("disks")
+        .render(32, 32)
+        .unwrap();
+    scatterscope::stack::preview::write_image(chart.view(), Some(1.0), &img).unwrap();
+    let o = scatterscope_with_data_dir(
+        &[
+            "denoise",
+            img.to_str().unwrap(),
+            "--sigma",
+            "1",
+            "--weights",
+            embedded.to_str().unwrap(),
+            "--out",
+            dir.path().join("d.png").to_str().unwrap(),
+        ],
+        &data,
+    );
+    let stdout = text(&o).0;
+    assert!(o.status.success(), "{}", text(&o).1);
+    assert!(
+        stdout.contains("ffdnet-gray-small.safetensors, 12x"),
+        "{stdout}"
+    );
+    assert!(
+        stdout
+            .contains("note: sigma 1.00000 is above the prior's trained range; clamped to 0.29412"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn denoise_bench_scores_every_prior_on_the_same_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    let images = dir.path().join("images");
+    std::fs::create_dir(&images).unwrap();
+    for scene in ["usaf", "disks"] {
+        let img = scatterscope::scene::Scene::parse(scene)
+            .render(64, 64)
+            .unwrap();
+        scatterscope::stack::preview::write_image(
+            img.view(),
+            Some(1.0),
+            &images.join(format!("{scene}.png")),
+        )
+        .unwrap();
+    }
+    let out = dir.path().join("bench");
+    let o = scatterscope(&[
+        "denoise-bench",
+        images.to_str().unwrap(),
+        "--sigmas",
+        "25",
+        "--save-noisy",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    // 2 images x 1 sigma x 3 priors (embedded, tv, tv oracle) + header.
+    assert_eq!(csv.lines().count(), 7, "{csv}");
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    for img in ["usaf", "disks"] {
+        let of = |prior: &str| -> f64 {
+            rows.iter()
+                .find(|r| r[0] == prior && r[1] == img)
+                .unwrap_or_else(|| panic!("{prior} on {img} in {csv}"))[4]
+                .parse()
+                .unwrap()
+        };
+        let noisy: Vec<&str> = rows.iter().filter(|r| r[1] == img).map(|r| r[3]).collect();
+        assert!(
+            noisy.windows(2).all(|w| w[0] == w[1]),
+            "same noise for every prior: {noisy:?}"
+        );
+        // The oracle picks the best of several gains including 0.5.
+        assert!(of("tv oracle gain") >= of("tv gain 0.5"), "{csv}");
+        assert!(
+            of("ffdnet embedded") > noisy[0].parse::<f64>().unwrap() + 3.0,
+            "{csv}"
+        );
+    }
+    assert!(out.join("noisy/usaf_sigma25.npy").is_file());
+    assert!(
+        std::fs::read_to_string(out.join("summary.md"))
+            .unwrap()
+            .contains("| ffdnet embedded | 25 |")
+    );
+    assert!(stdout.contains("wrote"), "{stdout}");
 }

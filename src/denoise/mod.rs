@@ -4,6 +4,8 @@
 //! on that scale. [`denoise_scaled`] maps an arbitrary image into that range
 //! and the noise level with it, and maps the result back.
 
+pub mod benchmark;
+pub mod ffdnet;
 pub mod tv;
 
 use ndarray::{Array2, ArrayView2};
@@ -16,6 +18,13 @@ pub trait Denoiser: Sync {
     /// Denoises `img` (values nominally in [0, 1]) corrupted by white
     /// Gaussian noise of standard deviation `sigma` on the same scale.
     fn denoise_unit(&self, img: ArrayView2<f64>, sigma: f64) -> Array2<f64>;
+
+    /// Largest sigma (on the [0, 1] scale) the denoiser honours; larger
+    /// requests are clamped to it (learned denoisers know only the noise
+    /// levels they were trained on).
+    fn sigma_max(&self) -> f64 {
+        f64::INFINITY
+    }
 }
 
 /// The identity: no prior (ADMM then reduces to a damped likelihood ascent).
@@ -32,10 +41,21 @@ impl Denoiser for Identity {
     }
 }
 
+/// Result of [`denoise_scaled`].
+#[derive(Debug, Clone)]
+pub struct Scaled {
+    /// The denoised image, on the input's scale.
+    pub image: Array2<f64>,
+    /// The sigma the denoiser was asked for on its [0, 1] scale (before any
+    /// clamping to [`Denoiser::sigma_max`]); `None` for a constant image,
+    /// which is returned unchanged.
+    pub unit_sigma: Option<f64>,
+}
+
 /// Denoises `img` of any range: it is shifted and scaled to [0, 1] by its
 /// minimum and maximum, `sigma` is scaled by the same factor, and the result
 /// is mapped back. A constant image is returned unchanged.
-pub fn denoise_scaled(d: &dyn Denoiser, img: ArrayView2<f64>, sigma: f64) -> Array2<f64> {
+pub fn denoise_scaled(d: &dyn Denoiser, img: ArrayView2<f64>, sigma: f64) -> Scaled {
     let (lo, hi) = img
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
@@ -43,9 +63,17 @@ pub fn denoise_scaled(d: &dyn Denoiser, img: ArrayView2<f64>, sigma: f64) -> Arr
         });
     let range = hi - lo;
     if range.is_nan() || range <= f64::EPSILON * hi.abs().max(1.0) {
-        return img.to_owned();
+        return Scaled {
+            image: img.to_owned(),
+            unit_sigma: None,
+        };
     }
     let unit = img.mapv(|v| (v - lo) / range);
-    d.denoise_unit(unit.view(), sigma / range)
-        .mapv(|v| v * range + lo)
+    let unit_sigma = sigma / range;
+    Scaled {
+        image: d
+            .denoise_unit(unit.view(), unit_sigma)
+            .mapv(|v| v * range + lo),
+        unit_sigma: Some(unit_sigma),
+    }
 }

@@ -236,6 +236,8 @@ pub fn pnp_admm(
     trace.rows.push(row0);
     let mut stopped = format!("iteration cap {}", opts.max_iters);
     let mut budget_hits = 0usize;
+    // Iterations whose sigma exceeded the denoiser's trained range.
+    let mut clamped: Vec<usize> = Vec::new();
     // Smallest deviance seen, with its iteration and iterate.
     let mut smallest: Option<(f64, usize, Array2<f64>)> = None;
     for it in 1..=opts.max_iters {
@@ -275,7 +277,11 @@ pub fn pnp_admm(
         // The prior includes what the physics knows: a transmittance is never
         // negative. Projecting the denoised iterate onto v >= 0 measured
         // +0.9 dB at the best iteration on the text scene (BENCHMARKS.md).
-        let v_new = denoise_scaled(denoiser, (&o_img + &u).view(), sigma).mapv(|x| x.max(0.0));
+        let scaled = denoise_scaled(denoiser, (&o_img + &u).view(), sigma);
+        if scaled.unit_sigma.is_some_and(|s| s > denoiser.sigma_max()) {
+            clamped.push(it);
+        }
+        let v_new = scaled.image.mapv(|x| x.max(0.0));
         u = u + &o_img - &v_new;
         let rms = |a: &Array2<f64>| (a.mapv(|x| x * x).sum() / n as f64).sqrt();
         let primal = rms(&(&o_img - &v_new));
@@ -324,6 +330,13 @@ pub fn pnp_admm(
         }
     }
     trace.notes.push(format!("stopped: {stopped}"));
+    if let (Some(first), Some(last)) = (clamped.first(), clamped.last()) {
+        trace.notes.push(format!(
+            "sigma clamped to the prior's trained maximum {:.4} (on its [0, 1] scale) in {} iteration(s), {first} to {last}",
+            denoiser.sigma_max(),
+            clamped.len()
+        ));
+    }
     if budget_hits > 0 {
         trace.notes.push(format!(
             "{budget_hits} o-update(s) ended on the evaluation budget ({} calls per update; the line search did not converge) with their best point",

@@ -8,7 +8,6 @@ use ndarray::Array2;
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use scatterscope::denoise::denoise_scaled;
 use scatterscope::metrics::{psnr, ssim};
 use scatterscope::scene::file::load_native;
 use scatterscope::stack::exr_file;
@@ -19,9 +18,11 @@ use crate::recon_args::PriorArgs;
 /// Denoise one image with a Plug-and-Play prior.
 ///
 /// INPUT and --out are PNG/JPEG (gray levels on a [0, 1] scale), EXR
-/// (luminance, values as stored) or 2-D .npy (float32/float64). --sigma is
-/// the noise standard deviation on the image's scale (e.g. 25/255 for
-/// sigma 25 of an 8-bit image). With --add-noise the input is taken as
+/// (luminance, values as stored) or 2-D .npy (float32/float64). The image
+/// is handed to the denoiser as it is, taken to be on a [0, 1] scale, and
+/// --sigma is the noise standard deviation on that scale (e.g. 25/255 for
+/// sigma 25 of an 8-bit image). Sigma above the prior's trained range is
+/// clamped, and the output says so. With --add-noise the input is taken as
 /// clean, white Gaussian noise of --sigma is added first (seeded), and the
 /// PSNR/SSIM of the noisy and the denoised image against it are printed.
 #[derive(Debug, clap::Args)]
@@ -133,8 +134,15 @@ pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {
         None => clean.clone(),
     };
     let t = Instant::now();
-    let out = denoise_scaled(denoiser.as_ref(), noisy.view(), args.sigma);
+    let out = denoiser.denoise_unit(noisy.view(), args.sigma);
     let secs = t.elapsed().as_secs_f64();
+    if args.sigma > denoiser.sigma_max() {
+        println!(
+            "note: sigma {:.5} is above the prior's trained range; clamped to {:.5}",
+            args.sigma,
+            denoiser.sigma_max()
+        );
+    }
     let (h, w) = out.dim();
     println!(
         "{} on {w}x{h} at sigma {:.5}: {:.1} ms",

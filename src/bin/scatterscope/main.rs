@@ -2,6 +2,7 @@
 
 mod acquire;
 mod denoise;
+mod denoise_bench;
 mod physics_summary;
 mod psf;
 mod recon_args;
@@ -9,6 +10,7 @@ mod reconstruct;
 mod report;
 mod simulate;
 mod tags_cmd;
+mod weights_cmd;
 
 use clap::{Parser, Subcommand};
 
@@ -37,6 +39,8 @@ enum Command {
     Acquire(acquire::AcquireArgs),
     Devices(acquire::DevicesArgs),
     Denoise(denoise::DenoiseArgs),
+    DenoiseBench(denoise_bench::DenoiseBenchArgs),
+    Weights(weights_cmd::WeightsArgs),
     Demo(DemoArgs),
 }
 
@@ -100,6 +104,8 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Acquire(args) => acquire::run(&args),
         Command::Devices(args) => acquire::devices(&args),
         Command::Denoise(args) => denoise::run(&args),
+        Command::DenoiseBench(args) => denoise_bench::run(&args),
+        Command::Weights(args) => weights_cmd::run(&args),
         Command::Demo(args) => demo(&args),
     }
 }

@@ -1,5 +1,8 @@
 //! Reconstruction settings shared by `reconstruct` and `report`.
 
+use std::path::PathBuf;
+
+use scatterscope::denoise::ffdnet::source;
 use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::denoise::{Denoiser, Identity};
 use scatterscope::reconstruct::method::MethodOptions;
@@ -8,6 +11,9 @@ use scatterscope::reconstruct::pnp::{PnpOptions, StopRule};
 /// The prior plugged into PnP-ADMM.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum DenoiserChoice {
+    /// FFDNet, the learned prior (weights: --weights, else
+    /// $SCATTERSCOPE_FFDNET_WEIGHTS, else imported, else embedded).
+    Ffdnet,
     /// Total variation (Chambolle), weight = gain * sigma.
     Tv,
     /// No prior.
@@ -18,8 +24,11 @@ pub enum DenoiserChoice {
 #[derive(Debug, Clone, clap::Args)]
 pub struct PriorArgs {
     /// Prior for PnP-ADMM (the denoiser).
-    #[arg(long, value_enum, default_value = "tv")]
+    #[arg(long, value_enum, default_value = "ffdnet")]
     pub denoiser: DenoiserChoice,
+    /// FFDNet weight file (the project's safetensors format).
+    #[arg(long, value_name = "PATH")]
+    pub weights: Option<PathBuf>,
     /// TV weight per unit of the denoiser's noise sigma.
     #[arg(long, default_value_t = 0.5)]
     pub tv_gain: f64,
@@ -33,7 +42,12 @@ impl PriorArgs {
             "--tv-gain = {} must be a positive number",
             self.tv_gain
         );
+        anyhow::ensure!(
+            self.weights.is_none() || self.denoiser == DenoiserChoice::Ffdnet,
+            "--weights applies to --denoiser ffdnet only"
+        );
         Ok(match self.denoiser {
+            DenoiserChoice::Ffdnet => Box::new(source::load(self.weights.as_deref())?),
             DenoiserChoice::Tv => Box::new(TotalVariation {
                 gain: self.tv_gain,
                 ..Default::default()

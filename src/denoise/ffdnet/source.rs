@@ -1,0 +1,64 @@
+//! Where FFDNet weights come from, in order of priority: an explicit path
+//! (`--weights`, else the environment variable [`WEIGHTS_ENV`]), weights
+//! imported into the user's data directory (`scatterscope weights import`),
+//! and the project's own weights embedded in the binary.
+
+use std::path::{Path, PathBuf};
+
+use super::Ffdnet;
+use super::weights::{FfdnetWeights, WeightsError};
+
+/// Environment variable naming a weight file (used when no `--weights`).
+pub const WEIGHTS_ENV: &str = "SCATTERSCOPE_FFDNET_WEIGHTS";
+/// Environment variable overriding the data directory (default: the
+/// platform's, e.g. `~/.local/share/scatterscope`).
+pub const DATA_DIR_ENV: &str = "SCATTERSCOPE_DATA_DIR";
+/// File name of imported weights inside the data directory.
+pub const IMPORTED_FILE: &str = "ffdnet-gray.safetensors";
+
+/// The project's own weights, trained by `training/train_ffdnet.py` on
+/// dead-leaves and scikit-image images (see `training/README.md`).
+const EMBEDDED: &[u8] = include_bytes!("../../../weights/ffdnet-gray-small.safetensors");
+
+/// The data directory of the project (may not exist yet).
+pub fn data_dir() -> Option<PathBuf> {
+    match std::env::var_os(DATA_DIR_ENV) {
+        Some(d) if !d.is_empty() => Some(PathBuf::from(d)),
+        _ => dirs::data_dir().map(|d| d.join("scatterscope")),
+    }
+}
+
+/// Where `weights import` writes and where imported weights are looked for.
+pub fn imported_path() -> Option<PathBuf> {
+    data_dir().map(|d| d.join(IMPORTED_FILE))
+}
+
+/// The embedded weights (validated like any file).
+pub fn embedded() -> FfdnetWeights {
+    FfdnetWeights::from_bytes(EMBEDDED, "embedded weights")
+        .expect("the embedded weights are validated by a test")
+}
+
+/// Loads FFDNet by priority: `explicit`, then [`WEIGHTS_ENV`], then the
+/// imported file, then the embedded weights. An explicit or imported file
+/// that fails validation is an error, never a silent fallback.
+pub fn load(explicit: Option<&Path>) -> Result<Ffdnet, WeightsError> {
+    let env = std::env::var_os(WEIGHTS_ENV)
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from);
+    if let Some(p) = explicit {
+        return Ok(Ffdnet::new(
+            FfdnetWeights::from_file(p)?,
+            p.display().to_string(),
+        ));
+    }
+    if let Some(p) = env {
+        let label = format!("{} from {WEIGHTS_ENV}", p.display());
+        return Ok(Ffdnet::new(FfdnetWeights::from_file(&p)?, label));
+    }
+    if let Some(p) = imported_path().filter(|p| p.is_file()) {
+        let label = format!("imported {}", p.display());
+        return Ok(Ffdnet::new(FfdnetWeights::from_file(&p)?, label));
+    }
+    Ok(Ffdnet::new(embedded(), "embedded"))
+}

