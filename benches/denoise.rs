@@ -1,7 +1,8 @@
 //! FFDNet inference speed: one 256x256 call of the original architecture
 //! (15 layers, 64 channels; the weights' values do not change the work, so
 //! deterministic stand-ins are used and no download is needed), the embedded
-//! network, one 64->64 layer alone, and TV for comparison.
+//! network, one 64->64 layer alone (im2col + GEMM and Winograd), and TV for
+//! comparison.
 
 use std::collections::BTreeMap;
 use std::hint::black_box;
@@ -11,6 +12,7 @@ use ndarray::Array2;
 use scatterscope::denoise::Denoiser;
 use scatterscope::denoise::ffdnet::conv::{FeatureMap, conv3x3};
 use scatterscope::denoise::ffdnet::weights::{Architecture, FfdnetWeights, to_safetensors};
+use scatterscope::denoise::ffdnet::winograd::{conv3x3_winograd, transform_weights};
 use scatterscope::denoise::ffdnet::{Ffdnet, source};
 use scatterscope::denoise::tv::TotalVariation;
 
@@ -70,6 +72,10 @@ fn bench(c: &mut Criterion) {
     let mut output = FeatureMap::zeros(128, 128, 64);
     g.bench_function("conv3x3_64x64_128x128", |b| {
         b.iter(|| conv3x3(layer, black_box(&input), &mut output))
+    });
+    let wino = transform_weights(layer);
+    g.bench_function("conv3x3_64x64_128x128_winograd", |b| {
+        b.iter(|| conv3x3_winograd(layer, &wino, black_box(&input), &mut output))
     });
     let tv = TotalVariation::default();
     let img64 = img.mapv(f64::from);

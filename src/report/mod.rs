@@ -74,13 +74,16 @@ pub struct SceneReport {
 
 /// Runs every method on `scene` simulated with `setup`, writing images,
 /// traces and plots into `dir`. `slice_step` picks every n-th bin for the
-/// single-bin methods. `progress` receives a line per finished method.
+/// single-bin methods. `comparison` adds whole-stack PnP with a second
+/// prior (labelled `pnp (NAME prior)`, never counted as a baseline).
+/// `progress` receives a line per finished method.
 #[allow(clippy::too_many_arguments)]
 pub fn run_scene(
     scene: &Scene,
     setup: &Setup,
     seed: u64,
     denoiser: &dyn Denoiser,
+    comparison: Option<(&str, &dyn Denoiser)>,
     opts: &MethodOptions,
     slice_step: usize,
     dir: &Path,
@@ -102,7 +105,10 @@ pub fn run_scene(
     std::fs::create_dir_all(dir).map_err(|e| ReportError::Io(dir.display().to_string(), e))?;
     let name = scene.name();
     write_image(truth.view(), Some(1.0), &dir.join("truth.png"))?;
-    let run = |method: Method, bin: Option<usize>| -> Result<Reconstruction, ReportError> {
+    let run_with = |method: Method,
+                    bin: Option<usize>,
+                    denoiser: &dyn Denoiser|
+     -> Result<Reconstruction, ReportError> {
         Ok(run_method(
             &problem,
             method,
@@ -113,6 +119,7 @@ pub fn run_scene(
             |_| {},
         )?)
     };
+    let run = |method: Method, bin: Option<usize>| run_with(method, bin, denoiser);
     let score = |label: String, r: &Reconstruction| {
         let last = r.trace.rows.last().expect("every method records a row");
         let best = r.trace.best_psnr().expect("truth is known");
@@ -147,6 +154,15 @@ pub fn run_scene(
         save(&r, label)?;
         progress(&format!("{name}: {label} done"));
         scores.push(score(label.into(), &r));
+        traces.push(r.trace);
+    }
+    if let Some((prior, d)) = comparison {
+        let label = format!("pnp ({prior} prior)");
+        let mut r = run_with(Method::Pnp, None, d)?;
+        r.trace.method = label.clone();
+        save(&r, &format!("pnp-{prior}"))?;
+        progress(&format!("{name}: {label} done"));
+        scores.push(score(label, &r));
         traces.push(r.trace);
     }
     let mut bins = Vec::new();
@@ -275,15 +291,16 @@ fn write_scene_files(
 /// best baseline (baselines at their best iteration chosen with the truth).
 pub fn summary_markdown(reports: &[SceneReport]) -> String {
     let mut md = String::from(
-        "| scene | method | PSNR (dB) | SSIM | wall (s) | iterations | best PSNR by truth (dB) @ iteration |\n|---|---|---|---|---|---|---|\n",
+        "| scene | method | prior | PSNR (dB) | SSIM | wall (s) | iterations | best PSNR by truth (dB) @ iteration |\n|---|---|---|---|---|---|---|---|\n",
     );
     for r in reports {
         for s in &r.scores {
             writeln!(
                 md,
-                "| {} | {} | {:.2} | {:.4} | {:.2} | {} | {:.2} @ {} |",
+                "| {} | {} | {} | {:.2} | {:.4} | {:.2} | {} | {:.2} @ {} |",
                 s.scene,
                 s.method,
+                s.prior.as_deref().unwrap_or(""),
                 s.psnr,
                 s.ssim,
                 s.wall_s,
@@ -302,7 +319,7 @@ pub fn summary_markdown(reports: &[SceneReport]) -> String {
         let best = r
             .scores
             .iter()
-            .filter(|s| s.method != "pnp")
+            .filter(|s| s.method != "pnp" && !s.method.starts_with("pnp ("))
             .max_by(|a, b| {
                 a.oracle_psnr
                     .max(a.psnr)
@@ -339,7 +356,7 @@ pub fn summary_csv(reports: &[SceneReport]) -> String {
             "{},{},{},{:.4},{:.5},{:.4},{},{:.4},{}",
             s.scene,
             s.method,
-            s.prior.clone().unwrap_or_default(),
+            csv_field(s.prior.as_deref().unwrap_or_default()),
             s.psnr,
             s.ssim,
             s.wall_s,
@@ -350,6 +367,15 @@ pub fn summary_csv(reports: &[SceneReport]) -> String {
         .expect("String");
     }
     csv
+}
+
+/// A CSV field, quoted when it holds a comma, quote or line break.
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
 }
 
 /// Why a report could not be produced.

@@ -57,6 +57,22 @@ impl PriorArgs {
     }
 }
 
+impl PriorArgs {
+    /// For `report`: TV (at `--tv-gain`) as a second prior when the chosen
+    /// one is not TV, so the learned prior is always shown beside it.
+    pub fn tv_comparison(&self) -> anyhow::Result<Option<(String, Box<dyn Denoiser>)>> {
+        if self.denoiser == DenoiserChoice::Tv {
+            return Ok(None);
+        }
+        let tv = PriorArgs {
+            denoiser: DenoiserChoice::Tv,
+            weights: None,
+            tv_gain: self.tv_gain,
+        };
+        Ok(Some(("tv".to_string(), tv.denoiser()?)))
+    }
+}
+
 /// Flags of the reconstruction algorithms.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ReconArgs {
@@ -72,7 +88,7 @@ pub struct ReconArgs {
     #[arg(long, default_value_t = 0.25)]
     pub beta: f64,
     /// ADMM iteration cap.
-    #[arg(long, default_value_t = 60)]
+    #[arg(long, default_value_t = 100)]
     pub max_iters: usize,
     /// ADMM stopping rule besides the cap and residual tolerances:
     /// deviance (stop when the Poisson deviance of the output stops falling;
@@ -80,7 +96,7 @@ pub struct ReconArgs {
     #[arg(long, value_enum, default_value = "deviance")]
     pub stop: StopRule,
     /// Iterations without a deviance decrease before the deviance rule stops.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 30)]
     pub patience: usize,
     /// ADMM primal and dual residual tolerance (RMS per pixel).
     #[arg(long, default_value_t = 1e-4)]

@@ -41,6 +41,8 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let setup = args.physics.resolve()?;
     let opts = args.recon.options()?;
     let denoiser = args.recon.prior.denoiser()?;
+    // The learned prior is compared with TV on the same data.
+    let comparison = args.recon.prior.tv_comparison()?;
     let names: Vec<String> = if args.scenes.is_empty() {
         Scene::BUILT_IN.iter().map(|s| s.to_string()).collect()
     } else {
@@ -61,6 +63,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             &setup,
             args.seed,
             denoiser.as_ref(),
+            comparison.as_ref().map(|(n, d)| (n.as_str(), d.as_ref())),
             &opts,
             args.slice_step,
             &dir,

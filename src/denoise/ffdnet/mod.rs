@@ -109,7 +109,7 @@ impl Ffdnet {
 impl Denoiser for Ffdnet {
     fn name(&self) -> String {
         let a = &self.weights.arch;
-        format!("ffdnet({}, {}x{})", self.label, a.layers, a.channels)
+        format!("ffdnet({}; {}x{})", self.label, a.layers, a.channels)
     }
 
     fn denoise_unit(&self, img: ArrayView2<f64>, sigma: f64) -> Array2<f64> {
