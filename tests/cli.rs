@@ -22,6 +22,16 @@ fn scatterscope_with_data_dir(args: &[&str], data_dir: &Path) -> Output {
         .expect("binary runs")
 }
 
+/// Writes a built-in scene rendered `size` x `size` as a PNG (gray levels
+/// in [0, 1]) and returns the rendered image.
+fn write_scene_png(scene: &str, size: usize, path: &Path) -> ndarray::Array2<f64> {
+    let img = scatterscope::scene::Scene::parse(scene)
+        .render(size, size)
+        .unwrap();
+    scatterscope::stack::preview::write_image(img.view(), Some(1.0), path).unwrap();
+    img
+}
+
 fn text(o: &Output) -> (String, String) {
     (
         String::from_utf8_lossy(&o.stdout).into_owned(),
@@ -754,10 +764,7 @@ fn acquire_reports_injected_faults_and_a_disconnect() {
 fn denoise_improves_a_noisy_chart_and_names_bad_input() {
     let dir = tempfile::tempdir().unwrap();
     let clean = dir.path().join("chart.png");
-    let chart = scatterscope::scene::Scene::parse("usaf")
-        .render(96, 96)
-        .unwrap();
-    scatterscope::stack::preview::write_image(chart.view(), Some(1.0), &clean).unwrap();
+    let chart = write_scene_png("usaf", 96, &clean);
     let psnrs = |stdout: &str| -> Vec<f64> {
         stdout
             .lines()
@@ -915,10 +922,7 @@ fn weights_import_show_and_priority() {
     let embedded =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/ffdnet-gray-small.safetensors");
     let img = dir.path().join("img.png");
-    let chart = scatterscope::scene::Scene::parse("disks")
-        .render(32, 32)
-        .unwrap();
-    scatterscope::stack::preview::write_image(chart.view(), Some(1.0), &img).unwrap();
+    write_scene_png("disks", 32, &img);
     let o = scatterscope_with_data_dir(
         &[
             "denoise",
@@ -951,15 +955,7 @@ fn denoise_bench_scores_every_prior_on_the_same_noise() {
     let images = dir.path().join("images");
     std::fs::create_dir(&images).unwrap();
     for scene in ["usaf", "disks"] {
-        let img = scatterscope::scene::Scene::parse(scene)
-            .render(64, 64)
-            .unwrap();
-        scatterscope::stack::preview::write_image(
-            img.view(),
-            Some(1.0),
-            &images.join(format!("{scene}.png")),
-        )
-        .unwrap();
+        write_scene_png(scene, 64, &images.join(format!("{scene}.png")));
     }
     let out = dir.path().join("bench");
     let o = scatterscope(&[

@@ -2,13 +2,12 @@
 //! noise, PSNR/SSIM and time per call.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::Context;
 use ndarray_npy::WriteNpyExt;
 use scatterscope::denoise::Denoiser;
 use scatterscope::denoise::benchmark::{self, BenchImage, BenchPrior};
-use scatterscope::denoise::ffdnet::weights::FfdnetWeights;
 use scatterscope::denoise::ffdnet::{Ffdnet, source};
 use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::scene::file::load_native;
@@ -81,10 +80,6 @@ fn collect_images(paths: &[PathBuf]) -> anyhow::Result<Vec<BenchImage>> {
         .collect()
 }
 
-fn ffdnet_at(path: &Path, label: &str) -> anyhow::Result<Ffdnet> {
-    Ok(Ffdnet::new(FfdnetWeights::from_file(path)?, label))
-}
-
 pub fn run(args: &DenoiseBenchArgs) -> anyhow::Result<()> {
     for &s in &args.sigmas {
         anyhow::ensure!(s > 0.0 && s <= 255.0, "--sigmas: {s} is not in (0, 255]");
@@ -95,12 +90,12 @@ pub fn run(args: &DenoiseBenchArgs) -> anyhow::Result<()> {
         Ffdnet::new(source::embedded(), "embedded"),
     )];
     if let Some(p) = source::imported_path().filter(|p| p.is_file()) {
-        nets.push(("ffdnet imported".into(), ffdnet_at(&p, "imported")?));
+        nets.push(("ffdnet imported".into(), Ffdnet::from_file(&p, "imported")?));
     }
     if let Some(p) = &args.weights {
         nets.push((
             format!("ffdnet {}", p.display()),
-            ffdnet_at(p, &p.display().to_string())?,
+            Ffdnet::from_file(p, p.display().to_string())?,
         ));
     }
     let tv = TotalVariation::default();

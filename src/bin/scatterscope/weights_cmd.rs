@@ -62,7 +62,7 @@ pub fn run(args: &WeightsArgs) -> anyhow::Result<()> {
         }
         Action::Show { path } => {
             let net = match path {
-                Some(p) => Ffdnet::new(FfdnetWeights::from_file(p)?, p.display().to_string()),
+                Some(p) => Ffdnet::from_file(p, p.display().to_string())?,
                 None => source::load(None)?,
             };
             println!("prior: {}", net.name());

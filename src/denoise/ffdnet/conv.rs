@@ -149,8 +149,48 @@ fn band_conv(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// A map of `h x w x cin` pseudo-random values in [-0.5, 0.5) and a
+    /// layer `cin -> cout` from the same stream (seeded by `seed`): weights
+    /// scaled by `weight_scale` and a bias when one is given, else a bias
+    /// only when `relu`.
+    pub(crate) fn random_case(
+        seed: u32,
+        h: usize,
+        w: usize,
+        cin: usize,
+        cout: usize,
+        weight_scale: Option<f32>,
+        relu: bool,
+    ) -> (FeatureMap, FoldedConv) {
+        let mut s = seed;
+        let mut next = || {
+            s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (s >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+        };
+        let mut input = FeatureMap::zeros(h, w, cin);
+        for y in 0..h {
+            for x in 0..w {
+                let at = input.at(y, x);
+                for c in 0..cin {
+                    input.data[at + c] = next();
+                }
+            }
+        }
+        let scale = weight_scale.unwrap_or(1.0);
+        let matrix = (0..9 * cin * cout).map(|_| next() * scale).collect();
+        let bias = (weight_scale.is_some() || relu).then(|| (0..cout).map(|_| next()).collect());
+        let layer = FoldedConv {
+            cin,
+            cout,
+            matrix,
+            bias,
+            relu,
+        };
+        (input, layer)
+    }
 
     /// Direct 3x3 convolution with zero padding, the textbook loop.
     fn direct(layer: &FoldedConv, input: &FeatureMap) -> FeatureMap {
@@ -187,27 +227,7 @@ mod tests {
             (37, 9, 8, 4, false),
             (3, 300, 3, 2, true),
         ] {
-            let mut input = FeatureMap::zeros(h, w, cin);
-            let mut s = 1u32;
-            let mut next = || {
-                s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                (s >> 8) as f32 / (1u32 << 24) as f32 - 0.5
-            };
-            for y in 0..h {
-                for x in 0..w {
-                    let at = input.at(y, x);
-                    for c in 0..cin {
-                        input.data[at + c] = next();
-                    }
-                }
-            }
-            let layer = FoldedConv {
-                cin,
-                cout,
-                matrix: (0..9 * cin * cout).map(|_| next()).collect(),
-                bias: relu.then(|| (0..cout).map(|_| next()).collect()),
-                relu,
-            };
+            let (input, layer) = random_case(1, h, w, cin, cout, None, relu);
             let want = direct(&layer, &input);
             let mut got = FeatureMap::zeros(h, w, cout);
             conv3x3(&layer, &input, &mut got);

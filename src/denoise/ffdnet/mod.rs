@@ -55,6 +55,14 @@ impl Ffdnet {
         }
     }
 
+    /// Loads and validates a weight file; `label` as in [`Ffdnet::new`].
+    pub fn from_file(
+        path: &std::path::Path,
+        label: impl Into<String>,
+    ) -> Result<Self, weights::WeightsError> {
+        Ok(Self::new(FfdnetWeights::from_file(path)?, label))
+    }
+
     /// The weights in use.
     pub fn weights(&self) -> &FfdnetWeights {
         &self.weights

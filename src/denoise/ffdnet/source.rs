@@ -47,18 +47,15 @@ pub fn load(explicit: Option<&Path>) -> Result<Ffdnet, WeightsError> {
         .filter(|v| !v.is_empty())
         .map(PathBuf::from);
     if let Some(p) = explicit {
-        return Ok(Ffdnet::new(
-            FfdnetWeights::from_file(p)?,
-            p.display().to_string(),
-        ));
+        return Ffdnet::from_file(p, p.display().to_string());
     }
     if let Some(p) = env {
         let label = format!("{} from {WEIGHTS_ENV}", p.display());
-        return Ok(Ffdnet::new(FfdnetWeights::from_file(&p)?, label));
+        return Ffdnet::from_file(&p, label);
     }
     if let Some(p) = imported_path().filter(|p| p.is_file()) {
         let label = format!("imported {}", p.display());
-        return Ok(Ffdnet::new(FfdnetWeights::from_file(&p)?, label));
+        return Ffdnet::from_file(&p, label);
     }
     Ok(Ffdnet::new(embedded(), "embedded"))
 }
