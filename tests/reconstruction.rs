@@ -3,6 +3,8 @@
 
 use ndarray::{Array2, Array3, Axis};
 use scatterscope::denoise::Identity;
+use scatterscope::denoise::ffdnet::Ffdnet;
+use scatterscope::denoise::ffdnet::source::embedded;
 use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::forward::{ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup, TimeBins};
@@ -10,6 +12,7 @@ use scatterscope::reconstruct::likelihood::{PoissonLikelihood, SurrogateLog};
 use scatterscope::reconstruct::operator::Convolution;
 use scatterscope::reconstruct::pnp::{PnpOptions, pnp_admm};
 use scatterscope::reconstruct::richardson_lucy::richardson_lucy;
+use scatterscope::reconstruct::trace::TraceRow;
 use scatterscope::reconstruct::{ReconstructError, validate_counts};
 use scatterscope::scene::Scene;
 
@@ -146,7 +149,70 @@ fn pnp_on_the_stack_beats_richardson_lucy_on_the_sum() {
     let best_rl = rl.trace.best_psnr().unwrap().psnr.unwrap();
     assert!(p > best_rl, "pnp {p} dB vs best RL {best_rl} dB");
     assert!(pnp.trace.notes.iter().any(|n| n.starts_with("stopped:")));
+    // TV fades to the identity at small sigma: auto stops on the deviance.
+    assert!(
+        pnp.trace
+            .notes
+            .iter()
+            .any(|n| n.starts_with("stopping rule: deviance"))
+    );
     assert_eq!(pnp.trace.prior.as_deref(), Some("tv(gain=0.5)"));
+}
+
+/// The agreement rule, recomputed from the trace: the output is the
+/// iterate with the smallest primal residual among those whose deviance is
+/// within one noise standard deviation of the smallest deviance up to the
+/// stop and passes the discrepancy test, and the run ends `patience`
+/// iterations after that pick.
+#[test]
+fn agreement_rule_returns_the_iterate_the_trace_says_it_should() {
+    let c = case(32, "text", 5);
+    let prior = Ffdnet::new(embedded(), "embedded");
+    let opts = PnpOptions {
+        patience: Some(4),
+        ..Default::default()
+    };
+    let r = pnp_admm(
+        &c.model,
+        &c.counts,
+        &c.bins,
+        &prior,
+        &opts,
+        Some(c.truth.view()),
+        |_| {},
+    )
+    .unwrap();
+    // The learned prior does not fade to the identity: auto picks agreement.
+    assert!(
+        r.trace
+            .notes
+            .iter()
+            .any(|n| n.starts_with("stopping rule: agreement"))
+    );
+    let rows = &r.trace.rows[1..];
+    let last = rows.last().unwrap();
+    assert!(last.iteration < opts.max_iters, "the rule never stopped");
+    let dmin = rows
+        .iter()
+        .map(|r| r.deviance.unwrap())
+        .fold(f64::INFINITY, f64::min);
+    // Eligible: within one noise standard deviation of the smallest
+    // deviance and at most two above the deviance the noise gives.
+    let eligible = |r: &&TraceRow| {
+        let (d, sd) = (r.deviance.unwrap(), r.deviance_sd.unwrap());
+        assert!(sd > 0.0 && sd.is_finite());
+        d <= (dmin + sd).min(r.expected_deviance.unwrap() + 2.0 * sd)
+    };
+    let pick = rows
+        .iter()
+        .filter(eligible)
+        .min_by(|a, b| a.primal_residual.partial_cmp(&b.primal_residual).unwrap())
+        .unwrap();
+    assert_eq!(last.iteration, pick.iteration + 4);
+    let note = format!("output: iteration {}", pick.iteration);
+    assert!(r.trace.notes.contains(&note), "{:?}", r.trace.notes);
+    let p = scatterscope::metrics::psnr(r.image.view(), c.truth.view());
+    assert!((p - pick.psnr.unwrap()).abs() < 1e-9);
 }
 
 fn finite_non_negative(a: &Array2<f64>) -> bool {

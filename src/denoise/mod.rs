@@ -25,6 +25,15 @@ pub trait Denoiser: Sync {
     fn sigma_max(&self) -> f64 {
         f64::INFINITY
     }
+
+    /// Whether the denoiser tends to the identity as sigma -> 0 (TV, whose
+    /// weight is proportional to sigma, and the identity itself). PnP-ADMM's
+    /// primal residual `||o - v||` then falls to zero with sigma and carries
+    /// no stopping signal, so [`crate::reconstruct::pnp::StopRule::Auto`]
+    /// stops such priors on the deviance instead.
+    fn fades_to_identity(&self) -> bool {
+        true
+    }
 }
 
 /// The identity: no prior (ADMM then reduces to a damped likelihood ascent).

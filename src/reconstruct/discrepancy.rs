@@ -7,17 +7,36 @@
 //! `m ~ Poisson(mu)`. For large means `f -> 1`; for the low means of early
 //! bins it is much smaller, which is why the classical "D = number of data"
 //! rule fails on photon-starved data and we use the exact `f`.
+//!
+//! The deviance of the noise is itself random: its standard deviation
+//! `sqrt(sum g(y))`, with `g(mu)` the variance of one point's deviance, says
+//! how far apart two estimates' deviances must be before the data can tell
+//! them apart (about 1650 on the paper preset, where `E` is about 1.37e6).
 
 use ndarray::parallel::prelude::*;
 use ndarray::{Array3, ArrayView2, Axis};
 
 use crate::forward::ForwardModel;
 
-/// Lookup of the expected deviance per data point, `f(mu)`.
+/// Lookup of the mean `f(mu)` and variance `g(mu)` of one data point's
+/// deviance under Poisson noise.
 pub struct ExpectedDeviance {
     log_lo: f64,
     step: f64,
-    table: Vec<f64>,
+    /// `(f, g)` at log-spaced means.
+    table: Vec<(f64, f64)>,
+}
+
+/// One estimate's deviance against the counts, with what Poisson noise alone
+/// would give around the same means.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DevianceCheck {
+    /// Deviance `D` of the estimate.
+    pub deviance: f64,
+    /// Its expectation `E[D]` under Poisson noise.
+    pub expected: f64,
+    /// Its standard deviation under Poisson noise.
+    pub sd: f64,
 }
 
 const TABLE_LO: f64 = 1e-8;
@@ -47,51 +66,62 @@ impl ExpectedDeviance {
     }
 }
 
-/// `f(mu)` by direct summation over the Poisson probabilities.
-fn exact(mu: f64) -> f64 {
+/// Mean and variance of one point's deviance `2 [m log(m/mu) - (m - mu)]`,
+/// `m ~ Poisson(mu)`, by direct summation over the Poisson probabilities
+/// (the mean as `2 (E[m log m] - mu log mu)`, which loses no digits to
+/// cancellation at small `mu`).
+fn exact(mu: f64) -> (f64, f64) {
     let spread = 15.0 * mu.sqrt() + 15.0;
     let hi = (mu + spread).ceil() as u64;
-    let lo = (mu - spread).floor().max(1.0) as u64;
-    let e_mlogm: f64 = (lo..=hi)
-        .map(|m| {
-            let mf = m as f64;
-            let log_p = mf * mu.ln() - mu - libm::lgamma(mf + 1.0);
-            log_p.exp() * mf * mf.ln()
-        })
-        .sum();
-    (2.0 * (e_mlogm - mu * mu.ln())).max(0.0)
+    let lo = (mu - spread).floor().max(0.0) as u64;
+    let (mut e_mlogm, mut e_d2) = (0.0, 0.0);
+    for m in lo..=hi {
+        let mf = m as f64;
+        let p = (mf * mu.ln() - mu - libm::lgamma(mf + 1.0)).exp();
+        let mlogm = if m > 0 { mf * mf.ln() } else { 0.0 };
+        let d = 2.0 * (mlogm - mf * mu.ln() - (mf - mu));
+        e_mlogm += p * mlogm;
+        e_d2 += p * d * d;
+    }
+    let mean = (2.0 * (e_mlogm - mu * mu.ln())).max(0.0);
+    (mean, (e_d2 - mean * mean).max(0.0))
 }
 
 impl ExpectedDeviance {
-    /// `f(mu)`, interpolated (relative error below 1e-5 on the table range).
-    pub fn per_point(&self, mu: f64) -> f64 {
+    /// `(f(mu), g(mu))`: mean and variance of one point's deviance,
+    /// interpolated (relative error below 1e-5 on the table range).
+    fn moments(&self, mu: f64) -> (f64, f64) {
         if mu.is_nan() || mu <= 0.0 {
-            0.0
+            (0.0, 0.0)
         } else if mu < TABLE_LO {
-            // f(mu) ~ -2 mu log mu + O(mu^2) as mu -> 0.
-            -2.0 * mu * mu.ln()
+            // As mu -> 0 the deviance is 2 mu (m = 0, probability ~1) or
+            // about -2 log mu (m = 1, probability mu).
+            let l = mu.ln();
+            (-2.0 * mu * l, 4.0 * mu * l * l)
         } else if mu >= TABLE_HI {
-            1.0 + 1.0 / (6.0 * mu)
+            // The chi-square limit with its first correction.
+            (1.0 + 1.0 / (6.0 * mu), 2.0 + 2.0 / mu)
         } else {
             let x = (mu.ln() - self.log_lo) / self.step;
             let i = (x.floor() as usize).min(TABLE_N - 2);
             let t = x - i as f64;
-            self.table[i] * (1.0 - t) + self.table[i + 1] * t
+            let (a, b) = (self.table[i], self.table[i + 1]);
+            (a.0 * (1.0 - t) + b.0 * t, a.1 * (1.0 - t) + b.1 * t)
         }
     }
 
     /// Deviance of `estimate` against `counts` (bins `bins` of `model`) and
-    /// the deviance Poisson noise alone would give: `(D, E[D])`.
+    /// the deviance Poisson noise alone would give around the same means.
     pub fn check(
         &self,
         model: &ForwardModel,
         counts: &Array3<f64>,
         bins: &[usize],
         estimate: ArrayView2<f64>,
-    ) -> (f64, f64) {
+    ) -> DevianceCheck {
         let x: Vec<f64> = estimate.iter().copied().collect();
         let spec = model.fft().forward(&x);
-        counts
+        let (deviance, expected, variance) = counts
             .axis_iter(Axis(0))
             .into_par_iter()
             .zip(bins.par_iter())
@@ -102,16 +132,22 @@ impl ExpectedDeviance {
                     .map(|(a, b)| a * b)
                     .collect();
                 let y = model.fft().inverse(prod);
-                let mut d = 0.0;
-                let mut e = 0.0;
+                let (mut d, mut e, mut var) = (0.0, 0.0, 0.0);
                 for (&mj, &yj) in m.iter().zip(&y) {
                     let yj = yj.max(1e-300);
                     d += if mj > 0.0 { mj * (mj / yj).ln() } else { 0.0 } - (mj - yj);
-                    e += self.per_point(yj);
+                    let (f, g) = self.moments(yj);
+                    e += f;
+                    var += g;
                 }
-                (2.0 * d, e)
+                (2.0 * d, e, var)
             })
-            .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
+            .reduce(|| (0.0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+        DevianceCheck {
+            deviance,
+            expected,
+            sd: variance.sqrt(),
+        }
     }
 }
 
@@ -122,15 +158,19 @@ mod tests {
     #[test]
     fn expected_deviance_limits_and_monte_carlo() {
         let f = ExpectedDeviance::shared();
-        assert!((f.per_point(1000.0) - 1.0).abs() < 1e-3);
-        assert!((f.per_point(100.0) - exact(100.0)).abs() < 1e-5);
-        assert!(f.per_point(0.01) < 0.2 && f.per_point(0.0) == 0.0);
+        assert!((f.moments(1000.0).0 - 1.0).abs() < 1e-3);
+        assert!((f.moments(100.0).0 - exact(100.0).0).abs() < 1e-5);
+        // Large means: the deviance tends to chi-square with one degree of
+        // freedom, variance 2.
+        assert!((f.moments(1000.0).1 - 2.0).abs() < 0.01);
+        assert!((f.moments(100.0).1 - exact(100.0).1).abs() < 1e-4);
+        assert!(f.moments(0.01).0 < 0.2 && f.moments(0.0) == (0.0, 0.0));
         // Monte Carlo check at mu = 0.7 with a simple inversion sampler.
         use rand::{RngExt, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         let mu: f64 = 0.7;
         let n = 200_000;
-        let mut acc = 0.0;
+        let (mut acc, mut acc2) = (0.0, 0.0);
         for _ in 0..n {
             let (mut m, mut p, u) = (0u32, (-mu).exp(), rng.random::<f64>());
             let mut cdf = p;
@@ -140,13 +180,17 @@ mod tests {
                 cdf += p;
             }
             let mf = m as f64;
-            acc += 2.0 * (if m > 0 { mf * (mf / mu).ln() } else { 0.0 } - (mf - mu));
+            let d = 2.0 * (if m > 0 { mf * (mf / mu).ln() } else { 0.0 } - (mf - mu));
+            acc += d;
+            acc2 += d * d;
         }
         let mc = acc / n as f64;
+        let mc_var = acc2 / n as f64 - mc * mc;
+        let (mean, var) = f.moments(mu);
+        assert!((mc - mean).abs() < 0.01, "mean {mc} vs {mean}");
         assert!(
-            (mc - f.per_point(mu)).abs() < 0.01,
-            "{mc} vs {}",
-            f.per_point(mu)
+            (mc_var - var).abs() < 0.02 * var,
+            "variance {mc_var} vs {var}"
         );
     }
 }

@@ -26,6 +26,8 @@ pub struct TraceRow {
     pub deviance: Option<f64>,
     /// Deviance expected from Poisson noise alone at that iterate.
     pub expected_deviance: Option<f64>,
+    /// Standard deviation of the deviance under Poisson noise at that iterate.
+    pub deviance_sd: Option<f64>,
     /// Inner optimiser iterations (L-BFGS) in this iteration.
     pub inner_iterations: Option<u64>,
     /// PSNR against the truth (dB), when known.
@@ -59,13 +61,13 @@ impl Trace {
     /// The CSV text: a header line and one line per row.
     pub fn to_csv(&self) -> String {
         let mut s = String::from(
-            "method,iteration,wall_s,objective,primal_residual,dual_residual,sigma,lambda,deviance,expected_deviance,inner_iterations,psnr,ssim\n",
+            "method,iteration,wall_s,objective,primal_residual,dual_residual,sigma,lambda,deviance,expected_deviance,deviance_sd,inner_iterations,psnr,ssim\n",
         );
         let f = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.9e}"));
         for r in &self.rows {
             writeln!(
                 s,
-                "{},{},{:.6},{},{},{},{},{},{},{},{},{},{}",
+                "{},{},{:.6},{},{},{},{},{},{},{},{},{},{},{}",
                 self.method,
                 r.iteration,
                 r.wall_s,
@@ -76,6 +78,7 @@ impl Trace {
                 f(r.lambda),
                 f(r.deviance),
                 f(r.expected_deviance),
+                f(r.deviance_sd),
                 r.inner_iterations.map_or(String::new(), |v| v.to_string()),
                 f(r.psnr),
                 f(r.ssim)

@@ -90,14 +90,17 @@ pub struct ReconArgs {
     /// ADMM iteration cap.
     #[arg(long, default_value_t = 100)]
     pub max_iters: usize,
-    /// ADMM stopping rule besides the cap and residual tolerances:
-    /// deviance (stop when the Poisson deviance of the output stops falling;
-    /// no truth needed) or iterations (cap only).
-    #[arg(long, value_enum, default_value = "deviance")]
+    /// ADMM stopping rule besides the cap and residual tolerances, none of
+    /// which needs the truth: agreement (the smallest primal residual among
+    /// iterates whose Poisson deviance the noise can explain), deviance (the
+    /// smallest deviance), iterations (cap only), or auto (agreement for the
+    /// learned prior, deviance for TV and identity).
+    #[arg(long, value_enum, default_value = "auto")]
     pub stop: StopRule,
-    /// Iterations without a deviance decrease before the deviance rule stops.
-    #[arg(long, default_value_t = 30)]
-    pub patience: usize,
+    /// Iterations without a new pick before the agreement or deviance rule
+    /// stops (default: 10 for agreement, 30 for deviance).
+    #[arg(long)]
+    pub patience: Option<usize>,
     /// ADMM primal and dual residual tolerance (RMS per pixel).
     #[arg(long, default_value_t = 1e-4)]
     pub residual_tol: f64,

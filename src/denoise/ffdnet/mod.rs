@@ -128,4 +128,10 @@ impl Denoiser for Ffdnet {
     fn sigma_max(&self) -> f64 {
         self.weights.arch.sigma_max
     }
+
+    /// The network does not become the identity at small sigma: PnP's
+    /// primal residual reaches a minimum and rises again (BENCHMARKS.md).
+    fn fades_to_identity(&self) -> bool {
+        false
+    }
 }
