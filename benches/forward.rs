@@ -1,7 +1,7 @@
 //! PSF generation and the forward model on the paper preset (256 x 256, 20 kept bins).
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use scatterscope::forward::{ForwardModel, poisson_counts};
+use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::scene::Scene;
 
@@ -15,9 +15,9 @@ fn benches(c: &mut Criterion) {
     });
     let kernels = KernelStack::build(&setup, Sampling::Integrated).unwrap();
     c.bench_function("kernel_spectra_256x256x20", |b| {
-        b.iter(|| ForwardModel::new(&kernels))
+        b.iter(|| ForwardModel::new(&kernels, Boundary::Periodic))
     });
-    let model = ForwardModel::new(&kernels);
+    let model = ForwardModel::new(&kernels, Boundary::Periodic);
     let truth = Scene::Usaf.render(256, 256).unwrap();
     c.bench_function("forward_expected_256x256x20", |b| {
         b.iter(|| model.expected(truth.view()))

@@ -1,32 +1,40 @@
-//! The reconstruction's hot path on the paper preset (256 x 256, 20 bins):
-//! one likelihood value + gradient against the FFTs it needs alone, and one
-//! full (shortened) reconstruction.
+//! The reconstruction's hot path on the paper preset (256 x 256, 20 bins,
+//! a sensor with edges): one likelihood value + gradient against the FFTs it
+//! needs alone, a shortened Algorithm 1 run, and one full default
+//! reconstruction as `scatterscope reconstruct` runs it (split solver,
+//! embedded FFDNet prior, its own stopping rule).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use ndarray::parallel::prelude::*;
 use rustfft::num_complex::Complex64;
+use scatterscope::denoise::ffdnet::Ffdnet;
+use scatterscope::denoise::ffdnet::source::embedded;
 use scatterscope::denoise::tv::TotalVariation;
-use scatterscope::forward::{ForwardModel, poisson_counts};
+use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::reconstruct::likelihood::PoissonLikelihood;
+use scatterscope::reconstruct::method::{Method, MethodOptions, Solver, run_method};
 use scatterscope::reconstruct::pnp::{PnpOptions, StopRule, pnp_admm};
+use scatterscope::reconstruct::problem::Problem;
+use scatterscope::reconstruct::split::SplitOptions;
 use scatterscope::scene::Scene;
 
 fn benches(c: &mut Criterion) {
     let setup = Preset::Paper.setup();
     let kernels = KernelStack::build(&setup, Sampling::Integrated).unwrap();
-    let model = ForwardModel::new(&kernels);
+    let model = ForwardModel::new(&kernels, Boundary::Sensor);
     let truth = Scene::Text.render(256, 256).unwrap();
-    let counts = poisson_counts(&model.expected(truth.view()).counts, 1);
+    let object = model.embed(truth.view(), 0.0);
+    let counts = poisson_counts(&model.expected(object.view()).counts, 1);
     let bins: Vec<usize> = (0..kernels.len()).collect();
     let lik = PoissonLikelihood::new(&model, &counts, &bins, 1e-10);
-    let o: Vec<f64> = truth.iter().map(|v| 0.5 * v + 0.2).collect();
-    c.bench_function("likelihood_gradient_256x256x20", |b| {
+    let o: Vec<f64> = object.iter().map(|v| 0.5 * v + 0.2).collect();
+    c.bench_function("likelihood_gradient_256x256x20_sensor", |b| {
         b.iter(|| lik.evaluate(&o))
     });
     // The same 42 transforms with the same parallel structure and nothing else.
     let fft = model.fft();
-    c.bench_function("likelihood_ffts_only_256x256x20", |b| {
+    c.bench_function("likelihood_ffts_only_256x256x20_sensor", |b| {
         b.iter(|| {
             let spec = fft.forward(&o);
             let parts: Vec<Vec<Complex64>> = bins
@@ -50,6 +58,34 @@ fn benches(c: &mut Criterion) {
     group.sample_size(10);
     group.bench_function("pnp_tv_256x256x20_10_iterations", |b| {
         b.iter(|| pnp_admm(&model, &counts, &bins, &tv, &opts, None, |_| {}).unwrap())
+    });
+    let problem = Problem {
+        model,
+        counts,
+        bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
+        setup,
+        left_out: Vec::new(),
+    };
+    let ffdnet = Ffdnet::new(embedded(), "embedded");
+    let defaults = MethodOptions {
+        solver: Solver::Split,
+        split: SplitOptions::default(),
+        pnp: PnpOptions::default(),
+        rl_iters: 200,
+    };
+    group.bench_function("pnp_split_ffdnet_256x256x20_default", |b| {
+        b.iter(|| {
+            run_method(
+                &problem,
+                Method::Pnp,
+                None,
+                &ffdnet,
+                &defaults,
+                None,
+                |_| {},
+            )
+            .unwrap()
+        })
     });
     group.finish();
 }

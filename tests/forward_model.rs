@@ -1,7 +1,7 @@
 //! Forward model against independent computations.
 
 use ndarray::{Array2, Array3};
-use scatterscope::forward::{ForwardModel, poisson_counts};
+use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup};
 
 fn small_setup(size: usize) -> Setup {
@@ -16,7 +16,7 @@ fn small_setup(size: usize) -> Setup {
 fn convolution_conserves_photons_per_bin() {
     let s = small_setup(64);
     let k = KernelStack::build(&s, Sampling::Integrated).unwrap();
-    let model = ForwardModel::new(&k);
+    let model = ForwardModel::new(&k, Boundary::Periodic);
     let object = Array2::from_shape_fn((64, 64), |(r, c)| ((r * 7 + c * 3) % 10) as f64 / 9.0);
     let e = model.expected(object.view());
     for (i, b) in k.kept_bins().enumerate() {
@@ -31,7 +31,7 @@ fn convolution_conserves_photons_per_bin() {
 fn fft_convolution_matches_direct_circular_sum() {
     let s = small_setup(32);
     let k = KernelStack::build(&s, Sampling::Integrated).unwrap();
-    let model = ForwardModel::new(&k);
+    let model = ForwardModel::new(&k, Boundary::Periodic);
     let n = 32usize;
     let object = Array2::from_shape_fn(
         (n, n),
@@ -69,7 +69,7 @@ fn negative_round_off_is_clamped_and_counted() {
     // either sign from FFT round-off.
     let s = small_setup(64);
     let k = KernelStack::build(&s, Sampling::Integrated).unwrap();
-    let model = ForwardModel::new(&k);
+    let model = ForwardModel::new(&k, Boundary::Periodic);
     let mut object = Array2::<f64>::zeros((64, 64));
     object[[10, 10]] = 1.0;
     let e = model.expected(object.view());

@@ -6,7 +6,7 @@ use scatterscope::denoise::Identity;
 use scatterscope::denoise::ffdnet::Ffdnet;
 use scatterscope::denoise::ffdnet::source::embedded;
 use scatterscope::denoise::tv::TotalVariation;
-use scatterscope::forward::{ForwardModel, poisson_counts};
+use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup, TimeBins};
 use scatterscope::reconstruct::likelihood::{PoissonLikelihood, SurrogateLog};
 use scatterscope::reconstruct::operator::Convolution;
@@ -33,7 +33,7 @@ struct Case {
 
 fn case(size: usize, scene: &str, seed: u64) -> Case {
     let k = KernelStack::build(&setup(size), Sampling::Integrated).unwrap();
-    let model = ForwardModel::new(&k);
+    let model = ForwardModel::new(&k, Boundary::Periodic);
     let truth = Scene::parse(scene).render(size, size).unwrap();
     let counts = poisson_counts(&model.expected(truth.view()).counts, seed);
     let bins = (0..k.len()).collect();
@@ -272,7 +272,7 @@ fn nearly_delta_kernel_recovers_the_object() {
     };
     s.total_photons = 4e4;
     let k = KernelStack::build(&s, Sampling::Integrated).unwrap();
-    let model = ForwardModel::new(&k);
+    let model = ForwardModel::new(&k, Boundary::Periodic);
     let truth = Scene::Disks.render(32, 32).unwrap();
     let counts = poisson_counts(&model.expected(truth.view()).counts, 9);
     let bins: Vec<usize> = (0..k.len()).collect();

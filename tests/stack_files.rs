@@ -28,6 +28,7 @@ fn sample_stack(kind: ValueKind) -> Stack {
             clamped_negative: 3,
             seed: Some(42),
             source: "test".into(),
+            boundary: None,
             acquisition: Some(serde_json::json!({"device": "mock", "photons": 12})),
         },
     }

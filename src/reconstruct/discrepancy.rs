@@ -90,7 +90,7 @@ fn exact(mu: f64) -> (f64, f64) {
 impl ExpectedDeviance {
     /// `(f(mu), g(mu))`: mean and variance of one point's deviance,
     /// interpolated (relative error below 1e-5 on the table range).
-    fn moments(&self, mu: f64) -> (f64, f64) {
+    pub fn moments(&self, mu: f64) -> (f64, f64) {
         if mu.is_nan() || mu <= 0.0 {
             (0.0, 0.0)
         } else if mu < TABLE_LO {
@@ -110,7 +110,8 @@ impl ExpectedDeviance {
         }
     }
 
-    /// Deviance of `estimate` against `counts` (bins `bins` of `model`) and
+    /// Deviance of `estimate` (on the model's grid) against `counts` (bins
+    /// `bins` of `model`, on the sensor) and
     /// the deviance Poisson noise alone would give around the same means.
     pub fn check(
         &self,
@@ -126,12 +127,7 @@ impl ExpectedDeviance {
             .into_par_iter()
             .zip(bins.par_iter())
             .map(|(m, &k)| {
-                let prod = spec
-                    .iter()
-                    .zip(model.spectrum(k))
-                    .map(|(a, b)| a * b)
-                    .collect();
-                let y = model.fft().inverse(prod);
+                let y = model.apply_spectrum(k, &spec);
                 let (mut d, mut e, mut var) = (0.0, 0.0, 0.0);
                 for (&mj, &yj) in m.iter().zip(&y) {
                     let yj = yj.max(1e-300);

@@ -3,10 +3,11 @@
 //!
 //! `L(o) = sum_k sum_j (H^k o)_j - m^k_j kappa((H^k o)_j)`.
 //!
-//! Work the data does not need is left out: for periodic convolution
-//! `sum_j (H^k o)_j = mass_k * sum(o)`, so the linear term and its gradient
-//! (`sum_k H^k^T 1 = M * 1`) cost nothing; pixels with zero counts add
-//! nothing to the log term; bins with no counts at all are not transformed.
+//! Work the data does not need is left out: the linear term is
+//! `<s, o>` with `s = sum_k H^k^T 1` over the sensor window, computed once
+//! (the total mass everywhere for a periodic model), so it and its gradient
+//! cost no FFT; pixels with zero counts add nothing to the log term; bins
+//! with no counts at all are not transformed.
 //! One value-and-gradient evaluation costs `2 + 2 K'` FFTs for `K'` bins
 //! with counts: one of `o`, one inverse and one forward per such bin, and one
 //! inverse of the accumulated spectrum.
@@ -15,7 +16,6 @@ use ndarray::parallel::prelude::*;
 use ndarray::{Array3, Axis};
 use rustfft::num_complex::Complex64;
 
-use crate::fft2::Fft2;
 use crate::forward::ForwardModel;
 
 /// The surrogate logarithm of Eq. 16: `log x` above `eps`, below it the
@@ -60,21 +60,23 @@ impl SurrogateLog {
 
 /// A bin that has at least one count.
 struct ActiveBin {
-    spectrum: Vec<Complex64>,
-    /// Dense counts of the bin (zeros included, used as a mask).
+    /// Position of the bin in the model.
+    bin: usize,
+    /// Dense counts of the bin on the sensor (zeros included, used as a mask).
     counts: Vec<f64>,
 }
 
 /// The data term for a stack of counts and its kernels.
-pub struct PoissonLikelihood {
-    fft: Fft2,
+pub struct PoissonLikelihood<'a> {
+    model: &'a ForwardModel,
     active: Vec<ActiveBin>,
+    /// `sum_k H_k^T 1_window`: gradient of the linear term.
+    sensitivity: Vec<f64>,
     total_mass: f64,
     kappa: SurrogateLog,
     /// `sum m - m log m` over counts, so that deviance = 2 (L - this).
     saturated: f64,
     bins: usize,
-    pixels: usize,
 }
 
 /// Value and gradient of the data term at one point.
@@ -85,17 +87,16 @@ pub struct Evaluation {
     pub gradient: Vec<f64>,
 }
 
-impl PoissonLikelihood {
-    /// The likelihood of `counts` (K x H x W, bins in the order of the kept
-    /// bins of `model`) with surrogate switch point `eps`.
-    pub fn new(model: &ForwardModel, counts: &Array3<f64>, bins: &[usize], eps: f64) -> Self {
+impl<'a> PoissonLikelihood<'a> {
+    /// The likelihood of `counts` (K x H x W on the sensor, bins in the
+    /// order of the kept bins of `model`) with surrogate switch point `eps`.
+    pub fn new(model: &'a ForwardModel, counts: &Array3<f64>, bins: &[usize], eps: f64) -> Self {
         assert_eq!(counts.shape()[0], bins.len(), "one count image per bin");
         let mut active = Vec::new();
         let mut total_mass = 0.0;
         let mut saturated = 0.0;
         for (img, &k) in counts.axis_iter(Axis(0)).zip(bins) {
-            let spectrum = model.spectrum(k);
-            total_mass += spectrum[0].re;
+            total_mass += model.mass(k);
             if img.iter().all(|&m| m == 0.0) {
                 continue;
             }
@@ -105,23 +106,22 @@ impl PoissonLikelihood {
                 .map(|&m| m - m * m.ln())
                 .sum::<f64>();
             active.push(ActiveBin {
-                spectrum: spectrum.to_vec(),
+                bin: k,
                 counts: img.iter().copied().collect(),
             });
         }
-        let (h, w) = model.shape();
         Self {
-            fft: model.fft().clone(),
+            model,
             active,
+            sensitivity: model.sensitivity(bins),
             total_mass,
             kappa: SurrogateLog::new(eps),
             saturated,
             bins: bins.len(),
-            pixels: h * w,
         }
     }
 
-    /// Total kernel mass M over all bins: `dL/do` of the linear term.
+    /// Total kernel mass M over all bins.
     pub fn total_mass(&self) -> f64 {
         self.total_mass
     }
@@ -136,29 +136,20 @@ impl PoissonLikelihood {
         2 + 2 * self.active.len()
     }
 
-    /// Number of pixels N of one image.
-    pub fn pixels(&self) -> usize {
-        self.pixels
-    }
-
     /// Poisson deviance `2 (L(o) - L_saturated)` for a value of `L`.
     pub fn deviance(&self, value: f64) -> f64 {
         2.0 * (value - self.saturated)
     }
 
-    /// `L(o)` and its gradient.
+    /// `L(o)` and its gradient, for `o` on the model's grid.
     pub fn evaluate(&self, o: &[f64]) -> Evaluation {
-        let o_spec = self.fft.forward(o);
+        let fft = self.model.fft();
+        let o_spec = fft.forward(o);
         let parts: Vec<(f64, Vec<Complex64>)> = self
             .active
             .par_iter()
             .map(|bin| {
-                let prod = o_spec
-                    .iter()
-                    .zip(&bin.spectrum)
-                    .map(|(a, b)| a * b)
-                    .collect();
-                let mut y = self.fft.inverse(prod);
+                let mut y = self.model.apply_spectrum(bin.bin, &o_spec);
                 let mut log_term = 0.0;
                 for (yj, &m) in y.iter_mut().zip(&bin.counts) {
                     if m > 0.0 {
@@ -168,27 +159,30 @@ impl PoissonLikelihood {
                         *yj = 0.0;
                     }
                 }
-                let r_spec = self
-                    .fft
-                    .forward(&y)
+                let r_spec = fft
+                    .forward(&self.model.embed_vec(&y))
                     .iter()
-                    .zip(&bin.spectrum)
+                    .zip(self.model.spectrum(bin.bin))
                     .map(|(a, b)| a * b.conj())
                     .collect();
                 (log_term, r_spec)
             })
             .collect();
-        let mut acc = vec![Complex64::default(); self.fft.spectrum_len()];
+        let mut acc = vec![Complex64::default(); fft.spectrum_len()];
         let mut log_total = 0.0;
         for (log_term, spec) in parts {
             log_total += log_term;
             acc.iter_mut().zip(&spec).for_each(|(a, s)| *a += s);
         }
-        let back = self.fft.inverse(acc);
-        let sum_o: f64 = o.iter().sum();
+        let back = fft.inverse(acc);
+        let linear: f64 = o.iter().zip(&self.sensitivity).map(|(a, b)| a * b).sum();
         Evaluation {
-            value: self.total_mass * sum_o - log_total,
-            gradient: back.iter().map(|g| self.total_mass - g).collect(),
+            value: linear - log_total,
+            gradient: back
+                .iter()
+                .zip(&self.sensitivity)
+                .map(|(g, s)| s - g)
+                .collect(),
         }
     }
 }

@@ -1,22 +1,27 @@
 //! The reconstruction methods by name, as the CLI and the report run them.
 
-use ndarray::ArrayView2;
+use ndarray::{Array3, ArrayView2, Axis};
 
 use super::pnp::{PnpOptions, pnp_admm};
 use super::problem::Problem;
 use super::raw::raw_scaled;
 use super::richardson_lucy::richardson_lucy;
+use super::split::{SplitOptions, pnp_split};
 use super::trace::TraceRow;
 use super::{ReconstructError, Reconstruction};
 use crate::denoise::Denoiser;
+use crate::forward::ForwardModel;
 
 /// A reconstruction method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Method {
     /// Poisson PnP-ADMM on the whole stack (the paper's method).
     Pnp,
-    /// PnP-ADMM on one bin (Algorithm 1 with K = 1).
+    /// PnP-ADMM on one bin (K = 1).
     PnpSlice,
+    /// PnP-ADMM on the time-summed stack with the time-summed kernel (does
+    /// the time axis help?).
+    PnpSum,
     /// Richardson-Lucy on one bin.
     Rl,
     /// Richardson-Lucy on the time-summed stack with the time-summed kernel.
@@ -31,6 +36,7 @@ impl Method {
         match self {
             Method::Pnp => "pnp",
             Method::PnpSlice => "pnp-slice",
+            Method::PnpSum => "pnp-sum",
             Method::Rl => "rl",
             Method::RlSum => "rl-sum",
             Method::Raw => "raw",
@@ -43,10 +49,35 @@ impl Method {
     }
 }
 
+/// How PnP-ADMM solves its data step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Solver {
+    /// Exact splitting (P4IP): closed-form Poisson prox per pixel and bin,
+    /// exact Fourier-domain o-update ([`super::split`]).
+    Split,
+    /// The paper's Algorithm 1: L-BFGS o-update on the surrogate
+    /// likelihood ([`super::pnp`]).
+    AdmmLbfgs,
+}
+
+impl Solver {
+    /// Name as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Solver::Split => "split",
+            Solver::AdmmLbfgs => "admm-lbfgs",
+        }
+    }
+}
+
 /// Settings of every method.
 #[derive(Debug, Clone, Copy)]
 pub struct MethodOptions {
-    /// PnP-ADMM settings.
+    /// Which PnP solver runs.
+    pub solver: Solver,
+    /// Settings of the exact-splitting solver.
+    pub split: SplitOptions,
+    /// Settings of Algorithm 1 (L-BFGS solver).
     pub pnp: PnpOptions,
     /// Richardson-Lucy iterations.
     pub rl_iters: usize,
@@ -61,7 +92,7 @@ pub fn run_method(
     denoiser: &dyn Denoiser,
     opts: &MethodOptions,
     truth: Option<ArrayView2<f64>>,
-    on_iter: impl FnMut(&TraceRow),
+    mut on_iter: impl FnMut(&TraceRow),
 ) -> Result<Reconstruction, ReconstructError> {
     let k = problem.counts.shape()[0];
     if let Some(b) = bin.filter(|&b| b >= k) {
@@ -77,27 +108,25 @@ pub fn run_method(
     };
     let all = problem.all_bins();
     let model = &problem.model;
+    let pnp = |model: &ForwardModel,
+               counts: &Array3<f64>,
+               bins: &[usize],
+               on_iter: &mut dyn FnMut(&TraceRow)| match opts.solver {
+        Solver::Split => pnp_split(model, counts, bins, denoiser, &opts.split, truth, on_iter),
+        Solver::AdmmLbfgs => pnp_admm(model, counts, bins, denoiser, &opts.pnp, truth, on_iter),
+    };
     match method {
-        Method::Pnp => pnp_admm(
-            model,
-            &problem.counts,
-            &all,
-            denoiser,
-            &opts.pnp,
-            truth,
-            on_iter,
-        ),
+        Method::Pnp => pnp(model, &problem.counts, &all, &mut on_iter),
         Method::PnpSlice => {
             let b = single(method)?;
-            pnp_admm(
-                model,
-                &problem.single_bin(b),
-                &[b],
-                denoiser,
-                &opts.pnp,
-                truth,
-                on_iter,
-            )
+            pnp(model, &problem.single_bin(b), &[b], &mut on_iter)
+        }
+        Method::PnpSum => {
+            let summed = model.summed(&all);
+            let counts = problem.counts.sum_axis(Axis(0)).insert_axis(Axis(0));
+            let mut r = pnp(&summed, &counts, &[0], &mut on_iter)?;
+            r.trace.method = method.name().into();
+            Ok(r)
         }
         Method::Rl => {
             let b = single(method)?;

@@ -1,7 +1,9 @@
 //! Reconstruction of the object from a transient stack.
 //!
-//! - [`pnp`]: Poisson Plug-and-Play ADMM (Algorithm 1) on the whole stack or
-//!   on one bin, with a data-driven stopping rule ([`discrepancy`]).
+//! - [`split`]: Poisson Plug-and-Play ADMM with exact splitting (P4IP), the
+//!   default PnP solver: closed-form Poisson prox, exact o-update.
+//! - [`pnp`]: the paper's Algorithm 1 (L-BFGS o-update), with a data-driven
+//!   stopping rule ([`discrepancy`]).
 //! - [`richardson_lucy`]: the classical baseline, on one bin or on the
 //!   time-summed stack.
 //! - [`raw`]: counts divided by kernel mass, for reference.
@@ -16,10 +18,12 @@ pub mod pnp;
 pub mod problem;
 pub mod raw;
 pub mod richardson_lucy;
+pub mod split;
 pub mod trace;
 
 use ndarray::{Array2, Array3, ArrayView2, Axis};
 
+use crate::forward::{Boundary, ForwardModel};
 use crate::metrics;
 use trace::{Trace, TraceRow};
 
@@ -117,6 +121,22 @@ pub(crate) fn no_photons(
     score(&mut row, image.view(), truth);
     trace.rows.push(row);
     Reconstruction { image, trace }
+}
+
+/// What the model assumes of the sensor's edges, for a trace note.
+pub(crate) fn grid_note(model: &ForwardModel) -> String {
+    let (h, w) = model.sensor_shape();
+    let (gh, gw) = model.grid_shape();
+    match model.boundary() {
+        Boundary::Periodic => {
+            format!("boundary: periodic (wrap-around) on the {h} x {w} sensor grid")
+        }
+        Boundary::Sensor => format!(
+            "boundary: sensor with edges; object estimated on a {gh} x {gw} grid, {} px beyond each sensor edge (the kernels carry < {:e} of their light farther out; farther object points left out), output is the {h} x {w} sensor window",
+            model.margin(),
+            crate::forward::EDGE_TAIL
+        ),
+    }
 }
 
 /// Clamps an estimate to >= 0, failing on any non-finite value.

@@ -59,7 +59,8 @@ use super::discrepancy::ExpectedDeviance;
 use super::likelihood::PoissonLikelihood;
 use super::trace::{Trace, TraceRow};
 use super::{
-    ReconstructError, Reconstruction, finish, flat_level, no_photons, score, validate_counts,
+    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, score,
+    validate_counts,
 };
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::forward::ForwardModel;
@@ -141,7 +142,7 @@ type Evaluated = (Vec<f64>, f64, Vec<f64>);
 /// evaluation counts against `budget`, past which the o-update ends with the
 /// best point it has evaluated.
 struct OUpdate<'a> {
-    likelihood: &'a PoissonLikelihood,
+    likelihood: &'a PoissonLikelihood<'a>,
     z: Vec<f64>,
     lambda: f64,
     cache: Mutex<Option<Evaluated>>,
@@ -247,8 +248,9 @@ pub fn pnp_admm(
     }
     let method = if bins.len() == 1 { "pnp-slice" } else { "pnp" };
     let start = Instant::now();
-    let (h, w) = model.shape();
-    let n = h * w;
+    let (h, w) = model.sensor_shape();
+    let (gh, gw) = model.grid_shape();
+    let n = gh * gw;
     let likelihood = PoissonLikelihood::new(model, counts, bins, opts.eps);
     let mut trace = Trace::new(method);
     trace.prior = Some(denoiser.name());
@@ -259,7 +261,8 @@ pub fn pnp_admm(
         bins.len()
     ));
     let total: f64 = counts.sum();
-    let flat = flat_level(total, likelihood.total_mass(), n);
+    trace.notes.push(grid_note(model));
+    let flat = flat_level(total, likelihood.total_mass(), h * w);
     if total == 0.0 {
         return Ok(no_photons(trace, (h, w), truth));
     }
@@ -284,14 +287,14 @@ pub fn pnp_admm(
         ));
     }
     let mut o = vec![flat; n];
-    let mut v = Array2::from_elem((h, w), flat);
-    let mut u = Array2::<f64>::zeros((h, w));
+    let mut v = Array2::from_elem((gh, gw), flat);
+    let mut u = Array2::<f64>::zeros((gh, gw));
     let mut lambda = opts.lambda0;
     let mut row0 = TraceRow {
         wall_s: start.elapsed().as_secs_f64(),
         ..Default::default()
     };
-    score(&mut row0, v.view(), truth);
+    score(&mut row0, model.crop(v.view()).view(), truth);
     trace.rows.push(row0);
     let mut stopped = format!("iteration cap {}", opts.max_iters);
     let mut budget_hits = 0usize;
@@ -332,7 +335,7 @@ pub fn pnp_admm(
             .expect("best lock")
             .ok_or_else(|| ReconstructError::Optimiser("no finite objective value".into()))?;
         o = best;
-        let o_img = Array2::from_shape_vec((h, w), o.clone()).expect("shape");
+        let o_img = Array2::from_shape_vec((gh, gw), o.clone()).expect("shape");
         let sigma = (opts.beta / lambda).sqrt();
         // The prior includes what the physics knows: a transmittance is never
         // negative. Projecting the denoised iterate onto v >= 0 measured
@@ -368,7 +371,9 @@ pub fn pnp_admm(
             inner_iterations: Some(inner),
             ..Default::default()
         };
-        score(&mut row, v.view(), truth);
+        if truth.is_some() {
+            score(&mut row, model.crop(v.view()).view(), truth);
+        }
         on_iter(&row);
         trace.rows.push(row);
         lambda *= opts.lambda_step;
@@ -448,6 +453,6 @@ pub fn pnp_admm(
         }
     };
     trace.notes.push(format!("output: iteration {iteration}"));
-    let image = finish(output, method, iteration)?;
+    let image = finish(model.crop(output.view()), method, iteration)?;
     Ok(Reconstruction { image, trace })
 }

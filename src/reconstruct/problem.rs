@@ -3,7 +3,7 @@
 use ndarray::{Array2, Array3};
 use scatterscope_physics::{KernelStack, Sampling, Setup};
 
-use crate::forward::ForwardModel;
+use crate::forward::{Boundary, ForwardModel};
 use crate::stack::{Stack, ValueKind};
 
 /// Counts and the forward model of exactly the stack's bins.
@@ -35,10 +35,16 @@ pub enum ProblemError {
 
 impl Problem {
     /// Matches each bin of `stack` with the kernel of `setup` that starts at
-    /// the same time. Kernels are built for every bin of the setup (none
+    /// the same time, modelling the sensor's edges with `boundary`. Kernels
+    /// are built for every bin of the setup (none
     /// dropped, so that the light budget normalisation is the recorded one)
     /// but only the stack's bins are transformed.
-    pub fn new(stack: &Stack, setup: &Setup, sampling: Sampling) -> Result<Self, ProblemError> {
+    pub fn new(
+        stack: &Stack,
+        setup: &Setup,
+        sampling: Sampling,
+        boundary: Boundary,
+    ) -> Result<Self, ProblemError> {
         if stack.meta.kind == ValueKind::Kernel {
             return Err(ProblemError::Mismatch(
                 "the stack holds ST-PSF kernels, not counts".into(),
@@ -107,7 +113,7 @@ impl Problem {
         let kernel_positions: Vec<usize> =
             kept.iter().map(|&i| positions[i].expect("kept")).collect();
         Ok(Self {
-            model: ForwardModel::with_bins(&kernels, &kernel_positions),
+            model: ForwardModel::with_bins(&kernels, &kernel_positions, boundary),
             counts: stack.data.select(ndarray::Axis(0), &kept).mapv(f64::from),
             bin_starts_ps: kept.iter().map(|&i| stack.meta.bin_starts_ps[i]).collect(),
             setup: *setup,

@@ -8,7 +8,8 @@ use ndarray::{Array2, Array3, ArrayView2, Axis};
 use super::operator::Convolution;
 use super::trace::{Trace, TraceRow};
 use super::{
-    ReconstructError, Reconstruction, finish, flat_level, no_photons, score, validate_counts,
+    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, score,
+    validate_counts,
 };
 use crate::forward::ForwardModel;
 
@@ -31,7 +32,7 @@ pub fn richardson_lucy(
     let op = Convolution::from_bins(model, bins);
     let data = counts.sum_axis(Axis(0));
     let (h, w) = data.dim();
-    let n = h * w;
+    let (gh, gw) = model.grid_shape();
     let m: Vec<f64> = data.iter().copied().collect();
     let total: f64 = m.iter().sum();
     let mass = op.mass();
@@ -39,11 +40,24 @@ pub fn richardson_lucy(
     if total == 0.0 || mass <= 0.0 {
         return Ok(no_photons(trace, (h, w), truth));
     }
-    let mut o = vec![flat_level(total, mass, n); n];
-    let guard = DENOMINATOR_GUARD * total / n as f64;
+    // H^T 1 over the window: the normaliser of RL with a sensor of finite
+    // size (Bertero and Boccacci 2005); the kernel mass for a periodic model.
+    // Object pixels the sensor does not see keep their value.
+    let sensitivity = op.sensitivity();
+    let seen = 1e-9 * mass;
+    let mut o = vec![flat_level(total, mass, h * w); gh * gw];
+    let guard = DENOMINATOR_GUARD * total / (h * w) as f64;
     trace.notes.push(format!(
-        "denominator guarded at {guard:.3e} ({DENOMINATOR_GUARD:e} x mean count); 4 FFTs per iteration"
+        "denominator guarded at {guard:.3e} ({DENOMINATOR_GUARD:e} x mean count); 4 FFTs per iteration; {}",
+        grid_note(model)
     ));
+    let crop = |o: &[f64]| {
+        model.crop(
+            Array2::from_shape_vec((gh, gw), o.to_vec())
+                .expect("shape")
+                .view(),
+        )
+    };
     for it in 1..=iterations {
         let y = op.apply(&o);
         let mut nll = 0.0;
@@ -59,22 +73,21 @@ pub fn richardson_lucy(
         let back = op.adjoint(&ratio);
         o.iter_mut()
             .zip(&back)
-            .for_each(|(oj, b)| *oj *= (b / mass).max(0.0));
-        let image = Array2::from_shape_vec((h, w), o.clone()).expect("shape");
+            .zip(&sensitivity)
+            .filter(|(_, s)| **s > seen)
+            .for_each(|((oj, b), s)| *oj *= (b / s).max(0.0));
         let mut row = TraceRow {
             iteration: it,
             wall_s: start.elapsed().as_secs_f64(),
             objective: Some(nll),
             ..Default::default()
         };
-        score(&mut row, image.view(), truth);
+        if truth.is_some() {
+            score(&mut row, crop(&o).view(), truth);
+        }
         on_iter(&row);
         trace.rows.push(row);
     }
-    let image = finish(
-        Array2::from_shape_vec((h, w), o).expect("shape"),
-        method,
-        iterations,
-    )?;
+    let image = finish(crop(&o), method, iterations)?;
     Ok(Reconstruction { image, trace })
 }

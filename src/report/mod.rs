@@ -4,6 +4,7 @@
 //! Fig. 4 analogue (PSNR per time bin of raw, RL and PnP on that bin, with
 //! the full-stack results as lines) and error-against-run-time curves.
 
+pub mod bench;
 pub mod plot;
 
 use std::fmt::Write as _;
@@ -12,9 +13,9 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::denoise::Denoiser;
-use crate::forward::{ForwardModel, poisson_counts};
+use crate::forward::{Boundary, ForwardModel, poisson_counts};
 use crate::physics::{KernelStack, Sampling, Setup};
-use crate::reconstruct::method::{Method, MethodOptions, run_method};
+use crate::reconstruct::method::{Method, MethodOptions, Solver, run_method};
 use crate::reconstruct::problem::Problem;
 use crate::reconstruct::trace::Trace;
 use crate::reconstruct::{ReconstructError, Reconstruction};
@@ -81,6 +82,7 @@ pub struct SceneReport {
 pub fn run_scene(
     scene: &Scene,
     setup: &Setup,
+    boundary: Boundary,
     seed: u64,
     denoiser: &dyn Denoiser,
     comparison: Option<(&str, &dyn Denoiser)>,
@@ -92,8 +94,8 @@ pub fn run_scene(
     let kernels = KernelStack::build(setup, Sampling::Integrated)?;
     let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
     let truth = scene.render(h, w)?;
-    let model = ForwardModel::new(&kernels);
-    let expected = model.expected(truth.view());
+    let model = ForwardModel::new(&kernels, boundary);
+    let expected = model.expected(model.embed(truth.view(), 0.0).view());
     let counts = poisson_counts(&expected.counts, seed);
     let problem = Problem {
         model,
@@ -154,6 +156,33 @@ pub fn run_scene(
         save(&r, label)?;
         progress(&format!("{name}: {label} done"));
         scores.push(score(label.into(), &r));
+        traces.push(r.trace);
+    }
+    // The other solver on the same stack with the same prior: PSNR against
+    // wall time of both lands in error_vs_time.png.
+    let other = match opts.solver {
+        Solver::Split => Solver::AdmmLbfgs,
+        Solver::AdmmLbfgs => Solver::Split,
+    };
+    {
+        let label = format!("pnp ({} solver)", other.name());
+        let r = run_method(
+            &problem,
+            Method::Pnp,
+            None,
+            denoiser,
+            &MethodOptions {
+                solver: other,
+                ..*opts
+            },
+            Some(truth.view()),
+            |_| {},
+        )?;
+        let mut r = r;
+        r.trace.method = label.clone();
+        save(&r, &format!("pnp-{}", other.name()))?;
+        progress(&format!("{name}: {label} done"));
+        scores.push(score(label, &r));
         traces.push(r.trace);
     }
     if let Some((prior, d)) = comparison {
@@ -399,4 +428,7 @@ pub enum ReportError {
     /// A plot could not be drawn.
     #[error("plot: {0}")]
     Plot(String),
+    /// An input file is unusable (names the file, line and value).
+    #[error("{0}")]
+    Input(String),
 }

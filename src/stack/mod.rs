@@ -15,6 +15,8 @@ use ndarray::{Array3, ArrayView2, Axis, s};
 use scatterscope_physics::{Sampling, Setup};
 use serde::{Deserialize, Serialize};
 
+use crate::forward::Boundary;
+
 /// Version of the metadata layout written to files.
 pub const META_VERSION: u32 = 1;
 
@@ -75,6 +77,10 @@ pub struct StackMeta {
     pub seed: Option<u64>,
     /// Where the stack came from (command, scene, file).
     pub source: String,
+    /// How the sensor's edges were modelled when the stack was simulated;
+    /// absent for measured stacks, whose sensor always has edges.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub boundary: Option<Boundary>,
     /// For measured stacks: the device, its configuration, the time window
     /// and the photon accounting of the acquisition.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -9,7 +9,7 @@ use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::acquire::{DeviceSpec, MockSetup, Plan, StopReason, acquire, open_device};
 use scatterscope::config::{PhysicsArgs, parse_ps};
-use scatterscope::forward::ForwardModel;
+use scatterscope::forward::{Boundary, ForwardModel};
 use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::scene::Scene;
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet, write_image};
@@ -231,8 +231,10 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     // such that reconstructions come out in the scene's units (comparable
     // with its truth image); (expected counts at the preset budget, scene).
     let mock_reference = mock.as_ref().map(|m| {
-        let expected = ForwardModel::new(&m.kernels)
-            .expected(m.scene.view())
+        // The mock's sensor has edges and its scene is dark outside it.
+        let model = ForwardModel::new(&m.kernels, Boundary::Sensor);
+        let expected = model
+            .expected(model.embed(m.scene.view(), 0.0).view())
             .counts;
         (expected, m.scene.clone())
     });
@@ -340,6 +342,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
             clamped_negative: 0,
             seed: args.device.is_mock().then_some(args.seed),
             source: format!("scatterscope acquire --device {}", args.device),
+            boundary: None,
             acquisition: Some(acquisition.clone()),
         },
     };

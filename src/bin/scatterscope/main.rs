@@ -1,6 +1,7 @@
 //! The `scatterscope` command-line tool.
 
 mod acquire;
+mod bench_recon;
 mod denoise;
 mod denoise_bench;
 mod physics_summary;
@@ -34,6 +35,7 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     Reconstruct(reconstruct::ReconstructArgs),
     Report(report::ReportArgs),
+    BenchRecon(bench_recon::BenchReconArgs),
     Info(tags_cmd::InfoArgs),
     Bin(tags_cmd::BinArgs),
     Acquire(acquire::AcquireArgs),
@@ -99,6 +101,7 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(&args),
         Command::Reconstruct(args) => reconstruct::run(&args),
         Command::Report(args) => report::run(&args),
+        Command::BenchRecon(args) => bench_recon::run(&args),
         Command::Info(args) => tags_cmd::info(&args),
         Command::Bin(args) => tags_cmd::bin(&args),
         Command::Acquire(args) => acquire::run(&args),

@@ -88,6 +88,7 @@ pub fn stack_meta(kernels: &KernelStack, kind: ValueKind, source: String) -> Sta
         clamped_negative: 0,
         seed: None,
         source,
+        boundary: None,
         acquisition: None,
     }
 }

@@ -5,8 +5,9 @@ use std::path::PathBuf;
 use scatterscope::denoise::ffdnet::source;
 use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::denoise::{Denoiser, Identity};
-use scatterscope::reconstruct::method::MethodOptions;
+use scatterscope::reconstruct::method::{MethodOptions, Solver};
 use scatterscope::reconstruct::pnp::{PnpOptions, StopRule};
+use scatterscope::reconstruct::split::SplitOptions;
 
 /// The prior plugged into PnP-ADMM.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -78,18 +79,52 @@ impl PriorArgs {
 pub struct ReconArgs {
     #[command(flatten)]
     pub prior: PriorArgs,
-    /// ADMM: initial penalty lambda_0.
+    /// PnP solver: split (exact splitting, P4IP: closed-form Poisson prox
+    /// and Fourier-domain o-update) or admm-lbfgs (the paper's Algorithm 1).
+    #[arg(long, value_enum, default_value = "split")]
+    pub solver: Solver,
+    /// Split solver: data-split penalty rho, relative to the Poisson
+    /// curvature at the flat object's counts.
+    #[arg(long, default_value_t = SplitOptions::default().rho)]
+    pub rho: f64,
+    /// Split solver: prior-split penalty gamma, relative to the data's
+    /// weight at zero frequency.
+    #[arg(long, default_value_t = SplitOptions::default().gamma)]
+    pub gamma: f64,
+    /// Split solver: the denoiser's first sigma, relative to the level of
+    /// the flat object that explains the total count.
+    #[arg(long, default_value_t = SplitOptions::default().sigma0)]
+    pub sigma0: f64,
+    /// Split solver: sigma shrinks by this factor per iteration down to its floor.
+    #[arg(long, default_value_t = SplitOptions::default().sigma_decay)]
+    pub sigma_decay: f64,
+    /// Split solver: the last sigma is sigma_floor x o_flat x n^-sigma_power,
+    /// n the photons per pixel of the flat object that explains the total.
+    #[arg(long, default_value_t = SplitOptions::default().sigma_floor)]
+    pub sigma_floor: f64,
+    /// Split solver: see --sigma-floor.
+    #[arg(long, default_value_t = SplitOptions::default().sigma_power)]
+    pub sigma_power: f64,
+    /// Split solver: the deviance target, in noise standard deviations
+    /// above the deviance Poisson noise alone gives.
+    #[arg(long, default_value_t = SplitOptions::default().target_z)]
+    pub target_z: f64,
+    /// Split solver: iterations at the target before stopping.
+    #[arg(long, default_value_t = SplitOptions::default().patience)]
+    pub split_patience: usize,
+    /// admm-lbfgs: initial penalty lambda_0.
     #[arg(long, default_value_t = 1.0)]
     pub lambda0: f64,
-    /// ADMM: lambda grows by this factor per iteration.
+    /// admm-lbfgs: lambda grows by this factor per iteration.
     #[arg(long, default_value_t = 1.1)]
     pub lambda_step: f64,
-    /// ADMM: regularisation weight beta; the denoiser gets sigma^2 = beta / lambda.
-    #[arg(long, default_value_t = 0.25)]
+    /// admm-lbfgs: regularisation weight beta; the denoiser gets
+    /// sigma^2 = beta / lambda.
+    #[arg(long, default_value_t = PnpOptions::default().beta)]
     pub beta: f64,
-    /// ADMM iteration cap.
-    #[arg(long, default_value_t = 100)]
-    pub max_iters: usize,
+    /// ADMM iteration cap [default: split 80, admm-lbfgs 100].
+    #[arg(long)]
+    pub max_iters: Option<usize>,
     /// ADMM stopping rule besides the cap and residual tolerances, none of
     /// which needs the truth: agreement (the smallest primal residual among
     /// iterates whose Poisson deviance the noise can explain), deviance (the
@@ -129,6 +164,24 @@ impl ReconArgs {
             Ok(())
         };
         positive("lambda0", self.lambda0)?;
+        positive("rho", self.rho)?;
+        positive("gamma", self.gamma)?;
+        anyhow::ensure!(
+            self.sigma0 >= 0.0 && self.sigma0.is_finite(),
+            "--sigma0 = {} must be a finite number >= 0",
+            self.sigma0
+        );
+        positive("sigma-floor", self.sigma_floor)?;
+        anyhow::ensure!(
+            self.sigma_power.is_finite(),
+            "--sigma-power = {} must be a finite number",
+            self.sigma_power
+        );
+        anyhow::ensure!(
+            self.target_z.is_finite(),
+            "--target-z = {} must be a finite number",
+            self.target_z
+        );
         positive("beta", self.beta)?;
         positive("eps", self.eps)?;
         anyhow::ensure!(
@@ -136,12 +189,31 @@ impl ReconArgs {
             "--lambda-step = {} must be at least 1",
             self.lambda_step
         );
+        anyhow::ensure!(
+            self.sigma_decay > 0.0 && self.sigma_decay <= 1.0,
+            "--sigma-decay = {} must lie in (0, 1]",
+            self.sigma_decay
+        );
+        let split = SplitOptions::default();
+        let lbfgs = PnpOptions::default();
         Ok(MethodOptions {
+            solver: self.solver,
+            split: SplitOptions {
+                rho: self.rho,
+                gamma: self.gamma,
+                sigma0: self.sigma0,
+                sigma_decay: self.sigma_decay,
+                sigma_floor: self.sigma_floor,
+                sigma_power: self.sigma_power,
+                target_z: self.target_z,
+                patience: self.split_patience,
+                max_iters: self.max_iters.unwrap_or(split.max_iters),
+            },
             pnp: PnpOptions {
                 lambda0: self.lambda0,
                 lambda_step: self.lambda_step,
                 beta: self.beta,
-                max_iters: self.max_iters,
+                max_iters: self.max_iters.unwrap_or(lbfgs.max_iters),
                 primal_tol: self.residual_tol,
                 dual_tol: self.residual_tol,
                 stop: self.stop,

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::config::PhysicsArgs;
+use scatterscope::forward::Boundary;
 use scatterscope::physics::{Preset, Sampling};
 use scatterscope::reconstruct::method::{Method, run_method};
 use scatterscope::reconstruct::problem::Problem;
@@ -30,6 +31,11 @@ pub struct ReconstructArgs {
     /// Bin (0-based, in stack order) for single-bin methods and raw.
     #[arg(long)]
     bin: Option<usize>,
+    /// How the sensor's edges are modelled: sensor (light off the sensor is
+    /// lost, light from outside its field reaches its edges; real sensors)
+    /// or periodic (wrap-around) [default: the stack's record, else sensor].
+    #[arg(long, value_enum)]
+    boundary: Option<Boundary>,
     /// Truth image (PNG/JPEG/EXR) to report PSNR and SSIM against.
     #[arg(long)]
     truth: Option<PathBuf>,
@@ -54,7 +60,8 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         );
     }
     let sampling = stack.meta.sampling.unwrap_or(Sampling::Integrated);
-    let problem = Problem::new(&stack, &setup, sampling)
+    let boundary = args.boundary.or(stack.meta.boundary).unwrap_or_default();
+    let problem = Problem::new(&stack, &setup, sampling, boundary)
         .with_context(|| format!("matching {} with its physics", args.stack.display()))?;
     if !problem.left_out.is_empty() {
         let counts: f64 = problem.left_out.iter().map(|(_, c)| c).sum();

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::config::PhysicsArgs;
+use scatterscope::forward::Boundary;
 use scatterscope::report::{run_scene, summary_csv, summary_markdown};
 use scatterscope::scene::Scene;
 
@@ -26,6 +27,10 @@ pub struct ReportArgs {
     physics: PhysicsArgs,
     #[command(flatten)]
     recon: ReconArgs,
+    /// How the sensor's edges are simulated and modelled (sensor: the scene
+    /// fills the field, dark outside; periodic: wrap-around).
+    #[arg(long, value_enum, default_value = "sensor")]
+    boundary: Boundary,
     /// Seed of the Poisson sampler.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -61,6 +66,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         let report = run_scene(
             &scene,
             &setup,
+            args.boundary,
             args.seed,
             denoiser.as_ref(),
             comparison.as_ref().map(|(n, d)| (n.as_str(), d.as_ref())),

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use scatterscope::config::PhysicsArgs;
-use scatterscope::forward::{ForwardModel, poisson_counts};
+use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::scene::Scene;
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet, write_image};
@@ -26,6 +26,11 @@ pub struct SimulateArgs {
     scene: String,
     #[command(flatten)]
     physics: PhysicsArgs,
+    /// How the sensor's edges are modelled: sensor (the scene fills the
+    /// sensor's field, dark outside it; light off the sensor is lost, as on
+    /// a real sensor) or periodic (wrap-around, the paper's simulation).
+    #[arg(long, value_enum, default_value = "sensor")]
+    boundary: Boundary,
     /// Seed of the Poisson sampler (the same seed gives the same counts).
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -59,10 +64,10 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
     let truth = scene.render(h, w)?;
     let t1 = Instant::now();
-    let model = ForwardModel::new(&kernels);
+    let model = ForwardModel::new(&kernels, args.boundary);
     let t_spectra = t1.elapsed().as_secs_f64();
     let t2 = Instant::now();
-    let expected = model.expected(truth.view());
+    let expected = model.expected(model.embed(truth.view(), 0.0).view());
     let t_forward = t2.elapsed().as_secs_f64();
     let t3 = Instant::now();
     let counts = poisson_counts(&expected.counts, args.seed);
@@ -73,6 +78,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let source = format!("scatterscope simulate --scene {}", scene.name());
     let mut meta = stack_meta(&kernels, ValueKind::ExpectedCounts, source);
     meta.clamped_negative = expected.clamped as u64;
+    meta.boundary = Some(args.boundary);
     let expected_stack = Stack {
         data: expected.counts.mapv(|v| v as f32),
         meta: meta.clone(),

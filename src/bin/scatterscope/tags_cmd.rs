@@ -460,6 +460,7 @@ fn counts_meta(
         clamped_negative: 0,
         seed: None,
         source,
+        boundary: None,
         acquisition,
     }
 }

@@ -1,0 +1,416 @@
+//! The held-out reconstruction benchmark (`scatterscope bench-recon`).
+//!
+//! Images come from a directory written by `scripts/bench_images.py`: grey
+//! PNGs larger than the sensor (the object extends past the sensor on every
+//! side) and a `manifest.csv` naming each image's source, category and
+//! split (`tuning` or `held-out`). Built-in scenes listed without a file are
+//! rendered on the sensor's field, dark outside it.
+//!
+//! Simulation is independent of the reconstruction's model: the object's
+//! whole grid is convolved (periodically, on a grid wider than the sensor by
+//! more than the kernels' full support, so nothing wraps into the sensor)
+//! with kernels at their full support, and only the sensor window is kept.
+//! Reconstruction then sees a sensor with edges and models it with its own
+//! padded grid and truncated margin.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use ndarray::{Array2, ArrayView2, s};
+use serde::Serialize;
+
+use crate::denoise::Denoiser;
+use crate::forward::{Boundary, ForwardModel, poisson_counts};
+use crate::metrics;
+use crate::physics::{KernelStack, Sampling, Setup};
+use crate::reconstruct::method::{Method, MethodOptions, Solver, run_method};
+use crate::reconstruct::problem::Problem;
+use crate::reconstruct::trace::Trace;
+use crate::scene::Scene;
+
+use super::ReportError;
+
+/// One image of the benchmark.
+#[derive(Debug, Clone)]
+pub struct BenchImage {
+    /// Short name.
+    pub name: String,
+    /// The PNG, or `None` for a built-in scene of that name.
+    pub file: Option<PathBuf>,
+    /// Where the image comes from (package or generator).
+    pub source: String,
+    /// Kind of scene (natural photo, medical, sparse, ...).
+    pub category: String,
+    /// `tuning` or `held-out`.
+    pub split: String,
+}
+
+/// Reads `dir/manifest.csv` (columns name, file, source, category, split,
+/// licence; the file empty for built-in scenes).
+pub fn read_manifest(dir: &Path) -> Result<Vec<BenchImage>, ReportError> {
+    let path = dir.join("manifest.csv");
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| ReportError::Io(path.display().to_string(), e))?;
+    let bad = |line: usize, why: String| {
+        ReportError::Input(format!("{}: line {line}: {why}", path.display()))
+    };
+    let mut lines = text.lines().enumerate();
+    let header = lines.next().map(|(_, h)| h).unwrap_or_default();
+    if !header.starts_with("name,file,source,category,split") {
+        return Err(bad(
+            1,
+            format!("header `{header}` is not name,file,source,category,split,licence"),
+        ));
+    }
+    let mut images = Vec::new();
+    for (i, line) in lines.filter(|(_, l)| !l.trim().is_empty()) {
+        let fields: Vec<&str> = line.splitn(6, ',').collect();
+        if fields.len() < 5 {
+            return Err(bad(
+                i + 1,
+                format!("{} fields, need at least 5", fields.len()),
+            ));
+        }
+        let split = fields[4].to_string();
+        if split != "tuning" && split != "held-out" {
+            return Err(bad(
+                i + 1,
+                format!("split `{split}` is neither tuning nor held-out"),
+            ));
+        }
+        images.push(BenchImage {
+            name: fields[0].to_string(),
+            file: (!fields[1].is_empty()).then(|| dir.join(fields[1])),
+            source: fields[2].to_string(),
+            category: fields[3].to_string(),
+            split,
+        });
+    }
+    Ok(images)
+}
+
+/// A simulated measurement of one image at one light level.
+pub struct BenchCase {
+    /// The object on the sensor's field (what a reconstruction should return).
+    pub truth: Array2<f64>,
+    /// Counts and the reconstruction's model (sensor with edges).
+    pub problem: Problem,
+}
+
+/// Simulates `image` through `setup`: the object on a square grid of side
+/// `object_px` (>= the sensor), the sensor seeing its centre.
+pub fn simulate_case(
+    image: &BenchImage,
+    setup: &Setup,
+    object_px: usize,
+    seed: u64,
+) -> Result<BenchCase, ReportError> {
+    let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
+    let (oy, ox) = ((object_px - h) / 2, (object_px - w) / 2);
+    let object = match &image.file {
+        Some(path) => Scene::File(path.clone()).render(object_px, object_px)?,
+        None => {
+            let mut full = Array2::zeros((object_px, object_px));
+            full.slice_mut(s![oy..oy + h, ox..ox + w])
+                .assign(&Scene::parse(&image.name).render(h, w)?);
+            full
+        }
+    };
+    let mut wide = *setup;
+    wide.sensor.height_px = object_px;
+    wide.sensor.width_px = object_px;
+    wide.sensor.fov_cm = setup.sensor.fov_cm * object_px as f64 / w as f64;
+    let sim_kernels = KernelStack::build(&wide, Sampling::Integrated)?;
+    let reach = sim_kernels
+        .kept_bins()
+        .map(|b| b.support_radius_px)
+        .max()
+        .unwrap_or(0);
+    if reach > oy.min(ox) {
+        return Err(ReportError::Input(format!(
+            "object grid {object_px} px leaves {} px around the sensor, less than the kernels' support {reach} px",
+            oy.min(ox)
+        )));
+    }
+    let sim = ForwardModel::new(&sim_kernels, Boundary::Periodic);
+    let expected = sim.expected(object.view()).counts;
+    let window = expected.slice(s![.., oy..oy + h, ox..ox + w]).to_owned();
+    let counts = poisson_counts(&window, seed);
+    let kernels = KernelStack::build(setup, Sampling::Integrated)?;
+    let problem = Problem {
+        model: ForwardModel::new(&kernels, Boundary::Sensor),
+        counts,
+        bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
+        setup: *setup,
+        left_out: Vec::new(),
+    };
+    Ok(BenchCase {
+        truth: object.slice(s![oy..oy + h, ox..ox + w]).to_owned(),
+        problem,
+    })
+}
+
+/// One method's result on one case.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchRow {
+    /// Image name.
+    pub image: String,
+    /// `tuning` or `held-out`.
+    pub split: String,
+    /// Scene category.
+    pub category: String,
+    /// Light level relative to the setup's budget.
+    pub level: f64,
+    /// Method label (`pnp split ffdnet`, `rl-sum`, ...).
+    pub method: String,
+    /// PSNR of the output (dB).
+    pub psnr: f64,
+    /// SSIM of the output.
+    pub ssim: f64,
+    /// Wall time (s).
+    pub wall_s: f64,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Best PSNR over the iterations, chosen with the truth (dB).
+    pub best_psnr: f64,
+    /// Iteration of that best PSNR.
+    pub best_iteration: usize,
+    /// Output deviance minus its expectation under Poisson noise, in noise
+    /// standard deviations (PnP only).
+    pub deviance_z: Option<f64>,
+}
+
+/// A PnP configuration of the benchmark.
+pub struct PnpEntry<'a> {
+    /// Label used in the rows.
+    pub label: String,
+    /// Method (`Pnp` or `PnpSum`).
+    pub method: Method,
+    /// Solver.
+    pub solver: Solver,
+    /// Prior.
+    pub denoiser: &'a dyn Denoiser,
+}
+
+/// Runs every PnP entry and Richardson-Lucy on the time-summed stack
+/// (`rl_iters` iterations: the output at `opts.rl_iters` is RL's default,
+/// the best iteration by truth its oracle) on one case. `on_trace` gets each
+/// PnP trace (PSNR against wall time) with its label.
+pub fn run_case(
+    image: &BenchImage,
+    level: f64,
+    case: &BenchCase,
+    entries: &[PnpEntry],
+    opts: &MethodOptions,
+    rl_iters: usize,
+    mut on_trace: impl FnMut(&str, &Trace),
+) -> Result<Vec<BenchRow>, ReportError> {
+    let truth = case.truth.view();
+    let row = |method: String, image_out: ArrayView2<f64>, trace: &Trace| {
+        let last = trace.rows.last().expect("every method records a row");
+        let best = trace.best_psnr().expect("truth is known");
+        let output_iteration = trace
+            .notes
+            .iter()
+            .find_map(|n| n.strip_prefix("output: iteration "))
+            .and_then(|n| n.parse::<usize>().ok())
+            .unwrap_or(last.iteration);
+        let out_row = trace.rows.iter().find(|r| r.iteration == output_iteration);
+        BenchRow {
+            image: image.name.clone(),
+            split: image.split.clone(),
+            category: image.category.clone(),
+            level,
+            method,
+            psnr: metrics::psnr(image_out, truth),
+            ssim: metrics::ssim(image_out, truth),
+            wall_s: last.wall_s,
+            iterations: last.iteration,
+            best_psnr: best.psnr.unwrap_or(f64::NAN),
+            best_iteration: best.iteration,
+            deviance_z: out_row
+                .and_then(|r| Some((r.deviance? - r.expected_deviance?) / r.deviance_sd?)),
+        }
+    };
+    let mut rows = Vec::new();
+    for e in entries {
+        let mut o = *opts;
+        o.solver = e.solver;
+        let r = run_method(
+            &case.problem,
+            e.method,
+            None,
+            e.denoiser,
+            &o,
+            Some(truth),
+            |_| {},
+        )?;
+        on_trace(&e.label, &r.trace);
+        rows.push(row(e.label.clone(), r.image.view(), &r.trace));
+    }
+    let mut o = *opts;
+    o.rl_iters = rl_iters.max(opts.rl_iters);
+    let rl = run_method(
+        &case.problem,
+        Method::RlSum,
+        None,
+        entries
+            .first()
+            .map_or(&crate::denoise::Identity as &dyn Denoiser, |e| e.denoiser),
+        &o,
+        Some(truth),
+        |_| {},
+    )?;
+    let mut best = row(
+        "rl-sum (best iteration by truth)".into(),
+        rl.image.view(),
+        &rl.trace,
+    );
+    best.psnr = best.best_psnr;
+    best.iterations = best.best_iteration;
+    let at_default = rl
+        .trace
+        .rows
+        .iter()
+        .find(|r| r.iteration == opts.rl_iters)
+        .expect("RL ran at least its default iterations");
+    let mut default = best.clone();
+    default.method = format!("rl-sum ({} iterations)", opts.rl_iters);
+    default.psnr = at_default.psnr.unwrap_or(f64::NAN);
+    default.ssim = at_default.ssim.unwrap_or(f64::NAN);
+    default.wall_s = at_default.wall_s;
+    default.iterations = opts.rl_iters;
+    rows.push(default);
+    best.wall_s = rl.trace.rows[best.best_iteration.min(rl.trace.rows.len() - 1)].wall_s;
+    rows.push(best);
+    Ok(rows)
+}
+
+/// CSV of all rows.
+pub fn rows_csv(rows: &[BenchRow]) -> String {
+    let mut csv = String::from(
+        "image,split,category,level,method,psnr,ssim,wall_s,iterations,best_psnr,best_iteration,deviance_z\n",
+    );
+    for r in rows {
+        writeln!(
+            csv,
+            "{},{},\"{}\",{},\"{}\",{:.4},{:.5},{:.3},{},{:.4},{},{}",
+            r.image,
+            r.split,
+            r.category,
+            r.level,
+            r.method,
+            r.psnr,
+            r.ssim,
+            r.wall_s,
+            r.iterations,
+            r.best_psnr,
+            r.best_iteration,
+            r.deviance_z.map_or(String::new(), |z| format!("{z:.2}"))
+        )
+        .expect("String");
+    }
+    csv
+}
+
+/// Markdown summary: per split and level, each method's mean PSNR and time,
+/// and the margins of `headline` over RL-sum's best iteration (mean, worst)
+/// and over RL-sum's default output (worst).
+pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> String {
+    let mut md = String::new();
+    let mut groups: Vec<(String, f64)> = Vec::new();
+    for r in rows {
+        if !groups.iter().any(|(s, l)| *s == r.split && *l == r.level) {
+            groups.push((r.split.clone(), r.level));
+        }
+    }
+    for (split, level) in groups {
+        let sel: Vec<&BenchRow> = rows
+            .iter()
+            .filter(|r| r.split == split && r.level == level)
+            .collect();
+        let mut methods: Vec<&str> = Vec::new();
+        for r in &sel {
+            if !methods.contains(&r.method.as_str()) {
+                methods.push(&r.method);
+            }
+        }
+        let images: Vec<&str> = {
+            let mut v: Vec<&str> = Vec::new();
+            for r in &sel {
+                if !v.contains(&r.image.as_str()) {
+                    v.push(&r.image);
+                }
+            }
+            v
+        };
+        writeln!(
+            md,
+            "\n### {split}, light level {level}x ({} images)\n",
+            images.len()
+        )
+        .expect("String");
+        md.push_str("| method | mean PSNR (dB) | mean SSIM | median time (s) | max time (s) |\n|---|---|---|---|---|\n");
+        for m in &methods {
+            let of: Vec<&&BenchRow> = sel.iter().filter(|r| r.method == *m).collect();
+            let mean =
+                |f: fn(&BenchRow) -> f64| of.iter().map(|r| f(r)).sum::<f64>() / of.len() as f64;
+            let mut times: Vec<f64> = of.iter().map(|r| r.wall_s).collect();
+            times.sort_by(f64::total_cmp);
+            writeln!(
+                md,
+                "| {m} | {:.2} | {:.4} | {:.2} | {:.2} |",
+                mean(|r| r.psnr),
+                mean(|r| r.ssim),
+                times[times.len() / 2],
+                times.last().copied().unwrap_or(0.0)
+            )
+            .expect("String");
+        }
+        let find = |img: &str, m: &str| sel.iter().find(|r| r.image == img && r.method == m);
+        let best_label = "rl-sum (best iteration by truth)";
+        let mut margins = Vec::new();
+        md.push_str(&format!(
+            "\n| image | {headline} (dB) | rl-sum best (dB) | margin | rl-sum default (dB) | margin | deviance z | time (s) |\n|---|---|---|---|---|---|---|---|\n"
+        ));
+        for img in &images {
+            let (Some(p), Some(b), Some(d)) = (
+                find(img, headline),
+                find(img, best_label),
+                find(img, rl_default),
+            ) else {
+                continue;
+            };
+            margins.push((p.psnr - b.psnr, p.psnr - d.psnr, p.wall_s));
+            writeln!(
+                md,
+                "| {img} | {:.2} | {:.2} | {:+.2} | {:.2} | {:+.2} | {} | {:.2} |",
+                p.psnr,
+                b.psnr,
+                p.psnr - b.psnr,
+                d.psnr,
+                p.psnr - d.psnr,
+                p.deviance_z.map_or("-".into(), |z| format!("{z:.1}")),
+                p.wall_s
+            )
+            .expect("String");
+        }
+        if !margins.is_empty() {
+            let n = margins.len() as f64;
+            let mean_best = margins.iter().map(|m| m.0).sum::<f64>() / n;
+            let worst_best = margins.iter().map(|m| m.0).fold(f64::INFINITY, f64::min);
+            let worst_default = margins.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
+            let mut times: Vec<f64> = margins.iter().map(|m| m.2).collect();
+            times.sort_by(f64::total_cmp);
+            let median = times[times.len() / 2];
+            writeln!(
+                md,
+                "\n{headline}: margin over RL-sum's best iteration mean {mean_best:+.2} dB, worst {worst_best:+.2} dB; over RL-sum's default output worst {worst_default:+.2} dB; time median {median:.2} s, max {:.2} s ({:.2}x the median)",
+                times.last().copied().unwrap_or(0.0),
+                times.last().copied().unwrap_or(0.0) / median
+            )
+            .expect("String");
+        }
+    }
+    md
+}
