@@ -44,10 +44,22 @@ impl Fft2 {
 
     /// Forward transform of a row-major `height * width` image.
     pub fn forward(&self, image: &[f64]) -> Vec<Complex64> {
+        let mut spectrum = vec![Complex64::default(); self.spectrum_len()];
+        self.forward_into(image, &mut spectrum);
+        spectrum
+    }
+
+    /// Forward transform into a caller's buffer of [`Self::spectrum_len`]
+    /// values (hot loops reuse their buffers).
+    pub fn forward_into(&self, image: &[f64], spectrum: &mut [Complex64]) {
         let (h, w) = (self.height, self.width);
         assert_eq!(image.len(), h * w, "image size does not match the plan");
         let wc = w / 2 + 1;
-        let mut spectrum = vec![Complex64::default(); wc * h];
+        assert_eq!(
+            spectrum.len(),
+            wc * h,
+            "spectrum size does not match the plan"
+        );
         let mut row = vec![0.0; w];
         let mut row_spec = vec![Complex64::default(); wc];
         let mut scratch = self.row_forward.make_scratch_vec();
@@ -60,13 +72,20 @@ impl Fft2 {
                 spectrum[kx * h + y] = *v;
             }
         }
-        self.col_forward.process(&mut spectrum);
-        spectrum
+        self.col_forward.process(spectrum);
     }
 
     /// Inverse transform, normalised so that `inverse(forward(x)) == x`.
     /// Consumes the spectrum as scratch.
     pub fn inverse(&self, mut spectrum: Vec<Complex64>) -> Vec<f64> {
+        let mut out = vec![0.0; self.height * self.width];
+        self.inverse_into(&mut spectrum, &mut out);
+        out
+    }
+
+    /// Inverse transform into a caller's buffer; the spectrum is used as
+    /// scratch and left changed.
+    pub fn inverse_into(&self, spectrum: &mut [Complex64], out: &mut [f64]) {
         let (h, w) = (self.height, self.width);
         let wc = w / 2 + 1;
         assert_eq!(
@@ -74,9 +93,9 @@ impl Fft2 {
             wc * h,
             "spectrum size does not match the plan"
         );
-        self.col_inverse.process(&mut spectrum);
+        assert_eq!(out.len(), h * w, "image size does not match the plan");
+        self.col_inverse.process(spectrum);
         let scale = 1.0 / (h * w) as f64;
-        let mut out = vec![0.0; h * w];
         let mut row_spec = vec![Complex64::default(); wc];
         let mut scratch = self.row_inverse.make_scratch_vec();
         for (y, dst) in out.chunks_exact_mut(w).enumerate() {
@@ -93,7 +112,6 @@ impl Fft2 {
                 .expect("buffer sizes come from the plan");
             dst.iter_mut().for_each(|v| *v *= scale);
         }
-        out
     }
 }
 

@@ -90,7 +90,7 @@ fn exact(mu: f64) -> (f64, f64) {
 impl ExpectedDeviance {
     /// `(f(mu), g(mu))`: mean and variance of one point's deviance,
     /// interpolated (relative error below 1e-5 on the table range).
-    pub fn moments(&self, mu: f64) -> (f64, f64) {
+    fn moments(&self, mu: f64) -> (f64, f64) {
         if mu.is_nan() || mu <= 0.0 {
             (0.0, 0.0)
         } else if mu < TABLE_LO {
@@ -108,6 +108,15 @@ impl ExpectedDeviance {
             let (a, b) = (self.table[i], self.table[i + 1]);
             (a.0 * (1.0 - t) + b.0 * t, a.1 * (1.0 - t) + b.1 * t)
         }
+    }
+
+    /// One data point: its deviance `2 [m log(m/y) - (m - y)]` for count `m`
+    /// and mean `y`, and the mean and variance Poisson noise gives it.
+    pub fn point(&self, m: f64, y: f64) -> (f64, f64, f64) {
+        let y = y.max(1e-300);
+        let d = if m > 0.0 { m * (m / y).ln() } else { 0.0 } - (m - y);
+        let (f, g) = self.moments(y);
+        (2.0 * d, f, g)
     }
 
     /// Deviance of `estimate` (on the model's grid) against `counts` (bins
@@ -130,13 +139,12 @@ impl ExpectedDeviance {
                 let y = model.apply_spectrum(k, &spec);
                 let (mut d, mut e, mut var) = (0.0, 0.0, 0.0);
                 for (&mj, &yj) in m.iter().zip(&y) {
-                    let yj = yj.max(1e-300);
-                    d += if mj > 0.0 { mj * (mj / yj).ln() } else { 0.0 } - (mj - yj);
-                    let (f, g) = self.moments(yj);
+                    let (dj, f, g) = self.point(mj, yj);
+                    d += dj;
                     e += f;
                     var += g;
                 }
-                (2.0 * d, e, var)
+                (d, e, var)
             })
             .reduce(|| (0.0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
         DevianceCheck {

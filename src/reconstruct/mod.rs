@@ -87,6 +87,23 @@ pub fn validate_counts(counts: &Array3<f64>) -> Result<(), ReconstructError> {
     Ok(())
 }
 
+/// Checks the counts of a PnP run (finite, >= 0, one image per listed bin)
+/// and names the method: `pnp` on several bins, `pnp-slice` on one.
+pub(crate) fn pnp_method(
+    counts: &Array3<f64>,
+    bins: &[usize],
+) -> Result<&'static str, ReconstructError> {
+    validate_counts(counts)?;
+    if counts.shape()[0] != bins.len() {
+        return Err(ReconstructError::Shape(format!(
+            "{} count images for {} kernels",
+            counts.shape()[0],
+            bins.len()
+        )));
+    }
+    Ok(if bins.len() == 1 { "pnp-slice" } else { "pnp" })
+}
+
 /// Least-squares flat object for the data: total counts over (mass x pixels).
 pub fn flat_level(total_counts: f64, mass: f64, pixels: usize) -> f64 {
     if mass > 0.0 {

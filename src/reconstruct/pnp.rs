@@ -59,8 +59,7 @@ use super::discrepancy::ExpectedDeviance;
 use super::likelihood::PoissonLikelihood;
 use super::trace::{Trace, TraceRow};
 use super::{
-    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, score,
-    validate_counts,
+    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, pnp_method, score,
 };
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::forward::ForwardModel;
@@ -238,15 +237,7 @@ pub fn pnp_admm(
     truth: Option<ArrayView2<f64>>,
     mut on_iter: impl FnMut(&TraceRow),
 ) -> Result<Reconstruction, ReconstructError> {
-    validate_counts(counts)?;
-    if counts.shape()[0] != bins.len() {
-        return Err(ReconstructError::Shape(format!(
-            "{} count images for {} kernels",
-            counts.shape()[0],
-            bins.len()
-        )));
-    }
-    let method = if bins.len() == 1 { "pnp-slice" } else { "pnp" };
+    let method = pnp_method(counts, bins)?;
     let start = Instant::now();
     let (h, w) = model.sensor_shape();
     let (gh, gw) = model.grid_shape();

@@ -63,8 +63,7 @@ use rustfft::num_complex::Complex64;
 use super::discrepancy::ExpectedDeviance;
 use super::trace::{Trace, TraceRow};
 use super::{
-    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, score,
-    validate_counts,
+    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, pnp_method, score,
 };
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::forward::ForwardModel;
@@ -125,6 +124,9 @@ struct BinState {
     ho: Vec<f64>,
     z: Vec<f64>,
     a: Vec<f64>,
+    /// Reused buffers: the grid image `z_k - a_k` and a spectrum.
+    q: Vec<f64>,
+    spec: Vec<Complex64>,
 }
 
 /// Minimiser of `z - m log z + rho/2 (z - t)^2` over `z >= 0`: the positive
@@ -153,15 +155,7 @@ pub fn pnp_split(
     truth: Option<ArrayView2<f64>>,
     mut on_iter: impl FnMut(&TraceRow),
 ) -> Result<Reconstruction, ReconstructError> {
-    validate_counts(counts)?;
-    if counts.shape()[0] != bins.len() {
-        return Err(ReconstructError::Shape(format!(
-            "{} count images for {} kernels",
-            counts.shape()[0],
-            bins.len()
-        )));
-    }
-    let method = if bins.len() == 1 { "pnp-slice" } else { "pnp" };
+    let method = pnp_method(counts, bins)?;
     let start = Instant::now();
     let (h, w) = model.sensor_shape();
     let (gh, gw) = model.grid_shape();
@@ -209,6 +203,8 @@ pub fn pnp_split(
                 rho: opts.rho / (model.mass(k) * flat),
                 z: model.crop_vec(&ho),
                 a: vec![0.0; h * w],
+                q: vec![0.0; n],
+                spec: vec![Complex64::default(); fft.spectrum_len()],
                 ho,
             }
         })
@@ -235,30 +231,25 @@ pub fn pnp_split(
     let (oy, ox) = model.sensor_offset();
     for it in 1..=opts.max_iters {
         // o-update: exact, in the Fourier domain.
-        let parts: Vec<Vec<Complex64>> = states
-            .par_iter()
-            .map(|s| {
-                // z_k - a_k on the window, H_k o (the free z) outside it.
-                let mut q = s.ho.clone();
-                for r in 0..h {
-                    let row = &mut q[(oy + r) * gw + ox..(oy + r) * gw + ox + w];
-                    let (z, a) = (&s.z[r * w..(r + 1) * w], &s.a[r * w..(r + 1) * w]);
-                    for ((qj, zj), aj) in row.iter_mut().zip(z).zip(a) {
-                        *qj = zj - aj;
-                    }
+        states.par_iter_mut().for_each(|s| {
+            // z_k - a_k on the window, H_k o (the free z) outside it.
+            s.q.copy_from_slice(&s.ho);
+            for r in 0..h {
+                let row = &mut s.q[(oy + r) * gw + ox..(oy + r) * gw + ox + w];
+                let (z, a) = (&s.z[r * w..(r + 1) * w], &s.a[r * w..(r + 1) * w]);
+                for ((qj, zj), aj) in row.iter_mut().zip(z).zip(a) {
+                    *qj = zj - aj;
                 }
-                let spec = model.spectrum(s.bin);
-                fft.forward(&q)
-                    .iter()
-                    .zip(spec)
-                    .map(|(x, k)| x * k.conj() * s.rho)
-                    .collect()
-            })
-            .collect();
+            }
+            fft.forward_into(&s.q, &mut s.spec);
+            for (x, k) in s.spec.iter_mut().zip(model.spectrum(s.bin)) {
+                *x = *x * k.conj() * s.rho;
+            }
+        });
         let vb: Vec<f64> = v.iter().zip(&b).map(|(vj, bj)| vj - bj).collect();
         let mut numerator: Vec<Complex64> = fft.forward(&vb).iter().map(|x| x * gamma).collect();
-        for p in &parts {
-            numerator.iter_mut().zip(p).for_each(|(a, x)| *a += x);
+        for s in &states {
+            numerator.iter_mut().zip(&s.spec).for_each(|(a, x)| *a += x);
         }
         let o_spec: Vec<Complex64> = numerator
             .iter()
@@ -274,13 +265,14 @@ pub fn pnp_split(
         let sums: Vec<(f64, f64, f64)> = states
             .par_iter_mut()
             .map(|s| {
-                s.ho = fft.inverse(
-                    o_spec
-                        .iter()
-                        .zip(model.spectrum(s.bin))
-                        .map(|(a, k)| a * k)
-                        .collect(),
-                );
+                for (x, (a, k)) in s
+                    .spec
+                    .iter_mut()
+                    .zip(o_spec.iter().zip(model.spectrum(s.bin)))
+                {
+                    *x = a * k;
+                }
+                fft.inverse_into(&mut s.spec, &mut s.ho);
                 let (mut d, mut e, mut var) = (0.0, 0.0, 0.0);
                 for r in 0..h {
                     let ho = &s.ho[(oy + r) * gw + ox..(oy + r) * gw + ox + w];
@@ -294,15 +286,14 @@ pub fn pnp_split(
                         *z = poisson_prox(m, y + *a, s.rho);
                         *a += y - *z;
                         if at_floor {
-                            let y = y.max(1e-300);
-                            d += if m > 0.0 { m * (m / y).ln() } else { 0.0 } - (m - y);
-                            let (f, gg) = deviance.moments(y);
+                            let (dj, f, g) = deviance.point(m, y);
+                            d += dj;
                             e += f;
-                            var += gg;
+                            var += g;
                         }
                     }
                 }
-                (2.0 * d, e, var)
+                (d, e, var)
             })
             .collect();
         // Summed in bin order, so that runs are reproducible.
