@@ -113,6 +113,10 @@ impl Default for SplitOptions {
     }
 }
 
+/// Share of the total kernel mass below which a bin without a single count
+/// is left out (its data term moves the answer by less than this).
+pub const NEGLIGIBLE_BIN: f64 = 1e-4;
+
 /// Per-bin state of the data split, on the sensor window except `ho`.
 struct BinState {
     /// Position of the bin in the model.
@@ -163,21 +167,40 @@ pub fn pnp_split(
     let fft = model.fft();
     let mut trace = Trace::new(method);
     trace.prior = Some(denoiser.name());
-    trace.notes.push(format!(
-        "solver: exact splitting (P4IP), {} FFTs and one denoiser call per iteration",
-        2 * bins.len() + 2
-    ));
     trace.notes.push(grid_note(model));
     let total: f64 = counts.sum();
     let total_mass: f64 = bins.iter().map(|&k| model.mass(k)).sum();
     if total == 0.0 {
         return Ok(no_photons(trace, (h, w), truth));
     }
+    // Bins without a count whose kernels carry a negligible share of the
+    // light (the first picoseconds) cannot change the answer: left out.
+    let used: Vec<(usize, usize)> = bins
+        .iter()
+        .enumerate()
+        .filter(|&(i, &k)| {
+            let mass = model.mass(k);
+            mass > 0.0
+                && (mass >= NEGLIGIBLE_BIN * total_mass
+                    || counts.index_axis(Axis(0), i).iter().any(|&m| m > 0.0))
+        })
+        .map(|(i, &k)| (i, k))
+        .collect();
+    if used.len() < bins.len() {
+        trace.notes.push(format!(
+            "left out {} bin(s) without a count whose kernels carry less than {NEGLIGIBLE_BIN:e} of the light each",
+            bins.len() - used.len()
+        ));
+    }
+    trace.notes.push(format!(
+        "solver: exact splitting (P4IP), {} FFTs and one denoiser call per iteration",
+        2 * used.len() + 2
+    ));
     let flat = flat_level(total, total_mass, h * w);
     // Precision of the data split per frequency, without rho:
     // sum_k |K_k|^2 / (mass_k o_flat).
     let mut kernel_power = vec![0.0f64; fft.spectrum_len()];
-    for &k in bins {
+    for &(_, k) in &used {
         let scale = 1.0 / (model.mass(k) * flat);
         kernel_power
             .iter_mut()
@@ -186,10 +209,10 @@ pub fn pnp_split(
     }
     let gamma_unit = total_mass / flat;
     let o0_spec = fft.forward(&vec![flat; n]);
-    let mut states: Vec<BinState> = counts
-        .axis_iter(Axis(0))
-        .zip(bins)
-        .map(|(m, &k)| {
+    let mut states: Vec<BinState> = used
+        .iter()
+        .map(|&(i, k)| {
+            let m = counts.index_axis(Axis(0), i);
             let ho = fft.inverse(
                 o0_spec
                     .iter()
