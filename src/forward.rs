@@ -188,7 +188,7 @@ impl ForwardModel {
     }
 
     /// A row-major grid image that is 1 in the sensor window and 0 outside.
-    pub fn window_mask(&self) -> Vec<f64> {
+    fn window_mask(&self) -> Vec<f64> {
         let (gh, gw) = self.grid;
         (0..gh * gw)
             .map(|i| f64::from(u8::from(self.in_window(i / gw, i % gw))))

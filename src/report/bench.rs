@@ -254,9 +254,7 @@ pub fn run_case(
         &case.problem,
         Method::RlSum,
         None,
-        entries
-            .first()
-            .map_or(&crate::denoise::Identity as &dyn Denoiser, |e| e.denoiser),
+        &crate::denoise::Identity,
         &o,
         Some(truth),
         |_| {},
