@@ -44,16 +44,6 @@ pub enum Boundary {
     Periodic,
 }
 
-impl Boundary {
-    /// Name as on the command line and in metadata.
-    pub fn name(self) -> &'static str {
-        match self {
-            Boundary::Sensor => "sensor",
-            Boundary::Periodic => "periodic",
-        }
-    }
-}
-
 /// Convolution with cached kernel spectra on an object grid that holds the
 /// sensor window.
 #[derive(Clone)]

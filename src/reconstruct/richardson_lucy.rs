@@ -51,13 +51,7 @@ pub fn richardson_lucy(
         "denominator guarded at {guard:.3e} ({DENOMINATOR_GUARD:e} x mean count); 4 FFTs per iteration; {}",
         grid_note(model)
     ));
-    let crop = |o: &[f64]| {
-        model.crop(
-            Array2::from_shape_vec((gh, gw), o.to_vec())
-                .expect("shape")
-                .view(),
-        )
-    };
+    let crop = |o: &[f64]| Array2::from_shape_vec((h, w), model.crop_vec(o)).expect("shape");
     for it in 1..=iterations {
         let y = op.apply(&o);
         let mut nll = 0.0;

@@ -348,7 +348,6 @@ pub fn pnp_split(
             dual_residual: Some(gamma * (dual / n as f64).sqrt()),
             sigma: Some(sigma),
             lambda: Some(gamma),
-            objective: None,
             deviance: at_floor.then_some(dev),
             expected_deviance: at_floor.then_some(expected),
             deviance_sd: at_floor.then_some(variance.sqrt()),

@@ -30,6 +30,14 @@ use crate::scene::Scene;
 
 use super::ReportError;
 
+/// Label of Richardson-Lucy's best iteration chosen with the truth.
+pub const RL_BEST: &str = "rl-sum (best iteration by truth)";
+
+/// Label of Richardson-Lucy's output after its default `iterations`.
+pub fn rl_default_label(iterations: usize) -> String {
+    format!("rl-sum ({iterations} iterations)")
+}
+
 /// One image of the benchmark.
 #[derive(Debug, Clone)]
 pub struct BenchImage {
@@ -87,6 +95,37 @@ pub fn read_manifest(dir: &Path) -> Result<Vec<BenchImage>, ReportError> {
         });
     }
     Ok(images)
+}
+
+/// The images of `split` (`tuning`, `held-out` or `all`), only those named
+/// in `only` when it is not empty.
+pub fn select(
+    images: Vec<BenchImage>,
+    split: &str,
+    only: &[String],
+) -> Result<Vec<BenchImage>, ReportError> {
+    if !["tuning", "held-out", "all"].contains(&split) {
+        return Err(ReportError::Input(format!(
+            "split `{split}` is not tuning, held-out or all"
+        )));
+    }
+    Ok(images
+        .into_iter()
+        .filter(|i| split == "all" || i.split == split)
+        .filter(|i| only.is_empty() || only.contains(&i.name))
+        .collect())
+}
+
+/// `base` with its light budget multiplied by `level` (> 0).
+pub fn level_setup(base: &Setup, level: f64) -> Result<Setup, ReportError> {
+    if !(level > 0.0 && level.is_finite()) {
+        return Err(ReportError::Input(format!(
+            "light level {level} must be a positive number"
+        )));
+    }
+    let mut setup = *base;
+    setup.total_photons *= level;
+    Ok(setup)
 }
 
 /// A simulated measurement of one image at one light level.
@@ -192,6 +231,36 @@ pub struct PnpEntry<'a> {
     pub denoiser: &'a dyn Denoiser,
 }
 
+/// The PnP runs of the benchmark: every solver with every named prior on
+/// the whole stack, and with `time_summed` the first solver and prior on
+/// the time-summed stack. The first entry is the headline.
+pub fn pnp_entries<'a>(
+    solvers: &[Solver],
+    priors: &'a [(String, Box<dyn Denoiser>)],
+    time_summed: bool,
+) -> Vec<PnpEntry<'a>> {
+    let mut entries = Vec::new();
+    for &solver in solvers {
+        for (name, d) in priors {
+            entries.push(PnpEntry {
+                label: format!("pnp {} {name}", solver.name()),
+                method: Method::Pnp,
+                solver,
+                denoiser: d.as_ref(),
+            });
+        }
+    }
+    if time_summed && let (Some(&solver), Some((name, d))) = (solvers.first(), priors.first()) {
+        entries.push(PnpEntry {
+            label: format!("pnp-sum {} {name}", solver.name()),
+            method: Method::PnpSum,
+            solver,
+            denoiser: d.as_ref(),
+        });
+    }
+    entries
+}
+
 /// Runs every PnP entry and Richardson-Lucy on the time-summed stack
 /// (`rl_iters` iterations: the output at `opts.rl_iters` is RL's default,
 /// the best iteration by truth its oracle) on one case. `on_trace` gets each
@@ -259,13 +328,12 @@ pub fn run_case(
         Some(truth),
         |_| {},
     )?;
-    let mut best = row(
-        "rl-sum (best iteration by truth)".into(),
-        rl.image.view(),
-        &rl.trace,
-    );
+    let mut best = row(RL_BEST.into(), rl.image.view(), &rl.trace);
+    let best_row = &rl.trace.rows[best.best_iteration.min(rl.trace.rows.len() - 1)];
     best.psnr = best.best_psnr;
+    best.ssim = best_row.ssim.unwrap_or(f64::NAN);
     best.iterations = best.best_iteration;
+    best.wall_s = best_row.wall_s;
     let at_default = rl
         .trace
         .rows
@@ -273,13 +341,12 @@ pub fn run_case(
         .find(|r| r.iteration == opts.rl_iters)
         .expect("RL ran at least its default iterations");
     let mut default = best.clone();
-    default.method = format!("rl-sum ({} iterations)", opts.rl_iters);
+    default.method = rl_default_label(opts.rl_iters);
     default.psnr = at_default.psnr.unwrap_or(f64::NAN);
     default.ssim = at_default.ssim.unwrap_or(f64::NAN);
     default.wall_s = at_default.wall_s;
     default.iterations = opts.rl_iters;
     rows.push(default);
-    best.wall_s = rl.trace.rows[best.best_iteration.min(rl.trace.rows.len() - 1)].wall_s;
     rows.push(best);
     Ok(rows)
 }
@@ -313,8 +380,9 @@ pub fn rows_csv(rows: &[BenchRow]) -> String {
 
 /// Markdown summary: per split and level, each method's mean PSNR and time,
 /// and the margins of `headline` over RL-sum's best iteration (mean, worst)
-/// and over RL-sum's default output (worst).
-pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> String {
+/// and over RL-sum's output after its default `rl_iters` (worst).
+pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_iters: usize) -> String {
+    let rl_default = rl_default_label(rl_iters);
     let mut md = String::new();
     let mut groups: Vec<(String, f64)> = Vec::new();
     for r in rows {
@@ -366,7 +434,6 @@ pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> 
             .expect("String");
         }
         let find = |img: &str, m: &str| sel.iter().find(|r| r.image == img && r.method == m);
-        let best_label = "rl-sum (best iteration by truth)";
         let mut margins = Vec::new();
         md.push_str(&format!(
             "\n| image | {headline} (dB) | rl-sum best (dB) | margin | rl-sum default (dB) | margin | deviance z | time (s) |\n|---|---|---|---|---|---|---|---|\n"
@@ -374,8 +441,8 @@ pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> 
         for img in &images {
             let (Some(p), Some(b), Some(d)) = (
                 find(img, headline),
-                find(img, best_label),
-                find(img, rl_default),
+                find(img, RL_BEST),
+                find(img, &rl_default),
             ) else {
                 continue;
             };

@@ -3,11 +3,13 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use clap::ValueEnum;
 use scatterscope::config::PhysicsArgs;
 use scatterscope::denoise::Denoiser;
-use scatterscope::reconstruct::method::{Method, Solver};
+use scatterscope::reconstruct::method::Solver;
 use scatterscope::report::bench::{
-    PnpEntry, read_manifest, rows_csv, run_case, simulate_case, summary_markdown,
+    level_setup, pnp_entries, read_manifest, rows_csv, run_case, select, simulate_case,
+    summary_markdown,
 };
 
 use crate::recon_args::{DenoiserChoice, PriorArgs, ReconArgs};
@@ -69,21 +71,18 @@ pub struct BenchReconArgs {
 pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
     let base = args.physics.resolve()?;
     let opts = args.recon.options()?;
-    anyhow::ensure!(
-        ["tuning", "held-out", "all"].contains(&args.split.as_str()),
-        "--split = {} must be tuning, held-out or all",
-        args.split
-    );
-    let images: Vec<_> = read_manifest(&args.images)?
-        .into_iter()
-        .filter(|i| args.split == "all" || i.split == args.split)
-        .filter(|i| args.only.is_empty() || args.only.contains(&i.name))
-        .collect();
+    let images =
+        select(read_manifest(&args.images)?, &args.split, &args.only).context("--split")?;
     anyhow::ensure!(
         !images.is_empty(),
         "no image of {} matches",
         args.images.display()
     );
+    let setups = args
+        .levels
+        .iter()
+        .map(|&level| Ok((level, level_setup(&base, level).context("--levels")?)))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let priors: Vec<(String, Box<dyn Denoiser>)> = args
         .priors
         .iter()
@@ -92,30 +91,15 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
                 denoiser: p,
                 ..args.recon.prior.clone()
             };
-            Ok((format!("{p:?}").to_lowercase(), prior.denoiser()?))
+            let name = p
+                .to_possible_value()
+                .expect("every prior has a name")
+                .get_name()
+                .to_string();
+            Ok((name, prior.denoiser()?))
         })
         .collect::<anyhow::Result<_>>()?;
-    let mut entries = Vec::new();
-    for &solver in &args.solvers {
-        for (name, d) in &priors {
-            entries.push(PnpEntry {
-                label: format!("pnp {} {name}", solver.name()),
-                method: Method::Pnp,
-                solver,
-                denoiser: d.as_ref(),
-            });
-        }
-    }
-    if !args.no_sum
-        && let (Some(&solver), Some((name, d))) = (args.solvers.first(), priors.first())
-    {
-        entries.push(PnpEntry {
-            label: format!("pnp-sum {} {name}", solver.name()),
-            method: Method::PnpSum,
-            solver,
-            denoiser: d.as_ref(),
-        });
-    }
+    let entries = pnp_entries(&args.solvers, &priors, !args.no_sum);
     anyhow::ensure!(!entries.is_empty(), "no solver or prior given");
     let headline = entries[0].label.clone();
     let traces = args.out.join("traces");
@@ -123,13 +107,7 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
         .with_context(|| format!("creating output directory {}", traces.display()))?;
     let mut rows = Vec::new();
     for image in &images {
-        for &level in &args.levels {
-            anyhow::ensure!(
-                level > 0.0 && level.is_finite(),
-                "--levels: {level} must be positive"
-            );
-            let mut setup = base;
-            setup.total_photons *= level;
+        for &(level, setup) in &setups {
             let case = simulate_case(image, &setup, args.object_px, args.seed)?;
             let new = run_case(
                 image,
@@ -167,11 +145,7 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
             std::fs::write(args.out.join("rows.csv"), rows_csv(&rows))?;
         }
     }
-    let md = summary_markdown(
-        &rows,
-        &headline,
-        &format!("rl-sum ({} iterations)", opts.rl_iters),
-    );
+    let md = summary_markdown(&rows, &headline, opts.rl_iters);
     std::fs::write(args.out.join("summary.md"), &md)?;
     println!("{md}");
     println!(

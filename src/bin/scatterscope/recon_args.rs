@@ -163,6 +163,10 @@ impl ReconArgs {
             );
             Ok(())
         };
+        let finite = |name: &str, v: f64| {
+            anyhow::ensure!(v.is_finite(), "--{name} = {v} must be a finite number");
+            Ok(())
+        };
         positive("lambda0", self.lambda0)?;
         positive("rho", self.rho)?;
         positive("gamma", self.gamma)?;
@@ -172,16 +176,8 @@ impl ReconArgs {
             self.sigma0
         );
         positive("sigma-floor", self.sigma_floor)?;
-        anyhow::ensure!(
-            self.sigma_power.is_finite(),
-            "--sigma-power = {} must be a finite number",
-            self.sigma_power
-        );
-        anyhow::ensure!(
-            self.target_z.is_finite(),
-            "--target-z = {} must be a finite number",
-            self.target_z
-        );
+        finite("sigma-power", self.sigma_power)?;
+        finite("target-z", self.target_z)?;
         positive("beta", self.beta)?;
         positive("eps", self.eps)?;
         anyhow::ensure!(
