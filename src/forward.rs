@@ -203,6 +203,12 @@ impl ForwardModel {
         out
     }
 
+    /// Expected counts of a scene that fills the sensor's field and is dark
+    /// outside it (simulations and the mock device).
+    pub fn expected_scene(&self, scene: ArrayView2<f64>) -> Expected {
+        self.expected(self.embed(scene, 0.0).view())
+    }
+
     /// `H_k^T r` on the grid for `r` on the sensor window (row-major).
     pub fn adjoint(&self, k: usize, r: &[f64]) -> Vec<f64> {
         let prod = self

@@ -95,7 +95,7 @@ pub fn run_scene(
     let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
     let truth = scene.render(h, w)?;
     let model = ForwardModel::new(&kernels, boundary);
-    let expected = model.expected(model.embed(truth.view(), 0.0).view());
+    let expected = model.expected_scene(truth.view());
     let counts = poisson_counts(&expected.counts, seed);
     let problem = Problem {
         model,

@@ -233,9 +233,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     let mock_reference = mock.as_ref().map(|m| {
         // The mock's sensor has edges and its scene is dark outside it.
         let model = ForwardModel::new(&m.kernels, Boundary::Sensor);
-        let expected = model
-            .expected(model.embed(m.scene.view(), 0.0).view())
-            .counts;
+        let expected = model.expected_scene(m.scene.view()).counts;
         (expected, m.scene.clone())
     });
     let opened = open_device(&args.device, mock)?;

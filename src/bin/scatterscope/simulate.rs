@@ -67,7 +67,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let model = ForwardModel::new(&kernels, args.boundary);
     let t_spectra = t1.elapsed().as_secs_f64();
     let t2 = Instant::now();
-    let expected = model.expected(model.embed(truth.view(), 0.0).view());
+    let expected = model.expected_scene(truth.view());
     let t_forward = t2.elapsed().as_secs_f64();
     let t3 = Instant::now();
     let counts = poisson_counts(&expected.counts, args.seed);
