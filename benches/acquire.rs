@@ -16,6 +16,8 @@ use scatterscope::tags::raw::bin_batch;
 use scatterscope_mocks::{EmitterOptions, MockOptions};
 
 const EVENTS: u64 = 20_000_000;
+/// Photons of one replayed end-to-end run.
+const REPLAYED: u64 = 200_000_000;
 
 /// A stream of full batches: 256 x 256 pixels, 1 ps micro times within the
 /// 120 ps the paper's bins cover, about one photon per 20 syncs (wraps now
@@ -67,21 +69,34 @@ fn binner() -> Binner {
     Binner::new(window, map, None, FrameSelect::Sum)
 }
 
-fn mock_setup() -> MockSetup {
+fn mock_setup(device: MockOptions) -> MockSetup {
     let setup = Preset::Paper.setup();
     MockSetup {
         scene: Scene::parse("usaf").render(256, 256).unwrap(),
         kernels: KernelStack::build(&setup, Sampling::Integrated).unwrap(),
         emitter: EmitterOptions::default(),
-        device: MockOptions {
-            real_time: false,
-            max_photons: 4_000_000,
-            ..MockOptions::default()
-        },
+        device,
     }
 }
 
-fn run_mock(spec: &DeviceSpec) -> u64 {
+/// Unpaced: every photon drawn from the ST-PSF.
+fn drawn(photons: u64) -> MockOptions {
+    MockOptions {
+        real_time: false,
+        max_photons: photons,
+        ..MockOptions::default()
+    }
+}
+
+/// Unpaced replay of 16 drawn batches: the host path at full speed.
+fn replayed(photons: u64) -> MockOptions {
+    MockOptions {
+        replay_batches: 16,
+        ..drawn(photons)
+    }
+}
+
+fn run_mock(spec: &DeviceSpec, device: MockOptions) -> u64 {
     let setup = Preset::Paper.setup();
     let plan = Plan {
         t_start_ps: 0.0,
@@ -94,7 +109,7 @@ fn run_mock(spec: &DeviceSpec) -> u64 {
         raw: None,
         software: "bench".into(),
     };
-    let opened = open_device(spec, Some(mock_setup())).unwrap();
+    let opened = open_device(spec, Some(mock_setup(device))).unwrap();
     let out = acquire(opened.link, &plan, &AtomicBool::new(false), |_| {}).unwrap();
     assert!(out.accounting.balances() && out.accounting.lost_in_device == 0);
     out.accounting.binned
@@ -151,7 +166,7 @@ fn benches(c: &mut Criterion) {
     g.throughput(Throughput::Elements(4_000_000));
     // The mock's own cost: drawing the photons, nothing sent.
     g.bench_function("mock_emitter_alone", |b| {
-        let m = mock_setup();
+        let m = mock_setup(drawn(4_000_000));
         let scene: Vec<f64> = m.scene.iter().copied().collect();
         b.iter(|| {
             let mut e =
@@ -162,10 +177,16 @@ fn benches(c: &mut Criterion) {
         })
     });
     g.bench_function("mock_usb_end_to_end", |b| {
-        b.iter(|| run_mock(&DeviceSpec::Mock))
+        b.iter(|| run_mock(&DeviceSpec::Mock, drawn(4_000_000)))
     });
     g.bench_function("mock_serial_end_to_end", |b| {
-        b.iter(|| run_mock(&DeviceSpec::MockSerial))
+        b.iter(|| run_mock(&DeviceSpec::MockSerial, drawn(4_000_000)))
+    });
+    // The whole host path at hardware rates: replayed batches through the
+    // in-process USB transport, reader, frame decoder and binner.
+    g.throughput(Throughput::Elements(REPLAYED));
+    g.bench_function("mock_usb_replay_end_to_end", |b| {
+        b.iter(|| run_mock(&DeviceSpec::Mock, replayed(REPLAYED)))
     });
     g.finish();
 }

@@ -135,12 +135,12 @@ pub struct PhysicsArgs {
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
     /// The TOML file could not be read.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
-        /// The cause.
-        source: std::io::Error,
+        /// The cause (in the message, not repeated as a source).
+        error: std::io::Error,
     },
     /// The TOML file has a syntax error, an unknown key or a bad value.
     #[error("{path}: {reason}")]
@@ -151,14 +151,16 @@ pub enum ConfigError {
         reason: String,
     },
     /// The resulting parameters are not physical.
-    #[error("{source} (set it with --{flag} or `{key}` in a --config file)")]
+    #[error("{error} (set it with --{flag} or `{key}` in {})", config.as_ref().map_or("a --config file".to_string(), |p| p.display().to_string()))]
     Param {
         /// The physics crate's error, naming the field and value.
-        source: scatterscope_physics::ParamError,
+        error: scatterscope_physics::ParamError,
         /// The command-line flag that sets the field.
         flag: &'static str,
         /// The TOML key that sets the field.
         key: &'static str,
+        /// The config file given, if any: it may hold the value.
+        config: Option<PathBuf>,
     },
 }
 
@@ -192,9 +194,14 @@ impl PhysicsArgs {
             file_as_flags(path, f)?.apply_flags(&mut s);
         }
         self.apply_flags(&mut s);
-        s.validate().map_err(|source| {
-            let (flag, key) = flag_and_key(source.field);
-            ConfigError::Param { source, flag, key }
+        s.validate().map_err(|error| {
+            let (flag, key) = flag_and_key(error.field);
+            ConfigError::Param {
+                error,
+                flag,
+                key,
+                config: self.config.clone(),
+            }
         })?;
         Ok(s)
     }
@@ -262,9 +269,9 @@ fn invalid(path: &Path, reason: impl Into<String>) -> ConfigError {
 }
 
 fn read_file(path: &Path) -> Result<FileOverrides, ConfigError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+    let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Io {
         path: path.to_owned(),
-        source,
+        error,
     })?;
     toml::from_str(&text).map_err(|e| invalid(path, e.to_string()))
 }

@@ -14,7 +14,56 @@
 //! - [`config`]: physics parameters from presets, TOML files and flags.
 //!
 //! The physics itself lives in the `scatterscope-physics` crate, re-exported
-//! as [`physics`].
+//! as [`physics`]; the main types are re-exported here.
+//!
+//! # Simulate a measurement, then reconstruct it
+//!
+//! ```
+//! use scatterscope::denoise::tv::TotalVariation;
+//! use scatterscope::forward::poisson_counts;
+//! use scatterscope::{
+//!     Boundary, ForwardModel, KernelStack, Method, MethodOptions, Preset, Problem, Sampling,
+//!     Scene, Stack, StackMeta, ValueKind, run_method,
+//! };
+//!
+//! // The paper's slab and bins on a small 32 x 32 sensor.
+//! let mut setup = Preset::Paper.setup();
+//! (setup.sensor.width_px, setup.sensor.height_px) = (32, 32);
+//! setup.sensor.fov_cm = 50.0 / 8.0;
+//! let kernels = KernelStack::build(&setup, Sampling::Integrated)?;
+//! let model = ForwardModel::new(&kernels, Boundary::Sensor);
+//! let truth = Scene::parse("disks").render(32, 32)?;
+//! let counts = poisson_counts(&model.expected_scene(truth.view()).counts, 7);
+//! let stack = Stack {
+//!     data: counts.mapv(|c| c as f32),
+//!     meta: StackMeta::simulated(&kernels, ValueKind::Counts, "example".into()),
+//! };
+//! let problem = Problem::new(&stack, &setup, Sampling::Integrated, Boundary::Sensor)?;
+//! let mut opts = MethodOptions::default();
+//! opts.split.max_iters = 10;
+//! let prior = TotalVariation::default();
+//! let result = run_method(&problem, Method::Pnp, None, &prior, &opts, None, |_| {})?;
+//! assert_eq!(result.image.dim(), (32, 32));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! # Bin a recorded PicoQuant file
+//!
+//! ```
+//! use scatterscope::tags::picoquant::writer::write_synthetic_t3;
+//! use scatterscope::{BinSpec, bin_file};
+//!
+//! let path = std::env::temp_dir().join(format!("scatterscope-doc-{}.ptu", std::process::id()));
+//! write_synthetic_t3(&path, 10_000)?;
+//! // One time histogram over one sync period, at the file's resolution.
+//! let binned = bin_file(&path, &BinSpec::default())?;
+//! assert!(binned.accounting.balances());
+//! assert_eq!(binned.stacks[0].total() as u64, binned.accounting.binned);
+//! std::fs::remove_file(&path)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+#![warn(missing_docs)]
 
 pub mod acquire;
 pub mod config;
@@ -29,3 +78,12 @@ pub mod stack;
 pub mod tags;
 
 pub use scatterscope_physics as physics;
+
+pub use forward::{Boundary, ForwardModel};
+pub use reconstruct::method::{Method, MethodOptions, run_method};
+pub use reconstruct::problem::Problem;
+pub use scatterscope_physics::{KernelStack, Preset, Sampling, Setup};
+pub use scene::Scene;
+pub use stack::{Stack, StackMeta, ValueKind};
+pub use tags::binning::{Accounting, Binner, TimeWindow};
+pub use tags::picoquant::bin_file::{BinSpec, BinnedFile, bin_file};

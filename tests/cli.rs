@@ -1101,3 +1101,63 @@ fn bench_recon_scores_pnp_against_richardson_lucy_on_a_manifest() {
         text(&o).1
     );
 }
+
+#[test]
+fn plain_npy_without_sidecar_reconstructs_like_the_stack_with_metadata() {
+    // A stack whose bins are the physics' whole window (none dropped), so a
+    // plain copy with the same flags describes the same measurement.
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    let flags = [
+        "--preset",
+        "paper",
+        "--size",
+        "48",
+        "--fov",
+        "10cm",
+        "--t-start",
+        "40ps",
+        "--bins",
+        "8",
+    ];
+    let mut args = vec!["simulate", "--scene", "disks", "--npy", "--seed", "5"];
+    args.extend(flags);
+    args.extend(["--out", sim.to_str().unwrap()]);
+    let o = scatterscope(&args);
+    assert!(o.status.success(), "{}", text(&o).1);
+    let with_meta = Stack::load(&sim.join("counts.npy")).unwrap();
+    assert!(with_meta.meta.dropped_bins.is_empty());
+    let plain = dir.path().join("plain.npy");
+    std::fs::copy(sim.join("counts.npy"), &plain).unwrap();
+    let reconstruct = |stack: &Path, extra: &[&str], out: &str| {
+        let out = dir.path().join(out);
+        let mut args = vec!["reconstruct", stack.to_str().unwrap(), "--max-iters", "5"];
+        args.extend(extra);
+        args.extend(["--out", out.to_str().unwrap()]);
+        let o = scatterscope(&args);
+        assert!(o.status.success(), "{}", text(&o).1);
+        (
+            text(&o).1,
+            scatterscope::scene::Scene::File(out.join("reconstruction.exr"))
+                .render(48, 48)
+                .unwrap(),
+        )
+    };
+    let (_, a) = reconstruct(&sim.join("counts.npy"), &[], "a");
+    let (note, b) = reconstruct(&plain, &flags, "b");
+    assert!(
+        note.contains("plain.npy has no sidecar")
+            && note.contains("8 consecutive bins of 4 ps from 40 ps"),
+        "{note}"
+    );
+    assert_eq!(a, b, "same counts and physics, same reconstruction");
+    // Without the physics' size the plain file cannot match the sensor.
+    let o = scatterscope(&[
+        "reconstruct",
+        plain.to_str().unwrap(),
+        "--out",
+        dir.path().join("c").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).1.contains("48 x 48 pixels"), "{}", text(&o).1);
+}

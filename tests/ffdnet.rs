@@ -83,6 +83,31 @@ fn importer_refuses_damaged_and_foreign_files_with_the_path() {
         (b"hello".to_vec(), "pickle at byte"),
         (Vec::new(), "file ends inside a pickle"),
     ];
+    // Found by the `pth` fuzz target: values nested until the stack
+    // overflowed (here 200 000 TUPLE1 opcodes), and memo copies doubling a
+    // value 40 times (200 bytes that would build 2^40 values).
+    let mut deep = b"\x80\x02N".to_vec();
+    deep.extend(std::iter::repeat_n(0x85u8, 200_000));
+    deep.push(b'.');
+    let mut wide = b"\x80\x02N".to_vec();
+    for _ in 0..40 {
+        wide.extend_from_slice(b"q\x00h\x00h\x00\x86");
+    }
+    wide.push(b'.');
+    // And a storage whose element count (2^62 - 1) overflowed the end
+    // offset: a panic with overflow checks, a wrapped bound without.
+    let huge = std::fs::read(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz/pth_storage_size_overflow.pth"),
+    )
+    .unwrap();
+    let cases: Vec<(Vec<u8>, &str)> = cases
+        .into_iter()
+        .chain([
+            (deep, "values nested 65 deep"),
+            (wide, "memo copies would build over"),
+            (huge, "4611686018427387903 elements run past the end"),
+        ])
+        .collect();
     for (bytes, want) in cases {
         let e = pth::import_ffdnet_gray(&bytes, path)
             .unwrap_err()

@@ -1,10 +1,16 @@
 //! PicoQuant readers: real sample files (when ../shared is present), files
 //! written with known content for every record type, and malformed input.
 
+#[path = "common/pt3.rs"]
+mod pt3;
+
 use std::path::{Path, PathBuf};
+
+use pt3::write_pt3;
 
 use scatterscope::tags::Tag;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
+use scatterscope::tags::picoquant::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::picoquant::records::{Decoder, RecordType};
 use scatterscope::tags::picoquant::writer::{PtuWriter, WriterHeader};
 use scatterscope::tags::picoquant::{self, Imaging, TtrError};
@@ -394,65 +400,6 @@ fn scanned_images_bin_photons_into_their_pixels_and_keep_every_frame() {
     assert_eq!(acc.outside_image, 6, "one photon between lines per line");
 }
 
-/// A PicoHarp 300 PT3 file (format 2.0) laid out field by field as in
-/// PicoQuant's C file-access demo: text header, binary header, one board
-/// header with router settings, TTTR header, image header, records.
-fn write_pt3(path: &Path, mode: i32, img_ints: usize, records: &[u32], announced: i32) {
-    let mut b = Vec::new();
-    let text = |b: &mut Vec<u8>, s: &str, n: usize| {
-        let mut f = s.as_bytes().to_vec();
-        f.resize(n, 0);
-        b.extend_from_slice(&f);
-    };
-    let int = |b: &mut Vec<u8>, v: i32| b.extend_from_slice(&v.to_le_bytes());
-    text(&mut b, "PicoHarp 300", 16);
-    text(&mut b, "2.0", 6);
-    text(&mut b, "PicoHarp Software", 18);
-    text(&mut b, "2.3.0.0", 12);
-    text(&mut b, "22/11/26 10:00:00", 18);
-    text(&mut b, "\r\n", 2);
-    text(&mut b, "test file", 256);
-    // Curves, BitsPerRecord, RoutingChannels, NumberOfBoards, ActiveCurve,
-    // MeasMode, SubMode, RangeNo, Offset, Tacq, StopAt, StopOnOvfl,
-    // Restart, DispLinLog, DispTimeFrom, DispTimeTo, DispCountFrom,
-    // DispCountTo.
-    for v in [0, 32, 4, 1, 0, mode, 0, 0, 0, 1000, 0, 0, 0, 0, 0, 0, 0, 0] {
-        int(&mut b, v);
-    }
-    b.extend_from_slice(&[0u8; 64 + 36 + 16]); // DispCurves, Params, Repeat*
-    text(&mut b, "", 20); // ScriptName
-    text(&mut b, "PicoHarp 300", 16);
-    text(&mut b, "2.0", 8);
-    for v in [1_000_123, 8, 10, 50, 10, 50] {
-        int(&mut b, v); // serial, SyncDivider, CFD settings
-    }
-    b.extend_from_slice(&0.016f32.to_le_bytes()); // Resolution, ns
-    b.extend_from_slice(&[0u8; 26 * 4]); // router model, enabled, 4 x 6 channel ints
-    for v in [
-        0,
-        0,
-        0,
-        40_000_000,
-        1000,
-        1000,
-        0,
-        announced,
-        img_ints as i32,
-    ] {
-        int(&mut b, v); // ExtDevices .. Records, ImgHdrSize
-    }
-    b.extend(std::iter::repeat_n(0u8, 4 * img_ints));
-    assert_eq!(
-        b.len(),
-        728 + 4 * img_ints,
-        "the PT3 2.0 header is 728 bytes + image header"
-    );
-    for r in records {
-        b.extend_from_slice(&r.to_le_bytes());
-    }
-    std::fs::write(path, b).unwrap();
-}
-
 #[test]
 fn legacy_pt3_files_decode_with_their_header_values() {
     let dir = tempfile::tempdir().unwrap();
@@ -594,6 +541,7 @@ fn bulk_binning_matches_record_by_record_binning() {
                 }
             });
         }
+        assert_eq!(one.past_window(), bulk.past_window(), "{map:?} {channel:?}");
         let (a, acc_a) = one.finish();
         let (b, acc_b) = bulk.finish();
         assert_eq!(acc_a, acc_b, "{map:?} {channel:?}");
@@ -602,4 +550,91 @@ fn bulk_binning_matches_record_by_record_binning() {
         );
         assert_eq!(a, b, "{map:?} {channel:?}");
     }
+}
+
+#[test]
+fn default_window_holds_micro_times_past_the_sync_period() {
+    // PicoHarp T3 at 4 ps and 80 MHz: one sync period is 3125 steps.
+    // Photons at and past it (a TAC range longer than the period) must not
+    // be dropped by the default window.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("flim.ptu");
+    let micro = [0u32, 100, 3124, 3125, 3125, 3200];
+    let tags: Vec<Tag> = micro
+        .iter()
+        .enumerate()
+        .map(|(i, &m)| Tag::Photon {
+            channel: 1,
+            macro_time: i as u64 * 10,
+            micro_time: m,
+        })
+        .collect();
+    write(&path, RecordType::PicoHarpT3, &header(), &tags);
+    let binned = bin_file(&path, &BinSpec::default()).unwrap();
+    let acc = binned.accounting;
+    assert!(acc.balances());
+    assert_eq!((acc.received, acc.binned, acc.outside_window), (6, 6, 0));
+    assert_eq!(
+        binned.window.bins, 3201,
+        "bins 0..=3200 hold every micro time"
+    );
+    let stack = &binned.stacks[0];
+    assert_eq!(stack.total(), 6.0);
+    assert_eq!(stack.data[[3125, 0, 0]], 2.0);
+    assert_eq!(stack.data[[3200, 0, 0]], 1.0);
+    assert_eq!(stack.meta.bin_starts_ps[3200], 12_800.0);
+    assert_eq!(binned.notes.len(), 1);
+    let note = &binned.notes[0];
+    assert!(
+        note.contains("3 photon(s)") && note.contains("widened to 3201 bins"),
+        "{note}"
+    );
+    // A window the caller chose is kept, and the note says what it missed.
+    let spec = BinSpec {
+        bins: Some(3125),
+        ..BinSpec::default()
+    };
+    let binned = bin_file(&path, &spec).unwrap();
+    assert_eq!(binned.window.bins, 3125);
+    assert_eq!(
+        (binned.accounting.binned, binned.accounting.outside_window),
+        (3, 3)
+    );
+    assert!(
+        binned.notes[0].contains("3201 bins would hold them"),
+        "{}",
+        binned.notes[0]
+    );
+    // Nothing past the period: nothing widened, nothing said.
+    write(&path, RecordType::PicoHarpT3, &header(), &tags[..3]);
+    let binned = bin_file(&path, &BinSpec::default()).unwrap();
+    assert_eq!(binned.window.bins, 3125);
+    assert!(binned.notes.is_empty());
+}
+
+#[test]
+fn bad_windows_and_record_types_are_refused_naming_the_field() {
+    for (start, width, bins, field) in [
+        (0.0, 0.0, 10, "bin_width = 0 ps"),
+        (0.0, f64::NAN, 10, "bin_width = NaN ps"),
+        (-4.0, 4.0, 10, "t_start = -4 ps"),
+        (0.0, 4.0, 0, "bins = 0"),
+        (0.0, 4.0, 65_537, "bins = 65537"),
+    ] {
+        let e = TimeWindow::from_ps(start, width, bins, 4.0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(field), "{e}");
+    }
+    let w = TimeWindow::from_ps(8.0, 12.0, 5, 4.0).unwrap();
+    assert_eq!((w.start, w.width, w.bins), (2.0, 3.0, 5));
+    assert_eq!(w.bins_to_hold(2), 1);
+    assert_eq!(w.bins_to_hold(16), 5);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t2.ptu");
+    write(&path, RecordType::PicoHarpT2, &header(), &[]);
+    let e = bin_file(&path, &BinSpec::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("t2.ptu") && e.contains("no micro time"), "{e}");
 }

@@ -1,5 +1,8 @@
 //! Stack file round trips and error messages.
 
+#[path = "common/npy.rs"]
+mod npy;
+
 use std::path::Path;
 
 use ndarray::Array3;
@@ -107,19 +110,7 @@ fn npy_round_trip_is_exact_for_floats_and_counts() {
 /// A .npy file built byte by byte from the format description, independent
 /// of the writer under test.
 fn handmade_npy(path: &Path, descr: &str, shape: (usize, usize, usize), payload: &[u8]) {
-    let mut header = format!(
-        "{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}, {}, {}), }}",
-        shape.0, shape.1, shape.2
-    );
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header.as_bytes());
-    bytes.extend(payload);
-    std::fs::write(path, bytes).unwrap();
+    std::fs::write(path, npy::npy_bytes(descr, shape, payload)).unwrap();
 }
 
 #[test]
@@ -212,4 +203,75 @@ fn bad_files_give_errors_naming_file_and_field() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("s.tif") && e.contains(".exr or .npy"), "{e}");
+}
+
+#[test]
+fn stacks_written_by_openexr_read_without_metadata() {
+    // Written by the OpenEXR project's own library
+    // (scripts/make_openexr_fixtures.py): float32 with ZIP, half with PIZ;
+    // bin k, row r, column c holds (k + 1) * 100 + 10 r + c.
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/openexr");
+    for name in ["float_zip.exr", "half_piz.exr"] {
+        let path = dir.join(name);
+        let (data, meta) = Stack::read(&path).unwrap();
+        assert!(meta.is_none(), "{name}");
+        assert_eq!(data.dim(), (3, 8, 8), "{name}");
+        for ((k, r, c), &v) in data.indexed_iter() {
+            assert_eq!(
+                v,
+                ((k + 1) * 100 + r * 10 + c) as f32,
+                "{name} at {k},{r},{c}"
+            );
+        }
+        let e = Stack::load(&path).unwrap_err().to_string();
+        assert!(
+            e.contains(name) && e.contains("no `scatterscope` attribute"),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn plain_npy_reads_without_sidecar_and_takes_given_metadata() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("plain.npy");
+    let payload: Vec<u8> = (0..105u32).flat_map(|v| v.to_le_bytes()).collect();
+    handmade_npy(&path, "<u4", (3, 5, 7), &payload);
+    let (data, meta) = Stack::read(&path).unwrap();
+    assert!(meta.is_none());
+    assert_eq!(data[[2, 4, 6]], 104.0);
+    let e = Stack::load(&path).unwrap_err().to_string();
+    assert!(e.contains("plain.npy") && e.contains("no sidecar"), "{e}");
+    // The physics' window becomes the file's three bins from t_start.
+    let mut setup = Preset::Paper.setup();
+    setup.bins.start_ps = 40.0;
+    setup.sensor.height_px = 5;
+    setup.sensor.width_px = 7;
+    let meta = StackMeta::consecutive(&setup, 3, ValueKind::Counts, "plain".into()).unwrap();
+    assert_eq!(meta.bin_starts_ps, vec![40.0, 44.0, 48.0]);
+    assert_eq!(meta.setup.unwrap().bins.count, 3);
+    assert_eq!(meta.pixel_pitch_cm, setup.sensor.pixel_pitch_cm());
+    let stack = Stack::from_parts(data, meta, &path).unwrap();
+    assert_eq!(stack.total(), (0..105).sum::<u32>() as f64);
+    // A window the physics cannot have is refused with its field.
+    let e = StackMeta::consecutive(&setup, 0, ValueKind::Counts, "plain".into())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("bins"), "{e}");
+}
+
+/// Found by the `exr_stack` fuzz target: 759 bytes whose header declares
+/// 117440513 x 8 pixels made the reader allocate gigabytes. Declared sizes
+/// beyond what the file could hold are refused before any pixel is read.
+#[test]
+fn an_exr_declaring_more_pixels_than_it_could_hold_is_refused() {
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz/exr_huge_declared_size.exr");
+    let e = Stack::read(&path).unwrap_err().to_string();
+    assert!(
+        e.contains("exr_huge_declared_size.exr")
+            && e.contains("declares 117440513 x 8 pixels")
+            && e.contains("file of 759 bytes"),
+        "{e}"
+    );
 }

@@ -13,6 +13,8 @@
 //!   on bounded channels, and its [`pipeline::LinkAccounting`].
 //! - [`raw`]: the project's raw tag file (lossless recording of batches).
 
+#![warn(missing_docs)]
+
 pub mod client;
 pub mod discovery;
 pub mod link;

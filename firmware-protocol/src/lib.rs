@@ -12,6 +12,8 @@
 //!
 //! `PROTOCOL.md` beside this crate's manifest is the specification a
 //! firmware author implements from.
+
+#![warn(missing_docs)]
 #![no_std]
 #![forbid(unsafe_code)]
 

@@ -5,7 +5,7 @@
 //! | 0    | photon | pixel 59..44 (16), micro time 43..24 (20), sync 23..0 (24) |
 //! | 1    | wrap   | count 31..0: the sync counter advanced count x 2^24      |
 //! | 2    | marker | bits 59..52 (8), sync 23..0 (24)                         |
-//! | 3    | lost   | count 47..0: photons the device dropped (FIFO overflow)  |
+//! | 3    | lost   | count 47..0 (>= 1): photons the device dropped (FIFO)    |
 //!
 //! `sync` is the low 24 bits of the laser-sync counter relative to the
 //! batch's running base; wrap records move the base. Unused bits are zero.
@@ -120,7 +120,7 @@ impl Record {
                 bits: (raw >> 52) as u8,
                 sync_offset: (raw & SYNC_MASK) as u32,
             }),
-            TYPE_LOST if (raw >> 48) & 0x0fff == 0 => Ok(Record::Lost {
+            TYPE_LOST if (raw >> 48) & 0x0fff == 0 && raw & MAX_LOST != 0 => Ok(Record::Lost {
                 count: raw & MAX_LOST,
             }),
             _ => err,

@@ -38,6 +38,10 @@ pub struct Faults {
     pub overflow_photons: u64,
     /// Close the link after this many batches (0 = never), mid-stream.
     pub disconnect_after: u32,
+    /// 0: each fault hits every n-th batch. Otherwise the seed of a
+    /// random schedule: each fault hits a batch with probability 1/n, at
+    /// seeded random times (soak tests).
+    pub random_seed: u64,
 }
 
 /// Everything about the emulated device.
@@ -60,6 +64,16 @@ pub struct MockOptions {
     pub batch_interval: Duration,
     /// Faults to inject.
     pub faults: Faults,
+    /// Replay mode for load tests at hardware rates (0 = off): this many
+    /// full batches are drawn from the emitter once, at Start, and then
+    /// served over and over with fresh sequence numbers, photon offsets and
+    /// sync bases, so a batch costs the device a copy and a CRC instead of
+    /// one random draw per photon. Unpaced, batches go out as fast as the
+    /// link takes them; paced (`real_time`), at the emitter's rate, and a
+    /// batch due while the link is full is a FIFO overflow: its photons
+    /// are counted lost and reported in a lost record. Dark counts,
+    /// afterpulses and exclusions are not counted per replayed batch.
+    pub replay_batches: usize,
 }
 
 impl Default for MockOptions {
@@ -73,6 +87,7 @@ impl Default for MockOptions {
             max_photons: 0,
             batch_interval: Duration::from_millis(5),
             faults: Faults::default(),
+            replay_batches: 0,
         }
     }
 }
@@ -208,11 +223,34 @@ struct Firmware {
     emit_origin: f64,
     /// Emitter's off-sensor count at Start.
     off_sensor_origin: u64,
+    /// Replay mode's batches and where the stream stands.
+    replay: Replay,
+    /// State of the random fault schedule.
+    fault_rng: u64,
+}
+
+/// One batch drawn for replay: its records relative to sync 0.
+struct ReplayBatch {
+    records: Vec<u8>,
+    photons: u64,
+    /// Syncs the batch covers (its last sync + 1).
+    span: u64,
+}
+
+/// The replayed stream's state (replay mode).
+#[derive(Default)]
+struct Replay {
+    batches: Vec<ReplayBatch>,
+    next: usize,
+    seq: u32,
+    photons_before: u64,
+    sync_base: u64,
 }
 
 impl Firmware {
     fn new(device: MockDevice, port: Box<dyn DevicePort>, truth: Arc<Mutex<Truth>>) -> Self {
         let identity = device.identity();
+        let fault_rng = device.options.faults.random_seed;
         Self {
             device,
             identity,
@@ -234,6 +272,8 @@ impl Firmware {
             local: Truth::default(),
             emit_origin: 0.0,
             off_sensor_origin: 0,
+            fault_rng,
+            replay: Replay::default(),
         }
     }
 
@@ -263,7 +303,11 @@ impl Firmware {
                 }
             }
             if self.running {
-                self.acquire();
+                if self.replay.batches.is_empty() {
+                    self.acquire();
+                } else {
+                    self.acquire_replay();
+                }
             }
             self.flush_outbox()?;
             self.publish();
@@ -401,10 +445,159 @@ impl Firmware {
         // off-sensor losses are counted from Start.
         self.emit_origin = self.device.emitter.time_s();
         self.off_sensor_origin = self.device.emitter.off_sensor();
+        if self.device.options.replay_batches > 0 {
+            self.draw_replay();
+        }
+    }
+
+    /// Draws the replay batches: detections mapped as in [`Self::acquire`],
+    /// encoded with room left for one lost record per batch.
+    fn draw_replay(&mut self) {
+        let mut batches = Vec::new();
+        while batches.len() < self.device.options.replay_batches {
+            let mut enc = BatchEncoder::new();
+            let mut first = None;
+            let mut last = 0;
+            while enc.len() + 3 <= MAX_RECORDS {
+                let d = self.device.emitter.next_detection();
+                let Some(Event::Photon { pixel, micro, sync }) = self.detection_event(&d) else {
+                    continue;
+                };
+                let origin = *first.get_or_insert(sync);
+                last = sync - origin;
+                enc.push(Event::Photon {
+                    pixel,
+                    micro,
+                    sync: last,
+                })
+                .expect("replay events are in time order and in range");
+            }
+            let photons = enc.photons();
+            let mut payload = Vec::new();
+            enc.finish_batch(&mut payload);
+            batches.push(ReplayBatch {
+                records: payload.split_off(firmware_protocol::batch::HEADER_LEN),
+                photons,
+                span: last + 1,
+            });
+        }
+        self.replay = Replay {
+            batches,
+            ..Replay::default()
+        };
+    }
+
+    /// The event a detection becomes under the current configuration, or
+    /// `None` if the device's time window or ROI excludes it.
+    fn detection_event(&self, d: &crate::emitter::Detection) -> Option<Event> {
+        let config = self.config.as_ref().expect("running implies configured");
+        let res = u64::from(config.resolution_fs);
+        let divider = u64::from(config.sync_divider.max(1));
+        let window = u64::from(config.time_window);
+        let width = u64::from(self.identity.pixels_x);
+        let period_units = (self.identity.sync_period_fs * divider / res).max(1);
+        let tdc = self.identity.tdc_resolution_fs as u64;
+        let delay_fs = (d.delay_ps * 1000.0) as u64;
+        // Arrivals after a full period belong to the next sync.
+        let micro = ((delay_fs / tdc * tdc) / res) % period_units;
+        let (x, y) = (u64::from(d.pixel) % width, u64::from(d.pixel) / width);
+        let in_roi = config.roi.is_none_or(|r| {
+            x >= u64::from(r.x)
+                && x < u64::from(r.x) + u64::from(r.width)
+                && y >= u64::from(r.y)
+                && y < u64::from(r.y) + u64::from(r.height)
+        });
+        if (window > 0 && micro >= window) || !in_roi {
+            return None;
+        }
+        Some(Event::Photon {
+            pixel: d.pixel as u16,
+            micro: micro as u32,
+            sync: d.sync / divider,
+        })
+    }
+
+    /// Replay mode's acquisition step: batches due go out while the link
+    /// has room; paced batches due while it is full overflow the FIFO.
+    fn acquire_replay(&mut self) {
+        let (real_time, max_photons) = (
+            self.device.options.real_time,
+            self.device.options.max_photons,
+        );
+        let due = real_time
+            .then(|| (self.started.elapsed().as_secs_f64() * self.device.emitter.rate_hz()) as u64);
+        for _ in 0..64 {
+            if max_photons > 0 && self.local.photons_detected >= max_photons {
+                break;
+            }
+            let index = self.replay.next % self.replay.batches.len();
+            let photons = self.replay.batches[index].photons;
+            if due.is_some_and(|due| self.local.photons_detected + photons > due) {
+                break;
+            }
+            let link_full = self.outbox.len() >= 4;
+            if link_full && due.is_none() {
+                break;
+            }
+            self.replay.next += 1;
+            self.local.photons_detected += photons;
+            if link_full || self.overflow_left > 0 {
+                // The FIFO overflows: the batch's photons are dropped.
+                self.overflow_left = self.overflow_left.saturating_sub(photons);
+                self.pending_lost += photons;
+                self.local.photons_lost_fifo += photons;
+                continue;
+            }
+            self.send_replay_batch(Some(index));
+        }
+        let quota_met = max_photons > 0 && self.local.photons_detected >= max_photons;
+        let exposure_over = self.exposure.is_some_and(|e| self.started.elapsed() >= e);
+        if quota_met || exposure_over {
+            self.stop();
+            let totals = self.totals();
+            self.respond(UNSOLICITED_ID, Response::Stopped(totals));
+        }
+    }
+
+    /// Frames replay batch `index` (`None`: a batch with only the lost
+    /// record), a lost record first if photons were dropped since the last
+    /// one, and hands it to the link; the stream moves past it.
+    fn send_replay_batch(&mut self, index: Option<usize>) {
+        let (records, photons, span): (&[u8], u64, u64) = match index {
+            Some(i) => {
+                let b = &self.replay.batches[i];
+                (&b.records, b.photons, b.span)
+            }
+            None => (&[], 0, 0),
+        };
+        let r = &self.replay;
+        let mut payload =
+            Vec::with_capacity(firmware_protocol::batch::HEADER_LEN + 8 + records.len());
+        payload.extend_from_slice(&r.seq.to_le_bytes());
+        payload.extend_from_slice(&r.photons_before.to_le_bytes());
+        payload.extend_from_slice(&r.sync_base.to_le_bytes());
+        if self.pending_lost > 0 {
+            let lost = firmware_protocol::record::Record::Lost {
+                count: self.pending_lost,
+            };
+            payload.extend_from_slice(&lost.encode().to_le_bytes());
+        }
+        payload.extend_from_slice(records);
+        self.pending_lost = 0;
+        let seq = self.replay.seq;
+        self.replay.seq = seq.wrapping_add(1);
+        self.replay.photons_before += photons;
+        self.replay.sync_base += span;
+        let mut frame = Vec::with_capacity(payload.len() + 12);
+        encode_frame(FrameKind::Events, &payload, &mut frame).expect("batches fit a frame");
+        self.send_batch(frame, photons, seq);
     }
 
     fn stop(&mut self) {
         self.running = false;
+        if !self.replay.batches.is_empty() && self.pending_lost > 0 {
+            self.send_replay_batch(None);
+        }
         while !self.fifo.is_empty() || self.pending_lost > 0 {
             self.drain_fifo(true);
         }
@@ -424,12 +617,6 @@ impl Firmware {
         let elapsed = self.started.elapsed();
         let cap = opts.fifo_capacity;
         let mut budget = 1 << 16;
-        let config = self.config.clone().expect("running implies configured");
-        let res = u64::from(config.resolution_fs);
-        let divider = u64::from(config.sync_divider.max(1));
-        let window = u64::from(config.time_window);
-        let width = u64::from(self.identity.pixels_x);
-        let period_units = (self.identity.sync_period_fs * divider / res).max(1);
         while budget > 0 {
             if opts.max_photons > 0 && self.local.photons_detected >= opts.max_photons {
                 break;
@@ -445,21 +632,10 @@ impl Firmware {
             }
             budget -= 1;
             let d = self.device.emitter.next_detection();
-            let tdc = self.identity.tdc_resolution_fs as u64;
-            let delay_fs = (d.delay_ps * 1000.0) as u64;
-            // Arrivals after a full period belong to the next sync.
-            let micro = ((delay_fs / tdc * tdc) / res) % period_units;
-            let (x, y) = (u64::from(d.pixel) % width, u64::from(d.pixel) / width);
-            let in_roi = config.roi.is_none_or(|r| {
-                x >= u64::from(r.x)
-                    && x < u64::from(r.x) + u64::from(r.width)
-                    && y >= u64::from(r.y)
-                    && y < u64::from(r.y) + u64::from(r.height)
-            });
-            if (window > 0 && micro >= window) || !in_roi {
+            let Some(event) = self.detection_event(&d) else {
                 self.local.photons_excluded += 1;
                 continue;
-            }
+            };
             self.local.photons_detected += 1;
             self.local.dark_counts += u64::from(d.origin == Origin::Dark);
             self.local.afterpulses += u64::from(d.origin == Origin::Afterpulse);
@@ -475,11 +651,7 @@ impl Firmware {
                 });
                 self.pending_lost = 0;
             }
-            self.fifo.push_back(Event::Photon {
-                pixel: d.pixel as u16,
-                micro: micro as u32,
-                sync: d.sync / divider,
-            });
+            self.fifo.push_back(event);
         }
         let exposure_over = self.exposure.is_some_and(|e| elapsed >= e);
         let quota_met = opts.max_photons > 0 && self.local.photons_detected >= opts.max_photons;
@@ -527,9 +699,35 @@ impl Firmware {
         let photons = photons_before - header.photon_offset;
         let mut frame = Vec::with_capacity(payload.len() + 12);
         encode_frame(FrameKind::Events, &payload, &mut frame).expect("batches fit a frame");
+        self.send_batch(frame, photons, header.seq);
+    }
+
+    /// Hands a batch frame to the link, with the faults due at its
+    /// sequence number, and keeps the truth.
+    fn send_batch(&mut self, mut frame: Vec<u8>, photons: u64, seq: u32) {
         let f = self.device.options.faults.clone();
-        let n = header.seq + 1;
-        let every = |k: u32| k > 0 && n.is_multiple_of(k);
+        let n = seq + 1;
+        let mut rng = self.fault_rng;
+        let mut every = |k: u32| {
+            if f.random_seed == 0 {
+                k > 0 && n.is_multiple_of(k)
+            } else {
+                // xorshift64*: one draw per fault kind and batch.
+                rng ^= rng >> 12;
+                rng ^= rng << 25;
+                rng ^= rng >> 27;
+                let draw = rng.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 32;
+                k > 0 && draw.is_multiple_of(u64::from(k))
+            }
+        };
+        let (overflow, drop_bytes, corrupt, duplicate, reorder) = (
+            every(f.overflow_every),
+            every(f.drop_bytes_every),
+            every(f.corrupt_every),
+            every(f.duplicate_every),
+            every(f.reorder_every),
+        );
+        self.fault_rng = rng;
         if f.disconnect_after > 0 && n > f.disconnect_after {
             // The cable is pulled: this batch and everything after is gone.
             self.local.photons_unsent += photons;
@@ -539,23 +737,23 @@ impl Firmware {
         }
         self.local.batches_sent += 1;
         self.local.photons_sent += photons;
-        if every(f.overflow_every) {
+        if overflow {
             self.overflow_left += f.overflow_photons;
         }
-        if every(f.drop_bytes_every) {
+        if drop_bytes {
             let mid = frame.len() / 2;
             frame.drain(mid..mid + 5);
             self.damaged(photons);
-        } else if every(f.corrupt_every) {
+        } else if corrupt {
             let mid = frame.len() / 2;
             frame[mid] ^= 0x10;
             self.damaged(photons);
         }
-        if every(f.duplicate_every) {
+        if duplicate {
             self.local.batches_duplicated += 1;
             self.outbox.push_back(frame.clone());
         }
-        if every(f.reorder_every) && self.held_back.is_none() {
+        if reorder && self.held_back.is_none() {
             self.local.batches_reordered += 1;
             self.held_back = Some(frame);
             return;

@@ -11,6 +11,8 @@
 //! - [`pty`]: the device behind a real pseudo-terminal, opened by the host
 //!   with `serialport` like a USB-CDC device.
 
+#![warn(missing_docs)]
+
 pub mod emitter;
 pub mod firmware;
 pub mod pty;

@@ -16,6 +16,8 @@
 //! (`scatterscope`) and the emulated devices (`scatterscope-mocks`) can use it
 //! without a dependency cycle.
 
+#![warn(missing_docs)]
+
 pub mod diffusion;
 pub mod error;
 pub mod kernel;

@@ -240,21 +240,12 @@ fn make_binner(
     config: &Config,
 ) -> Result<(Binner, (f64, f64)), AcquireError> {
     let res_ps = f64::from(config.resolution_fs) / 1000.0;
-    let steps = plan.bin_width_ps / res_ps;
-    let whole =
-        plan.bin_width_ps > 0.0 && (steps - steps.round()).abs() <= 1e-6 && steps.round() >= 1.0;
-    if !whole {
-        return Err(AcquireError::Plan(format!(
-            "--bin-width {} ps is not a positive multiple of the device's {res_ps} ps micro-time unit; bins would hold unequal numbers of TDC steps",
-            plan.bin_width_ps
-        )));
-    }
-    if plan.bins == 0 || plan.bins > 65_535 {
-        return Err(AcquireError::Plan(format!(
-            "--bins {}: use 1 to 65535 bins",
-            plan.bins
-        )));
-    }
+    let start_ps = plan.t0_ps + plan.t_start_ps;
+    let window = TimeWindow::from_ps(start_ps, plan.bin_width_ps, plan.bins, res_ps)
+        .and_then(|w| w.whole_steps(res_ps))
+        .map_err(|e| {
+            AcquireError::Plan(format!("{e} (the device's micro-time unit is {res_ps} ps)"))
+        })?;
     let (w, h) = (
         usize::from(identity.pixels_x),
         usize::from(identity.pixels_y),
@@ -276,12 +267,6 @@ fn make_binner(
             roi.width, roi.height, roi.x, roi.y
         )));
     }
-    let start_ps = plan.t0_ps + plan.t_start_ps;
-    let window = TimeWindow {
-        start: start_ps / res_ps,
-        width: steps.round(),
-        bins: plan.bins,
-    };
     let map = PixelMap::Sensor {
         sensor_width: w,
         roi,

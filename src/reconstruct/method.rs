@@ -83,6 +83,19 @@ pub struct MethodOptions {
     pub rl_iters: usize,
 }
 
+impl Default for MethodOptions {
+    /// The command line's defaults: the split solver with its defaults,
+    /// Algorithm 1's defaults, 200 Richardson-Lucy iterations.
+    fn default() -> Self {
+        Self {
+            solver: Solver::Split,
+            split: SplitOptions::default(),
+            pnp: PnpOptions::default(),
+            rl_iters: 200,
+        }
+    }
+}
+
 /// Runs `method` on `problem`; `bin` selects the bin of single-bin methods
 /// (and of `raw`, which otherwise sums all bins).
 pub fn run_method(

@@ -117,35 +117,38 @@ impl Default for SplitOptions {
 /// is left out (its data term moves the answer by less than this).
 pub const NEGLIGIBLE_BIN: f64 = 1e-4;
 
-/// Per-bin state of the data split, on the sensor window except `ho`.
+/// Per-bin state of the data split, on the sensor window except `q`.
 struct BinState {
     /// Position of the bin in the model.
     bin: usize,
     counts: Vec<f64>,
     /// `rho_k`.
     rho: f64,
-    /// `H_k o` on the whole grid.
-    ho: Vec<f64>,
     z: Vec<f64>,
     a: Vec<f64>,
-    /// Reused buffers: the grid image `z_k - a_k` and a spectrum.
+    /// The grid image the o-update needs: `z_k - a_k` on the window and
+    /// `H_k o` outside it (where `z_k` is free). The inverse transform of
+    /// `H_k o` is written here, the z-update reads the window and puts
+    /// `z_k - a_k` back, so no grid image is copied.
     q: Vec<f64>,
+    /// Reused spectrum buffer.
     spec: Vec<Complex64>,
 }
 
 /// Minimiser of `z - m log z + rho/2 (z - t)^2` over `z >= 0`: the positive
 /// root of `rho z^2 + (1 - rho t) z - m = 0`, written so that neither branch
 /// cancels digits.
+///
+/// Both branches are computed and one is selected, so that loops over it
+/// vectorise; for `m = 0` and `b < 0` the second branch is exactly 0.
+#[inline]
 pub fn poisson_prox(m: f64, t: f64, rho: f64) -> f64 {
     let b = rho * t - 1.0;
     let root = (b * b + 4.0 * rho * m).sqrt();
-    if b >= 0.0 {
-        (b + root) / (2.0 * rho)
-    } else if m > 0.0 {
-        2.0 * m / (root - b)
-    } else {
-        0.0
-    }
+    let upper = (b + root) / (2.0 * rho);
+    // root - b >= 2 |b| > 0 when b < 0; max keeps b >= 0 (unused) finite.
+    let lower = 2.0 * m / (root - b).max(f64::MIN_POSITIVE);
+    if b >= 0.0 { upper } else { lower }
 }
 
 /// Runs the exact-splitting PnP-ADMM on bins `bins` of `model` with
@@ -226,9 +229,8 @@ pub fn pnp_split(
                 rho: opts.rho / (model.mass(k) * flat),
                 z: model.crop_vec(&ho),
                 a: vec![0.0; h * w],
-                q: vec![0.0; n],
+                q: ho,
                 spec: vec![Complex64::default(); fft.spectrum_len()],
-                ho,
             }
         })
         .collect();
@@ -255,15 +257,6 @@ pub fn pnp_split(
     for it in 1..=opts.max_iters {
         // o-update: exact, in the Fourier domain.
         states.par_iter_mut().for_each(|s| {
-            // z_k - a_k on the window, H_k o (the free z) outside it.
-            s.q.copy_from_slice(&s.ho);
-            for r in 0..h {
-                let row = &mut s.q[(oy + r) * gw + ox..(oy + r) * gw + ox + w];
-                let (z, a) = (&s.z[r * w..(r + 1) * w], &s.a[r * w..(r + 1) * w]);
-                for ((qj, zj), aj) in row.iter_mut().zip(z).zip(a) {
-                    *qj = zj - aj;
-                }
-            }
             fft.forward_into(&s.q, &mut s.spec);
             for (x, k) in s.spec.iter_mut().zip(model.spectrum(s.bin)) {
                 *x = *x * k.conj() * s.rho;
@@ -295,25 +288,33 @@ pub fn pnp_split(
                 {
                     *x = a * k;
                 }
-                fft.inverse_into(&mut s.spec, &mut s.ho);
+                fft.inverse_into(&mut s.spec, &mut s.q);
                 let (mut d, mut e, mut var) = (0.0, 0.0, 0.0);
                 for r in 0..h {
-                    let ho = &s.ho[(oy + r) * gw + ox..(oy + r) * gw + ox + w];
+                    // H_k o on this window row; replaced by z_k - a_k.
+                    let q = &mut s.q[(oy + r) * gw + ox..(oy + r) * gw + ox + w];
                     let span = r * w..(r + 1) * w;
-                    for (((&y, &m), z), a) in ho
-                        .iter()
-                        .zip(&s.counts[span.clone()])
-                        .zip(&mut s.z[span.clone()])
-                        .zip(&mut s.a[span.clone()])
-                    {
-                        *z = poisson_prox(m, y + *a, s.rho);
-                        *a += y - *z;
-                        if at_floor {
-                            let (dj, f, g) = deviance.point(m, y);
+                    let m = &s.counts[span.clone()];
+                    if at_floor {
+                        for (&mj, &yj) in m.iter().zip(q.iter()) {
+                            let (dj, f, g) = deviance.point(mj, yj);
                             d += dj;
                             e += f;
                             var += g;
                         }
+                    }
+                    // Branch-free, so that it vectorises.
+                    for (((qj, &mj), zj), aj) in q
+                        .iter_mut()
+                        .zip(m)
+                        .zip(&mut s.z[span.clone()])
+                        .zip(&mut s.a[span])
+                    {
+                        let y = *qj;
+                        let z = poisson_prox(mj, y + *aj, s.rho);
+                        *aj += y - z;
+                        *zj = z;
+                        *qj = z - *aj;
                     }
                 }
                 (d, e, var)

@@ -50,7 +50,20 @@ fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, Sce
     let gray: ImageBuffer<Luma<f32>, Vec<f32>> = if is_exr {
         read_exr_luminance(path).map_err(decode)?
     } else {
-        image::open(path)
+        let bytes = std::fs::read(path).map_err(|e| decode(e.to_string()))?;
+        // JPEG decoders fill a cut file's missing blocks with grey and say
+        // nothing; a JPEG must end with its EOI marker (FF D9), trailing
+        // zero padding aside.
+        if bytes.starts_with(&[0xFF, 0xD8]) {
+            let end = bytes.iter().rposition(|&b| b != 0).map_or(0, |p| p + 1);
+            if !bytes[..end].ends_with(&[0xFF, 0xD9]) {
+                return Err(decode(format!(
+                    "JPEG without its end marker (FF D9) after {} bytes: the file is cut",
+                    bytes.len()
+                )));
+            }
+        }
+        image::load_from_memory(&bytes)
             .map_err(|e| decode(e.to_string()))?
             .to_luma32f()
     };

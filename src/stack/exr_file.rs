@@ -6,7 +6,8 @@
 //! `pixelPitchCm` and, when known, `muAPerCm`, `muSPerCm`, `anisotropyG`,
 //! `refractiveIndex`, `thicknessCm`. The complete metadata, including every
 //! bin start and the dropped bins, is the JSON text attribute `scatterscope`;
-//! it is what this reader trusts.
+//! it is what this reader trusts. Files from other tools need only the
+//! channel names; without the attribute the caller supplies the metadata.
 
 use std::path::Path;
 
@@ -82,10 +83,37 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
         .map_err(|e| exr_error(path, e))
 }
 
+/// Most decoded pixel bytes a file may declare per byte it holds. Lossless
+/// EXR compression (ZIP's deflate tops out near 1032:1) cannot reach it, so
+/// only headers that promise more pixels than the file could hold are
+/// refused, before anything is allocated for them.
+const MAX_EXPANSION: u64 = 4096;
+/// Decoded bytes any file may declare, whatever its size.
+const MIN_BUDGET: u64 = 64 << 20;
+
 /// The first valid layer of an EXR file with all its channels and attributes.
 pub(crate) fn read_first_layer(
     path: &Path,
 ) -> Result<Layer<AnyChannels<FlatSamples>>, exr::error::Error> {
+    let size = std::fs::metadata(path)?.len();
+    let budget = size.saturating_mul(MAX_EXPANSION).max(MIN_BUDGET);
+    let meta = exr::meta::MetaData::read_from_file(path, false)?;
+    for header in meta.headers.iter() {
+        let (w, h) = (header.layer_size.0 as u64, header.layer_size.1 as u64);
+        let declared = w
+            .saturating_mul(h)
+            .saturating_mul(header.channels.bytes_per_pixel as u64)
+            .saturating_add((header.chunk_count as u64).saturating_mul(8));
+        if declared > budget {
+            return Err(exr::error::Error::Invalid(
+                format!(
+                    "header declares {w} x {h} pixels of {} bytes ({declared} bytes decoded) in a file of {size} bytes",
+                    header.channels.bytes_per_pixel
+                )
+                .into(),
+            ));
+        }
+    }
     Ok(exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -96,27 +124,25 @@ pub(crate) fn read_first_layer(
         .layer_data)
 }
 
-/// Reads a stack written by [`write`] (or by any tool that follows the same
-/// channel names and metadata attribute).
-pub fn read(path: &Path) -> Result<Stack, StackError> {
+/// Reads the first layer's time-bin channels (`t000`, `t001`, ...), as
+/// [`write`] or any other OpenEXR writer lays them out, and the metadata
+/// attribute when there is one.
+pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
     let layer = read_first_layer(path).map_err(|e| exr_error(path, e))?;
-    let meta_text = match layer.attributes.other.get(&Text::from(META_ATTRIBUTE)) {
-        Some(AttributeValue::Text(t)) => t.to_string(),
+    let meta = match layer.attributes.other.get(&Text::from(META_ATTRIBUTE)) {
+        Some(AttributeValue::Text(t)) => Some(
+            serde_json::from_str::<StackMeta>(&t.to_string()).map_err(|e| {
+                StackError::format(path, format!("attribute `{META_ATTRIBUTE}`: {e}"))
+            })?,
+        ),
         Some(other) => {
             return Err(StackError::format(
                 path,
                 format!("attribute `{META_ATTRIBUTE}` is {other:?}, expected JSON text"),
             ));
         }
-        None => {
-            return Err(StackError::format(
-                path,
-                format!("no `{META_ATTRIBUTE}` metadata attribute: not a scatterscope stack"),
-            ));
-        }
+        None => None,
     };
-    let meta: StackMeta = serde_json::from_str(&meta_text)
-        .map_err(|e| StackError::format(path, format!("attribute `{META_ATTRIBUTE}`: {e}")))?;
     let mut bins: Vec<(usize, Vec<f32>)> = Vec::new();
     for ch in &layer.channel_data.list {
         let name = ch.name.to_string();
@@ -149,7 +175,7 @@ pub fn read(path: &Path) -> Result<Stack, StackError> {
     for (mut dst, (_, values)) in data.axis_iter_mut(Axis(0)).zip(bins) {
         dst.iter_mut().zip(values).for_each(|(d, v)| *d = v);
     }
-    Ok(Stack { data, meta })
+    Ok((data, meta))
 }
 
 fn exr_error(path: &Path, e: exr::error::Error) -> StackError {

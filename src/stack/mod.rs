@@ -204,20 +204,130 @@ impl Stack {
         }
     }
 
-    /// Reads and validates a stack; the format follows the extension.
+    /// Reads and validates a stack with its metadata; the format follows
+    /// the extension. A file without metadata (a plain `.npy`, an EXR from
+    /// another tool) is refused: read it with [`Stack::read`] and give the
+    /// metadata ([`StackMeta::consecutive`]).
     pub fn load(path: &Path) -> Result<Self, StackError> {
-        let stack = match extension(path).as_deref() {
-            Some("exr") => exr_file::read(path)?,
-            Some("npy") => npy_file::read(path)?,
-            _ => {
-                return Err(StackError::format(
-                    path,
-                    "unknown stack format: use a .exr or .npy file name",
-                ));
-            }
-        };
+        match Self::read(path)? {
+            (data, Some(meta)) => Self::from_parts(data, meta, path),
+            (_, None) => Err(StackError::format(
+                path,
+                format!("has no metadata ({})", missing_meta(path)),
+            )),
+        }
+    }
+
+    /// Reads a stack file's values and, when the file has them, its
+    /// metadata (the `.npy` sidecar, the EXR attribute); nothing is
+    /// validated yet.
+    pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
+        match extension(path).as_deref() {
+            Some("exr") => exr_file::read(path),
+            Some("npy") => npy_file::read(path),
+            _ => Err(StackError::format(
+                path,
+                "unknown stack format: use a .exr or .npy file name",
+            )),
+        }
+    }
+
+    /// A stack from values and metadata, validated ([`Stack::validate`]);
+    /// `path` names the source in errors.
+    pub fn from_parts(data: Array3<f32>, meta: StackMeta, path: &Path) -> Result<Self, StackError> {
+        let stack = Stack { data, meta };
         stack.validate(path)?;
         Ok(stack)
+    }
+}
+
+/// Where a file of this kind keeps its metadata, for error messages.
+pub fn missing_meta(path: &Path) -> String {
+    match extension(path).as_deref() {
+        Some("npy") => format!("no sidecar {}", npy_file::sidecar_path(path).display()),
+        _ => format!("no `{}` attribute", exr_file::META_ATTRIBUTE),
+    }
+}
+
+impl StackMeta {
+    /// Metadata of data produced from `kernels` (simulated counts, expected
+    /// counts, the kernels themselves): the kept bins, the physics, the
+    /// sampling and the bins left out with their light.
+    pub fn simulated(
+        kernels: &scatterscope_physics::KernelStack,
+        kind: ValueKind,
+        source: String,
+    ) -> Self {
+        StackMeta {
+            version: META_VERSION,
+            kind,
+            bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
+            bin_width_ps: kernels.setup.bins.width_ps,
+            pixel_pitch_cm: kernels.setup.sensor.pixel_pitch_cm(),
+            setup: Some(kernels.setup),
+            sampling: Some(kernels.sampling),
+            dropped_bins: kernels
+                .dropped_bins()
+                .map(|b| DroppedBin {
+                    start_ps: b.start_ps,
+                    photons: b.photons,
+                })
+                .collect(),
+            clamped_negative: 0,
+            seed: None,
+            source,
+            boundary: None,
+            acquisition: None,
+        }
+    }
+
+    /// Metadata of measured photon counts: `bins` bins of `width_ps` from
+    /// `start_ps` after the sync, no physics (the reconstruction takes it
+    /// from the user), unit pixel pitch, and the acquisition record when
+    /// the stack comes from a live acquisition.
+    pub fn measured(
+        start_ps: f64,
+        width_ps: f64,
+        bins: usize,
+        source: String,
+        acquisition: Option<serde_json::Value>,
+    ) -> Self {
+        StackMeta {
+            version: META_VERSION,
+            kind: ValueKind::Counts,
+            bin_starts_ps: (0..bins).map(|k| start_ps + k as f64 * width_ps).collect(),
+            bin_width_ps: width_ps,
+            pixel_pitch_cm: 1.0,
+            setup: None,
+            sampling: None,
+            dropped_bins: Vec::new(),
+            clamped_negative: 0,
+            seed: None,
+            source,
+            boundary: None,
+            acquisition,
+        }
+    }
+
+    /// Metadata of a stack of `bins` bins, one after another from
+    /// `setup`'s first bin, on `setup`'s sensor: what a file without
+    /// metadata is taken to hold. The physics' time window becomes the
+    /// file's (`bins` bins), so its photon budget is the recorded light.
+    pub fn consecutive(
+        setup: &Setup,
+        bins: usize,
+        kind: ValueKind,
+        source: String,
+    ) -> Result<Self, scatterscope_physics::ParamError> {
+        let mut setup = *setup;
+        setup.bins.count = bins;
+        setup.validate()?;
+        let mut meta =
+            StackMeta::measured(setup.bins.start_ps, setup.bins.width_ps, bins, source, None);
+        meta.kind = kind;
+        meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
+        meta.setup = Some(setup);
+        Ok(meta)
     }
 }
 

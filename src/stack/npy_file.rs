@@ -42,13 +42,20 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
     std::fs::write(&side, json).map_err(|e| StackError::io(&side, e))
 }
 
-/// Reads a `.npy` stack and its JSON sidecar.
-pub fn read(path: &Path) -> Result<Stack, StackError> {
+/// Reads a `.npy` array of shape (K, H, W) and its JSON sidecar when there
+/// is one (a plain `np.save` array has none).
+pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
     let side = sidecar_path(path);
-    let json = std::fs::read_to_string(&side).map_err(|e| StackError::io(&side, e))?;
-    let meta: StackMeta = serde_json::from_str(&json)
-        .map_err(|e| StackError::format(&side, format!("metadata: {e}")))?;
-    let descr = read_descr(path)?;
+    let meta = match std::fs::read_to_string(&side) {
+        Ok(json) => Some(
+            serde_json::from_str::<StackMeta>(&json)
+                .map_err(|e| StackError::format(&side, format!("metadata: {e}")))?,
+        ),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(StackError::io(&side, e)),
+    };
+    let (descr, shape, data_start) = read_header(path)?;
+    check_size(path, &descr, &shape, data_start)?;
     let open = || {
         File::open(path)
             .map(BufReader::new)
@@ -82,7 +89,7 @@ pub fn read(path: &Path) -> Result<Stack, StackError> {
             ));
         }
     };
-    Ok(Stack { data, meta })
+    Ok((data, meta))
 }
 
 fn exact_counts(path: &Path, counts: Array3<u64>) -> Result<Array3<f32>, StackError> {
@@ -97,8 +104,43 @@ fn exact_counts(path: &Path, counts: Array3<u64>) -> Result<Array3<f32>, StackEr
     Ok(counts.mapv(|c| c as f32))
 }
 
-/// The `descr` entry of a `.npy` header, e.g. `<f4`.
-fn read_descr(path: &Path) -> Result<String, StackError> {
+/// Refuses arrays that are not 3-D or whose shape needs more bytes than
+/// the file holds after its header, before anything is allocated for them.
+fn check_size(
+    path: &Path,
+    descr: &str,
+    shape: &[usize],
+    data_start: u64,
+) -> Result<(), StackError> {
+    if shape.len() != 3 {
+        return Err(StackError::format(
+            path,
+            format!("shape {shape:?}: a stack is a 3-D (bins, rows, columns) array"),
+        ));
+    }
+    let item: u64 = descr.get(2..).and_then(|n| n.parse().ok()).unwrap_or(1);
+    let held = std::fs::metadata(path)
+        .map_err(|e| StackError::io(path, e))?
+        .len()
+        .saturating_sub(data_start);
+    let needed = shape
+        .iter()
+        .try_fold(item, |acc, &d| acc.checked_mul(d as u64));
+    match needed {
+        Some(n) if n <= held => Ok(()),
+        _ => Err(StackError::format(
+            path,
+            format!(
+                "shape {shape:?} of `{descr}` needs {} bytes but the file holds {held} after its header",
+                needed.map_or("more than 2^64".to_string(), |n| n.to_string())
+            ),
+        )),
+    }
+}
+
+/// The `descr` and `shape` entries of a `.npy` header (e.g. `<f4`,
+/// `[20, 256, 256]`) and where the data start.
+fn read_header(path: &Path) -> Result<(String, Vec<usize>, u64), StackError> {
     let mut f = File::open(path).map_err(|e| StackError::io(path, e))?;
     let mut head = [0u8; 12];
     f.read_exact(&mut head)
@@ -143,5 +185,18 @@ fn read_descr(path: &Path) -> Result<String, StackError> {
         .and_then(|r| r.split_once('\''))
         .map(|(d, _)| d.to_string())
         .ok_or_else(|| StackError::format(path, ".npy header 'descr' is not a string"))?;
-    Ok(descr)
+    let shape = text
+        .split_once("'shape':")
+        .and_then(|(_, rest)| rest.trim_start().strip_prefix('('))
+        .and_then(|rest| rest.split_once(')'))
+        .map(|(dims, _)| {
+            dims.split(',')
+                .map(str::trim)
+                .filter(|d| !d.is_empty())
+                .map(str::parse::<usize>)
+                .collect::<Result<Vec<_>, _>>()
+        })
+        .ok_or_else(|| StackError::format(path, ".npy header has no 'shape' tuple"))?
+        .map_err(|e| StackError::format(path, format!(".npy header 'shape': {e}")))?;
+    Ok((descr, shape, (start + len) as u64))
 }

@@ -98,12 +98,137 @@ impl Accounting {
     }
 }
 
+/// Photons whose micro time fell at or past the end of the window (a
+/// subset of [`Accounting::outside_window`]): how many, and the largest such
+/// micro time, so that a caller can widen a default window to hold them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PastWindow {
+    /// Photons past the window's end.
+    pub photons: u64,
+    /// Largest micro time among them (0 when there are none).
+    pub max_micro: u32,
+}
+
+impl PastWindow {
+    #[inline]
+    fn note(&mut self, window: &TimeWindow, micro: u32) {
+        if f64::from(micro) >= window.start + window.width * window.bins as f64 {
+            self.photons += 1;
+            self.max_micro = self.max_micro.max(micro);
+        }
+    }
+}
+
+impl TimeWindow {
+    /// The window from picoseconds: `start_ps` after the sync, bins of
+    /// `width_ps`, on a micro-time unit of `resolution_ps`; every value
+    /// checked (finite, start >= 0, width > 0, 1 to [`MAX_BINS`] bins), the
+    /// error naming the field and value.
+    pub fn from_ps(
+        start_ps: f64,
+        width_ps: f64,
+        bins: usize,
+        resolution_ps: f64,
+    ) -> Result<Self, WindowError> {
+        let bad = |field: &'static str, value: String, reason: &'static str| {
+            Err(WindowError {
+                field,
+                value,
+                reason,
+            })
+        };
+        if !(resolution_ps > 0.0 && resolution_ps.is_finite()) {
+            return bad(
+                "resolution",
+                format!("{resolution_ps} ps"),
+                "must be positive",
+            );
+        }
+        if !(start_ps >= 0.0 && start_ps.is_finite()) {
+            return bad(
+                "t_start",
+                format!("{start_ps} ps"),
+                "must be a finite time >= 0 after the sync",
+            );
+        }
+        if !(width_ps > 0.0 && width_ps.is_finite()) {
+            return bad("bin_width", format!("{width_ps} ps"), "must be positive");
+        }
+        if !(1..=MAX_BINS).contains(&bins) {
+            return bad("bins", bins.to_string(), "must lie in 1..=65536");
+        }
+        Ok(TimeWindow {
+            start: start_ps / resolution_ps,
+            width: width_ps / resolution_ps,
+            bins,
+        })
+    }
+
+    /// The window, if every bin holds the same whole number of micro-time
+    /// steps (device data: bins of unequal step counts would hold unequal
+    /// light).
+    pub fn whole_steps(self, resolution_ps: f64) -> Result<Self, WindowError> {
+        let steps = self.width.round();
+        if (self.width - steps).abs() > 1e-6 || steps < 1.0 {
+            return Err(WindowError {
+                field: "bin_width",
+                value: format!("{} ps", self.width * resolution_ps),
+                reason: "is not a whole number of micro-time steps",
+            });
+        }
+        Ok(TimeWindow {
+            width: steps,
+            ..self
+        })
+    }
+
+    /// Start of the first bin (ps) on a micro-time unit of `resolution_ps`.
+    pub fn start_ps(&self, resolution_ps: f64) -> f64 {
+        self.start * resolution_ps
+    }
+
+    /// Bin width (ps) on a micro-time unit of `resolution_ps`.
+    pub fn width_ps(&self, resolution_ps: f64) -> f64 {
+        self.width * resolution_ps
+    }
+
+    /// Bins of `width_ps` from `start_ps` that cover one sync period of
+    /// `period_ps` (at least 1): the default window of recorded tags.
+    pub fn period_bins(period_ps: f64, start_ps: f64, width_ps: f64) -> usize {
+        ((period_ps - start_ps) / width_ps).ceil().max(1.0) as usize
+    }
+
+    /// Bins needed from this window's start to hold micro time `micro`.
+    pub fn bins_to_hold(&self, micro: u32) -> usize {
+        ((f64::from(micro) - self.start) / self.width)
+            .floor()
+            .max(0.0) as usize
+            + 1
+    }
+}
+
+/// Most bins a window may have.
+pub const MAX_BINS: usize = 65_536;
+
+/// A time window that cannot be binned: the field, its value and why.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("time window: {field} = {value} {reason}")]
+pub struct WindowError {
+    /// The field (`t_start`, `bin_width`, `bins`, `resolution`).
+    pub field: &'static str,
+    /// Its value, with unit.
+    pub value: String,
+    /// What is wrong.
+    pub reason: &'static str,
+}
+
 /// Micro times covered by the lookup table: every T3 format's range (15 bits).
 const MICRO_LUT_LEN: usize = 1 << 15;
 /// Lookup-table entry of a micro time outside the window.
 const OUTSIDE: u16 = u16::MAX;
 
 /// Builds stacks from a stream of tags.
+#[derive(Clone)]
 pub struct Binner {
     window: TimeWindow,
     /// Bin of every possible micro time; a table lookup instead of a
@@ -125,12 +250,15 @@ pub struct Binner {
     pixel_lut: Vec<u32>,
     /// Scratch space of [`Binner::push_sensor_photons`].
     offsets: Vec<u32>,
+    /// Photons past the window's end, from [`Binner::push`] and
+    /// [`Binner::bulk`].
+    past: PastWindow,
 }
 
 /// Pixel-table entry of a sensor pixel outside the region of interest.
 const OUTSIDE_ROI: u32 = u32::MAX;
 
-#[derive(Default)]
+#[derive(Clone, Default)]
 struct ScanState {
     frame: usize,
     line: usize,
@@ -196,7 +324,14 @@ impl Binner {
             scan: ScanState::default(),
             pixel_lut,
             offsets: Vec::new(),
+            past: PastWindow::default(),
         }
+    }
+
+    /// Photons so far whose micro time fell at or past the window's end
+    /// (tags from [`Binner::push`] and [`Binner::bulk`]).
+    pub fn past_window(&self) -> PastWindow {
+        self.past
     }
 
     #[inline(always)]
@@ -242,6 +377,7 @@ impl Binner {
             stacks,
             accounting,
             pixel_lut,
+            past,
             ..
         } = self;
         let mut sink = BulkSink {
@@ -256,6 +392,7 @@ impl Binner {
                 stack: &mut stacks[0],
                 acc: *accounting,
                 other_records: 0,
+                past: *past,
             }),
             slow: None,
         };
@@ -274,6 +411,7 @@ impl Binner {
             acc.records =
                 accounting.records + photons + (acc.markers - accounting.markers) + f.other_records;
             *accounting = acc;
+            *past = f.past;
         }
         r
     }
@@ -296,6 +434,7 @@ impl Binner {
                 }
                 let Some(bin) = self.micro_bin(micro_time) else {
                     self.accounting.outside_window += 1;
+                    self.past.note(&self.window, micro_time);
                     return;
                 };
                 match self.map {
@@ -510,6 +649,7 @@ struct FastSink<'a> {
     acc: Accounting,
     /// Records that are neither photons nor markers (overflows, syncs).
     other_records: u64,
+    past: PastWindow,
 }
 
 impl BulkSink<'_> {
@@ -542,6 +682,7 @@ impl FastSink<'_> {
                 }
                 let Some(bin) = lookup_bin(self.micro_lut, &self.window, micro_time) else {
                     self.acc.outside_window += 1;
+                    self.past.note(&self.window, micro_time);
                     return;
                 };
                 let pixel = match self.map {

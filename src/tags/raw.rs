@@ -121,7 +121,9 @@ pub fn read_raw(
     let mut file = File::open(path).map_err(io)?;
     let (header, _) = read_header(path, &mut file)?;
     let mut decoder = FrameDecoder::new();
-    let mut buf = vec![0u8; CHUNK];
+    // Small files get a small buffer.
+    let size = file.metadata().map_err(io)?.len();
+    let mut buf = vec![0u8; CHUNK.min(usize::try_from(size).unwrap_or(CHUNK)).max(1)];
     let mut summary = RawSummary {
         path: path.to_path_buf(),
         header,

@@ -13,7 +13,7 @@ use scatterscope::forward::{Boundary, ForwardModel};
 use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::scene::Scene;
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet, write_image};
-use scatterscope::stack::{META_VERSION, Stack, StackMeta, ValueKind, exr_file};
+use scatterscope::stack::{Stack, StackMeta, exr_file};
 use scatterscope::tags::binning::Region;
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
 
@@ -81,8 +81,14 @@ pub struct AcquireArgs {
     /// Mock: emit as fast as the link takes photons instead of in real time.
     #[arg(long)]
     unpaced: bool,
+    /// Mock: draw this many batches once and replay them (load tests at
+    /// hardware rates; with --rate above what the host takes, the device
+    /// FIFO overflows and says how much). 0: draw every photon.
+    #[arg(long, default_value_t = 0)]
+    replay: usize,
     /// Mock: inject faults, e.g. corrupt=10,duplicate=7,reorder=5,drop-bytes=9,
-    /// overflow=4:1000,disconnect=50 (every n-th batch).
+    /// overflow=4:1000,disconnect=50 (every n-th batch; with random=SEED,
+    /// each with probability 1/n per batch at seeded random times).
     #[arg(long, value_parser = parse_faults, default_value = "")]
     faults: Faults,
     /// Output directory (created if missing).
@@ -148,6 +154,11 @@ fn parse_faults(s: &str) -> Result<Faults, String> {
             "duplicate" => f.duplicate_every = n(value)?,
             "reorder" => f.reorder_every = n(value)?,
             "disconnect" => f.disconnect_after = n(value)?,
+            "random" => {
+                f.random_seed = value
+                    .parse()
+                    .map_err(|_| format!("fault `{item}`: `{value}` is not a seed"))?
+            }
             "overflow" => {
                 let (every, photons) = value
                     .split_once(':')
@@ -157,7 +168,7 @@ fn parse_faults(s: &str) -> Result<Faults, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown fault `{other}` (corrupt, drop-bytes, duplicate, reorder, overflow, disconnect)"
+                    "unknown fault `{other}` (corrupt, drop-bytes, duplicate, reorder, overflow, disconnect, random)"
                 ));
             }
         }
@@ -195,6 +206,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
                 real_time: !args.unpaced,
                 max_photons: args.max_photons,
                 faults: args.faults.clone(),
+                replay_batches: args.replay,
                 ..MockOptions::default()
             },
         })
@@ -324,25 +336,22 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         })),
         "raw": outcome.raw.as_ref().map(|p| p.display().to_string()),
     });
+    let mut meta = StackMeta::measured(
+        plan.t_start_ps,
+        plan.bin_width_ps,
+        plan.bins,
+        format!("scatterscope acquire --device {}", args.device),
+        Some(acquisition.clone()),
+    );
+    // The reconstruction's physics: the flags' (for the mock, the light
+    // budget of the known scene).
+    meta.pixel_pitch_cm = stack_setup.sensor.pixel_pitch_cm();
+    meta.setup = Some(stack_setup);
+    meta.sampling = Some(Sampling::Integrated);
+    meta.seed = args.device.is_mock().then_some(args.seed);
     let stack = Stack {
         data: outcome.counts.mapv(|c| c as f32),
-        meta: StackMeta {
-            version: META_VERSION,
-            kind: ValueKind::Counts,
-            bin_starts_ps: (0..plan.bins)
-                .map(|k| plan.t_start_ps + k as f64 * plan.bin_width_ps)
-                .collect(),
-            bin_width_ps: plan.bin_width_ps,
-            pixel_pitch_cm: stack_setup.sensor.pixel_pitch_cm(),
-            setup: Some(stack_setup),
-            sampling: Some(Sampling::Integrated),
-            dropped_bins: Vec::new(),
-            clamped_negative: 0,
-            seed: args.device.is_mock().then_some(args.seed),
-            source: format!("scatterscope acquire --device {}", args.device),
-            boundary: None,
-            acquisition: Some(acquisition.clone()),
-        },
+        meta,
     };
     stack.save(&args.out.join("stack.exr"))?;
     write_contact_sheet(&stack, SheetScale::Shared, &args.out.join("stack.png"))?;

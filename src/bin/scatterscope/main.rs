@@ -91,8 +91,18 @@ fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn main() -> anyhow::Result<()> {
-    dispatch(Cli::parse().command)
+/// Exit status: 0 success; 1 the command failed (bad input, I/O, a device
+/// error), with one `error:` line naming the file, field and value and the
+/// causes after it; 2 the command line itself is wrong (clap's usage
+/// errors). A panic (101) is a bug.
+fn main() -> std::process::ExitCode {
+    match dispatch(Cli::parse().command) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::from(1)
+        }
+    }
 }
 
 fn dispatch(command: Command) -> anyhow::Result<()> {

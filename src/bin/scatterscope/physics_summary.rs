@@ -4,7 +4,6 @@
 use scatterscope::physics::kernel::KernelStack;
 use scatterscope::physics::validity::diagnose;
 use scatterscope::physics::{Sampling, Setup};
-use scatterscope::stack::{DroppedBin, StackMeta, ValueKind};
 
 /// Prints the setup and the diffusion-regime warnings to stderr.
 pub fn print_setup(setup: &Setup, kernels: &KernelStack) {
@@ -66,31 +65,6 @@ pub fn print_setup(setup: &Setup, kernels: &KernelStack) {
         100.0 * evaluated / (full * kernels.len() as f64),
         kernels.len()
     );
-}
-
-/// Stack metadata for data produced from `kernels`.
-pub fn stack_meta(kernels: &KernelStack, kind: ValueKind, source: String) -> StackMeta {
-    StackMeta {
-        version: scatterscope::stack::META_VERSION,
-        kind,
-        bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
-        bin_width_ps: kernels.setup.bins.width_ps,
-        pixel_pitch_cm: kernels.setup.sensor.pixel_pitch_cm(),
-        setup: Some(kernels.setup),
-        sampling: Some(kernels.sampling),
-        dropped_bins: kernels
-            .dropped_bins()
-            .map(|b| DroppedBin {
-                start_ps: b.start_ps,
-                photons: b.photons,
-            })
-            .collect(),
-        clamped_negative: 0,
-        seed: None,
-        source,
-        boundary: None,
-        acquisition: None,
-    }
 }
 
 /// Parses `integrated` or `point`.

@@ -9,9 +9,9 @@ use ndarray::ArrayView2;
 use scatterscope::config::PhysicsArgs;
 use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet};
-use scatterscope::stack::{Stack, ValueKind};
+use scatterscope::stack::{Stack, StackMeta, ValueKind};
 
-use crate::physics_summary::{parse_sampling, print_setup, stack_meta};
+use crate::physics_summary::{parse_sampling, print_setup};
 
 /// Compute the ST-PSF for each time bin and write it with a per-bin table.
 ///
@@ -118,7 +118,7 @@ pub fn run(args: &PsfArgs) -> anyhow::Result<()> {
     std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
     let stack = Stack {
         data: chosen.kernels.mapv(|v| v as f32),
-        meta: stack_meta(chosen, ValueKind::Kernel, "scatterscope psf".into()),
+        meta: StackMeta::simulated(chosen, ValueKind::Kernel, "scatterscope psf".into()),
     };
     if stack.bins() == 0 {
         anyhow::bail!(

@@ -10,9 +10,9 @@ use scatterscope::physics::{Preset, Sampling};
 use scatterscope::reconstruct::method::{Method, run_method};
 use scatterscope::reconstruct::problem::Problem;
 use scatterscope::scene::Scene;
-use scatterscope::stack::Stack;
 use scatterscope::stack::exr_file;
 use scatterscope::stack::preview::write_image;
+use scatterscope::stack::{Stack, StackMeta, ValueKind, missing_meta};
 
 use crate::recon_args::ReconArgs;
 
@@ -49,16 +49,56 @@ pub struct ReconstructArgs {
 }
 
 pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
-    let stack = Stack::load(&args.stack)?;
-    let setup = args.physics.resolve_over(stack.meta.setup)?;
-    if stack.meta.setup.is_none() && args.physics.preset.is_none() && args.physics.config.is_none()
-    {
-        eprintln!(
-            "note: {} records no physics; using the {} preset with your flags",
-            args.stack.display(),
-            Preset::Paper.name()
-        );
-    }
+    let (data, meta) = Stack::read(&args.stack)?;
+    let (stack, setup) = match meta {
+        Some(meta) => {
+            let stack = Stack::from_parts(data, meta, &args.stack)?;
+            let setup = args.physics.resolve_over(stack.meta.setup)?;
+            if stack.meta.setup.is_none()
+                && args.physics.preset.is_none()
+                && args.physics.config.is_none()
+            {
+                eprintln!(
+                    "note: {} records no physics; using the {} preset with your flags",
+                    args.stack.display(),
+                    Preset::Paper.name()
+                );
+            }
+            (stack, setup)
+        }
+        None => {
+            // A plain array (np.save, another tool's EXR): physics and
+            // time window from the flags, the bins one after another.
+            let meta = StackMeta::consecutive(
+                &args.physics.resolve()?,
+                data.dim().0,
+                ValueKind::Counts,
+                format!("{} (no metadata)", args.stack.display()),
+            )
+            .with_context(|| format!("the physics for {}", args.stack.display()))?;
+            let setup = meta.setup.expect("consecutive metadata holds its physics");
+            eprintln!(
+                "note: {} has {}; assumed: photon counts in {} consecutive bins of {} ps from {} ps (the physics' time window and photon budget), {} x {} pixels of {} cm, physics from {}",
+                args.stack.display(),
+                missing_meta(&args.stack),
+                setup.bins.count,
+                setup.bins.width_ps,
+                setup.bins.start_ps,
+                setup.sensor.height_px,
+                setup.sensor.width_px,
+                meta.pixel_pitch_cm,
+                match (&args.physics.preset, &args.physics.config) {
+                    (Some(p), _) => format!("the {} preset and your flags", p.name()),
+                    (None, Some(c)) => format!("{} and your flags", c.display()),
+                    (None, None) => format!(
+                        "the {} preset (default) and your flags",
+                        Preset::Paper.name()
+                    ),
+                }
+            );
+            (Stack::from_parts(data, meta, &args.stack)?, setup)
+        }
+    };
     let sampling = stack.meta.sampling.unwrap_or(Sampling::Integrated);
     let boundary = args.boundary.or(stack.meta.boundary).unwrap_or_default();
     let problem = Problem::new(&stack, &setup, sampling, boundary)

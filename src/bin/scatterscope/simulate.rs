@@ -9,9 +9,9 @@ use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::scene::Scene;
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet, write_image};
-use scatterscope::stack::{Stack, ValueKind, exr_file};
+use scatterscope::stack::{Stack, StackMeta, ValueKind, exr_file};
 
-use crate::physics_summary::{parse_sampling, print_setup, stack_meta};
+use crate::physics_summary::{parse_sampling, print_setup};
 
 /// Simulate a transient measurement of a scene through the scattering slab.
 ///
@@ -76,7 +76,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output directory {}", args.out.display()))?;
     let source = format!("scatterscope simulate --scene {}", scene.name());
-    let mut meta = stack_meta(&kernels, ValueKind::ExpectedCounts, source);
+    let mut meta = StackMeta::simulated(&kernels, ValueKind::ExpectedCounts, source);
     meta.clamped_negative = expected.clamped as u64;
     meta.boundary = Some(args.boundary);
     let expected_stack = Stack {

@@ -6,11 +6,12 @@ use std::time::Instant;
 
 use anyhow::Context;
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet};
-use scatterscope::stack::{META_VERSION, Stack, StackMeta, ValueKind};
+use scatterscope::stack::{Stack, StackMeta};
 use scatterscope::tags::Tag;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
+use scatterscope::tags::picoquant::bin_file::{BinFileError, BinSpec, Pixels, bin_file};
 use scatterscope::tags::picoquant::records::Decoder;
-use scatterscope::tags::picoquant::{self, Container, FileInfo, TtrError};
+use scatterscope::tags::picoquant::{self, Container, FileError, FileInfo, TtrError};
 use scatterscope::tags::raw::{bin_batch, is_raw_file, read_raw};
 
 /// Show what a PicoQuant file (PTU, HT3, HT2) holds.
@@ -169,91 +170,31 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
     if is_raw_file(&args.file) {
         return bin_raw(args);
     }
-    let (info, mut reader) = picoquant::open(&args.file)?;
-    anyhow::ensure!(
-        info.record_type.is_t3(),
-        "{}: {} records carry no micro time; binning needs a T3 file",
-        args.file.display(),
-        info.record_type.name()
-    );
-    let res_ps = info.resolution_s * 1e12;
-    let width_ps = args.bin_width.unwrap_or(res_ps);
-    anyhow::ensure!(
-        width_ps > 0.0 && width_ps.is_finite(),
-        "--bin-width {width_ps} ps must be positive"
-    );
-    let bins = match args.bins {
-        Some(b) => b,
-        None => ((info.macro_unit_s * 1e12 - args.t_start) / width_ps)
-            .ceil()
-            .max(1.0) as usize,
+    let spec = BinSpec {
+        bin_width_ps: args.bin_width,
+        t_start_ps: args.t_start,
+        bins: args.bins,
+        channel: args.channel,
+        pixels: match args.pixels.as_str() {
+            "auto" => Pixels::Auto,
+            "single" => Pixels::Single,
+            "channel" => Pixels::Channel,
+            other => anyhow::bail!("--pixels {other}: use auto, single or channel"),
+        },
+        frames: parse_frames(&args.frames)?,
+        allow_truncated: args.allow_truncated,
     };
-    anyhow::ensure!(
-        (1..=65_536).contains(&bins),
-        "--bins {bins}: use 1 to 65536 bins"
-    );
-    let map = match (args.pixels.as_str(), info.imaging) {
-        ("auto", Some(img)) => PixelMap::Scan(img),
-        ("auto" | "single", _) => PixelMap::Single,
-        ("channel", _) => PixelMap::Channel { width: 64 },
-        (other, _) => anyhow::bail!("--pixels {other}: use auto, single or channel"),
-    };
-    let frames = parse_frames(&args.frames)?;
-    let window = TimeWindow {
-        start: args.t_start / res_ps,
-        width: width_ps / res_ps,
-        bins,
-    };
-    let mut binner = Binner::new(window, map, args.channel, frames);
-    let mut decoder = Decoder::new(info.record_type);
-    let start = Instant::now();
-    let mut chunk = Vec::new();
-    let mut truncated = None;
-    loop {
-        match reader.next_chunk(&mut chunk) {
-            Ok(true) => binner.bulk(|sink| decoder.decode_all(&chunk, sink)),
-            Ok(false) => break,
-            Err(e @ TtrError::Truncated { .. }) if args.allow_truncated => {
-                truncated = Some(e.to_string());
-                break;
-            }
-            Err(e) => {
-                return Err(anyhow::anyhow!(
-                    "{}: {e} (pass --allow-truncated to bin the complete records)",
-                    args.file.display()
-                ));
-            }
-        }
-    }
-    let elapsed = start.elapsed().as_secs_f64();
-    let (stacks, acc) = binner.finish();
-    let stacks: Vec<_> = if let PixelMap::Channel { .. } = map {
-        // Trim the channel row to the highest channel that saw a photon.
-        let used = stacks[0]
-            .axis_iter(ndarray::Axis(2))
-            .rposition(|c| c.iter().any(|&v| v > 0))
-            .map_or(1, |p| p + 1);
-        stacks
-            .iter()
-            .map(|s| s.slice(ndarray::s![.., .., ..used]).to_owned())
-            .collect()
-    } else {
-        stacks
-    };
+    let binned = bin_file(&args.file, &spec).map_err(|e| match e {
+        BinFileError::File(FileError {
+            error: TtrError::Truncated { .. },
+            ..
+        }) => anyhow::anyhow!("{e} (pass --allow-truncated to bin the complete records)"),
+        e => e.into(),
+    })?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output directory {}", args.out.display()))?;
-    let many = stacks.len() > 1;
-    for (f, counts) in stacks.iter().enumerate() {
-        let source = format!(
-            "scatterscope bin {} ({}, {})",
-            args.file.display(),
-            info.device,
-            info.record_type.name()
-        );
-        let stack = Stack {
-            data: counts.mapv(|c| c as f32),
-            meta: counts_meta(bins, args.t_start, width_ps, source, None),
-        };
+    let many = binned.stacks.len() > 1;
+    for (f, stack) in binned.stacks.iter().enumerate() {
         let stem = if many {
             format!("stack_f{f:03}")
         } else {
@@ -261,16 +202,16 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
         };
         stack.save(&args.out.join(format!("{stem}.exr")))?;
         write_contact_sheet(
-            &stack,
+            stack,
             SheetScale::Shared,
             &args.out.join(format!("{stem}.png")),
         )?;
     }
+    let acc = binned.accounting;
     println!(
-        "{} records in {:.3} s ({:.0} M records/s): {} photons, {} binned, {} outside the time window, {} on other channels, {} outside the image; {} markers, {} frames",
+        "{} records ({:.0} M records/s): {} photons, {} binned, {} outside the time window, {} on other channels, {} outside the image; {} markers, {} frames",
         acc.records,
-        elapsed,
-        acc.records as f64 / elapsed.max(1e-9) / 1e6,
+        binned.records_per_s / 1e6,
         acc.received,
         acc.binned,
         acc.outside_window,
@@ -279,14 +220,18 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
         acc.markers,
         acc.frames
     );
-    if let Some(t) = truncated {
+    for note in &binned.notes {
+        println!("note: {note}");
+    }
+    if let Some(t) = &binned.truncated {
         println!("warning: {t}");
     }
-    let (_, h, w) = stacks[0].dim();
+    let (k, h, w) = binned.stacks[0].data.dim();
     println!(
-        "wrote {} stack(s) of {bins} x {h} x {w} ({width_ps} ps bins from {} ps) to {}",
-        stacks.len(),
-        args.t_start,
+        "wrote {} stack(s) of {k} x {h} x {w} ({} ps bins from {} ps) to {}",
+        binned.stacks.len(),
+        binned.window.width_ps(binned.resolution_ps),
+        binned.window.start_ps(binned.resolution_ps),
         args.out.display()
     );
     Ok(())
@@ -364,31 +309,22 @@ fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
     };
     let res_ps = f64::from(header.resolution_fs) / 1000.0;
     let width_ps = args.bin_width.unwrap_or(res_ps);
-    let steps = width_ps / res_ps;
-    anyhow::ensure!(
-        width_ps > 0.0 && (steps - steps.round()).abs() < 1e-6,
-        "--bin-width {width_ps} ps is not a positive multiple of the file's {res_ps} ps micro-time unit"
-    );
-    let bins = args.bins.unwrap_or(
-        ((header.sync_period_fs as f64 / 1000.0 - args.t_start) / width_ps)
-            .ceil()
-            .max(1.0) as usize,
-    );
-    anyhow::ensure!(
-        (1..=65_535).contains(&bins),
-        "--bins {bins}: use 1 to 65535 bins"
-    );
+    let bins = args.bins.unwrap_or_else(|| {
+        TimeWindow::period_bins(
+            header.sync_period_fs as f64 / 1000.0,
+            args.t_start,
+            width_ps,
+        )
+    });
     let (w, h) = (usize::from(header.pixels_x), usize::from(header.pixels_y));
     anyhow::ensure!(
         w > 0 && h > 0,
         "{}: header sensor size {w} x {h} is empty",
         args.file.display()
     );
-    let window = TimeWindow {
-        start: args.t_start / res_ps,
-        width: steps.round(),
-        bins,
-    };
+    let window = TimeWindow::from_ps(args.t_start, width_ps, bins, res_ps)
+        .and_then(|w| w.whole_steps(res_ps))
+        .with_context(|| args.file.display().to_string())?;
     let map = PixelMap::Sensor {
         sensor_width: w,
         roi: scatterscope::tags::binning::Region {
@@ -416,7 +352,13 @@ fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
         serde_json::json!({ "raw_header": header, "totals_in_file": summary.totals.is_some() });
     let stack = Stack {
         data: stacks.swap_remove(0).mapv(|c| c as f32),
-        meta: counts_meta(bins, args.t_start, width_ps, source, Some(acquisition)),
+        meta: StackMeta::measured(
+            args.t_start,
+            width_ps,
+            window.bins,
+            source,
+            Some(acquisition),
+        ),
     };
     let path = args.out.join("stack.exr");
     stack.save(&path)?;
@@ -436,31 +378,4 @@ fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
     }
     println!("wrote {}", path.display());
     Ok(())
-}
-
-/// Metadata of a stack of binned counts: `bins` bins of `width_ps` from
-/// `t_start`. The object-plane pitch is not in tag files; reconstruction
-/// takes the field of view from --fov.
-fn counts_meta(
-    bins: usize,
-    t_start: f64,
-    width_ps: f64,
-    source: String,
-    acquisition: Option<serde_json::Value>,
-) -> StackMeta {
-    StackMeta {
-        version: META_VERSION,
-        kind: ValueKind::Counts,
-        bin_starts_ps: (0..bins).map(|k| t_start + k as f64 * width_ps).collect(),
-        bin_width_ps: width_ps,
-        pixel_pitch_cm: 1.0,
-        setup: None,
-        sampling: None,
-        dropped_bins: Vec::new(),
-        clamped_negative: 0,
-        seed: None,
-        source,
-        boundary: None,
-        acquisition,
-    }
 }

@@ -42,16 +42,77 @@ enum Value {
     Scalar,
     Int(i64),
     Str(String),
-    Tuple(Vec<Value>),
-    List(Vec<Value>),
-    Dict(Vec<(Value, Value)>),
+    Tuple(Vec<Value>, Size),
+    List(Vec<Value>, Size),
+    Dict(Vec<(Value, Value)>, Size),
     Global(String),
     /// A persistent id (a storage reference).
-    Persistent(Box<Value>),
+    Persistent(Box<Value>, Size),
     /// A tensor view of a storage.
     Tensor(TensorRef),
     /// The result of calling a global this reader does not model.
     Opaque(String),
+}
+
+/// Nesting depth and node count of a value, kept with every container so
+/// that limits cost nothing to check: a crafted pickle can otherwise nest
+/// values until the stack overflows, or double a value through the memo
+/// until memory runs out.
+#[derive(Debug, Clone, Copy, Default)]
+struct Size {
+    depth: u32,
+    nodes: u64,
+}
+
+/// Deepest nesting a state dict pickle may use (real ones need about 5).
+const MAX_DEPTH: u32 = 64;
+/// Most value nodes one pickle may build, memo copies included.
+const MAX_NODES: u64 = 1 << 24;
+
+impl Size {
+    /// The size of a container holding `children`.
+    fn of<'a>(children: impl IntoIterator<Item = &'a Value>) -> Self {
+        children
+            .into_iter()
+            .fold(Size { depth: 1, nodes: 1 }, |acc, c| {
+                let s = c.size();
+                Size {
+                    depth: acc.depth.max(s.depth + 1),
+                    nodes: acc.nodes + s.nodes,
+                }
+            })
+    }
+
+    /// This container's size after `child` is added to it.
+    fn with(self, child: &Value) -> Self {
+        let s = child.size();
+        Size {
+            depth: self.depth.max(s.depth + 1),
+            nodes: self.nodes + s.nodes,
+        }
+    }
+}
+
+impl Value {
+    fn size(&self) -> Size {
+        match self {
+            Value::Tuple(_, s)
+            | Value::List(_, s)
+            | Value::Dict(_, s)
+            | Value::Persistent(_, s) => *s,
+            _ => Size { depth: 0, nodes: 1 },
+        }
+    }
+
+    fn tuple(items: Vec<Value>) -> Self {
+        let s = Size::of(&items);
+        Value::Tuple(items, s)
+    }
+
+    fn list(items: Vec<Value>) -> Self {
+        let s = Size::of(&items);
+        Value::List(items, s)
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -69,6 +130,8 @@ struct Machine<'a> {
     stack: Vec<Value>,
     marks: Vec<usize>,
     memo: HashMap<u32, Value>,
+    /// Value nodes built by this pickle so far, memo copies included.
+    built: u64,
 }
 
 impl<'a> Machine<'a> {
@@ -116,6 +179,31 @@ impl<'a> Machine<'a> {
         Ok(self.stack.split_off(m))
     }
 
+    /// Pushes a container built by an opcode, within the nesting limit.
+    fn push_checked(&mut self, v: Value) -> Result<(), String> {
+        let s = v.size();
+        if s.depth > MAX_DEPTH {
+            return Err(self.err(format!(
+                "values nested {} deep; state dicts need a few levels (limit {MAX_DEPTH})",
+                s.depth
+            )));
+        }
+        self.built += 1;
+        self.stack.push(v);
+        Ok(())
+    }
+
+    /// Counts a memo copy of `v` against the pickle's node budget.
+    fn account(&mut self, v: &Value) -> Result<(), String> {
+        self.built += v.size().nodes;
+        if self.built > MAX_NODES {
+            return Err(self.err(format!(
+                "the memo copies would build over {MAX_NODES} values; not a state dict"
+            )));
+        }
+        Ok(())
+    }
+
     fn string(&mut self, n: usize) -> Result<Value, String> {
         let b = self.take(n)?;
         Ok(Value::Str(String::from_utf8_lossy(b).into_owned()))
@@ -126,6 +214,7 @@ impl<'a> Machine<'a> {
         self.stack.clear();
         self.marks.clear();
         self.memo.clear();
+        self.built = 0;
         loop {
             let op = self.u8()?;
             match op {
@@ -197,6 +286,7 @@ impl<'a> Machine<'a> {
                         .last()
                         .cloned()
                         .ok_or_else(|| self.err("BINPUT on empty stack"))?;
+                    self.account(&v)?;
                     self.memo.insert(k, v);
                 }
                 b'r' => {
@@ -206,6 +296,7 @@ impl<'a> Machine<'a> {
                         .last()
                         .cloned()
                         .ok_or_else(|| self.err("LONG_BINPUT on empty stack"))?;
+                    self.account(&v)?;
                     self.memo.insert(k, v);
                 }
                 b'h' | b'j' => {
@@ -219,14 +310,15 @@ impl<'a> Machine<'a> {
                         .get(&k)
                         .cloned()
                         .ok_or_else(|| self.err(format!("memo {k} unset")))?;
+                    self.account(&v)?;
                     self.stack.push(v);
                 }
-                b')' => self.stack.push(Value::Tuple(Vec::new())),
-                b']' => self.stack.push(Value::List(Vec::new())),
-                b'}' => self.stack.push(Value::Dict(Vec::new())),
+                b')' => self.stack.push(Value::tuple(Vec::new())),
+                b']' => self.stack.push(Value::list(Vec::new())),
+                b'}' => self.stack.push(Value::Dict(Vec::new(), Size::of([]))),
                 b't' => {
                     let items = self.pop_mark()?;
-                    self.stack.push(Value::Tuple(items));
+                    self.push_checked(Value::tuple(items))?;
                 }
                 0x85..=0x87 => {
                     let n = (op - 0x84) as usize;
@@ -234,25 +326,26 @@ impl<'a> Machine<'a> {
                         return Err(self.err("stack underflow"));
                     }
                     let items = self.stack.split_off(self.stack.len() - n);
-                    self.stack.push(Value::Tuple(items));
+                    self.push_checked(Value::tuple(items))?;
                 }
                 b'l' => {
                     let items = self.pop_mark()?;
-                    self.stack.push(Value::List(items));
+                    self.push_checked(Value::list(items))?;
                 }
-                b'a' => {
-                    let v = self.pop()?;
-                    match self.stack.last_mut() {
-                        Some(Value::List(l)) => l.push(v),
-                        _ => return Err(self.err("APPEND to a non-list")),
+                b'a' | b'e' => {
+                    let items = if op == b'a' {
+                        vec![self.pop()?]
+                    } else {
+                        self.pop_mark()?
+                    };
+                    let Some(Value::List(mut l, mut size)) = self.stack.pop() else {
+                        return Err(self.err("APPEND(S) to a non-list"));
+                    };
+                    for v in items {
+                        size = size.with(&v);
+                        l.push(v);
                     }
-                }
-                b'e' => {
-                    let items = self.pop_mark()?;
-                    match self.stack.last_mut() {
-                        Some(Value::List(l)) => l.extend(items),
-                        _ => return Err(self.err("APPENDS to a non-list")),
-                    }
+                    self.push_checked(Value::List(l, size))?;
                 }
                 b's' | b'u' => {
                     let items = if op == b's' {
@@ -265,20 +358,20 @@ impl<'a> Machine<'a> {
                     if items.len() % 2 != 0 {
                         return Err(self.err("SETITEMS with an odd number of items"));
                     }
-                    let pos = self.pos;
-                    match self.stack.last_mut() {
-                        Some(Value::Dict(d)) => {
-                            let mut it = items.into_iter();
-                            while let (Some(k), Some(v)) = (it.next(), it.next()) {
-                                d.push((k, v));
-                            }
-                        }
-                        _ => return Err(format!("pickle at byte {pos}: SETITEMS on a non-dict")),
+                    let Some(Value::Dict(mut d, mut size)) = self.stack.pop() else {
+                        return Err(self.err("SETITEMS on a non-dict"));
+                    };
+                    let mut it = items.into_iter();
+                    while let (Some(k), Some(v)) = (it.next(), it.next()) {
+                        size = size.with(&k).with(&v);
+                        d.push((k, v));
                     }
+                    self.push_checked(Value::Dict(d, size))?;
                 }
                 b'Q' => {
                     let pid = self.pop()?;
-                    self.stack.push(Value::Persistent(Box::new(pid)));
+                    let size = Size::of([&pid]);
+                    self.push_checked(Value::Persistent(Box::new(pid), size))?;
                 }
                 b'R' => {
                     let args = self.pop()?;
@@ -303,18 +396,18 @@ impl<'a> Machine<'a> {
         let Value::Global(name) = func else {
             return Err(self.err("REDUCE on a non-global"));
         };
-        let Value::Tuple(args) = args else {
+        let Value::Tuple(args, _) = args else {
             return Err(self.err(format!("{name} called without an argument tuple")));
         };
         match name.as_str() {
-            "collections.OrderedDict" => Ok(Value::Dict(Vec::new())),
+            "collections.OrderedDict" => Ok(Value::Dict(Vec::new(), Size::of([]))),
             "torch._utils._rebuild_tensor_v2" | "torch._utils._rebuild_tensor" => {
                 if args.len() < 4 {
                     return Err(self.err(format!("{name} with {} arguments", args.len())));
                 }
                 let (key, storage_type) = match &args[0] {
-                    Value::Persistent(p) => match p.as_ref() {
-                        Value::Tuple(t) if t.len() >= 3 => match (&t[1], &t[2]) {
+                    Value::Persistent(p, _) => match p.as_ref() {
+                        Value::Tuple(t, _) if t.len() >= 3 => match (&t[1], &t[2]) {
                             (Value::Global(ty), Value::Str(k)) => (k.clone(), ty.clone()),
                             _ => return Err(self.err("storage id without a type and key")),
                         },
@@ -327,7 +420,7 @@ impl<'a> Machine<'a> {
                     _ => Err(self.err("tensor offset/size/stride is not a non-negative int")),
                 };
                 let ints = |v: &Value| match v {
-                    Value::Tuple(t) => t.iter().map(int).collect::<Result<Vec<_>, _>>(),
+                    Value::Tuple(t, _) => t.iter().map(int).collect::<Result<Vec<_>, _>>(),
                     _ => Err(self.err("tensor size/stride is not a tuple")),
                 };
                 Ok(Value::Tensor(TensorRef {
@@ -366,6 +459,7 @@ fn read_state_dict(bytes: &[u8], path: &str) -> Result<BTreeMap<String, Tensor>,
         stack: Vec::new(),
         marks: Vec::new(),
         memo: HashMap::new(),
+        built: 0,
     };
     match m.load().map_err(&fail)? {
         Value::Opaque(s) if s == "magic" => {}
@@ -380,10 +474,10 @@ fn read_state_dict(bytes: &[u8], path: &str) -> Result<BTreeMap<String, Tensor>,
         v => return Err(fail(format!("protocol version {v:?}, expected 1001"))),
     }
     m.load().map_err(&fail)?; // system info
-    let Value::Dict(entries) = m.load().map_err(&fail)? else {
+    let Value::Dict(entries, _) = m.load().map_err(&fail)? else {
         return Err(fail("the saved object is not a state dict".into()));
     };
-    let Value::List(keys) = m.load().map_err(&fail)? else {
+    let Value::List(keys, _) = m.load().map_err(&fail)? else {
         return Err(fail("the storage key list is missing".into()));
     };
     let mut storages: HashMap<String, &[u8]> = HashMap::new();
@@ -399,7 +493,7 @@ fn read_state_dict(bytes: &[u8], path: &str) -> Result<BTreeMap<String, Tensor>,
         let len = usize::try_from(numel)
             .ok()
             .and_then(|n| n.checked_mul(4))
-            .filter(|&n| pos + 8 + n <= bytes.len())
+            .filter(|&n| n.checked_add(pos + 8).is_some_and(|end| end <= bytes.len()))
             .ok_or_else(|| {
                 fail(format!(
                     "storage {key} at byte {pos}: {numel} elements run past the end"

@@ -1,0 +1,24 @@
+//! Arbitrary bytes as a raw tag file (.sstags): read and binned without a
+//! panic; the photon accounting balances and the batch counts agree with
+//! the binner.
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
+use scatterscope::tags::raw::{bin_batch, read_raw};
+
+#[path = "common/file.rs"]
+mod file;
+
+fuzz_target!(|data: &[u8]| {
+    let path = file::write("tags.sstags", data);
+    let window = TimeWindow { start: 0.0, width: 1.0, bins: 8 };
+    let mut binner = Binner::new(window, PixelMap::Channel { width: 4 }, None, FrameSelect::Sum);
+    if read_raw(&path, |batch| {
+        bin_batch(batch, &mut binner);
+    })
+    .is_ok()
+    {
+        let acc = binner.finish().1;
+        assert!(acc.balances(), "{acc:?}");
+    }
+});

@@ -1,0 +1,270 @@
+//! A recorded T3 file -> transient stacks: the one place that reads,
+//! decodes and bins a PicoQuant file, for the `bin` command, the
+//! benchmarks and the tests alike.
+//!
+//! The default window starts at `t_start_ps` and covers one sync period.
+//! Photons whose micro times reach past it (a TAC range longer than the
+//! period, a sync divider) are not dropped: the window is widened to hold
+//! the largest micro time present and the file binned again, and a note
+//! says so. A window the caller set is kept; a note says how many photons
+//! fell past it and how many bins would hold them.
+
+use std::path::Path;
+use std::time::Instant;
+
+use ndarray::{Array3, Axis, s};
+
+use super::records::Decoder;
+use super::{FileError, FileInfo, RecordReader, TtrError, open};
+use crate::stack::{Stack, StackMeta};
+use crate::tags::binning::{
+    Accounting, Binner, FrameSelect, MAX_BINS, PastWindow, PixelMap, TimeWindow, WindowError,
+};
+
+/// How input channels and markers become pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pixels {
+    /// The scanned image for imaging files, else one pixel.
+    Auto,
+    /// One pixel: every photon in one time histogram.
+    Single,
+    /// One pixel per input channel (SPAD arrays), trimmed to the highest
+    /// channel that saw a photon.
+    Channel,
+}
+
+/// What to bin: the time window and the pixel and frame mapping.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BinSpec {
+    /// Bin width (ps); `None`: the file's micro-time resolution.
+    pub bin_width_ps: Option<f64>,
+    /// Start of the first bin after the sync (ps).
+    pub t_start_ps: f64,
+    /// Number of bins; `None`: one sync period, widened to every micro
+    /// time present.
+    pub bins: Option<usize>,
+    /// Keep only photons of this input channel.
+    pub channel: Option<u16>,
+    /// Pixel mapping.
+    pub pixels: Pixels,
+    /// Frames of imaging files.
+    pub frames: FrameSelect,
+    /// Bin the complete records of a cut file instead of failing.
+    pub allow_truncated: bool,
+}
+
+impl Default for BinSpec {
+    fn default() -> Self {
+        Self {
+            bin_width_ps: None,
+            t_start_ps: 0.0,
+            bins: None,
+            channel: None,
+            pixels: Pixels::Auto,
+            frames: FrameSelect::Sum,
+            allow_truncated: false,
+        }
+    }
+}
+
+/// The stacks of one file, with everything a user needs to trust them.
+#[derive(Debug)]
+pub struct BinnedFile {
+    /// The file's header.
+    pub info: FileInfo,
+    /// One stack per kept frame (one when frames are summed), counts with
+    /// their metadata.
+    pub stacks: Vec<Stack>,
+    /// Photon accounting of the (last) pass: it balances.
+    pub accounting: Accounting,
+    /// The window binned.
+    pub window: TimeWindow,
+    /// Micro-time resolution (ps): the window's unit.
+    pub resolution_ps: f64,
+    /// Records decoded per second in the (last) pass.
+    pub records_per_s: f64,
+    /// What was widened or fell outside, in words.
+    pub notes: Vec<String>,
+    /// Why the file ended early, when a cut file was binned.
+    pub truncated: Option<String>,
+}
+
+/// Why a file cannot be binned.
+#[derive(Debug, thiserror::Error)]
+pub enum BinFileError {
+    /// The file cannot be read.
+    #[error(transparent)]
+    File(#[from] FileError),
+    /// The request does not fit the file.
+    #[error("{path}: {reason}")]
+    Spec {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// Bins a PicoQuant T3 file (PTU, PT3, HT3) into transient stacks.
+pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
+    let spec_err = |reason: String| BinFileError::Spec {
+        path: path.to_owned(),
+        reason,
+    };
+    let (info, reader) = open(path)?;
+    if !info.record_type.is_t3() {
+        return Err(spec_err(format!(
+            "{} records carry no micro time; binning needs a T3 file",
+            info.record_type.name()
+        )));
+    }
+    let res_ps = info.resolution_s * 1e12;
+    let width_ps = spec.bin_width_ps.unwrap_or(res_ps);
+    let bins = spec.bins.unwrap_or_else(|| {
+        TimeWindow::period_bins(info.macro_unit_s * 1e12, spec.t_start_ps, width_ps).min(MAX_BINS)
+    });
+    let window = TimeWindow::from_ps(spec.t_start_ps, width_ps, bins, res_ps)
+        .map_err(|e: WindowError| spec_err(e.to_string()))?;
+    let map = match (spec.pixels, info.imaging) {
+        (Pixels::Auto, Some(img)) => PixelMap::Scan(img),
+        (Pixels::Auto | Pixels::Single, _) => PixelMap::Single,
+        (Pixels::Channel, _) => PixelMap::Channel { width: 64 },
+    };
+    let mut notes = Vec::new();
+    let mut pass = run_pass(path, &info, reader, window, map, spec)?;
+    let past = pass.past;
+    if past.photons > 0 {
+        let needed = window.bins_to_hold(past.max_micro);
+        let where_ = format!(
+            "{} photon(s) had micro times past the window's end ({:.6} ps), up to {} ({:.6} ps)",
+            past.photons,
+            (window.start + window.width * window.bins as f64) * res_ps,
+            past.max_micro,
+            f64::from(past.max_micro) * res_ps
+        );
+        if spec.bins.is_none() && needed <= MAX_BINS {
+            // The default window holds every micro time present.
+            let wider = TimeWindow {
+                bins: needed,
+                ..window
+            };
+            let (_, reader) = open(path)?;
+            pass = run_pass(path, &info, reader, wider, map, spec)?;
+            notes.push(format!(
+                "{where_}: the default window (one sync period, {} bins) was widened to {needed} bins to hold them",
+                window.bins
+            ));
+        } else if spec.bins.is_none() {
+            notes.push(format!(
+                "{where_}: holding them would take {needed} bins, more than {MAX_BINS}; they are counted outside the window"
+            ));
+        } else {
+            notes.push(format!(
+                "{where_}: they are counted outside the window; {needed} bins would hold them"
+            ));
+        }
+    }
+    let Pass {
+        stacks,
+        accounting,
+        window,
+        records_per_s,
+        truncated,
+        ..
+    } = pass;
+    let stacks = if let PixelMap::Channel { .. } = map {
+        // Trim the channel row to the highest channel that saw a photon.
+        let used = stacks[0]
+            .axis_iter(Axis(2))
+            .rposition(|c| c.iter().any(|&v| v > 0))
+            .map_or(1, |p| p + 1);
+        stacks
+            .iter()
+            .map(|s| s.slice(s![.., .., ..used]).to_owned())
+            .collect()
+    } else {
+        stacks
+    };
+    let source = format!(
+        "{} ({}, {})",
+        path.display(),
+        info.device,
+        info.record_type.name()
+    );
+    let stacks = stacks
+        .into_iter()
+        .map(|counts| Stack {
+            data: counts.mapv(|c| c as f32),
+            meta: StackMeta::measured(
+                window.start_ps(res_ps),
+                window.width_ps(res_ps),
+                window.bins,
+                source.clone(),
+                None,
+            ),
+        })
+        .collect();
+    Ok(BinnedFile {
+        info,
+        stacks,
+        accounting,
+        window,
+        resolution_ps: res_ps,
+        records_per_s,
+        notes,
+        truncated,
+    })
+}
+
+/// One read -> decode -> bin pass over the records.
+struct Pass {
+    stacks: Vec<Array3<u32>>,
+    accounting: Accounting,
+    past: PastWindow,
+    window: TimeWindow,
+    records_per_s: f64,
+    truncated: Option<String>,
+}
+
+fn run_pass(
+    path: &Path,
+    info: &FileInfo,
+    mut reader: RecordReader,
+    window: TimeWindow,
+    map: PixelMap,
+    spec: &BinSpec,
+) -> Result<Pass, BinFileError> {
+    let mut binner = Binner::new(window, map, spec.channel, spec.frames);
+    let mut decoder = Decoder::new(info.record_type);
+    let start = Instant::now();
+    let mut chunk = Vec::new();
+    let mut truncated = None;
+    loop {
+        match reader.next_chunk(&mut chunk) {
+            Ok(true) => binner.bulk(|sink| decoder.decode_all(&chunk, sink)),
+            Ok(false) => break,
+            Err(e @ TtrError::Truncated { .. }) if spec.allow_truncated => {
+                truncated = Some(e.to_string());
+                break;
+            }
+            Err(error) => {
+                return Err(FileError {
+                    path: path.to_owned(),
+                    error,
+                }
+                .into());
+            }
+        }
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let past = binner.past_window();
+    let (stacks, accounting) = binner.finish();
+    Ok(Pass {
+        records_per_s: accounting.records as f64 / seconds.max(1e-9),
+        stacks,
+        accounting,
+        past,
+        window,
+        truncated,
+    })
+}
