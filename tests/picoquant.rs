@@ -13,7 +13,8 @@ use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
 use scatterscope::tags::picoquant::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::picoquant::records::{Decoder, RecordType};
 use scatterscope::tags::picoquant::writer::{PtuWriter, WriterHeader};
-use scatterscope::tags::picoquant::{self, Imaging, TtrError};
+use scatterscope::tags::Imaging;
+use scatterscope::tags::picoquant::{self, TtrError};
 
 fn sample(rel: &str) -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR"))

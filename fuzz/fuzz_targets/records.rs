@@ -9,7 +9,7 @@ use std::sync::LazyLock;
 
 use libfuzzer_sys::fuzz_target;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
-use scatterscope::tags::picoquant::Imaging;
+use scatterscope::tags::Imaging;
 use scatterscope::tags::picoquant::records::{Decoder, RecordType};
 
 static BINNERS: LazyLock<Vec<(RecordType, Binner)>> = LazyLock::new(|| {

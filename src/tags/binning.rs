@@ -8,8 +8,7 @@
 
 use ndarray::Array3;
 
-use super::Tag;
-use super::picoquant::Imaging;
+use super::{Imaging, Tag, TagSink};
 
 /// How photons map to pixels.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -650,6 +649,13 @@ struct FastSink<'a> {
     /// Records that are neither photons nor markers (overflows, syncs).
     other_records: u64,
     past: PastWindow,
+}
+
+impl TagSink for &mut BulkSink<'_> {
+    #[inline(always)]
+    fn push(&mut self, tag: Option<Tag>) {
+        BulkSink::push(self, tag)
+    }
 }
 
 impl BulkSink<'_> {

@@ -40,3 +40,36 @@ pub enum Tag {
         macro_time: u64,
     },
 }
+
+/// Scanned-image (FLIM) description from `ImgHdr_*` tags.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Imaging {
+    /// Pixels per line.
+    pub pixels_x: usize,
+    /// Lines per frame.
+    pub pixels_y: usize,
+    /// Marker mask of the line start (1 << (bit - 1)).
+    pub line_start: u8,
+    /// Marker mask of the line stop.
+    pub line_stop: u8,
+    /// Marker mask of the frame clock (0 when absent).
+    pub frame: u8,
+    /// Lines alternate direction.
+    pub bidirectional: bool,
+}
+
+/// Where a decoder puts each record's tag: any `FnMut(Option<Tag>)`, or
+/// a [`binning::BulkSink`], whose `push` is then inlined into the
+/// decoder's per-layout loop.
+pub trait TagSink {
+    /// Takes one record's tag (`None` for records that carry no event,
+    /// such as overflows).
+    fn push(&mut self, tag: Option<Tag>);
+}
+
+impl<F: FnMut(Option<Tag>)> TagSink for F {
+    #[inline(always)]
+    fn push(&mut self, tag: Option<Tag>) {
+        self(tag)
+    }
+}

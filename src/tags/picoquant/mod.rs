@@ -19,6 +19,8 @@ use std::path::{Path, PathBuf};
 use ptu::{HeaderTag, TagLookup};
 use records::RecordType;
 
+use super::Imaging;
+
 /// Why a file cannot be read; the file is named by [`FileError`].
 #[derive(Debug, thiserror::Error)]
 pub enum TtrError {
@@ -78,23 +80,6 @@ pub enum Container {
     HydraHarpLegacy(String),
     /// Legacy PicoHarp PT3/PT2 header with its format version.
     PicoHarpLegacy(String),
-}
-
-/// Scanned-image (FLIM) description from `ImgHdr_*` tags.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Imaging {
-    /// Pixels per line.
-    pub pixels_x: usize,
-    /// Lines per frame.
-    pub pixels_y: usize,
-    /// Marker mask of the line start (1 << (bit - 1)).
-    pub line_start: u8,
-    /// Marker mask of the line stop.
-    pub line_stop: u8,
-    /// Marker mask of the frame clock (0 when absent).
-    pub frame: u8,
-    /// Lines alternate direction.
-    pub bidirectional: bool,
 }
 
 /// Everything the header says, in one place.

@@ -14,7 +14,7 @@
 //!   63 overflows by 33,552,000 (HydraHarp v1, always one) or by 2^25 times
 //!   the count (0 meaning 1); special channel 0 is a sync; 1-15 markers.
 
-use super::super::Tag;
+use crate::tags::{Tag, TagSink};
 
 /// A TTTR record type, as `TTResultFormat_TTTRRecType` codes it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -156,28 +156,6 @@ pub const WIDE_T2_WRAP: u64 = 33_554_432;
 pub struct Decoder {
     layout: Layout,
     base: u64,
-}
-
-/// Where [`Decoder::decode_all`] puts each record's tag: any
-/// `FnMut(Option<Tag>)`, or a [`crate::tags::binning::BulkSink`], whose
-/// `push` is then inlined into the per-layout loop.
-pub trait TagSink {
-    /// Takes one record's tag (`None` for overflow records).
-    fn push(&mut self, tag: Option<Tag>);
-}
-
-impl<F: FnMut(Option<Tag>)> TagSink for F {
-    #[inline(always)]
-    fn push(&mut self, tag: Option<Tag>) {
-        self(tag)
-    }
-}
-
-impl TagSink for &mut crate::tags::binning::BulkSink<'_> {
-    #[inline(always)]
-    fn push(&mut self, tag: Option<Tag>) {
-        crate::tags::binning::BulkSink::push(self, tag)
-    }
 }
 
 impl Decoder {

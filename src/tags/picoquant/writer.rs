@@ -6,7 +6,7 @@ use std::fs::File;
 use std::io::{self, BufWriter, Seek, SeekFrom, Write};
 use std::path::Path;
 
-use super::Imaging;
+use crate::tags::Imaging;
 use super::ptu::{self, ty};
 use super::records::{
     HYDRAHARP_V1_T2_WRAP, PICOHARP_T2_WRAP, PICOHARP_T3_WRAP, RecordType, WIDE_T2_WRAP,
