@@ -2,8 +2,8 @@
 //! [`bin_file`], the function `scatterscope bin` calls.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use scatterscope::tags::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::picoquant;
-use scatterscope::tags::picoquant::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::picoquant::writer::write_synthetic_t3;
 
 const RECORDS: u64 = 20_000_000;

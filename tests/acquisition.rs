@@ -17,8 +17,9 @@ use scatterscope::acquire::{
 };
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup};
 use scatterscope::scene::Scene;
-use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, Region, TimeWindow};
-use scatterscope::tags::raw::{bin_batch, read_raw};
+use scatterscope::tags::bin_file::{BinSpec, Recording, bin_file};
+use scatterscope::tags::binning::Region;
+use scatterscope_drivers::raw::read_raw;
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions, Truth};
 
 /// The paper's medium and bins on a 64 x 64 sensor with the paper's pixel
@@ -351,28 +352,27 @@ fn a_slow_host_makes_the_device_fifo_overflow_and_says_so() {
     assert_eq!(acc.lost_in_transit, 0);
 }
 
-fn bin_raw_file(path: &Path) -> (Array3<u32>, scatterscope::tags::raw::RawSummary) {
+/// Bins a raw tag file with the library's `bin_file` (what `scatterscope
+/// bin` runs) on the acquisition's window.
+fn bin_raw_file(path: &Path) -> (Array3<u32>, scatterscope_drivers::raw::RawSummary) {
     let s = setup();
-    let window = TimeWindow {
-        start: 0.0,
-        width: s.bins.width_ps,
-        bins: s.bins.count,
+    let spec = BinSpec {
+        bin_width_ps: Some(s.bins.width_ps),
+        bins: Some(s.bins.count),
+        ..BinSpec::default()
     };
-    let map = PixelMap::Sensor {
-        sensor_width: 64,
-        roi: Region {
-            x: 0,
-            y: 0,
-            width: 64,
-            height: 64,
-        },
-    };
-    let mut binner = Binner::new(window, map, None, FrameSelect::Sum);
-    let summary = read_raw(path, |b| {
-        bin_batch(b, &mut binner);
-    })
-    .unwrap();
-    (binner.finish().0.swap_remove(0), summary)
+    let binned = bin_file(path, &spec).unwrap();
+    assert!(binned.accounting.balances(), "{:?}", binned.accounting);
+    assert_eq!(binned.stacks.len(), 1);
+    let counts = binned.stacks[0].data.mapv(|c| c as u32);
+    match binned.recording {
+        Recording::Raw { summary, counts: c } => {
+            assert_eq!(c.invalid_records, 0);
+            assert_eq!(binned.truncated.is_some(), summary.totals.is_none());
+            (counts, summary)
+        }
+        Recording::PicoQuant(_) => panic!("{} was not read as a raw file", path.display()),
+    }
 }
 
 #[test]
@@ -480,7 +480,7 @@ fn plans_that_do_not_fit_the_device_are_refused_by_name() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("--roi 10x10 at (60, 0)") && err.contains("64x64"),
+        err.contains("region of interest 10x10 at (60, 0)") && err.contains("64x64"),
         "{err}"
     );
 

@@ -348,8 +348,8 @@ fn report_writes_tables_and_plots() {
 
 #[test]
 fn info_and_bin_on_recorded_files() {
-    use scatterscope::tags::Tag;
     use scatterscope::tags::Imaging;
+    use scatterscope::tags::Tag;
     use scatterscope::tags::picoquant::records::RecordType;
     use scatterscope::tags::picoquant::writer::{PtuWriter, WriterHeader};
     let dir = tempfile::tempdir().unwrap();

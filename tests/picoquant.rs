@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 
 use pt3::write_pt3;
 
+use scatterscope::tags::Imaging;
 use scatterscope::tags::Tag;
+use scatterscope::tags::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
-use scatterscope::tags::picoquant::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::picoquant::records::{Decoder, RecordType};
 use scatterscope::tags::picoquant::writer::{PtuWriter, WriterHeader};
-use scatterscope::tags::Imaging;
 use scatterscope::tags::picoquant::{self, TtrError};
 
 fn sample(rel: &str) -> Option<PathBuf> {

@@ -13,9 +13,7 @@ use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender, bounded};
 use firmware_protocol::record::Record;
-use firmware_protocol::{
-    EventBatch, FrameDecoder, FrameKind, Response, ResponseFrame, Totals, from_payload,
-};
+use firmware_protocol::{FrameDecoder, FromDevice, Response, ResponseFrame, Totals};
 use serde::Serialize;
 
 use crate::link::{ByteReader, Link, LinkError};
@@ -276,12 +274,8 @@ fn decode_loop(
             let mut acc = accounting.lock().expect("accounting lock");
             let acc = &mut *acc;
             acc.bytes += chunk.len() as u64;
-            decoder.push_with(&chunk, |frame| match frame.kind {
-                FrameKind::Events => {
-                    let Ok(batch) = EventBatch::parse(frame.payload) else {
-                        acc.batches_malformed += 1;
-                        return;
-                    };
+            decoder.push_with(&chunk, |frame| match FromDevice::parse(frame) {
+                FromDevice::Events(batch) => {
                     match seqs.accept(batch.header.seq) {
                         SeqVerdict::Duplicate => {
                             acc.batches_duplicate += 1;
@@ -311,17 +305,15 @@ fn decode_loop(
                     }
                     deliveries.push(Delivery::Batch(AcceptedBatch { payload }));
                 }
-                FrameKind::Response => match from_payload::<ResponseFrame>(frame.payload) {
-                    Ok(r) => {
-                        if matches!(r.response, Response::Started) {
-                            // A new run numbers its batches from 0.
-                            seqs = SeqTracker::default();
-                        }
-                        deliveries.push(Delivery::Response(r));
+                FromDevice::Response(r) => {
+                    if matches!(r.response, Response::Started) {
+                        // A new run numbers its batches from 0.
+                        seqs = SeqTracker::default();
                     }
-                    Err(_) => acc.stray_responses += 1,
-                },
-                FrameKind::Request => acc.stray_responses += 1,
+                    deliveries.push(Delivery::Response(r));
+                }
+                FromDevice::MalformedBatch(_) => acc.batches_malformed += 1,
+                FromDevice::Stray => acc.stray_responses += 1,
             });
             let s = decoder.stats();
             acc.bytes_skipped = s.bytes_skipped;

@@ -19,12 +19,15 @@ use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
 use firmware_protocol::{
-    Config, FrameKind, Identity, Response, ResponseFrame, Totals, encode_frame, to_payload,
+    Config, EventBatch, FrameDecoder, FrameKind, FromDevice, Identity, Response, ResponseFrame,
+    Totals, encode_frame, to_payload,
 };
 use serde::{Deserialize, Serialize};
 
 /// First bytes of every raw tag file.
 pub const MAGIC: &[u8; 8] = b"SSTAGS01";
+/// Bytes read per chunk (constant memory for any file size).
+const CHUNK: usize = 1 << 20;
 /// Largest header accepted when reading (a damaged length is not an
 /// allocation request).
 pub const MAX_HEADER: u32 = 1 << 20;
@@ -228,4 +231,81 @@ pub fn read_header(path: &Path, input: &mut impl Read) -> Result<(RawHeader, u64
         )));
     }
     Ok((header, 12 + u64::from(len)))
+}
+
+/// What a raw file holds, from one pass.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RawSummary {
+    /// The file.
+    pub path: PathBuf,
+    /// Its header.
+    pub header: RawHeader,
+    /// Event batches.
+    pub batches: u64,
+    /// The device's totals from the end frame; `None` if the recording was
+    /// cut (crash, disconnect) before it.
+    pub totals: Option<Totals>,
+    /// Bytes that did not form valid frames (damage, or a last batch cut
+    /// mid-write).
+    pub bytes_skipped: u64,
+    /// Batches whose payload did not parse.
+    pub malformed_batches: u64,
+}
+
+/// Reads a raw tag file, feeding every event batch to `on_batch`, in
+/// constant memory.
+pub fn read_raw(
+    path: &Path,
+    mut on_batch: impl FnMut(&EventBatch<'_>),
+) -> Result<RawSummary, RawError> {
+    let io = |source| RawError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut file = File::open(path).map_err(io)?;
+    let (header, _) = read_header(path, &mut file)?;
+    let mut decoder = FrameDecoder::new();
+    // Small files get a small buffer.
+    let size = file.metadata().map_err(io)?.len();
+    let mut buf = vec![0u8; CHUNK.min(usize::try_from(size).unwrap_or(CHUNK)).max(1)];
+    let mut summary = RawSummary {
+        path: path.to_path_buf(),
+        header,
+        batches: 0,
+        totals: None,
+        bytes_skipped: 0,
+        malformed_batches: 0,
+    };
+    loop {
+        let n = file.read(&mut buf).map_err(io)?;
+        if n == 0 {
+            decoder.end_stream();
+        }
+        decoder.push_with(&buf[..n], |frame| match FromDevice::parse(frame) {
+            FromDevice::Events(b) => {
+                summary.batches += 1;
+                on_batch(&b);
+            }
+            FromDevice::Response(ResponseFrame {
+                response: Response::Stopped(t),
+                ..
+            }) => summary.totals = Some(t),
+            FromDevice::MalformedBatch(_) => summary.malformed_batches += 1,
+            FromDevice::Response(_) | FromDevice::Stray => {}
+        });
+        if n == 0 {
+            break;
+        }
+    }
+    summary.bytes_skipped = decoder.stats().bytes_skipped;
+    Ok(summary)
+}
+
+/// Whether `path` starts with the raw tag file magic.
+pub fn is_raw_file(path: &Path) -> bool {
+    let mut magic = [0u8; 8];
+    File::open(path)
+        .and_then(|mut f| f.read_exact(&mut magic))
+        .is_ok()
+        && &magic == MAGIC
 }

@@ -55,7 +55,7 @@ impl core::fmt::Display for BatchError {
 }
 
 /// A parsed batch borrowing the frame payload.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct EventBatch<'a> {
     /// Header fields.
     pub header: BatchHeader,

@@ -37,3 +37,36 @@ pub use record::{Event, RecordError};
 /// Version of the wire protocol spoken by this crate. A host refuses a
 /// device whose [`Identity::protocol_version`] differs.
 pub const PROTOCOL_VERSION: u16 = 1;
+
+/// A frame from the device with its payload parsed by kind: the one
+/// dispatch that every host-side reader of device frames (the live
+/// pipeline, the raw tag file reader) shares.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FromDevice<'a> {
+    /// An event batch whose header and record area parse.
+    Events(EventBatch<'a>),
+    /// A control response.
+    Response(ResponseFrame),
+    /// An events frame whose payload does not parse as a batch.
+    MalformedBatch(BatchError),
+    /// A request frame (devices never send one) or a response whose
+    /// payload does not parse.
+    Stray,
+}
+
+impl<'a> FromDevice<'a> {
+    /// Parses `frame` (CRC already checked) by its kind.
+    pub fn parse(frame: Frame<'a>) -> Self {
+        match frame.kind {
+            FrameKind::Events => match EventBatch::parse(frame.payload) {
+                Ok(b) => FromDevice::Events(b),
+                Err(e) => FromDevice::MalformedBatch(e),
+            },
+            FrameKind::Response => match from_payload::<ResponseFrame>(frame.payload) {
+                Ok(r) => FromDevice::Response(r),
+                Err(_) => FromDevice::Stray,
+            },
+            FrameKind::Request => FromDevice::Stray,
+        }
+    }
+}

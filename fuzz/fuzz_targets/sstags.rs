@@ -4,7 +4,8 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
-use scatterscope::tags::raw::{bin_batch, read_raw};
+use scatterscope::tags::raw::bin_batch;
+use scatterscope_drivers::raw::read_raw;
 
 #[path = "common/file.rs"]
 mod file;

@@ -8,10 +8,10 @@
 //! The first line needs the device's totals (sent with its Stopped answer);
 //! without them (a disconnect) the transit loss is a lower bound.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The photon and batch counts of one acquisition.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct AcquisitionAccounting {
     /// Photons the device detected (sent + dropped), from its totals.
     pub detected: Option<u64>,

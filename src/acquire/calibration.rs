@@ -8,7 +8,7 @@ use std::path::Path;
 use firmware_protocol::record::Record;
 
 use super::session::AcquireError;
-use crate::tags::raw::read_raw;
+use scatterscope_drivers::raw::read_raw;
 
 /// t0 in picoseconds from a raw tag file of a reference measurement.
 pub fn t0_from_reference(path: &Path) -> Result<f64, AcquireError> {

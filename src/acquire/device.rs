@@ -1,9 +1,12 @@
 //! Devices by name: `mock` (in-process USB), `mock-serial` (a real
-//! pseudo-terminal), `serial:PATH`, `usb:VID:PID[:SERIAL]`.
+//! pseudo-terminal), `serial:PATH`, `usb:VID:PID[:SERIAL]`: parsing an
+//! address, listing what is attached, and opening it (mocks included).
 
 use std::str::FromStr;
 
 use ndarray::Array2;
+pub use scatterscope_drivers::discovery::DeviceEntry;
+use scatterscope_drivers::discovery::{serial_ports, usb_devices};
 use scatterscope_drivers::usb::UsbSelector;
 use scatterscope_drivers::{Link, LinkError};
 use scatterscope_mocks::emitter::EmitterError;
@@ -69,6 +72,24 @@ impl DeviceSpec {
     pub fn is_mock(&self) -> bool {
         matches!(self, Self::Mock | Self::MockSerial)
     }
+}
+
+/// Every device [`open_device`] can open here: USB time taggers with
+/// known ids, serial ports, then the two mocks. Returns the list and how
+/// many of its entries are hardware. Listing never fails.
+pub fn list_devices() -> (Vec<DeviceEntry>, usize) {
+    let mut all = usb_devices();
+    all.extend(serial_ports());
+    let hardware = all.len();
+    all.push(DeviceEntry {
+        address: DeviceSpec::Mock.to_string(),
+        description: "emulated time tagger on an in-process USB transport".into(),
+    });
+    all.push(DeviceEntry {
+        address: DeviceSpec::MockSerial.to_string(),
+        description: "emulated time tagger behind a pseudo-terminal".into(),
+    });
+    (all, hardware)
 }
 
 /// What a mock device emits.

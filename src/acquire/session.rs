@@ -12,7 +12,7 @@ use scatterscope_drivers::Link;
 use scatterscope_drivers::client::{ClientError, Device};
 use scatterscope_drivers::pipeline::Delivery;
 use scatterscope_drivers::raw::{RawError, RawHeader, RawWriter};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::accounting::AcquisitionAccounting;
 use crate::tags::binning::{Binner, FrameSelect, PixelMap, Region, TimeWindow};
@@ -50,7 +50,7 @@ pub struct Plan {
 }
 
 /// Why the acquisition ended.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum StopReason {
     /// The planned duration elapsed.
@@ -99,6 +99,8 @@ pub struct Outcome {
     pub elapsed: Duration,
     /// The binned window in device micro time: (first bin start, width), ps.
     pub window_ps: (f64, f64),
+    /// The pixels binned (the whole sensor unless the plan set a region).
+    pub roi: Region,
     /// The raw tag file written, if any.
     pub raw: Option<PathBuf>,
     /// The link.
@@ -137,8 +139,7 @@ pub fn acquire(
         roi: None,
         exposure_ms: 0,
     })?;
-    let (binner, window_ps) = make_binner(plan, &identity, &applied)?;
-    let mut binner = binner;
+    let (mut binner, window_ps, roi) = make_binner(plan, &identity, &applied)?;
     if let Some(path) = &plan.raw {
         let header = RawHeader::new(&link_name, &identity, &applied, &plan.software);
         device.record_to(RawWriter::create(path, &header).map_err(AcquireError::Raw)?);
@@ -227,18 +228,20 @@ pub fn acquire(
         stop: reason,
         elapsed,
         window_ps,
+        roi,
         raw,
         link: link_name,
     })
 }
 
 /// The binner for `plan` on this device: checks the window against the
-/// micro-time unit and the ROI against the sensor.
+/// micro-time unit and the region against the sensor. Returns it with the
+/// window in device micro time and the region binned.
 fn make_binner(
     plan: &Plan,
     identity: &Identity,
     config: &Config,
-) -> Result<(Binner, (f64, f64)), AcquireError> {
+) -> Result<(Binner, (f64, f64), Region), AcquireError> {
     let res_ps = f64::from(config.resolution_fs) / 1000.0;
     let start_ps = plan.t0_ps + plan.t_start_ps;
     let window = TimeWindow::from_ps(start_ps, plan.bin_width_ps, plan.bins, res_ps)
@@ -263,7 +266,7 @@ fn make_binner(
         || w == 0
     {
         return Err(AcquireError::Plan(format!(
-            "--roi {}x{} at ({}, {}) is not inside the device's {w}x{h} sensor",
+            "region of interest {}x{} at ({}, {}) is not inside the device's {w}x{h} sensor",
             roi.width, roi.height, roi.x, roi.y
         )));
     }
@@ -274,5 +277,6 @@ fn make_binner(
     Ok((
         Binner::new(window, map, None, FrameSelect::Sum),
         (start_ps, plan.bin_width_ps),
+        roi,
     ))
 }

@@ -2,10 +2,14 @@
 //! produces before they are binned into a stack.
 //!
 //! - [`picoquant`]: PicoQuant PTU and legacy HT3 files.
-//! - [`raw`]: the project's own raw tag files from live acquisition.
+//! - [`raw`]: event batches of the wire protocol (live, or from the
+//!   project's raw tag files) -> the binner.
 //! - [`binning`]: tags -> K x H x W transient stack (single pixel, pixel
-//!   per channel, or scanned images from line/frame markers).
+//!   per channel, scanned images from line/frame markers, or a sensor).
+//! - [`bin_file`]: a recorded file (PicoQuant or raw) -> stacks, in one
+//!   call.
 
+pub mod bin_file;
 pub mod binning;
 pub mod picoquant;
 pub mod raw;

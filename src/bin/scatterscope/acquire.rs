@@ -7,13 +7,14 @@ use std::time::Duration;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use scatterscope::acquire::{DeviceSpec, MockSetup, Plan, StopReason, acquire, open_device};
+use scatterscope::acquire::{
+    DeviceSpec, MockReference, MockSetup, Plan, StopReason, acquire, open_device,
+};
 use scatterscope::config::{PhysicsArgs, parse_ps};
-use scatterscope::forward::{Boundary, ForwardModel};
 use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::scene::Scene;
+use scatterscope::stack::exr_file;
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet, write_image};
-use scatterscope::stack::{Stack, StackMeta, exr_file};
 use scatterscope::tags::binning::Region;
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
 
@@ -241,13 +242,8 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     }
     // For a mock the scene is known, so the stack's light budget can be set
     // such that reconstructions come out in the scene's units (comparable
-    // with its truth image); (expected counts at the preset budget, scene).
-    let mock_reference = mock.as_ref().map(|m| {
-        // The mock's sensor has edges and its scene is dark outside it.
-        let model = ForwardModel::new(&m.kernels, Boundary::Sensor);
-        let expected = model.expected_scene(m.scene.view()).counts;
-        (expected, m.scene.clone())
-    });
+    // with its truth image).
+    let mock_reference = mock.as_ref().map(MockReference::new);
     let opened = open_device(&args.device, mock)?;
     let bar = match plan.duration {
         Some(d) => ProgressBar::new(d.as_millis() as u64).with_style(
@@ -280,87 +276,30 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     let truth = opened.mock.map(|m| m.truth());
 
     let acc = &outcome.accounting;
-    let roi = args.roi.unwrap_or(Region {
-        x: 0,
-        y: 0,
-        width: w,
-        height: h,
-    });
     let mut stack_setup = setup;
-    stack_setup.sensor.width_px = roi.width;
-    stack_setup.sensor.height_px = roi.height;
-    stack_setup.sensor.fov_cm = setup.sensor.fov_cm * roi.width as f64 / w as f64;
-    if let (Some((expected, _)), Some(t)) = (&mock_reference, truth) {
-        let e0: f64 = expected
-            .slice(ndarray::s![
-                ..,
-                roi.y..roi.y + roi.height,
-                roi.x..roi.x + roi.width
-            ])
-            .sum();
-        let signal =
-            acc.binned as f64 * (1.0 - t.dark_counts as f64 / t.photons_detected.max(1) as f64);
-        if e0 > 0.0 && signal > 0.0 {
-            stack_setup.total_photons = setup.total_photons * signal / e0;
-            println!(
-                "light budget {:.4e} photons (mock: scaled so the object comes out in the scene's units)",
-                stack_setup.total_photons
-            );
-        }
+    if let (Some(reference), Some(t)) = (&mock_reference, &truth)
+        && let Some(budget) =
+            reference.light_budget(setup.total_photons, outcome.roi, acc.binned, t)
+    {
+        stack_setup.total_photons = budget;
+        println!(
+            "light budget {budget:.4e} photons (mock: scaled so the object comes out in the scene's units)"
+        );
     }
-    let acquisition = serde_json::json!({
-        "link": outcome.link,
-        "identity": {
-            "model": outcome.identity.model,
-            "serial": outcome.identity.serial,
-            "firmware": outcome.identity.firmware,
-            "protocol_version": outcome.identity.protocol_version,
-            "pixels_x": outcome.identity.pixels_x,
-            "pixels_y": outcome.identity.pixels_y,
-            "tdc_resolution_fs": outcome.identity.tdc_resolution_fs,
-            "sync_period_fs": outcome.identity.sync_period_fs,
-        },
-        "config": {
-            "resolution_fs": outcome.config.resolution_fs,
-            "sync_divider": outcome.config.sync_divider,
-            "time_window": outcome.config.time_window,
-        },
-        "t0_ps": t0_ps,
-        "window_start_device_ps": outcome.window_ps.0,
-        "roi": roi,
-        "stop": outcome.stop,
-        "elapsed_s": outcome.elapsed.as_secs_f64(),
-        "accounting": acc,
-        "device_totals": outcome.totals.map(|t| serde_json::json!({
-            "batches": t.batches, "photons_sent": t.photons_sent, "photons_lost": t.photons_lost
-        })),
-        "raw": outcome.raw.as_ref().map(|p| p.display().to_string()),
-    });
-    let mut meta = StackMeta::measured(
-        plan.t_start_ps,
-        plan.bin_width_ps,
-        plan.bins,
-        format!("scatterscope acquire --device {}", args.device),
-        Some(acquisition.clone()),
-    );
     // The reconstruction's physics: the flags' (for the mock, the light
     // budget of the known scene).
-    meta.pixel_pitch_cm = stack_setup.sensor.pixel_pitch_cm();
-    meta.setup = Some(stack_setup);
-    meta.sampling = Some(Sampling::Integrated);
-    meta.seed = args.device.is_mock().then_some(args.seed);
-    let stack = Stack {
-        data: outcome.counts.mapv(|c| c as f32),
-        meta,
-    };
+    let mut stack = outcome.stack(
+        &plan,
+        &stack_setup,
+        format!("scatterscope acquire --device {}", args.device),
+    );
+    stack.meta.seed = args.device.is_mock().then_some(args.seed);
+    let record = outcome.record(&plan);
     stack.save(&args.out.join("stack.exr"))?;
     write_contact_sheet(&stack, SheetScale::Shared, &args.out.join("stack.png"))?;
     let json_path = args.out.join("acquisition.json");
-    std::fs::write(
-        &json_path,
-        serde_json::to_string_pretty(&acquisition)? + "\n",
-    )
-    .with_context(|| format!("writing {}", json_path.display()))?;
+    std::fs::write(&json_path, serde_json::to_string_pretty(&record)? + "\n")
+        .with_context(|| format!("writing {}", json_path.display()))?;
 
     let secs = outcome.elapsed.as_secs_f64().max(1e-9);
     println!(
@@ -374,7 +313,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         plan.bins,
         plan.bin_width_ps,
         plan.t_start_ps,
-        t0_ps
+        plan.t0_ps
     );
     print!("{}", acc.table());
     if let Some(t) = truth {
@@ -434,18 +373,7 @@ pub struct DevicesArgs {
 }
 
 pub fn devices(args: &DevicesArgs) -> anyhow::Result<()> {
-    use scatterscope_drivers::discovery::{DeviceEntry, serial_ports, usb_devices};
-    let mut all = usb_devices();
-    all.extend(serial_ports());
-    let hardware = all.len();
-    all.push(DeviceEntry {
-        address: "mock".into(),
-        description: "emulated time tagger on an in-process USB transport".into(),
-    });
-    all.push(DeviceEntry {
-        address: "mock-serial".into(),
-        description: "emulated time tagger behind a pseudo-terminal".into(),
-    });
+    let (all, hardware) = scatterscope::acquire::device::list_devices();
     if args.json {
         println!("{}", serde_json::to_string_pretty(&all)?);
     } else {

@@ -2,17 +2,15 @@
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::Context;
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet};
-use scatterscope::stack::{Stack, StackMeta};
 use scatterscope::tags::Tag;
-use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
-use scatterscope::tags::picoquant::bin_file::{BinFileError, BinSpec, Pixels, bin_file};
+use scatterscope::tags::bin_file::{BinFileError, BinSpec, Pixels, Recording, bin_file};
+use scatterscope::tags::binning::FrameSelect;
 use scatterscope::tags::picoquant::records::Decoder;
 use scatterscope::tags::picoquant::{self, Container, FileError, FileInfo, TtrError};
-use scatterscope::tags::raw::{bin_batch, is_raw_file, read_raw};
+use scatterscope_drivers::raw::{is_raw_file, read_raw};
 
 /// Show what a PicoQuant file (PTU, HT3, HT2) holds.
 ///
@@ -167,9 +165,6 @@ fn parse_frames(s: &str) -> anyhow::Result<FrameSelect> {
 }
 
 pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
-    if is_raw_file(&args.file) {
-        return bin_raw(args);
-    }
     let spec = BinSpec {
         bin_width_ps: args.bin_width,
         t_start_ps: args.t_start,
@@ -208,18 +203,30 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
         )?;
     }
     let acc = binned.accounting;
-    println!(
-        "{} records ({:.0} M records/s): {} photons, {} binned, {} outside the time window, {} on other channels, {} outside the image; {} markers, {} frames",
-        acc.records,
-        binned.records_per_s / 1e6,
-        acc.received,
-        acc.binned,
-        acc.outside_window,
-        acc.other_channel,
-        acc.outside_image,
-        acc.markers,
-        acc.frames
-    );
+    match &binned.recording {
+        Recording::PicoQuant(_) => println!(
+            "{} records ({:.0} M records/s): {} photons, {} binned, {} outside the time window, {} on other channels, {} outside the image; {} markers, {} frames",
+            acc.records,
+            binned.records_per_s / 1e6,
+            acc.received,
+            acc.binned,
+            acc.outside_window,
+            acc.other_channel,
+            acc.outside_image,
+            acc.markers,
+            acc.frames
+        ),
+        Recording::Raw { counts, .. } => println!(
+            "{} records ({:.0} M records/s): {} photons, {} binned, {} outside the window, {} lost in the device, {} invalid",
+            acc.records,
+            binned.records_per_s / 1e6,
+            acc.received,
+            acc.binned,
+            acc.outside_window,
+            counts.lost_in_device,
+            counts.invalid_records
+        ),
+    }
     for note in &binned.notes {
         println!("note: {note}");
     }
@@ -239,11 +246,14 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
 
 /// `info` of the project's raw tag files.
 fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
-    let mut photons = 0u64;
-    let mut markers = 0u64;
+    let (mut photons, mut markers, mut lost, mut invalid) = (0u64, 0u64, 0u64, 0u64);
     let mut last_sync = 0u64;
     let summary = read_raw(&args.file, |batch| {
-        for e in batch.events().flatten() {
+        for e in batch.events() {
+            let Ok(e) = e else {
+                invalid += 1;
+                continue;
+            };
             match e {
                 firmware_protocol::Event::Photon { sync, .. } => {
                     photons += 1;
@@ -253,7 +263,7 @@ fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
                     markers += 1;
                     last_sync = last_sync.max(sync);
                 }
-                firmware_protocol::Event::Lost { .. } => {}
+                firmware_protocol::Event::Lost { count } => lost += count,
             }
         }
     })?;
@@ -270,7 +280,7 @@ fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
     );
     println!(
         "batches: {}; photons: {photons}; markers: {markers}; lost in the device: {}; invalid records: {}",
-        summary.batches, summary.counts.lost_in_device, summary.counts.invalid_records
+        summary.batches, lost, invalid
     );
     println!(
         "measured duration: {:.6} s (last event)",
@@ -296,86 +306,5 @@ fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
             summary.bytes_skipped
         );
     }
-    Ok(())
-}
-
-/// `bin` of the project's raw tag files: the whole sensor, micro time from
-/// the sync.
-fn bin_raw(args: &BinArgs) -> anyhow::Result<()> {
-    let (header, _) = {
-        let mut f = std::fs::File::open(&args.file)
-            .with_context(|| format!("opening {}", args.file.display()))?;
-        scatterscope_drivers::raw::read_header(&args.file, &mut f)?
-    };
-    let res_ps = f64::from(header.resolution_fs) / 1000.0;
-    let width_ps = args.bin_width.unwrap_or(res_ps);
-    let bins = args.bins.unwrap_or_else(|| {
-        TimeWindow::period_bins(
-            header.sync_period_fs as f64 / 1000.0,
-            args.t_start,
-            width_ps,
-        )
-    });
-    let (w, h) = (usize::from(header.pixels_x), usize::from(header.pixels_y));
-    anyhow::ensure!(
-        w > 0 && h > 0,
-        "{}: header sensor size {w} x {h} is empty",
-        args.file.display()
-    );
-    let window = TimeWindow::from_ps(args.t_start, width_ps, bins, res_ps)
-        .and_then(|w| w.whole_steps(res_ps))
-        .with_context(|| args.file.display().to_string())?;
-    let map = PixelMap::Sensor {
-        sensor_width: w,
-        roi: scatterscope::tags::binning::Region {
-            x: 0,
-            y: 0,
-            width: w,
-            height: h,
-        },
-    };
-    let mut binner = Binner::new(window, map, args.channel, FrameSelect::Sum);
-    let start = Instant::now();
-    let mut counts = scatterscope::tags::raw::BatchCounts::default();
-    let summary = read_raw(&args.file, |batch| counts += bin_batch(batch, &mut binner))?;
-    let elapsed = start.elapsed().as_secs_f64();
-    let (mut stacks, acc) = binner.finish();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating output directory {}", args.out.display()))?;
-    let source = format!(
-        "scatterscope bin {} ({} {})",
-        args.file.display(),
-        header.model,
-        header.serial
-    );
-    let acquisition =
-        serde_json::json!({ "raw_header": header, "totals_in_file": summary.totals.is_some() });
-    let stack = Stack {
-        data: stacks.swap_remove(0).mapv(|c| c as f32),
-        meta: StackMeta::measured(
-            args.t_start,
-            width_ps,
-            window.bins,
-            source,
-            Some(acquisition),
-        ),
-    };
-    let path = args.out.join("stack.exr");
-    stack.save(&path)?;
-    write_contact_sheet(&stack, SheetScale::Shared, &args.out.join("stack.png"))?;
-    println!(
-        "{} records in {:.3} s: {} photons, {} binned, {} outside the window, {} lost in the device, {} invalid",
-        acc.records,
-        elapsed,
-        acc.received,
-        acc.binned,
-        acc.outside_window,
-        counts.lost_in_device,
-        counts.invalid_records
-    );
-    if summary.totals.is_none() {
-        println!("warning: no end frame: the recording was cut (crash or disconnect)");
-    }
-    println!("wrote {}", path.display());
     Ok(())
 }

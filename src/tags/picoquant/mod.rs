@@ -3,10 +3,9 @@
 //!
 //! [`open`] reads the header into a [`FileInfo`] and returns a
 //! [`RecordReader`] that streams the 32-bit records in fixed-size chunks
-//! (constant memory for files larger than memory); [`bin_file::bin_file`]
+//! (constant memory for files larger than memory); [`crate::tags::bin_file`]
 //! turns a T3 file into transient stacks.
 
-pub mod bin_file;
 pub mod legacy;
 pub mod ptu;
 pub mod records;

@@ -6,12 +6,12 @@ use std::fs::File;
 use std::io::{self, BufWriter, Seek, SeekFrom, Write};
 use std::path::Path;
 
-use crate::tags::Imaging;
 use super::ptu::{self, ty};
 use super::records::{
     HYDRAHARP_V1_T2_WRAP, PICOHARP_T2_WRAP, PICOHARP_T3_WRAP, RecordType, WIDE_T2_WRAP,
     WIDE_T3_WRAP,
 };
+use crate::tags::Imaging;
 use crate::tags::Tag;
 
 /// Header content of a written file.

@@ -1,25 +1,32 @@
-//! A recorded T3 file -> transient stacks: the one place that reads,
-//! decodes and bins a PicoQuant file, for the `bin` command, the
-//! benchmarks and the tests alike.
+//! A recorded tag file -> transient stacks: the one place that reads,
+//! decodes and bins a file, for the `bin` command, the benchmarks and the
+//! tests alike. Two kinds of file: PicoQuant T3 files (PTU, PT3, HT3) and
+//! the project's raw tag files (`.sstags`, from `acquire --raw`).
 //!
 //! The default window starts at `t_start_ps` and covers one sync period.
-//! Photons whose micro times reach past it (a TAC range longer than the
-//! period, a sync divider) are not dropped: the window is widened to hold
-//! the largest micro time present and the file binned again, and a note
-//! says so. A window the caller set is kept; a note says how many photons
-//! fell past it and how many bins would hold them.
+//! In PicoQuant files, photons whose micro times reach past it (a TAC
+//! range longer than the period, a sync divider) are not dropped: the
+//! window is widened to hold the largest micro time present and the file
+//! binned again, and a note says so. A window the caller set is kept; a
+//! note says how many photons fell past it and how many bins would hold
+//! them. Raw files hold the device's whole sensor and micro times within
+//! its sync period; they are binned onto the sensor in whole micro-time
+//! steps.
 
 use std::path::Path;
 use std::time::Instant;
 
 use ndarray::{Array3, Axis, s};
+use scatterscope_drivers::raw::{RawError, RawSummary, is_raw_file, read_raw};
 
-use super::records::Decoder;
-use super::{FileError, FileInfo, RecordReader, TtrError, open};
-use crate::stack::{Stack, StackMeta};
-use crate::tags::binning::{
-    Accounting, Binner, FrameSelect, MAX_BINS, PastWindow, PixelMap, TimeWindow, WindowError,
+use super::binning::{
+    Accounting, Binner, FrameSelect, MAX_BINS, PastWindow, PixelMap, Region, TimeWindow,
+    WindowError,
 };
+use super::picoquant::records::Decoder;
+use super::picoquant::{FileError, FileInfo, RecordReader, TtrError, open};
+use super::raw::{BatchCounts, bin_batch};
+use crate::stack::{Stack, StackMeta};
 
 /// How input channels and markers become pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -70,8 +77,8 @@ impl Default for BinSpec {
 /// The stacks of one file, with everything a user needs to trust them.
 #[derive(Debug)]
 pub struct BinnedFile {
-    /// The file's header.
-    pub info: FileInfo,
+    /// The file and what its header says.
+    pub recording: Recording,
     /// One stack per kept frame (one when frames are summed), counts with
     /// their metadata.
     pub stacks: Vec<Stack>,
@@ -89,12 +96,29 @@ pub struct BinnedFile {
     pub truncated: Option<String>,
 }
 
+/// The file a [`BinnedFile`] came from.
+#[derive(Debug)]
+pub enum Recording {
+    /// A PicoQuant file and its header.
+    PicoQuant(FileInfo),
+    /// A raw tag file: its header and frames, and the records' own counts.
+    Raw {
+        /// What the file holds.
+        summary: RawSummary,
+        /// Photons the device reported lost, and records that did not decode.
+        counts: BatchCounts,
+    },
+}
+
 /// Why a file cannot be binned.
 #[derive(Debug, thiserror::Error)]
 pub enum BinFileError {
-    /// The file cannot be read.
+    /// The PicoQuant file cannot be read.
     #[error(transparent)]
     File(#[from] FileError),
+    /// The raw tag file cannot be read.
+    #[error(transparent)]
+    Raw(#[from] RawError),
     /// The request does not fit the file.
     #[error("{path}: {reason}")]
     Spec {
@@ -105,12 +129,26 @@ pub enum BinFileError {
     },
 }
 
-/// Bins a PicoQuant T3 file (PTU, PT3, HT3) into transient stacks.
+/// Bins a recorded tag file into transient stacks: a project raw tag file
+/// (recognised by its magic) or a PicoQuant T3 file (PTU, PT3, HT3).
 pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
-    let spec_err = |reason: String| BinFileError::Spec {
+    if is_raw_file(path) {
+        bin_raw(path, spec)
+    } else {
+        bin_picoquant(path, spec)
+    }
+}
+
+fn spec_error(path: &Path, reason: String) -> BinFileError {
+    BinFileError::Spec {
         path: path.to_owned(),
         reason,
-    };
+    }
+}
+
+/// A PicoQuant T3 file.
+fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
+    let spec_err = |reason| spec_error(path, reason);
     let (info, reader) = open(path)?;
     if !info.record_type.is_t3() {
         return Err(spec_err(format!(
@@ -205,7 +243,7 @@ pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError>
         })
         .collect();
     Ok(BinnedFile {
-        info,
+        recording: Recording::PicoQuant(info),
         stacks,
         accounting,
         window,
@@ -267,4 +305,91 @@ fn run_pass(
         window,
         truncated,
     })
+}
+
+/// A raw tag file: the device's whole sensor, micro time from the sync.
+fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
+    let spec_err = |reason| spec_error(path, reason);
+    if !matches!(spec.pixels, Pixels::Auto) || spec.frames != FrameSelect::Sum {
+        return Err(spec_err(
+            "a raw tag file is binned onto its sensor with every frame summed; pixel and frame mappings do not apply".into(),
+        ));
+    }
+    let header = {
+        let mut f = std::fs::File::open(path).map_err(|source| RawError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        scatterscope_drivers::raw::read_header(path, &mut f)?.0
+    };
+    let res_ps = f64::from(header.resolution_fs) / 1000.0;
+    let width_ps = spec.bin_width_ps.unwrap_or(res_ps);
+    let bins = spec.bins.unwrap_or_else(|| {
+        TimeWindow::period_bins(
+            header.sync_period_fs as f64 / 1000.0,
+            spec.t_start_ps,
+            width_ps,
+        )
+        .min(MAX_BINS)
+    });
+    let (w, h) = (usize::from(header.pixels_x), usize::from(header.pixels_y));
+    if w == 0 || h == 0 {
+        return Err(spec_err(format!("header sensor size {w} x {h} is empty")));
+    }
+    let window = TimeWindow::from_ps(spec.t_start_ps, width_ps, bins, res_ps)
+        .and_then(|win| win.whole_steps(res_ps))
+        .map_err(|e| spec_err(e.to_string()))?;
+    let map = PixelMap::Sensor {
+        sensor_width: w,
+        roi: Region {
+            x: 0,
+            y: 0,
+            width: w,
+            height: h,
+        },
+    };
+    let mut binner = Binner::new(window, map, spec.channel, FrameSelect::Sum);
+    let start = Instant::now();
+    let mut counts = BatchCounts::default();
+    let summary = read_raw(path, |batch| counts += bin_batch(batch, &mut binner))?;
+    let seconds = start.elapsed().as_secs_f64();
+    let (mut stacks, accounting) = binner.finish();
+    let source = format!("{} ({} {})", path.display(), header.model, header.serial);
+    let record = RawFileRecord {
+        raw_header: header,
+        totals_in_file: summary.totals.is_some(),
+    };
+    let stack = Stack {
+        data: stacks.swap_remove(0).mapv(|c| c as f32),
+        meta: StackMeta::measured(
+            window.start_ps(res_ps),
+            window.width_ps(res_ps),
+            window.bins,
+            source,
+            Some(serde_json::to_value(&record).expect("the record serialises")),
+        ),
+    };
+    let truncated = summary
+        .totals
+        .is_none()
+        .then(|| "no end frame: the recording was cut (crash or disconnect)".to_string());
+    Ok(BinnedFile {
+        recording: Recording::Raw { summary, counts },
+        stacks: vec![stack],
+        accounting,
+        window,
+        resolution_ps: res_ps,
+        records_per_s: accounting.records as f64 / seconds.max(1e-9),
+        notes: Vec::new(),
+        truncated,
+    })
+}
+
+/// What a stack binned from a raw tag file records about its source.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RawFileRecord {
+    /// The file's header.
+    pub raw_header: scatterscope_drivers::raw::RawHeader,
+    /// Whether the file ends with the device's totals (else it was cut).
+    pub totals_in_file: bool,
 }

@@ -1,0 +1,136 @@
+//! An acquisition outcome -> a stack with its metadata, and the typed
+//! record of the acquisition that goes with it (the stack's `acquisition`
+//! metadata and `acquisition.json`).
+
+use std::path::PathBuf;
+
+use firmware_protocol::{Config, Identity, Totals};
+use ndarray::{Array3, s};
+use serde::{Deserialize, Serialize};
+
+use super::accounting::AcquisitionAccounting;
+use super::device::MockSetup;
+use super::session::{Outcome, Plan, StopReason};
+use crate::forward::{Boundary, ForwardModel};
+use crate::physics::{Sampling, Setup};
+use crate::stack::{Stack, StackMeta};
+use crate::tags::binning::Region;
+use scatterscope_mocks::Truth;
+
+/// What one acquisition was: the device, its configuration, the window,
+/// why it ended and where every photon went.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AcquisitionRecord {
+    /// The link the device was on.
+    pub link: String,
+    /// The device's identity.
+    pub identity: Identity,
+    /// The configuration the device applied.
+    pub config: Config,
+    /// Time zero: device micro time of the instrument's zero, ps.
+    pub t0_ps: f64,
+    /// Start of the first bin in device micro time (t0 + the plan's start), ps.
+    pub window_start_device_ps: f64,
+    /// The pixels binned.
+    pub roi: Region,
+    /// Why the acquisition ended.
+    pub stop: StopReason,
+    /// From Start to the last batch, seconds.
+    pub elapsed_s: f64,
+    /// Where every photon went.
+    pub accounting: AcquisitionAccounting,
+    /// The device's totals, when it sent them.
+    pub device_totals: Option<Totals>,
+    /// The raw tag file written, if any.
+    pub raw: Option<PathBuf>,
+}
+
+impl Outcome {
+    /// The record of this acquisition of `plan`.
+    pub fn record(&self, plan: &Plan) -> AcquisitionRecord {
+        AcquisitionRecord {
+            link: self.link.clone(),
+            identity: self.identity.clone(),
+            config: self.config.clone(),
+            t0_ps: plan.t0_ps,
+            window_start_device_ps: self.window_ps.0,
+            roi: self.roi,
+            stop: self.stop.clone(),
+            elapsed_s: self.elapsed.as_secs_f64(),
+            accounting: self.accounting,
+            device_totals: self.totals,
+            raw: self.raw.clone(),
+        }
+    }
+
+    /// The counts as a stack: bins from the plan (relative to t0), the
+    /// acquisition's record in the metadata, and `setup` (the sample's
+    /// physics on the whole sensor) cut to the binned region, so the stack
+    /// reconstructs as it is. `source` says how it was made.
+    pub fn stack(&self, plan: &Plan, setup: &Setup, source: String) -> Stack {
+        let record = serde_json::to_value(self.record(plan)).expect("the record serialises");
+        let mut meta = StackMeta::measured(
+            plan.t_start_ps,
+            plan.bin_width_ps,
+            plan.bins,
+            source,
+            Some(record),
+        );
+        let setup = cropped(setup, self.roi);
+        meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
+        meta.setup = Some(setup);
+        meta.sampling = Some(Sampling::Integrated);
+        Stack {
+            data: self.counts.mapv(|c| c as f32),
+            meta,
+        }
+    }
+}
+
+/// The same physics on `roi` of `setup`'s sensor: the region's pixels at
+/// the same pitch.
+fn cropped(setup: &Setup, roi: Region) -> Setup {
+    let mut s = *setup;
+    s.sensor.fov_cm = setup.sensor.fov_cm * roi.width as f64 / setup.sensor.width_px as f64;
+    s.sensor.width_px = roi.width;
+    s.sensor.height_px = roi.height;
+    s
+}
+
+/// A mock's known scene as the sensor sees it: the expected stack at the
+/// set-up's light budget, to put a mock acquisition's reconstruction in
+/// the scene's units.
+pub struct MockReference {
+    expected: Array3<f64>,
+}
+
+impl MockReference {
+    /// The expected stack of `mock` (its sensor has edges and its scene is
+    /// dark outside it).
+    pub fn new(mock: &MockSetup) -> Self {
+        let model = ForwardModel::new(&mock.kernels, Boundary::Sensor);
+        Self {
+            expected: model.expected_scene(mock.scene.view()).counts,
+        }
+    }
+
+    /// The light budget that makes `binned` photons in `roi` (dark counts
+    /// removed, from the mock's truth) come out in the scene's units:
+    /// `total_photons` scaled by the signal over its expectation. `None`
+    /// when either is zero.
+    pub fn light_budget(
+        &self,
+        total_photons: f64,
+        roi: Region,
+        binned: u64,
+        truth: &Truth,
+    ) -> Option<f64> {
+        let expected: f64 = self
+            .expected
+            .slice(s![.., roi.y..roi.y + roi.height, roi.x..roi.x + roi.width])
+            .sum();
+        let dark_fraction = truth.dark_counts as f64 / truth.photons_detected.max(1) as f64;
+        let signal = binned as f64 * (1.0 - dark_fraction);
+        (expected > 0.0 && signal > 0.0).then(|| total_photons * signal / expected)
+    }
+}
