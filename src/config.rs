@@ -1,9 +1,10 @@
-//! Physics parameters from a preset, a TOML file and command-line flags.
+//! Physics parameters from a preset, a TOML file and overrides (a front
+//! end's flags).
 //!
-//! Precedence: flags over the TOML file over the preset. The TOML keys are
-//! the flag names with `_` for `-` (`mu_a`, `mu_s`, `g`, `n`, `thickness`,
-//! `fov`, `size`, `bin_width`, `t_start`, `bins`, `photons`,
-//! `min_bin_photons`, `preset`). Lengths and times take plain numbers in the
+//! Precedence: overrides over the TOML file over the preset. The TOML keys
+//! are the override names (`mu_a`, `mu_s`, `g`, `n`, `thickness`, `fov`,
+//! `size`, `bin_width`, `t_start`, `bins`, `photons`, `min_bin_photons`,
+//! `preset`). Lengths and times take plain numbers in the
 //! documented unit (cm, ps) or strings with a unit (`"30mm"`, `"0.004ns"`).
 
 use std::path::{Path, PathBuf};
@@ -83,55 +84,43 @@ struct FileOverrides {
     min_bin_photons: Option<f64>,
 }
 
-/// Physics flags shared by every command that needs an ST-PSF.
-#[derive(Debug, Clone, Default, clap::Args)]
-pub struct PhysicsArgs {
+/// Overrides of a preset's physics (what a front end's flags set); every
+/// field is optional.
+#[derive(Debug, Clone, Default)]
+pub struct PhysicsOverrides {
     /// Parameter set to start from (`paper`: the paper's skin-like 3 cm slab,
     /// 50 cm field, 256x256, 30 bins of 4 ps, 450 photons).
-    #[arg(long, value_name = "NAME", value_parser = parse_preset)]
     pub preset: Option<Preset>,
-    /// TOML file with any of the keys below (flags override it).
-    #[arg(long, value_name = "FILE")]
+    /// TOML file with any of the keys in the module docs (the other
+    /// fields override it).
     pub config: Option<PathBuf>,
     /// Absorption coefficient mu_a in 1/cm.
-    #[arg(long, value_name = "1/CM", allow_negative_numbers = true)]
     pub mu_a: Option<f64>,
     /// Scattering coefficient mu_s in 1/cm.
-    #[arg(long, value_name = "1/CM", allow_negative_numbers = true)]
     pub mu_s: Option<f64>,
     /// Scattering anisotropy g in [-1, 1] (0.9-0.99 for tissue).
-    #[arg(long, value_name = "G", allow_negative_numbers = true)]
     pub g: Option<f64>,
     /// Refractive index of the medium (light speed is c/n).
-    #[arg(long, value_name = "N", allow_negative_numbers = true)]
     pub n: Option<f64>,
     /// Slab thickness z0 between object and sensor (default unit cm; e.g. 30mm).
-    #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
     pub thickness: Option<f64>,
     /// Horizontal field of view (default unit cm).
-    #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
     pub fov: Option<f64>,
     /// Image side in pixels (square images).
-    #[arg(long, value_name = "PIXELS")]
     pub size: Option<usize>,
     /// Time-bin width (default unit ps; e.g. 4ps, 0.004ns).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     pub bin_width: Option<f64>,
     /// Start of the first bin after the pulse reaches the object (default unit ps).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     pub t_start: Option<f64>,
     /// Number of time bins.
-    #[arg(long, value_name = "COUNT")]
     pub bins: Option<usize>,
     /// Light budget: expected photons in the whole ST-PSF over all bins.
-    #[arg(long, value_name = "COUNT", allow_negative_numbers = true)]
     pub photons: Option<f64>,
     /// Drop bins whose ST-PSF carries fewer expected photons (0 keeps all).
-    #[arg(long, value_name = "COUNT", allow_negative_numbers = true)]
     pub min_bin_photons: Option<f64>,
 }
 
-/// A configuration problem, naming the file or flag and the value.
+/// A configuration problem, naming the file or key and the value.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
     /// The TOML file could not be read.
@@ -151,21 +140,19 @@ pub enum ConfigError {
         reason: String,
     },
     /// The resulting parameters are not physical.
-    #[error("{error} (set it with --{flag} or `{key}` in {})", config.as_ref().map_or("a --config file".to_string(), |p| p.display().to_string()))]
+    #[error("{error} (key `{key}`{})", config.as_ref().map_or(String::new(), |p| format!(" in {}", p.display())))]
     Param {
         /// The physics crate's error, naming the field and value.
         error: scatterscope_physics::ParamError,
-        /// The command-line flag that sets the field.
-        flag: &'static str,
-        /// The TOML key that sets the field.
+        /// The TOML key (and override) that sets the field.
         key: &'static str,
         /// The config file given, if any: it may hold the value.
         config: Option<PathBuf>,
     },
 }
 
-impl PhysicsArgs {
-    /// Resolves preset, file and flags into a validated setup.
+impl PhysicsOverrides {
+    /// Resolves preset, file and overrides into a validated setup.
     pub fn resolve(&self) -> Result<Setup, ConfigError> {
         self.resolve_over(None)
     }
@@ -191,14 +178,13 @@ impl PhysicsArgs {
             (None, None) => Preset::Paper.setup(),
         };
         if let Some((path, f)) = &file {
-            file_as_flags(path, f)?.apply_flags(&mut s);
+            file_as_overrides(path, f)?.apply(&mut s);
         }
-        self.apply_flags(&mut s);
+        self.apply(&mut s);
         s.validate().map_err(|error| {
-            let (flag, key) = flag_and_key(error.field);
+            let key = key_of(error.field);
             ConfigError::Param {
                 error,
-                flag,
                 key,
                 config: self.config.clone(),
             }
@@ -206,7 +192,7 @@ impl PhysicsArgs {
         Ok(s)
     }
 
-    fn apply_flags(&self, s: &mut Setup) {
+    fn apply(&self, s: &mut Setup) {
         let m = &mut s.medium;
         set(&mut m.mu_a_per_cm, self.mu_a);
         set(&mut m.mu_s_per_cm, self.mu_s);
@@ -226,21 +212,21 @@ impl PhysicsArgs {
     }
 }
 
-/// The flag and TOML key that set a [`Setup`] field.
-fn flag_and_key(field: &str) -> (&'static str, &'static str) {
+/// The TOML key (and override) that sets a [`Setup`] field.
+fn key_of(field: &str) -> &'static str {
     match field {
-        "mu_a_per_cm" => ("mu-a", "mu_a"),
-        "mu_s_per_cm" => ("mu-s", "mu_s"),
-        "g" => ("g", "g"),
-        "refractive_index" => ("n", "n"),
-        "thickness_cm" => ("thickness", "thickness"),
-        "fov_cm" => ("fov", "fov"),
-        "width_px" | "height_px" => ("size", "size"),
-        "width_ps" => ("bin-width", "bin_width"),
-        "start_ps" => ("t-start", "t_start"),
-        "min_bin_photons" => ("min-bin-photons", "min_bin_photons"),
-        "photons" => ("photons", "photons"),
-        _ => ("bins", "bins"),
+        "mu_a_per_cm" => "mu_a",
+        "mu_s_per_cm" => "mu_s",
+        "g" => "g",
+        "refractive_index" => "n",
+        "thickness_cm" => "thickness",
+        "fov_cm" => "fov",
+        "width_px" | "height_px" => "size",
+        "width_ps" => "bin_width",
+        "start_ps" => "t_start",
+        "min_bin_photons" => "min_bin_photons",
+        "photons" => "photons",
+        _ => "bins",
     }
 }
 
@@ -250,7 +236,7 @@ fn set<T>(dst: &mut T, v: Option<T>) {
     }
 }
 
-/// Parses a preset name as the CLI and TOML files spell it.
+/// Parses a preset name as TOML files (and the command line) spell it.
 pub fn parse_preset(name: &str) -> Result<Preset, String> {
     Preset::ALL
         .into_iter()
@@ -276,9 +262,9 @@ fn read_file(path: &Path) -> Result<FileOverrides, ConfigError> {
     toml::from_str(&text).map_err(|e| invalid(path, e.to_string()))
 }
 
-/// The file's overrides as the flag values they stand for, units resolved,
-/// so that file and flags are applied by the same code.
-fn file_as_flags(path: &Path, f: &FileOverrides) -> Result<PhysicsArgs, ConfigError> {
+/// The file's keys as overrides, units resolved, so that the file and the
+/// caller's overrides are applied by the same code.
+fn file_as_overrides(path: &Path, f: &FileOverrides) -> Result<PhysicsOverrides, ConfigError> {
     let q = |key: &str, v: &Option<Quantity>, parse: fn(&str) -> Result<f64, String>| {
         v.as_ref()
             .map(|q| match q {
@@ -289,7 +275,7 @@ fn file_as_flags(path: &Path, f: &FileOverrides) -> Result<PhysicsArgs, ConfigEr
             })
             .transpose()
     };
-    Ok(PhysicsArgs {
+    Ok(PhysicsOverrides {
         preset: None,
         config: None,
         mu_a: f.mu_a,
@@ -316,7 +302,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("lab.toml");
         std::fs::write(&path, "mu_s = 7.5\nthickness = \"20mm\"\nbin_width = 2\n").unwrap();
-        let args = PhysicsArgs {
+        let args = PhysicsOverrides {
             config: Some(path.clone()),
             bin_width: Some(8.0),
             ..Default::default()
@@ -332,14 +318,14 @@ mod tests {
     }
 
     #[test]
-    fn invalid_values_name_field_flag_and_key() {
-        let args = PhysicsArgs {
+    fn invalid_values_name_field_and_key() {
+        let args = PhysicsOverrides {
             mu_a: Some(-1.0),
             ..Default::default()
         };
         let e = args.resolve().unwrap_err().to_string();
         assert!(
-            e.contains("invalid mu_a_per_cm = -1") && e.contains("--mu-a") && e.contains("`mu_a`"),
+            e.contains("invalid mu_a_per_cm = -1") && e.contains("key `mu_a`") && !e.contains("--"),
             "{e}"
         );
     }

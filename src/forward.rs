@@ -28,12 +28,13 @@ use scatterscope_physics::KernelStack;
 use serde::{Deserialize, Serialize};
 
 use crate::fft2::Fft2;
+use crate::named::named;
 
 /// Fraction of a kernel's light that may fall outside the modelled margin.
 pub const EDGE_TAIL: f64 = 1e-4;
 
 /// How the edges of the sensor are modelled.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum Boundary {
     /// A sensor with edges: light off the sensor is lost, light from outside
@@ -43,6 +44,11 @@ pub enum Boundary {
     /// Wrap-around convolution on the sensor grid (the paper's simulation).
     Periodic,
 }
+
+named!(Boundary {
+    Sensor => "sensor",
+    Periodic => "periodic",
+});
 
 /// Convolution with cached kernel spectra on an object grid that holds the
 /// sensor window.

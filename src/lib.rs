@@ -71,6 +71,7 @@ pub mod denoise;
 pub mod fft2;
 pub mod forward;
 pub mod metrics;
+pub mod named;
 pub mod reconstruct;
 pub mod report;
 pub mod scene;
@@ -80,6 +81,7 @@ pub mod tags;
 pub use scatterscope_physics as physics;
 
 pub use forward::{Boundary, ForwardModel};
+pub use named::Named;
 pub use reconstruct::method::{Method, MethodOptions, run_method};
 pub use reconstruct::problem::Problem;
 pub use scatterscope_physics::{KernelStack, Preset, Sampling, Setup};

@@ -11,9 +11,10 @@ use super::trace::TraceRow;
 use super::{ReconstructError, Reconstruction};
 use crate::denoise::Denoiser;
 use crate::forward::ForwardModel;
+use crate::named::{Named, named};
 
 /// A reconstruction method.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Method {
     /// Poisson PnP-ADMM on the whole stack (the paper's method).
     Pnp,
@@ -30,19 +31,16 @@ pub enum Method {
     Raw,
 }
 
-impl Method {
-    /// Name as on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Pnp => "pnp",
-            Method::PnpSlice => "pnp-slice",
-            Method::PnpSum => "pnp-sum",
-            Method::Rl => "rl",
-            Method::RlSum => "rl-sum",
-            Method::Raw => "raw",
-        }
-    }
+named!(Method {
+    Pnp => "pnp",
+    PnpSlice => "pnp-slice",
+    PnpSum => "pnp-sum",
+    Rl => "rl",
+    RlSum => "rl-sum",
+    Raw => "raw",
+});
 
+impl Method {
     /// Whether the method works on a single bin.
     pub fn needs_bin(self) -> bool {
         matches!(self, Method::PnpSlice | Method::Rl)
@@ -50,7 +48,7 @@ impl Method {
 }
 
 /// How PnP-ADMM solves its data step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Solver {
     /// Exact splitting (P4IP): closed-form Poisson prox per pixel and bin,
     /// exact Fourier-domain o-update ([`super::split`]).
@@ -60,15 +58,10 @@ pub enum Solver {
     AdmmLbfgs,
 }
 
-impl Solver {
-    /// Name as on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Solver::Split => "split",
-            Solver::AdmmLbfgs => "admm-lbfgs",
-        }
-    }
-}
+named!(Solver {
+    Split => "split",
+    AdmmLbfgs => "admm-lbfgs",
+});
 
 /// Settings of every method.
 #[derive(Debug, Clone, Copy)]
@@ -116,7 +109,10 @@ pub fn run_method(
     }
     let single = |method: Method| {
         bin.ok_or_else(|| {
-            ReconstructError::Shape(format!("method {} needs --bin K", method.name()))
+            ReconstructError::Shape(format!(
+                "method {} works on one bin; none was chosen",
+                method.name()
+            ))
         })
     };
     let all = problem.all_bins();

@@ -63,9 +63,10 @@ use super::{
 };
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::forward::ForwardModel;
+use crate::named::named;
 
 /// When ADMM stops, besides the iteration cap and residual tolerances.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StopRule {
     /// `agreement` for priors that do not fade to the identity at small
     /// sigma (the learned one), `deviance` for those that do (TV, identity).
@@ -79,6 +80,13 @@ pub enum StopRule {
     /// Only the iteration cap and the residual tolerances.
     Iterations,
 }
+
+named!(StopRule {
+    Auto => "auto",
+    Agreement => "agreement",
+    Deviance => "deviance",
+    Iterations => "iterations",
+});
 
 /// Parameters of Algorithm 1 and of its o-update.
 #[derive(Debug, Clone, Copy)]

@@ -28,6 +28,25 @@ pub enum ProblemError {
     /// The mismatch, naming both values.
     #[error("{0}")]
     Mismatch(String),
+    /// The stack's image size differs from the physics' sensor.
+    #[error(
+        "the stack is {} x {} pixels but the physics sensor is {} x {}",
+        stack.0, stack.1, physics.0, physics.1
+    )]
+    SensorSize {
+        /// The stack's rows and columns.
+        stack: (usize, usize),
+        /// The physics' sensor rows and columns.
+        physics: (usize, usize),
+    },
+    /// The stack's bin width differs from the physics'.
+    #[error("the stack's bins are {stack_ps} ps wide but the physics uses {physics_ps} ps")]
+    BinWidth {
+        /// The stack's bin width, ps.
+        stack_ps: f64,
+        /// The physics' bin width, ps.
+        physics_ps: f64,
+    },
     /// Invalid physics.
     #[error(transparent)]
     Param(#[from] scatterscope_physics::ParamError),
@@ -52,17 +71,17 @@ impl Problem {
         }
         let (_, h, w) = stack.data.dim();
         if (setup.sensor.height_px, setup.sensor.width_px) != (h, w) {
-            return Err(ProblemError::Mismatch(format!(
-                "the stack is {h} x {w} pixels but the physics sensor is {} x {} (set --size)",
-                setup.sensor.height_px, setup.sensor.width_px
-            )));
+            return Err(ProblemError::SensorSize {
+                stack: (h, w),
+                physics: (setup.sensor.height_px, setup.sensor.width_px),
+            });
         }
         let width = setup.bins.width_ps;
         if (stack.meta.bin_width_ps - width).abs() > 1e-9 * width {
-            return Err(ProblemError::Mismatch(format!(
-                "the stack's bins are {} ps wide but the physics uses {width} ps (set --bin-width)",
-                stack.meta.bin_width_ps
-            )));
+            return Err(ProblemError::BinWidth {
+                stack_ps: stack.meta.bin_width_ps,
+                physics_ps: width,
+            });
         }
         let mut all = *setup;
         all.min_bin_photons = 0.0;

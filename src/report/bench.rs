@@ -13,6 +13,7 @@
 //! Reconstruction then sees a sensor with edges and models it with its own
 //! padded grid and truncated margin.
 
+use crate::named::Named;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 

@@ -7,6 +7,7 @@
 pub mod bench;
 pub mod plot;
 
+use crate::named::Named;
 use std::fmt::Write as _;
 use std::path::Path;
 

@@ -6,16 +6,22 @@ use image::{GrayImage, Luma};
 use ndarray::{ArrayView2, Axis};
 
 use super::{Stack, StackError};
+use crate::named::named;
 use crate::scene::font;
 
 /// How contact-sheet tiles are scaled to 8 bits.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SheetScale {
     /// One scale for all bins: brightness compares across time.
     Shared,
     /// Each bin scaled to its own maximum: structure of dim bins is visible.
     PerBin,
 }
+
+named!(SheetScale {
+    Shared => "shared",
+    PerBin => "per-bin",
+});
 
 const GAP: u32 = 2;
 const LABEL_H: u32 = font::GLYPH_HEIGHT as u32 + 3;

@@ -5,12 +5,13 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+use crate::shared_args::PhysicsArgs;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::acquire::{
     DeviceSpec, MockReference, MockSetup, Plan, StopReason, acquire, open_device,
 };
-use scatterscope::config::{PhysicsArgs, parse_ps};
+use scatterscope::config::parse_ps;
 use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::scene::Scene;
 use scatterscope::stack::exr_file;

@@ -2,9 +2,9 @@
 
 use std::path::PathBuf;
 
+use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
 use clap::ValueEnum;
-use scatterscope::config::PhysicsArgs;
 use scatterscope::denoise::Denoiser;
 use scatterscope::reconstruct::method::Solver;
 use scatterscope::report::bench::{
@@ -39,7 +39,7 @@ pub struct BenchReconArgs {
     /// PnP solvers to run on the whole stack.
     #[arg(
         long,
-        value_enum,
+        value_parser = choice::<Solver>(),
         value_delimiter = ',',
         default_value = "split,admm-lbfgs"
     )]

@@ -9,6 +9,7 @@ mod psf;
 mod recon_args;
 mod reconstruct;
 mod report;
+mod shared_args;
 mod simulate;
 mod tags_cmd;
 mod weights_cmd;

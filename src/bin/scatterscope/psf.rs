@@ -4,9 +4,9 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
+use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
 use ndarray::ArrayView2;
-use scatterscope::config::PhysicsArgs;
 use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet};
 use scatterscope::stack::{Stack, StackMeta, ValueKind};
@@ -28,7 +28,7 @@ pub struct PsfArgs {
     #[arg(long, default_value = "integrated", value_parser = parse_sampling)]
     sampling: Sampling,
     /// Contact-sheet scaling.
-    #[arg(long, value_enum, default_value = "per-bin")]
+    #[arg(long, value_parser = choice::<SheetScale>(), default_value = "per-bin")]
     sheet_scale: SheetScale,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/psf")]

@@ -1,5 +1,6 @@
 //! Reconstruction settings shared by `reconstruct` and `report`.
 
+use crate::shared_args::choice;
 use std::path::PathBuf;
 
 use scatterscope::denoise::ffdnet::source;
@@ -81,7 +82,7 @@ pub struct ReconArgs {
     pub prior: PriorArgs,
     /// PnP solver: split (exact splitting, P4IP: closed-form Poisson prox
     /// and Fourier-domain o-update) or admm-lbfgs (the paper's Algorithm 1).
-    #[arg(long, value_enum, default_value = "split")]
+    #[arg(long, value_parser = choice::<Solver>(), default_value = "split")]
     pub solver: Solver,
     /// Split solver: data-split penalty rho, relative to the Poisson
     /// curvature at the flat object's counts.
@@ -130,7 +131,7 @@ pub struct ReconArgs {
     /// iterates whose Poisson deviance the noise can explain), deviance (the
     /// smallest deviance), iterations (cap only), or auto (agreement for the
     /// learned prior, deviance for TV and identity).
-    #[arg(long, value_enum, default_value = "auto")]
+    #[arg(long, value_parser = choice::<StopRule>(), default_value = "auto")]
     pub stop: StopRule,
     /// Iterations without a new pick before the agreement or deviance rule
     /// stops (default: 10 for agreement, 30 for deviance).

@@ -1,14 +1,15 @@
 //! `scatterscope reconstruct`: recover the object from a stack.
 
+use scatterscope::Named;
 use std::path::PathBuf;
 
+use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use scatterscope::config::PhysicsArgs;
 use scatterscope::forward::Boundary;
 use scatterscope::physics::{Preset, Sampling};
 use scatterscope::reconstruct::method::{Method, run_method};
-use scatterscope::reconstruct::problem::Problem;
+use scatterscope::reconstruct::problem::{Problem, ProblemError};
 use scatterscope::scene::Scene;
 use scatterscope::stack::exr_file;
 use scatterscope::stack::preview::write_image;
@@ -26,7 +27,7 @@ pub struct ReconstructArgs {
     /// The stack file.
     stack: PathBuf,
     /// Method: pnp (whole stack), pnp-slice, rl (one bin), rl-sum, raw.
-    #[arg(long, value_enum, default_value = "pnp")]
+    #[arg(long, value_parser = choice::<Method>(), default_value = "pnp")]
     method: Method,
     /// Bin (0-based, in stack order) for single-bin methods and raw.
     #[arg(long)]
@@ -34,7 +35,7 @@ pub struct ReconstructArgs {
     /// How the sensor's edges are modelled: sensor (light off the sensor is
     /// lost, light from outside its field reaches its edges; real sensors)
     /// or periodic (wrap-around) [default: the stack's record, else sensor].
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = choice::<Boundary>())]
     boundary: Option<Boundary>,
     /// Truth image (PNG/JPEG/EXR) to report PSNR and SSIM against.
     #[arg(long)]
@@ -101,7 +102,20 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     };
     let sampling = stack.meta.sampling.unwrap_or(Sampling::Integrated);
     let boundary = args.boundary.or(stack.meta.boundary).unwrap_or_default();
+    anyhow::ensure!(
+        !args.method.needs_bin() || args.bin.is_some(),
+        "method {} needs --bin K",
+        args.method.name()
+    );
     let problem = Problem::new(&stack, &setup, sampling, boundary)
+        .map_err(|e| {
+            let flag = match e {
+                ProblemError::SensorSize { .. } => " (set --size)",
+                ProblemError::BinWidth { .. } => " (set --bin-width)",
+                _ => "",
+            };
+            anyhow::anyhow!("{e}{flag}")
+        })
         .with_context(|| format!("matching {} with its physics", args.stack.display()))?;
     if !problem.left_out.is_empty() {
         let counts: f64 = problem.left_out.iter().map(|(_, c)| c).sum();

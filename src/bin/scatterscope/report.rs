@@ -2,9 +2,9 @@
 
 use std::path::PathBuf;
 
+use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use scatterscope::config::PhysicsArgs;
 use scatterscope::forward::Boundary;
 use scatterscope::report::{run_scene, summary_csv, summary_markdown};
 use scatterscope::scene::Scene;
@@ -29,7 +29,7 @@ pub struct ReportArgs {
     recon: ReconArgs,
     /// How the sensor's edges are simulated and modelled (sensor: the scene
     /// fills the field, dark outside; periodic: wrap-around).
-    #[arg(long, value_enum, default_value = "sensor")]
+    #[arg(long, value_parser = choice::<Boundary>(), default_value = "sensor")]
     boundary: Boundary,
     /// Seed of the Poisson sampler.
     #[arg(long, default_value_t = 0)]

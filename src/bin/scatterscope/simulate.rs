@@ -3,8 +3,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
-use scatterscope::config::PhysicsArgs;
 use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::scene::Scene;
@@ -29,7 +29,7 @@ pub struct SimulateArgs {
     /// How the sensor's edges are modelled: sensor (the scene fills the
     /// sensor's field, dark outside it; light off the sensor is lost, as on
     /// a real sensor) or periodic (wrap-around, the paper's simulation).
-    #[arg(long, value_enum, default_value = "sensor")]
+    #[arg(long, value_parser = choice::<Boundary>(), default_value = "sensor")]
     boundary: Boundary,
     /// Seed of the Poisson sampler (the same seed gives the same counts).
     #[arg(long, default_value_t = 0)]
@@ -38,7 +38,7 @@ pub struct SimulateArgs {
     #[arg(long, default_value = "integrated", value_parser = parse_sampling)]
     sampling: Sampling,
     /// Contact-sheet scaling.
-    #[arg(long, value_enum, default_value = "shared")]
+    #[arg(long, value_parser = choice::<SheetScale>(), default_value = "shared")]
     sheet_scale: SheetScale,
     /// Also write the stacks as .npy with JSON metadata sidecars.
     #[arg(long)]

@@ -1,0 +1,103 @@
+//! Arguments shared by several commands: the physics flags (which the
+//! library takes as [`PhysicsOverrides`]) and named choices.
+
+use clap::builder::{PossibleValuesParser, TypedValueParser};
+use scatterscope::Named;
+use scatterscope::config::{ConfigError, PhysicsOverrides, parse_cm, parse_ps};
+use scatterscope::physics::{Preset, Setup};
+use std::path::PathBuf;
+
+/// A clap value parser for a [`Named`] choice: its names are the possible
+/// values.
+pub fn choice<T: Named + Clone>() -> impl TypedValueParser<Value = T> {
+    PossibleValuesParser::new(T::names())
+        .map(|name| T::from_name(&name).expect("clap checked the name"))
+}
+
+/// Physics flags shared by every command that needs an ST-PSF.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct PhysicsArgs {
+    /// Parameter set to start from (`paper`: the paper's skin-like 3 cm slab,
+    /// 50 cm field, 256x256, 30 bins of 4 ps, 450 photons).
+    #[arg(long, value_name = "NAME", value_parser = scatterscope::config::parse_preset)]
+    pub preset: Option<Preset>,
+    /// TOML file with any of the keys below (flags override it).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Absorption coefficient mu_a in 1/cm.
+    #[arg(long, value_name = "1/CM", allow_negative_numbers = true)]
+    pub mu_a: Option<f64>,
+    /// Scattering coefficient mu_s in 1/cm.
+    #[arg(long, value_name = "1/CM", allow_negative_numbers = true)]
+    pub mu_s: Option<f64>,
+    /// Scattering anisotropy g in [-1, 1] (0.9-0.99 for tissue).
+    #[arg(long, value_name = "G", allow_negative_numbers = true)]
+    pub g: Option<f64>,
+    /// Refractive index of the medium (light speed is c/n).
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    pub n: Option<f64>,
+    /// Slab thickness z0 between object and sensor (default unit cm; e.g. 30mm).
+    #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
+    pub thickness: Option<f64>,
+    /// Horizontal field of view (default unit cm).
+    #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
+    pub fov: Option<f64>,
+    /// Image side in pixels (square images).
+    #[arg(long, value_name = "PIXELS")]
+    pub size: Option<usize>,
+    /// Time-bin width (default unit ps; e.g. 4ps, 0.004ns).
+    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    pub bin_width: Option<f64>,
+    /// Start of the first bin after the pulse reaches the object (default unit ps).
+    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    pub t_start: Option<f64>,
+    /// Number of time bins.
+    #[arg(long, value_name = "COUNT")]
+    pub bins: Option<usize>,
+    /// Light budget: expected photons in the whole ST-PSF over all bins.
+    #[arg(long, value_name = "COUNT", allow_negative_numbers = true)]
+    pub photons: Option<f64>,
+    /// Drop bins whose ST-PSF carries fewer expected photons (0 keeps all).
+    #[arg(long, value_name = "COUNT", allow_negative_numbers = true)]
+    pub min_bin_photons: Option<f64>,
+}
+
+impl PhysicsArgs {
+    /// The flags as the library's overrides.
+    fn overrides(&self) -> PhysicsOverrides {
+        PhysicsOverrides {
+            preset: self.preset,
+            config: self.config.clone(),
+            mu_a: self.mu_a,
+            mu_s: self.mu_s,
+            g: self.g,
+            n: self.n,
+            thickness: self.thickness,
+            fov: self.fov,
+            size: self.size,
+            bin_width: self.bin_width,
+            t_start: self.t_start,
+            bins: self.bins,
+            photons: self.photons,
+            min_bin_photons: self.min_bin_photons,
+        }
+    }
+
+    /// Resolves preset, config file and flags into a validated setup.
+    pub fn resolve(&self) -> anyhow::Result<Setup> {
+        self.resolve_over(None)
+    }
+
+    /// Like [`Self::resolve`], starting from `base` (a stack's recorded
+    /// physics) instead of the default preset.
+    pub fn resolve_over(&self, base: Option<Setup>) -> anyhow::Result<Setup> {
+        self.overrides().resolve_over(base).map_err(|e| match e {
+            ConfigError::Param { error, key, config } => anyhow::anyhow!(
+                "{error} (set it with --{} or `{key}` in {})",
+                key.replace('_', "-"),
+                config.map_or("a --config file".to_string(), |p| p.display().to_string())
+            ),
+            e => e.into(),
+        })
+    }
+}
