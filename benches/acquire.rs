@@ -59,7 +59,7 @@ fn binner() -> Binner {
     };
     let map = PixelMap::Sensor {
         sensor_width: 256,
-        roi: Region {
+        region: Region {
             x: 0,
             y: 0,
             width: 256,
@@ -103,7 +103,7 @@ fn run_mock(spec: &DeviceSpec, device: MockOptions) -> u64 {
         bin_width_ps: setup.bins.width_ps,
         bins: setup.bins.count,
         t0_ps: 0.0,
-        roi: None,
+        region: None,
         duration: None,
         resolution_fs: None,
         raw: None,

@@ -58,7 +58,7 @@ fn plan(t0_ps: f64) -> Plan {
         bin_width_ps: s.bins.width_ps,
         bins: s.bins.count,
         t0_ps,
-        roi: None,
+        region: None,
         duration: None,
         resolution_fs: None,
         raw: None,
@@ -469,7 +469,7 @@ fn plans_that_do_not_fit_the_device_are_refused_by_name() {
     );
 
     let mut p = plan(0.0);
-    p.roi = Some(Region {
+    p.region = Some(Region {
         x: 60,
         y: 0,
         width: 10,
@@ -500,13 +500,13 @@ fn plans_that_do_not_fit_the_device_are_refused_by_name() {
 #[test]
 fn a_region_of_interest_bins_its_pixels_and_counts_the_rest() {
     let mut p = plan(0.0);
-    p.roi = Some(Region {
+    p.region = Some(Region {
         x: 16,
         y: 8,
         width: 32,
         height: 24,
     });
-    let (roi, _) = run(
+    let (region, _) = run(
         DeviceSpec::Mock,
         mock(2, 50_000, Faults::default(), 0.0),
         &p,
@@ -516,15 +516,15 @@ fn a_region_of_interest_bins_its_pixels_and_counts_the_rest() {
         mock(2, 50_000, Faults::default(), 0.0),
         &plan(0.0),
     );
-    assert_eq!(roi.counts.dim(), (30, 24, 32));
+    assert_eq!(region.counts.dim(), (30, 24, 32));
     assert_eq!(
-        roi.counts,
+        region.counts,
         full.counts.slice(ndarray::s![.., 8..32, 16..48]).to_owned()
     );
-    assert!(roi.accounting.balances());
+    assert!(region.accounting.balances());
     assert_eq!(
-        roi.accounting.outside_roi,
-        50_000 - roi.accounting.binned - roi.accounting.outside_window
+        region.accounting.outside_region,
+        50_000 - region.accounting.binned - region.accounting.outside_window
     );
 }
 

@@ -218,7 +218,7 @@ fn reconstruct_a_simulated_stack_with_every_method() {
         ("pnp-slice", Some("10")),
         ("rl", Some("10")),
         ("rl-sum", None),
-        ("raw", None),
+        ("scaled-counts", None),
     ] {
         let out = dir.path().join(method);
         let mut args = vec![

@@ -2,7 +2,7 @@
 //! invariants, and stability on extreme inputs.
 
 use ndarray::{Array2, Array3, Axis};
-use scatterscope::denoise::Identity;
+use scatterscope::denoise::NoPrior;
 use scatterscope::denoise::ffdnet::Ffdnet;
 use scatterscope::denoise::ffdnet::source::embedded;
 use scatterscope::denoise::tv::TotalVariation;
@@ -256,7 +256,7 @@ fn extreme_inputs_give_finite_images() {
     };
     assert!(finite_non_negative(&run(&c.counts, &stiff).image));
     // Identity prior.
-    let r = pnp_admm(&c.model, &c.counts, &c.bins, &Identity, &opts, None, |_| {}).unwrap();
+    let r = pnp_admm(&c.model, &c.counts, &c.bins, &NoPrior, &opts, None, |_| {}).unwrap();
     assert!(finite_non_negative(&r.image));
 }
 

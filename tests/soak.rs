@@ -76,7 +76,7 @@ fn soak_with_every_fault_at_random_times_balances_and_stays_flat() {
         bin_width_ps: setup.bins.width_ps,
         bins: setup.bins.count,
         t0_ps: 0.0,
-        roi: None,
+        region: None,
         duration: Some(Duration::from_secs(seconds)),
         resolution_fs: None,
         raw: None,

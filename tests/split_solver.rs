@@ -6,7 +6,7 @@
 use ndarray::{Array2, Array3, Axis};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use scatterscope::denoise::Identity;
+use scatterscope::denoise::NoPrior;
 use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::forward::{Boundary, EDGE_TAIL, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup};
@@ -252,7 +252,7 @@ fn split_solver_with_no_prior_reaches_the_maximum_likelihood_of_newtons_method()
         patience: usize::MAX,
         ..Default::default()
     };
-    let r = pnp_split(&model, &counts, &[0, 1], &Identity, &opts, None, |_| {}).unwrap();
+    let r = pnp_split(&model, &counts, &[0, 1], &NoPrior, &opts, None, |_| {}).unwrap();
     let got: Vec<f64> = r.image.iter().copied().collect();
     let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     for (g, w) in got.iter().zip(&want) {

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! detected by the device = received + lost in transit + lost in the device
-//! received               = binned + outside the time window + outside the ROI
+//! received               = binned + outside the time window + outside the region
 //! ```
 //!
 //! The first line needs the device's totals (sent with its Stopped answer);
@@ -22,7 +22,7 @@ pub struct AcquisitionAccounting {
     /// Photons whose arrival time is outside the binned window.
     pub outside_window: u64,
     /// Photons on pixels outside the region of interest.
-    pub outside_roi: u64,
+    pub outside_region: u64,
     /// Photons the device dropped (FIFO overflow).
     pub lost_in_device: u64,
     /// Photons in batches that never arrived or arrived damaged.
@@ -51,7 +51,7 @@ impl AcquisitionAccounting {
     /// Whether both lines of the balance hold (the first only when the
     /// device's totals are known).
     pub fn balances(&self) -> bool {
-        self.received == self.binned + self.outside_window + self.outside_roi
+        self.received == self.binned + self.outside_window + self.outside_region
             && self
                 .detected
                 .is_none_or(|d| d == self.received + self.lost_in_transit + self.lost_in_device)
@@ -77,7 +77,7 @@ impl AcquisitionAccounting {
         line("received", self.received.to_string());
         line("  binned", self.binned.to_string());
         line("  outside the time window", self.outside_window.to_string());
-        line("  outside the ROI", self.outside_roi.to_string());
+        line("  outside the region", self.outside_region.to_string());
         line("batches received", self.batches_received.to_string());
         line("batches lost or damaged", self.batches_lost.to_string());
         line(

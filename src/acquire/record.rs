@@ -32,7 +32,7 @@ pub struct AcquisitionRecord {
     /// Start of the first bin in device micro time (t0 + the plan's start), ps.
     pub window_start_device_ps: f64,
     /// The pixels binned.
-    pub roi: Region,
+    pub region: Region,
     /// Why the acquisition ended.
     pub stop: StopReason,
     /// From Start to the last batch, seconds.
@@ -54,7 +54,7 @@ impl Outcome {
             config: self.config.clone(),
             t0_ps: plan.t0_ps,
             window_start_device_ps: self.window_ps.0,
-            roi: self.roi,
+            region: self.region,
             stop: self.stop.clone(),
             elapsed_s: self.elapsed.as_secs_f64(),
             accounting: self.accounting,
@@ -76,7 +76,7 @@ impl Outcome {
             source,
             Some(record),
         );
-        let setup = cropped(setup, self.roi);
+        let setup = cropped(setup, self.region);
         meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
         meta.setup = Some(setup);
         meta.sampling = Some(Sampling::Integrated);
@@ -87,13 +87,13 @@ impl Outcome {
     }
 }
 
-/// The same physics on `roi` of `setup`'s sensor: the region's pixels at
+/// The same physics on `region` of `setup`'s sensor: the region's pixels at
 /// the same pitch.
-fn cropped(setup: &Setup, roi: Region) -> Setup {
+fn cropped(setup: &Setup, region: Region) -> Setup {
     let mut s = *setup;
-    s.sensor.fov_cm = setup.sensor.fov_cm * roi.width as f64 / setup.sensor.width_px as f64;
-    s.sensor.width_px = roi.width;
-    s.sensor.height_px = roi.height;
+    s.sensor.fov_cm = setup.sensor.fov_cm * region.width as f64 / setup.sensor.width_px as f64;
+    s.sensor.width_px = region.width;
+    s.sensor.height_px = region.height;
     s
 }
 
@@ -114,20 +114,24 @@ impl MockReference {
         }
     }
 
-    /// The light budget that makes `binned` photons in `roi` (dark counts
+    /// The light budget that makes `binned` photons in `region` (dark counts
     /// removed, from the mock's truth) come out in the scene's units:
     /// `total_photons` scaled by the signal over its expectation. `None`
     /// when either is zero.
     pub fn light_budget(
         &self,
         total_photons: f64,
-        roi: Region,
+        region: Region,
         binned: u64,
         truth: &Truth,
     ) -> Option<f64> {
         let expected: f64 = self
             .expected
-            .slice(s![.., roi.y..roi.y + roi.height, roi.x..roi.x + roi.width])
+            .slice(s![
+                ..,
+                region.y..region.y + region.height,
+                region.x..region.x + region.width
+            ])
             .sum();
         let dark_fraction = truth.dark_counts as f64 / truth.photons_detected.max(1) as f64;
         let signal = binned as f64 * (1.0 - dark_fraction);

@@ -38,7 +38,7 @@ pub struct Plan {
     /// Time zero: micro time of the instrument's zero, ps.
     pub t0_ps: f64,
     /// Pixels to bin (the whole sensor if `None`).
-    pub roi: Option<Region>,
+    pub region: Option<Region>,
     /// Stop after this long (`None`: when the device stops or on request).
     pub duration: Option<Duration>,
     /// Micro-time unit to configure, fs (`None`: the TDC resolution).
@@ -100,7 +100,7 @@ pub struct Outcome {
     /// The binned window in device micro time: (first bin start, width), ps.
     pub window_ps: (f64, f64),
     /// The pixels binned (the whole sensor unless the plan set a region).
-    pub roi: Region,
+    pub region: Region,
     /// The raw tag file written, if any.
     pub raw: Option<PathBuf>,
     /// The link.
@@ -139,7 +139,7 @@ pub fn acquire(
         roi: None,
         exposure_ms: 0,
     })?;
-    let (mut binner, window_ps, roi) = make_binner(plan, &identity, &applied)?;
+    let (mut binner, window_ps, region) = make_binner(plan, &identity, &applied)?;
     if let Some(path) = &plan.raw {
         let header = RawHeader::new(&link_name, &identity, &applied, &plan.software);
         device.record_to(RawWriter::create(path, &header).map_err(AcquireError::Raw)?);
@@ -206,7 +206,7 @@ pub fn acquire(
         received: bin_acc.received,
         binned: bin_acc.binned,
         outside_window: bin_acc.outside_window,
-        outside_roi: bin_acc.outside_image + bin_acc.other_channel,
+        outside_region: bin_acc.outside_image + bin_acc.other_channel,
         lost_in_device: totals.map_or(counts.lost_in_device, |t| t.photons_lost),
         lost_in_transit: transit.photons,
         transit_exact: transit.exact,
@@ -228,7 +228,7 @@ pub fn acquire(
         stop: reason,
         elapsed,
         window_ps,
-        roi,
+        region,
         raw,
         link: link_name,
     })
@@ -253,30 +253,30 @@ fn make_binner(
         usize::from(identity.pixels_x),
         usize::from(identity.pixels_y),
     );
-    let roi = plan.roi.unwrap_or(Region {
+    let region = plan.region.unwrap_or(Region {
         x: 0,
         y: 0,
         width: w,
         height: h,
     });
-    if roi.width == 0
-        || roi.height == 0
-        || roi.x + roi.width > w
-        || roi.y + roi.height > h
+    if region.width == 0
+        || region.height == 0
+        || region.x + region.width > w
+        || region.y + region.height > h
         || w == 0
     {
         return Err(AcquireError::Plan(format!(
             "region of interest {}x{} at ({}, {}) is not inside the device's {w}x{h} sensor",
-            roi.width, roi.height, roi.x, roi.y
+            region.width, region.height, region.x, region.y
         )));
     }
     let map = PixelMap::Sensor {
         sensor_width: w,
-        roi,
+        region,
     };
     Ok((
         Binner::new(window, map, None, FrameSelect::Sum),
         (start_ps, plan.bin_width_ps),
-        roi,
+        region,
     ))
 }

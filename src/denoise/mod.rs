@@ -36,11 +36,12 @@ pub trait Denoiser: Sync {
     }
 }
 
-/// The identity: no prior (ADMM then reduces to a damped likelihood ascent).
+/// No prior: the denoiser that returns its input (ADMM then reduces to a
+/// damped likelihood ascent). Named "identity" on the command line.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct Identity;
+pub struct NoPrior;
 
-impl Denoiser for Identity {
+impl Denoiser for NoPrior {
     fn name(&self) -> String {
         "identity".into()
     }

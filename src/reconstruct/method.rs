@@ -4,8 +4,8 @@ use ndarray::{Array3, ArrayView2, Axis};
 
 use super::pnp::{PnpOptions, pnp_admm};
 use super::problem::Problem;
-use super::raw::raw_scaled;
 use super::richardson_lucy::richardson_lucy;
+use super::scaled_counts::scaled_counts;
 use super::split::{SplitOptions, pnp_split};
 use super::trace::TraceRow;
 use super::{ReconstructError, Reconstruction};
@@ -27,8 +27,9 @@ pub enum Method {
     Rl,
     /// Richardson-Lucy on the time-summed stack with the time-summed kernel.
     RlSum,
-    /// Counts divided by kernel mass (one bin, or the sum without --bin).
-    Raw,
+    /// Counts divided by kernel mass, no deblurring (one bin, or the sum
+    /// of all bins when none is chosen).
+    ScaledCounts,
 }
 
 named!(Method {
@@ -37,7 +38,7 @@ named!(Method {
     PnpSum => "pnp-sum",
     Rl => "rl",
     RlSum => "rl-sum",
-    Raw => "raw",
+    ScaledCounts => "scaled-counts",
 });
 
 impl Method {
@@ -90,7 +91,7 @@ impl Default for MethodOptions {
 }
 
 /// Runs `method` on `problem`; `bin` selects the bin of single-bin methods
-/// (and of `raw`, which otherwise sums all bins).
+/// (and of `scaled-counts`, which otherwise sums all bins).
 pub fn run_method(
     problem: &Problem,
     method: Method,
@@ -151,9 +152,9 @@ pub fn run_method(
         Method::RlSum => {
             richardson_lucy(model, &problem.counts, &all, opts.rl_iters, truth, on_iter)
         }
-        Method::Raw => match bin {
-            Some(b) => raw_scaled(model, &problem.single_bin(b), &[b], truth),
-            None => raw_scaled(model, &problem.counts, &all, truth),
+        Method::ScaledCounts => match bin {
+            Some(b) => scaled_counts(model, &problem.single_bin(b), &[b], truth),
+            None => scaled_counts(model, &problem.counts, &all, truth),
         },
     }
 }

@@ -6,7 +6,8 @@
 //!   stopping rule ([`discrepancy`]).
 //! - [`richardson_lucy`]: the classical baseline, on one bin or on the
 //!   time-summed stack.
-//! - [`raw`]: counts divided by kernel mass, for reference.
+//! - [`scaled_counts`]: counts divided by kernel mass (no deblurring),
+//!   for reference.
 //!
 //! Every method returns the image and a per-iteration [`trace::Trace`].
 
@@ -16,8 +17,8 @@ pub mod method;
 pub mod operator;
 pub mod pnp;
 pub mod problem;
-pub mod raw;
 pub mod richardson_lucy;
+pub mod scaled_counts;
 pub mod split;
 pub mod trace;
 

@@ -324,7 +324,7 @@ pub fn run_case(
         &case.problem,
         Method::RlSum,
         None,
-        &crate::denoise::Identity,
+        &crate::denoise::NoPrior,
         &o,
         Some(truth),
         |_| {},

@@ -1,7 +1,7 @@
 //! The `report`: every method on simulated scenes, against the truth.
 //!
 //! Per scene: a table of PSNR / SSIM / wall time per method, the paper's
-//! Fig. 4 analogue (PSNR per time bin of raw, RL and PnP on that bin, with
+//! Fig. 4 analogue (PSNR per time bin of scaled counts, RL and PnP on that bin, with
 //! the full-stack results as lines) and error-against-run-time curves.
 
 pub mod bench;
@@ -52,8 +52,8 @@ pub struct MethodScore {
 pub struct BinScore {
     /// Bin start (ps).
     pub start_ps: f64,
-    /// Raw counts / kernel mass.
-    pub raw_psnr: f64,
+    /// Counts / kernel mass (no deblurring).
+    pub scaled_counts_psnr: f64,
     /// Richardson-Lucy, output of the last iteration.
     pub rl_psnr: f64,
     /// Richardson-Lucy, best iteration by truth.
@@ -147,10 +147,10 @@ pub fn run_scene(
             .write(dir, &format!("trace_{file}"))
             .map_err(|e| ReportError::Io(dir.display().to_string(), e))
     };
-    for method in [Method::Pnp, Method::RlSum, Method::Raw] {
+    for method in [Method::Pnp, Method::RlSum, Method::ScaledCounts] {
         let r = run(method, None)?;
-        let label = if method == Method::Raw {
-            "raw-sum"
+        let label = if method == Method::ScaledCounts {
+            "scaled-counts-sum"
         } else {
             method.name()
         };
@@ -199,15 +199,15 @@ pub fn run_scene(
     let mut best_slices: [Option<(f64, MethodScore, Reconstruction)>; 2] = [None, None];
     for k in (0..problem.counts.shape()[0]).step_by(slice_step.max(1)) {
         let start = problem.bin_starts_ps[k];
-        let raw = run(Method::Raw, Some(k))?;
+        let scaled = run(Method::ScaledCounts, Some(k))?;
         let rl = run(Method::Rl, Some(k))?;
         let pnp = run(Method::PnpSlice, Some(k))?;
-        let raw_s = score(format!("raw (bin {start} ps)"), &raw);
+        let scaled_s = score(format!("scaled-counts (bin {start} ps)"), &scaled);
         let rl_s = score(format!("rl (bin {start} ps)"), &rl);
         let pnp_s = score(format!("pnp-slice (bin {start} ps)"), &pnp);
         bins.push(BinScore {
             start_ps: start,
-            raw_psnr: raw_s.psnr,
+            scaled_counts_psnr: scaled_s.psnr,
             rl_psnr: rl_s.psnr,
             rl_oracle_psnr: rl_s.oracle_psnr,
             pnp_psnr: pnp_s.psnr,
@@ -249,12 +249,13 @@ fn write_scene_files(
     bins: &[BinScore],
     traces: &[Trace],
 ) -> Result<(), ReportError> {
-    let mut csv = String::from("start_ps,raw_psnr,rl_psnr,rl_oracle_psnr,pnp_slice_psnr\n");
+    let mut csv =
+        String::from("start_ps,scaled_counts_psnr,rl_psnr,rl_oracle_psnr,pnp_slice_psnr\n");
     for b in bins {
         writeln!(
             csv,
             "{},{:.4},{:.4},{:.4},{:.4}",
-            b.start_ps, b.raw_psnr, b.rl_psnr, b.rl_oracle_psnr, b.pnp_psnr
+            b.start_ps, b.scaled_counts_psnr, b.rl_psnr, b.rl_oracle_psnr, b.pnp_psnr
         )
         .expect("String");
     }
@@ -274,7 +275,7 @@ fn write_scene_files(
             points: vec![(x0, s.psnr), (x1, s.psnr)],
         })
     };
-    let lines: Vec<Series> = ["raw-sum", "rl-sum", "pnp"]
+    let lines: Vec<Series> = ["scaled-counts-sum", "rl-sum", "pnp"]
         .iter()
         .filter_map(|l| full(l))
         .collect();
@@ -284,7 +285,7 @@ fn write_scene_files(
         "bin start (ps)",
         "PSNR (dB)",
         &[
-            per_bin(|b| b.raw_psnr, "raw"),
+            per_bin(|b| b.scaled_counts_psnr, "scaled counts"),
             per_bin(|b| b.rl_oracle_psnr, "RL (best iteration)"),
             per_bin(|b| b.pnp_psnr, "PnP-ADMM"),
         ],

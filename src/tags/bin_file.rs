@@ -341,7 +341,7 @@ fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
         .map_err(|e| spec_err(e.to_string()))?;
     let map = PixelMap::Sensor {
         sensor_width: w,
-        roi: Region {
+        region: Region {
             x: 0,
             y: 0,
             width: w,

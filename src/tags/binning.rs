@@ -23,16 +23,17 @@ pub enum PixelMap {
     /// Scanned image from line/frame markers.
     Scan(Imaging),
     /// The channel is a row-major pixel index on a sensor `sensor_width`
-    /// pixels wide (live SPAD-array data); only the region `roi` is kept.
+    /// pixels wide (live SPAD-array data); only the region `region` is kept.
     Sensor {
         /// Columns of the whole sensor.
         sensor_width: usize,
         /// The region binned.
-        roi: Region,
+        region: Region,
     },
 }
 
-/// A rectangle of pixels.
+/// A rectangle of pixels that the host bins (a region of interest). The
+/// device-side region of the wire protocol is `firmware_protocol::Roi`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Region {
     /// First column.
@@ -244,7 +245,7 @@ pub struct Binner {
     accounting: Accounting,
     scan: ScanState,
     /// For [`PixelMap::Sensor`]: flat stack pixel of every sensor pixel,
-    /// or [`OUTSIDE_ROI`]; one table lookup per photon instead of a
+    /// or [`OUTSIDE_REGION`]; one table lookup per photon instead of a
     /// division and four comparisons (see BENCHMARKS.md, acquisition).
     pixel_lut: Vec<u32>,
     /// Scratch space of [`Binner::push_sensor_photons`].
@@ -255,7 +256,7 @@ pub struct Binner {
 }
 
 /// Pixel-table entry of a sensor pixel outside the region of interest.
-const OUTSIDE_ROI: u32 = u32::MAX;
+const OUTSIDE_REGION: u32 = u32::MAX;
 
 #[derive(Clone, Default)]
 struct ScanState {
@@ -296,16 +297,23 @@ impl Binner {
             PixelMap::Single => (window.bins, 1, 1),
             PixelMap::Channel { width } => (window.bins, 1, width),
             PixelMap::Scan(img) => (window.bins, img.pixels_y, img.pixels_x),
-            PixelMap::Sensor { roi, .. } => (window.bins, roi.height, roi.width),
+            PixelMap::Sensor { region, .. } => (window.bins, region.height, region.width),
         };
         let pixel_lut = match map {
-            PixelMap::Sensor { sensor_width, roi } if sensor_width > 0 => (0..1usize << 16)
+            PixelMap::Sensor {
+                sensor_width,
+                region,
+            } if sensor_width > 0 => (0..1usize << 16)
                 .map(|p| {
                     let (x, y) = (p % sensor_width, p / sensor_width);
-                    if x >= roi.x && y >= roi.y && x - roi.x < roi.width && y - roi.y < roi.height {
-                        ((y - roi.y) * roi.width + (x - roi.x)) as u32
+                    if x >= region.x
+                        && y >= region.y
+                        && x - region.x < region.width
+                        && y - region.y < region.height
+                    {
+                        ((y - region.y) * region.width + (x - region.x)) as u32
                     } else {
-                        OUTSIDE_ROI
+                        OUTSIDE_REGION
                     }
                 })
                 .collect(),
@@ -484,7 +492,7 @@ impl Binner {
         let plane = h * w;
         let mut offsets = std::mem::take(&mut self.offsets);
         offsets.clear();
-        let (mut n, mut outside_window, mut outside_roi) = (0u64, 0u64, 0u64);
+        let (mut n, mut outside_window, mut outside_region) = (0u64, 0u64, 0u64);
         for (pixel, micro) in photons {
             n += 1;
             let Some(bin) = self.micro_bin(micro) else {
@@ -492,8 +500,8 @@ impl Binner {
                 continue;
             };
             let flat = self.pixel_lut[usize::from(pixel)];
-            if flat == OUTSIDE_ROI {
-                outside_roi += 1;
+            if flat == OUTSIDE_REGION {
+                outside_region += 1;
                 continue;
             }
             offsets.push((bin * plane) as u32 + flat);
@@ -509,7 +517,7 @@ impl Binner {
         self.accounting.received += n;
         self.accounting.binned += offsets.len() as u64;
         self.accounting.outside_window += outside_window;
-        self.accounting.outside_image += outside_roi;
+        self.accounting.outside_image += outside_region;
         self.offsets = offsets;
     }
 
@@ -526,8 +534,8 @@ impl Binner {
             .pixel_lut
             .get(usize::from(pixel))
             .copied()
-            .unwrap_or(OUTSIDE_ROI);
-        if flat == OUTSIDE_ROI {
+            .unwrap_or(OUTSIDE_REGION);
+        if flat == OUTSIDE_REGION {
             self.accounting.outside_image += 1;
             return;
         }
@@ -697,7 +705,7 @@ impl FastSink<'_> {
                         usize::from(channel)
                     }
                     PixelMap::Sensor { .. } => match self.pixel_lut.get(usize::from(channel)) {
-                        Some(&p) if p != OUTSIDE_ROI => p as usize,
+                        Some(&p) if p != OUTSIDE_REGION => p as usize,
                         _ => {
                             self.acc.outside_image += 1;
                             return;

@@ -228,7 +228,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         bin_width_ps: setup.bins.width_ps,
         bins: setup.bins.count,
         t0_ps,
-        roi: args.roi,
+        region: args.roi,
         duration: (!args.duration.is_zero()).then_some(args.duration),
         resolution_fs: args.resolution.map(|ps| (ps * 1000.0).round() as u32),
         raw: args.raw.clone(),
@@ -280,7 +280,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     let mut stack_setup = setup;
     if let (Some(reference), Some(t)) = (&mock_reference, &truth)
         && let Some(budget) =
-            reference.light_budget(setup.total_photons, outcome.roi, acc.binned, t)
+            reference.light_budget(setup.total_photons, outcome.region, acc.binned, t)
     {
         stack_setup.total_photons = budget;
         println!(

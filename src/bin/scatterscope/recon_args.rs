@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use scatterscope::denoise::ffdnet::source;
 use scatterscope::denoise::tv::TotalVariation;
-use scatterscope::denoise::{Denoiser, Identity};
+use scatterscope::denoise::{Denoiser, NoPrior};
 use scatterscope::reconstruct::method::{MethodOptions, Solver};
 use scatterscope::reconstruct::pnp::{PnpOptions, StopRule};
 use scatterscope::reconstruct::split::SplitOptions;
@@ -54,7 +54,7 @@ impl PriorArgs {
                 gain: self.tv_gain,
                 ..Default::default()
             }),
-            DenoiserChoice::Identity => Box::new(Identity),
+            DenoiserChoice::Identity => Box::new(NoPrior),
         })
     }
 }

@@ -1,4 +1,5 @@
-//! Raw reference: counts divided by the kernel mass (no deblurring).
+//! Scaled counts, the reference without deblurring: counts divided by the
+//! kernel mass.
 
 use ndarray::{Array3, ArrayView2, Axis};
 
@@ -9,7 +10,7 @@ use crate::forward::ForwardModel;
 
 /// Sum of the counts of `bins` divided by their kernel mass: the object
 /// estimate a perfectly sharp PSF would give.
-pub fn raw_scaled(
+pub fn scaled_counts(
     model: &ForwardModel,
     counts: &Array3<f64>,
     bins: &[usize],
@@ -20,8 +21,12 @@ pub fn raw_scaled(
     let image = counts
         .sum_axis(Axis(0))
         .mapv(|m| if mass > 0.0 { m / mass } else { 0.0 });
-    let image = finish(image, "raw", 0)?;
-    let mut trace = Trace::new(if bins.len() == 1 { "raw" } else { "raw-sum" });
+    let image = finish(image, "scaled-counts", 0)?;
+    let mut trace = Trace::new(if bins.len() == 1 {
+        "scaled-counts"
+    } else {
+        "scaled-counts-sum"
+    });
     let mut row = TraceRow::default();
     score(&mut row, image.view(), truth);
     trace.rows.push(row);
