@@ -77,10 +77,71 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels),
     );
+    let mut bytes = Vec::new();
     Image::from_layer(layer)
         .write()
-        .to_file(path)
-        .map_err(|e| exr_error(path, e))
+        .to_buffered(std::io::Cursor::new(&mut bytes))
+        .map_err(|e| exr_error(path, e))?;
+    sort_header_attributes(&mut bytes);
+    std::fs::write(path, bytes).map_err(|e| StackError::io(path, e))
+}
+
+/// Puts the header attributes of a single-part EXR file in name order, in
+/// place, so that the same stack always gives the same bytes. The `exr`
+/// crate writes custom attributes in hash-map order, which changes from
+/// run to run; attribute order carries no meaning in OpenEXR and the
+/// header keeps its length, so the offset table after it stays valid.
+/// Leaves anything it does not recognise untouched.
+fn sort_header_attributes(bytes: &mut [u8]) {
+    const MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
+    const MULTIPART: u32 = 0x1000;
+    let Some(flags) = bytes.get(4..8) else { return };
+    let flags = u32::from_le_bytes(flags.try_into().expect("4 bytes"));
+    if bytes[..4] != MAGIC || flags & MULTIPART != 0 {
+        return;
+    }
+    let nul_after = |from: usize| {
+        bytes
+            .get(from..)?
+            .iter()
+            .position(|&b| b == 0)
+            .map(|i| from + i)
+    };
+    let mut attributes: Vec<(usize, usize)> = Vec::new();
+    let mut pos = 8;
+    loop {
+        match bytes.get(pos) {
+            None => return,
+            Some(0) => break,
+            Some(_) => {}
+        }
+        let Some(name_end) = nul_after(pos) else {
+            return;
+        };
+        let Some(type_end) = nul_after(name_end + 1) else {
+            return;
+        };
+        let Some(size) = bytes.get(type_end + 1..type_end + 5) else {
+            return;
+        };
+        let size = u32::from_le_bytes(size.try_into().expect("4 bytes")) as usize;
+        let end = type_end + 5 + size;
+        if end > bytes.len() {
+            return;
+        }
+        attributes.push((pos, end));
+        pos = end;
+    }
+    let name = |&(start, _): &(usize, usize)| {
+        let end = nul_after(start).expect("checked above");
+        &bytes[start..end]
+    };
+    attributes.sort_by(|a, b| name(a).cmp(name(b)));
+    let sorted: Vec<u8> = attributes
+        .iter()
+        .flat_map(|&(start, end)| bytes[start..end].iter().copied())
+        .collect();
+    bytes[8..pos].copy_from_slice(&sorted);
 }
 
 /// Most decoded pixel bytes a file may declare per byte it holds. Lossless
@@ -196,8 +257,11 @@ pub fn write_image(img: ndarray::ArrayView2<f32>, path: &Path) -> Result<(), Sta
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(SmallVec::from_vec(vec![channel])),
     );
+    let mut bytes = Vec::new();
     Image::from_layer(layer)
         .write()
-        .to_file(path)
-        .map_err(|e| exr_error(path, e))
+        .to_buffered(std::io::Cursor::new(&mut bytes))
+        .map_err(|e| exr_error(path, e))?;
+    sort_header_attributes(&mut bytes);
+    std::fs::write(path, bytes).map_err(|e| StackError::io(path, e))
 }
