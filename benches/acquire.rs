@@ -13,6 +13,7 @@ use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::scene::Scene;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, Region, TimeWindow};
 use scatterscope::tags::raw::bin_batch;
+use scatterscope_drivers::pipeline::count_records;
 use scatterscope_mocks::{EmitterOptions, MockOptions};
 
 const EVENTS: u64 = 20_000_000;
@@ -146,6 +147,16 @@ fn benches(c: &mut Criterion) {
                 bin_batch(&EventBatch::parse(p).unwrap(), &mut bin);
             }
             bin.finish().1.binned
+        })
+    });
+    // The ledger's own pass over the records in the pipeline's decoder
+    // thread (the consumer decodes them again to bin them).
+    g.bench_function("count_records_of_the_stream", |b| {
+        b.iter(|| {
+            payloads
+                .iter()
+                .map(|p| count_records(&EventBatch::parse(p).unwrap()).0)
+                .sum::<u64>()
         })
     });
     g.throughput(Throughput::Bytes(wire.len() as u64));

@@ -1,12 +1,65 @@
-//! Decode + bin throughput of a T3 file read from the page cache, through
-//! [`bin_file`], the function `scatterscope bin` calls.
+//! Decode + bin throughput of recorded tag files read from the page cache,
+//! through [`bin_file`], the function `scatterscope bin` calls: a PicoQuant
+//! T3 file and one of the project's raw tag files.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use firmware_protocol::{BatchEncoder, Config, Event, Identity};
 use scatterscope::tags::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::picoquant;
 use scatterscope::tags::picoquant::writer::write_synthetic_t3;
+use scatterscope_drivers::raw::{RawHeader, RawWriter};
 
 const RECORDS: u64 = 20_000_000;
+
+/// A raw tag file of `RECORDS` photons in full batches: a 256 x 256 sensor,
+/// 1 ps micro times within the paper's 120 ps, about one photon per 20
+/// syncs.
+fn write_raw(path: &std::path::Path) {
+    let identity = Identity {
+        model: "bench".into(),
+        serial: "0".into(),
+        firmware: [0, 0, 0],
+        protocol_version: firmware_protocol::PROTOCOL_VERSION,
+        pixels_x: 256,
+        pixels_y: 256,
+        channels: 1,
+        tdc_resolution_fs: 1000,
+        sync_period_fs: 12_500_000,
+    };
+    let config = Config {
+        sync_divider: 1,
+        resolution_fs: 1000,
+        time_window: 0,
+        roi: None,
+        exposure_ms: 0,
+    };
+    let header = RawHeader::new("bench", &identity, &config, "bench");
+    let mut out = RawWriter::create(path, &header).unwrap();
+    let mut enc = BatchEncoder::new();
+    let mut payload = Vec::new();
+    let (mut sync, mut state) = (0u64, 0x9E37_79B9_7F4A_7C15u64);
+    for _ in 0..RECORDS {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        sync += state % 40;
+        if !enc.has_room(2) {
+            payload.clear();
+            enc.finish_batch(&mut payload);
+            out.write_batch(&payload);
+        }
+        enc.push(Event::Photon {
+            pixel: (state >> 24) as u16,
+            micro: (state >> 44) as u32 % 120,
+            sync,
+        })
+        .unwrap();
+    }
+    payload.clear();
+    enc.finish_batch(&mut payload);
+    out.write_batch(&payload);
+    out.finish(None).unwrap();
+}
 
 fn benches(c: &mut Criterion) {
     let dir = tempfile::tempdir().unwrap();
@@ -23,6 +76,20 @@ fn benches(c: &mut Criterion) {
     g.sample_size(10);
     g.bench_function("decode_bin_generic_t3_from_page_cache", |b| {
         b.iter(|| bin_file(&path, &spec).unwrap().accounting.binned)
+    });
+    // A raw tag file onto its 256 x 256 sensor in the paper's 30 bins of
+    // 4 ps (a 7.9 MB stack).
+    let raw = dir.path().join("bench.sstags");
+    write_raw(&raw);
+    let spec = BinSpec {
+        bin_width_ps: Some(4.0),
+        bins: Some(30),
+        ..BinSpec::default()
+    };
+    assert_eq!(bin_file(&raw, &spec).unwrap().accounting.binned, RECORDS);
+    g.throughput(Throughput::Elements(RECORDS));
+    g.bench_function("decode_bin_raw_tag_file_from_page_cache", |b| {
+        b.iter(|| bin_file(&raw, &spec).unwrap().accounting.binned)
     });
     g.finish();
 }
