@@ -6,8 +6,11 @@
 
 use std::sync::atomic::AtomicBool;
 
+#[path = "common/photons.rs"]
+mod photons;
+
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use firmware_protocol::{BatchEncoder, Event, EventBatch, FrameDecoder, FrameKind, encode_frame};
+use firmware_protocol::{EventBatch, FrameDecoder, FrameKind, encode_frame};
 use scatterscope::acquire::{DeviceSpec, MockSetup, Plan, acquire, open_device};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::scene::Scene;
@@ -20,34 +23,12 @@ const EVENTS: u64 = 20_000_000;
 /// Photons of one replayed end-to-end run.
 const REPLAYED: u64 = 200_000_000;
 
-/// A stream of full batches: 256 x 256 pixels, 1 ps micro times within the
-/// 120 ps the paper's bins cover, about one photon per 20 syncs (wraps now
-/// and then).
+/// The synthetic stream as a USB reader receives it: framed batches.
 fn wire_stream() -> Vec<u8> {
-    let mut enc = BatchEncoder::new();
     let mut wire = Vec::with_capacity(EVENTS as usize * 8 + (1 << 20));
-    let mut payload = Vec::new();
-    let (mut sync, mut state) = (0u64, 0x9E37_79B9_7F4A_7C15u64);
-    for _ in 0..EVENTS {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        sync += state % 40;
-        if !enc.has_room(2) {
-            payload.clear();
-            enc.finish_batch(&mut payload);
-            encode_frame(FrameKind::Events, &payload, &mut wire).unwrap();
-        }
-        enc.push(Event::Photon {
-            pixel: (state >> 24) as u16,
-            micro: (state >> 44) as u32 % 120,
-            sync,
-        })
-        .unwrap();
-    }
-    payload.clear();
-    enc.finish_batch(&mut payload);
-    encode_frame(FrameKind::Events, &payload, &mut wire).unwrap();
+    photons::batches(EVENTS, |payload| {
+        encode_frame(FrameKind::Events, payload, &mut wire).unwrap()
+    });
     wire
 }
 

@@ -2,8 +2,11 @@
 //! through [`bin_file`], the function `scatterscope bin` calls: a PicoQuant
 //! T3 file and one of the project's raw tag files.
 
+#[path = "common/photons.rs"]
+mod photons;
+
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use firmware_protocol::{BatchEncoder, Config, Event, Identity};
+use firmware_protocol::{Config, Identity};
 use scatterscope::tags::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::picoquant;
 use scatterscope::tags::picoquant::writer::write_synthetic_t3;
@@ -11,9 +14,7 @@ use scatterscope_drivers::raw::{RawHeader, RawWriter};
 
 const RECORDS: u64 = 20_000_000;
 
-/// A raw tag file of `RECORDS` photons in full batches: a 256 x 256 sensor,
-/// 1 ps micro times within the paper's 120 ps, about one photon per 20
-/// syncs.
+/// A raw tag file of the synthetic stream's `RECORDS` photons.
 fn write_raw(path: &std::path::Path) {
     let identity = Identity {
         model: "bench".into(),
@@ -35,29 +36,7 @@ fn write_raw(path: &std::path::Path) {
     };
     let header = RawHeader::new("bench", &identity, &config, "bench");
     let mut out = RawWriter::create(path, &header).unwrap();
-    let mut enc = BatchEncoder::new();
-    let mut payload = Vec::new();
-    let (mut sync, mut state) = (0u64, 0x9E37_79B9_7F4A_7C15u64);
-    for _ in 0..RECORDS {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        sync += state % 40;
-        if !enc.has_room(2) {
-            payload.clear();
-            enc.finish_batch(&mut payload);
-            out.write_batch(&payload);
-        }
-        enc.push(Event::Photon {
-            pixel: (state >> 24) as u16,
-            micro: (state >> 44) as u32 % 120,
-            sync,
-        })
-        .unwrap();
-    }
-    payload.clear();
-    enc.finish_batch(&mut payload);
-    out.write_batch(&payload);
+    photons::batches(RECORDS, |payload| out.write_batch(payload));
     out.finish(None).unwrap();
 }
 

@@ -13,9 +13,7 @@ use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender, bounded};
 use firmware_protocol::record::Record;
-use firmware_protocol::{
-    EventBatch, FrameDecoder, FromDevice, Response, ResponseFrame, Totals,
-};
+use firmware_protocol::{EventBatch, FrameDecoder, FromDevice, Response, ResponseFrame, Totals};
 use serde::Serialize;
 
 use crate::link::{ByteReader, Link, LinkError};

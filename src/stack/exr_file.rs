@@ -77,6 +77,12 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels),
     );
+    write_layer(layer, path)
+}
+
+/// Encodes one layer and writes it to `path`, header attributes in name
+/// order.
+fn write_layer(layer: Layer<AnyChannels<FlatSamples>>, path: &Path) -> Result<(), StackError> {
     let mut bytes = Vec::new();
     Image::from_layer(layer)
         .write()
@@ -257,11 +263,5 @@ pub fn write_image(img: ndarray::ArrayView2<f32>, path: &Path) -> Result<(), Sta
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(SmallVec::from_vec(vec![channel])),
     );
-    let mut bytes = Vec::new();
-    Image::from_layer(layer)
-        .write()
-        .to_buffered(std::io::Cursor::new(&mut bytes))
-        .map_err(|e| exr_error(path, e))?;
-    sort_header_attributes(&mut bytes);
-    std::fs::write(path, bytes).map_err(|e| StackError::io(path, e))
+    write_layer(layer, path)
 }
