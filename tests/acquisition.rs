@@ -393,6 +393,13 @@ fn raw_recordings_round_trip_and_survive_a_cut() {
     assert_eq!(summary.batches, out.accounting.batches_received);
     assert_eq!(summary.bytes_skipped, 0);
     assert_eq!(summary.header.pixels_x, 64);
+    // What `info` shows: the file's events counted by kind agree with the
+    // acquisition's ledger.
+    let (_, survey) = scatterscope::tags::survey::survey_raw(&path).unwrap();
+    assert_eq!(survey.photons, out.accounting.received);
+    assert_eq!(survey.lost_in_device, out.accounting.lost_in_device);
+    assert_eq!(survey.invalid_records, 0);
+    assert!(survey.last_event_s > 0.0);
 
     // A crash mid-write: the end frame and part of the last batch are gone.
     let bytes = std::fs::read(&path).unwrap();

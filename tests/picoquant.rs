@@ -639,3 +639,54 @@ fn bad_windows_and_record_types_are_refused_naming_the_field() {
         .to_string();
     assert!(e.contains("t2.ptu") && e.contains("no micro time"), "{e}");
 }
+
+#[test]
+fn survey_counts_every_record_kind_and_reports_a_cut() {
+    use scatterscope::tags::survey::survey_picoquant;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.ptu");
+    // Macro times past the 10-bit PicoHarp T3 sync field force overflow
+    // records between the events.
+    let tags = [
+        Tag::Photon {
+            channel: 0,
+            macro_time: 5,
+            micro_time: 7,
+        },
+        Tag::Photon {
+            channel: 2,
+            macro_time: 70_000,
+            micro_time: 9,
+        },
+        Tag::Marker {
+            bits: 1,
+            macro_time: 70_001,
+        },
+        Tag::Photon {
+            channel: 2,
+            macro_time: 200_000,
+            micro_time: 1,
+        },
+    ];
+    let records = write(&path, RecordType::PicoHarpT3, &header(), &tags);
+    let (info, s) = survey_picoquant(&path).unwrap();
+    assert_eq!(
+        s.photons_per_channel.into_iter().collect::<Vec<_>>(),
+        [(0, 1), (2, 2)]
+    );
+    assert_eq!((s.markers, s.syncs), (1, 0));
+    assert_eq!(
+        s.overflows,
+        records - 4,
+        "every other record is an overflow"
+    );
+    assert!(s.overflows > 0);
+    assert!((s.last_event_s - 200_000.0 * info.macro_unit_s).abs() < 1e-15);
+    assert!(s.cut.is_none());
+    // Cut inside the records: counted up to the cut, which is reported.
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() - 4]).unwrap();
+    let (_, s) = survey_picoquant(&path).unwrap();
+    assert!(s.cut.is_some());
+    assert_eq!(s.photons_per_channel.values().sum::<u64>(), 2);
+}

@@ -8,11 +8,13 @@
 //!   per channel, scanned images from line/frame markers, or a sensor).
 //! - [`bin_file`]: a recorded file (PicoQuant or raw) -> stacks, in one
 //!   call.
+//! - [`survey`]: what a recorded file holds, counted by kind.
 
 pub mod bin_file;
 pub mod binning;
 pub mod picoquant;
 pub mod raw;
+pub mod survey;
 
 /// One decoded event.
 ///

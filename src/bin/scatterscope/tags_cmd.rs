@@ -1,16 +1,14 @@
 //! `scatterscope info` and `scatterscope bin`: recorded time-tag files.
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::Context;
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet};
-use scatterscope::tags::Tag;
 use scatterscope::tags::bin_file::{BinFileError, BinSpec, Pixels, Recording, bin_file};
 use scatterscope::tags::binning::FrameSelect;
-use scatterscope::tags::picoquant::records::Decoder;
-use scatterscope::tags::picoquant::{self, Container, FileError, FileInfo, TtrError};
-use scatterscope_drivers::raw::{is_raw_file, read_raw};
+use scatterscope::tags::picoquant::{Container, FileError, FileInfo, TtrError};
+use scatterscope::tags::survey::{survey_picoquant, survey_raw};
+use scatterscope_drivers::raw::is_raw_file;
 
 /// Show what a PicoQuant file (PTU, HT3, HT2) holds.
 ///
@@ -62,47 +60,18 @@ pub fn info(args: &InfoArgs) -> anyhow::Result<()> {
     if is_raw_file(&args.file) {
         return info_raw(args);
     }
-    let (info, mut reader) = picoquant::open(&args.file)?;
+    let (info, survey) = survey_picoquant(&args.file)?;
     print_header(&info);
-    let mut decoder = Decoder::new(info.record_type);
-    let mut photons: BTreeMap<u16, u64> = BTreeMap::new();
-    let (mut markers, mut syncs, mut overflows, mut last) = (0u64, 0u64, 0u64, 0u64);
-    let mut chunk = Vec::new();
-    let outcome = loop {
-        match reader.next_chunk(&mut chunk) {
-            Ok(true) => {}
-            Ok(false) => break Ok(()),
-            Err(e) => break Err(e),
-        }
-        for &rec in &chunk {
-            match decoder.decode(rec) {
-                None => overflows += 1,
-                Some(Tag::Photon {
-                    channel,
-                    macro_time,
-                    ..
-                }) => {
-                    *photons.entry(channel).or_default() += 1;
-                    last = macro_time;
-                }
-                Some(Tag::Marker { macro_time, .. }) => {
-                    markers += 1;
-                    last = macro_time;
-                }
-                Some(Tag::Sync { macro_time }) => {
-                    syncs += 1;
-                    last = macro_time;
-                }
-            }
-        }
-    };
-    println!("photons per channel: {photons:?}");
-    println!("markers: {markers}, syncs: {syncs}, overflow records: {overflows}");
+    println!("photons per channel: {:?}", survey.photons_per_channel);
+    println!(
+        "markers: {}, syncs: {}, overflow records: {}",
+        survey.markers, survey.syncs, survey.overflows
+    );
     println!(
         "measured duration: {:.6} s (last event)",
-        last as f64 * info.macro_unit_s
+        survey.last_event_s
     );
-    if let Err(e) = outcome {
+    if let Some(e) = survey.cut {
         println!("warning: {e}");
     }
     Ok(())
@@ -246,27 +215,7 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
 
 /// `info` of the project's raw tag files.
 fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
-    let (mut photons, mut markers, mut lost, mut invalid) = (0u64, 0u64, 0u64, 0u64);
-    let mut last_sync = 0u64;
-    let summary = read_raw(&args.file, |batch| {
-        for e in batch.events() {
-            let Ok(e) = e else {
-                invalid += 1;
-                continue;
-            };
-            match e {
-                firmware_protocol::Event::Photon { sync, .. } => {
-                    photons += 1;
-                    last_sync = last_sync.max(sync);
-                }
-                firmware_protocol::Event::Marker { sync, .. } => {
-                    markers += 1;
-                    last_sync = last_sync.max(sync);
-                }
-                firmware_protocol::Event::Lost { count } => lost += count,
-            }
-        }
-    })?;
+    let (summary, survey) = survey_raw(&args.file)?;
     let h = &summary.header;
     println!("file: {}", args.file.display());
     println!(
@@ -279,12 +228,16 @@ fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
         h.pixels_x, h.pixels_y, h.resolution_fs, h.sync_period_fs, h.sync_divider
     );
     println!(
-        "batches: {}; photons: {photons}; markers: {markers}; lost in the device: {}; invalid records: {}",
-        summary.batches, lost, invalid
+        "batches: {}; photons: {}; markers: {}; lost in the device: {}; invalid records: {}",
+        summary.batches,
+        survey.photons,
+        survey.markers,
+        survey.lost_in_device,
+        survey.invalid_records
     );
     println!(
         "measured duration: {:.6} s (last event)",
-        last_sync as f64 * h.sync_period_fs as f64 * 1e-15
+        survey.last_event_s
     );
     match summary.totals {
         Some(t) => println!(
@@ -292,7 +245,7 @@ fn info_raw(args: &InfoArgs) -> anyhow::Result<()> {
             t.batches,
             t.photons_sent,
             t.photons_lost,
-            if t.photons_sent == photons {
+            if t.photons_sent == survey.photons {
                 ""
             } else {
                 " (the file misses some: lost in transit)"

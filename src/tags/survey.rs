@@ -1,0 +1,112 @@
+//! What a recorded tag file holds, from one pass over its records, without
+//! binning anything: events per kind and the measured duration (what
+//! `scatterscope info` shows).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use firmware_protocol::Event;
+use scatterscope_drivers::raw::{RawError, RawSummary, read_raw};
+
+use super::Tag;
+use super::picoquant::records::Decoder;
+use super::picoquant::{FileError, FileInfo, TtrError, open};
+
+/// The records of a PicoQuant file, counted by kind.
+#[derive(Debug, Default)]
+pub struct PicoQuantSurvey {
+    /// Photons per input channel (as numbered in the records).
+    pub photons_per_channel: BTreeMap<u16, u64>,
+    /// Marker records.
+    pub markers: u64,
+    /// Sync records (T2 files only).
+    pub syncs: u64,
+    /// Overflow records (they only advance the time base).
+    pub overflows: u64,
+    /// Time of the last event, seconds.
+    pub last_event_s: f64,
+    /// Why the pass ended before the announced record count (a cut file).
+    pub cut: Option<TtrError>,
+}
+
+/// Counts the records of a PicoQuant file (PTU, HT3, PT3; T2 or T3). A cut
+/// file is counted up to the cut, which is reported, not an error.
+pub fn survey_picoquant(path: &Path) -> Result<(FileInfo, PicoQuantSurvey), FileError> {
+    let (info, mut reader) = open(path)?;
+    let mut decoder = Decoder::new(info.record_type);
+    let mut s = PicoQuantSurvey::default();
+    let mut last = 0u64;
+    let mut chunk = Vec::new();
+    loop {
+        match reader.next_chunk(&mut chunk) {
+            Ok(true) => {}
+            Ok(false) => break,
+            Err(e) => {
+                s.cut = Some(e);
+                break;
+            }
+        }
+        for &rec in &chunk {
+            match decoder.decode(rec) {
+                None => s.overflows += 1,
+                Some(Tag::Photon {
+                    channel,
+                    macro_time,
+                    ..
+                }) => {
+                    *s.photons_per_channel.entry(channel).or_default() += 1;
+                    last = macro_time;
+                }
+                Some(Tag::Marker { macro_time, .. }) => {
+                    s.markers += 1;
+                    last = macro_time;
+                }
+                Some(Tag::Sync { macro_time }) => {
+                    s.syncs += 1;
+                    last = macro_time;
+                }
+            }
+        }
+    }
+    s.last_event_s = last as f64 * info.macro_unit_s;
+    Ok((info, s))
+}
+
+/// The events of a raw tag file, counted by kind.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RawSurvey {
+    /// Photon records.
+    pub photons: u64,
+    /// Marker records.
+    pub markers: u64,
+    /// Photons the device reported lost (lost records).
+    pub lost_in_device: u64,
+    /// Records that do not decode.
+    pub invalid_records: u64,
+    /// Time of the last event, seconds (from the sync count and period).
+    pub last_event_s: f64,
+}
+
+/// Counts the events of a raw tag file.
+pub fn survey_raw(path: &Path) -> Result<(RawSummary, RawSurvey), RawError> {
+    let mut s = RawSurvey::default();
+    let mut last_sync = 0u64;
+    let summary = read_raw(path, |batch| {
+        for e in batch.events() {
+            match e {
+                Ok(Event::Photon { sync, .. }) => {
+                    s.photons += 1;
+                    last_sync = last_sync.max(sync);
+                }
+                Ok(Event::Marker { sync, .. }) => {
+                    s.markers += 1;
+                    last_sync = last_sync.max(sync);
+                }
+                Ok(Event::Lost { count }) => s.lost_in_device += count,
+                Err(_) => s.invalid_records += 1,
+            }
+        }
+    })?;
+    s.last_event_s = last_sync as f64 * summary.header.sync_period_fs as f64 * 1e-15;
+    Ok((summary, s))
+}
