@@ -367,6 +367,24 @@ fn every_reader_refuses_bad_files_clearly() {
             // A recording cut by a crash is read up to the cut, and said so.
             cut: Expect::Either,
             short: Expect::Either,
+            extra: vec![(
+                "absurd sensor size",
+                {
+                    // The JSON header claims a 65535 x 65535 sensor.
+                    let v = std::fs::read(&raw).unwrap();
+                    let n = u32::from_le_bytes(v[8..12].try_into().unwrap()) as usize;
+                    let mut h: serde_json::Value = serde_json::from_slice(&v[12..12 + n]).unwrap();
+                    h["pixels_x"] = 65535.into();
+                    h["pixels_y"] = 65535.into();
+                    let json = serde_json::to_vec(&h).unwrap();
+                    let mut out = v[..8].to_vec();
+                    out.extend((json.len() as u32).to_le_bytes());
+                    out.extend(json);
+                    out.extend(&v[12 + n..]);
+                    out
+                },
+                Expect::Refused,
+            )],
             ..Kind::new(
                 "sstags",
                 "sstags",

@@ -631,6 +631,22 @@ fn bad_windows_and_record_types_are_refused_naming_the_field() {
     assert_eq!((w.start, w.width, w.bins), (2.0, 3.0, 5));
     assert_eq!(w.bins_to_hold(2), 1);
     assert_eq!(w.bins_to_hold(16), 5);
+    // A stack too large to allocate is refused before binning.
+    use scatterscope::tags::binning::{PixelMap, Region};
+    let sensor = |side: usize| PixelMap::Sensor {
+        sensor_width: side,
+        region: Region {
+            x: 0,
+            y: 0,
+            width: side,
+            height: side,
+        },
+    };
+    let big = TimeWindow::from_ps(0.0, 4.0, 65_536, 4.0).unwrap();
+    assert!(big.check_stack(&sensor(128)).is_ok(), "2^30 cells fit");
+    let e = big.check_stack(&sensor(129)).unwrap_err().to_string();
+    assert!(e.contains("bins = 65536 over 129 x 129 pixels"), "{e}");
+    assert!(big.check_stack(&PixelMap::Single).is_ok());
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("t2.ptu");
     write(&path, RecordType::PicoHarpT2, &header(), &[]);

@@ -1,6 +1,7 @@
 //! Arbitrary bytes as a raw tag file (.sstags): read and binned without a
 //! panic; the photon accounting balances and the batch counts agree with
-//! the binner.
+//! the binner. Files with a small sensor also go through `bin_file`, what
+//! `scatterscope bin` runs (large sensors make large stacks by design).
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
@@ -21,5 +22,18 @@ fuzz_target!(|data: &[u8]| {
     {
         let acc = binner.finish().1;
         assert!(acc.balances(), "{acc:?}");
+    }
+    let small = std::fs::File::open(&path)
+        .ok()
+        .and_then(|mut f| scatterscope_drivers::raw::read_header(&path, &mut f).ok())
+        .is_some_and(|(h, _)| u32::from(h.pixels_x) * u32::from(h.pixels_y) <= 4096);
+    if small {
+        let spec = scatterscope::BinSpec {
+            bins: Some(8),
+            ..scatterscope::BinSpec::default()
+        };
+        if let Ok(b) = scatterscope::bin_file(&path, &spec) {
+            assert!(b.accounting.balances(), "{:?}", b.accounting);
+        }
     }
 });

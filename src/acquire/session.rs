@@ -274,6 +274,9 @@ fn make_binner(
         sensor_width: w,
         region,
     };
+    window
+        .check_stack(&map)
+        .map_err(|e| AcquireError::Plan(e.to_string()))?;
     Ok((
         Binner::new(window, map, None, FrameSelect::Sum),
         (start_ps, plan.bin_width_ps),

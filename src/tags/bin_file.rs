@@ -168,6 +168,9 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
         (Pixels::Auto | Pixels::Single, _) => PixelMap::Single,
         (Pixels::Channel, _) => PixelMap::Channel { width: 64 },
     };
+    window
+        .check_stack(&map)
+        .map_err(|e| spec_err(e.to_string()))?;
     let mut notes = Vec::new();
     let mut pass = run_pass(path, &info, reader, window, map, spec)?;
     let past = pass.past;
@@ -180,12 +183,13 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
             past.max_micro,
             f64::from(past.max_micro) * res_ps
         );
-        if spec.bins.is_none() && needed <= MAX_BINS {
+        let wider = TimeWindow {
+            bins: needed,
+            ..window
+        };
+        let fits = needed <= MAX_BINS && wider.check_stack(&map).is_ok();
+        if spec.bins.is_none() && fits {
             // The default window holds every micro time present.
-            let wider = TimeWindow {
-                bins: needed,
-                ..window
-            };
             let (_, reader) = open(path)?;
             pass = run_pass(path, &info, reader, wider, map, spec)?;
             notes.push(format!(
@@ -194,7 +198,7 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
             ));
         } else if spec.bins.is_none() {
             notes.push(format!(
-                "{where_}: holding them would take {needed} bins, more than {MAX_BINS}; they are counted outside the window"
+                "{where_}: holding them would take {needed} bins, more than {MAX_BINS} or a stack of more than 2^30 counts; they are counted outside the window"
             ));
         } else {
             notes.push(format!(
@@ -348,6 +352,9 @@ fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
             height: h,
         },
     };
+    window
+        .check_stack(&map)
+        .map_err(|e| spec_err(e.to_string()))?;
     let mut binner = Binner::new(window, map, spec.channel, FrameSelect::Sum);
     let start = Instant::now();
     let mut counts = BatchCounts::default();

@@ -32,6 +32,23 @@ pub enum PixelMap {
     },
 }
 
+impl PixelMap {
+    /// Rows and columns of the image this map bins into.
+    pub fn image_size(&self) -> (usize, usize) {
+        match *self {
+            PixelMap::Single => (1, 1),
+            PixelMap::Channel { width } => (1, width),
+            PixelMap::Scan(img) => (img.pixels_y, img.pixels_x),
+            PixelMap::Sensor { region, .. } => (region.height, region.width),
+        }
+    }
+}
+
+/// Most cells (bins x pixels) one binned stack may hold: 2^30 counts, 4 GiB
+/// as `u32`. A header's absurd sensor size fails here with a clear error
+/// instead of an allocation the machine cannot make.
+pub const MAX_STACK_CELLS: usize = 1 << 30;
+
 /// A rectangle of pixels that the host bins (a region of interest). The
 /// device-side region of the wire protocol is `firmware_protocol::Roi`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -198,6 +215,21 @@ impl TimeWindow {
         ((period_ps - start_ps) / width_ps).ceil().max(1.0) as usize
     }
 
+    /// Checks that this window's bins over `map`'s image stay within
+    /// [`MAX_STACK_CELLS`].
+    pub fn check_stack(&self, map: &PixelMap) -> Result<(), WindowError> {
+        let (h, w) = map.image_size();
+        let cells = self.bins.checked_mul(h).and_then(|c| c.checked_mul(w));
+        match cells {
+            Some(c) if c <= MAX_STACK_CELLS => Ok(()),
+            _ => Err(WindowError {
+                field: "bins",
+                value: format!("{} over {h} x {w} pixels", self.bins),
+                reason: "makes a stack of more than 2^30 counts (4 GiB); bin fewer or wider bins, or fewer pixels",
+            }),
+        }
+    }
+
     /// Bins needed from this window's start to hold micro time `micro`.
     pub fn bins_to_hold(&self, micro: u32) -> usize {
         ((f64::from(micro) - self.start) / self.width)
@@ -293,11 +325,9 @@ impl Binner {
                 }
             })
             .collect();
-        let shape = match map {
-            PixelMap::Single => (window.bins, 1, 1),
-            PixelMap::Channel { width } => (window.bins, 1, width),
-            PixelMap::Scan(img) => (window.bins, img.pixels_y, img.pixels_x),
-            PixelMap::Sensor { region, .. } => (window.bins, region.height, region.width),
+        let shape = {
+            let (h, w) = map.image_size();
+            (window.bins, h, w)
         };
         let pixel_lut = match map {
             PixelMap::Sensor {
