@@ -398,7 +398,7 @@ fn scanned_images_bin_photons_into_their_pixels_and_keep_every_frame() {
         }
     }
     assert!(acc.balances(), "{acc:?}");
-    assert_eq!(acc.outside_image, 6, "one photon between lines per line");
+    assert_eq!(acc.outside_region, 6, "one photon between lines per line");
 }
 
 #[test]
@@ -547,7 +547,7 @@ fn bulk_binning_matches_record_by_record_binning() {
         let (b, acc_b) = bulk.finish();
         assert_eq!(acc_a, acc_b, "{map:?} {channel:?}");
         assert!(
-            acc_a.balances() && acc_a.outside_window > 0 && acc_a.binned + acc_a.outside_image > 0
+            acc_a.balances() && acc_a.outside_window > 0 && acc_a.binned + acc_a.outside_region > 0
         );
         assert_eq!(a, b, "{map:?} {channel:?}");
     }

@@ -206,7 +206,7 @@ pub fn acquire(
         received: bin_acc.received,
         binned: bin_acc.binned,
         outside_window: bin_acc.outside_window,
-        outside_region: bin_acc.outside_image + bin_acc.other_channel,
+        outside_region: bin_acc.outside_region + bin_acc.other_channel,
         lost_in_device: totals.map_or(counts.lost_in_device, |t| t.photons_lost),
         lost_in_transit: transit.photons,
         transit_exact: transit.exact,

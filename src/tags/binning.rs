@@ -86,7 +86,7 @@ pub struct TimeWindow {
 }
 
 /// Photon bookkeeping; `received = binned + outside_window + other_channel
-/// + outside_image`.
+/// + outside_region`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct Accounting {
     /// Records decoded (overflows included).
@@ -99,9 +99,11 @@ pub struct Accounting {
     pub outside_window: u64,
     /// Photons on channels that were not selected.
     pub other_channel: u64,
-    /// Photons outside the image (before the first line, between lines,
-    /// beyond the last line or frame).
-    pub outside_image: u64,
+    /// Photons on no pixel of the stack: outside the region binned (sensor
+    /// maps), or before the first line, between lines, beyond the last line
+    /// or frame (scanned images). The acquisition ledger uses the same
+    /// words: received, binned, outside the window, outside the region.
+    pub outside_region: u64,
     /// Marker records.
     pub markers: u64,
     /// Frames seen (scanned images).
@@ -111,7 +113,8 @@ pub struct Accounting {
 impl Accounting {
     /// Whether every photon is in exactly one category.
     pub fn balances(&self) -> bool {
-        self.received == self.binned + self.outside_window + self.other_channel + self.outside_image
+        self.received
+            == self.binned + self.outside_window + self.other_channel + self.outside_region
     }
 }
 
@@ -443,7 +446,7 @@ impl Binner {
             let binned_before = accounting.binned;
             let excluded = (acc.other_channel - accounting.other_channel)
                 + (acc.outside_window - accounting.outside_window)
-                + (acc.outside_image - accounting.outside_image);
+                + (acc.outside_region - accounting.outside_region);
             acc.binned = binned_before + photons - excluded;
             acc.records =
                 accounting.records + photons + (acc.markers - accounting.markers) + f.other_records;
@@ -480,7 +483,7 @@ impl Binner {
                         if usize::from(channel) < width {
                             self.bin_at(0, bin, 0, usize::from(channel));
                         } else {
-                            self.accounting.outside_image += 1;
+                            self.accounting.outside_region += 1;
                         }
                     }
                     PixelMap::Sensor { .. } => self.bin_sensor_pixel(bin, channel),
@@ -488,7 +491,7 @@ impl Binner {
                         if self.scan.line_start.is_some() {
                             self.scan.pending.push((macro_time, bin));
                         } else {
-                            self.accounting.outside_image += 1;
+                            self.accounting.outside_region += 1;
                         }
                     }
                 }
@@ -547,7 +550,7 @@ impl Binner {
         self.accounting.received += n;
         self.accounting.binned += offsets.len() as u64;
         self.accounting.outside_window += outside_window;
-        self.accounting.outside_image += outside_region;
+        self.accounting.outside_region += outside_region;
         self.offsets = offsets;
     }
 
@@ -566,7 +569,7 @@ impl Binner {
             .copied()
             .unwrap_or(OUTSIDE_REGION);
         if flat == OUTSIDE_REGION {
-            self.accounting.outside_image += 1;
+            self.accounting.outside_region += 1;
             return;
         }
         let (_, h, w) = self.shape;
@@ -587,14 +590,14 @@ impl Binner {
                 stack[(bin * h + row) * w + col] += 1;
                 self.accounting.binned += 1;
             }
-            None => self.accounting.outside_image += 1,
+            None => self.accounting.outside_region += 1,
         }
     }
 
     fn scan_marker(&mut self, img: Imaging, bits: u8, t: u64) {
         if bits & img.line_start != 0 {
             // A start without a stop: photons of the unfinished line are lost.
-            self.accounting.outside_image += self.scan.pending.len() as u64;
+            self.accounting.outside_region += self.scan.pending.len() as u64;
             self.scan.pending.clear();
             self.scan.line_start = Some(t);
         }
@@ -611,7 +614,7 @@ impl Binner {
                     let col = if reverse { img.pixels_x - 1 - x } else { x };
                     self.bin_at(self.scan.frame, bin, row, col);
                 } else {
-                    self.accounting.outside_image += 1;
+                    self.accounting.outside_region += 1;
                 }
             }
             self.scan.line += 1;
@@ -638,7 +641,7 @@ impl Binner {
     /// Ends the stream: photons of an unfinished line count as outside the
     /// image; a last frame with lines counts as a frame.
     pub fn finish(mut self) -> (Vec<Array3<u32>>, Accounting) {
-        self.accounting.outside_image += self.scan.pending.len() as u64;
+        self.accounting.outside_region += self.scan.pending.len() as u64;
         if self.scan.lines_in_frame > 0 {
             self.accounting.frames += 1;
         }
@@ -737,12 +740,12 @@ impl FastSink<'_> {
                     PixelMap::Sensor { .. } => match self.pixel_lut.get(usize::from(channel)) {
                         Some(&p) if p != OUTSIDE_REGION => p as usize,
                         _ => {
-                            self.acc.outside_image += 1;
+                            self.acc.outside_region += 1;
                             return;
                         }
                     },
                     _ => {
-                        self.acc.outside_image += 1;
+                        self.acc.outside_region += 1;
                         return;
                     }
                 };

@@ -181,7 +181,7 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
             acc.binned,
             acc.outside_window,
             acc.other_channel,
-            acc.outside_image,
+            acc.outside_region,
             acc.markers,
             acc.frames
         ),
