@@ -75,6 +75,7 @@ pub mod named;
 pub mod reconstruct;
 pub mod report;
 pub mod scene;
+pub mod simulate;
 pub mod stack;
 pub mod tags;
 

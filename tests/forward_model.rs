@@ -113,3 +113,62 @@ fn poisson_sampler_mean_variance_and_seed() {
     assert_eq!(a, poisson_counts(&expected, 7));
     assert_ne!(a, poisson_counts(&expected, 8));
 }
+
+#[test]
+fn simulate_draws_poisson_counts_around_the_expected_stack_with_metadata() {
+    use scatterscope::ValueKind;
+    use scatterscope::simulate::{SimulateError, simulate};
+    let mut setup = scatterscope::Preset::Paper.setup();
+    setup.sensor.width_px = 48;
+    setup.sensor.height_px = 48;
+    setup.total_photons = 2e5;
+    let scene = scatterscope::Scene::parse("disks");
+    let sim = simulate(
+        &setup,
+        &scene,
+        scatterscope::Sampling::Integrated,
+        scatterscope::Boundary::Sensor,
+        3,
+    )
+    .unwrap();
+    let (e, c) = (&sim.expected, &sim.counts);
+    assert_eq!(e.data.dim(), c.data.dim());
+    assert_eq!(e.bins(), sim.kernels.len());
+    assert_eq!(
+        (e.meta.kind, c.meta.kind),
+        (ValueKind::ExpectedCounts, ValueKind::Counts)
+    );
+    assert_eq!((e.meta.seed, c.meta.seed), (None, Some(3)));
+    assert_eq!(c.meta.boundary, Some(scatterscope::Boundary::Sensor));
+    assert!(c.data.iter().all(|&v| v >= 0.0 && v.fract() == 0.0));
+    // The draw's total is Poisson around the expected total: within 5 sigma.
+    let (te, tc) = (e.total(), c.total());
+    assert!(te > 100.0, "{te}");
+    assert!(
+        (tc - te).abs() < 5.0 * te.sqrt(),
+        "expected {te}, drew {tc}"
+    );
+    // The same seed draws the same counts.
+    let again = simulate(
+        &setup,
+        &scene,
+        scatterscope::Sampling::Integrated,
+        scatterscope::Boundary::Sensor,
+        3,
+    )
+    .unwrap();
+    assert_eq!(again.counts.data, c.data);
+    // A threshold no bin reaches is an error naming it.
+    setup.min_bin_photons = 1e12;
+    let err = simulate(
+        &setup,
+        &scene,
+        scatterscope::Sampling::Integrated,
+        scatterscope::Boundary::Sensor,
+        3,
+    )
+    .err()
+    .unwrap();
+    assert!(matches!(err, SimulateError::NoBins { .. }), "{err}");
+    assert!(err.to_string().contains("1000000000000"), "{err}");
+}

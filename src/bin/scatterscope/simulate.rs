@@ -1,15 +1,15 @@
 //! `scatterscope simulate`: truth image, expected stack and Poisson counts.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
-use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
-use scatterscope::physics::{KernelStack, Sampling};
+use scatterscope::forward::Boundary;
+use scatterscope::physics::Sampling;
 use scatterscope::scene::Scene;
+use scatterscope::simulate::{SimulateError, simulate};
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet, write_image};
-use scatterscope::stack::{Stack, StackMeta, ValueKind, exr_file};
+use scatterscope::stack::{Stack, exr_file};
 
 use crate::physics_summary::{parse_sampling, print_setup};
 
@@ -51,48 +51,23 @@ pub struct SimulateArgs {
 pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let setup = args.physics.resolve()?;
     let scene = Scene::parse(&args.scene);
-    let t0 = Instant::now();
-    let kernels = KernelStack::build(&setup, args.sampling)?;
-    let t_psf = t0.elapsed().as_secs_f64();
-    print_setup(&setup, &kernels);
-    if kernels.is_empty() {
-        anyhow::bail!(
-            "no bin carries at least {} expected photons; lower --min-bin-photons or raise --photons",
-            setup.min_bin_photons
-        );
-    }
+    let sim =
+        simulate(&setup, &scene, args.sampling, args.boundary, args.seed).map_err(|e| match e {
+            SimulateError::NoBins { .. } => {
+                anyhow::anyhow!("{e}; lower --min-bin-photons or raise --photons")
+            }
+            e => e.into(),
+        })?;
+    print_setup(&setup, &sim.kernels);
     let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
-    let truth = scene.render(h, w)?;
-    let t1 = Instant::now();
-    let model = ForwardModel::new(&kernels, args.boundary);
-    let t_spectra = t1.elapsed().as_secs_f64();
-    let t2 = Instant::now();
-    let expected = model.expected_scene(truth.view());
-    let t_forward = t2.elapsed().as_secs_f64();
-    let t3 = Instant::now();
-    let counts = poisson_counts(&expected.counts, args.seed);
-    let t_noise = t3.elapsed().as_secs_f64();
-
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output directory {}", args.out.display()))?;
-    let source = format!("scatterscope simulate --scene {}", scene.name());
-    let mut meta = StackMeta::simulated(&kernels, ValueKind::ExpectedCounts, source);
-    meta.clamped_negative = expected.clamped as u64;
-    meta.boundary = Some(args.boundary);
-    let expected_stack = Stack {
-        data: expected.counts.mapv(|v| v as f32),
-        meta: meta.clone(),
-    };
-    meta.kind = ValueKind::Counts;
-    meta.seed = Some(args.seed);
-    let counts_stack = Stack {
-        data: counts.mapv(|v| v as f32),
-        meta,
-    };
+    let (truth, kernels) = (&sim.truth, &sim.kernels);
+    let (expected_stack, counts_stack) = (&sim.expected, &sim.counts);
     let truth_f32 = truth.mapv(|v| v as f32);
     exr_file::write_image(truth_f32.view(), &args.out.join("truth.exr"))?;
     write_image(truth.view(), Some(1.0), &args.out.join("truth.png"))?;
-    for (name, stack) in [("expected", &expected_stack), ("counts", &counts_stack)] {
+    for (name, stack) in [("expected", expected_stack), ("counts", counts_stack)] {
         write_stack(stack, &args.out, name, args.npy, args.sheet_scale)?;
     }
 
@@ -130,18 +105,19 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             max
         );
     }
-    if expected.clamped > 0 {
+    if sim.clamped > 0 {
         println!(
             "clamped {} expected-count values made negative by FFT round-off (most negative {:.3e}) to 0",
-            expected.clamped, expected.most_negative
+            sim.clamped, sim.most_negative
         );
     }
+    let t = sim.timings;
     println!(
         "run time: PSF {:.1} ms, kernel spectra {:.1} ms, forward model {:.1} ms, Poisson {:.1} ms",
-        t_psf * 1e3,
-        t_spectra * 1e3,
-        t_forward * 1e3,
-        t_noise * 1e3
+        t.psf_s * 1e3,
+        t.spectra_s * 1e3,
+        t.forward_s * 1e3,
+        t.poisson_s * 1e3
     );
     println!("wrote {}", args.out.display());
     Ok(())
