@@ -252,53 +252,86 @@ pub struct RawSummary {
     pub malformed_batches: u64,
 }
 
+/// An opened raw tag file: its header read, positioned at the first frame.
+pub struct RawFile {
+    path: PathBuf,
+    file: File,
+    /// The file's header.
+    pub header: RawHeader,
+}
+
+impl RawFile {
+    /// Opens `path` and reads its magic and header.
+    pub fn open(path: &Path) -> Result<Self, RawError> {
+        let mut file = File::open(path).map_err(|source| RawError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let (header, _) = read_header(path, &mut file)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            file,
+            header,
+        })
+    }
+
+    /// Reads every frame, feeding each event batch to `on_batch`, in
+    /// constant memory.
+    pub fn read(self, mut on_batch: impl FnMut(&EventBatch<'_>)) -> Result<RawSummary, RawError> {
+        let Self {
+            path,
+            mut file,
+            header,
+        } = self;
+        let io = |source| RawError::Io {
+            path: path.clone(),
+            source,
+        };
+        let mut decoder = FrameDecoder::new();
+        // Small files get a small buffer.
+        let size = file.metadata().map_err(io)?.len();
+        let mut buf = vec![0u8; CHUNK.min(usize::try_from(size).unwrap_or(CHUNK)).max(1)];
+        let mut summary = RawSummary {
+            path: path.clone(),
+            header,
+            batches: 0,
+            totals: None,
+            bytes_skipped: 0,
+            malformed_batches: 0,
+        };
+        loop {
+            let n = file.read(&mut buf).map_err(io)?;
+            if n == 0 {
+                decoder.end_stream();
+            }
+            decoder.push_with(&buf[..n], |frame| match FromDevice::parse(frame) {
+                FromDevice::Events(b) => {
+                    summary.batches += 1;
+                    on_batch(&b);
+                }
+                FromDevice::Response(ResponseFrame {
+                    response: Response::Stopped(t),
+                    ..
+                }) => summary.totals = Some(t),
+                FromDevice::MalformedBatch(_) => summary.malformed_batches += 1,
+                FromDevice::Response(_) | FromDevice::Stray => {}
+            });
+            if n == 0 {
+                break;
+            }
+        }
+        summary.bytes_skipped = decoder.stats().bytes_skipped;
+        Ok(summary)
+    }
+}
+
 /// Reads a raw tag file, feeding every event batch to `on_batch`, in
-/// constant memory.
+/// constant memory ([`RawFile::open`] then [`RawFile::read`]).
 pub fn read_raw(
     path: &Path,
-    mut on_batch: impl FnMut(&EventBatch<'_>),
+    on_batch: impl FnMut(&EventBatch<'_>),
 ) -> Result<RawSummary, RawError> {
-    let io = |source| RawError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut file = File::open(path).map_err(io)?;
-    let (header, _) = read_header(path, &mut file)?;
-    let mut decoder = FrameDecoder::new();
-    // Small files get a small buffer.
-    let size = file.metadata().map_err(io)?.len();
-    let mut buf = vec![0u8; CHUNK.min(usize::try_from(size).unwrap_or(CHUNK)).max(1)];
-    let mut summary = RawSummary {
-        path: path.to_path_buf(),
-        header,
-        batches: 0,
-        totals: None,
-        bytes_skipped: 0,
-        malformed_batches: 0,
-    };
-    loop {
-        let n = file.read(&mut buf).map_err(io)?;
-        if n == 0 {
-            decoder.end_stream();
-        }
-        decoder.push_with(&buf[..n], |frame| match FromDevice::parse(frame) {
-            FromDevice::Events(b) => {
-                summary.batches += 1;
-                on_batch(&b);
-            }
-            FromDevice::Response(ResponseFrame {
-                response: Response::Stopped(t),
-                ..
-            }) => summary.totals = Some(t),
-            FromDevice::MalformedBatch(_) => summary.malformed_batches += 1,
-            FromDevice::Response(_) | FromDevice::Stray => {}
-        });
-        if n == 0 {
-            break;
-        }
-    }
-    summary.bytes_skipped = decoder.stats().bytes_skipped;
-    Ok(summary)
+    RawFile::open(path)?.read(on_batch)
 }
 
 /// Whether `path` starts with the raw tag file magic.

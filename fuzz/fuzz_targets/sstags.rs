@@ -23,10 +23,8 @@ fuzz_target!(|data: &[u8]| {
         let acc = binner.finish().1;
         assert!(acc.balances(), "{acc:?}");
     }
-    let small = std::fs::File::open(&path)
-        .ok()
-        .and_then(|mut f| scatterscope_drivers::raw::read_header(&path, &mut f).ok())
-        .is_some_and(|(h, _)| u32::from(h.pixels_x) * u32::from(h.pixels_y) <= 4096);
+    let small = scatterscope_drivers::raw::RawFile::open(&path)
+        .is_ok_and(|r| u32::from(r.header.pixels_x) * u32::from(r.header.pixels_y) <= 4096);
     if small {
         let spec = scatterscope::BinSpec {
             bins: Some(8),

@@ -17,7 +17,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use ndarray::{Array3, Axis, s};
-use scatterscope_drivers::raw::{RawError, RawSummary, is_raw_file, read_raw};
+use scatterscope_drivers::raw::{RawError, RawFile, RawSummary, is_raw_file};
 
 use super::binning::{
     Accounting, Binner, FrameSelect, MAX_BINS, PastWindow, PixelMap, Region, TimeWindow,
@@ -319,13 +319,8 @@ fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
             "a raw tag file is binned onto its sensor with every frame summed; pixel and frame mappings do not apply".into(),
         ));
     }
-    let header = {
-        let mut f = std::fs::File::open(path).map_err(|source| RawError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        scatterscope_drivers::raw::read_header(path, &mut f)?.0
-    };
+    let raw = RawFile::open(path)?;
+    let header = raw.header.clone();
     let res_ps = f64::from(header.resolution_fs) / 1000.0;
     let width_ps = spec.bin_width_ps.unwrap_or(res_ps);
     let bins = spec.bins.unwrap_or_else(|| {
@@ -358,7 +353,7 @@ fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
     let mut binner = Binner::new(window, map, spec.channel, FrameSelect::Sum);
     let start = Instant::now();
     let mut counts = BatchCounts::default();
-    let summary = read_raw(path, |batch| counts += bin_batch(batch, &mut binner))?;
+    let summary = raw.read(|batch| counts += bin_batch(batch, &mut binner))?;
     let seconds = start.elapsed().as_secs_f64();
     let (mut stacks, accounting) = binner.finish();
     let source = format!("{} ({} {})", path.display(), header.model, header.serial);
