@@ -14,13 +14,14 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::denoise::Denoiser;
-use crate::forward::{Boundary, ForwardModel, poisson_counts};
-use crate::physics::{KernelStack, Sampling, Setup};
+use crate::forward::Boundary;
+use crate::physics::{Sampling, Setup};
 use crate::reconstruct::method::{Method, MethodOptions, Solver, run_method};
 use crate::reconstruct::problem::Problem;
 use crate::reconstruct::trace::Trace;
 use crate::reconstruct::{ReconstructError, Reconstruction};
 use crate::scene::Scene;
+use crate::simulate::{SimulateError, Simulation, simulate};
 use crate::stack::preview::write_image;
 use plot::Series;
 
@@ -92,15 +93,17 @@ pub fn run_scene(
     dir: &Path,
     mut progress: impl FnMut(&str),
 ) -> Result<SceneReport, ReportError> {
-    let kernels = KernelStack::build(setup, Sampling::Integrated)?;
-    let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
-    let truth = scene.render(h, w)?;
-    let model = ForwardModel::new(&kernels, boundary);
-    let expected = model.expected_scene(truth.view());
-    let counts = poisson_counts(&expected.counts, seed);
-    let problem = Problem {
+    let Simulation {
+        truth,
+        kernels,
         model,
         counts,
+        ..
+    } = simulate(setup, scene, Sampling::Integrated, boundary, seed)?;
+    let problem = Problem {
+        model,
+        // Whole counts: exact in f32 and back.
+        counts: counts.data.mapv(f64::from),
         bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
         setup: *setup,
         left_out: Vec::new(),
@@ -418,6 +421,9 @@ pub enum ReportError {
     /// A scene could not be rendered.
     #[error(transparent)]
     Scene(#[from] crate::scene::SceneLoadError),
+    /// A scene could not be simulated.
+    #[error(transparent)]
+    Simulate(#[from] SimulateError),
     /// A reconstruction failed.
     #[error(transparent)]
     Reconstruct(#[from] ReconstructError),
