@@ -2,14 +2,14 @@
 //! end's flags).
 //!
 //! Precedence: overrides over the TOML file over the preset. The TOML keys
-//! are the override names (`mu_a`, `mu_s`, `g`, `n`, `thickness`, `fov`,
+//! are the override names (`mu_a`, `mu_s`, `g`, `n`, `thickness`, `medium`, `fov`,
 //! `size`, `bin_width`, `t_start`, `bins`, `photons`, `min_bin_photons`,
 //! `preset`). Lengths and times take plain numbers in the
 //! documented unit (cm, ps) or strings with a unit (`"30mm"`, `"0.004ns"`).
 
 use std::path::{Path, PathBuf};
 
-use scatterscope_physics::{Preset, Setup};
+use scatterscope_physics::{MediumModel, Preset, Setup};
 use serde::Deserialize;
 
 /// Parses a time with an optional unit (`fs`, `ps`, `ns`, `us`); plain numbers are ps.
@@ -75,6 +75,7 @@ struct FileOverrides {
     g: Option<f64>,
     n: Option<f64>,
     thickness: Option<Quantity>,
+    medium: Option<String>,
     fov: Option<Quantity>,
     size: Option<usize>,
     bin_width: Option<Quantity>,
@@ -104,6 +105,9 @@ pub struct PhysicsOverrides {
     pub n: Option<f64>,
     /// Slab thickness z0 between object and sensor (default unit cm; e.g. 30mm).
     pub thickness: Option<f64>,
+    /// How the slab's faces are modelled (`infinite`: the paper's Eq. 6;
+    /// `slab`: extrapolated boundaries and image sources).
+    pub medium: Option<MediumModel>,
     /// Horizontal field of view (default unit cm).
     pub fov: Option<f64>,
     /// Image side in pixels (square images).
@@ -199,6 +203,7 @@ impl PhysicsOverrides {
         set(&mut m.g, self.g);
         set(&mut m.refractive_index, self.n);
         set(&mut m.thickness_cm, self.thickness);
+        set(&mut m.model, self.medium);
         set(&mut s.sensor.fov_cm, self.fov);
         if let Some(size) = self.size {
             s.sensor.width_px = size;
@@ -220,6 +225,7 @@ fn key_of(field: &str) -> &'static str {
         "g" => "g",
         "refractive_index" => "n",
         "thickness_cm" => "thickness",
+        "model" => "medium",
         "fov_cm" => "fov",
         "width_px" | "height_px" => "size",
         "width_ps" => "bin_width",
@@ -244,6 +250,20 @@ pub fn parse_preset(name: &str) -> Result<Preset, String> {
         .ok_or_else(|| {
             let known: Vec<_> = Preset::ALL.iter().map(|p| p.name()).collect();
             format!("unknown preset `{name}` (known: {})", known.join(", "))
+        })
+}
+
+/// Parses a medium model name (`infinite` or `slab`).
+pub fn parse_medium(name: &str) -> Result<MediumModel, String> {
+    MediumModel::ALL
+        .into_iter()
+        .find(|m| m.name() == name)
+        .ok_or_else(|| {
+            let known: Vec<_> = MediumModel::ALL.iter().map(|m| m.name()).collect();
+            format!(
+                "unknown medium model `{name}` (known: {})",
+                known.join(", ")
+            )
         })
 }
 
@@ -283,6 +303,12 @@ fn file_as_overrides(path: &Path, f: &FileOverrides) -> Result<PhysicsOverrides,
         g: f.g,
         n: f.n,
         thickness: q("thickness", &f.thickness, parse_cm)?,
+        medium: f
+            .medium
+            .as_deref()
+            .map(parse_medium)
+            .transpose()
+            .map_err(|e| invalid(path, format!("key `medium`: {e}")))?,
         fov: q("fov", &f.fov, parse_cm)?,
         size: f.size,
         bin_width: q("bin_width", &f.bin_width, parse_ps)?,
@@ -315,6 +341,39 @@ mod tests {
         std::fs::write(&path, "mu_z = 1\n").unwrap();
         let e = args.resolve().unwrap_err().to_string();
         assert!(e.contains("lab.toml") && e.contains("mu_z"), "{e}");
+    }
+
+    #[test]
+    fn the_medium_model_comes_from_the_file_and_bad_names_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("lab.toml");
+        std::fs::write(&path, "medium = \"slab\"\nmu_s = 200\ng = 0.9\n").unwrap();
+        let args = PhysicsOverrides {
+            config: Some(path.clone()),
+            ..Default::default()
+        };
+        assert_eq!(args.resolve().unwrap().medium.model, MediumModel::Slab);
+        assert_eq!(
+            Preset::Paper.setup().medium.model,
+            MediumModel::Infinite,
+            "the paper's model stays the default"
+        );
+        std::fs::write(&path, "medium = \"slap\"\n").unwrap();
+        let e = args.resolve().unwrap_err().to_string();
+        assert!(
+            e.contains("lab.toml")
+                && e.contains("`medium`")
+                && e.contains("slap")
+                && e.contains("infinite, slab"),
+            "{e}"
+        );
+        // A slab too thin for its source is refused naming the key.
+        std::fs::write(&path, "medium = \"slab\"\nthickness = 0.5\n").unwrap();
+        let e = args.resolve().unwrap_err().to_string();
+        assert!(
+            e.contains("thickness") && e.contains("transport mean free path"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -5,7 +5,8 @@
 //! numbers instead of overflow, underflow to a wrong zero, or NaN.
 
 use crate::error::ParamError;
-use crate::params::Medium;
+use crate::params::{Medium, MediumModel};
+use crate::slab::{SlabTransmittance, effective_reflection};
 
 /// Speed of light in vacuum (cm/ns).
 pub const SPEED_OF_LIGHT_CM_PER_NS: f64 = 29.979_245_8;
@@ -23,6 +24,9 @@ pub struct Diffusion {
     pub mu_s_reduced_per_cm: f64,
     /// Slab thickness z0 (cm).
     pub z0_cm: f64,
+    /// The finite slab's transmittance (`--medium slab`); `None` for the
+    /// paper's infinite medium.
+    pub slab: Option<SlabTransmittance>,
 }
 
 impl Diffusion {
@@ -30,12 +34,30 @@ impl Diffusion {
     pub fn new(medium: &Medium) -> Result<Self, ParamError> {
         medium.validate()?;
         let mu_s_reduced = (1.0 - medium.g) * medium.mu_s_per_cm;
+        let d_cm = 1.0 / (3.0 * (medium.mu_a_per_cm + mu_s_reduced));
+        let c_cm_per_ps = SPEED_OF_LIGHT_CM_PER_NS / 1000.0 / medium.refractive_index;
+        let slab = match medium.model {
+            MediumModel::Infinite => None,
+            MediumModel::Slab => {
+                // validate() has checked that the slab is thicker than this.
+                let source_depth_cm = 3.0 * d_cm;
+                let r = effective_reflection(medium.refractive_index);
+                Some(SlabTransmittance {
+                    thickness_cm: medium.thickness_cm,
+                    source_depth_cm,
+                    extrapolation_cm: 2.0 * (1.0 + r) / (1.0 - r) * d_cm,
+                    dc_cm2_per_ps: d_cm * c_cm_per_ps,
+                    absorption_per_ps: medium.mu_a_per_cm * c_cm_per_ps,
+                })
+            }
+        };
         Ok(Self {
-            d_cm: 1.0 / (3.0 * (medium.mu_a_per_cm + mu_s_reduced)),
-            c_cm_per_ps: SPEED_OF_LIGHT_CM_PER_NS / 1000.0 / medium.refractive_index,
+            d_cm,
+            c_cm_per_ps,
             mu_a_per_cm: medium.mu_a_per_cm,
             mu_s_reduced_per_cm: mu_s_reduced,
             z0_cm: medium.thickness_cm,
+            slab,
         })
     }
 
@@ -50,10 +72,15 @@ impl Diffusion {
     }
 
     /// ln of the ST-PSF integrated over the whole sensor plane,
-    /// `T(t) = c (4 pi D c t)^(-1/2) exp(-z0^2/(4 D c t) - mu_a c t)` (1/ps).
+    /// `T(t) = c (4 pi D c t)^(-1/2) exp(-z0^2/(4 D c t) - mu_a c t)` (1/ps)
+    /// for the infinite medium, the transmitted flux of
+    /// [`SlabTransmittance`] for the slab.
     ///
     /// Returns `-inf` for `t <= 0` (causality) and for non-finite `t`.
     pub fn log_temporal_density(&self, t_ps: f64) -> f64 {
+        if let Some(slab) = &self.slab {
+            return slab.log_density(t_ps);
+        }
         if t_ps.is_nan() || t_ps <= 0.0 || t_ps.is_infinite() {
             return f64::NEG_INFINITY;
         }
@@ -78,6 +105,9 @@ impl Diffusion {
     /// Time of maximal photon arrival, the maximum of `T(t)` (ps); 0 when
     /// `z0 = 0` (the density then decreases from `t = 0`).
     pub fn peak_time_ps(&self) -> f64 {
+        if let Some(slab) = &self.slab {
+            return slab.peak_time_ps();
+        }
         // d/dt ln T = -1/(2t) + a/t^2 - b = 0  <=>  b t^2 + t/2 - a = 0.
         let a = self.z0_cm * self.z0_cm / (4.0 * self.dc_cm2_per_ps());
         let b = self.mu_a_per_cm * self.c_cm_per_ps;

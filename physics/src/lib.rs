@@ -23,10 +23,11 @@ pub mod error;
 pub mod kernel;
 pub mod params;
 pub mod quadrature;
+pub mod slab;
 pub mod validity;
 
 pub use diffusion::Diffusion;
 pub use error::ParamError;
 pub use kernel::{KernelStack, Sampling};
-pub use params::{Medium, Preset, Sensor, Setup, TimeBins};
+pub use params::{Medium, MediumModel, Preset, Sensor, Setup, TimeBins};
 pub use validity::Diagnostic;

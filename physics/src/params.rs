@@ -20,6 +20,38 @@ pub struct Medium {
     pub refractive_index: f64,
     /// Slab thickness z0 between object and sensor (cm).
     pub thickness_cm: f64,
+    /// How the slab's faces are modelled (absent in older files: the
+    /// paper's infinite medium).
+    #[serde(default)]
+    pub model: MediumModel,
+}
+
+/// How the diffusion model treats the slab's faces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MediumModel {
+    /// The paper's Eq. 6: the infinite-medium Green's function at distance
+    /// z0, no faces.
+    #[default]
+    Infinite,
+    /// A finite slab with extrapolated boundaries and image sources
+    /// (Patterson, Chance and Wilson 1989; Contini, Martelli and Zaccanti
+    /// 1997): transmitted flux through the far face, with the boundary
+    /// reflection from the refractive-index mismatch to air.
+    Slab,
+}
+
+impl MediumModel {
+    /// Both models, for help texts.
+    pub const ALL: [MediumModel; 2] = [MediumModel::Infinite, MediumModel::Slab];
+
+    /// The model's name in configuration files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            MediumModel::Infinite => "infinite",
+            MediumModel::Slab => "slab",
+        }
+    }
 }
 
 /// The sensor plane: a square-pixel grid behind the slab.
@@ -115,6 +147,7 @@ impl Preset {
                     g: 0.99,
                     refractive_index: 1.4,
                     thickness_cm: 3.0,
+                    model: MediumModel::Infinite,
                 },
                 sensor: Sensor {
                     fov_cm: 50.0,
@@ -161,6 +194,16 @@ impl Medium {
                 format!(
                     "mu_a + (1 - g) mu_s = {attenuation} must be positive and finite, \
                      otherwise the diffusion coefficient D = 1/(3 (mu_a + (1 - g) mu_s)) is infinite"
+                ),
+            ));
+        }
+        let source_depth = 1.0 / attenuation;
+        if self.model == MediumModel::Slab && self.thickness_cm <= source_depth {
+            return Err(ParamError::new(
+                "thickness_cm",
+                self.thickness_cm,
+                format!(
+                    "the slab model needs a slab thicker than one transport mean free path, 1/(mu_a + (1 - g) mu_s) = {source_depth:.4} cm, where its equivalent source sits"
                 ),
             ));
         }

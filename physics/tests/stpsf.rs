@@ -226,6 +226,7 @@ fn extreme_times_and_coefficients_stay_finite() {
             g: 0.9,
             refractive_index: 1.4,
             thickness_cm: z0,
+            model: Default::default(),
         };
         let d = Diffusion::new(&m).unwrap();
         for &t in &times {

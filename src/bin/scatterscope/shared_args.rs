@@ -4,7 +4,7 @@
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use scatterscope::Named;
 use scatterscope::config::{ConfigError, PhysicsOverrides, parse_cm, parse_ps};
-use scatterscope::physics::{Preset, Setup};
+use scatterscope::physics::{MediumModel, Preset, Setup};
 use std::path::PathBuf;
 
 /// A clap value parser for a [`Named`] choice: its names are the possible
@@ -39,6 +39,11 @@ pub struct PhysicsArgs {
     /// Slab thickness z0 between object and sensor (default unit cm; e.g. 30mm).
     #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
     pub thickness: Option<f64>,
+    /// How the slab's faces are modelled: infinite (the paper's Eq. 6, no
+    /// faces) or slab (extrapolated boundaries with the refractive-index
+    /// mismatch, image sources; transmitted flux).
+    #[arg(long, value_name = "MODEL", value_parser = scatterscope::config::parse_medium)]
+    pub medium: Option<MediumModel>,
     /// Horizontal field of view (default unit cm).
     #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
     pub fov: Option<f64>,
@@ -73,6 +78,7 @@ impl PhysicsArgs {
             g: self.g,
             n: self.n,
             thickness: self.thickness,
+            medium: self.medium,
             fov: self.fov,
             size: self.size,
             bin_width: self.bin_width,
