@@ -4,12 +4,12 @@
 //! Precedence: overrides over the TOML file over the preset. The TOML keys
 //! are the override names (`mu_a`, `mu_s`, `g`, `n`, `thickness`, `medium`, `fov`,
 //! `size`, `bin_width`, `t_start`, `bins`, `photons`, `min_bin_photons`,
-//! `preset`). Lengths and times take plain numbers in the
+//! `irf_fwhm`, `irf_tail`, `preset`). Lengths and times take plain numbers in the
 //! documented unit (cm, ps) or strings with a unit (`"30mm"`, `"0.004ns"`).
 
 use std::path::{Path, PathBuf};
 
-use scatterscope_physics::{MediumModel, Preset, Setup};
+use scatterscope_physics::{Irf, MediumModel, Preset, Setup};
 use serde::Deserialize;
 
 /// Parses a time with an optional unit (`fs`, `ps`, `ns`, `us`); plain numbers are ps.
@@ -83,6 +83,8 @@ struct FileOverrides {
     bins: Option<usize>,
     photons: Option<f64>,
     min_bin_photons: Option<f64>,
+    irf_fwhm: Option<Quantity>,
+    irf_tail: Option<Quantity>,
 }
 
 /// Overrides of a preset's physics (what a front end's flags set); every
@@ -122,6 +124,10 @@ pub struct PhysicsOverrides {
     pub photons: Option<f64>,
     /// Drop bins whose ST-PSF carries fewer expected photons (0 keeps all).
     pub min_bin_photons: Option<f64>,
+    /// FWHM of the instrument response's Gaussian part (ps; 0: ideal timing).
+    pub irf_fwhm: Option<f64>,
+    /// Time constant of the instrument response's exponential tail (ps).
+    pub irf_tail: Option<f64>,
 }
 
 /// A configuration problem, naming the file or key and the value.
@@ -214,6 +220,20 @@ impl PhysicsOverrides {
         set(&mut s.bins.count, self.bins);
         set(&mut s.total_photons, self.photons);
         set(&mut s.min_bin_photons, self.min_bin_photons);
+        match (self.irf_fwhm, self.irf_tail) {
+            (Some(0.0), _) => s.irf = None,
+            (Some(fwhm_ps), tail) => {
+                let tail_ps = tail.or(s.irf.map(|i| i.tail_ps)).unwrap_or(0.0);
+                s.irf = Some(Irf { fwhm_ps, tail_ps });
+            }
+            // A tail alone changes a recorded IRF; without one the zero
+            // FWHM is refused by validation, naming `irf_fwhm`.
+            (None, Some(tail_ps)) => {
+                let fwhm_ps = s.irf.map_or(0.0, |i| i.fwhm_ps);
+                s.irf = Some(Irf { fwhm_ps, tail_ps });
+            }
+            (None, None) => {}
+        }
     }
 }
 
@@ -231,6 +251,8 @@ fn key_of(field: &str) -> &'static str {
         "width_ps" => "bin_width",
         "start_ps" => "t_start",
         "min_bin_photons" => "min_bin_photons",
+        "irf_fwhm_ps" => "irf_fwhm",
+        "irf_tail_ps" => "irf_tail",
         "photons" => "photons",
         _ => "bins",
     }
@@ -316,6 +338,8 @@ fn file_as_overrides(path: &Path, f: &FileOverrides) -> Result<PhysicsOverrides,
         bins: f.bins,
         photons: f.photons,
         min_bin_photons: f.min_bin_photons,
+        irf_fwhm: q("irf_fwhm", &f.irf_fwhm, parse_ps)?,
+        irf_tail: q("irf_tail", &f.irf_tail, parse_ps)?,
     })
 }
 
@@ -372,6 +396,33 @@ mod tests {
         let e = args.resolve().unwrap_err().to_string();
         assert!(
             e.contains("thickness") && e.contains("transport mean free path"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn the_irf_comes_from_flags_or_the_file_and_zero_turns_it_off() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("lab.toml");
+        std::fs::write(&path, "irf_fwhm = \"0.05ns\"\nirf_tail = 20\n").unwrap();
+        let mut args = PhysicsOverrides {
+            config: Some(path.clone()),
+            ..Default::default()
+        };
+        let irf = args.resolve().unwrap().irf.unwrap();
+        assert_eq!((irf.fwhm_ps, irf.tail_ps), (50.0, 20.0));
+        // A flag's FWHM keeps the file's tail; 0 turns the IRF off.
+        args.irf_fwhm = Some(30.0);
+        let irf = args.resolve().unwrap().irf.unwrap();
+        assert_eq!((irf.fwhm_ps, irf.tail_ps), (30.0, 20.0));
+        args.irf_fwhm = Some(0.0);
+        assert_eq!(args.resolve().unwrap().irf, None);
+        // A tail without a width is refused, naming the key to set.
+        std::fs::write(&path, "irf_tail = 20\n").unwrap();
+        args.irf_fwhm = None;
+        let e = args.resolve().unwrap_err();
+        assert!(
+            matches!(&e, ConfigError::Param { key, .. } if *key == "irf_fwhm"),
             "{e}"
         );
     }

@@ -7,11 +7,22 @@
 //! the offset; photons that land off the sensor are not detected. Arrival
 //! times form a Poisson process at the configured rate; dark counts add
 //! uniformly distributed pixels and times.
+//!
+//! With an instrument response in the kernels' setup, arrivals are sampled
+//! from the ideal (IRF-free) kernels over every bin the IRF can move light
+//! from, and each recorded time is the arrival plus a delay drawn from the
+//! IRF (a Gaussian plus an exponential), as a detector's jitter does. A
+//! delay that would fall before its own sync is recorded at 0: give
+//! `t0_delay_ps` more than the IRF's early support.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Exp, weighted::WeightedAliasIndex};
-use scatterscope_physics::KernelStack;
+use rand_distr::{Distribution, Exp, Normal, weighted::WeightedAliasIndex};
+use scatterscope_physics::{Irf, KernelStack, Sampling, Setup};
+
+/// Bins of the ideal arrival kernels carrying fewer expected photons than
+/// this are not sampled (a millionth of a photon per bin).
+pub const NEGLIGIBLE_ARRIVAL_PHOTONS: f64 = 1e-6;
 
 /// What to emit, besides the scene and its kernels.
 #[derive(Debug, Clone, PartialEq)]
@@ -88,6 +99,25 @@ pub struct Emitter {
     /// Afterpulses due later: (time s, pixel), earliest last.
     afterpulses: Vec<(f64, u32)>,
     off_sensor: u64,
+    /// The IRF's Gaussian part and its exponential tail, if any.
+    jitter: Option<(Normal<f64>, Option<Exp<f64>>)>,
+}
+
+/// Kernels of the arrival times that the IRF can move into `setup`'s
+/// bins: the same physics without the IRF, the binning extended on both
+/// sides by the IRF's support.
+fn arrival_kernels(setup: &Setup, irf: &Irf) -> Result<KernelStack, EmitterError> {
+    let mut s = *setup;
+    s.irf = None;
+    s.min_bin_photons = NEGLIGIBLE_ARRIVAL_PHOTONS;
+    let (early, late) = irf.support_ps();
+    let w = s.bins.width_ps;
+    let before = ((late / w).ceil() as usize).min((s.bins.start_ps / w).floor() as usize);
+    let after = (-early / w).ceil() as usize;
+    s.bins.start_ps -= before as f64 * w;
+    s.bins.count += before + after;
+    KernelStack::build(&s, Sampling::Integrated)
+        .map_err(|e| EmitterError::Invalid(format!("arrival kernels without the IRF: {e}")))
 }
 
 /// Why an emitter cannot be built.
@@ -149,9 +179,25 @@ impl Emitter {
                 .collect(),
         )
         .map_err(|e| EmitterError::Invalid(format!("scene weights: {e}")))?;
-        let kernel = WeightedAliasIndex::new(kernels.kernels.iter().map(|&v| v.max(0.0)).collect())
+        let arrivals = match &kernels.setup.irf {
+            Some(irf) => Some(arrival_kernels(&kernels.setup, irf)?),
+            None => None,
+        };
+        let jitter = match &kernels.setup.irf {
+            Some(irf) => Some((
+                Normal::new(0.0, irf.sigma_ps())
+                    .map_err(|e| EmitterError::Invalid(format!("IRF: {e}")))?,
+                (irf.tail_ps > 0.0)
+                    .then(|| Exp::new(1.0 / irf.tail_ps))
+                    .transpose()
+                    .map_err(|e| EmitterError::Invalid(format!("IRF tail: {e}")))?,
+            )),
+            None => None,
+        };
+        let sampled = arrivals.as_ref().unwrap_or(kernels);
+        let kernel = WeightedAliasIndex::new(sampled.kernels.iter().map(|&v| v.max(0.0)).collect())
             .map_err(|e| EmitterError::Invalid(format!("kernel weights: {e}")))?;
-        let bins = kernels
+        let bins = sampled
             .kept_bins()
             .map(|b| (b.start_ps, b.end_ps - b.start_ps))
             .collect();
@@ -168,6 +214,7 @@ impl Emitter {
             time_s: 0.0,
             afterpulses: Vec::new(),
             off_sensor: 0,
+            jitter,
         })
     }
 
@@ -265,7 +312,14 @@ impl Emitter {
                 continue;
             }
             let (start, width) = self.bins[bin];
-            let delay_ps = self.options.t0_delay_ps + start + self.rng.random::<f64>() * width;
+            let mut delay_ps = self.options.t0_delay_ps + start + self.rng.random::<f64>() * width;
+            if let Some((gauss, tail)) = &self.jitter {
+                delay_ps += gauss.sample(&mut self.rng);
+                if let Some(tail) = tail {
+                    delay_ps += tail.sample(&mut self.rng);
+                }
+                delay_ps = delay_ps.max(0.0);
+            }
             return Detection {
                 pixel: (y as usize * self.width + x as usize) as u32,
                 delay_ps,

@@ -9,6 +9,11 @@
 //! sampling at pixel and bin centres is offered for comparison; it is wrong
 //! where the kernel is narrower than a pixel (early bins).
 //!
+//! With an instrument response ([`crate::irf`]) the time integral runs over
+//! every arrival time that can be recorded in the bin, weighted by the
+//! probability that it is: the ST-PSF convolved in time with the IRF, then
+//! integrated over the bin, in one quadrature.
+//!
 //! Work that cannot change the answer is left out: each bin is evaluated only
 //! within `SUPPORT_SIGMAS` lateral standard deviations of its centre, and
 //! quadrature nodes whose weight underflows to zero are skipped.
@@ -101,6 +106,13 @@ impl KernelStack {
     pub fn build(setup: &Setup, sampling: Sampling) -> Result<Self, ParamError> {
         setup.validate()?;
         let diffusion = Diffusion::new(&setup.medium)?;
+        if let (Some(irf), Sampling::Point) = (&setup.irf, sampling) {
+            return Err(ParamError::new(
+                "irf_fwhm_ps",
+                irf.fwhm_ps,
+                "point sampling does not model an instrument response; use integrated sampling",
+            ));
+        }
         let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
         let locals: Vec<Option<LocalKernel>> = (0..setup.bins.count)
             .map(|k| {
@@ -244,29 +256,44 @@ fn separable_sum(radius: (usize, usize), nodes: &[(f64, Vec<f64>, Vec<f64>)]) ->
 }
 
 fn integrated_bin(d: &Diffusion, setup: &Setup, ta: f64, tb: f64) -> Option<LocalKernel> {
-    let ta = ta.max(0.0);
-    if tb <= ta {
+    // Arrival times that can be recorded in [ta, tb): the bin itself, or
+    // with an IRF the bin shifted back by every delay the IRF allows.
+    let (lo, hi) = match &setup.irf {
+        None => (ta, tb),
+        Some(irf) => {
+            let (early, late) = irf.support_ps();
+            (ta - late, tb - early)
+        }
+    };
+    let lo = lo.max(0.0);
+    if hi <= lo {
         return None;
     }
     let pitch = setup.sensor.pixel_pitch_cm();
     let four_dc = 4.0 * d.dc_cm2_per_ps();
-    let radius = support_radius(d, setup, tb);
-    // Upper bound of ln(T(t) * dt/dv) on the bin, so scaled values stay <= ~1.
-    let log_scale = if d.z0_cm == 0.0 && ta == 0.0 {
+    let radius = support_radius(d, setup, hi);
+    // Upper bound of ln(T(t) * dt/dv) on the range, so scaled values stay
+    // <= ~1 (the IRF's weight is at most 1).
+    let log_scale = if d.z0_cm == 0.0 && lo == 0.0 {
         (2.0 * d.c_cm_per_ps).ln() - 0.5 * (std::f64::consts::PI * four_dc).ln()
     } else {
-        d.log_temporal_density(d.peak_time_ps().clamp(ta, tb)) + (2.0 * tb.sqrt()).ln()
+        d.log_temporal_density(d.peak_time_ps().clamp(lo, hi)) + (2.0 * hi.sqrt()).ln()
     };
     let weight_at = |v: f64| {
         let t = v * v;
-        (d.log_temporal_density(t) - log_scale).exp() * 2.0 * v
+        let recorded = setup.irf.map_or(1.0, |irf| irf.bin_weight(ta, tb, t));
+        if recorded == 0.0 {
+            return 0.0;
+        }
+        (d.log_temporal_density(t) - log_scale).exp() * 2.0 * v * recorded
     };
     let cell = |i: i64, s: f64| {
         gaussian_interval_fraction((i as f64 - 0.5) * pitch, (i as f64 + 0.5) * pitch, s)
     };
-    // Breakpoints in v = sqrt(t): halve t from tb down to ta (features of T
-    // scale with t), ending in a panel from 0 when the bin starts at 0.
-    let (va, vb) = (ta.sqrt(), tb.sqrt());
+    // Breakpoints in v = sqrt(t): halve t from the end down to the start
+    // (features of T scale with t), ending in a panel from 0 when the range
+    // starts at 0.
+    let (va, vb) = (lo.sqrt(), hi.sqrt());
     let mut breaks = vec![vb];
     let mut v = vb;
     while v / std::f64::consts::SQRT_2 > va && breaks.len() < 60 {
@@ -274,10 +301,26 @@ fn integrated_bin(d: &Diffusion, setup: &Setup, ta: f64, tb: f64) -> Option<Loca
         breaks.push(v);
     }
     breaks.push(va);
-    breaks.reverse();
+    // With an IRF the weight turns on and off over about one IRF sigma at
+    // each bin edge (and decays with the tail before ta): break there too.
+    if let Some(irf) = &setup.irf {
+        let s = irf.sigma_ps();
+        let edges = [ta, tb]
+            .into_iter()
+            .flat_map(|edge| (-4..=4).map(move |k| edge + k as f64 * s));
+        let tail = (1..=8).map(|k| ta - k as f64 * irf.tail_ps);
+        breaks.extend(
+            edges
+                .chain(tail)
+                .filter(|&t| t > lo && t < hi)
+                .map(f64::sqrt),
+        );
+    }
+    breaks.sort_by(f64::total_cmp);
+    breaks.dedup();
     // Probes: total mass, the centre pixel (narrowest feature) and a pixel at
-    // one end-of-bin sigma (where the lateral profile turns on latest).
-    let probe_offset = ((d.lateral_sigma_cm(tb) / pitch).round() as i64).max(1);
+    // one end-of-range sigma (where the lateral profile turns on latest).
+    let probe_offset = ((d.lateral_sigma_cm(hi) / pitch).round() as i64).max(1);
     let adapted = adaptive_nodes(&breaks, TIME_RTOL, MAX_TIME_PANELS, |v| {
         let wgt = weight_at(v);
         if wgt == 0.0 {

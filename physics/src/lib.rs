@@ -20,6 +20,7 @@
 
 pub mod diffusion;
 pub mod error;
+pub mod irf;
 pub mod kernel;
 pub mod params;
 pub mod quadrature;
@@ -28,6 +29,7 @@ pub mod validity;
 
 pub use diffusion::Diffusion;
 pub use error::ParamError;
+pub use irf::Irf;
 pub use kernel::{KernelStack, Sampling};
 pub use params::{Medium, MediumModel, Preset, Sensor, Setup, TimeBins};
 pub use validity::Diagnostic;

@@ -6,6 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ParamError, finite, non_negative, positive};
+use crate::irf::Irf;
 
 /// Optical properties and thickness of the homogeneous scattering slab.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -111,6 +112,10 @@ pub struct Setup {
     /// Bins whose expected photon total (kernel mass) is below this are
     /// dropped as carrying no information; 0 keeps every bin.
     pub min_bin_photons: f64,
+    /// The instrument's timing response; `None` for ideal timing (absent
+    /// in older files).
+    #[serde(default)]
+    pub irf: Option<Irf>,
 }
 
 /// Largest light budget accepted; Poisson sampling of larger means is not
@@ -161,6 +166,7 @@ impl Preset {
                 },
                 total_photons: 450.0,
                 min_bin_photons: 1.0,
+                irf: None,
             },
         }
     }
@@ -263,6 +269,26 @@ impl TimeBins {
 }
 
 impl Setup {
+    /// One line saying what the model assumes about the medium and the
+    /// instrument, for outputs to state.
+    pub fn model_summary(&self) -> String {
+        let medium = match self.medium.model {
+            MediumModel::Infinite => "infinite medium (the paper's Eq. 6)".to_string(),
+            MediumModel::Slab => format!(
+                "finite slab with extrapolated boundaries (n = {})",
+                self.medium.refractive_index
+            ),
+        };
+        let timing = match &self.irf {
+            None => "ideal timing (no instrument response)".to_string(),
+            Some(irf) => format!(
+                "instrument response: Gaussian FWHM {} ps, exponential tail {} ps",
+                irf.fwhm_ps, irf.tail_ps
+            ),
+        };
+        format!("{medium}; {timing}; no background counts modelled")
+    }
+
     /// Checks every field; the error names the first invalid one.
     pub fn validate(&self) -> Result<(), ParamError> {
         self.medium.validate()?;
@@ -277,6 +303,9 @@ impl Setup {
             ));
         }
         non_negative("min_bin_photons", self.min_bin_photons)?;
+        if let Some(irf) = &self.irf {
+            irf.validate()?;
+        }
         Ok(())
     }
 }

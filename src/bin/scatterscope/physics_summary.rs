@@ -31,6 +31,15 @@ pub fn print_setup(setup: &Setup, kernels: &KernelStack) {
             s.extrapolation_cm, m.refractive_index, s.source_depth_cm
         ),
     }
+    match &setup.irf {
+        None => eprintln!("instrument response: none (ideal timing)"),
+        Some(irf) => eprintln!(
+            "instrument response: Gaussian FWHM {} ps with an exponential tail of {} ps (mean delay {} ps); kernels convolved with it in time",
+            irf.fwhm_ps,
+            irf.tail_ps,
+            irf.mean_ps()
+        ),
+    }
     eprintln!(
         "sensor: {} x {} px over {} cm ({:.4} cm/px); bins: {} x {} ps from {} ps; light budget {} photons",
         setup.sensor.width_px,

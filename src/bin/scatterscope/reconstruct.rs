@@ -117,6 +117,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
             anyhow::anyhow!("{e}{flag}")
         })
         .with_context(|| format!("matching {} with its physics", args.stack.display()))?;
+    println!("model: {}", setup.model_summary());
     if !problem.left_out.is_empty() {
         let counts: f64 = problem.left_out.iter().map(|(_, c)| c).sum();
         println!(

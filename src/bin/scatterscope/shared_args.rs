@@ -65,6 +65,15 @@ pub struct PhysicsArgs {
     /// Drop bins whose ST-PSF carries fewer expected photons (0 keeps all).
     #[arg(long, value_name = "COUNT", allow_negative_numbers = true)]
     pub min_bin_photons: Option<f64>,
+    /// Instrument response: FWHM of its Gaussian part (default unit ps;
+    /// 0: ideal timing). The kernels are the ST-PSF convolved in time with
+    /// it; time zero is the Gaussian's centre.
+    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    pub irf_fwhm: Option<f64>,
+    /// Instrument response: time constant of its exponential tail (default
+    /// unit ps; 0: none).
+    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    pub irf_tail: Option<f64>,
 }
 
 impl PhysicsArgs {
@@ -86,6 +95,8 @@ impl PhysicsArgs {
             bins: self.bins,
             photons: self.photons,
             min_bin_photons: self.min_bin_photons,
+            irf_fwhm: self.irf_fwhm,
+            irf_tail: self.irf_tail,
         }
     }
 
