@@ -63,6 +63,10 @@ pub struct ForwardModel {
     sensor: (usize, usize),
     boundary: Boundary,
     margin: usize,
+    /// Background counts per sensor pixel and bin (dark counts, ambient
+    /// light), uniform in time and space: the measurement is
+    /// `Poisson(H_k o + background)`.
+    background: f64,
 }
 
 /// Noise-free expected counts and what had to be corrected in them.
@@ -112,11 +116,25 @@ impl ForwardModel {
             sensor: (h, w),
             boundary,
             margin,
+            background: 0.0,
         }
     }
 
+    /// The same model with `background` counts per pixel and bin added to
+    /// every expected count (what the solvers fit; [`Self::expected`] stays
+    /// `H o`).
+    pub fn with_background(mut self, background: f64) -> Self {
+        self.background = background;
+        self
+    }
+
+    /// Background counts per sensor pixel and bin.
+    pub fn background(&self) -> f64 {
+        self.background
+    }
+
     /// A one-bin model whose kernel is the sum of the kernels of `bins`
-    /// (all bins: the time-summed ST-PSF).
+    /// (all bins: the time-summed ST-PSF), with their summed background.
     pub fn summed(&self, bins: &[usize]) -> Self {
         let mut sum = vec![Complex64::default(); self.fft.spectrum_len()];
         for &k in bins {
@@ -127,6 +145,7 @@ impl ForwardModel {
         Self {
             fft: self.fft.clone(),
             spectra: vec![sum],
+            background: self.background * bins.len() as f64,
             ..*self
         }
     }

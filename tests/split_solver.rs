@@ -137,8 +137,9 @@ fn padded_model_is_the_linear_convolution_and_its_adjoint_holds() {
 }
 
 /// Newton's method on the interior Poisson maximum-likelihood problem of a
-/// small periodic model, with dense matrices built column by column.
-fn newton_ml(model: &ForwardModel, counts: &Array3<f64>) -> Vec<f64> {
+/// small periodic model with background `bg` per pixel and bin (counts
+/// ~ Poisson(H o + bg)), with dense matrices built column by column.
+fn newton_ml(model: &ForwardModel, counts: &Array3<f64>, bg: f64) -> Vec<f64> {
     let (h, w) = model.grid_shape();
     let n = h * w;
     let bins = counts.shape()[0];
@@ -156,12 +157,12 @@ fn newton_ml(model: &ForwardModel, counts: &Array3<f64>) -> Vec<f64> {
         .collect();
     let total: f64 = m.iter().flatten().sum();
     let mass: f64 = (0..bins).map(|k| model.mass(k)).sum();
-    let mut o = vec![total / (mass * n as f64); n];
+    let mut o = vec![(total - bg * (bins * n) as f64) / (mass * n as f64); n];
     let value = |o: &[f64]| -> f64 {
         let mut v = 0.0;
         for k in 0..bins {
             for i in 0..n {
-                let y: f64 = (0..n).map(|j| cols[k][j][i] * o[j]).sum();
+                let y: f64 = (0..n).map(|j| cols[k][j][i] * o[j]).sum::<f64>() + bg;
                 v += y - m[k][i] * y.ln();
             }
         }
@@ -172,7 +173,7 @@ fn newton_ml(model: &ForwardModel, counts: &Array3<f64>) -> Vec<f64> {
         let mut hess = vec![vec![0.0; n]; n];
         for k in 0..bins {
             let y: Vec<f64> = (0..n)
-                .map(|i| (0..n).map(|j| cols[k][j][i] * o[j]).sum())
+                .map(|i| (0..n).map(|j| cols[k][j][i] * o[j]).sum::<f64>() + bg)
                 .collect();
             for i in 0..n {
                 let r = 1.0 - m[k][i] / y[i];
@@ -236,41 +237,57 @@ fn newton_ml(model: &ForwardModel, counts: &Array3<f64>) -> Vec<f64> {
 #[test]
 fn split_solver_with_no_prior_reaches_the_maximum_likelihood_of_newtons_method() {
     // 6 x 6 periodic, two bins, kernels about a pixel wide, counts in the
-    // thousands: the maximum-likelihood object is interior and unique.
+    // thousands: the maximum-likelihood object is interior and unique. With
+    // and without a background of about a fifth of the counts.
     let mut s = setup(6, 2.5, 2e6);
     s.bins.start_ps = 100.0;
     s.bins.count = 2;
     let k = KernelStack::build(&s, Sampling::Integrated).unwrap();
-    let model = ForwardModel::new(&k, Boundary::Periodic);
     let truth = Array2::from_shape_fn((6, 6), |(r, c)| {
         0.4 + 0.5 * (((r * 5 + c * 3) % 7) as f64 / 6.0)
     });
-    let counts = poisson_counts(&model.expected(truth.view()).counts, 3);
-    let want = newton_ml(&model, &counts);
-    let opts = SplitOptions {
-        max_iters: 3000,
-        patience: usize::MAX,
-        ..Default::default()
-    };
-    let r = pnp_split(&model, &counts, &[0, 1], &NoPrior, &opts, None, |_| {}).unwrap();
-    let got: Vec<f64> = r.image.iter().copied().collect();
-    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    for (g, w) in got.iter().zip(&want) {
-        assert!((g - w).abs() < 1e-4 * scale, "{g} vs {w}");
+    let mean = ForwardModel::new(&k, Boundary::Periodic)
+        .expected(truth.view())
+        .counts
+        .mean()
+        .unwrap();
+    for bg in [0.0, 0.25 * mean] {
+        let model = ForwardModel::new(&k, Boundary::Periodic).with_background(bg);
+        let expected = model.expected(truth.view()).counts.mapv(|y| y + bg);
+        let counts = poisson_counts(&expected, 3);
+        let want = newton_ml(&model, &counts, bg);
+        let opts = SplitOptions {
+            max_iters: 3000,
+            patience: usize::MAX,
+            ..Default::default()
+        };
+        let r = pnp_split(&model, &counts, &[0, 1], &NoPrior, &opts, None, |_| {}).unwrap();
+        let got: Vec<f64> = r.image.iter().copied().collect();
+        let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() < 1e-4 * scale, "background {bg}: {g} vs {w}");
+        }
+        // And the likelihood's gradient vanishes there.
+        let lik = PoissonLikelihood::new(&model, &counts, &[0, 1], 1e-10);
+        let g_ml = lik.evaluate(&got).gradient;
+        let g_flat = lik
+            .evaluate(&vec![got.iter().sum::<f64>() / 36.0; 36])
+            .gradient;
+        let norm = |g: &[f64]| g.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!(
+            norm(&g_ml) < 1e-4 * norm(&g_flat),
+            "background {bg}: {} vs {}",
+            norm(&g_ml),
+            norm(&g_flat)
+        );
+        if bg > 0.0 {
+            // Ignoring the background gives a different, brighter object.
+            let plain = ForwardModel::new(&k, Boundary::Periodic);
+            let wrong = pnp_split(&plain, &counts, &[0, 1], &NoPrior, &opts, None, |_| {}).unwrap();
+            let (a, b) = (wrong.image.sum(), r.image.sum());
+            assert!(a > 1.2 * b, "without background {a}, with {b}");
+        }
     }
-    // And the likelihood's gradient vanishes there.
-    let lik = PoissonLikelihood::new(&model, &counts, &[0, 1], 1e-10);
-    let g_ml = lik.evaluate(&got).gradient;
-    let g_flat = lik
-        .evaluate(&vec![got.iter().sum::<f64>() / 36.0; 36])
-        .gradient;
-    let norm = |g: &[f64]| g.iter().map(|v| v * v).sum::<f64>().sqrt();
-    assert!(
-        norm(&g_ml) < 1e-4 * norm(&g_flat),
-        "{} vs {}",
-        norm(&g_ml),
-        norm(&g_flat)
-    );
 }
 
 #[test]

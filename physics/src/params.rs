@@ -286,7 +286,7 @@ impl Setup {
                 irf.fwhm_ps, irf.tail_ps
             ),
         };
-        format!("{medium}; {timing}; no background counts modelled")
+        format!("{medium}; {timing}")
     }
 
     /// Checks every field; the error names the first invalid one.

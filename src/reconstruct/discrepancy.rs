@@ -130,8 +130,8 @@ impl ExpectedDeviance {
         (2.0 * d, f, g)
     }
 
-    /// Deviance of `estimate` (on the model's grid) against `counts` (bins
-    /// `bins` of `model`, on the sensor) and
+    /// Deviance of `estimate` (on the model's grid, plus the model's
+    /// background) against `counts` (bins `bins` of `model`, on the sensor) and
     /// the deviance Poisson noise alone would give around the same means.
     pub fn check(
         &self,
@@ -142,6 +142,7 @@ impl ExpectedDeviance {
     ) -> DevianceCheck {
         let x: Vec<f64> = estimate.iter().copied().collect();
         let spec = model.fft().forward(&x);
+        let bg = model.background();
         let (deviance, expected, variance) = counts
             .axis_iter(Axis(0))
             .into_par_iter()
@@ -150,7 +151,7 @@ impl ExpectedDeviance {
                 let y = model.apply_spectrum(k, &spec);
                 let (mut d, mut e, mut var) = (0.0, 0.0, 0.0);
                 for (&mj, &yj) in m.iter().zip(&y) {
-                    let (dj, f, g) = self.point(mj, yj);
+                    let (dj, f, g) = self.point(mj, yj + bg);
                     d += dj;
                     e += f;
                     var += g;

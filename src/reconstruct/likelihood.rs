@@ -77,6 +77,10 @@ pub struct PoissonLikelihood<'a> {
     /// `sum m - m log m` over counts, so that deviance = 2 (L - this).
     saturated: f64,
     bins: usize,
+    /// The model's background per pixel and bin, and its total over the
+    /// sensor and all bins (a constant of `L`).
+    background: f64,
+    background_total: f64,
 }
 
 /// Value and gradient of the data term at one point.
@@ -118,6 +122,9 @@ impl<'a> PoissonLikelihood<'a> {
             kappa: SurrogateLog::new(eps),
             saturated,
             bins: bins.len(),
+            background: model.background(),
+            background_total: model.background()
+                * (bins.len() * model.sensor_shape().0 * model.sensor_shape().1) as f64,
         }
     }
 
@@ -151,10 +158,11 @@ impl<'a> PoissonLikelihood<'a> {
             .map(|bin| {
                 let mut y = self.model.apply_spectrum(bin.bin, &o_spec);
                 let mut log_term = 0.0;
+                let bg = self.background;
                 for (yj, &m) in y.iter_mut().zip(&bin.counts) {
                     if m > 0.0 {
-                        log_term += m * self.kappa.value(*yj);
-                        *yj = m * self.kappa.derivative(*yj);
+                        log_term += m * self.kappa.value(*yj + bg);
+                        *yj = m * self.kappa.derivative(*yj + bg);
                     } else {
                         *yj = 0.0;
                     }
@@ -177,7 +185,7 @@ impl<'a> PoissonLikelihood<'a> {
         let back = fft.inverse(acc);
         let linear: f64 = o.iter().zip(&self.sensitivity).map(|(a, b)| a * b).sum();
         Evaluation {
-            value: linear - log_total,
+            value: linear + self.background_total - log_total,
             gradient: back
                 .iter()
                 .zip(&self.sensitivity)

@@ -105,7 +105,19 @@ pub(crate) fn pnp_method(
     Ok(if bins.len() == 1 { "pnp-slice" } else { "pnp" })
 }
 
-/// Least-squares flat object for the data: total counts over (mass x pixels).
+/// Share of the total count kept as signal when the background explains
+/// all of it (so that starting levels stay positive).
+pub const SIGNAL_FLOOR: f64 = 1e-3;
+
+/// Counts the object explains: the total less `background` per pixel in
+/// each of `bins` bins of `pixels` pixels, at least [`SIGNAL_FLOOR`] of the
+/// total.
+pub fn signal_counts(total_counts: f64, background: f64, bins: usize, pixels: usize) -> f64 {
+    (total_counts - background * (bins * pixels) as f64).max(SIGNAL_FLOOR * total_counts)
+}
+
+/// Least-squares flat object for the data: total counts over (mass x
+/// pixels), 0 without mass.
 pub fn flat_level(total_counts: f64, mass: f64, pixels: usize) -> f64 {
     if mass > 0.0 {
         total_counts / (mass * pixels as f64)

@@ -60,6 +60,7 @@ use super::likelihood::PoissonLikelihood;
 use super::trace::{Trace, TraceRow};
 use super::{
     ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, pnp_method, score,
+    signal_counts,
 };
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::forward::ForwardModel;
@@ -261,7 +262,17 @@ pub fn pnp_admm(
     ));
     let total: f64 = counts.sum();
     trace.notes.push(grid_note(model));
-    let flat = flat_level(total, likelihood.total_mass(), h * w);
+    let bg = model.background();
+    if bg > 0.0 {
+        trace.notes.push(format!(
+            "background: {bg:.4e} counts per pixel and bin in the likelihood"
+        ));
+    }
+    let flat = flat_level(
+        signal_counts(total, bg, bins.len(), h * w),
+        likelihood.total_mass(),
+        h * w,
+    );
     if total == 0.0 {
         return Ok(no_photons(trace, (h, w), truth));
     }

@@ -6,6 +6,53 @@ use scatterscope_physics::{KernelStack, Sampling, Setup};
 use crate::forward::{Boundary, ForwardModel};
 use crate::stack::{Stack, ValueKind};
 
+/// Kept bins where even an object explaining every count would send fewer
+/// than this many counts per pixel count as "before the first light" for
+/// the background estimate (which their light can bias by at most this).
+pub const DARK_COUNTS_PER_PIXEL: f64 = 1e-3;
+
+/// How the background per pixel and bin is chosen.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BackgroundChoice {
+    /// Estimated from the bins before the first light; none without such bins.
+    Auto,
+    /// Not modelled.
+    None,
+    /// Given, counts per pixel and bin.
+    Given(f64),
+}
+
+impl BackgroundChoice {
+    /// Parses `auto`, `none` or a number of counts per pixel and bin.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "none" => Ok(Self::None),
+            _ => s
+                .parse::<f64>()
+                .ok()
+                .filter(|b| b.is_finite() && *b >= 0.0)
+                .map(Self::Given)
+                .ok_or_else(|| {
+                    format!("`{s}` is not auto, none or a number of counts >= 0 per pixel and bin")
+                }),
+        }
+    }
+}
+
+/// The background measured in the bins before the first light.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BackgroundEstimate {
+    /// Mean counts per pixel and bin.
+    pub per_pixel_per_bin: f64,
+    /// Its Poisson standard error.
+    pub standard_error: f64,
+    /// How many bins it comes from.
+    pub bins: usize,
+    /// From the start of the first to the end of the last of them (ps).
+    pub span_ps: (f64, f64),
+}
+
 /// Counts and the forward model of exactly the stack's bins.
 pub struct Problem {
     /// Kernel spectra of the stack's bins, in stack order.
@@ -138,6 +185,74 @@ impl Problem {
             setup: *setup,
             left_out,
         })
+    }
+
+    /// The background from the bins before the first light: stack bins
+    /// where the ST-PSF puts no light, and kept bins whose share of the
+    /// kernels' light, times all the counts, is below
+    /// [`DARK_COUNTS_PER_PIXEL`] per pixel. `None` when there is none.
+    pub fn estimate_background(&self) -> Option<BackgroundEstimate> {
+        let (_, h, w) = self.counts.dim();
+        let total_mass: f64 = (0..self.model.bins()).map(|k| self.model.mass(k)).sum();
+        let total: f64 = self.counts.sum();
+        let mut dark: Vec<(f64, f64)> = self.left_out.clone();
+        for k in 0..self.model.bins() {
+            let most_signal = total * self.model.mass(k) / total_mass;
+            if most_signal < DARK_COUNTS_PER_PIXEL * (h * w) as f64 {
+                let counts = self.counts.index_axis(ndarray::Axis(0), k).sum();
+                dark.push((self.bin_starts_ps[k], counts));
+            }
+        }
+        if dark.is_empty() {
+            return None;
+        }
+        let cells = (dark.len() * h * w) as f64;
+        let counts: f64 = dark.iter().map(|(_, c)| c).sum();
+        let first = dark.iter().map(|(t, _)| *t).fold(f64::INFINITY, f64::min);
+        let last = dark
+            .iter()
+            .map(|(t, _)| *t)
+            .fold(f64::NEG_INFINITY, f64::max);
+        Some(BackgroundEstimate {
+            per_pixel_per_bin: counts / cells,
+            standard_error: counts.sqrt() / cells,
+            bins: dark.len(),
+            span_ps: (first, last + self.setup.bins.width_ps),
+        })
+    }
+
+    /// Sets the background the methods fit (`Poisson(H o + b)`), from
+    /// `choice`; returns the problem and a sentence saying what was used.
+    pub fn with_background(
+        mut self,
+        choice: BackgroundChoice,
+    ) -> Result<(Self, String), ProblemError> {
+        let (b, said) = match choice {
+            BackgroundChoice::None => (0.0, "none (not modelled)".to_string()),
+            BackgroundChoice::Given(b) => {
+                if !(b.is_finite() && b >= 0.0) {
+                    return Err(ProblemError::Mismatch(format!(
+                        "background = {b} counts per pixel and bin must be a finite number >= 0"
+                    )));
+                }
+                (b, format!("{b:.4e} counts per pixel and bin (given)"))
+            }
+            BackgroundChoice::Auto => match self.estimate_background() {
+                Some(e) => (
+                    e.per_pixel_per_bin,
+                    format!(
+                        "{:.4e} +- {:.1e} counts per pixel and bin, estimated from the {} bin(s) before the first light ({} to {} ps)",
+                        e.per_pixel_per_bin, e.standard_error, e.bins, e.span_ps.0, e.span_ps.1
+                    ),
+                ),
+                None => (
+                    0.0,
+                    "none assumed: the stack has no bin before the first light to estimate it from (give it explicitly if there is one)".to_string(),
+                ),
+            },
+        };
+        self.model = self.model.with_background(b);
+        Ok((self, said))
     }
 
     /// Indices of all bins, `0..K`.

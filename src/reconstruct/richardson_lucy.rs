@@ -9,7 +9,7 @@ use super::operator::Convolution;
 use super::trace::{Trace, TraceRow};
 use super::{
     ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, score,
-    validate_counts,
+    signal_counts, validate_counts,
 };
 use crate::forward::ForwardModel;
 
@@ -45,12 +45,20 @@ pub fn richardson_lucy(
     // Object pixels the sensor does not see keep their value.
     let sensitivity = op.sensitivity();
     let seen = 1e-9 * mass;
-    let mut o = vec![flat_level(total, mass, h * w); gh * gw];
+    // Background of the summed bins, per pixel: the data are
+    // Poisson(H o + bg) and RL divides by H o + bg.
+    let bg = model.background() * bins.len() as f64;
+    let mut o = vec![flat_level(signal_counts(total, bg, 1, h * w), mass, h * w); gh * gw];
     let guard = DENOMINATOR_GUARD * total / (h * w) as f64;
     trace.notes.push(format!(
         "denominator guarded at {guard:.3e} ({DENOMINATOR_GUARD:e} x mean count); 4 FFTs per iteration; {}",
         grid_note(model)
     ));
+    if bg > 0.0 {
+        trace.notes.push(format!(
+            "background: {bg:.4e} counts per pixel in the summed image"
+        ));
+    }
     let crop = |o: &[f64]| Array2::from_shape_vec((h, w), model.crop_vec(o)).expect("shape");
     for it in 1..=iterations {
         let y = op.apply(&o);
@@ -59,7 +67,7 @@ pub fn richardson_lucy(
             .iter()
             .zip(&m)
             .map(|(&yj, &mj)| {
-                let d = yj.max(guard);
+                let d = (yj + bg).max(guard);
                 nll += d - if mj > 0.0 { mj * d.ln() } else { 0.0 };
                 mj / d
             })

@@ -64,6 +64,7 @@ use super::discrepancy::ExpectedDeviance;
 use super::trace::{Trace, TraceRow};
 use super::{
     ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, pnp_method, score,
+    signal_counts,
 };
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::forward::ForwardModel;
@@ -199,7 +200,18 @@ pub fn pnp_split(
         "solver: exact splitting (P4IP), {} FFTs and one denoiser call per iteration",
         2 * used.len() + 2
     ));
-    let flat = flat_level(total, total_mass, h * w);
+    // Background counts per pixel and bin: the data are Poisson(H o + bg).
+    let bg = model.background();
+    if bg > 0.0 {
+        trace.notes.push(format!(
+            "background: {bg:.4e} counts per pixel and bin in the likelihood"
+        ));
+    }
+    let flat = flat_level(
+        signal_counts(total, bg, used.len(), h * w),
+        total_mass,
+        h * w,
+    );
     // Precision of the data split per frequency, without rho:
     // sum_k |K_k|^2 / (mass_k o_flat).
     let mut kernel_power = vec![0.0f64; fft.spectrum_len()];
@@ -297,7 +309,7 @@ pub fn pnp_split(
                     let m = &s.counts[span.clone()];
                     if at_floor {
                         for (&mj, &yj) in m.iter().zip(q.iter()) {
-                            let (dj, f, g) = deviance.point(mj, yj);
+                            let (dj, f, g) = deviance.point(mj, yj + bg);
                             d += dj;
                             e += f;
                             var += g;
@@ -311,7 +323,9 @@ pub fn pnp_split(
                         .zip(&mut s.a[span])
                     {
                         let y = *qj;
-                        let z = poisson_prox(mj, y + *aj, s.rho);
+                        // With y' = z + bg the term is the plain Poisson
+                        // prox at t + bg.
+                        let z = poisson_prox(mj, y + *aj + bg, s.rho) - bg;
                         *aj += y - z;
                         *zj = z;
                         *qj = z - *aj;

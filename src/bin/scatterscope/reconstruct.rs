@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::forward::Boundary;
 use scatterscope::physics::{Preset, Sampling};
 use scatterscope::reconstruct::method::{Method, run_method};
-use scatterscope::reconstruct::problem::{Problem, ProblemError};
+use scatterscope::reconstruct::problem::{BackgroundChoice, Problem, ProblemError};
 use scatterscope::scene::Scene;
 use scatterscope::stack::exr_file;
 use scatterscope::stack::preview::write_image;
@@ -40,6 +40,11 @@ pub struct ReconstructArgs {
     /// Truth image (PNG/JPEG/EXR) to report PSNR and SSIM against.
     #[arg(long)]
     truth: Option<PathBuf>,
+    /// Background counts per pixel and bin (dark counts, ambient light) in
+    /// the likelihood of every method: auto (estimated from the stack's bins
+    /// before the first light, none if it has none), none, or a number.
+    #[arg(long, value_parser = BackgroundChoice::parse, default_value = "auto")]
+    background: BackgroundChoice,
     #[command(flatten)]
     recon: ReconArgs,
     #[command(flatten)]
@@ -117,7 +122,11 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
             anyhow::anyhow!("{e}{flag}")
         })
         .with_context(|| format!("matching {} with its physics", args.stack.display()))?;
+    let (problem, background) = problem
+        .with_background(args.background)
+        .with_context(|| format!("the background of {}", args.stack.display()))?;
     println!("model: {}", setup.model_summary());
+    println!("background: {background}");
     if !problem.left_out.is_empty() {
         let counts: f64 = problem.left_out.iter().map(|(_, c)| c).sum();
         println!(
