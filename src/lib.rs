@@ -66,6 +66,7 @@
 #![warn(missing_docs)]
 
 pub mod acquire;
+pub mod calibrate;
 pub mod config;
 pub mod denoise;
 pub mod fft2;

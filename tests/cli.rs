@@ -1161,3 +1161,31 @@ fn plain_npy_without_sidecar_reconstructs_like_the_stack_with_metadata() {
     assert!(!o.status.success());
     assert!(text(&o).1.contains("48 x 48 pixels"), "{}", text(&o).1);
 }
+
+#[test]
+fn calibrate_fits_a_simulated_stack_and_names_bad_parameters() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = simulate_small(dir.path(), 32);
+    let stack = sim.join("counts.exr");
+    let out = dir.path().join("cal");
+    let o = scatterscope(&[
+        "calibrate",
+        stack.to_str().unwrap(),
+        "--fit",
+        "mu_s",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stdout.contains("mu_s'") && stdout.contains("chi-square per degree of freedom"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("(fixed)"), "{stdout}");
+    assert!(out.join("profile.csv").is_file() && out.join("profile.png").is_file());
+    fails_with(
+        &["calibrate", stack.to_str().unwrap(), "--fit", "mu_z"],
+        &["unknown parameter `mu_z`", "mu_a, mu_s, t0, irf"],
+    );
+}

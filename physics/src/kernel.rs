@@ -255,73 +255,140 @@ fn separable_sum(radius: (usize, usize), nodes: &[(f64, Vec<f64>, Vec<f64>)]) ->
     out
 }
 
-fn integrated_bin(d: &Diffusion, setup: &Setup, ta: f64, tb: f64) -> Option<LocalKernel> {
-    // Arrival times that can be recorded in [ta, tb): the bin itself, or
-    // with an IRF the bin shifted back by every delay the IRF allows.
-    let (lo, hi) = match &setup.irf {
-        None => (ta, tb),
-        Some(irf) => {
-            let (early, late) = irf.support_ps();
-            (ta - late, tb - early)
+/// The time integral of one bin `[ta, tb)`: every arrival time that can be
+/// recorded in it, the scale that keeps the integrand near 1, and the
+/// quadrature's breakpoints, in `v = sqrt(t)`.
+struct BinTime<'a> {
+    d: &'a Diffusion,
+    setup: &'a Setup,
+    ta: f64,
+    tb: f64,
+    /// Latest arrival time that can be recorded in the bin (ps).
+    hi: f64,
+    log_scale: f64,
+    breaks: Vec<f64>,
+}
+
+impl<'a> BinTime<'a> {
+    fn new(d: &'a Diffusion, setup: &'a Setup, ta: f64, tb: f64) -> Option<Self> {
+        // Arrival times that can be recorded in [ta, tb): the bin itself, or
+        // with an IRF the bin shifted back by every delay the IRF allows.
+        let (lo, hi) = match &setup.irf {
+            None => (ta, tb),
+            Some(irf) => {
+                let (early, late) = irf.support_ps();
+                (ta - late, tb - early)
+            }
+        };
+        let lo = lo.max(0.0);
+        if hi <= lo {
+            return None;
         }
-    };
-    let lo = lo.max(0.0);
-    if hi <= lo {
-        return None;
+        let four_dc = 4.0 * d.dc_cm2_per_ps();
+        // Upper bound of ln(T(t) * dt/dv) on the range, so scaled values
+        // stay <= ~1 (the IRF's weight is at most 1).
+        let log_scale = if d.z0_cm == 0.0 && lo == 0.0 {
+            (2.0 * d.c_cm_per_ps).ln() - 0.5 * (std::f64::consts::PI * four_dc).ln()
+        } else {
+            d.log_temporal_density(d.peak_time_ps().clamp(lo, hi)) + (2.0 * hi.sqrt()).ln()
+        };
+        // Breakpoints in v = sqrt(t): halve t from the end down to the start
+        // (features of T scale with t), ending in a panel from 0 when the
+        // range starts at 0.
+        let (va, vb) = (lo.sqrt(), hi.sqrt());
+        let mut breaks = vec![vb];
+        let mut v = vb;
+        while v / std::f64::consts::SQRT_2 > va && breaks.len() < 60 {
+            v /= std::f64::consts::SQRT_2;
+            breaks.push(v);
+        }
+        breaks.push(va);
+        // With an IRF the weight turns on and off over about one IRF sigma
+        // at each bin edge (and decays with the tail before ta): break
+        // there too.
+        if let Some(irf) = &setup.irf {
+            let s = irf.sigma_ps();
+            let edges = [ta, tb]
+                .into_iter()
+                .flat_map(|edge| (-4..=4).map(move |k| edge + k as f64 * s));
+            let tail = (1..=8).map(|k| ta - k as f64 * irf.tail_ps);
+            breaks.extend(
+                edges
+                    .chain(tail)
+                    .filter(|&t| t > lo && t < hi)
+                    .map(f64::sqrt),
+            );
+        }
+        breaks.sort_by(f64::total_cmp);
+        breaks.dedup();
+        Some(Self {
+            d,
+            setup,
+            ta,
+            tb,
+            hi,
+            log_scale,
+            breaks,
+        })
     }
-    let pitch = setup.sensor.pixel_pitch_cm();
-    let four_dc = 4.0 * d.dc_cm2_per_ps();
-    let radius = support_radius(d, setup, hi);
-    // Upper bound of ln(T(t) * dt/dv) on the range, so scaled values stay
-    // <= ~1 (the IRF's weight is at most 1).
-    let log_scale = if d.z0_cm == 0.0 && lo == 0.0 {
-        (2.0 * d.c_cm_per_ps).ln() - 0.5 * (std::f64::consts::PI * four_dc).ln()
-    } else {
-        d.log_temporal_density(d.peak_time_ps().clamp(lo, hi)) + (2.0 * hi.sqrt()).ln()
-    };
-    let weight_at = |v: f64| {
+
+    /// `T(t) W(t) dt/dv / exp(log_scale)` at `v = sqrt(t)`, `W` the chance
+    /// that an arrival at `t` is recorded in the bin.
+    fn weight(&self, v: f64) -> f64 {
         let t = v * v;
-        let recorded = setup.irf.map_or(1.0, |irf| irf.bin_weight(ta, tb, t));
+        let recorded = self
+            .setup
+            .irf
+            .map_or(1.0, |irf| irf.bin_weight(self.ta, self.tb, t));
         if recorded == 0.0 {
             return 0.0;
         }
-        (d.log_temporal_density(t) - log_scale).exp() * 2.0 * v * recorded
-    };
+        (self.d.log_temporal_density(t) - self.log_scale).exp() * 2.0 * v * recorded
+    }
+}
+
+/// Share of the light in each bin of `setup` over the whole sensor plane
+/// (no pixels, no sensor edges): the time profile that `calibrate` fits.
+/// Sums to 1 over the bins; an error when no bin has light.
+pub fn bin_profile(setup: &Setup) -> Result<Vec<f64>, ParamError> {
+    setup.validate()?;
+    let d = Diffusion::new(&setup.medium)?;
+    let logs: Vec<f64> = (0..setup.bins.count)
+        .map(|k| {
+            let (ta, tb) = setup.bins.edges_ps(k);
+            BinTime::new(&d, setup, ta, tb).map_or(f64::NEG_INFINITY, |bt| {
+                let r = adaptive_nodes(&bt.breaks, TIME_RTOL, MAX_TIME_PANELS, |v| [bt.weight(v)]);
+                bt.log_scale + r.integral[0].ln()
+            })
+        })
+        .collect();
+    let total = log_sum_exp(&logs);
+    if !total.is_finite() {
+        return Err(ParamError::new(
+            "bins",
+            setup.bins.end_ps(),
+            "the ST-PSF carries no photons in these bins",
+        ));
+    }
+    Ok(logs.iter().map(|l| (l - total).exp()).collect())
+}
+
+fn integrated_bin(d: &Diffusion, setup: &Setup, ta: f64, tb: f64) -> Option<LocalKernel> {
+    let bt = BinTime::new(d, setup, ta, tb)?;
+    let hi = bt.hi;
+    let log_scale = bt.log_scale;
+    let breaks = &bt.breaks;
+    let weight_at = |v: f64| bt.weight(v);
+    let pitch = setup.sensor.pixel_pitch_cm();
+    let four_dc = 4.0 * d.dc_cm2_per_ps();
+    let radius = support_radius(d, setup, hi);
     let cell = |i: i64, s: f64| {
         gaussian_interval_fraction((i as f64 - 0.5) * pitch, (i as f64 + 0.5) * pitch, s)
     };
-    // Breakpoints in v = sqrt(t): halve t from the end down to the start
-    // (features of T scale with t), ending in a panel from 0 when the range
-    // starts at 0.
-    let (va, vb) = (lo.sqrt(), hi.sqrt());
-    let mut breaks = vec![vb];
-    let mut v = vb;
-    while v / std::f64::consts::SQRT_2 > va && breaks.len() < 60 {
-        v /= std::f64::consts::SQRT_2;
-        breaks.push(v);
-    }
-    breaks.push(va);
-    // With an IRF the weight turns on and off over about one IRF sigma at
-    // each bin edge (and decays with the tail before ta): break there too.
-    if let Some(irf) = &setup.irf {
-        let s = irf.sigma_ps();
-        let edges = [ta, tb]
-            .into_iter()
-            .flat_map(|edge| (-4..=4).map(move |k| edge + k as f64 * s));
-        let tail = (1..=8).map(|k| ta - k as f64 * irf.tail_ps);
-        breaks.extend(
-            edges
-                .chain(tail)
-                .filter(|&t| t > lo && t < hi)
-                .map(f64::sqrt),
-        );
-    }
-    breaks.sort_by(f64::total_cmp);
-    breaks.dedup();
     // Probes: total mass, the centre pixel (narrowest feature) and a pixel at
     // one end-of-range sigma (where the lateral profile turns on latest).
     let probe_offset = ((d.lateral_sigma_cm(hi) / pitch).round() as i64).max(1);
-    let adapted = adaptive_nodes(&breaks, TIME_RTOL, MAX_TIME_PANELS, |v| {
+    let adapted = adaptive_nodes(breaks, TIME_RTOL, MAX_TIME_PANELS, |v| {
         let wgt = weight_at(v);
         if wgt == 0.0 {
             return [0.0; 3];

@@ -216,3 +216,30 @@ fn bad_irf_values_and_point_sampling_are_refused_naming_the_field() {
     assert_eq!(e.field, "irf_fwhm_ps");
     assert!(e.to_string().contains("point sampling"), "{e}");
 }
+
+#[test]
+fn the_whole_plane_profile_is_the_kernels_masses_on_a_sensor_that_holds_the_light() {
+    for irf in [
+        None,
+        Some(Irf {
+            fwhm_ps: 30.0,
+            tail_ps: 10.0,
+        }),
+    ] {
+        let mut s = small_setup();
+        s.sensor.fov_cm = 40.0; // every kernel well inside the sensor
+        s.irf = irf;
+        let profile = scatterscope_physics::kernel::bin_profile(&s).unwrap();
+        let k = KernelStack::build(&s, Sampling::Integrated).unwrap();
+        let total: f64 = k.bins.iter().map(|b| b.photons).sum();
+        assert!((profile.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        for (p, b) in profile.iter().zip(&k.bins) {
+            let want = b.photons / total;
+            assert!(
+                (p - want).abs() < 1e-6 * want.max(1e-9),
+                "{irf:?} bin {}: {p} vs {want}",
+                b.index
+            );
+        }
+    }
+}

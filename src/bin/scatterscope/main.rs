@@ -2,6 +2,7 @@
 
 mod acquire;
 mod bench_recon;
+mod calibrate_cmd;
 mod denoise;
 mod denoise_bench;
 mod physics_summary;
@@ -35,6 +36,7 @@ enum Command {
     Psf(psf::PsfArgs),
     Simulate(simulate::SimulateArgs),
     Reconstruct(reconstruct::ReconstructArgs),
+    Calibrate(calibrate_cmd::CalibrateArgs),
     Report(report::ReportArgs),
     BenchRecon(bench_recon::BenchReconArgs),
     Info(tags_cmd::InfoArgs),
@@ -111,6 +113,7 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Psf(args) => psf::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Reconstruct(args) => reconstruct::run(&args),
+        Command::Calibrate(args) => calibrate_cmd::run(&args),
         Command::Report(args) => report::run(&args),
         Command::BenchRecon(args) => bench_recon::run(&args),
         Command::Info(args) => tags_cmd::info(&args),

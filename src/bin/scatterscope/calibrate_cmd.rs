@@ -1,0 +1,127 @@
+//! `scatterscope calibrate`: the medium's and the instrument's parameters
+//! from a measured stack's time profile.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use scatterscope::calibrate::{Free, calibrate, time_profile};
+use scatterscope::report::plot::{Series, chart};
+use scatterscope::stack::Stack;
+
+use crate::shared_args::PhysicsArgs;
+
+/// Fit mu_a, mu_s' and, optionally, time zero and the IRF width to a stack.
+///
+/// Poisson maximum likelihood on the stack's time profile (counts summed
+/// over the sensor per bin), with the signal and a constant background per
+/// bin always fitted. Prints each parameter with its standard error, the
+/// chi-square per degree of freedom and the parameters the data cannot pin
+/// down; writes OUT/profile.csv and OUT/profile.png (measured and fitted).
+#[derive(Debug, clap::Args)]
+pub struct CalibrateArgs {
+    /// The stack (.exr or .npy with metadata; its physics is the start).
+    stack: PathBuf,
+    /// What to fit, comma-separated: mu_a, mu_s (the reduced scattering
+    /// coefficient), t0 (time zero) and irf (the IRF's FWHM).
+    #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s")]
+    fit: Vec<String>,
+    #[command(flatten)]
+    physics: PhysicsArgs,
+    /// Output directory (created if missing).
+    #[arg(long, default_value = "out/calibrate")]
+    out: PathBuf,
+}
+
+pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    let (data, meta) = Stack::read(&args.stack)?;
+    let meta = meta.with_context(|| {
+        format!(
+            "{} records no time bins; calibration needs a stack with metadata",
+            args.stack.display()
+        )
+    })?;
+    let stack = Stack::from_parts(data, meta, &args.stack)?;
+    let setup = args.physics.resolve_over(stack.meta.setup)?;
+    let mut free = Free {
+        mu_a: false,
+        mu_s_reduced: false,
+        t0: false,
+        irf_fwhm: false,
+    };
+    for name in &args.fit {
+        match name.as_str() {
+            "mu_a" => free.mu_a = true,
+            "mu_s" => free.mu_s_reduced = true,
+            "t0" => free.t0 = true,
+            "irf" => free.irf_fwhm = true,
+            other => anyhow::bail!("--fit: unknown parameter `{other}` (use mu_a, mu_s, t0, irf)"),
+        }
+    }
+    let (start, counts) = time_profile(&stack)?;
+    let c = calibrate(&counts, start, &setup, free)
+        .with_context(|| format!("calibrating {}", args.stack.display()))?;
+    println!("model: {}", setup.model_summary());
+    println!(
+        "fit of {} bins ({} counts), {} likelihood evaluations:",
+        counts.len(),
+        counts.iter().sum::<f64>(),
+        c.evaluations
+    );
+    for p in &c.parameters {
+        let value = match (p.fitted, p.standard_error) {
+            (true, Some(se)) => format!("{:.6} +- {:.2e}", p.value, se),
+            (true, None) => format!("{:.6} (not determined by the data)", p.value),
+            (false, _) => format!("{:.6} (fixed)", p.value),
+        };
+        println!("  {:<11} {value} {}", p.name, p.unit);
+    }
+    println!(
+        "  chi-square per degree of freedom {:.3} ({} degrees of freedom)",
+        c.chi2_per_dof, c.dof
+    );
+    for u in &c.undetermined {
+        println!("  note: {u}");
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating output directory {}", args.out.display()))?;
+    let width = stack.meta.bin_width_ps;
+    let mut csv = String::from("bin_start_ps,measured,fitted\n");
+    for (i, (m, f)) in c.measured.iter().zip(&c.fitted).enumerate() {
+        writeln!(csv, "{},{m},{f}", start + i as f64 * width).expect("writing to a String");
+    }
+    let csv_path = args.out.join("profile.csv");
+    std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
+    let centre = |i: usize| start + (i as f64 + 0.5) * width;
+    let measured = Series {
+        label: "measured".into(),
+        points: c
+            .measured
+            .iter()
+            .enumerate()
+            .map(|(i, &m)| (centre(i), m))
+            .collect(),
+    };
+    let fitted = Series {
+        label: "fitted".into(),
+        points: c
+            .fitted
+            .iter()
+            .enumerate()
+            .map(|(i, &f)| (centre(i), f))
+            .collect(),
+    };
+    let png = args.out.join("profile.png");
+    chart(
+        &png,
+        "time profile",
+        "time (ps)",
+        "counts per bin",
+        &[measured],
+        &[fitted],
+        false,
+    )
+    .map_err(|e| anyhow::anyhow!("writing {}: {e}", png.display()))?;
+    println!("wrote {}/{{profile.csv, profile.png}}", args.out.display());
+    Ok(())
+}

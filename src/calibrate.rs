@@ -1,0 +1,411 @@
+//! The medium's and the instrument's parameters from a measured stack: a
+//! Poisson maximum-likelihood fit of its time profile (counts summed over
+//! the sensor per bin).
+//!
+//! Model of bin `i`: `A p_i(mu_a, mu_s', t0, IRF) + B`, with `p` the share
+//! of the ST-PSF's light in each bin over the whole sensor plane
+//! ([`scatterscope_physics::kernel::bin_profile`]: light landing off the
+//! sensor is assumed negligible), `A` the signal counts and `B` the
+//! background counts per bin over the sensor. `t0` shifts the model's time
+//! axis against the stack's. The fit is Nelder-Mead on log-parameters;
+//! standard errors come from the inverse of the negative log-likelihood's
+//! Hessian (numerical, central differences) at the optimum. A parameter
+//! whose standard error exceeds its value, or a Hessian that is not
+//! positive definite, is reported as not determined by the data.
+
+use argmin::core::{CostFunction, Executor, State};
+use argmin::solver::neldermead::NelderMead;
+use scatterscope_physics::kernel::bin_profile;
+use scatterscope_physics::{Irf, Setup};
+
+/// Which parameters are fitted; the others keep the setup's values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Free {
+    /// Absorption coefficient.
+    pub mu_a: bool,
+    /// Reduced scattering coefficient `(1 - g) mu_s`.
+    pub mu_s_reduced: bool,
+    /// Shift of time zero.
+    pub t0: bool,
+    /// FWHM of the instrument response (a Gaussian if the setup has none).
+    pub irf_fwhm: bool,
+}
+
+/// One fitted or fixed parameter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Parameter {
+    /// Name as the output prints it.
+    pub name: &'static str,
+    /// Unit.
+    pub unit: &'static str,
+    /// Value at the optimum (or the fixed value).
+    pub value: f64,
+    /// Standard error, for fitted parameters the data determine.
+    pub standard_error: Option<f64>,
+    /// Whether it was fitted.
+    pub fitted: bool,
+}
+
+/// The result of [`calibrate`].
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// Every parameter, fitted or fixed, in a fixed order: mu_a, mu_s',
+    /// t0 shift, IRF FWHM, signal counts, background counts per bin.
+    pub parameters: Vec<Parameter>,
+    /// The setup with the fitted medium and IRF (time zero not applied).
+    pub setup: Setup,
+    /// Pearson chi-square per degree of freedom of the fit.
+    pub chi2_per_dof: f64,
+    /// Degrees of freedom: bins less fitted parameters.
+    pub dof: usize,
+    /// Measured counts per bin.
+    pub measured: Vec<f64>,
+    /// Fitted expected counts per bin.
+    pub fitted: Vec<f64>,
+    /// Likelihood evaluations the fit took.
+    pub evaluations: u64,
+    /// Parameters the data do not determine, and why.
+    pub undetermined: Vec<String>,
+}
+
+/// Why a calibration cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrateError {
+    /// The profile or the setup cannot be fitted.
+    #[error("calibration: {0}")]
+    Invalid(String),
+}
+
+/// Natural parameters in the order of [`Calibration::parameters`].
+const NAMES: [(&str, &str); 6] = [
+    ("mu_a", "1/cm"),
+    ("mu_s'", "1/cm"),
+    ("t0 shift", "ps"),
+    ("IRF FWHM", "ps"),
+    ("signal", "counts"),
+    ("background", "counts per bin"),
+];
+
+struct Model<'a> {
+    setup: Setup,
+    counts: &'a [f64],
+    start_ps: f64,
+    /// Indices into the natural parameters of the free ones (A and B last).
+    free: Vec<usize>,
+    base: [f64; 6],
+}
+
+impl Model<'_> {
+    /// Natural parameters from the optimiser's vector (logs except t0).
+    fn natural(&self, x: &[f64]) -> [f64; 6] {
+        let mut p = self.base;
+        for (&i, &v) in self.free.iter().zip(x) {
+            p[i] = if i == 2 { v } else { v.exp() };
+        }
+        p
+    }
+
+    fn expected(&self, p: &[f64; 6]) -> Option<Vec<f64>> {
+        let mut s = self.setup;
+        let g = s.medium.g;
+        s.medium.mu_a_per_cm = p[0];
+        s.medium.mu_s_per_cm = p[1] / (1.0 - g);
+        s.bins.start_ps = self.start_ps - p[2];
+        if p[3] > 0.0 {
+            let tail = s.irf.map_or(0.0, |i| i.tail_ps);
+            s.irf = Some(Irf {
+                fwhm_ps: p[3],
+                tail_ps: tail,
+            });
+        }
+        let profile = bin_profile(&s).ok()?;
+        Some(profile.iter().map(|q| p[4] * q + p[5]).collect())
+    }
+
+    fn nll(&self, p: &[f64; 6]) -> f64 {
+        match self.expected(p) {
+            Some(mu) => mu
+                .iter()
+                .zip(self.counts)
+                .map(|(&u, &m)| {
+                    if u <= 0.0 {
+                        if m > 0.0 { f64::INFINITY } else { 0.0 }
+                    } else {
+                        u - if m > 0.0 { m * u.ln() } else { 0.0 }
+                    }
+                })
+                .sum(),
+            None => f64::INFINITY,
+        }
+    }
+}
+
+impl CostFunction for Model<'_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, x: &Self::Param) -> Result<f64, argmin::core::Error> {
+        let v = self.nll(&self.natural(x));
+        // Nelder-Mead compares values: an impossible point is just bad.
+        Ok(if v.is_finite() { v } else { f64::MAX })
+    }
+}
+
+/// Fits `counts` (one per bin, bins of the setup's width from `start_ps`)
+/// with `setup`'s physics as the starting point.
+pub fn calibrate(
+    counts: &[f64],
+    start_ps: f64,
+    setup: &Setup,
+    free: Free,
+) -> Result<Calibration, CalibrateError> {
+    let n = counts.len();
+    if counts.iter().any(|c| !c.is_finite() || *c < 0.0) {
+        return Err(CalibrateError::Invalid(
+            "the time profile holds negative or non-finite counts".into(),
+        ));
+    }
+    let total: f64 = counts.iter().sum();
+    if total <= 0.0 {
+        return Err(CalibrateError::Invalid(
+            "the time profile holds no counts".into(),
+        ));
+    }
+    if setup.medium.g >= 1.0 {
+        return Err(CalibrateError::Invalid(format!(
+            "g = {} leaves no scattering to fit",
+            setup.medium.g
+        )));
+    }
+    let mut setup = *setup;
+    setup.bins.count = n;
+    let lowest = counts.iter().copied().fold(f64::INFINITY, f64::min);
+    let background = lowest.max(1e-3);
+    let base = [
+        setup.medium.mu_a_per_cm.max(1e-4),
+        (1.0 - setup.medium.g) * setup.medium.mu_s_per_cm,
+        0.0,
+        setup.irf.map_or(0.0, |i| i.fwhm_ps),
+        (total - background * n as f64).max(1.0),
+        background,
+    ];
+    let mut base = base;
+    if free.irf_fwhm && base[3] == 0.0 {
+        base[3] = 2.0 * setup.bins.width_ps;
+    }
+    let mut free_idx: Vec<usize> = [
+        (free.mu_a, 0),
+        (free.mu_s_reduced, 1),
+        (free.t0, 2),
+        (free.irf_fwhm, 3),
+    ]
+    .into_iter()
+    .filter_map(|(f, i)| f.then_some(i))
+    .collect();
+    free_idx.extend([4, 5]);
+    if n <= free_idx.len() {
+        return Err(CalibrateError::Invalid(format!(
+            "{n} bins cannot determine {} parameters",
+            free_idx.len()
+        )));
+    }
+    let model = Model {
+        setup,
+        counts,
+        start_ps,
+        free: free_idx.clone(),
+        base,
+    };
+    let x0: Vec<f64> = free_idx
+        .iter()
+        .map(|&i| if i == 2 { base[2] } else { base[i].ln() })
+        .collect();
+    let mut simplex = vec![x0.clone()];
+    for (j, &i) in free_idx.iter().enumerate() {
+        let mut x = x0.clone();
+        x[j] += if i == 2 { setup.bins.width_ps } else { 0.2 };
+        simplex.push(x);
+    }
+    let solver = NelderMead::new(simplex)
+        .with_sd_tolerance(1e-10)
+        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+    let result = Executor::new(model, solver)
+        .configure(|c| c.max_iters(3000))
+        .run()
+        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+    let evaluations = result
+        .problem
+        .counts
+        .get("cost_count")
+        .copied()
+        .unwrap_or(0);
+    let x = result
+        .state()
+        .get_best_param()
+        .cloned()
+        .ok_or_else(|| CalibrateError::Invalid("the fit found no point".into()))?;
+    let model = result
+        .problem
+        .problem
+        .expect("the executor returns its problem");
+    let p = model.natural(&x);
+    let fitted = model
+        .expected(&p)
+        .ok_or_else(|| CalibrateError::Invalid("the fitted physics is invalid".into()))?;
+    let (se, undetermined) = standard_errors(&model, &p);
+    let chi2: f64 = fitted
+        .iter()
+        .zip(counts)
+        .filter(|(u, _)| **u > 0.0)
+        .map(|(u, m)| (m - u) * (m - u) / u)
+        .sum();
+    let dof = n - free_idx.len();
+    let parameters = NAMES
+        .iter()
+        .enumerate()
+        .map(|(i, &(name, unit))| Parameter {
+            name,
+            unit,
+            value: p[i],
+            standard_error: free_idx.iter().position(|&f| f == i).and_then(|j| se[j]),
+            fitted: free_idx.contains(&i),
+        })
+        .collect();
+    let mut out_setup = model.setup;
+    out_setup.medium.mu_a_per_cm = p[0];
+    out_setup.medium.mu_s_per_cm = p[1] / (1.0 - out_setup.medium.g);
+    out_setup.bins.start_ps = start_ps;
+    if p[3] > 0.0 {
+        out_setup.irf = Some(Irf {
+            fwhm_ps: p[3],
+            tail_ps: out_setup.irf.map_or(0.0, |i| i.tail_ps),
+        });
+    }
+    Ok(Calibration {
+        parameters,
+        setup: out_setup,
+        chi2_per_dof: chi2 / dof as f64,
+        dof,
+        measured: counts.to_vec(),
+        fitted,
+        evaluations,
+        undetermined: undetermined
+            .into_iter()
+            .map(|j| {
+                format!(
+                    "{}: the data do not determine it (standard error above its value or a flat likelihood)",
+                    NAMES[free_idx[j]].0
+                )
+            })
+            .collect(),
+    })
+}
+
+/// Standard errors of the free parameters from the inverse Hessian of the
+/// negative log-likelihood in natural parameters, and the indices (into
+/// the free list) of those the data do not determine.
+fn standard_errors(model: &Model, p: &[f64; 6]) -> (Vec<Option<f64>>, Vec<usize>) {
+    let free = &model.free;
+    let k = free.len();
+    let step = |i: usize| match i {
+        2 => 1e-3 * model.setup.bins.width_ps,
+        _ => 1e-4 * p[i].abs().max(1e-12),
+    };
+    let at = |d: &[(usize, f64)]| {
+        let mut q = *p;
+        for &(i, h) in d {
+            q[i] += h;
+        }
+        model.nll(&q)
+    };
+    let mut hess = vec![vec![0.0; k]; k];
+    for a in 0..k {
+        for b in a..k {
+            let (i, j) = (free[a], free[b]);
+            let (hi, hj) = (step(i), step(j));
+            let v = if a == b {
+                (at(&[(i, hi)]) - 2.0 * at(&[]) + at(&[(i, -hi)])) / (hi * hi)
+            } else {
+                (at(&[(i, hi), (j, hj)]) - at(&[(i, hi), (j, -hj)]) - at(&[(i, -hi), (j, hj)])
+                    + at(&[(i, -hi), (j, -hj)]))
+                    / (4.0 * hi * hj)
+            };
+            hess[a][b] = v;
+            hess[b][a] = v;
+        }
+    }
+    let inverse = invert(&hess);
+    let mut se = vec![None; k];
+    let mut undetermined = Vec::new();
+    for a in 0..k {
+        let var = inverse.as_ref().map_or(f64::NAN, |m| m[a][a]);
+        // Time zero may be 0: it counts as determined within ten bins.
+        let bound = match free[a] {
+            2 => 10.0 * model.setup.bins.width_ps,
+            i => p[i].abs(),
+        };
+        if var.is_finite() && var > 0.0 && var.sqrt() <= bound {
+            se[a] = Some(var.sqrt());
+        } else {
+            undetermined.push(a);
+        }
+    }
+    (se, undetermined)
+}
+
+/// Inverse of a small symmetric matrix by Gauss-Jordan elimination with
+/// partial pivoting; `None` when it is singular.
+fn invert(m: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
+    let n = m.len();
+    let mut a: Vec<Vec<f64>> = m
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            let mut r = row.clone();
+            r.extend((0..n).map(|j| if i == j { 1.0 } else { 0.0 }));
+            r
+        })
+        .collect();
+    for c in 0..n {
+        let piv = (c..n).max_by(|&x, &y| a[x][c].abs().total_cmp(&a[y][c].abs()))?;
+        if a[piv][c].abs() < 1e-300 {
+            return None;
+        }
+        a.swap(c, piv);
+        let d = a[c][c];
+        a[c].iter_mut().for_each(|v| *v /= d);
+        let row = a[c].clone();
+        for (r, other) in a.iter_mut().enumerate() {
+            if r != c {
+                let f = other[c];
+                other.iter_mut().zip(&row).for_each(|(v, w)| *v -= f * w);
+            }
+        }
+    }
+    Some(a.into_iter().map(|r| r[n..].to_vec()).collect())
+}
+
+/// The time profile of `stack`: counts summed over the sensor per bin, and
+/// the start of its first bin (ps). Its bins must follow one another.
+pub fn time_profile(stack: &crate::stack::Stack) -> Result<(f64, Vec<f64>), CalibrateError> {
+    let starts = &stack.meta.bin_starts_ps;
+    let width = stack.meta.bin_width_ps;
+    let first = *starts
+        .first()
+        .ok_or_else(|| CalibrateError::Invalid("the stack has no bins".into()))?;
+    if let Some((i, t)) = starts
+        .iter()
+        .enumerate()
+        .find(|(i, t)| (**t - (first + *i as f64 * width)).abs() > 1e-6 * width)
+    {
+        return Err(CalibrateError::Invalid(format!(
+            "bin {i} starts at {t} ps, not {} ps: calibration needs consecutive bins",
+            first + i as f64 * width
+        )));
+    }
+    let counts = stack
+        .data
+        .outer_iter()
+        .map(|img| img.iter().map(|&v| f64::from(v)).sum())
+        .collect();
+    Ok((first, counts))
+}

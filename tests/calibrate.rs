@@ -1,0 +1,107 @@
+//! Calibration recovers the medium and the instrument from a simulated time
+//! profile with Poisson noise, within its own standard errors.
+
+use ndarray::Array3;
+use scatterscope::calibrate::{Free, calibrate};
+use scatterscope::forward::poisson_counts;
+use scatterscope::physics::kernel::bin_profile;
+use scatterscope::physics::{Irf, Medium, MediumModel, Preset, Setup};
+
+fn truth() -> Setup {
+    let mut s = Preset::Paper.setup();
+    s.medium = Medium {
+        mu_a_per_cm: 0.2,
+        mu_s_per_cm: 100.0,
+        g: 0.9,
+        refractive_index: 1.4,
+        thickness_cm: 1.5,
+        model: MediumModel::Infinite,
+    };
+    s.bins.start_ps = 0.0;
+    s.bins.width_ps = 16.0;
+    s.bins.count = 64;
+    s.irf = Some(Irf {
+        fwhm_ps: 60.0,
+        tail_ps: 0.0,
+    });
+    s
+}
+
+/// Counts of `signal` photons with `background` per bin, Poisson noise.
+fn profile(s: &Setup, signal: f64, background: f64, seed: u64) -> Vec<f64> {
+    let p = bin_profile(s).unwrap();
+    let mean = Array3::from_shape_fn((p.len(), 1, 1), |(k, _, _)| signal * p[k] + background);
+    poisson_counts(&mean, seed).iter().copied().collect()
+}
+
+#[test]
+fn calibration_recovers_the_medium_the_irf_and_the_background() {
+    let t = truth();
+    let counts = profile(&t, 2e6, 40.0, 3);
+    // Start from a wrong guess of every fitted parameter.
+    let mut guess = t;
+    guess.medium.mu_a_per_cm = 0.5;
+    guess.medium.mu_s_per_cm = 60.0;
+    guess.irf = Some(Irf {
+        fwhm_ps: 30.0,
+        tail_ps: 0.0,
+    });
+    let free = Free {
+        mu_a: true,
+        mu_s_reduced: true,
+        t0: false,
+        irf_fwhm: true,
+    };
+    let c = calibrate(&counts, t.bins.start_ps, &guess, free).unwrap();
+    assert!(c.undetermined.is_empty(), "{:?}", c.undetermined);
+    let want = [0.2, 10.0, 0.0, 60.0, 2e6, 40.0];
+    for (p, w) in c.parameters.iter().zip(want) {
+        if let Some(se) = p.standard_error {
+            assert!(
+                (p.value - w).abs() < 4.0 * se,
+                "{}: {} +- {se} vs {w}",
+                p.name,
+                p.value
+            );
+            assert!(se < 0.2 * w.abs().max(1.0), "{}: se {se}", p.name);
+        } else {
+            assert!(!p.fitted, "{} fitted without a standard error", p.name);
+        }
+    }
+    assert!(
+        (0.5..1.6).contains(&c.chi2_per_dof),
+        "chi2/dof {}",
+        c.chi2_per_dof
+    );
+}
+
+#[test]
+fn a_shifted_time_zero_is_found() {
+    let t = truth();
+    let mut shifted = t;
+    shifted.bins.start_ps -= 24.0; // the stack's clock runs 24 ps late
+    let counts = profile(&shifted, 1e6, 10.0, 5);
+    let free = Free {
+        mu_a: false,
+        mu_s_reduced: false,
+        t0: true,
+        irf_fwhm: false,
+    };
+    let c = calibrate(&counts, t.bins.start_ps, &t, free).unwrap();
+    let t0 = &c.parameters[2];
+    let se = t0.standard_error.expect("time zero is determined");
+    assert!((t0.value - 24.0).abs() < 4.0 * se, "{} +- {se}", t0.value);
+}
+
+#[test]
+fn empty_or_bad_profiles_are_refused() {
+    let free = Free {
+        mu_a: true,
+        mu_s_reduced: true,
+        t0: false,
+        irf_fwhm: false,
+    };
+    assert!(calibrate(&[0.0; 64], 0.0, &truth(), free).is_err());
+    assert!(calibrate(&[f64::NAN; 64], 0.0, &truth(), free).is_err());
+    assert!(calibrate(&[1.0; 3], 0.0, &truth(), free).is_err());
+}
