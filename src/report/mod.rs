@@ -5,6 +5,7 @@
 //! the full-stack results as lines) and error-against-run-time curves.
 
 pub mod bench;
+pub mod instrument;
 pub mod plot;
 
 use crate::named::Named;
@@ -427,6 +428,9 @@ pub enum ReportError {
     /// A reconstruction failed.
     #[error(transparent)]
     Reconstruct(#[from] ReconstructError),
+    /// A stack does not fit its physics.
+    #[error(transparent)]
+    Problem(#[from] crate::reconstruct::problem::ProblemError),
     /// An image could not be written.
     #[error(transparent)]
     Stack(#[from] crate::stack::StackError),

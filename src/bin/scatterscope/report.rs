@@ -6,6 +6,8 @@ use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::forward::Boundary;
+use scatterscope::physics::Irf;
+use scatterscope::report::instrument::{instrument_costs, instrument_markdown};
 use scatterscope::report::{run_scene, summary_csv, summary_markdown};
 use scatterscope::scene::Scene;
 
@@ -34,6 +36,15 @@ pub struct ReportArgs {
     /// Seed of the Poisson sampler.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Instrument: ideal (the physics as given) or realistic (also measure
+    /// each scene with an IRF, the physics' own or 50 ps FWHM with a 20 ps
+    /// tail, and a background, and report what ignoring either costs).
+    #[arg(long, value_parser = ["ideal", "realistic"], default_value = "ideal")]
+    instrument: String,
+    /// Realistic instrument: background as a share of the mean expected
+    /// count per pixel and bin.
+    #[arg(long, default_value_t = 0.05)]
+    background_share: f64,
     /// Run the single-bin methods on every n-th bin only.
     #[arg(long, default_value_t = 1)]
     slice_step: usize,
@@ -78,8 +89,38 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         bar.println(format!("{name}: done, files in {}", dir.display()));
         reports.push(report);
     }
+    let mut md = summary_markdown(&reports);
+    if args.instrument == "realistic" {
+        anyhow::ensure!(
+            args.background_share.is_finite() && args.background_share >= 0.0,
+            "--background-share = {} must be a finite number >= 0",
+            args.background_share
+        );
+        let mut realistic = setup;
+        realistic.irf.get_or_insert(Irf {
+            fwhm_ps: 50.0,
+            tail_ps: 20.0,
+        });
+        let (mut backgrounds, mut rows) = (Vec::new(), Vec::new());
+        for name in &names {
+            let scene = Scene::parse(name);
+            bar.set_message(format!("{name}: realistic instrument"));
+            let (b, r) = instrument_costs(
+                &scene,
+                &realistic,
+                args.background_share,
+                args.boundary,
+                args.seed,
+                denoiser.as_ref(),
+                &opts,
+            )?;
+            backgrounds.push((scene.name(), b));
+            rows.extend(r);
+        }
+        md.push('\n');
+        md.push_str(&instrument_markdown(&realistic, &backgrounds, &rows));
+    }
     bar.finish_and_clear();
-    let md = summary_markdown(&reports);
     std::fs::write(args.out.join("summary.md"), &md)?;
     std::fs::write(args.out.join("summary.csv"), summary_csv(&reports))?;
     println!("{md}");
