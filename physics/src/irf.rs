@@ -30,6 +30,9 @@ pub const GAUSS_SIGMAS: f64 = 8.5;
 /// 1e-16).
 pub const TAIL_CONSTANTS: f64 = 37.0;
 
+/// Longest IRF width or tail accepted (ps).
+pub const MAX_IRF_PS: f64 = 1e6;
+
 /// Parametric instrument response.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Irf {
@@ -44,6 +47,17 @@ impl Irf {
     pub fn validate(&self) -> Result<(), ParamError> {
         positive("irf_fwhm_ps", self.fwhm_ps)?;
         non_negative("irf_tail_ps", self.tail_ps)?;
+        for (field, v) in [("irf_fwhm_ps", self.fwhm_ps), ("irf_tail_ps", self.tail_ps)] {
+            if v > MAX_IRF_PS {
+                return Err(ParamError::new(
+                    field,
+                    v,
+                    format!(
+                        "at most {MAX_IRF_PS:e} ps (a microsecond: longer than any time window)"
+                    ),
+                ));
+            }
+        }
         Ok(())
     }
 

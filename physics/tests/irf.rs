@@ -209,6 +209,16 @@ fn bad_irf_values_and_point_sampling_are_refused_naming_the_field() {
     });
     assert_eq!(s.validate().unwrap_err().field, "irf_tail_ps");
     s.irf = Some(Irf {
+        fwhm_ps: 1e300,
+        tail_ps: 0.0,
+    });
+    assert_eq!(s.validate().unwrap_err().field, "irf_fwhm_ps");
+    s.irf = Some(Irf {
+        fwhm_ps: 30.0,
+        tail_ps: 1e7,
+    });
+    assert_eq!(s.validate().unwrap_err().field, "irf_tail_ps");
+    s.irf = Some(Irf {
         fwhm_ps: 30.0,
         tail_ps: 0.0,
     });
