@@ -109,20 +109,32 @@ pub(crate) fn pnp_method(
 /// all of it (so that starting levels stay positive).
 pub const SIGNAL_FLOOR: f64 = 1e-3;
 
-/// Counts the object explains: the total less `background` per pixel in
-/// each of `bins` bins of `pixels` pixels, at least [`SIGNAL_FLOOR`] of the
-/// total.
-pub fn signal_counts(total_counts: f64, background: f64, bins: usize, pixels: usize) -> f64 {
-    (total_counts - background * (bins * pixels) as f64).max(SIGNAL_FLOOR * total_counts)
-}
-
-/// Least-squares flat object for the data: total counts over (mass x
-/// pixels), 0 without mass.
-pub fn flat_level(total_counts: f64, mass: f64, pixels: usize) -> f64 {
+/// Least-squares flat object for the data: the counts the object explains
+/// (the total less `background` per pixel in each of `bins` bins, at least
+/// [`SIGNAL_FLOOR`] of the total) over (mass x pixels); 0 without mass.
+pub fn flat_level(
+    total_counts: f64,
+    background: f64,
+    bins: usize,
+    mass: f64,
+    pixels: usize,
+) -> f64 {
+    let signal =
+        (total_counts - background * (bins * pixels) as f64).max(SIGNAL_FLOOR * total_counts);
     if mass > 0.0 {
-        total_counts / (mass * pixels as f64)
+        signal / (mass * pixels as f64)
     } else {
         0.0
+    }
+}
+
+/// Says in the trace which background the likelihood holds, if any.
+pub(crate) fn note_background(trace: &mut Trace, model: &ForwardModel) {
+    let bg = model.background();
+    if bg > 0.0 {
+        trace.notes.push(format!(
+            "background: {bg:.4e} counts per pixel and bin in the likelihood"
+        ));
     }
 }
 

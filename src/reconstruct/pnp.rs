@@ -59,8 +59,8 @@ use super::discrepancy::ExpectedDeviance;
 use super::likelihood::PoissonLikelihood;
 use super::trace::{Trace, TraceRow};
 use super::{
-    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, pnp_method, score,
-    signal_counts,
+    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, note_background,
+    pnp_method, score,
 };
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::forward::ForwardModel;
@@ -262,14 +262,11 @@ pub fn pnp_admm(
     ));
     let total: f64 = counts.sum();
     trace.notes.push(grid_note(model));
-    let bg = model.background();
-    if bg > 0.0 {
-        trace.notes.push(format!(
-            "background: {bg:.4e} counts per pixel and bin in the likelihood"
-        ));
-    }
+    note_background(&mut trace, model);
     let flat = flat_level(
-        signal_counts(total, bg, bins.len(), h * w),
+        total,
+        model.background(),
+        bins.len(),
         likelihood.total_mass(),
         h * w,
     );

@@ -8,8 +8,8 @@ use ndarray::{Array2, Array3, ArrayView2, Axis};
 use super::operator::Convolution;
 use super::trace::{Trace, TraceRow};
 use super::{
-    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, score,
-    signal_counts, validate_counts,
+    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, note_background,
+    score, validate_counts,
 };
 use crate::forward::ForwardModel;
 
@@ -48,17 +48,13 @@ pub fn richardson_lucy(
     // Background of the summed bins, per pixel: the data are
     // Poisson(H o + bg) and RL divides by H o + bg.
     let bg = model.background() * bins.len() as f64;
-    let mut o = vec![flat_level(signal_counts(total, bg, 1, h * w), mass, h * w); gh * gw];
+    let mut o = vec![flat_level(total, bg, 1, mass, h * w); gh * gw];
     let guard = DENOMINATOR_GUARD * total / (h * w) as f64;
     trace.notes.push(format!(
         "denominator guarded at {guard:.3e} ({DENOMINATOR_GUARD:e} x mean count); 4 FFTs per iteration; {}",
         grid_note(model)
     ));
-    if bg > 0.0 {
-        trace.notes.push(format!(
-            "background: {bg:.4e} counts per pixel in the summed image"
-        ));
-    }
+    note_background(&mut trace, model);
     let crop = |o: &[f64]| Array2::from_shape_vec((h, w), model.crop_vec(o)).expect("shape");
     for it in 1..=iterations {
         let y = op.apply(&o);

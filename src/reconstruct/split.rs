@@ -63,8 +63,8 @@ use rustfft::num_complex::Complex64;
 use super::discrepancy::ExpectedDeviance;
 use super::trace::{Trace, TraceRow};
 use super::{
-    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, pnp_method, score,
-    signal_counts,
+    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, note_background,
+    pnp_method, score,
 };
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::forward::ForwardModel;
@@ -202,16 +202,8 @@ pub fn pnp_split(
     ));
     // Background counts per pixel and bin: the data are Poisson(H o + bg).
     let bg = model.background();
-    if bg > 0.0 {
-        trace.notes.push(format!(
-            "background: {bg:.4e} counts per pixel and bin in the likelihood"
-        ));
-    }
-    let flat = flat_level(
-        signal_counts(total, bg, used.len(), h * w),
-        total_mass,
-        h * w,
-    );
+    note_background(&mut trace, model);
+    let flat = flat_level(total, bg, used.len(), total_mass, h * w);
     // Precision of the data split per frequency, without rho:
     // sum_k |K_k|^2 / (mass_k o_flat).
     let mut kernel_power = vec![0.0f64; fft.spectrum_len()];
