@@ -31,6 +31,32 @@ pub struct Free {
     pub irf_fwhm: bool,
 }
 
+impl Free {
+    /// The parameters named in `names` (`mu_a`, `mu_s`, `t0`, `irf`).
+    pub fn from_names<S: AsRef<str>>(names: &[S]) -> Result<Self, CalibrateError> {
+        let mut free = Free {
+            mu_a: false,
+            mu_s_reduced: false,
+            t0: false,
+            irf_fwhm: false,
+        };
+        for name in names {
+            match name.as_ref() {
+                "mu_a" => free.mu_a = true,
+                "mu_s" => free.mu_s_reduced = true,
+                "t0" => free.t0 = true,
+                "irf" => free.irf_fwhm = true,
+                other => {
+                    return Err(CalibrateError::Invalid(format!(
+                        "unknown parameter `{other}` (use mu_a, mu_s, t0, irf)"
+                    )));
+                }
+            }
+        }
+        Ok(free)
+    }
+}
+
 /// One fitted or fixed parameter.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Parameter {
@@ -105,20 +131,24 @@ impl Model<'_> {
         p
     }
 
-    fn expected(&self, p: &[f64; 6]) -> Option<Vec<f64>> {
+    /// The setup with the medium and IRF of `p`, its bins on the model's
+    /// time axis (shifted by `p`'s time zero).
+    fn setup_at(&self, p: &[f64; 6]) -> Setup {
         let mut s = self.setup;
-        let g = s.medium.g;
         s.medium.mu_a_per_cm = p[0];
-        s.medium.mu_s_per_cm = p[1] / (1.0 - g);
+        s.medium.mu_s_per_cm = p[1] / (1.0 - s.medium.g);
         s.bins.start_ps = self.start_ps - p[2];
         if p[3] > 0.0 {
-            let tail = s.irf.map_or(0.0, |i| i.tail_ps);
             s.irf = Some(Irf {
                 fwhm_ps: p[3],
-                tail_ps: tail,
+                tail_ps: s.irf.map_or(0.0, |i| i.tail_ps),
             });
         }
-        let profile = bin_profile(&s).ok()?;
+        s
+    }
+
+    fn expected(&self, p: &[f64; 6]) -> Option<Vec<f64>> {
+        let profile = bin_profile(&self.setup_at(p)).ok()?;
         Some(profile.iter().map(|q| p[4] * q + p[5]).collect())
     }
 
@@ -180,18 +210,20 @@ pub fn calibrate(
     setup.bins.count = n;
     let lowest = counts.iter().copied().fold(f64::INFINITY, f64::min);
     let background = lowest.max(1e-3);
+    let irf_fwhm = match setup.irf {
+        Some(irf) => irf.fwhm_ps,
+        // A fitted IRF the setup lacks starts at two bins.
+        None if free.irf_fwhm => 2.0 * setup.bins.width_ps,
+        None => 0.0,
+    };
     let base = [
         setup.medium.mu_a_per_cm.max(1e-4),
         (1.0 - setup.medium.g) * setup.medium.mu_s_per_cm,
         0.0,
-        setup.irf.map_or(0.0, |i| i.fwhm_ps),
+        irf_fwhm,
         (total - background * n as f64).max(1.0),
         background,
     ];
-    let mut base = base;
-    if free.irf_fwhm && base[3] == 0.0 {
-        base[3] = 2.0 * setup.bins.width_ps;
-    }
     let mut free_idx: Vec<usize> = [
         (free.mu_a, 0),
         (free.mu_s_reduced, 1),
@@ -270,16 +302,8 @@ pub fn calibrate(
             fitted: free_idx.contains(&i),
         })
         .collect();
-    let mut out_setup = model.setup;
-    out_setup.medium.mu_a_per_cm = p[0];
-    out_setup.medium.mu_s_per_cm = p[1] / (1.0 - out_setup.medium.g);
+    let mut out_setup = model.setup_at(&p);
     out_setup.bins.start_ps = start_ps;
-    if p[3] > 0.0 {
-        out_setup.irf = Some(Irf {
-            fwhm_ps: p[3],
-            tail_ps: out_setup.irf.map_or(0.0, |i| i.tail_ps),
-        });
-    }
     Ok(Calibration {
         parameters,
         setup: out_setup,

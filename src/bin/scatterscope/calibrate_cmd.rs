@@ -43,21 +43,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     })?;
     let stack = Stack::from_parts(data, meta, &args.stack)?;
     let setup = args.physics.resolve_over(stack.meta.setup)?;
-    let mut free = Free {
-        mu_a: false,
-        mu_s_reduced: false,
-        t0: false,
-        irf_fwhm: false,
-    };
-    for name in &args.fit {
-        match name.as_str() {
-            "mu_a" => free.mu_a = true,
-            "mu_s" => free.mu_s_reduced = true,
-            "t0" => free.t0 = true,
-            "irf" => free.irf_fwhm = true,
-            other => anyhow::bail!("--fit: unknown parameter `{other}` (use mu_a, mu_s, t0, irf)"),
-        }
-    }
+    let free = Free::from_names(&args.fit).context("--fit")?;
     let (start, counts) = time_profile(&stack)?;
     let c = calibrate(&counts, start, &setup, free)
         .with_context(|| format!("calibrating {}", args.stack.display()))?;
