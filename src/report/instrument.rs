@@ -2,7 +2,7 @@
 //! background counts, reconstructed with the full model, without the IRF
 //! and without the background.
 
-use scatterscope_physics::{Sampling, Setup};
+use scatterscope_physics::{Irf, Sampling, Setup};
 
 use super::ReportError;
 use crate::denoise::Denoiser;
@@ -13,6 +13,20 @@ use crate::reconstruct::problem::{BackgroundChoice, Problem};
 use crate::scene::Scene;
 use crate::simulate::simulate;
 use crate::stack::Stack;
+
+/// The IRF a realistic instrument gets when its physics has none.
+pub const REALISTIC_IRF: Irf = Irf {
+    fwhm_ps: 50.0,
+    tail_ps: 20.0,
+};
+
+/// `setup` as a realistic instrument measures it: its own IRF, else
+/// [`REALISTIC_IRF`].
+pub fn realistic(setup: &Setup) -> Setup {
+    let mut s = *setup;
+    s.irf.get_or_insert(REALISTIC_IRF);
+    s
+}
 
 /// One reconstruction of the realistic measurement.
 #[derive(Debug, Clone, PartialEq)]
@@ -29,7 +43,7 @@ pub struct InstrumentCost {
     pub wall_s: f64,
 }
 
-/// Simulates `scene` with `setup` (its IRF included) plus a background of
+/// Simulates `scene` with `setup` (its IRF, else [`REALISTIC_IRF`]) plus a background of
 /// `background_share` times the mean expected count per pixel and bin, and
 /// reconstructs it with PnP and RL-sum three ways: the full model, the IRF
 /// ignored, the background ignored. Returns the background used (counts
@@ -43,6 +57,12 @@ pub fn instrument_costs(
     denoiser: &dyn Denoiser,
     opts: &MethodOptions,
 ) -> Result<(f64, Vec<InstrumentCost>), ReportError> {
+    if !(background_share.is_finite() && background_share >= 0.0) {
+        return Err(ReportError::Input(format!(
+            "background share = {background_share} must be a finite number >= 0"
+        )));
+    }
+    let setup = &realistic(setup);
     let sim = simulate(setup, scene, Sampling::Integrated, boundary, seed)?;
     let expected = sim.expected.data.mapv(f64::from);
     let background = background_share * expected.mean().unwrap_or(0.0);

@@ -24,21 +24,12 @@ pub fn print_setup(setup: &Setup, kernels: &KernelStack) {
             .map_or(f64::NAN, |b| b.start_ps),
         d.peak_time_ps(),
     );
-    match &d.slab {
-        None => eprintln!("medium model: infinite (the paper's Eq. 6, no slab faces)"),
-        Some(s) => eprintln!(
-            "medium model: slab with extrapolated boundaries {:.4} cm outside each face (n = {} against air), equivalent source {:.4} cm deep; transmitted flux",
+    eprintln!("model: {}", setup.model_summary());
+    if let Some(s) = &d.slab {
+        eprintln!(
+            "slab: extrapolated boundaries {:.4} cm outside each face (n = {} against air), equivalent source {:.4} cm deep; transmitted flux",
             s.extrapolation_cm, m.refractive_index, s.source_depth_cm
-        ),
-    }
-    match &setup.irf {
-        None => eprintln!("instrument response: none (ideal timing)"),
-        Some(irf) => eprintln!(
-            "instrument response: Gaussian FWHM {} ps with an exponential tail of {} ps (mean delay {} ps); kernels convolved with it in time",
-            irf.fwhm_ps,
-            irf.tail_ps,
-            irf.mean_ps()
-        ),
+        );
     }
     eprintln!(
         "sensor: {} x {} px over {} cm ({:.4} cm/px); bins: {} x {} ps from {} ps; light budget {} photons",

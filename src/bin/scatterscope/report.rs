@@ -6,8 +6,7 @@ use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::forward::Boundary;
-use scatterscope::physics::Irf;
-use scatterscope::report::instrument::{instrument_costs, instrument_markdown};
+use scatterscope::report::instrument::{instrument_costs, instrument_markdown, realistic};
 use scatterscope::report::{run_scene, summary_csv, summary_markdown};
 use scatterscope::scene::Scene;
 
@@ -91,34 +90,34 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     }
     let mut md = summary_markdown(&reports);
     if args.instrument == "realistic" {
-        anyhow::ensure!(
-            args.background_share.is_finite() && args.background_share >= 0.0,
-            "--background-share = {} must be a finite number >= 0",
-            args.background_share
-        );
-        let mut realistic = setup;
-        realistic.irf.get_or_insert(Irf {
-            fwhm_ps: 50.0,
-            tail_ps: 20.0,
-        });
         let (mut backgrounds, mut rows) = (Vec::new(), Vec::new());
         for name in &names {
             let scene = Scene::parse(name);
             bar.set_message(format!("{name}: realistic instrument"));
             let (b, r) = instrument_costs(
                 &scene,
-                &realistic,
+                &setup,
                 args.background_share,
                 args.boundary,
                 args.seed,
                 denoiser.as_ref(),
                 &opts,
-            )?;
+            )
+            .with_context(|| {
+                format!(
+                    "{name}: realistic instrument (--background-share {})",
+                    args.background_share
+                )
+            })?;
             backgrounds.push((scene.name(), b));
             rows.extend(r);
         }
         md.push('\n');
-        md.push_str(&instrument_markdown(&realistic, &backgrounds, &rows));
+        md.push_str(&instrument_markdown(
+            &realistic(&setup),
+            &backgrounds,
+            &rows,
+        ));
     }
     bar.finish_and_clear();
     std::fs::write(args.out.join("summary.md"), &md)?;
