@@ -74,30 +74,37 @@ pub fn instrument_costs(
     };
     let mut ideal = *setup;
     ideal.irf = None;
-    let variants: [(&'static str, &Setup, BackgroundChoice); 3] = [
-        ("full model", setup, BackgroundChoice::Given(background)),
-        ("IRF ignored", &ideal, BackgroundChoice::Given(background)),
-        ("background ignored", setup, BackgroundChoice::None),
-    ];
-    let mut out = Vec::new();
-    for (model, s, choice) in variants {
-        let problem = Problem::new(&stack, s, Sampling::Integrated, boundary)?;
-        let (problem, _) = problem.with_background(choice)?;
-        for method in [Method::Pnp, Method::RlSum] {
-            let r = run_method(&problem, method, None, denoiser, opts, None, |_| {})?;
-            out.push(InstrumentCost {
-                scene: scene.name(),
-                model,
-                method: if method == Method::Pnp {
-                    "pnp"
-                } else {
-                    "rl-sum"
-                },
-                psnr: psnr(r.image.view(), sim.truth.view()),
-                wall_s: r.trace.rows.last().map_or(0.0, |row| row.wall_s),
-            });
-        }
-    }
+    let run =
+        |problem: &Problem, model: &'static str| -> Result<Vec<InstrumentCost>, ReportError> {
+            [Method::Pnp, Method::RlSum]
+                .into_iter()
+                .map(|method| {
+                    let r = run_method(problem, method, None, denoiser, opts, None, |_| {})?;
+                    Ok(InstrumentCost {
+                        scene: scene.name(),
+                        model,
+                        method: if method == Method::Pnp {
+                            "pnp"
+                        } else {
+                            "rl-sum"
+                        },
+                        psnr: psnr(r.image.view(), sim.truth.view()),
+                        wall_s: r.trace.rows.last().map_or(0.0, |row| row.wall_s),
+                    })
+                })
+                .collect()
+        };
+    // The full model and the one without background share their kernels:
+    // built once, the background set twice.
+    let given = BackgroundChoice::Given(background);
+    let (full, _) =
+        Problem::new(&stack, setup, Sampling::Integrated, boundary)?.with_background(given)?;
+    let mut out = run(&full, "full model")?;
+    let (no_irf, _) =
+        Problem::new(&stack, &ideal, Sampling::Integrated, boundary)?.with_background(given)?;
+    out.extend(run(&no_irf, "IRF ignored")?);
+    let (no_background, _) = full.with_background(BackgroundChoice::None)?;
+    out.extend(run(&no_background, "background ignored")?);
     Ok((background, out))
 }
 
