@@ -266,26 +266,27 @@ fn set<T>(dst: &mut T, v: Option<T>) {
 
 /// Parses a preset name as TOML files (and the command line) spell it.
 pub fn parse_preset(name: &str) -> Result<Preset, String> {
-    Preset::ALL
-        .into_iter()
-        .find(|p| p.name() == name)
-        .ok_or_else(|| {
-            let known: Vec<_> = Preset::ALL.iter().map(|p| p.name()).collect();
-            format!("unknown preset `{name}` (known: {})", known.join(", "))
-        })
+    parse_by_name(name, &Preset::ALL, Preset::name, "preset")
 }
 
 /// Parses a medium model name (`infinite` or `slab`).
 pub fn parse_medium(name: &str) -> Result<MediumModel, String> {
-    MediumModel::ALL
-        .into_iter()
-        .find(|m| m.name() == name)
+    parse_by_name(name, &MediumModel::ALL, MediumModel::name, "medium model")
+}
+
+/// The value of `all` called `name`, or an error listing the known names.
+fn parse_by_name<T: Copy>(
+    name: &str,
+    all: &[T],
+    name_of: fn(T) -> &'static str,
+    what: &str,
+) -> Result<T, String> {
+    all.iter()
+        .copied()
+        .find(|&v| name_of(v) == name)
         .ok_or_else(|| {
-            let known: Vec<_> = MediumModel::ALL.iter().map(|m| m.name()).collect();
-            format!(
-                "unknown medium model `{name}` (known: {})",
-                known.join(", ")
-            )
+            let known: Vec<_> = all.iter().map(|&v| name_of(v)).collect();
+            format!("unknown {what} `{name}` (known: {})", known.join(", "))
         })
 }
 
