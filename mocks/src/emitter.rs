@@ -179,20 +179,20 @@ impl Emitter {
                 .collect(),
         )
         .map_err(|e| EmitterError::Invalid(format!("scene weights: {e}")))?;
-        let arrivals = match &kernels.setup.irf {
-            Some(irf) => Some(arrival_kernels(&kernels.setup, irf)?),
-            None => None,
-        };
-        let jitter = match &kernels.setup.irf {
-            Some(irf) => Some((
-                Normal::new(0.0, irf.sigma_ps())
-                    .map_err(|e| EmitterError::Invalid(format!("IRF: {e}")))?,
-                (irf.tail_ps > 0.0)
-                    .then(|| Exp::new(1.0 / irf.tail_ps))
-                    .transpose()
-                    .map_err(|e| EmitterError::Invalid(format!("IRF tail: {e}")))?,
-            )),
-            None => None,
+        // With an IRF: arrivals from the IRF-free kernels, then the jitter.
+        let (arrivals, jitter) = match &kernels.setup.irf {
+            Some(irf) => (
+                Some(arrival_kernels(&kernels.setup, irf)?),
+                Some((
+                    Normal::new(0.0, irf.sigma_ps())
+                        .map_err(|e| EmitterError::Invalid(format!("IRF: {e}")))?,
+                    (irf.tail_ps > 0.0)
+                        .then(|| Exp::new(1.0 / irf.tail_ps))
+                        .transpose()
+                        .map_err(|e| EmitterError::Invalid(format!("IRF tail: {e}")))?,
+                )),
+            ),
+            None => (None, None),
         };
         let sampled = arrivals.as_ref().unwrap_or(kernels);
         let kernel = WeightedAliasIndex::new(sampled.kernels.iter().map(|&v| v.max(0.0)).collect())

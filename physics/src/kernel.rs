@@ -375,21 +375,17 @@ pub fn bin_profile(setup: &Setup) -> Result<Vec<f64>, ParamError> {
 
 fn integrated_bin(d: &Diffusion, setup: &Setup, ta: f64, tb: f64) -> Option<LocalKernel> {
     let bt = BinTime::new(d, setup, ta, tb)?;
-    let hi = bt.hi;
-    let log_scale = bt.log_scale;
-    let breaks = &bt.breaks;
-    let weight_at = |v: f64| bt.weight(v);
     let pitch = setup.sensor.pixel_pitch_cm();
     let four_dc = 4.0 * d.dc_cm2_per_ps();
-    let radius = support_radius(d, setup, hi);
+    let radius = support_radius(d, setup, bt.hi);
     let cell = |i: i64, s: f64| {
         gaussian_interval_fraction((i as f64 - 0.5) * pitch, (i as f64 + 0.5) * pitch, s)
     };
     // Probes: total mass, the centre pixel (narrowest feature) and a pixel at
     // one end-of-range sigma (where the lateral profile turns on latest).
-    let probe_offset = ((d.lateral_sigma_cm(hi) / pitch).round() as i64).max(1);
-    let adapted = adaptive_nodes(breaks, TIME_RTOL, MAX_TIME_PANELS, |v| {
-        let wgt = weight_at(v);
+    let probe_offset = ((d.lateral_sigma_cm(bt.hi) / pitch).round() as i64).max(1);
+    let adapted = adaptive_nodes(&bt.breaks, TIME_RTOL, MAX_TIME_PANELS, |v| {
+        let wgt = bt.weight(v);
         if wgt == 0.0 {
             return [0.0; 3];
         }
@@ -402,7 +398,7 @@ fn integrated_bin(d: &Diffusion, setup: &Setup, ta: f64, tb: f64) -> Option<Loca
         .nodes
         .iter()
         .filter_map(|n| {
-            let weight = n.w * weight_at(n.x);
+            let weight = n.w * bt.weight(n.x);
             (weight > 0.0).then(|| {
                 let s = (four_dc * n.x * n.x).sqrt();
                 let fy = (-(ry as i64)..=ry as i64).map(|i| cell(i, s)).collect();
@@ -416,7 +412,7 @@ fn integrated_bin(d: &Diffusion, setup: &Setup, ta: f64, tb: f64) -> Option<Loca
     }
     Some(LocalKernel {
         values: separable_sum(radius, &nodes),
-        log_scale,
+        log_scale: bt.log_scale,
         radius,
         nodes: nodes.len(),
     })
