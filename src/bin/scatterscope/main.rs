@@ -3,6 +3,7 @@
 mod acquire;
 mod bench_recon;
 mod calibrate_cmd;
+mod calibrate_slab;
 mod denoise;
 mod denoise_bench;
 mod physics_summary;
@@ -37,6 +38,7 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     Reconstruct(reconstruct::ReconstructArgs),
     Calibrate(calibrate_cmd::CalibrateArgs),
+    CalibrateSlab(calibrate_slab::CalibrateSlabArgs),
     Report(report::ReportArgs),
     BenchRecon(bench_recon::BenchReconArgs),
     Info(tags_cmd::InfoArgs),
@@ -114,6 +116,7 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(&args),
         Command::Reconstruct(args) => reconstruct::run(&args),
         Command::Calibrate(args) => calibrate_cmd::run(&args),
+        Command::CalibrateSlab(args) => calibrate_slab::run(&args),
         Command::Report(args) => report::run(&args),
         Command::BenchRecon(args) => bench_recon::run(&args),
         Command::Info(args) => tags_cmd::info(&args),

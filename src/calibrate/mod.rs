@@ -18,6 +18,13 @@ use argmin::solver::neldermead::NelderMead;
 use scatterscope_physics::kernel::bin_profile;
 use scatterscope_physics::{Irf, Setup};
 
+pub mod hessian;
+pub mod histogram;
+pub mod measured_irf;
+pub mod transmittance;
+
+use hessian::{invert, numerical_hessian};
+
 /// Which parameters are fitted; the others keep the setup's values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Free {
@@ -329,41 +336,28 @@ pub fn calibrate(
 /// the free list) of those the data do not determine.
 fn standard_errors(model: &Model, p: &[f64; 6]) -> (Vec<Option<f64>>, Vec<usize>) {
     let free = &model.free;
-    let k = free.len();
-    let step = |i: usize| match i {
-        2 => 1e-3 * model.setup.bins.width_ps,
-        _ => 1e-4 * p[i].abs().max(1e-12),
-    };
-    let at = |d: &[(usize, f64)]| {
+    let f = |v: &[f64]| {
         let mut q = *p;
-        for &(i, h) in d {
-            q[i] += h;
+        for (&i, &x) in free.iter().zip(v) {
+            q[i] = x;
         }
         model.nll(&q)
     };
-    let mut hess = vec![vec![0.0; k]; k];
-    for a in 0..k {
-        for b in a..k {
-            let (i, j) = (free[a], free[b]);
-            let (hi, hj) = (step(i), step(j));
-            let v = if a == b {
-                (at(&[(i, hi)]) - 2.0 * at(&[]) + at(&[(i, -hi)])) / (hi * hi)
-            } else {
-                (at(&[(i, hi), (j, hj)]) - at(&[(i, hi), (j, -hj)]) - at(&[(i, -hi), (j, hj)])
-                    + at(&[(i, -hi), (j, -hj)]))
-                    / (4.0 * hi * hj)
-            };
-            hess[a][b] = v;
-            hess[b][a] = v;
-        }
-    }
-    let inverse = invert(&hess);
-    let mut se = vec![None; k];
+    let x: Vec<f64> = free.iter().map(|&i| p[i]).collect();
+    let steps: Vec<f64> = free
+        .iter()
+        .map(|&i| match i {
+            2 => 1e-3 * model.setup.bins.width_ps,
+            _ => 1e-4 * p[i].abs().max(1e-12),
+        })
+        .collect();
+    let inverse = invert(&numerical_hessian(&f, &x, &steps));
+    let mut se = vec![None; free.len()];
     let mut undetermined = Vec::new();
-    for a in 0..k {
+    for (a, &i) in free.iter().enumerate() {
         let var = inverse.as_ref().map_or(f64::NAN, |m| m[a][a]);
         // Time zero may be 0: it counts as determined within ten bins.
-        let bound = match free[a] {
+        let bound = match i {
             2 => 10.0 * model.setup.bins.width_ps,
             i => p[i].abs(),
         };
@@ -374,38 +368,6 @@ fn standard_errors(model: &Model, p: &[f64; 6]) -> (Vec<Option<f64>>, Vec<usize>
         }
     }
     (se, undetermined)
-}
-
-/// Inverse of a small symmetric matrix by Gauss-Jordan elimination with
-/// partial pivoting; `None` when it is singular.
-fn invert(m: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
-    let n = m.len();
-    let mut a: Vec<Vec<f64>> = m
-        .iter()
-        .enumerate()
-        .map(|(i, row)| {
-            let mut r = row.clone();
-            r.extend((0..n).map(|j| if i == j { 1.0 } else { 0.0 }));
-            r
-        })
-        .collect();
-    for c in 0..n {
-        let piv = (c..n).max_by(|&x, &y| a[x][c].abs().total_cmp(&a[y][c].abs()))?;
-        if a[piv][c].abs() < 1e-300 {
-            return None;
-        }
-        a.swap(c, piv);
-        let d = a[c][c];
-        a[c].iter_mut().for_each(|v| *v /= d);
-        let row = a[c].clone();
-        for (r, other) in a.iter_mut().enumerate() {
-            if r != c {
-                let f = other[c];
-                other.iter_mut().zip(&row).for_each(|(v, w)| *v -= f * w);
-            }
-        }
-    }
-    Some(a.into_iter().map(|r| r[n..].to_vec()).collect())
 }
 
 /// The time profile of `stack`: counts summed over the sensor per bin, and

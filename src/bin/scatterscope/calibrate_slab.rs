@@ -1,0 +1,243 @@
+//! `scatterscope calibrate-slab`: mu_s' and mu_a from time-resolved
+//! transmittance captures of slabs of known thickness.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use scatterscope::calibrate::histogram::TimeHistogram;
+use scatterscope::calibrate::measured_irf::MeasuredIrf;
+use scatterscope::calibrate::transmittance::{
+    Capture, SlabFit, SlabFitOptions, fit_slab, parse_length_cm, predict_captures,
+};
+use scatterscope::report::plot::{Series, chart};
+
+/// Fit mu_s' and mu_a to transmittance captures through slabs.
+///
+/// Each capture is one detector's time histogram on the laser's axis
+/// behind a slab of known thickness. The model is the diffusion slab with
+/// extrapolated boundaries, convolved with the instrument response measured
+/// without the slab (--irf-from), plus a constant background; mu_s' and
+/// mu_a are shared, time zero, signal and background are each capture's.
+/// Captures given with --predict are not fitted: the fitted medium predicts
+/// them (only their time zero, signal and background are fitted), to test
+/// the medium on data it never saw. Writes OUT/fit.csv and OUT/fit.png.
+#[derive(Debug, clap::Args)]
+pub struct CalibrateSlabArgs {
+    /// Captures to fit, each FILE=THICKNESS (THICKNESS with its unit: cm,
+    /// mm, m or in), e.g. capture_1_0_inch.mat=1in.
+    #[arg(long = "capture", required = true, value_name = "FILE=THICKNESS")]
+    captures: Vec<String>,
+    /// Captures the fitted medium predicts, FILE=THICKNESS.
+    #[arg(long = "predict", value_name = "FILE=THICKNESS")]
+    predict: Vec<String>,
+    /// The instrument response: a capture without the slab.
+    #[arg(long)]
+    irf_from: PathBuf,
+    /// Bin width (ps) of MATLAB histograms, which do not record it.
+    #[arg(long)]
+    bin_ps: Option<f64>,
+    /// Dataset holding the histogram in MATLAB files.
+    #[arg(long, default_value = "out")]
+    dataset: String,
+    /// Refractive index of the medium (not fitted).
+    #[arg(long)]
+    refractive_index: f64,
+    /// Starting mu_a (1/cm).
+    #[arg(long, default_value_t = 0.01)]
+    mu_a: f64,
+    /// Starting mu_s' (1/cm).
+    #[arg(long, default_value_t = 5.0)]
+    mu_s: f64,
+    /// What to fit, comma-separated: mu_a, mu_s; the others stay at their
+    /// starting values.
+    #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s")]
+    fit: Vec<String>,
+    /// Output directory (created if missing).
+    #[arg(long, default_value = "out/calibrate-slab")]
+    out: PathBuf,
+}
+
+fn read_capture(spec: &str, args: &CalibrateSlabArgs) -> anyhow::Result<Capture> {
+    let (file, thickness) = spec
+        .rsplit_once('=')
+        .with_context(|| format!("capture `{spec}`: expected FILE=THICKNESS"))?;
+    let thickness_cm = parse_length_cm(thickness).with_context(|| format!("capture `{spec}`"))?;
+    let path = PathBuf::from(file);
+    let histogram = TimeHistogram::read(&path, &args.dataset, args.bin_ps)?;
+    let label = path
+        .file_stem()
+        .map_or_else(|| file.to_string(), |s| s.to_string_lossy().into_owned());
+    Ok(Capture {
+        histogram,
+        thickness_cm,
+        label,
+    })
+}
+
+fn print_fit(title: &str, fit: &SlabFit) {
+    println!("{title}");
+    for (name, est) in [("mu_a", fit.mu_a), ("mu_s'", fit.mu_s_reduced)] {
+        let value = match (est.fitted, est.standard_error) {
+            (true, Some(se)) => format!(
+                "{:.5} +- {:.1e} /cm (Poisson), +- {:.1e} scaled by sqrt(chi2/dof)",
+                est.value,
+                se,
+                se * fit.scatter_factor()
+            ),
+            (true, None) => format!("{:.5} /cm (not determined by the data)", est.value),
+            (false, _) => format!("{:.5} /cm (fixed)", est.value),
+        };
+        println!("  {name:<6} {value}");
+    }
+    println!(
+        "  extrapolation distance {:.2} mm; chi-square per degree of freedom {:.2} ({} degrees of freedom)",
+        10.0 * fit.extrapolation_cm,
+        fit.chi2_per_dof,
+        fit.dof
+    );
+    println!(
+        "  capture              thickness   t0 (ps)        signal       background/bin  bins  chi2/dof"
+    );
+    for c in &fit.captures {
+        println!(
+            "  {:<20} {:>6.2} cm  {:>12.1}  {:>12.0}  {:>14.1}  {:>5}  {:>8.2}",
+            c.label,
+            c.thickness_cm,
+            c.t0_ps,
+            c.signal,
+            c.background,
+            c.measured.len(),
+            c.chi2_per_dof()
+        );
+    }
+    for u in &fit.undetermined {
+        println!("  note: {u}");
+    }
+}
+
+pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
+    let reference = TimeHistogram::read(&args.irf_from, &args.dataset, args.bin_ps)?;
+    let irf = MeasuredIrf::from_histogram(&reference)?;
+    println!(
+        "instrument response from {}: {} bins of {} ps, FWHM {:.1} ps, mean delay after the peak {:.1} ps, background {} counts per bin subtracted",
+        irf.source,
+        irf.weights.len(),
+        irf.bin_width_ps,
+        irf.fwhm_ps(),
+        irf.mean_delay_ps(),
+        irf.background_per_bin
+    );
+    let captures: Vec<Capture> = args
+        .captures
+        .iter()
+        .map(|s| read_capture(s, args))
+        .collect::<anyhow::Result<_>>()?;
+    let held: Vec<Capture> = args
+        .predict
+        .iter()
+        .map(|s| read_capture(s, args))
+        .collect::<anyhow::Result<_>>()?;
+    let mut opts = SlabFitOptions {
+        refractive_index: args.refractive_index,
+        mu_a_per_cm: args.mu_a,
+        mu_s_reduced_per_cm: args.mu_s,
+        fit_mu_a: false,
+        fit_mu_s_reduced: false,
+    };
+    for name in &args.fit {
+        match name.as_str() {
+            "mu_a" => opts.fit_mu_a = true,
+            "mu_s" => opts.fit_mu_s_reduced = true,
+            other => anyhow::bail!("--fit: unknown parameter `{other}` (use mu_a, mu_s)"),
+        }
+    }
+    println!(
+        "model: slab with extrapolated boundaries, n = {}, on-axis point detector, measured instrument response, constant background per capture",
+        args.refractive_index
+    );
+    let started = std::time::Instant::now();
+    let fit = fit_slab(&captures, &irf, &opts)?;
+    print_fit(
+        &format!(
+            "joint fit of {} captures ({} single-capture model evaluations, {:.1} s):",
+            captures.len(),
+            fit.evaluations,
+            started.elapsed().as_secs_f64()
+        ),
+        &fit,
+    );
+    let mut all = vec![(captures, fit.clone())];
+    if !held.is_empty() {
+        let pred = predict_captures(
+            &held,
+            &irf,
+            args.refractive_index,
+            fit.mu_a.value,
+            fit.mu_s_reduced.value,
+        )?;
+        print_fit(
+            "prediction of captures left out of the fit (medium fixed):",
+            &pred,
+        );
+        all.push((held, pred));
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating output directory {}", args.out.display()))?;
+    let mut csv = String::from("capture,role,bin_start_ps,measured,fitted\n");
+    let mut pngs = Vec::new();
+    for ((caps, f), role) in all.iter().zip(["fitted", "predicted"]) {
+        for (cap, c) in caps.iter().zip(&f.captures) {
+            let h = &cap.histogram;
+            let start = |i: usize| h.start_ps + (c.window_start + i) as f64 * h.bin_width_ps;
+            for (i, (m, u)) in c.measured.iter().zip(&c.fitted).enumerate() {
+                writeln!(csv, "{},{role},{},{m},{u}", c.label, start(i))
+                    .expect("writing to a String");
+            }
+            // Log counts against the time since the pulse entered the slab.
+            let points = |v: &[f64]| {
+                v.iter()
+                    .enumerate()
+                    .map(|(i, &x)| {
+                        (
+                            start(i) + 0.5 * h.bin_width_ps - c.t0_ps,
+                            x.max(0.5).log10(),
+                        )
+                    })
+                    .collect()
+            };
+            let name = format!("fit_{}.png", c.label);
+            let png = args.out.join(&name);
+            chart(
+                &png,
+                &format!(
+                    "{} ({role}, {:.2} cm): chi2/dof {:.2}",
+                    c.label,
+                    c.thickness_cm,
+                    c.chi2_per_dof()
+                ),
+                "time after the pulse enters the slab (ps)",
+                "log10 counts per bin",
+                &[Series {
+                    label: "measured".into(),
+                    points: points(&c.measured),
+                }],
+                &[Series {
+                    label: "model".into(),
+                    points: points(&c.fitted),
+                }],
+                false,
+            )
+            .map_err(|e| anyhow::anyhow!("writing {}: {e}", png.display()))?;
+            pngs.push(name);
+        }
+    }
+    let csv_path = args.out.join("fit.csv");
+    std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
+    println!(
+        "wrote {}/{{fit.csv, {}}}",
+        args.out.display(),
+        pngs.join(", ")
+    );
+    Ok(())
+}

@@ -1,0 +1,204 @@
+//! One detector's measured time histogram: photon counts in consecutive
+//! bins of equal width, as a TCSPC module accumulates them.
+//!
+//! Sources: MATLAB v7.3 files (HDF5 inside; read with the pure-Rust
+//! `hdf5-reader`, so no system HDF5 library is needed), and our own stacks
+//! (the counts summed over the sensor per bin).
+
+use std::path::{Path, PathBuf};
+
+use crate::stack::Stack;
+
+/// Most bins before the light whose median is the background.
+pub const BACKGROUND_BINS: usize = 1000;
+
+/// Fewest bins before the light that give a background.
+pub const MIN_BACKGROUND_BINS: usize = 8;
+
+/// Counts per bin of one detector, bins `[k w, (k + 1) w)` of the
+/// recording's own clock.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimeHistogram {
+    /// Counts per bin (non-negative, finite).
+    pub counts: Vec<f64>,
+    /// Width of every bin (ps).
+    pub bin_width_ps: f64,
+    /// Time of the first bin's start on the recording's clock (ps).
+    pub start_ps: f64,
+    /// Where the histogram came from, for messages.
+    pub source: String,
+}
+
+/// Why a histogram cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum HistogramError {
+    /// The file cannot be opened or decoded.
+    #[error("{path}: {message}")]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+fn file_error(path: &Path, message: impl Into<String>) -> HistogramError {
+    HistogramError::File {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+impl TimeHistogram {
+    /// Checks the counts and the bin width; `source` names the origin in
+    /// the error.
+    pub fn new(
+        counts: Vec<f64>,
+        bin_width_ps: f64,
+        start_ps: f64,
+        source: &Path,
+    ) -> Result<Self, HistogramError> {
+        if !(bin_width_ps.is_finite() && bin_width_ps > 0.0) {
+            return Err(file_error(
+                source,
+                format!("bin width {bin_width_ps} ps must be positive and finite"),
+            ));
+        }
+        if counts.is_empty() {
+            return Err(file_error(source, "the histogram has no bins"));
+        }
+        if let Some((i, c)) = counts
+            .iter()
+            .enumerate()
+            .find(|(_, c)| !c.is_finite() || **c < 0.0)
+        {
+            return Err(file_error(
+                source,
+                format!("bin {i} holds {c} counts: counts must be finite and non-negative"),
+            ));
+        }
+        Ok(Self {
+            counts,
+            bin_width_ps,
+            start_ps,
+            source: source.display().to_string(),
+        })
+    }
+
+    /// Reads dataset `dataset` (a vector of counts, e.g. `out` in the
+    /// confocal-diffuse-tomography captures) of a MATLAB v7.3 file. MATLAB
+    /// files do not say the bin width, so the caller gives it.
+    pub fn read_mat(path: &Path, dataset: &str, bin_width_ps: f64) -> Result<Self, HistogramError> {
+        let file = hdf5_reader::Hdf5File::open(path).map_err(|e| {
+            file_error(
+                path,
+                format!("not a MATLAB v7.3 (HDF5) file: {e} (older MATLAB formats are not read; save with -v7.3)"),
+            )
+        })?;
+        let ds = file.dataset(&format!("/{dataset}")).map_err(|_| {
+            let names = file
+                .root_group()
+                .and_then(|g| g.member_names())
+                .map(|(_, d)| d.join(", "))
+                .unwrap_or_default();
+            file_error(
+                path,
+                format!("no dataset `{dataset}` (datasets in the file: {names})"),
+            )
+        })?;
+        let shape = ds.shape().to_vec();
+        if shape.iter().filter(|&&d| d > 1).count() > 1 {
+            return Err(file_error(
+                path,
+                format!("dataset `{dataset}` has shape {shape:?}: a histogram is one vector"),
+            ));
+        }
+        let values: ndarray::ArrayD<f64> = ds.read_array().map_err(|e| {
+            file_error(
+                path,
+                format!("dataset `{dataset}` cannot be read as numbers: {e}"),
+            )
+        })?;
+        Self::new(values.iter().copied().collect(), bin_width_ps, 0.0, path)
+    }
+
+    /// The counts of `stack` summed over the sensor per bin; its bins must
+    /// follow one another.
+    pub fn from_stack(stack: &Stack, path: &Path) -> Result<Self, HistogramError> {
+        let (start, counts) =
+            super::time_profile(stack).map_err(|e| file_error(path, e.to_string()))?;
+        Self::new(counts, stack.meta.bin_width_ps, start, path)
+    }
+
+    /// Reads a histogram file by its extension: `.mat` (dataset `dataset`,
+    /// bins of `bin_width_ps`), or a stack (`.exr`, `.npy`: summed over the
+    /// sensor, bins from its metadata).
+    pub fn read(
+        path: &Path,
+        dataset: &str,
+        bin_width_ps: Option<f64>,
+    ) -> Result<Self, HistogramError> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("mat") => {
+                let width = bin_width_ps.ok_or_else(|| {
+                    file_error(
+                        path,
+                        "a MATLAB file does not record its bin width: give it (--bin-ps)",
+                    )
+                })?;
+                Self::read_mat(path, dataset, width)
+            }
+            Some("exr") | Some("npy") => {
+                let stack = Stack::load(path).map_err(|e| file_error(path, e.to_string()))?;
+                Self::from_stack(&stack, path)
+            }
+            _ => Err(file_error(
+                path,
+                "unknown histogram format (read: .mat MATLAB v7.3, .exr and .npy stacks)",
+            )),
+        }
+    }
+
+    /// Total counts.
+    pub fn total(&self) -> f64 {
+        self.counts.iter().sum()
+    }
+
+    /// Index of the fullest bin (the first of equals).
+    pub fn peak_index(&self) -> usize {
+        self.counts
+            .iter()
+            .enumerate()
+            .fold((0, f64::NEG_INFINITY), |best, (i, &c)| {
+                if c > best.1 { (i, c) } else { best }
+            })
+            .0
+    }
+
+    /// Background counts per bin before the light: the median of the
+    /// bins from [`BACKGROUND_BINS`] + `gap` bins before `peak` to `gap`
+    /// bins before it, and how many bins that was; `None` when fewer than
+    /// [`MIN_BACKGROUND_BINS`] precede the peak. (Not the whole histogram's
+    /// median: TCSPC histograms often end in a run of empty bins past the
+    /// laser period, and the background need not be flat over all of it.)
+    pub fn background_before(&self, peak: usize, gap: usize) -> Option<(f64, usize)> {
+        let end = peak.checked_sub(gap)?;
+        let start = end.saturating_sub(BACKGROUND_BINS);
+        let n = end - start;
+        if n < MIN_BACKGROUND_BINS {
+            return None;
+        }
+        let mut sorted = self.counts[start..end].to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let median = if n % 2 == 1 {
+            sorted[n / 2]
+        } else {
+            0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
+        };
+        Some((median, n))
+    }
+}

@@ -1,0 +1,146 @@
+//! An instrument response measured without the medium (laser straight into
+//! the detector), as a table on the recording's bins.
+//!
+//! From a reference histogram: the background is the median of the bins
+//! before the peak (more than [`BACKGROUND_GAP`] bins before it), the response is the contiguous run of
+//! bins around the peak whose excess over the background is significant
+//! (every block of [`BLOCK_BINS`] bins inside holds more than
+//! [`SIGNIFICANCE`] standard deviations of background noise), and the
+//! excess there, clipped at zero, is scaled to unit sum. Zero delay is the
+//! peak bin. Light later than the last significant block is left out; the
+//! output says how many counts that was at most.
+
+use super::histogram::TimeHistogram;
+
+/// Width of the blocks whose summed excess decides the response's extent.
+pub const BLOCK_BINS: usize = 8;
+
+/// Standard deviations of background noise a block must exceed.
+pub const SIGNIFICANCE: f64 = 3.0;
+
+/// Bins just before the peak left out of the background estimate (the
+/// response's own rise).
+pub const BACKGROUND_GAP: usize = 2 * BLOCK_BINS;
+
+/// Standard deviations of background noise the peak bin must exceed for
+/// the reference to count as holding a response at all.
+pub const PEAK_SIGNIFICANCE: f64 = 5.0;
+
+/// A tabulated instrument response.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasuredIrf {
+    /// Share of photons recorded with delay `(j - peak) * bin_width_ps`;
+    /// sums to 1.
+    pub weights: Vec<f64>,
+    /// Index in `weights` of zero delay (the reference's peak).
+    pub peak: usize,
+    /// Bin width (ps), the reference's.
+    pub bin_width_ps: f64,
+    /// Background subtracted from every bin (counts).
+    pub background_per_bin: f64,
+    /// Counts above the background inside the response.
+    pub signal_counts: f64,
+    /// Time of the reference's peak bin start on its clock (ps).
+    pub peak_time_ps: f64,
+    /// The reference's origin.
+    pub source: String,
+}
+
+/// Why a reference gives no response.
+#[derive(Debug, thiserror::Error)]
+#[error("{source_name}: {message}")]
+pub struct IrfError {
+    /// The reference's origin.
+    pub source_name: String,
+    /// What is wrong with it.
+    pub message: String,
+}
+
+impl MeasuredIrf {
+    /// The response in `reference` (see the module's documentation).
+    pub fn from_histogram(reference: &TimeHistogram) -> Result<Self, IrfError> {
+        let fail = |message: String| IrfError {
+            source_name: reference.source.clone(),
+            message,
+        };
+        let n = reference.counts.len();
+        if n < 4 * BLOCK_BINS {
+            return Err(fail(format!(
+                "{n} bins are too few to tell the response from its background (need {})",
+                4 * BLOCK_BINS
+            )));
+        }
+        let peak = reference.peak_index();
+        let (background, _) = reference
+            .background_before(peak, BACKGROUND_GAP)
+            .ok_or_else(|| {
+                fail(format!(
+                    "the peak (bin {peak}) leaves fewer than {} bins before it to measure the background",
+                    super::histogram::MIN_BACKGROUND_BINS
+                ))
+            })?;
+        let excess: Vec<f64> = reference.counts.iter().map(|c| c - background).collect();
+        let noise = background.max(1.0).sqrt();
+        if excess[peak] <= PEAK_SIGNIFICANCE * noise {
+            return Err(fail(format!(
+                "no instrument response: the fullest bin ({peak}) holds {} counts over a background of {background} per bin, under {PEAK_SIGNIFICANCE} standard deviations",
+                excess[peak]
+            )));
+        }
+        let threshold = SIGNIFICANCE * noise * (BLOCK_BINS as f64).sqrt();
+        let block = |from: usize| excess[from..from + BLOCK_BINS].iter().sum::<f64>();
+        let mut end = peak + 1;
+        while end + BLOCK_BINS <= n && block(end) > threshold {
+            end += 1;
+        }
+        let mut start = peak;
+        while start >= BLOCK_BINS && block(start - BLOCK_BINS) > threshold {
+            start -= 1;
+        }
+        let weights: Vec<f64> = excess[start..end].iter().map(|e| e.max(0.0)).collect();
+        let signal: f64 = weights.iter().sum();
+        Ok(Self {
+            weights: weights.iter().map(|w| w / signal).collect(),
+            peak: peak - start,
+            bin_width_ps: reference.bin_width_ps,
+            background_per_bin: background,
+            signal_counts: signal,
+            peak_time_ps: reference.start_ps + peak as f64 * reference.bin_width_ps,
+            source: reference.source.clone(),
+        })
+    }
+
+    /// Full width at half maximum (ps), by linear interpolation between
+    /// bin centres.
+    pub fn fwhm_ps(&self) -> f64 {
+        let half = 0.5 * self.weights[self.peak];
+        let crossing = |range: &mut dyn Iterator<Item = usize>, step: isize| -> f64 {
+            for j in range {
+                let k = (j as isize + step) as usize;
+                if self.weights[k] < half {
+                    let (a, b) = (self.weights[j], self.weights[k]);
+                    return j as f64 + step as f64 * (a - half) / (a - b);
+                }
+            }
+            if step < 0 {
+                -0.5
+            } else {
+                self.weights.len() as f64 - 0.5
+            }
+        };
+        let right = crossing(&mut (self.peak..self.weights.len() - 1), 1);
+        let left = crossing(&mut (1..=self.peak).rev(), -1);
+        (right - left) * self.bin_width_ps
+    }
+
+    /// Mean delay after the peak (ps): the response's centroid against
+    /// its zero.
+    pub fn mean_delay_ps(&self) -> f64 {
+        self.weights
+            .iter()
+            .enumerate()
+            .map(|(j, w)| w * (j as f64 - self.peak as f64))
+            .sum::<f64>()
+            * self.bin_width_ps
+    }
+}

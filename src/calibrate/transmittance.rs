@@ -1,0 +1,804 @@
+//! The medium's mu_s' and mu_a from time-resolved transmittance captures of
+//! slabs of known thickness: a point detector on the far face, on the
+//! laser's axis, recording a time histogram.
+//!
+//! Model of capture bin `i` (bins of width `w` from the histogram's start
+//! `t_s`):
+//!
+//! ```text
+//! mu_i = A sum_j r_j q(i - j + p) + B
+//! q(k) = int over [t_s + k w - t0, t_s + (k + 1) w - t0] of T(rho = 0, t) dt
+//! ```
+//!
+//! `T(rho = 0, t)` is the slab model's transmittance on the axis
+//! ([`scatterscope_physics::Diffusion::log_psf`] with
+//! [`MediumModel::Slab`]: extrapolated boundaries, the reflection of the
+//! refractive-index mismatch), integrated over each bin by
+//! [`GAUSS_NODES`]-point Gauss-Legendre, `r` the measured instrument
+//! response with zero delay at index `p`, `t0` the time the pulse enters
+//! the slab on the capture's clock, `A` the signal and `B` the background
+//! counts per bin. The shape `sum_j r_j q` is scaled to unit sum over the
+//! fitted window, so `A` is the capture's signal counts there.
+//!
+//! mu_s' and mu_a are shared by every capture; `t0`, `A` and `B` are each
+//! capture's own. The fit maximises the Poisson likelihood: Nelder-Mead
+//! over ln mu_s' and ln mu_a, for each of its points a Brent search over
+//! each capture's `t0`, and for each `t0` Newton's method on the convex
+//! likelihood in `A` and `B`. Standard errors come from the inverse of the
+//! full Hessian (all parameters, central differences) at the optimum; with
+//! the chi-square per degree of freedom `X` above 1 they are also given
+//! scaled by `sqrt(X)` (the quasi-likelihood correction for scatter the
+//! model does not explain).
+
+use argmin::core::{CostFunction, Executor, State};
+use argmin::solver::brent::BrentOpt;
+use argmin::solver::neldermead::NelderMead;
+use rayon::prelude::*;
+use scatterscope_physics::{Diffusion, Medium, MediumModel};
+
+use super::CalibrateError;
+use super::hessian::{invert, numerical_hessian};
+use super::histogram::TimeHistogram;
+use super::measured_irf::MeasuredIrf;
+
+/// Nodes of the Gauss-Legendre rule integrating `T` over one bin. The
+/// transmittance changes by well under a factor e per 8 ps bin wherever
+/// it carries light (its rise time is hundreds of ps for centimetre
+/// slabs), where a 4-point rule's relative error is below 1e-8.
+pub const GAUSS_NODES: usize = 4;
+
+const GL_X: [f64; 4] = [
+    -0.861_136_311_594_052_6,
+    -0.339_981_043_584_856_3,
+    0.339_981_043_584_856_3,
+    0.861_136_311_594_052_6,
+];
+const GL_W: [f64; 4] = [
+    0.347_854_845_137_453_9,
+    0.652_145_154_862_546_1,
+    0.652_145_154_862_546_1,
+    0.347_854_845_137_453_9,
+];
+
+/// Bins before the model's first light kept in the window, for the
+/// background.
+pub const PRE_LIGHT_BINS: usize = 50;
+
+/// The window ends where the capture's excess over its background, averaged
+/// over [`TAIL_AVERAGE_BINS`] bins, falls below this share of its peak.
+pub const TAIL_SHARE: f64 = 0.01;
+
+/// Bins averaged to find the window's end.
+pub const TAIL_AVERAGE_BINS: usize = 32;
+
+/// Most bins a window holds.
+pub const MAX_WINDOW_BINS: usize = 4000;
+
+/// Half-width of the search for each capture's `t0`, in bins around the
+/// time that puts the model's peak on the capture's.
+pub const T0_SEARCH_BINS: f64 = 40.0;
+
+/// Tolerance of each capture's `t0` search (ps): well under the standard
+/// error of `t0` at tens of millions of counts.
+pub const T0_TOLERANCE_PS: f64 = 1e-3;
+
+/// The medium's search stops when the negative log-likelihood across
+/// its simplex varies by less than this (a change of 0.5 is one standard
+/// error's worth).
+pub const NLL_TOLERANCE: f64 = 1e-3;
+
+/// A fitted coefficient below this (1/cm) has run to its bound 0.
+pub const AT_ZERO_PER_CM: f64 = 1e-7;
+
+/// One capture through a slab of known thickness.
+#[derive(Debug, Clone)]
+pub struct Capture {
+    /// The detector's histogram.
+    pub histogram: TimeHistogram,
+    /// Slab thickness (cm).
+    pub thickness_cm: f64,
+    /// Name for the output.
+    pub label: String,
+}
+
+/// What the fit assumes and where it starts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlabFitOptions {
+    /// Refractive index of the medium (given, not fitted).
+    pub refractive_index: f64,
+    /// Starting (or, when not fitted, fixed) mu_a (1/cm).
+    pub mu_a_per_cm: f64,
+    /// Starting (or fixed) mu_s' (1/cm).
+    pub mu_s_reduced_per_cm: f64,
+    /// Whether mu_a is fitted.
+    pub fit_mu_a: bool,
+    /// Whether mu_s' is fitted.
+    pub fit_mu_s_reduced: bool,
+}
+
+/// One capture's part of a fit.
+#[derive(Debug, Clone)]
+pub struct CaptureFit {
+    /// The capture's label.
+    pub label: String,
+    /// Slab thickness (cm).
+    pub thickness_cm: f64,
+    /// Time the pulse enters the slab on the capture's clock (ps).
+    pub t0_ps: f64,
+    /// Standard error of `t0` (ps), when determined.
+    pub t0_standard_error_ps: Option<f64>,
+    /// Signal counts in the window.
+    pub signal: f64,
+    /// Background counts per bin.
+    pub background: f64,
+    /// Index of the window's first bin in the histogram.
+    pub window_start: usize,
+    /// Measured counts in the window.
+    pub measured: Vec<f64>,
+    /// Fitted expected counts in the window.
+    pub fitted: Vec<f64>,
+    /// Pearson chi-square over the window.
+    pub chi2: f64,
+    /// Bins in the window less this capture's own parameters.
+    pub dof: usize,
+}
+
+impl CaptureFit {
+    /// Chi-square per degree of freedom of this capture alone.
+    pub fn chi2_per_dof(&self) -> f64 {
+        self.chi2 / self.dof.max(1) as f64
+    }
+
+    /// Time of the window's first bin start (ps) on the capture's clock.
+    pub fn window_start_ps(&self, bin_width_ps: f64, histogram_start_ps: f64) -> f64 {
+        histogram_start_ps + self.window_start as f64 * bin_width_ps
+    }
+}
+
+/// A fitted or fixed medium parameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MediumEstimate {
+    /// Value (1/cm).
+    pub value: f64,
+    /// Standard error from the Poisson likelihood (1/cm), when determined.
+    pub standard_error: Option<f64>,
+    /// Whether it was fitted.
+    pub fitted: bool,
+}
+
+/// The result of [`fit_slab`] or [`predict_capture`].
+#[derive(Debug, Clone)]
+pub struct SlabFit {
+    /// Absorption coefficient.
+    pub mu_a: MediumEstimate,
+    /// Reduced scattering coefficient.
+    pub mu_s_reduced: MediumEstimate,
+    /// Refractive index assumed.
+    pub refractive_index: f64,
+    /// Extrapolation distance of the fitted medium's boundaries (cm).
+    pub extrapolation_cm: f64,
+    /// Each capture's part.
+    pub captures: Vec<CaptureFit>,
+    /// Chi-square per degree of freedom over all captures.
+    pub chi2_per_dof: f64,
+    /// Degrees of freedom: bins less every fitted parameter.
+    pub dof: usize,
+    /// Model evaluations of one capture the fit took.
+    pub evaluations: u64,
+    /// Parameters the data do not determine, and why.
+    pub undetermined: Vec<String>,
+}
+
+impl SlabFit {
+    /// Factor to scale standard errors by for the scatter the model does
+    /// not explain: `sqrt(chi2 per dof)`, at least 1.
+    pub fn scatter_factor(&self) -> f64 {
+        self.chi2_per_dof.max(1.0).sqrt()
+    }
+}
+
+/// One capture prepared for the fit: its window and response.
+struct Prepared<'a> {
+    label: &'a str,
+    counts: &'a [f64],
+    start: usize,
+    bin_ps: f64,
+    hist_start_ps: f64,
+    thickness_cm: f64,
+    irf: &'a MeasuredIrf,
+    peak_time_ps: f64,
+}
+
+impl Prepared<'_> {
+    /// Unit-sum model shape over the window for the medium and `t0`;
+    /// `None` when the physics is invalid or carries no light there.
+    fn shape(&self, diffusion: &Diffusion, t0: f64) -> Option<Vec<f64>> {
+        let n = self.counts.len();
+        let m = self.irf.weights.len();
+        let p = self.irf.peak;
+        // q(k) for k in [start - (m - 1 - p), start + n + p).
+        let k_lo = self.start as isize - (m - 1 - p) as isize;
+        let len = n + m - 1;
+        let w = self.bin_ps;
+        let q: Vec<f64> = (0..len)
+            .map(|idx| {
+                let k = k_lo + idx as isize;
+                let a = self.hist_start_ps + k as f64 * w - t0;
+                let half = 0.5 * w;
+                let mid = a + half;
+                GL_X.iter()
+                    .zip(GL_W)
+                    .map(|(x, wt)| wt * diffusion.log_psf(0.0, mid + half * x).exp())
+                    .sum::<f64>()
+                    * half
+            })
+            .collect();
+        // out[i] = sum_j r_j q(start + i - j + p); q index = i - j + m - 1.
+        let mut out = vec![0.0; n];
+        for (i, o) in out.iter_mut().enumerate() {
+            let mut acc = 0.0;
+            for (j, r) in self.irf.weights.iter().enumerate() {
+                acc += r * q[i + m - 1 - j];
+            }
+            *o = acc;
+        }
+        let total: f64 = out.iter().sum();
+        if !(total.is_finite() && total > 0.0) {
+            return None;
+        }
+        out.iter_mut().for_each(|v| *v /= total);
+        Some(out)
+    }
+}
+
+/// Poisson negative log-likelihood (without the data's constant) of
+/// `mu = a s + b`.
+fn nll(shape: &[f64], counts: &[f64], a: f64, b: f64) -> f64 {
+    shape
+        .iter()
+        .zip(counts)
+        .map(|(&s, &m)| {
+            let u = a * s + b;
+            if u <= 0.0 {
+                if m > 0.0 { f64::INFINITY } else { 0.0 }
+            } else {
+                u - if m > 0.0 { m * u.ln() } else { 0.0 }
+            }
+        })
+        .sum()
+}
+
+/// The `A >= 0`, `B >= 0` maximising the likelihood of `A s + B` (a
+/// convex problem: Newton's method with step halving), and the value.
+fn amplitudes(shape: &[f64], counts: &[f64]) -> (f64, f64, f64) {
+    let n = counts.len() as f64;
+    let total: f64 = counts.iter().sum();
+    let smax = shape.iter().copied().fold(0.0, f64::max);
+    let (dark_sum, dark_n) = shape
+        .iter()
+        .zip(counts)
+        .filter(|(s, _)| **s < 1e-3 * smax)
+        .fold((0.0, 0.0), |(a, k), (_, m)| (a + m, k + 1.0));
+    let floor = 1e-9 * (total / n).max(1e-9);
+    let mut b = if dark_n > 0.0 { dark_sum / dark_n } else { 0.0 }.max(floor);
+    let mut a = (total - b * n).max(1e-9 * total.max(1.0));
+    let mut f = nll(shape, counts, a, b);
+    for _ in 0..50 {
+        let (mut ga, mut gb, mut haa, mut hab, mut hbb) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (&s, &m) in shape.iter().zip(counts) {
+            let u = a * s + b;
+            let r = m / u;
+            ga += s * (1.0 - r);
+            gb += 1.0 - r;
+            let c = m / (u * u);
+            haa += s * s * c;
+            hab += s * c;
+            hbb += c;
+        }
+        let det = haa * hbb - hab * hab;
+        if !(det.is_finite() && det > 0.0) {
+            break;
+        }
+        let da = (hbb * ga - hab * gb) / det;
+        let db = (haa * gb - hab * ga) / det;
+        let mut step = 1.0;
+        let mut improved = false;
+        for _ in 0..40 {
+            let (na, nb) = ((a - step * da).max(0.0), (b - step * db).max(floor));
+            let nf = nll(shape, counts, na, nb);
+            if nf <= f {
+                improved = (f - nf) > 1e-12 * f.abs().max(1.0);
+                (a, b, f) = (na, nb, nf);
+                break;
+            }
+            step *= 0.5;
+        }
+        if !improved {
+            break;
+        }
+    }
+    (a, b, f)
+}
+
+/// For a medium: each capture's best `t0`, `A`, `B` and the summed
+/// negative log-likelihood.
+fn profile(
+    prepared: &[Prepared],
+    diffusion: &[Diffusion],
+    evaluations: &mut u64,
+) -> Option<(Vec<[f64; 3]>, f64)> {
+    let fits: Vec<Option<([f64; 3], f64, u64)>> = prepared
+        .par_iter()
+        .zip(diffusion)
+        .map(|(cap, d)| best_t0(cap, d))
+        .collect();
+    let mut total = 0.0;
+    let mut out = Vec::with_capacity(fits.len());
+    for f in fits {
+        let (p, v, e) = f?;
+        *evaluations += e;
+        total += v;
+        out.push(p);
+    }
+    Some((out, total))
+}
+
+struct T0Search<'a> {
+    cap: &'a Prepared<'a>,
+    diffusion: &'a Diffusion,
+}
+
+impl CostFunction for T0Search<'_> {
+    type Param = f64;
+    type Output = f64;
+    fn cost(&self, t0: &f64) -> Result<f64, argmin::core::Error> {
+        Ok(match self.cap.shape(self.diffusion, *t0) {
+            Some(s) => amplitudes(&s, self.cap.counts).2,
+            None => f64::MAX,
+        })
+    }
+}
+
+/// The `t0` (with its `A`, `B`) maximising one capture's likelihood.
+fn best_t0(cap: &Prepared, diffusion: &Diffusion) -> Option<([f64; 3], f64, u64)> {
+    let guess = cap.peak_time_ps - model_peak_ps(diffusion);
+    let half = T0_SEARCH_BINS * cap.bin_ps;
+    let solver = BrentOpt::new(guess - half, guess + half).set_tolerance(1e-12, T0_TOLERANCE_PS);
+    let res = Executor::new(T0Search { cap, diffusion }, solver)
+        .configure(|c| c.max_iters(200))
+        .run()
+        .ok()?;
+    let evals = res.problem.counts.get("cost_count").copied().unwrap_or(0);
+    let t0 = *res.state().get_best_param()?;
+    let shape = cap.shape(diffusion, t0)?;
+    let (a, b, v) = amplitudes(&shape, cap.counts);
+    v.is_finite().then_some(([t0, a, b], v, evals + 1))
+}
+
+/// Time of the on-axis transmittance's maximum after the pulse enters
+/// (ps), by golden-section search on its logarithm.
+fn model_peak_ps(d: &Diffusion) -> f64 {
+    let f = |t: f64| -d.log_psf(0.0, t);
+    let (mut lo, mut hi) = (1e-3, 10.0 * d.peak_time_ps().max(1.0));
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..100 {
+        let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+        if f(x1) < f(x2) { hi = x2 } else { lo = x1 }
+    }
+    0.5 * (lo + hi)
+}
+
+fn diffusion_for(
+    opts: &SlabFitOptions,
+    mu_a: f64,
+    mu_s: f64,
+    thickness_cm: f64,
+) -> Option<Diffusion> {
+    Diffusion::new(&Medium {
+        mu_a_per_cm: mu_a,
+        mu_s_per_cm: mu_s,
+        g: 0.0,
+        refractive_index: opts.refractive_index,
+        thickness_cm,
+        model: MediumModel::Slab,
+    })
+    .ok()
+}
+
+/// The fitted window of one capture, and its peak time.
+fn prepare<'a>(
+    capture: &'a Capture,
+    irf: &'a MeasuredIrf,
+    opts: &SlabFitOptions,
+) -> Result<Prepared<'a>, CalibrateError> {
+    let h = &capture.histogram;
+    let fail = |m: String| CalibrateError::Invalid(format!("{}: {m}", capture.label));
+    if (h.bin_width_ps - irf.bin_width_ps).abs() > 1e-9 * irf.bin_width_ps {
+        return Err(fail(format!(
+            "bins of {} ps, but the instrument response's are {} ps",
+            h.bin_width_ps, irf.bin_width_ps
+        )));
+    }
+    if !(capture.thickness_cm.is_finite() && capture.thickness_cm > 0.0) {
+        return Err(fail(format!(
+            "thickness {} cm must be positive",
+            capture.thickness_cm
+        )));
+    }
+    let start_d = diffusion_for(
+        opts,
+        opts.mu_a_per_cm,
+        opts.mu_s_reduced_per_cm,
+        capture.thickness_cm,
+    )
+    .ok_or_else(|| fail("the starting medium is invalid for this slab".into()))?;
+    let peak = h.peak_index();
+    let w = h.bin_width_ps;
+    let rise_bins = (model_peak_ps(&start_d) / w).ceil() as usize;
+    let (background, _) = h.background_before(peak, rise_bins).ok_or_else(|| {
+        fail(format!(
+            "the peak (bin {peak}) leaves too few bins before the light ({rise_bins} bins of rise) to measure the background"
+        ))
+    })?;
+    let peak_excess = h.counts[peak] - background;
+    if peak_excess <= super::measured_irf::PEAK_SIGNIFICANCE * background.max(1.0).sqrt() {
+        return Err(fail(format!(
+            "no transmitted light: the fullest bin ({peak}) holds {peak_excess} counts over a background of {background}"
+        )));
+    }
+    let start = peak.saturating_sub(rise_bins + PRE_LIGHT_BINS);
+    let mut end = peak + 1;
+    while end + TAIL_AVERAGE_BINS <= h.counts.len() && end - start < MAX_WINDOW_BINS {
+        let mean =
+            h.counts[end..end + TAIL_AVERAGE_BINS].iter().sum::<f64>() / TAIL_AVERAGE_BINS as f64;
+        if mean - background < TAIL_SHARE * peak_excess {
+            break;
+        }
+        end += 1;
+    }
+    Ok(Prepared {
+        label: &capture.label,
+        counts: &h.counts[start..end],
+        start,
+        bin_ps: w,
+        hist_start_ps: h.start_ps,
+        thickness_cm: capture.thickness_cm,
+        irf,
+        peak_time_ps: h.start_ps + (peak as f64 + 0.5) * w,
+    })
+}
+
+struct Outer<'a> {
+    prepared: &'a [Prepared<'a>],
+    opts: SlabFitOptions,
+    evaluations: std::cell::Cell<u64>,
+}
+
+impl Outer<'_> {
+    fn medium(&self, x: &[f64]) -> (f64, f64) {
+        let mut it = x.iter();
+        let mu_a = if self.opts.fit_mu_a {
+            it.next().map_or(0.0, |v| v.exp())
+        } else {
+            self.opts.mu_a_per_cm
+        };
+        let mu_s = if self.opts.fit_mu_s_reduced {
+            it.next().map_or(0.0, |v| v.exp())
+        } else {
+            self.opts.mu_s_reduced_per_cm
+        };
+        (mu_a, mu_s)
+    }
+
+    fn diffusions(&self, mu_a: f64, mu_s: f64) -> Option<Vec<Diffusion>> {
+        self.prepared
+            .iter()
+            .map(|c| diffusion_for(&self.opts, mu_a, mu_s, c.thickness_cm))
+            .collect()
+    }
+}
+
+impl CostFunction for Outer<'_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, x: &Vec<f64>) -> Result<f64, argmin::core::Error> {
+        let (mu_a, mu_s) = self.medium(x);
+        let Some(d) = self.diffusions(mu_a, mu_s) else {
+            return Ok(f64::MAX);
+        };
+        let mut e = 0;
+        let v = profile(self.prepared, &d, &mut e).map_or(f64::MAX, |(_, v)| v);
+        self.evaluations.set(self.evaluations.get() + e);
+        Ok(if v.is_finite() { v } else { f64::MAX })
+    }
+}
+
+/// Fits the shared mu_s' and mu_a (those `opts` frees) and each capture's
+/// `t0`, signal and background; see the module's documentation.
+pub fn fit_slab(
+    captures: &[Capture],
+    irf: &MeasuredIrf,
+    opts: &SlabFitOptions,
+) -> Result<SlabFit, CalibrateError> {
+    if captures.is_empty() {
+        return Err(CalibrateError::Invalid("no capture to fit".into()));
+    }
+    for (name, v) in [
+        ("refractive index", opts.refractive_index),
+        ("starting mu_a", opts.mu_a_per_cm),
+        ("starting mu_s'", opts.mu_s_reduced_per_cm),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(CalibrateError::Invalid(format!(
+                "{name} {v} must be positive and finite"
+            )));
+        }
+    }
+    let prepared: Vec<Prepared> = captures
+        .iter()
+        .map(|c| prepare(c, irf, opts))
+        .collect::<Result<_, _>>()?;
+    let outer = Outer {
+        prepared: &prepared,
+        opts: *opts,
+        evaluations: std::cell::Cell::new(0),
+    };
+    let mut x0 = Vec::new();
+    if opts.fit_mu_a {
+        x0.push(opts.mu_a_per_cm.ln());
+    }
+    if opts.fit_mu_s_reduced {
+        x0.push(opts.mu_s_reduced_per_cm.ln());
+    }
+    let (x, outer) = if x0.is_empty() {
+        (x0, outer)
+    } else {
+        let mut simplex = vec![x0.clone()];
+        for j in 0..x0.len() {
+            let mut v = x0.clone();
+            v[j] += 0.3;
+            simplex.push(v);
+        }
+        let solver = NelderMead::new(simplex)
+            .with_sd_tolerance(NLL_TOLERANCE)
+            .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+        let res = Executor::new(outer, solver)
+            .configure(|c| c.max_iters(400))
+            .run()
+            .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+        let x = res
+            .state()
+            .get_best_param()
+            .cloned()
+            .ok_or_else(|| CalibrateError::Invalid("the fit found no point".into()))?;
+        let outer = res
+            .problem
+            .problem
+            .expect("the executor returns its problem");
+        (x, outer)
+    };
+    let (mu_a, mu_s) = outer.medium(&x);
+    finish(&prepared, opts, mu_a, mu_s, outer.evaluations.get())
+}
+
+/// Each capture's `t0`, signal and background for a medium held fixed at
+/// `mu_a`, `mu_s'`: how well known parameters predict captures they were
+/// not fitted on.
+pub fn predict_captures(
+    captures: &[Capture],
+    irf: &MeasuredIrf,
+    refractive_index: f64,
+    mu_a_per_cm: f64,
+    mu_s_reduced_per_cm: f64,
+) -> Result<SlabFit, CalibrateError> {
+    let opts = SlabFitOptions {
+        refractive_index,
+        mu_a_per_cm,
+        mu_s_reduced_per_cm,
+        fit_mu_a: false,
+        fit_mu_s_reduced: false,
+    };
+    fit_slab(captures, irf, &opts)
+}
+
+/// Natural parameters of the full Hessian: the fitted medium parameters,
+/// then `t0`, `A`, `B` of each capture.
+fn finish(
+    prepared: &[Prepared],
+    opts: &SlabFitOptions,
+    mu_a: f64,
+    mu_s: f64,
+    mut evaluations: u64,
+) -> Result<SlabFit, CalibrateError> {
+    let invalid = || CalibrateError::Invalid("the fitted medium is invalid".into());
+    let d: Vec<Diffusion> = prepared
+        .iter()
+        .map(|c| diffusion_for(opts, mu_a, mu_s, c.thickness_cm))
+        .collect::<Option<_>>()
+        .ok_or_else(invalid)?;
+    let (nuisance, _) = profile(prepared, &d, &mut evaluations).ok_or_else(invalid)?;
+    let globals: Vec<usize> = [(opts.fit_mu_a, 0usize), (opts.fit_mu_s_reduced, 1)]
+        .into_iter()
+        .filter_map(|(f, i)| f.then_some(i))
+        .collect();
+    let g = globals.len();
+    let k = g + 3 * prepared.len();
+    // The Hessian is block-arrow shaped: captures couple only through the
+    // medium. Each capture's block comes from its own likelihood.
+    let mut hess = vec![vec![0.0; k]; k];
+    for (c, cap) in prepared.iter().enumerate() {
+        let base = [mu_a, mu_s, nuisance[c][0], nuisance[c][1], nuisance[c][2]];
+        let free: Vec<usize> = globals.iter().copied().chain([2, 3, 4]).collect();
+        let f = |v: &[f64]| {
+            let mut p = base;
+            for (&i, &x) in free.iter().zip(v) {
+                p[i] = x;
+            }
+            diffusion_for(opts, p[0], p[1], cap.thickness_cm)
+                .and_then(|d| cap.shape(&d, p[2]))
+                .map_or(f64::INFINITY, |s| nll(&s, cap.counts, p[3], p[4]))
+        };
+        let x: Vec<f64> = free.iter().map(|&i| base[i]).collect();
+        let steps: Vec<f64> = free
+            .iter()
+            .map(|&i| match i {
+                2 => 1e-3 * cap.bin_ps,
+                _ => 1e-4 * base[i].abs().max(1e-12),
+            })
+            .collect();
+        let h = numerical_hessian(&f, &x, &steps);
+        evaluations += (2 * free.len() * free.len() + 1) as u64;
+        let idx: Vec<usize> = (0..g).chain((0..3).map(|j| g + 3 * c + j)).collect();
+        for (a, &ia) in idx.iter().enumerate() {
+            for (b, &ib) in idx.iter().enumerate() {
+                hess[ia][ib] += h[a][b];
+            }
+        }
+    }
+    let inverse = invert(&hess);
+    let se = |i: usize, bound: f64| -> Option<f64> {
+        let var = inverse.as_ref()?[i][i];
+        (var.is_finite() && var > 0.0 && var.sqrt() <= bound).then(|| var.sqrt())
+    };
+    let mut undetermined = Vec::new();
+    let mut medium = |index: usize, value: f64, fitted: bool, name: &str| {
+        let at_bound = fitted && value < AT_ZERO_PER_CM;
+        let standard_error = globals
+            .iter()
+            .position(|&x| x == index)
+            .and_then(|i| se(i, value))
+            .filter(|_| !at_bound);
+        if at_bound {
+            undetermined.push(format!(
+                "{name}: the fit ran to its bound 0 (the captures prefer none; no standard error)"
+            ));
+        } else if fitted && standard_error.is_none() {
+            undetermined.push(format!(
+                "{name}: the captures do not determine it (standard error above its value or a flat likelihood)"
+            ));
+        }
+        MediumEstimate {
+            value,
+            standard_error,
+            fitted,
+        }
+    };
+    let mu_a_est = medium(0, mu_a, opts.fit_mu_a, "mu_a");
+    let mu_s_est = medium(1, mu_s, opts.fit_mu_s_reduced, "mu_s'");
+    let mut chi2_total = 0.0;
+    let mut bins = 0;
+    let captures: Vec<CaptureFit> = prepared
+        .iter()
+        .enumerate()
+        .map(|(c, cap)| {
+            let [t0, a, b] = nuisance[c];
+            let shape = cap.shape(&d[c], t0).unwrap_or_default();
+            let fitted: Vec<f64> = shape.iter().map(|s| a * s + b).collect();
+            let chi2: f64 = fitted
+                .iter()
+                .zip(cap.counts)
+                .filter(|(u, _)| **u > 0.0)
+                .map(|(u, m)| (m - u) * (m - u) / u)
+                .sum();
+            chi2_total += chi2;
+            bins += fitted.len();
+            CaptureFit {
+                label: cap.label.to_string(),
+                thickness_cm: cap.thickness_cm,
+                t0_ps: t0,
+                t0_standard_error_ps: se(g + 3 * c, 10.0 * cap.bin_ps),
+                signal: a,
+                background: b,
+                window_start: cap.start,
+                measured: cap.counts.to_vec(),
+                fitted,
+                chi2,
+                dof: cap.counts.len().saturating_sub(3),
+            }
+        })
+        .collect();
+    let dof = bins.saturating_sub(k).max(1);
+    Ok(SlabFit {
+        mu_a: mu_a_est,
+        mu_s_reduced: mu_s_est,
+        refractive_index: opts.refractive_index,
+        extrapolation_cm: d[0].slab.map_or(0.0, |s| s.extrapolation_cm),
+        captures,
+        chi2_per_dof: chi2_total / dof as f64,
+        dof,
+        evaluations,
+        undetermined,
+    })
+}
+
+/// A length with its unit (`2.54cm`, `25.4mm`, `1in`, `0.0254m`) in cm.
+pub fn parse_length_cm(text: &str) -> Result<f64, CalibrateError> {
+    let t = text.trim();
+    let split = t.find(|c: char| c.is_ascii_alphabetic()).ok_or_else(|| {
+        CalibrateError::Invalid(format!("length `{text}` needs a unit: cm, mm, m or in"))
+    })?;
+    let (number, unit) = t.split_at(split);
+    let value: f64 = number.trim().parse().map_err(|_| {
+        CalibrateError::Invalid(format!("length `{text}`: `{number}` is not a number"))
+    })?;
+    let scale = match unit {
+        "cm" => 1.0,
+        "mm" => 0.1,
+        "m" => 100.0,
+        "in" => 2.54,
+        other => {
+            return Err(CalibrateError::Invalid(format!(
+                "length `{text}`: unknown unit `{other}` (cm, mm, m or in)"
+            )));
+        }
+    };
+    let cm = value * scale;
+    if !(cm.is_finite() && cm > 0.0) {
+        return Err(CalibrateError::Invalid(format!(
+            "length `{text}` must be positive"
+        )));
+    }
+    Ok(cm)
+}
+
+/// Expected counts in bins `0..bins` (of the response's width, from time
+/// 0) of a capture through a slab `thickness_cm` thick: the model of the
+/// module's documentation, `signal` counts in all and `background` per
+/// bin. For simulating captures and checking fits.
+#[allow(clippy::too_many_arguments)]
+pub fn expected_capture(
+    irf: &MeasuredIrf,
+    refractive_index: f64,
+    mu_a_per_cm: f64,
+    mu_s_reduced_per_cm: f64,
+    thickness_cm: f64,
+    t0_ps: f64,
+    signal: f64,
+    background: f64,
+    bins: usize,
+) -> Result<Vec<f64>, CalibrateError> {
+    let opts = SlabFitOptions {
+        refractive_index,
+        mu_a_per_cm,
+        mu_s_reduced_per_cm,
+        fit_mu_a: false,
+        fit_mu_s_reduced: false,
+    };
+    let d = diffusion_for(&opts, mu_a_per_cm, mu_s_reduced_per_cm, thickness_cm)
+        .ok_or_else(|| CalibrateError::Invalid("invalid medium for this slab".into()))?;
+    let zeros = vec![0.0; bins];
+    let window = Prepared {
+        label: "model",
+        counts: &zeros,
+        start: 0,
+        bin_ps: irf.bin_width_ps,
+        hist_start_ps: 0.0,
+        thickness_cm,
+        irf,
+        peak_time_ps: 0.0,
+    };
+    let shape = window
+        .shape(&d, t0_ps)
+        .ok_or_else(|| CalibrateError::Invalid("no light falls in the bins".into()))?;
+    Ok(shape.iter().map(|s| signal * s + background).collect())
+}

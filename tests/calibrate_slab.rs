@@ -1,0 +1,339 @@
+//! The slab transmittance fit (`calibrate-slab`): recovery of a known
+//! medium from simulated captures, error messages, and the real foam
+//! captures of `../shared/data/cdt-calibration` when present.
+
+use std::path::{Path, PathBuf};
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Poisson};
+use scatterscope::calibrate::histogram::TimeHistogram;
+use scatterscope::calibrate::measured_irf::MeasuredIrf;
+use scatterscope::calibrate::transmittance::{
+    Capture, SlabFitOptions, expected_capture, fit_slab, parse_length_cm, predict_captures,
+};
+
+const BIN_PS: f64 = 8.0;
+
+fn poisson(means: &[f64], seed: u64) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    means
+        .iter()
+        .map(|&m| {
+            if m > 0.0 {
+                Poisson::new(m).unwrap().sample(&mut rng)
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// A reference: a 40 ps FWHM Gaussian with a 60 ps exponential tail at
+/// bin 200, 2e7 counts over a background of 30 per bin.
+fn reference(seed: u64) -> TimeHistogram {
+    let sigma = 40.0 / 2.354_820_045 / BIN_PS;
+    let tau = 60.0 / BIN_PS;
+    let mut shape: Vec<f64> = (0..1000)
+        .map(|i| {
+            let x = i as f64 - 200.0;
+            // Gaussian convolved with the tail, sampled on the bin grid.
+            (0..200)
+                .map(|k| {
+                    let d = k as f64 * 0.25;
+                    (-d / tau).exp() * (-(x - d) * (x - d) / (2.0 * sigma * sigma)).exp()
+                })
+                .sum::<f64>()
+        })
+        .collect();
+    let total: f64 = shape.iter().sum();
+    shape.iter_mut().for_each(|v| *v = 2e7 * *v / total + 30.0);
+    TimeHistogram::new(poisson(&shape, seed), BIN_PS, 0.0, Path::new("reference")).unwrap()
+}
+
+#[test]
+fn a_simulated_medium_is_recovered_within_its_standard_errors() {
+    let irf = MeasuredIrf::from_histogram(&reference(1)).unwrap();
+    assert_eq!(
+        irf.peak,
+        irf.weights
+            .iter()
+            .enumerate()
+            .fold((0, 0.0), |b, (i, &w)| if w > b.1 { (i, w) } else { b })
+            .0
+    );
+    assert!((irf.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    assert!(
+        (irf.background_per_bin - 30.0).abs() < 2.0,
+        "{}",
+        irf.background_per_bin
+    );
+    let (n, mu_a, mu_s) = (1.12, 0.0053, 2.62);
+    let captures: Vec<Capture> = [
+        (5.08, 1100.0, 2e6, 40.0),
+        (7.62, 1000.0, 3e6, 60.0),
+        (10.16, 900.0, 2e6, 25.0),
+    ]
+    .iter()
+    .enumerate()
+    .map(|(k, &(s, t0, a, b))| {
+        let mean = expected_capture(&irf, n, mu_a, mu_s, s, t0, a, b, 3000).unwrap();
+        Capture {
+            histogram: TimeHistogram::new(
+                poisson(&mean, 10 + k as u64),
+                BIN_PS,
+                0.0,
+                Path::new("sim"),
+            )
+            .unwrap(),
+            thickness_cm: s,
+            label: format!("sim{k}"),
+        }
+    })
+    .collect();
+    let opts = SlabFitOptions {
+        refractive_index: n,
+        mu_a_per_cm: 0.02,
+        mu_s_reduced_per_cm: 5.0,
+        fit_mu_a: true,
+        fit_mu_s_reduced: true,
+    };
+    let fit = fit_slab(&captures, &irf, &opts).unwrap();
+    assert!(fit.undetermined.is_empty(), "{:?}", fit.undetermined);
+    for (est, truth) in [(fit.mu_a, mu_a), (fit.mu_s_reduced, mu_s)] {
+        let se = est.standard_error.expect("determined");
+        assert!(
+            (est.value - truth).abs() < 4.0 * se,
+            "{} vs {truth} (se {se})",
+            est.value
+        );
+        assert!(
+            se < 0.05 * truth,
+            "standard error {se} above 5 % of {truth}"
+        );
+    }
+    // The model matches the counts to their Poisson noise.
+    assert!(
+        (0.9..1.1).contains(&fit.chi2_per_dof),
+        "chi2/dof {}",
+        fit.chi2_per_dof
+    );
+    for (c, t0) in fit.captures.iter().zip([1100.0, 1000.0, 900.0]) {
+        let se = c.t0_standard_error_ps.expect("t0 determined");
+        assert!(
+            (c.t0_ps - t0).abs() < 4.0 * se + 0.5,
+            "t0 {} vs {t0} (se {se})",
+            c.t0_ps
+        );
+    }
+    // A fixed wrong medium predicts a capture far worse than the right one.
+    let right = predict_captures(&captures[1..2], &irf, n, mu_a, mu_s).unwrap();
+    let wrong = predict_captures(&captures[1..2], &irf, n, mu_a, 1.2 * mu_s).unwrap();
+    assert!(right.chi2_per_dof < 1.2, "{}", right.chi2_per_dof);
+    assert!(wrong.chi2_per_dof > 3.0, "{}", wrong.chi2_per_dof);
+}
+
+#[test]
+fn references_and_captures_without_light_are_refused_by_name() {
+    // 50 counts per bin and an insignificant bump of 10 at bin 300.
+    let mut dark = vec![50.0; 500];
+    dark[300] = 60.0;
+    let flat = TimeHistogram::new(dark, BIN_PS, 0.0, Path::new("dark.mat")).unwrap();
+    let err = MeasuredIrf::from_histogram(&flat).unwrap_err().to_string();
+    assert!(
+        err.contains("dark.mat") && err.contains("no instrument response"),
+        "{err}"
+    );
+    let empty = TimeHistogram::new(vec![0.0; 500], BIN_PS, 0.0, Path::new("empty.mat")).unwrap();
+    let err = MeasuredIrf::from_histogram(&empty).unwrap_err().to_string();
+    assert!(
+        err.contains("empty.mat") && err.contains("before it"),
+        "{err}"
+    );
+    let err = TimeHistogram::new(vec![1.0, f64::NAN], BIN_PS, 0.0, Path::new("x.mat"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("x.mat") && err.contains("bin 1"), "{err}");
+
+    let irf = MeasuredIrf::from_histogram(&reference(2)).unwrap();
+    let capture = Capture {
+        histogram: flat.clone(),
+        thickness_cm: 5.0,
+        label: "foam_2in".into(),
+    };
+    let opts = SlabFitOptions {
+        refractive_index: 1.12,
+        mu_a_per_cm: 0.01,
+        mu_s_reduced_per_cm: 2.0,
+        fit_mu_a: true,
+        fit_mu_s_reduced: true,
+    };
+    let err = fit_slab(&[capture], &irf, &opts).unwrap_err().to_string();
+    assert!(
+        err.contains("foam_2in") && err.contains("no transmitted light"),
+        "{err}"
+    );
+    let mut coarse = flat;
+    coarse.bin_width_ps = 16.0;
+    let capture = Capture {
+        histogram: coarse,
+        thickness_cm: 5.0,
+        label: "coarse".into(),
+    };
+    let err = fit_slab(&[capture], &irf, &opts).unwrap_err().to_string();
+    assert!(err.contains("coarse") && err.contains("16 ps"), "{err}");
+}
+
+#[test]
+fn lengths_need_a_known_unit() {
+    assert!((parse_length_cm("1in").unwrap() - 2.54).abs() < 1e-12);
+    assert!((parse_length_cm("25.4mm").unwrap() - 2.54).abs() < 1e-12);
+    assert!((parse_length_cm("0.5 m").unwrap() - 50.0).abs() < 1e-12);
+    for bad in ["3", "3ft", "-1cm", "xcm", "0in"] {
+        assert!(parse_length_cm(bad).is_err(), "{bad} accepted");
+    }
+}
+
+fn cdt() -> Option<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/cdt-calibration");
+    if dir.join("capture_direct.mat").exists() {
+        Some(dir)
+    } else {
+        println!("skipped: ../shared/data/cdt-calibration is absent (a user's clone has none)");
+        None
+    }
+}
+
+#[test]
+fn real_foam_captures_read_and_fit_near_the_published_medium() {
+    let Some(dir) = cdt() else { return };
+    // Reference values from h5py (an independent HDF5 reader).
+    let direct = TimeHistogram::read(&dir.join("capture_direct.mat"), "out", Some(BIN_PS)).unwrap();
+    assert_eq!(direct.counts.len(), 65536);
+    assert_eq!(direct.total(), 18_181_571.0);
+    assert_eq!(direct.peak_index(), 3881);
+    let err = TimeHistogram::read(&dir.join("capture_direct.mat"), "histogram", Some(BIN_PS))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("capture_direct.mat")
+            && err.contains("no dataset `histogram`")
+            && err.contains("out"),
+        "{err}"
+    );
+    let err = TimeHistogram::read(&dir.join("capture_direct.mat"), "out", None)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("bin width"), "{err}");
+
+    let irf = MeasuredIrf::from_histogram(&direct).unwrap();
+    assert!(
+        (30.0..80.0).contains(&irf.fwhm_ps()),
+        "IRF FWHM {}",
+        irf.fwhm_ps()
+    );
+    let captures: Vec<Capture> = [("3_0", 3.0), ("3_5", 3.5)]
+        .iter()
+        .map(|(name, inches)| Capture {
+            histogram: TimeHistogram::read(
+                &dir.join(format!("capture_{name}_inch.mat")),
+                "out",
+                Some(BIN_PS),
+            )
+            .unwrap(),
+            thickness_cm: inches * 2.54,
+            label: (*name).into(),
+        })
+        .collect();
+    let opts = SlabFitOptions {
+        refractive_index: 1.12,
+        mu_a_per_cm: 0.01,
+        mu_s_reduced_per_cm: 5.0,
+        fit_mu_a: true,
+        fit_mu_s_reduced: true,
+    };
+    let fit = fit_slab(&captures, &irf, &opts).unwrap();
+    // Published (Lindell and Wetzstein 2020, a fit over 1-8 inch): mu_s'
+    // 2.62 /cm, mu_a 0.0053 /cm.
+    assert!(
+        (fit.mu_s_reduced.value / 2.62 - 1.0).abs() < 0.1,
+        "mu_s' {}",
+        fit.mu_s_reduced.value
+    );
+    assert!(
+        (0.5..2.0).contains(&(fit.mu_a.value / 0.0053)),
+        "mu_a {}",
+        fit.mu_a.value
+    );
+    assert!(fit.chi2_per_dof.is_finite() && fit.chi2_per_dof > 0.0);
+}
+
+#[test]
+fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
+    let Some(dir) = cdt() else { return };
+    let out = tempfile::tempdir().unwrap();
+    let arg = |name: &str, t: &str| format!("{}={t}", dir.join(name).display());
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args([
+            "calibrate-slab",
+            "--bin-ps",
+            "8",
+            "--refractive-index",
+            "1.12",
+            "--irf-from",
+        ])
+        .arg(dir.join("capture_direct.mat"))
+        .args([
+            "--capture",
+            &arg("capture_3_0_inch.mat", "3in"),
+            "--predict",
+            &arg("capture_3_5_inch.mat", "88.9mm"),
+        ])
+        .arg("--out")
+        .arg(out.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(
+        stdout.contains("instrument response from")
+            && stdout.contains("prediction of captures left out"),
+        "{stdout}"
+    );
+    for f in [
+        "fit.csv",
+        "fit_capture_3_0_inch.png",
+        "fit_capture_3_5_inch.png",
+    ] {
+        assert!(out.path().join(f).exists(), "{f} missing");
+    }
+    let csv = std::fs::read_to_string(out.path().join("fit.csv")).unwrap();
+    assert!(
+        csv.lines()
+            .any(|l| l.starts_with("capture_3_5_inch,predicted,"))
+    );
+    // A bad thickness is refused by name.
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args([
+            "calibrate-slab",
+            "--bin-ps",
+            "8",
+            "--refractive-index",
+            "1.12",
+            "--irf-from",
+        ])
+        .arg(dir.join("capture_direct.mat"))
+        .args(["--capture", &arg("capture_3_0_inch.mat", "3ft")])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("3ft") && stderr.contains("unit"),
+        "{stderr}"
+    );
+}
