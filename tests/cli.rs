@@ -1189,3 +1189,87 @@ fn calibrate_fits_a_simulated_stack_and_names_bad_parameters() {
         &["unknown parameter `mu_z`", "mu_a, mu_s, t0, irf"],
     );
 }
+
+#[test]
+fn reconstruct_fits_the_physics_first_when_asked_and_records_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    // mu_s' = (1 - 0.99) 1000 = 10 /cm, mu_a 0.2 /cm: both shape the profile.
+    let physics = [
+        "--mu-a",
+        "0.2",
+        "--mu-s",
+        "1000",
+        "--g",
+        "0.99",
+        "--thickness",
+        "1.5cm",
+        "--bins",
+        "60",
+        "--bin-width",
+        "8ps",
+        "--size",
+        "32",
+        "--fov",
+        "6cm",
+    ];
+    let mut args = vec![
+        "simulate",
+        "--scene",
+        "disks",
+        "--photons",
+        "1e7",
+        "--out",
+        sim.to_str().unwrap(),
+    ];
+    args.extend(physics);
+    let o = scatterscope(&args);
+    assert!(o.status.success(), "{}", text(&o).1);
+    let stack = sim.join("counts.exr");
+    let rec = dir.path().join("rec");
+    let o = scatterscope(&[
+        "reconstruct",
+        stack.to_str().unwrap(),
+        "--method",
+        "rl-sum",
+        "--mu-a",
+        "0.4",
+        "--mu-s",
+        "600",
+        "--fit-physics",
+        "mu_a,mu_s",
+        "--out",
+        rec.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    let fitted = |name: &str| -> f64 {
+        let line = stdout
+            .lines()
+            .find(|l| l.trim_start().starts_with(name))
+            .unwrap_or_else(|| panic!("{stdout}"));
+        line.split_whitespace().nth(1).unwrap().parse().unwrap()
+    };
+    // From a start 2x and 0.6x off; a 6 cm sensor loses some late light,
+    // which the whole-plane profile ignores, hence the tolerances.
+    assert!((fitted("mu_s'") / 10.0 - 1.0).abs() < 0.05, "{stdout}");
+    assert!((fitted("mu_a") / 0.2 - 1.0).abs() < 0.15, "{stdout}");
+    let trace = std::fs::read_to_string(rec.join("trace.json")).unwrap();
+    assert!(
+        trace.contains("physics fitted to the stack's time profile (mu_a, mu_s)"),
+        "{trace}"
+    );
+    assert!(
+        trace.contains("background:") && trace.contains("model:"),
+        "{trace}"
+    );
+    fails_with(
+        &[
+            "reconstruct",
+            stack.to_str().unwrap(),
+            "--fit-physics",
+            "mu_x",
+        ],
+        &["--fit-physics", "unknown parameter `mu_x`"],
+    );
+}

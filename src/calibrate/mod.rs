@@ -370,6 +370,28 @@ fn standard_errors(model: &Model, p: &[f64; 6]) -> (Vec<Option<f64>>, Vec<usize>
     (se, undetermined)
 }
 
+/// Fits `stack`'s physics to its time profile ([`calibrate`], starting
+/// from `setup`) and applies the fit: the returned calibration's setup
+/// holds the fitted medium and IRF, and a fitted time-zero shift is
+/// applied to both the stack's bin starts and that setup's bins, so the
+/// two stay aligned for [`crate::Problem::new`].
+pub fn fit_stack_physics(
+    stack: &mut crate::stack::Stack,
+    setup: &Setup,
+    free: Free,
+) -> Result<Calibration, CalibrateError> {
+    let (start, counts) = time_profile(stack)?;
+    let mut cal = calibrate(&counts, start, setup, free)?;
+    let shift = cal.parameters[2].value;
+    cal.setup.bins.start_ps -= shift;
+    stack
+        .meta
+        .bin_starts_ps
+        .iter_mut()
+        .for_each(|t| *t -= shift);
+    Ok(cal)
+}
+
 /// The time profile of `stack`: counts summed over the sensor per bin, and
 /// the start of its first bin (ps). Its bins must follow one another.
 pub fn time_profile(stack: &crate::stack::Stack) -> Result<(f64, Vec<f64>), CalibrateError> {

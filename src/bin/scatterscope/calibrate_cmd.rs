@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use scatterscope::calibrate::{Free, calibrate, time_profile};
+use scatterscope::calibrate::{Calibration, Free, calibrate, time_profile};
 use scatterscope::report::plot::{Series, chart};
 use scatterscope::stack::Stack;
 
@@ -33,6 +33,30 @@ pub struct CalibrateArgs {
     out: PathBuf,
 }
 
+/// The fit's parameters, quality and notes, one printable line each.
+pub fn calibration_lines(c: &Calibration) -> Vec<String> {
+    let mut lines = vec![format!(
+        "fit of {} bins ({} counts), {} likelihood evaluations:",
+        c.measured.len(),
+        c.measured.iter().sum::<f64>(),
+        c.evaluations
+    )];
+    for p in &c.parameters {
+        let value = match (p.fitted, p.standard_error) {
+            (true, Some(se)) => format!("{:.6} +- {:.2e}", p.value, se),
+            (true, None) => format!("{:.6} (not determined by the data)", p.value),
+            (false, _) => format!("{:.6} (fixed)", p.value),
+        };
+        lines.push(format!("  {:<11} {value} {}", p.name, p.unit));
+    }
+    lines.push(format!(
+        "  chi-square per degree of freedom {:.3} ({} degrees of freedom)",
+        c.chi2_per_dof, c.dof
+    ));
+    lines.extend(c.undetermined.iter().map(|u| format!("  note: {u}")));
+    lines
+}
+
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let (data, meta) = Stack::read(&args.stack)?;
     let meta = meta.with_context(|| {
@@ -48,26 +72,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let c = calibrate(&counts, start, &setup, free)
         .with_context(|| format!("calibrating {}", args.stack.display()))?;
     println!("model: {}", setup.model_summary());
-    println!(
-        "fit of {} bins ({} counts), {} likelihood evaluations:",
-        counts.len(),
-        counts.iter().sum::<f64>(),
-        c.evaluations
-    );
-    for p in &c.parameters {
-        let value = match (p.fitted, p.standard_error) {
-            (true, Some(se)) => format!("{:.6} +- {:.2e}", p.value, se),
-            (true, None) => format!("{:.6} (not determined by the data)", p.value),
-            (false, _) => format!("{:.6} (fixed)", p.value),
-        };
-        println!("  {:<11} {value} {}", p.name, p.unit);
-    }
-    println!(
-        "  chi-square per degree of freedom {:.3} ({} degrees of freedom)",
-        c.chi2_per_dof, c.dof
-    );
-    for u in &c.undetermined {
-        println!("  note: {u}");
+    for line in calibration_lines(&c) {
+        println!("{line}");
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output directory {}", args.out.display()))?;

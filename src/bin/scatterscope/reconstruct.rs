@@ -15,7 +15,9 @@ use scatterscope::stack::exr_file;
 use scatterscope::stack::preview::write_image;
 use scatterscope::stack::{Stack, StackMeta, ValueKind, missing_meta};
 
+use crate::calibrate_cmd::calibration_lines;
 use crate::recon_args::ReconArgs;
+use scatterscope::calibrate::{Free, fit_stack_physics};
 
 /// Reconstruct the object from a transient stack (.exr or .npy).
 ///
@@ -45,6 +47,11 @@ pub struct ReconstructArgs {
     /// before the first light, none if it has none), none, or a number.
     #[arg(long, value_parser = BackgroundChoice::parse, default_value = "auto")]
     background: BackgroundChoice,
+    /// Fit these to the stack's time profile first and reconstruct with the
+    /// fitted physics, comma-separated: mu_a, mu_s, t0, irf (as
+    /// `calibrate --fit`); the fit is printed and kept in trace.json.
+    #[arg(long, value_delimiter = ',')]
+    fit_physics: Vec<String>,
     #[command(flatten)]
     recon: ReconArgs,
     #[command(flatten)]
@@ -56,7 +63,7 @@ pub struct ReconstructArgs {
 
 pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     let (data, meta) = Stack::read(&args.stack)?;
-    let (stack, setup) = match meta {
+    let (mut stack, mut setup) = match meta {
         Some(meta) => {
             let stack = Stack::from_parts(data, meta, &args.stack)?;
             let setup = args.physics.resolve_over(stack.meta.setup)?;
@@ -105,6 +112,18 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
             (Stack::from_parts(data, meta, &args.stack)?, setup)
         }
     };
+    let mut assumed = Vec::new();
+    if !args.fit_physics.is_empty() {
+        let free = Free::from_names(&args.fit_physics).context("--fit-physics")?;
+        let cal = fit_stack_physics(&mut stack, &setup, free)
+            .with_context(|| format!("fitting the physics of {}", args.stack.display()))?;
+        assumed.push(format!(
+            "physics fitted to the stack's time profile ({})",
+            args.fit_physics.join(", ")
+        ));
+        assumed.extend(calibration_lines(&cal));
+        setup = cal.setup;
+    }
     let sampling = stack.meta.sampling.unwrap_or(Sampling::Integrated);
     let boundary = args.boundary.or(stack.meta.boundary).unwrap_or_default();
     anyhow::ensure!(
@@ -125,8 +144,11 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     let (problem, background) = problem
         .with_background(args.background)
         .with_context(|| format!("the background of {}", args.stack.display()))?;
-    println!("model: {}", setup.model_summary());
-    println!("background: {background}");
+    assumed.push(format!("model: {}", setup.model_summary()));
+    assumed.push(format!("background: {background}"));
+    for line in &assumed {
+        println!("{line}");
+    }
     if !problem.left_out.is_empty() {
         let counts: f64 = problem.left_out.iter().map(|(_, c)| c).sum();
         println!(
@@ -145,7 +167,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     let denoiser = args.recon.prior.denoiser()?;
     let bar = ProgressBar::new_spinner();
     bar.set_style(ProgressStyle::with_template("{spinner} {elapsed} {msg}").expect("template"));
-    let result = run_method(
+    let mut result = run_method(
         &problem,
         args.method,
         args.bin,
@@ -165,6 +187,9 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         },
     )?;
     bar.finish_and_clear();
+    // The record says what the reconstruction assumed (printed above).
+    let printed = assumed.len();
+    result.trace.notes.splice(0..0, assumed);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output directory {}", args.out.display()))?;
     let image = &result.image;
@@ -194,7 +219,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         last.map_or(0, |r| r.iteration),
         last.map_or(0.0, |r| r.wall_s)
     );
-    for note in &result.trace.notes {
+    for note in result.trace.notes.iter().skip(printed) {
         println!("  {note}");
     }
     if let (Some(t), Some(best)) = (&truth, result.trace.best_psnr()) {
