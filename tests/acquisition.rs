@@ -572,6 +572,19 @@ fn t0_from_a_reference_recording_is_its_peak() {
     w.finish(None).unwrap();
     let t0 = scatterscope::acquire::calibration::t0_from_reference(&path).unwrap();
     assert!((t0 - 617.5 * 2.0).abs() < 1e-9, "{t0}");
+    // A reference with no photons gives no t0, and says so by file.
+    let empty = dir.path().join("empty.sstags");
+    RawWriter::create(&empty, &RawHeader::new("test", &identity, &config, "test"))
+        .unwrap()
+        .finish(None)
+        .unwrap();
+    let err = scatterscope::acquire::calibration::t0_from_reference(&empty)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("empty.sstags") && err.contains("no photons"),
+        "{err}"
+    );
 }
 
 #[test]
