@@ -55,7 +55,7 @@ fn levels(stack: &Stack, s: &Setup, choice: BackgroundChoice) -> Vec<(Method, f6
     for method in [Method::RlSum, Method::ScaledCounts, Method::Pnp] {
         let problem = Problem::new(stack, s, Sampling::Integrated, Boundary::Sensor).unwrap();
         let (problem, _) = problem.with_background(choice).unwrap();
-        let mut o = opts.clone();
+        let mut o = opts;
         o.split.max_iters = 30;
         let r = run_method(&problem, method, None, &NoPrior, &o, None, |_| {}).unwrap();
         assert!(
