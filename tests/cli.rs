@@ -530,7 +530,12 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
         stdout.contains("balance: every photon accounted for"),
         "{stdout}"
     );
-    assert!(stdout.contains("10 of 30 bins are empty"), "{stdout}");
+    // Light reaches the paper's slab's far side from about 16 ps on: the
+    // first four 4 ps bins see none.
+    assert!(
+        stdout.contains("bins are empty (bins [0, 1, 2, 3,"),
+        "{stdout}"
+    );
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap())
             .unwrap();

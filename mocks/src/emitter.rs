@@ -3,7 +3,10 @@
 //! A photon's source pixel is drawn with probability proportional to the
 //! scene's intensity, its time bin and lateral offset jointly from the
 //! ST-PSF kernels (their relative masses are the physics), its arrival time
-//! uniformly within that bin. The detected pixel is the source pixel plus
+//! uniformly within that bin. Every bin with light is sampled, also those
+//! the given kernels leave out for carrying under `min_bin_photons` of the
+//! setup's light budget: that threshold is a reconstruction's choice, and a
+//! device records every photon that arrives. The detected pixel is the source pixel plus
 //! the offset; photons that land off the sensor are not detected. Arrival
 //! times form a Poisson process at the configured rate; dark counts add
 //! uniformly distributed pixels and times.
@@ -103,21 +106,26 @@ pub struct Emitter {
     jitter: Option<(Normal<f64>, Option<Exp<f64>>)>,
 }
 
-/// Kernels of the arrival times that the IRF can move into `setup`'s
-/// bins: the same physics without the IRF, the binning extended on both
-/// sides by the IRF's support.
-fn arrival_kernels(setup: &Setup, irf: &Irf) -> Result<KernelStack, EmitterError> {
+/// Kernels of the arrival times that reach `setup`'s bins: the same
+/// physics without the IRF, every bin down to
+/// [`NEGLIGIBLE_ARRIVAL_PHOTONS`] kept (the setup's `min_bin_photons` is a
+/// reconstruction's choice about its light budget; a device records every
+/// photon that arrives), and with an IRF the binning extended on both
+/// sides by its support.
+fn arrival_kernels(setup: &Setup, irf: Option<&Irf>) -> Result<KernelStack, EmitterError> {
     let mut s = *setup;
     s.irf = None;
     s.min_bin_photons = NEGLIGIBLE_ARRIVAL_PHOTONS;
-    let (early, late) = irf.support_ps();
-    let w = s.bins.width_ps;
-    let before = ((late / w).ceil() as usize).min((s.bins.start_ps / w).floor() as usize);
-    let after = (-early / w).ceil() as usize;
-    s.bins.start_ps -= before as f64 * w;
-    s.bins.count += before + after;
+    if let Some(irf) = irf {
+        let (early, late) = irf.support_ps();
+        let w = s.bins.width_ps;
+        let before = ((late / w).ceil() as usize).min((s.bins.start_ps / w).floor() as usize);
+        let after = (-early / w).ceil() as usize;
+        s.bins.start_ps -= before as f64 * w;
+        s.bins.count += before + after;
+    }
     KernelStack::build(&s, Sampling::Integrated)
-        .map_err(|e| EmitterError::Invalid(format!("arrival kernels without the IRF: {e}")))
+        .map_err(|e| EmitterError::Invalid(format!("arrival kernels: {e}")))
 }
 
 /// Why an emitter cannot be built.
@@ -179,22 +187,21 @@ impl Emitter {
                 .collect(),
         )
         .map_err(|e| EmitterError::Invalid(format!("scene weights: {e}")))?;
-        // With an IRF: arrivals from the IRF-free kernels, then the jitter.
-        let (arrivals, jitter) = match &kernels.setup.irf {
-            Some(irf) => (
-                Some(arrival_kernels(&kernels.setup, irf)?),
-                Some((
+        // Arrivals from the IRF-free kernels of every bin with light; with
+        // an IRF, then the jitter.
+        let arrivals = arrival_kernels(&kernels.setup, kernels.setup.irf.as_ref())?;
+        let jitter = match &kernels.setup.irf {
+            Some(irf) => Some((
                     Normal::new(0.0, irf.sigma_ps())
                         .map_err(|e| EmitterError::Invalid(format!("IRF: {e}")))?,
                     (irf.tail_ps > 0.0)
                         .then(|| Exp::new(1.0 / irf.tail_ps))
                         .transpose()
                         .map_err(|e| EmitterError::Invalid(format!("IRF tail: {e}")))?,
-                )),
-            ),
-            None => (None, None),
+            )),
+            None => None,
         };
-        let sampled = arrivals.as_ref().unwrap_or(kernels);
+        let sampled = &arrivals;
         let kernel = WeightedAliasIndex::new(sampled.kernels.iter().map(|&v| v.max(0.0)).collect())
             .map_err(|e| EmitterError::Invalid(format!("kernel weights: {e}")))?;
         let bins = sampled
