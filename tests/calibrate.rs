@@ -105,3 +105,94 @@ fn empty_or_bad_profiles_are_refused() {
     assert!(calibrate(&[f64::NAN; 64], 0.0, &truth(), free).is_err());
     assert!(calibrate(&[1.0; 3], 0.0, &truth(), free).is_err());
 }
+
+/// A mock acquisition (in-process device) of a small bright square in the
+/// middle of a sensor wide enough to hold its light, `photons` detections,
+/// with `irf` and `dark_rate_hz`; the time profile and the setup used.
+fn mock_profile(photons: u64, irf: Option<Irf>, dark_rate_hz: f64) -> (Vec<f64>, Setup) {
+    use scatterscope::acquire::{DeviceSpec, MockSetup, Plan, acquire, open_device};
+    use scatterscope::physics::{KernelStack, Sampling};
+    use scatterscope_mocks::{EmitterOptions, MockOptions};
+    let mut s = truth();
+    s.medium.mu_s_per_cm = 1000.0;
+    s.medium.g = 0.99;
+    (s.sensor.width_px, s.sensor.height_px, s.sensor.fov_cm) = (32, 32, 12.0);
+    (s.bins.start_ps, s.bins.width_ps, s.bins.count) = (-200.0, 8.0, 85);
+    s.irf = irf;
+    let mut scene = ndarray::Array2::zeros((32, 32));
+    scene.slice_mut(ndarray::s![12..20, 12..20]).fill(1.0);
+    let mock = MockSetup {
+        scene,
+        kernels: KernelStack::build(&s, Sampling::Integrated).unwrap(),
+        emitter: EmitterOptions {
+            seed: 21,
+            t0_delay_ps: 1000.0,
+            dark_rate_hz,
+            ..EmitterOptions::default()
+        },
+        device: MockOptions {
+            real_time: false,
+            max_photons: photons,
+            ..MockOptions::default()
+        },
+    };
+    let plan = Plan {
+        t_start_ps: s.bins.start_ps,
+        bin_width_ps: s.bins.width_ps,
+        bins: s.bins.count,
+        t0_ps: 1000.0,
+        region: None,
+        duration: None,
+        resolution_fs: None,
+        raw: None,
+        software: "test".into(),
+    };
+    let opened = open_device(&DeviceSpec::Mock, Some(mock)).unwrap();
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    let out = acquire(opened.link, &plan, &stop, |_| {}).unwrap();
+    opened.mock.unwrap().join();
+    let profile = out
+        .counts
+        .outer_iter()
+        .map(|b| b.iter().map(|&c| f64::from(c)).sum())
+        .collect();
+    (profile, s)
+}
+
+#[test]
+fn calibration_recovers_the_medium_of_a_mock_acquisition() {
+    // mu_a 0.2 /cm, mu_s' 10 /cm; a 50 ps IRF and dark counts. The fit
+    // starts from 0.4 /cm, 6 /cm and 30 ps.
+    let irf = Irf {
+        fwhm_ps: 50.0,
+        tail_ps: 0.0,
+    };
+    let (counts, truth) = mock_profile(600_000, Some(irf), 20_000.0);
+    let mut start = truth;
+    start.medium.mu_a_per_cm = 0.4;
+    start.medium.mu_s_per_cm = 600.0;
+    start.irf = Some(Irf {
+        fwhm_ps: 30.0,
+        tail_ps: 0.0,
+    });
+    let free = Free {
+        mu_a: true,
+        mu_s_reduced: true,
+        t0: false,
+        irf_fwhm: true,
+    };
+    let c = calibrate(&counts, truth.bins.start_ps, &start, free).unwrap();
+    assert!(c.undetermined.is_empty(), "{:?}", c.undetermined);
+    for (i, want) in [(0, 0.2), (1, 10.0), (3, 50.0)] {
+        let p = &c.parameters[i];
+        let se = p.standard_error.unwrap();
+        assert!(
+            (p.value - want).abs() < 3.0 * se,
+            "{}: {} +- {se} vs {want}",
+            p.name,
+            p.value
+        );
+        assert!(se < 0.05 * want, "{}: standard error {se}", p.name);
+    }
+    assert!((0.7..1.4).contains(&c.chi2_per_dof), "{}", c.chi2_per_dof);
+}

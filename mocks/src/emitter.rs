@@ -192,12 +192,12 @@ impl Emitter {
         let arrivals = arrival_kernels(&kernels.setup, kernels.setup.irf.as_ref())?;
         let jitter = match &kernels.setup.irf {
             Some(irf) => Some((
-                    Normal::new(0.0, irf.sigma_ps())
-                        .map_err(|e| EmitterError::Invalid(format!("IRF: {e}")))?,
-                    (irf.tail_ps > 0.0)
-                        .then(|| Exp::new(1.0 / irf.tail_ps))
-                        .transpose()
-                        .map_err(|e| EmitterError::Invalid(format!("IRF tail: {e}")))?,
+                Normal::new(0.0, irf.sigma_ps())
+                    .map_err(|e| EmitterError::Invalid(format!("IRF: {e}")))?,
+                (irf.tail_ps > 0.0)
+                    .then(|| Exp::new(1.0 / irf.tail_ps))
+                    .transpose()
+                    .map_err(|e| EmitterError::Invalid(format!("IRF tail: {e}")))?,
             )),
             None => None,
         };

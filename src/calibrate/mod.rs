@@ -265,7 +265,7 @@ pub fn calibrate(
         simplex.push(x);
     }
     let solver = NelderMead::new(simplex)
-        .with_sd_tolerance(1e-10)
+        .with_sd_tolerance(transmittance::NLL_TOLERANCE)
         .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
     let result = Executor::new(model, solver)
         .configure(|c| c.max_iters(3000))

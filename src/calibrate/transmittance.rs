@@ -82,9 +82,9 @@ pub const T0_SEARCH_BINS: f64 = 40.0;
 /// error of `t0` at tens of millions of counts.
 pub const T0_TOLERANCE_PS: f64 = 1e-3;
 
-/// The medium's search stops when the negative log-likelihood across
-/// its simplex varies by less than this (a change of 0.5 is one standard
-/// error's worth).
+/// The Nelder-Mead searches of the calibrations stop when the negative
+/// log-likelihood across their simplex varies by less than this (a change
+/// of 0.5 is one standard error's worth).
 pub const NLL_TOLERANCE: f64 = 1e-3;
 
 /// A fitted coefficient below this (1/cm) has run to its bound 0.
