@@ -180,3 +180,46 @@ fn zero_background_given_is_the_model_without_one() {
         assert_eq!(x, y, "{}", m.name());
     }
 }
+
+#[test]
+fn bins_lit_only_by_the_irf_far_tail_are_left_out_not_overflowed() {
+    // A 50 ps IRF and a window opening 300 ps early: the first bins' kernels
+    // carry 1e-30 of the light and less, and hold only background counts.
+    // Their Poisson weights would overflow; they are left out instead.
+    let mut s = setup(Some(Irf {
+        fwhm_ps: 50.0,
+        tail_ps: 0.0,
+    }));
+    s.bins.start_ps = -300.0;
+    s.bins.count = 105;
+    s.min_bin_photons = 0.0;
+    let (stack, truth) = measured(&s, 0.01, 6);
+    let problem = Problem::new(&stack, &s, Sampling::Integrated, Boundary::Sensor).unwrap();
+    let masses: Vec<f64> = (0..problem.model.bins())
+        .map(|k| problem.model.mass(k))
+        .collect();
+    let total: f64 = masses.iter().sum();
+    assert!(
+        masses.iter().any(|&m| m < 1e-30 * total),
+        "the test needs a bin lit only by the far tail"
+    );
+    let (problem, _) = problem.with_background(BackgroundChoice::Auto).unwrap();
+    let mut opts = MethodOptions::default();
+    opts.split.max_iters = 30;
+    let r = run_method(&problem, Method::Pnp, None, &NoPrior, &opts, None, |_| {}).unwrap();
+    let last = r.trace.rows.last().unwrap();
+    for v in [last.deviance, last.primal_residual] {
+        assert!(v.is_some_and(f64::is_finite), "{last:?}");
+    }
+    assert!(
+        r.trace
+            .notes
+            .iter()
+            .any(|n| n.contains("background explains")),
+        "{:?}",
+        r.trace.notes
+    );
+    let t = truth.mean().unwrap();
+    let level = r.image.mean().unwrap();
+    assert!((level - t).abs() < 0.1 * t, "{level} vs {t}");
+}

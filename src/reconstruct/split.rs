@@ -114,9 +114,17 @@ impl Default for SplitOptions {
     }
 }
 
-/// Share of the total kernel mass below which a bin without a single count
-/// is left out (its data term moves the answer by less than this).
+/// Share of the total kernel mass below which a bin is left out when it
+/// holds no count or a modelled background explains its counts (its data
+/// term moves the answer by less than this).
 pub const NEGLIGIBLE_BIN: f64 = 1e-4;
+
+/// Share of the total kernel mass below which a bin is left out even with
+/// counts and no background: its light is beyond what double precision
+/// resolves against the other bins (its Poisson weight `1/mass` would
+/// overflow). Its counts cannot come from the model; the output says how
+/// many there were.
+pub const UNRESOLVED_BIN: f64 = 1e-12;
 
 /// Per-bin state of the data split, on the sensor window except `q`.
 struct BinState {
@@ -177,23 +185,34 @@ pub fn pnp_split(
     if total == 0.0 {
         return Ok(no_photons(trace, (h, w), truth));
     }
-    // Bins without a count whose kernels carry a negligible share of the
-    // light (the first picoseconds) cannot change the answer: left out.
-    let used: Vec<(usize, usize)> = bins
-        .iter()
-        .enumerate()
-        .filter(|&(i, &k)| {
-            let mass = model.mass(k);
-            mass > 0.0
-                && (mass >= NEGLIGIBLE_BIN * total_mass
-                    || counts.index_axis(Axis(0), i).iter().any(|&m| m > 0.0))
-        })
-        .map(|(i, &k)| (i, k))
-        .collect();
+    // Bins whose kernels carry a negligible share of the light (the first
+    // picoseconds, or IRF-spread tails) cannot change the answer when they
+    // hold no count or a background explains their counts: left out.
+    let bg = model.background();
+    let (mut used, mut unexplained) = (Vec::new(), 0.0);
+    for (i, &k) in bins.iter().enumerate() {
+        let share = model.mass(k) / total_mass;
+        let held: f64 = counts.index_axis(Axis(0), i).sum();
+        if share >= NEGLIGIBLE_BIN || (bg == 0.0 && held > 0.0 && share >= UNRESOLVED_BIN) {
+            used.push((i, k));
+        } else if bg == 0.0 {
+            unexplained += held;
+        }
+    }
     if used.len() < bins.len() {
+        let why = if bg > 0.0 {
+            "without a count or whose counts the background explains"
+        } else {
+            "without a count"
+        };
         trace.notes.push(format!(
-            "left out {} bin(s) without a count whose kernels carry less than {NEGLIGIBLE_BIN:e} of the light each",
+            "left out {} bin(s) {why}, whose kernels carry less than {NEGLIGIBLE_BIN:e} of the light each",
             bins.len() - used.len()
+        ));
+    }
+    if unexplained > 0.0 {
+        trace.notes.push(format!(
+            "left out {unexplained} counts in bins whose kernels carry less than {UNRESOLVED_BIN:e} of the light: no light of the model reaches them (a background not modelled, or a time window the physics does not match)"
         ));
     }
     trace.notes.push(format!(
@@ -201,9 +220,14 @@ pub fn pnp_split(
         2 * used.len() + 2
     ));
     // Background counts per pixel and bin: the data are Poisson(H o + bg).
-    let bg = model.background();
     note_background(&mut trace, model);
-    let flat = flat_level(total, bg, used.len(), total_mass, h * w);
+    // The flat object that explains the counts of the bins used (the
+    // left-out bins' background counts are not its light).
+    let used_counts: f64 = used
+        .iter()
+        .map(|&(i, _)| counts.index_axis(Axis(0), i).sum())
+        .sum();
+    let flat = flat_level(used_counts, bg, used.len(), total_mass, h * w);
     // Precision of the data split per frequency, without rho:
     // sum_k |K_k|^2 / (mass_k o_flat).
     let mut kernel_power = vec![0.0f64; fft.spectrum_len()];
