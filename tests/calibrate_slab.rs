@@ -147,7 +147,7 @@ fn references_and_captures_without_light_are_refused_by_name() {
     let empty = TimeHistogram::new(vec![0.0; 500], BIN_PS, 0.0, Path::new("empty.mat")).unwrap();
     let err = MeasuredIrf::from_histogram(&empty).unwrap_err().to_string();
     assert!(
-        err.contains("empty.mat") && err.contains("before it"),
+        err.contains("empty.mat") && err.contains("no instrument response"),
         "{err}"
     );
     let err = TimeHistogram::new(vec![1.0, f64::NAN], BIN_PS, 0.0, Path::new("x.mat"))
@@ -336,4 +336,52 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
         stderr.contains("3ft") && stderr.contains("unit"),
         "{stderr}"
     );
+}
+
+#[test]
+fn the_parametric_irf_is_recovered_from_a_reference_and_a_poor_fit_is_flagged() {
+    use scatterscope::calibrate::irf_fit::fit_irf;
+    use scatterscope::physics::Irf;
+    let truth = Irf {
+        fwhm_ps: 45.0,
+        tail_ps: 30.0,
+    };
+    let centre = 1600.0;
+    let mean: Vec<f64> = (0..400)
+        .map(|i| {
+            let a = i as f64 * BIN_PS;
+            2e6 * truth.bin_weight(a, a + BIN_PS, centre) + 20.0
+        })
+        .collect();
+    let reference =
+        TimeHistogram::new(poisson(&mean, 5), BIN_PS, 0.0, Path::new("ref.sstags")).unwrap();
+    let fit = fit_irf(&reference).unwrap();
+    let (se_fwhm, se_tail) = fit.standard_errors_ps;
+    let (se_fwhm, se_tail) = (se_fwhm.unwrap(), se_tail.unwrap());
+    assert!((fit.irf.fwhm_ps - 45.0).abs() < 4.0 * se_fwhm, "{fit:?}");
+    assert!((fit.irf.tail_ps - 30.0).abs() < 4.0 * se_tail, "{fit:?}");
+    assert!((fit.centre_ps - centre).abs() < 2.0, "{fit:?}");
+    assert!((0.8..1.25).contains(&fit.chi2_per_dof), "{fit:?}");
+    // A sharp peak plus a long, weak tail (as measured SPAD responses
+    // have): the form cannot follow it, and the chi-square says so.
+    let sharp = Irf {
+        fwhm_ps: 10.0,
+        tail_ps: 0.0,
+    };
+    let slow = Irf {
+        fwhm_ps: 10.0,
+        tail_ps: 230.0,
+    };
+    let mean: Vec<f64> = (0..400)
+        .map(|i| {
+            let a = i as f64 * BIN_PS;
+            2e6 * (0.8 * sharp.bin_weight(a, a + BIN_PS, centre)
+                + 0.2 * slow.bin_weight(a, a + BIN_PS, centre))
+                + 20.0
+        })
+        .collect();
+    let reference =
+        TimeHistogram::new(poisson(&mean, 6), BIN_PS, 0.0, Path::new("spad.sstags")).unwrap();
+    let fit = fit_irf(&reference).unwrap();
+    assert!(fit.chi2_per_dof > 10.0, "{fit:?}");
 }

@@ -1278,3 +1278,75 @@ fn reconstruct_fits_the_physics_first_when_asked_and_records_it() {
         &["--fit-physics", "unknown parameter `mu_x`"],
     );
 }
+
+#[test]
+fn simulate_takes_its_irf_from_a_reference_recording_and_records_it() {
+    use scatterscope::physics::{Irf, Preset};
+    use scatterscope::stack::StackMeta;
+    let dir = tempfile::tempdir().unwrap();
+    // A reference stack (one pixel, 200 bins of 4 ps): a 30 ps Gaussian
+    // with a 10 ps tail centred at 400 ps, 1e6 counts and a background.
+    let truth = Irf {
+        fwhm_ps: 30.0,
+        tail_ps: 10.0,
+    };
+    let mut s = Preset::Paper.setup();
+    (s.sensor.width_px, s.sensor.height_px, s.bins.count) = (1, 1, 200);
+    let meta = StackMeta::consecutive(&s, 200, ValueKind::Counts, "reference".into()).unwrap();
+    let data = ndarray::Array3::from_shape_fn((200, 1, 1), |(k, _, _)| {
+        let a = k as f64 * 4.0;
+        (1e6 * truth.bin_weight(a, a + 4.0, 400.0) + 5.0).round() as f32
+    });
+    let reference = dir.path().join("reference.exr");
+    Stack { data, meta }.save(&reference).unwrap();
+    let sim = dir.path().join("sim");
+    let o = scatterscope(&[
+        "simulate",
+        "--scene",
+        "disks",
+        "--size",
+        "32",
+        "--fov",
+        "6.25cm",
+        "--irf-from",
+        reference.to_str().unwrap(),
+        "--out",
+        sim.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stdout.contains("instrument response fitted to") && stdout.contains("Gaussian FWHM 30.0"),
+        "{stdout}"
+    );
+    let stack = Stack::load(&sim.join("counts.exr")).unwrap();
+    let irf = stack.meta.setup.unwrap().irf.expect("the IRF is recorded");
+    assert!(
+        (irf.fwhm_ps - 30.0).abs() < 0.3 && (irf.tail_ps - 10.0).abs() < 0.3,
+        "{irf:?}"
+    );
+    // With an explicit width too it is refused; a reference without a
+    // response is refused by name.
+    fails_with(
+        &[
+            "simulate",
+            "--irf-from",
+            reference.to_str().unwrap(),
+            "--irf-fwhm",
+            "20ps",
+        ],
+        &["--irf-from", "--irf-fwhm"],
+    );
+    let flat = dir.path().join("flat.exr");
+    let meta = StackMeta::consecutive(&s, 200, ValueKind::Counts, "flat".into()).unwrap();
+    Stack {
+        data: ndarray::Array3::from_elem((200, 1, 1), 7.0),
+        meta,
+    }
+    .save(&flat)
+    .unwrap();
+    fails_with(
+        &["simulate", "--irf-from", flat.to_str().unwrap()],
+        &["flat.exr", "no instrument response"],
+    );
+}

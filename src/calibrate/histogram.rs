@@ -2,8 +2,9 @@
 //! bins of equal width, as a TCSPC module accumulates them.
 //!
 //! Sources: MATLAB v7.3 files (HDF5 inside; read with the pure-Rust
-//! `hdf5-reader`, so no system HDF5 library is needed), and our own stacks
-//! (the counts summed over the sensor per bin).
+//! `hdf5-reader`, so no system HDF5 library is needed), our own stacks
+//! (the counts summed over the sensor per bin) and tag files (every photon
+//! at the file's resolution).
 
 use std::path::{Path, PathBuf};
 
@@ -130,9 +131,32 @@ impl TimeHistogram {
         Self::new(counts, stack.meta.bin_width_ps, start, path)
     }
 
+    /// Every photon of a tag file (PicoQuant or our raw records) in one
+    /// histogram over one sync period at the file's resolution.
+    pub fn from_tags(path: &Path) -> Result<Self, HistogramError> {
+        let spec = crate::BinSpec {
+            pixels: crate::tags::bin_file::Pixels::Single,
+            ..crate::BinSpec::default()
+        };
+        let binned = crate::bin_file(path, &spec).map_err(|e| file_error(path, e.to_string()))?;
+        let first = binned
+            .stacks
+            .first()
+            .ok_or_else(|| file_error(path, "the file holds no histogram"))?;
+        let mut counts = vec![0.0; first.bins()];
+        for stack in &binned.stacks {
+            for (c, img) in counts.iter_mut().zip(stack.data.outer_iter()) {
+                *c += img.iter().map(|&v| f64::from(v)).sum::<f64>();
+            }
+        }
+        let start = first.meta.bin_starts_ps.first().copied().unwrap_or(0.0);
+        Self::new(counts, first.meta.bin_width_ps, start, path)
+    }
+
     /// Reads a histogram file by its extension: `.mat` (dataset `dataset`,
-    /// bins of `bin_width_ps`), or a stack (`.exr`, `.npy`: summed over the
-    /// sensor, bins from its metadata).
+    /// bins of `bin_width_ps`), a stack (`.exr`, `.npy`: summed over the
+    /// sensor, bins from its metadata), or a tag file (`.ptu`, `.pt3`,
+    /// `.ht3`, `.sstags`: every photon, the file's resolution).
     pub fn read(
         path: &Path,
         dataset: &str,
@@ -156,9 +180,10 @@ impl TimeHistogram {
                 let stack = Stack::load(path).map_err(|e| file_error(path, e.to_string()))?;
                 Self::from_stack(&stack, path)
             }
+            Some("ptu") | Some("pt3") | Some("ht3") | Some("sstags") => Self::from_tags(path),
             _ => Err(file_error(
                 path,
-                "unknown histogram format (read: .mat MATLAB v7.3, .exr and .npy stacks)",
+                "unknown histogram format (read: .mat MATLAB v7.3, .exr and .npy stacks, .ptu, .pt3, .ht3 and .sstags tag files)",
             )),
         }
     }

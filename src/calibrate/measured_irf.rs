@@ -71,6 +71,17 @@ impl MeasuredIrf {
             )));
         }
         let peak = reference.peak_index();
+        // A reference whose fullest bin does not stand out of the rest
+        // (an empty or flat one) holds no response at all.
+        let mut sorted = reference.counts.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[n / 2];
+        if reference.counts[peak] - median <= PEAK_SIGNIFICANCE * median.max(1.0).sqrt() {
+            return Err(fail(format!(
+                "no instrument response: the fullest bin ({peak}) holds {} counts, the median bin {median}",
+                reference.counts[peak]
+            )));
+        }
         let (background, _) = reference
             .background_before(peak, BACKGROUND_GAP)
             .ok_or_else(|| {

@@ -20,6 +20,7 @@ use scatterscope_physics::{Irf, Setup};
 
 pub mod hessian;
 pub mod histogram;
+pub mod irf_fit;
 pub mod measured_irf;
 pub mod transmittance;
 

@@ -253,7 +253,7 @@ impl Prepared<'_> {
 
 /// Poisson negative log-likelihood (without the data's constant) of
 /// `mu = a s + b`.
-fn nll(shape: &[f64], counts: &[f64], a: f64, b: f64) -> f64 {
+pub(super) fn nll(shape: &[f64], counts: &[f64], a: f64, b: f64) -> f64 {
     shape
         .iter()
         .zip(counts)
@@ -270,7 +270,7 @@ fn nll(shape: &[f64], counts: &[f64], a: f64, b: f64) -> f64 {
 
 /// The `A >= 0`, `B >= 0` maximising the likelihood of `A s + B` (a
 /// convex problem: Newton's method with step halving), and the value.
-fn amplitudes(shape: &[f64], counts: &[f64]) -> (f64, f64, f64) {
+pub(super) fn amplitudes(shape: &[f64], counts: &[f64]) -> (f64, f64, f64) {
     let n = counts.len() as f64;
     let total: f64 = counts.iter().sum();
     let smax = shape.iter().copied().fold(0.0, f64::max);

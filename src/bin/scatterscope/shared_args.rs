@@ -1,11 +1,18 @@
 //! Arguments shared by several commands: the physics flags (which the
 //! library takes as [`PhysicsOverrides`]) and named choices.
 
+use anyhow::Context;
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use scatterscope::Named;
+use scatterscope::calibrate::histogram::TimeHistogram;
+use scatterscope::calibrate::irf_fit::fit_irf;
 use scatterscope::config::{ConfigError, PhysicsOverrides, parse_cm, parse_ps};
 use scatterscope::physics::{MediumModel, Preset, Setup};
 use std::path::PathBuf;
+
+/// Chi-square per degree of freedom of an IRF fit above which the output
+/// says the parametric form does not describe the reference.
+const IRF_FORM_CHI2: f64 = 2.0;
 
 /// A clap value parser for a [`Named`] choice: its names are the possible
 /// values.
@@ -74,6 +81,12 @@ pub struct PhysicsArgs {
     /// unit ps; 0: none).
     #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     pub irf_tail: Option<f64>,
+    /// Instrument response fitted to a reference recording without the
+    /// medium (.sstags, .ptu, .pt3, .ht3 tag file or an .exr/.npy stack):
+    /// the Gaussian-plus-exponential form, by Poisson maximum likelihood;
+    /// the fit and its chi-square are printed.
+    #[arg(long, value_name = "REF", conflicts_with_all = ["irf_fwhm", "irf_tail"])]
+    pub irf_from: Option<PathBuf>,
 }
 
 impl PhysicsArgs {
@@ -108,6 +121,36 @@ impl PhysicsArgs {
     /// Like [`Self::resolve`], starting from `base` (a stack's recorded
     /// physics) instead of the default preset.
     pub fn resolve_over(&self, base: Option<Setup>) -> anyhow::Result<Setup> {
+        let mut setup = self.resolve_flags_over(base)?;
+        if let Some(reference) = &self.irf_from {
+            let histogram = TimeHistogram::read(reference, "out", None)?;
+            let fit = fit_irf(&histogram)
+                .with_context(|| format!("fitting the IRF to {}", reference.display()))?;
+            let se = |v: Option<f64>| v.map_or(String::new(), |e| format!(" +- {e:.2}"));
+            println!(
+                "instrument response fitted to {}: Gaussian FWHM {:.2}{} ps, exponential tail {:.2}{} ps, centre at {:.2} ps on its clock, background {:.3} counts per bin, chi-square per degree of freedom {:.2}",
+                reference.display(),
+                fit.irf.fwhm_ps,
+                se(fit.standard_errors_ps.0),
+                fit.irf.tail_ps,
+                se(fit.standard_errors_ps.1),
+                fit.centre_ps,
+                fit.background_per_bin,
+                fit.chi2_per_dof
+            );
+            if fit.chi2_per_dof > IRF_FORM_CHI2 {
+                println!(
+                    "note: the Gaussian-plus-exponential form does not describe {} (chi-square per degree of freedom {:.1}); the kernels use it as an approximation",
+                    reference.display(),
+                    fit.chi2_per_dof
+                );
+            }
+            setup.irf = Some(fit.irf);
+        }
+        Ok(setup)
+    }
+
+    fn resolve_flags_over(&self, base: Option<Setup>) -> anyhow::Result<Setup> {
         self.overrides().resolve_over(base).map_err(|e| match e {
             ConfigError::Param { error, key, config } => anyhow::anyhow!(
                 "{error} (set it with --{} or `{key}` in {})",
