@@ -21,7 +21,8 @@ use scatterscope::report::plot::{Series, chart};
 /// mu_a are shared, time zero, signal and background are each capture's.
 /// Captures given with --predict are not fitted: the fitted medium predicts
 /// them (only their time zero, signal and background are fitted), to test
-/// the medium on data it never saw. Writes OUT/fit.csv and OUT/fit.png.
+/// the medium on data it never saw. Writes OUT/fit.csv and a plot per
+/// capture, OUT/fit_LABEL.png (log counts, measured and model).
 #[derive(Debug, clap::Args)]
 pub struct CalibrateSlabArgs {
     /// Captures to fit, each FILE=THICKNESS (THICKNESS with its unit: cm,
