@@ -385,3 +385,43 @@ fn the_parametric_irf_is_recovered_from_a_reference_and_a_poor_fit_is_flagged() 
     let fit = fit_irf(&reference).unwrap();
     assert!(fit.chi2_per_dof > 10.0, "{fit:?}");
 }
+
+#[test]
+fn broken_matlab_files_give_errors_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let junk = dir.path().join("junk.mat");
+    std::fs::write(&junk, b"MATLAB 5.0 MAT-file, not HDF5 at all").unwrap();
+    let err = TimeHistogram::read(&junk, "out", Some(BIN_PS))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("junk.mat") && err.contains("MATLAB v7.3"),
+        "{err}"
+    );
+    let missing = dir.path().join("missing.mat");
+    let err = TimeHistogram::read(&missing, "out", Some(BIN_PS))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("missing.mat"), "{err}");
+    let odd = dir.path().join("capture.txt");
+    std::fs::write(&odd, b"1\n2\n").unwrap();
+    let err = TimeHistogram::read(&odd, "out", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("capture.txt") && err.contains("unknown histogram format"),
+        "{err}"
+    );
+    // A real capture cut short (when the shared data are here).
+    if let Some(dir_cdt) = cdt() {
+        let bytes = std::fs::read(dir_cdt.join("capture_direct.mat")).unwrap();
+        for keep in [100, 600, 5000, bytes.len() / 2] {
+            let cut = dir.path().join(format!("cut{keep}.mat"));
+            std::fs::write(&cut, &bytes[..keep]).unwrap();
+            let err = TimeHistogram::read(&cut, "out", Some(BIN_PS))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(&format!("cut{keep}.mat")), "{err}");
+        }
+    }
+}
