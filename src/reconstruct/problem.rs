@@ -8,7 +8,7 @@ use crate::stack::{Stack, ValueKind};
 
 /// Kept bins where even an object explaining every count would send fewer
 /// than this many counts per pixel count as "before the first light" for
-/// the background estimate (which their light can bias by at most this).
+/// the background estimate (their expected light is subtracted).
 pub const DARK_COUNTS_PER_PIXEL: f64 = 1e-3;
 
 /// How the background per pixel and bin is chosen.
@@ -190,24 +190,31 @@ impl Problem {
     /// The background from the bins before the first light: stack bins
     /// where the ST-PSF puts no light, and kept bins whose share of the
     /// kernels' light, times all the counts, is below
-    /// [`DARK_COUNTS_PER_PIXEL`] per pixel. `None` when there is none.
+    /// [`DARK_COUNTS_PER_PIXEL`] per pixel; that light is subtracted from
+    /// their counts (at most down to 0). `None` when there is no such bin.
     pub fn estimate_background(&self) -> Option<BackgroundEstimate> {
         let (_, h, w) = self.counts.dim();
         let total_mass: f64 = (0..self.model.bins()).map(|k| self.model.mass(k)).sum();
         let total: f64 = self.counts.sum();
         let mut dark: Vec<(f64, f64)> = self.left_out.clone();
+        // The light the kernels still put in the kept dark bins, for an
+        // object explaining every count: taken off, so that the earliest
+        // photons of the signal do not pass for background.
+        let mut their_light = 0.0;
         for k in 0..self.model.bins() {
             let most_signal = total * self.model.mass(k) / total_mass;
             if most_signal < DARK_COUNTS_PER_PIXEL * (h * w) as f64 {
                 let counts = self.counts.index_axis(ndarray::Axis(0), k).sum();
                 dark.push((self.bin_starts_ps[k], counts));
+                their_light += most_signal;
             }
         }
         if dark.is_empty() {
             return None;
         }
         let cells = (dark.len() * h * w) as f64;
-        let counts: f64 = dark.iter().map(|(_, c)| c).sum();
+        let held: f64 = dark.iter().map(|(_, c)| c).sum();
+        let counts = (held - their_light).max(0.0);
         let first = dark.iter().map(|(t, _)| *t).fold(f64::INFINITY, f64::min);
         let last = dark
             .iter()
@@ -215,7 +222,7 @@ impl Problem {
             .fold(f64::NEG_INFINITY, f64::max);
         Some(BackgroundEstimate {
             per_pixel_per_bin: counts / cells,
-            standard_error: counts.sqrt() / cells,
+            standard_error: held.sqrt() / cells,
             bins: dark.len(),
             span_ps: (first, last + self.setup.bins.width_ps),
         })
