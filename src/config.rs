@@ -57,6 +57,29 @@ fn parse_unit(s: &str, units: &[(&str, f64)], default: &str) -> Result<f64, Stri
         })
 }
 
+/// The medium and instrument of `setup` as a TOML file of this module's
+/// keys (`mu_a`, `mu_s`, `g`, `n`, `thickness`, `medium`, `irf_fwhm`,
+/// `irf_tail`), each value exact (shortest round-trip form), after the
+/// comment lines of `header`: what `--config` reads back over a stack's
+/// own sensor and bins.
+pub fn medium_toml(setup: &Setup, header: &str) -> String {
+    let m = &setup.medium;
+    let (fwhm, tail) = setup.irf.map_or((0.0, 0.0), |i| (i.fwhm_ps, i.tail_ps));
+    let mut out: String = header.lines().map(|l| format!("# {l}\n")).collect();
+    out.push_str(&format!(
+        "mu_a = {:?}\nmu_s = {:?}\ng = {:?}\nn = {:?}\nthickness = {:?}\nmedium = \"{}\"\nirf_fwhm = {:?}\nirf_tail = {:?}\n",
+        m.mu_a_per_cm,
+        m.mu_s_per_cm,
+        m.g,
+        m.refractive_index,
+        m.thickness_cm,
+        m.model.name(),
+        fwhm,
+        tail
+    ));
+    out
+}
+
 /// A number, or a string with a unit.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(untagged)]

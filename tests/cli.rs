@@ -1189,6 +1189,40 @@ fn calibrate_fits_a_simulated_stack_and_names_bad_parameters() {
     );
     assert!(stdout.contains("(fixed)"), "{stdout}");
     assert!(out.join("profile.csv").is_file() && out.join("profile.png").is_file());
+    // physics.toml holds the fitted medium exactly and reads back as
+    // --config over the stack's own sensor and bins.
+    let toml_path = out.join("physics.toml");
+    let toml = std::fs::read_to_string(&toml_path).unwrap();
+    let fitted: f64 = stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with("mu_s'"))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let back = scatterscope::config::PhysicsOverrides {
+        config: Some(toml_path.clone()),
+        ..Default::default()
+    }
+    .resolve_over(Stack::load(&stack).unwrap().meta.setup)
+    .unwrap();
+    let in_file: f64 = toml
+        .lines()
+        .find_map(|l| l.strip_prefix("mu_s = "))
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(back.medium.mu_s_per_cm, in_file, "exact round trip");
+    let mu_s_reduced = (1.0 - back.medium.g) * in_file;
+    assert_eq!(
+        format!("{mu_s_reduced:.6}"),
+        format!("{fitted:.6}"),
+        "{toml}"
+    );
+    assert!(
+        toml.contains("irf_fwhm = 0.0") && toml.starts_with("# Medium and instrument fitted"),
+        "{toml}"
+    );
     fails_with(
         &["calibrate", stack.to_str().unwrap(), "--fit", "mu_z"],
         &["unknown parameter `mu_z`", "mu_a, mu_s, t0, irf"],

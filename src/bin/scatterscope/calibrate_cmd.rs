@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use scatterscope::calibrate::{Calibration, Free, calibrate, time_profile};
+use scatterscope::config::medium_toml;
 use scatterscope::report::plot::{Series, chart};
 use scatterscope::stack::Stack;
 
@@ -17,7 +18,8 @@ use crate::shared_args::PhysicsArgs;
 /// over the sensor per bin), with the signal and a constant background per
 /// bin always fitted. Prints each parameter with its standard error, the
 /// chi-square per degree of freedom and the parameters the data cannot pin
-/// down; writes OUT/profile.csv and OUT/profile.png (measured and fitted).
+/// down; writes OUT/profile.csv and OUT/profile.png (measured and fitted)
+/// and OUT/physics.toml, the fitted medium and IRF for `--config`.
 #[derive(Debug, clap::Args)]
 pub struct CalibrateArgs {
     /// The stack (.exr or .npy with metadata; its physics is the start).
@@ -114,6 +116,25 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         false,
     )
     .map_err(|e| anyhow::anyhow!("writing {}: {e}", png.display()))?;
-    println!("wrote {}/{{profile.csv, profile.png}}", args.out.display());
+    let toml_path = args.out.join("physics.toml");
+    let shift = &c.parameters[2];
+    let mut header = format!(
+        "Medium and instrument fitted by `scatterscope calibrate {}` (chi-square per degree of freedom {:.3}).\nUse: scatterscope reconstruct STACK --config {}",
+        args.stack.display(),
+        c.chi2_per_dof,
+        toml_path.display()
+    );
+    if shift.fitted {
+        header.push_str(&format!(
+            "\nNot in this file: the fitted time-zero shift of {:.3} ps (reconstruct --fit-physics t0 applies it).",
+            shift.value
+        ));
+    }
+    std::fs::write(&toml_path, medium_toml(&c.setup, &header))
+        .with_context(|| format!("writing {}", toml_path.display()))?;
+    println!(
+        "wrote {}/{{profile.csv, profile.png, physics.toml}}",
+        args.out.display()
+    );
     Ok(())
 }
