@@ -64,6 +64,14 @@ pub fn invert(m: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
     Some(a.into_iter().map(|r| r[n..].to_vec()).collect())
 }
 
+/// Standard error of coordinate `i` from the inverse Hessian `inverse`:
+/// `None` when there is no inverse, the variance is not positive and
+/// finite, or the error exceeds `bound` (the data do not determine it).
+pub fn standard_error(inverse: Option<&Vec<Vec<f64>>>, i: usize, bound: f64) -> Option<f64> {
+    let var = inverse?[i][i];
+    (var.is_finite() && var > 0.0 && var.sqrt() <= bound).then(|| var.sqrt())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -13,15 +13,15 @@
 //! parametric form does not describe the reference (a sharp peak with a
 //! long diffusion tail, say); the caller reports it.
 
-use argmin::core::{CostFunction, Executor, State};
-use argmin::solver::neldermead::NelderMead;
+use argmin::core::CostFunction;
 use scatterscope_physics::Irf;
 
 use super::CalibrateError;
-use super::hessian::{invert, numerical_hessian};
+use super::hessian::{invert, numerical_hessian, standard_error};
 use super::histogram::TimeHistogram;
 use super::measured_irf::MeasuredIrf;
-use super::transmittance::{NLL_TOLERANCE, amplitudes, nll};
+use super::search::{nelder_mead, pearson_chi2};
+use super::transmittance::{amplitudes, nll};
 
 /// Bins added on each side of the response's extent for the fit.
 pub const WINDOW_MARGIN_BINS: usize = 16;
@@ -112,41 +112,15 @@ pub fn fit_irf(reference: &TimeHistogram) -> Result<IrfFit, CalibrateError> {
         fwhm0.ln(),
         tail0.ln(),
     ];
-    let mut simplex = vec![x0.clone()];
-    for (j, step) in [w, 0.3, 0.5].into_iter().enumerate() {
-        let mut v = x0.clone();
-        v[j] += step;
-        simplex.push(v);
-    }
-    let solver = NelderMead::new(simplex)
-        .with_sd_tolerance(NLL_TOLERANCE)
-        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
-    let res = Executor::new(model, solver)
-        .configure(|c| c.max_iters(2000))
-        .run()
-        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
-    let x = res
-        .state()
-        .get_best_param()
-        .cloned()
-        .ok_or_else(|| CalibrateError::Invalid("the IRF fit found no point".into()))?;
-    let model = res
-        .problem
-        .problem
-        .expect("the executor returns its problem");
+    let (x, model, _) = nelder_mead(model, x0, &[w, 0.3, 0.5], 2000, "the IRF fit")?;
     let (tc, fwhm, tail) = (x[0], x[1].exp(), x[2].exp());
     let tail = if tail < MIN_TAIL_PS { 0.0 } else { tail };
     let shape = model.shape(tc, fwhm, tail).ok_or_else(|| {
         CalibrateError::Invalid(format!("{}: the fitted IRF is invalid", reference.source))
     })?;
     let (a, b, _) = amplitudes(&shape, counts);
-    let chi2: f64 = shape
-        .iter()
-        .map(|s| a * s + b)
-        .zip(counts)
-        .filter(|(u, _)| *u > 0.0)
-        .map(|(u, m)| (m - u) * (m - u) / u)
-        .sum();
+    let fitted: Vec<f64> = shape.iter().map(|s| a * s + b).collect();
+    let chi2 = pearson_chi2(&fitted, counts);
     let dof = counts.len().saturating_sub(5).max(1);
     // Standard errors of FWHM and tail from the full Hessian in natural
     // parameters (centre, FWHM, tail, A, B).
@@ -158,10 +132,7 @@ pub fn fit_irf(reference: &TimeHistogram) -> Result<IrfFit, CalibrateError> {
     let p = [tc, fwhm, tail.max(MIN_TAIL_PS), a, b.max(1e-9)];
     let steps: Vec<f64> = [1e-3 * w, 1e-4 * fwhm, 1e-4 * p[2], 1e-4 * a, 1e-4 * p[4]].to_vec();
     let inverse = invert(&numerical_hessian(&f, &p, &steps));
-    let se = |i: usize, bound: f64| {
-        let var = inverse.as_ref()?[i][i];
-        (var.is_finite() && var > 0.0 && var.sqrt() <= bound).then(|| var.sqrt())
-    };
+    let se = |i: usize, bound: f64| standard_error(inverse.as_ref(), i, bound);
     Ok(IrfFit {
         irf: Irf {
             fwhm_ps: fwhm,

@@ -13,8 +13,7 @@
 //! whose standard error exceeds its value, or a Hessian that is not
 //! positive definite, is reported as not determined by the data.
 
-use argmin::core::{CostFunction, Executor, State};
-use argmin::solver::neldermead::NelderMead;
+use argmin::core::CostFunction;
 use scatterscope_physics::kernel::bin_profile;
 use scatterscope_physics::{Irf, Setup};
 
@@ -22,9 +21,11 @@ pub mod hessian;
 pub mod histogram;
 pub mod irf_fit;
 pub mod measured_irf;
+pub mod search;
 pub mod transmittance;
 
-use hessian::{invert, numerical_hessian};
+use hessian::{invert, numerical_hessian, standard_error};
+use search::{nelder_mead, pearson_chi2};
 
 /// Which parameters are fitted; the others keep the setup's values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -259,45 +260,17 @@ pub fn calibrate(
         .iter()
         .map(|&i| if i == 2 { base[2] } else { base[i].ln() })
         .collect();
-    let mut simplex = vec![x0.clone()];
-    for (j, &i) in free_idx.iter().enumerate() {
-        let mut x = x0.clone();
-        x[j] += if i == 2 { setup.bins.width_ps } else { 0.2 };
-        simplex.push(x);
-    }
-    let solver = NelderMead::new(simplex)
-        .with_sd_tolerance(transmittance::NLL_TOLERANCE)
-        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
-    let result = Executor::new(model, solver)
-        .configure(|c| c.max_iters(3000))
-        .run()
-        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
-    let evaluations = result
-        .problem
-        .counts
-        .get("cost_count")
-        .copied()
-        .unwrap_or(0);
-    let x = result
-        .state()
-        .get_best_param()
-        .cloned()
-        .ok_or_else(|| CalibrateError::Invalid("the fit found no point".into()))?;
-    let model = result
-        .problem
-        .problem
-        .expect("the executor returns its problem");
+    let steps: Vec<f64> = free_idx
+        .iter()
+        .map(|&i| if i == 2 { setup.bins.width_ps } else { 0.2 })
+        .collect();
+    let (x, model, evaluations) = nelder_mead(model, x0, &steps, 3000, "the fit")?;
     let p = model.natural(&x);
     let fitted = model
         .expected(&p)
         .ok_or_else(|| CalibrateError::Invalid("the fitted physics is invalid".into()))?;
     let (se, undetermined) = standard_errors(&model, &p);
-    let chi2: f64 = fitted
-        .iter()
-        .zip(counts)
-        .filter(|(u, _)| **u > 0.0)
-        .map(|(u, m)| (m - u) * (m - u) / u)
-        .sum();
+    let chi2 = pearson_chi2(&fitted, counts);
     let dof = n - free_idx.len();
     let parameters = NAMES
         .iter()
@@ -356,15 +329,13 @@ fn standard_errors(model: &Model, p: &[f64; 6]) -> (Vec<Option<f64>>, Vec<usize>
     let mut se = vec![None; free.len()];
     let mut undetermined = Vec::new();
     for (a, &i) in free.iter().enumerate() {
-        let var = inverse.as_ref().map_or(f64::NAN, |m| m[a][a]);
         // Time zero may be 0: it counts as determined within ten bins.
         let bound = match i {
             2 => 10.0 * model.setup.bins.width_ps,
             i => p[i].abs(),
         };
-        if var.is_finite() && var > 0.0 && var.sqrt() <= bound {
-            se[a] = Some(var.sqrt());
-        } else {
+        se[a] = standard_error(inverse.as_ref(), a, bound);
+        if se[a].is_none() {
             undetermined.push(a);
         }
     }

@@ -32,14 +32,14 @@
 
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::brent::BrentOpt;
-use argmin::solver::neldermead::NelderMead;
 use rayon::prelude::*;
 use scatterscope_physics::{Diffusion, Medium, MediumModel};
 
 use super::CalibrateError;
-use super::hessian::{invert, numerical_hessian};
+use super::hessian::{invert, numerical_hessian, standard_error};
 use super::histogram::TimeHistogram;
 use super::measured_irf::MeasuredIrf;
+use super::search::{nelder_mead, pearson_chi2};
 
 /// Nodes of the Gauss-Legendre rule integrating `T` over one bin. The
 /// transmittance changes by well under a factor e per 8 ps bin wherever
@@ -81,11 +81,6 @@ pub const T0_SEARCH_BINS: f64 = 40.0;
 /// Tolerance of each capture's `t0` search (ps): well under the standard
 /// error of `t0` at tens of millions of counts.
 pub const T0_TOLERANCE_PS: f64 = 1e-3;
-
-/// The Nelder-Mead searches of the calibrations stop when the negative
-/// log-likelihood across their simplex varies by less than this (a change
-/// of 0.5 is one standard error's worth).
-pub const NLL_TOLERANCE: f64 = 1e-3;
 
 /// A fitted coefficient below this (1/cm) has run to its bound 0.
 pub const AT_ZERO_PER_CM: f64 = 1e-7;
@@ -166,7 +161,7 @@ pub struct MediumEstimate {
     pub fitted: bool,
 }
 
-/// The result of [`fit_slab`] or [`predict_capture`].
+/// The result of [`fit_slab`] or [`predict_captures`].
 #[derive(Debug, Clone)]
 pub struct SlabFit {
     /// Absorption coefficient.
@@ -553,28 +548,8 @@ pub fn fit_slab(
     let (x, outer) = if x0.is_empty() {
         (x0, outer)
     } else {
-        let mut simplex = vec![x0.clone()];
-        for j in 0..x0.len() {
-            let mut v = x0.clone();
-            v[j] += 0.3;
-            simplex.push(v);
-        }
-        let solver = NelderMead::new(simplex)
-            .with_sd_tolerance(NLL_TOLERANCE)
-            .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
-        let res = Executor::new(outer, solver)
-            .configure(|c| c.max_iters(400))
-            .run()
-            .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
-        let x = res
-            .state()
-            .get_best_param()
-            .cloned()
-            .ok_or_else(|| CalibrateError::Invalid("the fit found no point".into()))?;
-        let outer = res
-            .problem
-            .problem
-            .expect("the executor returns its problem");
+        let steps = vec![0.3; x0.len()];
+        let (x, outer, _) = nelder_mead(outer, x0, &steps, 400, "the fit")?;
         (x, outer)
     };
     let (mu_a, mu_s) = outer.medium(&x);
@@ -656,10 +631,7 @@ fn finish(
         }
     }
     let inverse = invert(&hess);
-    let se = |i: usize, bound: f64| -> Option<f64> {
-        let var = inverse.as_ref()?[i][i];
-        (var.is_finite() && var > 0.0 && var.sqrt() <= bound).then(|| var.sqrt())
-    };
+    let se = |i: usize, bound: f64| standard_error(inverse.as_ref(), i, bound);
     let mut undetermined = Vec::new();
     let mut medium = |index: usize, value: f64, fitted: bool, name: &str| {
         let at_bound = fitted && value < AT_ZERO_PER_CM;
@@ -694,12 +666,7 @@ fn finish(
             let [t0, a, b] = nuisance[c];
             let shape = cap.shape(&d[c], t0).unwrap_or_default();
             let fitted: Vec<f64> = shape.iter().map(|s| a * s + b).collect();
-            let chi2: f64 = fitted
-                .iter()
-                .zip(cap.counts)
-                .filter(|(u, _)| **u > 0.0)
-                .map(|(u, m)| (m - u) * (m - u) / u)
-                .sum();
+            let chi2 = pearson_chi2(&fitted, cap.counts);
             chi2_total += chi2;
             bins += fitted.len();
             CaptureFit {
