@@ -30,6 +30,10 @@ pub const WINDOW_MARGIN_BINS: usize = 16;
 /// reported as none.
 pub const MIN_TAIL_PS: f64 = 1e-3;
 
+/// Chi-square per degree of freedom above which the parametric form is
+/// taken as not describing the reference.
+pub const FORM_CHI2: f64 = 2.0;
+
 /// The fitted response.
 #[derive(Debug, Clone, PartialEq)]
 pub struct IrfFit {
@@ -86,6 +90,23 @@ impl CostFunction for Model<'_> {
         let v = self.cost_at(x[0], x[1].exp(), x[2].exp());
         Ok(if v.is_finite() { v } else { f64::MAX })
     }
+}
+
+impl IrfFit {
+    /// Whether the parametric form describes the reference (chi-square per
+    /// degree of freedom at most [`FORM_CHI2`]).
+    pub fn describes_reference(&self) -> bool {
+        self.chi2_per_dof <= FORM_CHI2
+    }
+}
+
+/// [`fit_irf`] on the histogram of the reference recording at `path`
+/// (a tag file or a stack; see [`TimeHistogram::read`]).
+pub fn irf_from_reference(path: &std::path::Path) -> Result<IrfFit, CalibrateError> {
+    let histogram = TimeHistogram::read(path, "out", None)
+        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+    fit_irf(&histogram)
+        .map_err(|e| CalibrateError::Invalid(format!("fitting the IRF to {}: {e}", path.display())))
 }
 
 /// Fits [`Irf`] to `reference` (see the module's documentation).

@@ -96,6 +96,34 @@ pub struct Capture {
     pub label: String,
 }
 
+impl Capture {
+    /// The capture `FILE=THICKNESS` (THICKNESS with its unit, see
+    /// [`parse_length_cm`]), read by [`TimeHistogram::read`] with
+    /// `dataset` and `bin_width_ps`, labelled by the file's stem.
+    pub fn from_spec(
+        spec: &str,
+        dataset: &str,
+        bin_width_ps: Option<f64>,
+    ) -> Result<Self, CalibrateError> {
+        let fail = |m: String| CalibrateError::Invalid(format!("capture `{spec}`: {m}"));
+        let (file, thickness) = spec
+            .rsplit_once('=')
+            .ok_or_else(|| fail("expected FILE=THICKNESS".into()))?;
+        let thickness_cm = parse_length_cm(thickness).map_err(|e| fail(e.to_string()))?;
+        let path = std::path::Path::new(file);
+        let histogram = TimeHistogram::read(path, dataset, bin_width_ps)
+            .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+        let label = path
+            .file_stem()
+            .map_or_else(|| file.to_string(), |s| s.to_string_lossy().into_owned());
+        Ok(Self {
+            histogram,
+            thickness_cm,
+            label,
+        })
+    }
+}
+
 /// What the fit assumes and where it starts.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SlabFitOptions {
@@ -109,6 +137,25 @@ pub struct SlabFitOptions {
     pub fit_mu_a: bool,
     /// Whether mu_s' is fitted.
     pub fit_mu_s_reduced: bool,
+}
+
+impl SlabFitOptions {
+    /// Frees the parameters named in `names` (`mu_a`, `mu_s`); the others
+    /// stay fixed at their starting values.
+    pub fn free_named<S: AsRef<str>>(&mut self, names: &[S]) -> Result<(), CalibrateError> {
+        for name in names {
+            match name.as_ref() {
+                "mu_a" => self.fit_mu_a = true,
+                "mu_s" => self.fit_mu_s_reduced = true,
+                other => {
+                    return Err(CalibrateError::Invalid(format!(
+                        "unknown parameter `{other}` (use mu_a, mu_s)"
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// One capture's part of a fit.

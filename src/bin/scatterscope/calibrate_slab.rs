@@ -8,7 +8,7 @@ use anyhow::Context;
 use scatterscope::calibrate::histogram::TimeHistogram;
 use scatterscope::calibrate::measured_irf::MeasuredIrf;
 use scatterscope::calibrate::transmittance::{
-    Capture, SlabFit, SlabFitOptions, fit_slab, parse_length_cm, predict_captures,
+    Capture, SlabFit, SlabFitOptions, fit_slab, predict_captures,
 };
 use scatterscope::report::plot::{Series, chart};
 
@@ -57,23 +57,6 @@ pub struct CalibrateSlabArgs {
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/calibrate-slab")]
     out: PathBuf,
-}
-
-fn read_capture(spec: &str, args: &CalibrateSlabArgs) -> anyhow::Result<Capture> {
-    let (file, thickness) = spec
-        .rsplit_once('=')
-        .with_context(|| format!("capture `{spec}`: expected FILE=THICKNESS"))?;
-    let thickness_cm = parse_length_cm(thickness).with_context(|| format!("capture `{spec}`"))?;
-    let path = PathBuf::from(file);
-    let histogram = TimeHistogram::read(&path, &args.dataset, args.bin_ps)?;
-    let label = path
-        .file_stem()
-        .map_or_else(|| file.to_string(), |s| s.to_string_lossy().into_owned());
-    Ok(Capture {
-        histogram,
-        thickness_cm,
-        label,
-    })
 }
 
 fn print_fit(title: &str, fit: &SlabFit) {
@@ -132,13 +115,13 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     let captures: Vec<Capture> = args
         .captures
         .iter()
-        .map(|s| read_capture(s, args))
-        .collect::<anyhow::Result<_>>()?;
+        .map(|s| Capture::from_spec(s, &args.dataset, args.bin_ps))
+        .collect::<Result<_, _>>()?;
     let held: Vec<Capture> = args
         .predict
         .iter()
-        .map(|s| read_capture(s, args))
-        .collect::<anyhow::Result<_>>()?;
+        .map(|s| Capture::from_spec(s, &args.dataset, args.bin_ps))
+        .collect::<Result<_, _>>()?;
     let mut opts = SlabFitOptions {
         refractive_index: args.refractive_index,
         mu_a_per_cm: args.mu_a,
@@ -146,13 +129,7 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
         fit_mu_a: false,
         fit_mu_s_reduced: false,
     };
-    for name in &args.fit {
-        match name.as_str() {
-            "mu_a" => opts.fit_mu_a = true,
-            "mu_s" => opts.fit_mu_s_reduced = true,
-            other => anyhow::bail!("--fit: unknown parameter `{other}` (use mu_a, mu_s)"),
-        }
-    }
+    opts.free_named(&args.fit).context("--fit")?;
     println!(
         "model: slab with extrapolated boundaries, n = {}, on-axis point detector, measured instrument response, constant background per capture",
         args.refractive_index
@@ -190,7 +167,8 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     for ((caps, f), role) in all.iter().zip(["fitted", "predicted"]) {
         for (cap, c) in caps.iter().zip(&f.captures) {
             let h = &cap.histogram;
-            let start = |i: usize| h.start_ps + (c.window_start + i) as f64 * h.bin_width_ps;
+            let first = c.window_start_ps(h.bin_width_ps, h.start_ps);
+            let start = |i: usize| first + i as f64 * h.bin_width_ps;
             for (i, (m, u)) in c.measured.iter().zip(&c.fitted).enumerate() {
                 writeln!(csv, "{},{role},{},{m},{u}", c.label, start(i))
                     .expect("writing to a String");

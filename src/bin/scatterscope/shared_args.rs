@@ -1,18 +1,12 @@
 //! Arguments shared by several commands: the physics flags (which the
 //! library takes as [`PhysicsOverrides`]) and named choices.
 
-use anyhow::Context;
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use scatterscope::Named;
-use scatterscope::calibrate::histogram::TimeHistogram;
-use scatterscope::calibrate::irf_fit::fit_irf;
+use scatterscope::calibrate::irf_fit::irf_from_reference;
 use scatterscope::config::{ConfigError, PhysicsOverrides, parse_cm, parse_ps};
 use scatterscope::physics::{MediumModel, Preset, Setup};
 use std::path::PathBuf;
-
-/// Chi-square per degree of freedom of an IRF fit above which the output
-/// says the parametric form does not describe the reference.
-const IRF_FORM_CHI2: f64 = 2.0;
 
 /// A clap value parser for a [`Named`] choice: its names are the possible
 /// values.
@@ -123,9 +117,7 @@ impl PhysicsArgs {
     pub fn resolve_over(&self, base: Option<Setup>) -> anyhow::Result<Setup> {
         let mut setup = self.resolve_flags_over(base)?;
         if let Some(reference) = &self.irf_from {
-            let histogram = TimeHistogram::read(reference, "out", None)?;
-            let fit = fit_irf(&histogram)
-                .with_context(|| format!("fitting the IRF to {}", reference.display()))?;
+            let fit = irf_from_reference(reference)?;
             let se = |v: Option<f64>| v.map_or(String::new(), |e| format!(" +- {e:.2}"));
             println!(
                 "instrument response fitted to {}: Gaussian FWHM {:.2}{} ps, exponential tail {:.2}{} ps, centre at {:.2} ps on its clock, background {:.3} counts per bin, chi-square per degree of freedom {:.2}",
@@ -138,7 +130,7 @@ impl PhysicsArgs {
                 fit.background_per_bin,
                 fit.chi2_per_dof
             );
-            if fit.chi2_per_dof > IRF_FORM_CHI2 {
+            if !fit.describes_reference() {
                 println!(
                     "note: the Gaussian-plus-exponential form does not describe {} (chi-square per degree of freedom {:.1}); the kernels use it as an approximation",
                     reference.display(),
