@@ -189,12 +189,15 @@ pub fn pnp_split(
     // picoseconds, or IRF-spread tails) cannot change the answer when they
     // hold no count or a background explains their counts: left out.
     let bg = model.background();
-    let (mut used, mut unexplained) = (Vec::new(), 0.0);
+    // The counts of the bins used: the flat object explains them (the
+    // left-out bins' background counts are not its light).
+    let (mut used, mut used_counts, mut unexplained) = (Vec::new(), 0.0, 0.0);
     for (i, &k) in bins.iter().enumerate() {
         let share = model.mass(k) / total_mass;
         let held: f64 = counts.index_axis(Axis(0), i).sum();
         if share >= NEGLIGIBLE_BIN || (bg == 0.0 && held > 0.0 && share >= UNRESOLVED_BIN) {
             used.push((i, k));
+            used_counts += held;
         } else if bg == 0.0 {
             unexplained += held;
         }
@@ -221,12 +224,6 @@ pub fn pnp_split(
     ));
     // Background counts per pixel and bin: the data are Poisson(H o + bg).
     note_background(&mut trace, model);
-    // The flat object that explains the counts of the bins used (the
-    // left-out bins' background counts are not its light).
-    let used_counts: f64 = used
-        .iter()
-        .map(|&(i, _)| counts.index_axis(Axis(0), i).sum())
-        .sum();
     let flat = flat_level(used_counts, bg, used.len(), total_mass, h * w);
     // Precision of the data split per frequency, without rho:
     // sum_k |K_k|^2 / (mass_k o_flat).
