@@ -73,6 +73,15 @@ fn run(spec: DeviceSpec, m: MockSetup, plan: &Plan) -> (Outcome, Truth) {
     (outcome, truth)
 }
 
+/// Photons in bin `k` of `counts`, over the sensor.
+fn bin_total(counts: &Array3<u32>, k: usize) -> f64 {
+    counts
+        .index_axis(Axis(0), k)
+        .iter()
+        .map(|&c| f64::from(c))
+        .sum()
+}
+
 /// Each kept bin's kernel convolved with `scene` on the sensor, light
 /// landing off the sensor lost (written out directly, independent of the
 /// FFT forward model).
@@ -138,12 +147,7 @@ fn usb_mock_stack_balances_and_agrees_with_the_forward_model() {
     let scale = acc.binned as f64 / expected.sum();
     for (pos, &k) in kept.iter().enumerate() {
         let e = expected.index_axis(Axis(0), pos).sum() * scale;
-        let o = out
-            .counts
-            .index_axis(Axis(0), k)
-            .iter()
-            .map(|&c| f64::from(c))
-            .sum::<f64>();
+        let o = bin_total(&out.counts, k);
         assert!(
             (o - e).abs() < 5.0 * e.sqrt() + 1.0,
             "bin {k}: {o} photons, expected {e:.1}"
@@ -211,12 +215,7 @@ fn a_mock_with_an_irf_and_background_matches_the_irf_kernels_plus_background() {
     // Per-bin totals within 5 sigma, IRF-spread early bins included.
     for k in 0..bins {
         let e = model.index_axis(Axis(0), k).sum();
-        let o = out
-            .counts
-            .index_axis(Axis(0), k)
-            .iter()
-            .map(|&c| f64::from(c))
-            .sum::<f64>();
+        let o = bin_total(&out.counts, k);
         assert!(
             (o - e).abs() < 5.0 * e.sqrt(),
             "bin {k}: {o} photons, expected {e:.1}"
@@ -251,12 +250,7 @@ fn a_mock_with_an_irf_and_background_matches_the_irf_kernels_plus_background() {
                     .iter()
                     .position(|&i| i == k)
                     .map_or(0.0, |p| sharp_scale * sharp.index_axis(Axis(0), p).sum());
-            let o = out
-                .counts
-                .index_axis(Axis(0), k)
-                .iter()
-                .map(|&c| f64::from(c))
-                .sum::<f64>();
+            let o = bin_total(&out.counts, k);
             (o - e).abs() / e.max(1.0).sqrt()
         })
         .fold(0.0, f64::max);

@@ -27,6 +27,26 @@ fn truth() -> Setup {
     s
 }
 
+/// The medium and the IRF's width fitted, time zero fixed.
+const MEDIUM_AND_IRF: Free = Free {
+    mu_a: true,
+    mu_s_reduced: true,
+    t0: false,
+    irf_fwhm: true,
+};
+
+/// `s` with a wrong mu_a, mu_s (1/cm) and a 30 ps IRF: where fits start.
+fn wrong_start(s: Setup, mu_a: f64, mu_s: f64) -> Setup {
+    let mut start = s;
+    start.medium.mu_a_per_cm = mu_a;
+    start.medium.mu_s_per_cm = mu_s;
+    start.irf = Some(Irf {
+        fwhm_ps: 30.0,
+        tail_ps: 0.0,
+    });
+    start
+}
+
 /// Counts of `signal` photons with `background` per bin, Poisson noise.
 fn profile(s: &Setup, signal: f64, background: f64, seed: u64) -> Vec<f64> {
     let p = bin_profile(s).unwrap();
@@ -39,20 +59,8 @@ fn calibration_recovers_the_medium_the_irf_and_the_background() {
     let t = truth();
     let counts = profile(&t, 2e6, 40.0, 3);
     // Start from a wrong guess of every fitted parameter.
-    let mut guess = t;
-    guess.medium.mu_a_per_cm = 0.5;
-    guess.medium.mu_s_per_cm = 60.0;
-    guess.irf = Some(Irf {
-        fwhm_ps: 30.0,
-        tail_ps: 0.0,
-    });
-    let free = Free {
-        mu_a: true,
-        mu_s_reduced: true,
-        t0: false,
-        irf_fwhm: true,
-    };
-    let c = calibrate(&counts, t.bins.start_ps, &guess, free).unwrap();
+    let guess = wrong_start(t, 0.5, 60.0);
+    let c = calibrate(&counts, t.bins.start_ps, &guess, MEDIUM_AND_IRF).unwrap();
     assert!(c.undetermined.is_empty(), "{:?}", c.undetermined);
     let want = [0.2, 10.0, 0.0, 60.0, 2e6, 40.0];
     for (p, w) in c.parameters.iter().zip(want) {
@@ -168,20 +176,8 @@ fn calibration_recovers_the_medium_of_a_mock_acquisition() {
         tail_ps: 0.0,
     };
     let (counts, truth) = mock_profile(600_000, Some(irf), 20_000.0);
-    let mut start = truth;
-    start.medium.mu_a_per_cm = 0.4;
-    start.medium.mu_s_per_cm = 600.0;
-    start.irf = Some(Irf {
-        fwhm_ps: 30.0,
-        tail_ps: 0.0,
-    });
-    let free = Free {
-        mu_a: true,
-        mu_s_reduced: true,
-        t0: false,
-        irf_fwhm: true,
-    };
-    let c = calibrate(&counts, truth.bins.start_ps, &start, free).unwrap();
+    let start = wrong_start(truth, 0.4, 600.0);
+    let c = calibrate(&counts, truth.bins.start_ps, &start, MEDIUM_AND_IRF).unwrap();
     assert!(c.undetermined.is_empty(), "{:?}", c.undetermined);
     for (i, want) in [(0, 0.2), (1, 10.0), (3, 50.0)] {
         let p = &c.parameters[i];

@@ -338,6 +338,28 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     );
 }
 
+/// A reference of 400 bins: 2e6 counts from the mixture `parts` (weight,
+/// IRF) centred at `centre_ps`, 20 background counts per bin, Poisson
+/// noise.
+fn irf_reference(
+    parts: &[(f64, scatterscope::physics::Irf)],
+    centre_ps: f64,
+    seed: u64,
+    name: &str,
+) -> TimeHistogram {
+    let mean: Vec<f64> = (0..400)
+        .map(|i| {
+            let a = i as f64 * BIN_PS;
+            let share: f64 = parts
+                .iter()
+                .map(|(w, irf)| w * irf.bin_weight(a, a + BIN_PS, centre_ps))
+                .sum();
+            2e6 * share + 20.0
+        })
+        .collect();
+    TimeHistogram::new(poisson(&mean, seed), BIN_PS, 0.0, Path::new(name)).unwrap()
+}
+
 #[test]
 fn the_parametric_irf_is_recovered_from_a_reference_and_a_poor_fit_is_flagged() {
     use scatterscope::calibrate::irf_fit::fit_irf;
@@ -347,14 +369,7 @@ fn the_parametric_irf_is_recovered_from_a_reference_and_a_poor_fit_is_flagged() 
         tail_ps: 30.0,
     };
     let centre = 1600.0;
-    let mean: Vec<f64> = (0..400)
-        .map(|i| {
-            let a = i as f64 * BIN_PS;
-            2e6 * truth.bin_weight(a, a + BIN_PS, centre) + 20.0
-        })
-        .collect();
-    let reference =
-        TimeHistogram::new(poisson(&mean, 5), BIN_PS, 0.0, Path::new("ref.sstags")).unwrap();
+    let reference = irf_reference(&[(1.0, truth)], centre, 5, "ref.sstags");
     let fit = fit_irf(&reference).unwrap();
     let (se_fwhm, se_tail) = fit.standard_errors_ps;
     let (se_fwhm, se_tail) = (se_fwhm.unwrap(), se_tail.unwrap());
@@ -372,16 +387,7 @@ fn the_parametric_irf_is_recovered_from_a_reference_and_a_poor_fit_is_flagged() 
         fwhm_ps: 10.0,
         tail_ps: 230.0,
     };
-    let mean: Vec<f64> = (0..400)
-        .map(|i| {
-            let a = i as f64 * BIN_PS;
-            2e6 * (0.8 * sharp.bin_weight(a, a + BIN_PS, centre)
-                + 0.2 * slow.bin_weight(a, a + BIN_PS, centre))
-                + 20.0
-        })
-        .collect();
-    let reference =
-        TimeHistogram::new(poisson(&mean, 6), BIN_PS, 0.0, Path::new("spad.sstags")).unwrap();
+    let reference = irf_reference(&[(0.8, sharp), (0.2, slow)], centre, 6, "spad.sstags");
     let fit = fit_irf(&reference).unwrap();
     assert!(fit.chi2_per_dof > 10.0, "{fit:?}");
 }
