@@ -60,7 +60,7 @@ use ndarray::parallel::prelude::*;
 use ndarray::{Array2, Array3, ArrayView2, Axis};
 use rustfft::num_complex::Complex64;
 
-use super::discrepancy::ExpectedDeviance;
+use super::discrepancy::{ExpectedDeviance, m_log_m};
 use super::trace::{Trace, TraceRow};
 use super::{
     ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, note_background,
@@ -131,6 +131,8 @@ struct BinState {
     /// Position of the bin in the model.
     bin: usize,
     counts: Vec<f64>,
+    /// `m log m` of each count, for the deviance check.
+    m_log_m: Vec<f64>,
     /// `rho_k`.
     rho: f64,
     z: Vec<f64>,
@@ -251,6 +253,7 @@ pub fn pnp_split(
             BinState {
                 bin: k,
                 counts: m.iter().copied().collect(),
+                m_log_m: m.iter().map(|&c| m_log_m(c)).collect(),
                 rho: opts.rho / (model.mass(k) * flat),
                 z: model.crop_vec(&ho),
                 a: vec![0.0; h * w],
@@ -261,6 +264,10 @@ pub fn pnp_split(
         .collect();
     let mut v = Array2::from_elem((gh, gw), flat);
     let mut b = vec![0.0f64; n];
+    let (mut vb, mut o) = (vec![0.0f64; n], vec![0.0f64; n]);
+    let mut ob = Array2::<f64>::zeros((gh, gw));
+    let mut o_spec = vec![Complex64::default(); fft.spectrum_len()];
+    let mut spec_scratch = o_spec.clone();
     let gamma = opts.gamma * gamma_unit;
     // The prior starts at sigma0 o_flat and never rises above it; it
     // anneals down to the floor that the photon noise sets.
@@ -287,17 +294,23 @@ pub fn pnp_split(
                 *x = *x * k.conj() * s.rho;
             }
         });
-        let vb: Vec<f64> = v.iter().zip(&b).map(|(vj, bj)| vj - bj).collect();
-        let mut numerator: Vec<Complex64> = fft.forward(&vb).iter().map(|x| x * gamma).collect();
+        // The grid and spectrum buffers below are reused across iterations.
+        vb.iter_mut()
+            .zip(v.iter().zip(&b))
+            .for_each(|(x, (vj, bj))| *x = vj - bj);
+        fft.forward_into(&vb, &mut o_spec);
+        o_spec.iter_mut().for_each(|x| *x *= gamma);
         for s in &states {
-            numerator.iter_mut().zip(&s.spec).for_each(|(a, x)| *a += x);
+            o_spec.iter_mut().zip(&s.spec).for_each(|(a, x)| *a += x);
         }
-        let o_spec: Vec<Complex64> = numerator
-            .iter()
+        o_spec
+            .iter_mut()
             .zip(&kernel_power)
-            .map(|(x, p)| x / (opts.rho * p + gamma))
-            .collect();
-        let o = fft.inverse(o_spec.clone());
+            .for_each(|(x, p)| *x /= opts.rho * p + gamma);
+        // The inverse transform uses its input as scratch: a copy keeps
+        // o_spec for the z-update.
+        spec_scratch.copy_from_slice(&o_spec);
+        fft.inverse_into(&mut spec_scratch, &mut o);
         // z-update and data duals, per bin.
         // The deviance check (a logarithm and a table lookup per pixel and
         // bin) only matters once sigma has reached its floor, where it
@@ -321,8 +334,9 @@ pub fn pnp_split(
                     let span = r * w..(r + 1) * w;
                     let m = &s.counts[span.clone()];
                     if at_floor {
-                        for (&mj, &yj) in m.iter().zip(q.iter()) {
-                            let (dj, f, g) = deviance.point(mj, yj + bg);
+                        let mlm = &s.m_log_m[span.clone()];
+                        for ((&mj, &lj), &yj) in m.iter().zip(mlm).zip(q.iter()) {
+                            let (dj, f, g) = deviance.point_with(mj, lj, yj + bg);
                             d += dj;
                             e += f;
                             var += g;
@@ -352,10 +366,11 @@ pub fn pnp_split(
             .iter()
             .fold((0.0, 0.0, 0.0), |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2));
         // v-update: the prior at the noise level of its input, and v >= 0.
-        let ob = Array2::from_shape_fn((gh, gw), |(r, c)| o[r * gw + c] + b[r * gw + c]);
-        let v_new = denoise_scaled(denoiser, ob.view(), sigma)
-            .image
-            .mapv(|x| x.max(0.0));
+        ob.iter_mut()
+            .zip(o.iter().zip(&b))
+            .for_each(|(x, (oj, bj))| *x = oj + bj);
+        let mut v_new = denoise_scaled(denoiser, ob.view(), sigma).image;
+        v_new.mapv_inplace(|x| x.max(0.0));
         let (mut primal, mut dual) = (0.0, 0.0);
         for (((bj, &oj), &vn), &vo) in b.iter_mut().zip(&o).zip(&v_new).zip(&v) {
             *bj += oj - vn;
