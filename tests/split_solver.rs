@@ -301,6 +301,7 @@ fn split_solver_is_finite_on_extreme_inputs() {
         ..Default::default()
     };
     let tv = TotalVariation::default();
+    let mut per_count_at = None;
     let mut one_hot = Array3::<f64>::zeros(shape);
     one_hot[[k.len() - 1, 5, 7]] = 1.0;
     let mut early_only = Array3::<f64>::zeros(shape);
@@ -311,6 +312,9 @@ fn split_solver_is_finite_on_extreme_inputs() {
         ("only the stiff first bin", early_only),
         ("saturated", Array3::from_elem(shape, 65535.0)),
         ("huge", Array3::from_elem(shape, 1e12)),
+        // Counts at single precision's largest value: a transform of them
+        // would overflow it unless scaled.
+        ("far beyond any detector", Array3::from_elem(shape, 3e38)),
     ] {
         let r = pnp_split(&model, &counts, &bins, &tv, &opts, None, |_| {})
             .unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -318,6 +322,18 @@ fn split_solver_is_finite_on_extreme_inputs() {
         assert!(r.image.iter().all(|v| v.is_finite() && *v >= 0.0), "{name}");
         if name == "all zero" {
             assert!(r.image.iter().all(|v| *v == 0.0));
+        }
+        // Uniform counts: the estimate per count is the same at every scale
+        // (the prior's strength follows the light, so only roughly), not a
+        // value lost to overflow.
+        let level = counts[[0, 0, 0]];
+        if level >= 65535.0 {
+            let per_count = r.image.mean().unwrap() / level;
+            let reference = *per_count_at.get_or_insert(per_count);
+            assert!(
+                (0.5..2.0).contains(&(per_count / reference)),
+                "{name}: {per_count:e} per count against {reference:e} when saturated"
+            );
         }
     }
     let mut bad = Array3::<f64>::zeros(shape);
