@@ -289,7 +289,7 @@ pub fn pnp_split(
     let (mut vb, mut o) = (vec![0.0f64; n], vec![0.0f64; n]);
     let mut ob = Array2::<f64>::zeros((gh, gw));
     let mut o_spec = vec![Complex64::default(); fft.spectrum_len()];
-    let mut spec_scratch = o_spec.clone();
+    let mut o_spec32 = vec![Complex32::default(); fft.spectrum_len()];
     let gamma = opts.gamma * gamma_unit;
     // The prior starts at sigma0 o_flat and never rises above it; it
     // anneals down to the floor that the photon noise sets.
@@ -333,10 +333,14 @@ pub fn pnp_split(
             .iter_mut()
             .zip(&kernel_power)
             .for_each(|(x, p)| *x /= opts.rho * p + gamma);
-        // The inverse transform uses its input as scratch: a copy keeps
-        // o_spec for the z-update.
-        spec_scratch.copy_from_slice(&o_spec);
-        fft.inverse_into(&mut spec_scratch, &mut o);
+        // The z-update's copy of o's spectrum, in the per-bin images'
+        // precision and units, made once for all bins; the inverse
+        // transform then uses o_spec as its scratch.
+        o_spec32
+            .iter_mut()
+            .zip(&o_spec)
+            .for_each(|(x, &a)| *x = single(a / unit));
+        fft.inverse_into(&mut o_spec, &mut o);
         // z-update and data duals, per bin.
         // The deviance check (a logarithm and a table lookup per pixel and
         // bin) only matters once sigma has reached its floor, where it
@@ -345,8 +349,8 @@ pub fn pnp_split(
         let sums: Vec<(f64, f64, f64)> = states
             .par_iter_mut()
             .map(|s| {
-                for (x, (&a, k)) in s.spec.iter_mut().zip(o_spec.iter().zip(&s.kernel)) {
-                    *x = single(a / unit) * k;
+                for (x, (a, k)) in s.spec.iter_mut().zip(o_spec32.iter().zip(&s.kernel)) {
+                    *x = a * k;
                 }
                 fft32.inverse_into(&mut s.spec, &mut s.q);
                 let (mut d, mut e, mut var) = (0.0, 0.0, 0.0);
