@@ -13,6 +13,10 @@ use crate::stack::Stack;
 /// Most bins before the light whose median is the background.
 pub const BACKGROUND_BINS: usize = 1000;
 
+/// The dataset read from MATLAB histograms unless another is named (the
+/// one the confocal diffuse tomography captures use).
+pub const DEFAULT_MAT_DATASET: &str = "out";
+
 /// Fewest bins before the light that give a background.
 pub const MIN_BACKGROUND_BINS: usize = 8;
 

@@ -18,7 +18,7 @@ use scatterscope_physics::Irf;
 
 use super::CalibrateError;
 use super::hessian::{invert, numerical_hessian, standard_error};
-use super::histogram::TimeHistogram;
+use super::histogram::{DEFAULT_MAT_DATASET, TimeHistogram};
 use super::measured_irf::MeasuredIrf;
 use super::search::{nelder_mead, pearson_chi2};
 use super::transmittance::{amplitudes, nll};
@@ -103,7 +103,7 @@ impl IrfFit {
 /// [`fit_irf`] on the histogram of the reference recording at `path`
 /// (a tag file or a stack; see [`TimeHistogram::read`]).
 pub fn irf_from_reference(path: &std::path::Path) -> Result<IrfFit, CalibrateError> {
-    let histogram = TimeHistogram::read(path, "out", None)
+    let histogram = TimeHistogram::read(path, DEFAULT_MAT_DATASET, None)
         .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
     fit_irf(&histogram)
         .map_err(|e| CalibrateError::Invalid(format!("fitting the IRF to {}: {e}", path.display())))

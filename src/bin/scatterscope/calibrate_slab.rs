@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use scatterscope::calibrate::histogram::TimeHistogram;
+use scatterscope::calibrate::histogram::{DEFAULT_MAT_DATASET, TimeHistogram};
 use scatterscope::calibrate::measured_irf::MeasuredIrf;
 use scatterscope::calibrate::transmittance::{
     Capture, SlabFit, SlabFitOptions, fit_slab, predict_captures,
@@ -39,7 +39,7 @@ pub struct CalibrateSlabArgs {
     #[arg(long)]
     bin_ps: Option<f64>,
     /// Dataset holding the histogram in MATLAB files.
-    #[arg(long, default_value = "out")]
+    #[arg(long, default_value = DEFAULT_MAT_DATASET)]
     dataset: String,
     /// Refractive index of the medium (not fitted).
     #[arg(long)]
