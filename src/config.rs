@@ -9,7 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
-use scatterscope_physics::{Irf, MediumModel, Preset, Setup};
+use scatterscope_physics::{InstrumentResponse, Irf, MediumModel, Preset, Setup};
 use serde::Deserialize;
 
 /// Parses a time with an optional unit (`fs`, `ps`, `ns`, `us`); plain numbers are ps.
@@ -61,22 +61,32 @@ fn parse_unit(s: &str, units: &[(&str, f64)], default: &str) -> Result<f64, Stri
 /// keys (`mu_a`, `mu_s`, `g`, `n`, `thickness`, `medium`, `irf_fwhm`,
 /// `irf_tail`), each value exact (shortest round-trip form), after the
 /// comment lines of `header`: what `--config` reads back over a stack's
-/// own sensor and bins.
+/// own sensor and bins. A measured IRF table has no keys: it is left out
+/// (a comment says so), so the stack's own table stays in force.
 pub fn medium_toml(setup: &Setup, header: &str) -> String {
     let m = &setup.medium;
-    let (fwhm, tail) = setup.irf.map_or((0.0, 0.0), |i| (i.fwhm_ps, i.tail_ps));
     let mut out: String = header.lines().map(|l| format!("# {l}\n")).collect();
     out.push_str(&format!(
-        "mu_a = {:?}\nmu_s = {:?}\ng = {:?}\nn = {:?}\nthickness = {:?}\nmedium = \"{}\"\nirf_fwhm = {:?}\nirf_tail = {:?}\n",
+        "mu_a = {:?}\nmu_s = {:?}\ng = {:?}\nn = {:?}\nthickness = {:?}\nmedium = \"{}\"\n",
         m.mu_a_per_cm,
         m.mu_s_per_cm,
         m.g,
         m.refractive_index,
         m.thickness_cm,
         m.model.name(),
-        fwhm,
-        tail
     ));
+    match &setup.irf {
+        Some(InstrumentResponse::Measured(_)) => out.push_str(
+            "# the instrument response is a measured table, recorded in the stack's metadata (no key here)\n",
+        ),
+        irf => {
+            let (fwhm, tail) = irf
+                .as_ref()
+                .and_then(InstrumentResponse::parametric)
+                .map_or((0.0, 0.0), |i| (i.fwhm_ps, i.tail_ps));
+            out.push_str(&format!("irf_fwhm = {fwhm:?}\nirf_tail = {tail:?}\n"));
+        }
+    }
     out
 }
 
@@ -243,17 +253,22 @@ impl PhysicsOverrides {
         set(&mut s.bins.count, self.bins);
         set(&mut s.total_photons, self.photons);
         set(&mut s.min_bin_photons, self.min_bin_photons);
+        let recorded = s
+            .irf
+            .as_ref()
+            .and_then(InstrumentResponse::parametric)
+            .copied();
         match (self.irf_fwhm, self.irf_tail) {
             (Some(0.0), _) => s.irf = None,
             (Some(fwhm_ps), tail) => {
-                let tail_ps = tail.or(s.irf.map(|i| i.tail_ps)).unwrap_or(0.0);
-                s.irf = Some(Irf { fwhm_ps, tail_ps });
+                let tail_ps = tail.or(recorded.map(|i| i.tail_ps)).unwrap_or(0.0);
+                s.irf = Some(Irf { fwhm_ps, tail_ps }.into());
             }
-            // A tail alone changes a recorded IRF; without one the zero
-            // FWHM is refused by validation, naming `irf_fwhm`.
+            // A tail alone changes a recorded parametric IRF; without one
+            // the zero FWHM is refused by validation, naming `irf_fwhm`.
             (None, Some(tail_ps)) => {
-                let fwhm_ps = s.irf.map_or(0.0, |i| i.fwhm_ps);
-                s.irf = Some(Irf { fwhm_ps, tail_ps });
+                let fwhm_ps = recorded.map_or(0.0, |i| i.fwhm_ps);
+                s.irf = Some(Irf { fwhm_ps, tail_ps }.into());
             }
             (None, None) => {}
         }
@@ -434,11 +449,25 @@ mod tests {
             ..Default::default()
         };
         let irf = args.resolve().unwrap().irf.unwrap();
-        assert_eq!((irf.fwhm_ps, irf.tail_ps), (50.0, 20.0));
+        assert_eq!(
+            irf,
+            Irf {
+                fwhm_ps: 50.0,
+                tail_ps: 20.0
+            }
+            .into()
+        );
         // A flag's FWHM keeps the file's tail; 0 turns the IRF off.
         args.irf_fwhm = Some(30.0);
         let irf = args.resolve().unwrap().irf.unwrap();
-        assert_eq!((irf.fwhm_ps, irf.tail_ps), (30.0, 20.0));
+        assert_eq!(
+            irf,
+            Irf {
+                fwhm_ps: 30.0,
+                tail_ps: 20.0
+            }
+            .into()
+        );
         args.irf_fwhm = Some(0.0);
         assert_eq!(args.resolve().unwrap().irf, None);
         // A tail without a width is refused, naming the key to set.

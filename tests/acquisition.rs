@@ -179,10 +179,13 @@ fn a_mock_with_an_irf_and_background_matches_the_irf_kernels_plus_background() {
     let mut s = setup();
     // Keep every bin: at this many photons the IRF-lit early bins matter.
     s.min_bin_photons = 0.0;
-    s.irf = Some(scatterscope::physics::Irf {
-        fwhm_ps: 50.0,
-        tail_ps: 0.0,
-    });
+    s.irf = Some(
+        scatterscope::physics::Irf {
+            fwhm_ps: 50.0,
+            tail_ps: 0.0,
+        }
+        .into(),
+    );
     let kernels = KernelStack::build(&s, Sampling::Integrated).unwrap();
     let scene = Scene::parse("usaf").render(64, 64).unwrap();
     // Time zero 500 ps after the sync (cables), so no jittered photon

@@ -20,10 +20,13 @@ fn truth() -> Setup {
     s.bins.start_ps = 0.0;
     s.bins.width_ps = 16.0;
     s.bins.count = 64;
-    s.irf = Some(Irf {
-        fwhm_ps: 60.0,
-        tail_ps: 0.0,
-    });
+    s.irf = Some(
+        Irf {
+            fwhm_ps: 60.0,
+            tail_ps: 0.0,
+        }
+        .into(),
+    );
     s
 }
 
@@ -40,10 +43,13 @@ fn wrong_start(s: Setup, mu_a: f64, mu_s: f64) -> Setup {
     let mut start = s;
     start.medium.mu_a_per_cm = mu_a;
     start.medium.mu_s_per_cm = mu_s;
-    start.irf = Some(Irf {
-        fwhm_ps: 30.0,
-        tail_ps: 0.0,
-    });
+    start.irf = Some(
+        Irf {
+            fwhm_ps: 30.0,
+            tail_ps: 0.0,
+        }
+        .into(),
+    );
     start
 }
 
@@ -59,7 +65,7 @@ fn calibration_recovers_the_medium_the_irf_and_the_background() {
     let t = truth();
     let counts = profile(&t, 2e6, 40.0, 3);
     // Start from a wrong guess of every fitted parameter.
-    let guess = wrong_start(t, 0.5, 60.0);
+    let guess = wrong_start(t.clone(), 0.5, 60.0);
     let c = calibrate(&counts, t.bins.start_ps, &guess, MEDIUM_AND_IRF).unwrap();
     assert!(c.undetermined.is_empty(), "{:?}", c.undetermined);
     let want = [0.2, 10.0, 0.0, 60.0, 2e6, 40.0];
@@ -86,7 +92,7 @@ fn calibration_recovers_the_medium_the_irf_and_the_background() {
 #[test]
 fn a_shifted_time_zero_is_found() {
     let t = truth();
-    let mut shifted = t;
+    let mut shifted = t.clone();
     shifted.bins.start_ps -= 24.0; // the stack's clock runs 24 ps late
     let counts = profile(&shifted, 1e6, 10.0, 5);
     let free = Free {
@@ -126,7 +132,7 @@ fn mock_profile(photons: u64, irf: Option<Irf>, dark_rate_hz: f64) -> (Vec<f64>,
     s.medium.g = 0.99;
     (s.sensor.width_px, s.sensor.height_px, s.sensor.fov_cm) = (32, 32, 12.0);
     (s.bins.start_ps, s.bins.width_ps, s.bins.count) = (-200.0, 8.0, 85);
-    s.irf = irf;
+    s.irf = irf.map(Into::into);
     let mut scene = ndarray::Array2::zeros((32, 32));
     scene.slice_mut(ndarray::s![12..20, 12..20]).fill(1.0);
     let mock = MockSetup {
@@ -176,7 +182,7 @@ fn calibration_recovers_the_medium_of_a_mock_acquisition() {
         tail_ps: 0.0,
     };
     let (counts, truth) = mock_profile(600_000, Some(irf), 20_000.0);
-    let start = wrong_start(truth, 0.4, 600.0);
+    let start = wrong_start(truth.clone(), 0.4, 600.0);
     let c = calibrate(&counts, truth.bins.start_ps, &start, MEDIUM_AND_IRF).unwrap();
     assert!(c.undetermined.is_empty(), "{:?}", c.undetermined);
     for (i, want) in [(0, 0.2), (1, 10.0), (3, 50.0)] {

@@ -1313,9 +1313,19 @@ fn reconstruct_fits_the_physics_first_when_asked_and_records_it() {
     );
 }
 
+/// The fullest 4 ps bin of `irf` centred at 400 ps.
+fn truth_peak_bin(irf: &scatterscope::physics::Irf) -> usize {
+    (0..200)
+        .max_by(|&a, &b| {
+            let w = |k: usize| irf.bin_weight(4.0 * k as f64, 4.0 * (k + 1) as f64, 400.0);
+            w(a).total_cmp(&w(b))
+        })
+        .unwrap()
+}
+
 #[test]
 fn simulate_takes_its_irf_from_a_reference_recording_and_records_it() {
-    use scatterscope::physics::{Irf, Preset};
+    use scatterscope::physics::{InstrumentResponse, Irf, Preset};
     use scatterscope::stack::StackMeta;
     let dir = tempfile::tempdir().unwrap();
     // A reference stack (one pixel, 200 bins of 4 ps): a 30 ps Gaussian
@@ -1333,31 +1343,77 @@ fn simulate_takes_its_irf_from_a_reference_recording_and_records_it() {
     });
     let reference = dir.path().join("reference.exr");
     Stack { data, meta }.save(&reference).unwrap();
-    let sim = dir.path().join("sim");
-    let o = scatterscope(&[
-        "simulate",
-        "--scene",
-        "disks",
-        "--size",
-        "32",
-        "--fov",
-        "6.25cm",
-        "--irf-from",
-        reference.to_str().unwrap(),
-        "--out",
-        sim.to_str().unwrap(),
-    ]);
-    let (stdout, stderr) = text(&o);
-    assert!(o.status.success(), "{stderr}");
+    let simulate = |out: &str, extra: &[&str]| {
+        let sim = dir.path().join(out);
+        let mut args = vec![
+            "simulate",
+            "--scene",
+            "disks",
+            "--size",
+            "32",
+            "--fov",
+            "6.25cm",
+            "--irf-from",
+            reference.to_str().unwrap(),
+            "--out",
+            sim.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = scatterscope(&args);
+        let (stdout, stderr) = text(&o);
+        assert!(o.status.success(), "{stderr}");
+        let stack = Stack::load(&sim.join("counts.exr")).unwrap();
+        let irf = stack.meta.setup.unwrap().irf.expect("the IRF is recorded");
+        (stdout, irf)
+    };
+    // The parametric form fitted to it.
+    let (stdout, irf) = simulate("sim_fit", &["--irf-parametric"]);
     assert!(
         stdout.contains("instrument response fitted to") && stdout.contains("Gaussian FWHM 30.0"),
         "{stdout}"
     );
-    let stack = Stack::load(&sim.join("counts.exr")).unwrap();
-    let irf = stack.meta.setup.unwrap().irf.expect("the IRF is recorded");
+    let irf = *irf.parametric().expect("a parametric IRF");
     assert!(
         (irf.fwhm_ps - 30.0).abs() < 0.3 && (irf.tail_ps - 10.0).abs() < 0.3,
         "{irf:?}"
+    );
+    // By default the measured table: on the reference's 4 ps bins, its
+    // zero at the peak bin's centre, its mean delay the tail's mean less
+    // the peak's offset from the Gaussian's centre.
+    let (stdout, irf) = simulate("sim_table", &[]);
+    assert!(
+        stdout.contains("instrument response measured in") && stdout.contains("bins of 4 ps"),
+        "{stdout}"
+    );
+    let InstrumentResponse::Measured(table) = irf else {
+        panic!("a measured table: {irf:?}")
+    };
+    assert_eq!(table.bin_ps(), 4.0);
+    assert!((table.weights().iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    // Its FWHM is the response's (the tail widens it past the Gaussian's
+    // 30 ps), to within the 4 ps bins' smoothing.
+    let (lo, hi) = truth.support_ps();
+    let grid: Vec<f64> = (0..=20_000)
+        .map(|i| lo + (hi - lo) * i as f64 / 20_000.0)
+        .collect();
+    let peak = grid.iter().map(|&x| truth.density(x)).fold(0.0, f64::max);
+    let above: Vec<f64> = grid
+        .iter()
+        .copied()
+        .filter(|&x| truth.density(x) >= 0.5 * peak)
+        .collect();
+    let want_fwhm = above[above.len() - 1] - above[0];
+    assert!(
+        (table.fwhm_ps() - want_fwhm).abs() < 1.5,
+        "FWHM {} against {want_fwhm}",
+        table.fwhm_ps()
+    );
+    let peak_centre = 4.0 * (truth_peak_bin(&truth) as f64 + 0.5);
+    let want_mean = 400.0 + truth.mean_ps() - peak_centre;
+    assert!(
+        (table.mean_ps() - want_mean).abs() < 0.5,
+        "mean delay {} against {want_mean}",
+        table.mean_ps()
     );
     // With an explicit width too it is refused; a reference without a
     // response is refused by name.

@@ -15,10 +15,13 @@ fn ignoring_the_background_costs_psnr_and_every_variant_is_reported() {
     s.sensor.height_px = 32;
     s.sensor.fov_cm = 50.0 * 32.0 / 256.0;
     s.total_photons = 4000.0;
-    s.irf = Some(Irf {
-        fwhm_ps: 60.0,
-        tail_ps: 20.0,
-    });
+    s.irf = Some(
+        Irf {
+            fwhm_ps: 60.0,
+            tail_ps: 20.0,
+        }
+        .into(),
+    );
     let tv = TotalVariation::default();
     let mut opts = MethodOptions {
         rl_iters: 100,

@@ -18,7 +18,7 @@ fn setup(irf: Option<Irf>) -> Setup {
     s.sensor.height_px = 32;
     s.sensor.fov_cm = 50.0 / 8.0;
     s.total_photons = 2e5;
-    s.irf = irf;
+    s.irf = irf.map(Into::into);
     s
 }
 

@@ -279,7 +279,7 @@ fn plain_npy_reads_without_sidecar_and_takes_given_metadata() {
     setup.sensor.width_px = 7;
     let meta = StackMeta::consecutive(&setup, 3, ValueKind::Counts, "plain".into()).unwrap();
     assert_eq!(meta.bin_starts_ps, vec![40.0, 44.0, 48.0]);
-    assert_eq!(meta.setup.unwrap().bins.count, 3);
+    assert_eq!(meta.setup.as_ref().unwrap().bins.count, 3);
     assert_eq!(meta.pixel_pitch_cm, setup.sensor.pixel_pitch_cm());
     let stack = Stack::from_parts(data, meta, &path).unwrap();
     assert_eq!(stack.total(), (0..105).sum::<u32>() as f64);

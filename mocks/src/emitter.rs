@@ -14,14 +14,15 @@
 //! With an instrument response in the kernels' setup, arrivals are sampled
 //! from the ideal (IRF-free) kernels over every bin the IRF can move light
 //! from, and each recorded time is the arrival plus a delay drawn from the
-//! IRF (a Gaussian plus an exponential), as a detector's jitter does. A
+//! IRF (a Gaussian plus an exponential, or a measured table: uniform within
+//! the drawn table bin), as a detector's jitter does. A
 //! delay that would fall before its own sync is recorded at 0: give
 //! `t0_delay_ps` more than the IRF's early support.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Exp, Normal, weighted::WeightedAliasIndex};
-use scatterscope_physics::{Irf, KernelStack, Sampling, Setup};
+use scatterscope_physics::{InstrumentResponse, IrfTable, KernelStack, Sampling, Setup};
 
 /// Bins of the ideal arrival kernels carrying fewer expected photons than
 /// this are not sampled (a millionth of a photon per bin).
@@ -102,8 +103,17 @@ pub struct Emitter {
     /// Afterpulses due later: (time s, pixel), earliest last.
     afterpulses: Vec<(f64, u32)>,
     off_sensor: u64,
-    /// The IRF's Gaussian part and its exponential tail, if any.
-    jitter: Option<(Normal<f64>, Option<Exp<f64>>)>,
+    /// The IRF's delays, if any.
+    jitter: Option<Jitter>,
+}
+
+/// How the recorded delay after an arrival is drawn.
+#[derive(Debug, Clone)]
+enum Jitter {
+    /// The Gaussian part and the exponential tail, if any.
+    Parametric(Normal<f64>, Option<Exp<f64>>),
+    /// A measured table, by its inverse distribution.
+    Measured(IrfTable),
 }
 
 /// Kernels of the arrival times that reach `setup`'s bins: the same
@@ -112,8 +122,11 @@ pub struct Emitter {
 /// reconstruction's choice about its light budget; a device records every
 /// photon that arrives), and with an IRF the binning extended on both
 /// sides by its support.
-fn arrival_kernels(setup: &Setup, irf: Option<&Irf>) -> Result<KernelStack, EmitterError> {
-    let mut s = *setup;
+fn arrival_kernels(
+    setup: &Setup,
+    irf: Option<&InstrumentResponse>,
+) -> Result<KernelStack, EmitterError> {
+    let mut s = setup.clone();
     s.irf = None;
     s.min_bin_photons = NEGLIGIBLE_ARRIVAL_PHOTONS;
     if let Some(irf) = irf {
@@ -191,7 +204,7 @@ impl Emitter {
         // an IRF, then the jitter.
         let arrivals = arrival_kernels(&kernels.setup, kernels.setup.irf.as_ref())?;
         let jitter = match &kernels.setup.irf {
-            Some(irf) => Some((
+            Some(InstrumentResponse::Parametric(irf)) => Some(Jitter::Parametric(
                 Normal::new(0.0, irf.sigma_ps())
                     .map_err(|e| EmitterError::Invalid(format!("IRF: {e}")))?,
                 (irf.tail_ps > 0.0)
@@ -199,6 +212,7 @@ impl Emitter {
                     .transpose()
                     .map_err(|e| EmitterError::Invalid(format!("IRF tail: {e}")))?,
             )),
+            Some(InstrumentResponse::Measured(table)) => Some(Jitter::Measured(table.clone())),
             None => None,
         };
         let sampled = &arrivals;
@@ -320,13 +334,19 @@ impl Emitter {
             }
             let (start, width) = self.bins[bin];
             let mut delay_ps = self.options.t0_delay_ps + start + self.rng.random::<f64>() * width;
-            if let Some((gauss, tail)) = &self.jitter {
-                delay_ps += gauss.sample(&mut self.rng);
-                if let Some(tail) = tail {
-                    delay_ps += tail.sample(&mut self.rng);
+            match &self.jitter {
+                Some(Jitter::Parametric(gauss, tail)) => {
+                    delay_ps += gauss.sample(&mut self.rng);
+                    if let Some(tail) = tail {
+                        delay_ps += tail.sample(&mut self.rng);
+                    }
                 }
-                delay_ps = delay_ps.max(0.0);
+                Some(Jitter::Measured(table)) => {
+                    delay_ps += table.delay_for(self.rng.random::<f64>());
+                }
+                None => {}
             }
+            delay_ps = delay_ps.max(0.0);
             return Detection {
                 pixel: (y as usize * self.width + x as usize) as u32,
                 delay_ps,

@@ -18,11 +18,12 @@
 //! within `SUPPORT_SIGMAS` lateral standard deviations of its centre, and
 //! quadrature nodes whose weight underflows to zero are skipped.
 
-use ndarray::{Array2, Array3, ArrayView2, s};
+use ndarray::{Array2, Array3, ArrayView2, azip, s};
 use serde::{Deserialize, Serialize};
 
 use crate::diffusion::{Diffusion, gaussian_interval_fraction};
 use crate::error::ParamError;
+use crate::irf::{InstrumentResponse, Irf, IrfTable};
 use crate::params::Setup;
 use crate::quadrature::adaptive_nodes;
 
@@ -107,22 +108,32 @@ impl KernelStack {
         setup.validate()?;
         let diffusion = Diffusion::new(&setup.medium)?;
         if let (Some(irf), Sampling::Point) = (&setup.irf, sampling) {
+            let (field, value) = match irf {
+                InstrumentResponse::Parametric(p) => ("irf_fwhm_ps", p.fwhm_ps),
+                InstrumentResponse::Measured(t) => ("irf_table_weights", t.weights().len() as f64),
+            };
             return Err(ParamError::new(
-                "irf_fwhm_ps",
-                irf.fwhm_ps,
+                field,
+                value,
                 "point sampling does not model an instrument response; use integrated sampling",
             ));
         }
         let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
-        let locals: Vec<Option<LocalKernel>> = (0..setup.bins.count)
-            .map(|k| {
-                let (ta, tb) = setup.bins.edges_ps(k);
-                match sampling {
-                    Sampling::Integrated => integrated_bin(&diffusion, setup, ta, tb),
-                    Sampling::Point => point_bin(&diffusion, setup, ta, tb),
-                }
-            })
-            .collect();
+        let locals: Vec<Option<LocalKernel>> = match &setup.irf {
+            Some(InstrumentResponse::Measured(table)) => measured_bins(&diffusion, setup, table),
+            irf => {
+                let irf = irf.as_ref().and_then(InstrumentResponse::parametric);
+                (0..setup.bins.count)
+                    .map(|k| {
+                        let (ta, tb) = setup.bins.edges_ps(k);
+                        match sampling {
+                            Sampling::Integrated => integrated_bin(&diffusion, setup, irf, ta, tb),
+                            Sampling::Point => point_bin(&diffusion, setup, ta, tb),
+                        }
+                    })
+                    .collect()
+            }
+        };
         let log_masses: Vec<f64> = locals
             .iter()
             .map(|l| match l {
@@ -187,7 +198,7 @@ impl KernelStack {
             kernels.slice_mut(s![i, .., ..]).assign(&kern);
         }
         Ok(Self {
-            setup: *setup,
+            setup: setup.clone(),
             sampling,
             diffusion,
             kernels,
@@ -260,7 +271,7 @@ fn separable_sum(radius: (usize, usize), nodes: &[(f64, Vec<f64>, Vec<f64>)]) ->
 /// quadrature's breakpoints, in `v = sqrt(t)`.
 struct BinTime<'a> {
     d: &'a Diffusion,
-    setup: &'a Setup,
+    irf: Option<&'a Irf>,
     ta: f64,
     tb: f64,
     /// Latest arrival time that can be recorded in the bin (ps).
@@ -270,10 +281,10 @@ struct BinTime<'a> {
 }
 
 impl<'a> BinTime<'a> {
-    fn new(d: &'a Diffusion, setup: &'a Setup, ta: f64, tb: f64) -> Option<Self> {
+    fn new(d: &'a Diffusion, irf: Option<&'a Irf>, ta: f64, tb: f64) -> Option<Self> {
         // Arrival times that can be recorded in [ta, tb): the bin itself, or
         // with an IRF the bin shifted back by every delay the IRF allows.
-        let (lo, hi) = match &setup.irf {
+        let (lo, hi) = match irf {
             None => (ta, tb),
             Some(irf) => {
                 let (early, late) = irf.support_ps();
@@ -306,7 +317,7 @@ impl<'a> BinTime<'a> {
         // With an IRF the weight turns on and off over about one IRF sigma
         // at each bin edge (and decays with the tail before ta): break
         // there too.
-        if let Some(irf) = &setup.irf {
+        if let Some(irf) = irf {
             let s = irf.sigma_ps();
             let edges = [ta, tb]
                 .into_iter()
@@ -323,7 +334,7 @@ impl<'a> BinTime<'a> {
         breaks.dedup();
         Some(Self {
             d,
-            setup,
+            irf,
             ta,
             tb,
             hi,
@@ -337,7 +348,6 @@ impl<'a> BinTime<'a> {
     fn weight(&self, v: f64) -> f64 {
         let t = v * v;
         let recorded = self
-            .setup
             .irf
             .map_or(1.0, |irf| irf.bin_weight(self.ta, self.tb, t));
         if recorded == 0.0 {
@@ -353,15 +363,39 @@ impl<'a> BinTime<'a> {
 pub fn bin_profile(setup: &Setup) -> Result<Vec<f64>, ParamError> {
     setup.validate()?;
     let d = Diffusion::new(&setup.medium)?;
-    let logs: Vec<f64> = (0..setup.bins.count)
-        .map(|k| {
-            let (ta, tb) = setup.bins.edges_ps(k);
-            BinTime::new(&d, setup, ta, tb).map_or(f64::NEG_INFINITY, |bt| {
-                let r = adaptive_nodes(&bt.breaks, TIME_RTOL, MAX_TIME_PANELS, |v| [bt.weight(v)]);
-                bt.log_scale + r.integral[0].ln()
-            })
-        })
-        .collect();
+    let logs: Vec<f64> = match &setup.irf {
+        Some(InstrumentResponse::Measured(table)) => {
+            let cells = ArrivalCells::new(&d, setup, table);
+            let mut sums = vec![0.0; setup.bins.count];
+            for cell in cells.cells() {
+                let r = adaptive_nodes(&cell.time.breaks, TIME_RTOL, MAX_TIME_PANELS, |v| {
+                    let wgt = cell.time.weight(v);
+                    let beta = cell.beta(v);
+                    [wgt * (1.0 - beta), wgt * beta]
+                });
+                let scale = (cell.time.log_scale - cells.log_scale).exp();
+                for (k, sum) in sums.iter_mut().enumerate() {
+                    let (a, b) = cells.shares(k, cell.index);
+                    *sum += scale * (a * r.integral[0] + b * r.integral[1]);
+                }
+            }
+            sums.iter().map(|v| cells.log_scale + v.ln()).collect()
+        }
+        irf => {
+            let irf = irf.as_ref().and_then(InstrumentResponse::parametric);
+            (0..setup.bins.count)
+                .map(|k| {
+                    let (ta, tb) = setup.bins.edges_ps(k);
+                    BinTime::new(&d, irf, ta, tb).map_or(f64::NEG_INFINITY, |bt| {
+                        let r = adaptive_nodes(&bt.breaks, TIME_RTOL, MAX_TIME_PANELS, |v| {
+                            [bt.weight(v)]
+                        });
+                        bt.log_scale + r.integral[0].ln()
+                    })
+                })
+                .collect()
+        }
+    };
     let total = log_sum_exp(&logs);
     if !total.is_finite() {
         return Err(ParamError::new(
@@ -373,8 +407,14 @@ pub fn bin_profile(setup: &Setup) -> Result<Vec<f64>, ParamError> {
     Ok(logs.iter().map(|l| (l - total).exp()).collect())
 }
 
-fn integrated_bin(d: &Diffusion, setup: &Setup, ta: f64, tb: f64) -> Option<LocalKernel> {
-    let bt = BinTime::new(d, setup, ta, tb)?;
+fn integrated_bin(
+    d: &Diffusion,
+    setup: &Setup,
+    irf: Option<&Irf>,
+    ta: f64,
+    tb: f64,
+) -> Option<LocalKernel> {
+    let bt = BinTime::new(d, irf, ta, tb)?;
     let pitch = setup.sensor.pixel_pitch_cm();
     let four_dc = 4.0 * d.dc_cm2_per_ps();
     let radius = support_radius(d, setup, bt.hi);
@@ -416,6 +456,209 @@ fn integrated_bin(d: &Diffusion, setup: &Setup, ta: f64, tb: f64) -> Option<Loca
         radius,
         nodes: nodes.len(),
     })
+}
+
+/// Arrival-time cells per bin width for a measured response: the table is
+/// re-binned onto delays of `width / MEASURED_CELLS_PER_BIN`, and arrivals
+/// are integrated over cells of the same step, so that the chance of being
+/// recorded in a bin is linear in the arrival time inside every cell and
+/// the kernels are exact sums over cells. Two: a reference binned like the
+/// stack (its bins centred on its peak, half a bin off the stack's edges)
+/// then falls on the grid exactly.
+pub const MEASURED_CELLS_PER_BIN: usize = 2;
+
+/// The arrival-time cells `[t_s + c g, t_s + (c + 1) g)` (`g` the step)
+/// whose light a measured response can put into the setup's bins, and the
+/// table re-binned onto delays `[j g, (j + 1) g)`.
+struct ArrivalCells<'a> {
+    d: &'a Diffusion,
+    start_ps: f64,
+    step: f64,
+    /// Cells per bin.
+    m: i64,
+    /// First delay index of `shares` and the re-binned shares.
+    first: i64,
+    shares: Vec<f64>,
+    /// Range of cell indices with light for some bin.
+    cells: std::ops::Range<i64>,
+    /// Largest of the cells' log scales: the common scale of the sums.
+    log_scale: f64,
+}
+
+/// One arrival cell's quadrature.
+struct Cell<'a> {
+    index: i64,
+    /// Start of the cell (ps) and the step.
+    u0: f64,
+    step: f64,
+    time: BinTime<'a>,
+}
+
+impl Cell<'_> {
+    /// Position of `t = v^2` in the cell, 0 at its start and 1 at its end.
+    fn beta(&self, v: f64) -> f64 {
+        ((v * v - self.u0) / self.step).clamp(0.0, 1.0)
+    }
+}
+
+impl<'a> ArrivalCells<'a> {
+    fn new(d: &'a Diffusion, setup: &Setup, table: &IrfTable) -> Self {
+        let m = MEASURED_CELLS_PER_BIN as i64;
+        let step = setup.bins.width_ps / m as f64;
+        let (first, shares) = table.rebinned(step);
+        let len = shares.len() as i64;
+        let bins = setup.bins.count as i64;
+        // Bin k takes delays [(k m - c) g, (k m + m - c) g) from cell c's
+        // start: some share for c in [k m - first - len + 1, k m + m - 1 -
+        // first]; the cell before also reaches its end. No cell before
+        // time zero.
+        let lo = (-first - len).max((-setup.bins.start_ps / step).floor() as i64);
+        let hi = (bins - 1) * m + m - first;
+        let mut cells = Self {
+            d,
+            start_ps: setup.bins.start_ps,
+            step,
+            m,
+            first,
+            shares,
+            cells: lo..hi.max(lo),
+            log_scale: f64::NEG_INFINITY,
+        };
+        cells.log_scale = cells
+            .cells()
+            .map(|c| c.time.log_scale)
+            .fold(f64::NEG_INFINITY, f64::max);
+        cells
+    }
+
+    /// The cells that hold any arrival time after zero.
+    fn cells(&self) -> impl Iterator<Item = Cell<'a>> + '_ {
+        self.cells.clone().filter_map(move |c| {
+            let u0 = self.start_ps + c as f64 * self.step;
+            let time = BinTime::new(self.d, None, u0.max(0.0), u0 + self.step)?;
+            Some(Cell {
+                index: c,
+                u0,
+                step: self.step,
+                time,
+            })
+        })
+    }
+
+    /// Chance that an arrival at the start of cell `c` is recorded in bin
+    /// `k`: the re-binned shares of delays `[(k m - c) g, (k m + m - c) g)`.
+    fn share_at(&self, k: usize, c: i64) -> f64 {
+        let from = k as i64 * self.m - c - self.first;
+        (from..from + self.m)
+            .filter(|&j| j >= 0 && (j as usize) < self.shares.len())
+            .map(|j| self.shares[j as usize])
+            .sum()
+    }
+
+    /// The chances at cell `c`'s start and end for bin `k`; in between
+    /// the chance is linear.
+    fn shares(&self, k: usize, c: i64) -> (f64, f64) {
+        (self.share_at(k, c), self.share_at(k, c + 1))
+    }
+}
+
+/// Every bin's kernel under the measured response `table`: for each
+/// arrival cell the ST-PSF integrated over the cell twice (weighted by the
+/// position in the cell and by its complement), then added into each bin
+/// with the chances at the cell's two ends ([`ArrivalCells`]).
+fn measured_bins(d: &Diffusion, setup: &Setup, table: &IrfTable) -> Vec<Option<LocalKernel>> {
+    let cells = ArrivalCells::new(d, setup, table);
+    // The latest arrival that bin k takes ends a cell that starts at most
+    // `tb - first g`: the bin's support covers every cell's.
+    let radii: Vec<(usize, usize)> = (0..setup.bins.count)
+        .map(|k| {
+            let tb = setup.bins.edges_ps(k).1;
+            support_radius(d, setup, tb - (cells.first - 1) as f64 * cells.step)
+        })
+        .collect();
+    let mut sums: Vec<Array2<f64>> = radii
+        .iter()
+        .map(|&(ry, rx)| Array2::zeros((2 * ry + 1, 2 * rx + 1)))
+        .collect();
+    let mut nodes_used = vec![0usize; setup.bins.count];
+    let pitch = setup.sensor.pixel_pitch_cm();
+    let four_dc = 4.0 * d.dc_cm2_per_ps();
+    let cell_px = |i: i64, s: f64| {
+        gaussian_interval_fraction((i as f64 - 0.5) * pitch, (i as f64 + 0.5) * pitch, s)
+    };
+    for cell in cells.cells() {
+        let chances: Vec<(usize, f64, f64)> = (0..setup.bins.count)
+            .map(|k| {
+                let (a, b) = cells.shares(k, cell.index);
+                (k, a, b)
+            })
+            .filter(|&(_, a, b)| a > 0.0 || b > 0.0)
+            .collect();
+        if chances.is_empty() {
+            continue;
+        }
+        let bt = &cell.time;
+        let radius = support_radius(d, setup, bt.hi);
+        let probe_offset = ((d.lateral_sigma_cm(bt.hi) / pitch).round() as i64).max(1);
+        let adapted = adaptive_nodes(&bt.breaks, TIME_RTOL, MAX_TIME_PANELS, |v| {
+            let wgt = bt.weight(v);
+            if wgt == 0.0 {
+                return [0.0; 4];
+            }
+            let beta = cell.beta(v);
+            let s = (four_dc * v * v).sqrt();
+            let c0 = cell_px(0, s);
+            [
+                wgt * (1.0 - beta),
+                wgt * beta,
+                wgt * c0 * c0,
+                wgt * c0 * cell_px(probe_offset, s),
+            ]
+        });
+        let scale = (bt.log_scale - cells.log_scale).exp();
+        if scale == 0.0 {
+            continue;
+        }
+        let (ry, rx) = radius;
+        let mut early = Vec::new();
+        let mut late = Vec::new();
+        for n in &adapted.nodes {
+            let weight = n.w * bt.weight(n.x) * scale;
+            if weight > 0.0 {
+                let s = (four_dc * n.x * n.x).sqrt();
+                let fy: Vec<f64> = (-(ry as i64)..=ry as i64).map(|i| cell_px(i, s)).collect();
+                let fx: Vec<f64> = (-(rx as i64)..=rx as i64).map(|i| cell_px(i, s)).collect();
+                let beta = cell.beta(n.x);
+                early.push((weight * (1.0 - beta), fy.clone(), fx.clone()));
+                late.push((weight * beta, fy, fx));
+            }
+        }
+        if early.is_empty() {
+            continue;
+        }
+        let a_img = separable_sum(radius, &early);
+        let b_img = separable_sum(radius, &late);
+        for (k, a, b) in chances {
+            let (by, bx) = radii[k];
+            // The cell's support lies inside the bin's (see `radii`).
+            let (oy, ox) = (by - ry, bx - rx);
+            let mut dst = sums[k].slice_mut(s![oy..oy + 2 * ry + 1, ox..ox + 2 * rx + 1]);
+            azip!((d in &mut dst, &x in &a_img, &y in &b_img) *d += a * x + b * y);
+            nodes_used[k] += early.len();
+        }
+    }
+    sums.into_iter()
+        .zip(radii)
+        .zip(nodes_used)
+        .map(|((values, radius), nodes)| {
+            (values.iter().any(|&v| v > 0.0)).then_some(LocalKernel {
+                values,
+                log_scale: cells.log_scale,
+                radius,
+                nodes,
+            })
+        })
+        .collect()
 }
 
 fn point_bin(d: &Diffusion, setup: &Setup, ta: f64, tb: f64) -> Option<LocalKernel> {

@@ -29,7 +29,7 @@ pub mod validity;
 
 pub use diffusion::Diffusion;
 pub use error::ParamError;
-pub use irf::Irf;
+pub use irf::{InstrumentResponse, Irf, IrfTable};
 pub use kernel::{KernelStack, Sampling};
 pub use params::{Medium, MediumModel, Preset, Sensor, Setup, TimeBins};
 pub use validity::Diagnostic;

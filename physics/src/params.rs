@@ -6,7 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ParamError, finite, non_negative, positive};
-use crate::irf::Irf;
+use crate::irf::InstrumentResponse;
 
 /// Optical properties and thickness of the homogeneous scattering slab.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -98,7 +98,7 @@ impl TimeBins {
 }
 
 /// Everything needed to build the ST-PSF kernel stack of an experiment.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Setup {
     /// The scattering slab.
     pub medium: Medium,
@@ -115,7 +115,7 @@ pub struct Setup {
     /// The instrument's timing response; `None` for ideal timing (absent
     /// in older files).
     #[serde(default)]
-    pub irf: Option<Irf>,
+    pub irf: Option<InstrumentResponse>,
 }
 
 /// Largest light budget accepted; Poisson sampling of larger means is not
@@ -281,10 +281,7 @@ impl Setup {
         };
         let timing = match &self.irf {
             None => "ideal timing (no instrument response)".to_string(),
-            Some(irf) => format!(
-                "instrument response: Gaussian FWHM {} ps, exponential tail {} ps",
-                irf.fwhm_ps, irf.tail_ps
-            ),
+            Some(irf) => irf.describe(),
         };
         format!("{medium}; {timing}")
     }

@@ -2,7 +2,8 @@
 //! and kernels with an IRF against the fine-binned kernels without one,
 //! convolved by hand.
 
-use scatterscope_physics::irf::{Irf, erfcx, normal_cdf};
+use scatterscope_physics::irf::{InstrumentResponse, Irf, IrfTable, erfcx, normal_cdf};
+use scatterscope_physics::kernel::bin_profile;
 use scatterscope_physics::quadrature::adaptive_nodes;
 use scatterscope_physics::{KernelStack, Preset, Sampling, Setup};
 
@@ -118,7 +119,7 @@ fn kernels_with_an_irf_are_the_fine_kernels_convolved_by_hand() {
     coarse.bins.start_ps = 60.0;
     coarse.bins.width_ps = 8.0;
     coarse.bins.count = 12;
-    coarse.irf = Some(irf);
+    coarse.irf = Some(irf.into());
     let with = KernelStack::build(&coarse, Sampling::Integrated).unwrap();
 
     let mut fine = small_setup();
@@ -160,10 +161,13 @@ fn kernels_with_an_irf_are_the_fine_kernels_convolved_by_hand() {
 fn a_vanishing_irf_gives_the_ideal_kernels_and_a_wide_one_moves_light_earlier() {
     let ideal = KernelStack::build(&small_setup(), Sampling::Integrated).unwrap();
     let mut sharp = small_setup();
-    sharp.irf = Some(Irf {
-        fwhm_ps: 1e-3,
-        tail_ps: 0.0,
-    });
+    sharp.irf = Some(
+        Irf {
+            fwhm_ps: 1e-3,
+            tail_ps: 0.0,
+        }
+        .into(),
+    );
     let sharp = KernelStack::build(&sharp, Sampling::Integrated).unwrap();
     for (a, b) in ideal.bins.iter().zip(&sharp.bins) {
         assert!(
@@ -178,10 +182,13 @@ fn a_vanishing_irf_gives_the_ideal_kernels_and_a_wide_one_moves_light_earlier() 
     // leaves out as dark, and the bins before the peak gain light.
     let mut wide = small_setup();
     wide.min_bin_photons = 1.0;
-    wide.irf = Some(Irf {
-        fwhm_ps: 60.0,
-        tail_ps: 20.0,
-    });
+    wide.irf = Some(
+        Irf {
+            fwhm_ps: 60.0,
+            tail_ps: 20.0,
+        }
+        .into(),
+    );
     let wide = KernelStack::build(&wide, Sampling::Integrated).unwrap();
     let mut ideal_kept = small_setup();
     ideal_kept.min_bin_photons = 1.0;
@@ -198,30 +205,45 @@ fn a_vanishing_irf_gives_the_ideal_kernels_and_a_wide_one_moves_light_earlier() 
 #[test]
 fn bad_irf_values_and_point_sampling_are_refused_naming_the_field() {
     let mut s = small_setup();
-    s.irf = Some(Irf {
-        fwhm_ps: -1.0,
-        tail_ps: 0.0,
-    });
+    s.irf = Some(
+        Irf {
+            fwhm_ps: -1.0,
+            tail_ps: 0.0,
+        }
+        .into(),
+    );
     assert_eq!(s.validate().unwrap_err().field, "irf_fwhm_ps");
-    s.irf = Some(Irf {
-        fwhm_ps: 30.0,
-        tail_ps: f64::NAN,
-    });
+    s.irf = Some(
+        Irf {
+            fwhm_ps: 30.0,
+            tail_ps: f64::NAN,
+        }
+        .into(),
+    );
     assert_eq!(s.validate().unwrap_err().field, "irf_tail_ps");
-    s.irf = Some(Irf {
-        fwhm_ps: 1e300,
-        tail_ps: 0.0,
-    });
+    s.irf = Some(
+        Irf {
+            fwhm_ps: 1e300,
+            tail_ps: 0.0,
+        }
+        .into(),
+    );
     assert_eq!(s.validate().unwrap_err().field, "irf_fwhm_ps");
-    s.irf = Some(Irf {
-        fwhm_ps: 30.0,
-        tail_ps: 1e7,
-    });
+    s.irf = Some(
+        Irf {
+            fwhm_ps: 30.0,
+            tail_ps: 1e7,
+        }
+        .into(),
+    );
     assert_eq!(s.validate().unwrap_err().field, "irf_tail_ps");
-    s.irf = Some(Irf {
-        fwhm_ps: 30.0,
-        tail_ps: 0.0,
-    });
+    s.irf = Some(
+        Irf {
+            fwhm_ps: 30.0,
+            tail_ps: 0.0,
+        }
+        .into(),
+    );
     let e = KernelStack::build(&s, Sampling::Point).unwrap_err();
     assert_eq!(e.field, "irf_fwhm_ps");
     assert!(e.to_string().contains("point sampling"), "{e}");
@@ -238,7 +260,7 @@ fn the_whole_plane_profile_is_the_kernels_masses_on_a_sensor_that_holds_the_ligh
     ] {
         let mut s = small_setup();
         s.sensor.fov_cm = 40.0; // every kernel well inside the sensor
-        s.irf = irf;
+        s.irf = irf.map(Into::into);
         let profile = scatterscope_physics::kernel::bin_profile(&s).unwrap();
         let k = KernelStack::build(&s, Sampling::Integrated).unwrap();
         let total: f64 = k.bins.iter().map(|b| b.photons).sum();
@@ -252,4 +274,150 @@ fn the_whole_plane_profile_is_the_kernels_masses_on_a_sensor_that_holds_the_ligh
             );
         }
     }
+}
+
+/// A measured-looking response: a sharp peak with a slow diffusion tail
+/// and a small bump, on `bin_ps` bins from `start_ps` (not normalised).
+fn spad_like_table(bin_ps: f64, start_ps: f64, count: usize) -> IrfTable {
+    let weights = (0..count)
+        .map(|j| {
+            let d = start_ps + (j as f64 + 0.5) * bin_ps;
+            let peak = (-0.5 * (d / 9.0).powi(2)).exp();
+            let tail = if d > 0.0 {
+                0.08 * (-d / 40.0).exp()
+            } else {
+                0.0
+            };
+            let bump = 0.05 * (-0.5 * ((d - 70.0) / 6.0).powi(2)).exp();
+            peak + tail + bump
+        })
+        .collect();
+    IrfTable::new(bin_ps, start_ps, weights).unwrap()
+}
+
+/// `setup`'s kernels built by hand: kernels of 0.25 ps bins without an
+/// IRF over 0-250 ps, each weighted by the chance that `irf` moves its
+/// photons into each bin, normalised like the stack.
+fn convolved_by_hand(setup: &Setup, irf: &InstrumentResponse) -> Vec<ndarray::Array2<f64>> {
+    let mut fine = small_setup();
+    fine.bins.start_ps = 0.0;
+    fine.bins.width_ps = 0.25;
+    fine.bins.count = 1000;
+    let fine = KernelStack::build(&fine, Sampling::Integrated).unwrap();
+    let mut by_hand: Vec<ndarray::Array2<f64>> = (0..setup.bins.count)
+        .map(|k| {
+            let (ta, tb) = setup.bins.edges_ps(k);
+            let mut acc = ndarray::Array2::<f64>::zeros((48, 48));
+            for (i, b) in fine.kept_bins().enumerate() {
+                let t = 0.5 * (b.start_ps + b.end_ps);
+                acc.scaled_add(irf.bin_weight(ta, tb, t), &fine.kernel(i));
+            }
+            acc
+        })
+        .collect();
+    let total: f64 = by_hand.iter().map(|k| k.sum()).sum();
+    by_hand
+        .iter_mut()
+        .for_each(|k| *k *= setup.total_photons / total);
+    by_hand
+}
+
+/// Largest difference of any bin's kernel from `want`'s, relative to the
+/// largest kernel value of all.
+fn worst_relative(got: &KernelStack, want: &[ndarray::Array2<f64>]) -> f64 {
+    let peak = want
+        .iter()
+        .flat_map(|k| k.iter())
+        .fold(0.0f64, |m, v| m.max(*v));
+    (0..want.len())
+        .map(|k| {
+            got.kernel(k)
+                .iter()
+                .zip(&want[k])
+                .fold(0.0f64, |m, (g, w)| m.max((g - w).abs()))
+        })
+        .fold(0.0, f64::max)
+        / peak
+}
+
+#[test]
+fn kernels_with_a_measured_table_are_the_fine_kernels_convolved_by_hand() {
+    let mut coarse = small_setup();
+    coarse.bins.start_ps = 60.0;
+    coarse.bins.width_ps = 8.0;
+    coarse.bins.count = 12;
+    // On the kernels' own delay grid (4 ps steps from a multiple of 4):
+    // the cell sums are exact.
+    let aligned = InstrumentResponse::from(spad_like_table(4.0, -24.0, 40));
+    coarse.irf = Some(aligned.clone());
+    let got = KernelStack::build(&coarse, Sampling::Integrated).unwrap();
+    assert_eq!(got.len(), coarse.bins.count);
+    let worst = worst_relative(&got, &convolved_by_hand(&coarse, &aligned));
+    assert!(worst < 2e-4, "aligned table: off by {worst} of the peak");
+    // Off the grid (3 ps bins from -25 ps) the table is re-binned onto 4
+    // ps delays first: a smoothing below half a bin (5.6e-4 of the peak when written).
+    let offset = InstrumentResponse::from(spad_like_table(3.0, -25.0, 55));
+    coarse.irf = Some(offset.clone());
+    let got = KernelStack::build(&coarse, Sampling::Integrated).unwrap();
+    let worst = worst_relative(&got, &convolved_by_hand(&coarse, &offset));
+    assert!(worst < 2e-3, "re-binned table: off by {worst} of the peak");
+    eprintln!("re-binned table: largest difference {worst:.2e} of the peak");
+    // The time profile calibrate fits is the kernels' masses.
+    let profile = bin_profile(&coarse).unwrap();
+    let masses: Vec<f64> = (0..got.len()).map(|k| got.kernel(k).sum()).collect();
+    let total: f64 = masses.iter().sum();
+    for (p, m) in profile.iter().zip(&masses) {
+        assert!(
+            (p - m / total).abs() < 1e-9,
+            "profile {p} vs kernels {}",
+            m / total
+        );
+    }
+}
+
+#[test]
+fn a_measured_table_is_a_distribution_and_bad_tables_are_refused_by_field() {
+    let t = spad_like_table(3.0, -25.0, 55);
+    assert!((t.weights().iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    let (lo, hi) = t.support_ps();
+    assert_eq!((lo, hi), (-25.0, -25.0 + 165.0));
+    for x in [-30.0, -25.0, -10.0, 0.0, 0.7, 33.3, 139.9, 140.0, 200.0] {
+        let (c, s) = (t.cdf(x), t.survival(x));
+        assert!((c + s - 1.0).abs() < 1e-14, "at {x}: {c} + {s}");
+        // The inverse distribution returns the delay.
+        if x > lo && x < hi {
+            assert!((t.delay_for(c) - x).abs() < 1e-9, "at {x}");
+        }
+    }
+    // Re-binning conserves every share, exactly on an aligned grid.
+    let (first, shares) = t.rebinned(4.0);
+    assert_eq!(first, -7);
+    assert!((shares.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    let (first, shares) = t.rebinned(1.0);
+    assert_eq!(first, -25);
+    for (j, w) in t.weights().iter().enumerate() {
+        let three: f64 = shares[3 * j..3 * j + 3].iter().sum();
+        assert!((three - w).abs() < 1e-15);
+    }
+    // A setup carrying it survives a round trip through its stored form.
+    let mut s = small_setup();
+    s.irf = Some(t.clone().into());
+    let json = serde_json::to_string(&s).unwrap();
+    let back: Setup = serde_json::from_str(&json).unwrap();
+    assert_eq!(back, s);
+    for (weights, field, value) in [
+        (vec![1.0, f64::NAN], "irf_table_weights", "NaN"),
+        (vec![1.0, -0.5], "irf_table_weights", "-0.5"),
+        (vec![0.0, 0.0], "irf_table_weights", "0"),
+        (vec![], "irf_table_weights", "0"),
+    ] {
+        let e = IrfTable::new(4.0, 0.0, weights).unwrap_err().to_string();
+        assert!(e.contains(field) && e.contains(value), "{e}");
+    }
+    let e = IrfTable::new(0.0, 0.0, vec![1.0]).unwrap_err().to_string();
+    assert!(e.contains("irf_table_bin_ps"), "{e}");
+    // A stored table with a bad entry is refused when read back.
+    let bad = json.replacen("\"weights\":[", "\"weights\":[-1.0,", 1);
+    let e = serde_json::from_str::<Setup>(&bad).unwrap_err().to_string();
+    assert!(e.contains("irf_table_weights"), "{e}");
 }

@@ -90,7 +90,7 @@ impl Outcome {
 /// The same physics on `region` of `setup`'s sensor: the region's pixels at
 /// the same pitch.
 fn cropped(setup: &Setup, region: Region) -> Setup {
-    let mut s = *setup;
+    let mut s = setup.clone();
     s.sensor.fov_cm = setup.sensor.fov_cm * region.width as f64 / setup.sensor.width_px as f64;
     s.sensor.width_px = region.width;
     s.sensor.height_px = region.height;

@@ -10,7 +10,10 @@
 //! peak bin. Light later than the last significant block is left out; the
 //! output says how many counts that was at most.
 
-use super::histogram::TimeHistogram;
+use scatterscope_physics::{IrfTable, ParamError};
+
+use super::CalibrateError;
+use super::histogram::{DEFAULT_MAT_DATASET, TimeHistogram};
 
 /// Width of the blocks whose summed excess decides the response's extent.
 pub const BLOCK_BINS: usize = 8;
@@ -144,6 +147,23 @@ impl MeasuredIrf {
         (right - left) * self.bin_width_ps
     }
 
+    /// The response as the physics' table: entry `j` covers delays
+    /// `[(j - peak - 1/2) w, (j - peak + 1/2) w)`, so time zero is the
+    /// centre of the reference's peak bin ([`Self::zero_time_ps`]).
+    pub fn table(&self) -> Result<IrfTable, ParamError> {
+        IrfTable::new(
+            self.bin_width_ps,
+            -(self.peak as f64 + 0.5) * self.bin_width_ps,
+            self.weights.clone(),
+        )
+    }
+
+    /// Time zero of [`Self::table`] on the reference's clock (ps): the
+    /// centre of its peak bin.
+    pub fn zero_time_ps(&self) -> f64 {
+        self.peak_time_ps + 0.5 * self.bin_width_ps
+    }
+
     /// Mean delay after the peak (ps): the response's centroid against
     /// its zero.
     pub fn mean_delay_ps(&self) -> f64 {
@@ -154,4 +174,19 @@ impl MeasuredIrf {
             .sum::<f64>()
             * self.bin_width_ps
     }
+}
+
+/// The measured response of the reference recording at `path` (a tag file
+/// or a stack; see [`TimeHistogram::read`]) and its table for the kernels.
+pub fn measured_irf_from_reference(
+    path: &std::path::Path,
+) -> Result<(MeasuredIrf, IrfTable), CalibrateError> {
+    let histogram = TimeHistogram::read(path, DEFAULT_MAT_DATASET, None)
+        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+    let measured = MeasuredIrf::from_histogram(&histogram)
+        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+    let table = measured.table().map_err(|e| {
+        CalibrateError::Invalid(format!("the response measured in {}: {e}", path.display()))
+    })?;
+    Ok((measured, table))
 }

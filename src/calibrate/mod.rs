@@ -15,7 +15,7 @@
 
 use argmin::core::CostFunction;
 use scatterscope_physics::kernel::bin_profile;
-use scatterscope_physics::{Irf, Setup};
+use scatterscope_physics::{InstrumentResponse, Irf, Setup};
 
 pub mod hessian;
 pub mod histogram;
@@ -143,15 +143,23 @@ impl Model<'_> {
     /// The setup with the medium and IRF of `p`, its bins on the model's
     /// time axis (shifted by `p`'s time zero).
     fn setup_at(&self, p: &[f64; 6]) -> Setup {
-        let mut s = self.setup;
+        let mut s = self.setup.clone();
         s.medium.mu_a_per_cm = p[0];
         s.medium.mu_s_per_cm = p[1] / (1.0 - s.medium.g);
         s.bins.start_ps = self.start_ps - p[2];
         if p[3] > 0.0 {
-            s.irf = Some(Irf {
-                fwhm_ps: p[3],
-                tail_ps: s.irf.map_or(0.0, |i| i.tail_ps),
-            });
+            let tail_ps = s
+                .irf
+                .as_ref()
+                .and_then(InstrumentResponse::parametric)
+                .map_or(0.0, |i| i.tail_ps);
+            s.irf = Some(
+                Irf {
+                    fwhm_ps: p[3],
+                    tail_ps,
+                }
+                .into(),
+            );
         }
         s
     }
@@ -215,12 +223,18 @@ pub fn calibrate(
             setup.medium.g
         )));
     }
-    let mut setup = *setup;
+    let mut setup = setup.clone();
     setup.bins.count = n;
     let lowest = counts.iter().copied().fold(f64::INFINITY, f64::min);
     let background = lowest.max(1e-3);
-    let irf_fwhm = match setup.irf {
-        Some(irf) => irf.fwhm_ps,
+    let irf_fwhm = match &setup.irf {
+        Some(InstrumentResponse::Parametric(irf)) => irf.fwhm_ps,
+        Some(InstrumentResponse::Measured(_)) if free.irf_fwhm => {
+            return Err(CalibrateError::Invalid(
+                "the IRF width cannot be fitted: the instrument response is a measured table (leave `irf` out of the fitted parameters)".into(),
+            ));
+        }
+        Some(InstrumentResponse::Measured(_)) => 0.0,
         // A fitted IRF the setup lacks starts at two bins.
         None if free.irf_fwhm => 2.0 * setup.bins.width_ps,
         None => 0.0,
@@ -249,6 +263,7 @@ pub fn calibrate(
             free_idx.len()
         )));
     }
+    let bin_width_ps = setup.bins.width_ps;
     let model = Model {
         setup,
         counts,
@@ -262,7 +277,7 @@ pub fn calibrate(
         .collect();
     let steps: Vec<f64> = free_idx
         .iter()
-        .map(|&i| if i == 2 { setup.bins.width_ps } else { 0.2 })
+        .map(|&i| if i == 2 { bin_width_ps } else { 0.2 })
         .collect();
     let (x, model, evaluations) = nelder_mead(model, x0, &steps, 3000, "the fit")?;
     let p = model.natural(&x);

@@ -130,7 +130,7 @@ impl Problem {
                 physics_ps: width,
             });
         }
-        let mut all = *setup;
+        let mut all = setup.clone();
         all.min_bin_photons = 0.0;
         let kernels = KernelStack::build(&all, sampling)?;
         let positions = stack
@@ -182,7 +182,7 @@ impl Problem {
             model: ForwardModel::with_bins(&kernels, &kernel_positions, boundary),
             counts: stack.data.select(ndarray::Axis(0), &kept).mapv(f64::from),
             bin_starts_ps: kept.iter().map(|&i| stack.meta.bin_starts_ps[i]).collect(),
-            setup: *setup,
+            setup: setup.clone(),
             left_out,
         })
     }

@@ -124,7 +124,7 @@ pub fn level_setup(base: &Setup, level: f64) -> Result<Setup, ReportError> {
             "light level {level} must be a positive number"
         )));
     }
-    let mut setup = *base;
+    let mut setup = base.clone();
     setup.total_photons *= level;
     Ok(setup)
 }
@@ -156,7 +156,7 @@ pub fn simulate_case(
             full
         }
     };
-    let mut wide = *setup;
+    let mut wide = setup.clone();
     wide.sensor.height_px = object_px;
     wide.sensor.width_px = object_px;
     wide.sensor.fov_cm = setup.sensor.fov_cm * object_px as f64 / w as f64;
@@ -181,7 +181,7 @@ pub fn simulate_case(
         model: ForwardModel::new(&kernels, Boundary::Sensor),
         counts,
         bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
-        setup: *setup,
+        setup: setup.clone(),
         left_out: Vec::new(),
     };
     Ok(BenchCase {

@@ -23,8 +23,8 @@ pub const REALISTIC_IRF: Irf = Irf {
 /// `setup` as a realistic instrument measures it: its own IRF, else
 /// [`REALISTIC_IRF`].
 pub fn realistic(setup: &Setup) -> Setup {
-    let mut s = *setup;
-    s.irf.get_or_insert(REALISTIC_IRF);
+    let mut s = setup.clone();
+    s.irf.get_or_insert(REALISTIC_IRF.into());
     s
 }
 
@@ -72,7 +72,7 @@ pub fn instrument_costs(
         data: counts,
         meta: sim.counts.meta.clone(),
     };
-    let mut ideal = *setup;
+    let mut ideal = setup.clone();
     ideal.irf = None;
     let run =
         |problem: &Problem, model: &'static str| -> Result<Vec<InstrumentCost>, ReportError> {

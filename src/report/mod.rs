@@ -106,7 +106,7 @@ pub fn run_scene(
         // Whole counts: exact in f32 and back.
         counts: counts.data.mapv(f64::from),
         bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
-        setup: *setup,
+        setup: setup.clone(),
         left_out: Vec::new(),
     };
     std::fs::create_dir_all(dir).map_err(|e| ReportError::Io(dir.display().to_string(), e))?;

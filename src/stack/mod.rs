@@ -264,7 +264,7 @@ impl StackMeta {
             bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
             bin_width_ps: kernels.setup.bins.width_ps,
             pixel_pitch_cm: kernels.setup.sensor.pixel_pitch_cm(),
-            setup: Some(kernels.setup),
+            setup: Some(kernels.setup.clone()),
             sampling: Some(kernels.sampling),
             dropped_bins: kernels
                 .dropped_bins()
@@ -319,7 +319,7 @@ impl StackMeta {
         kind: ValueKind,
         source: String,
     ) -> Result<Self, scatterscope_physics::ParamError> {
-        let mut setup = *setup;
+        let mut setup = setup.clone();
         setup.bins.count = bins;
         setup.validate()?;
         let mut meta =

@@ -277,7 +277,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     let truth = opened.mock.map(|m| m.truth());
 
     let acc = &outcome.accounting;
-    let mut stack_setup = setup;
+    let mut stack_setup = setup.clone();
     if let (Some(reference), Some(t)) = (&mock_reference, &truth)
         && let Some(budget) =
             reference.light_budget(setup.total_photons, outcome.region, acc.binned, t)

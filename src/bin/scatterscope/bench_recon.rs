@@ -107,8 +107,8 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
         .with_context(|| format!("creating output directory {}", traces.display()))?;
     let mut rows = Vec::new();
     for image in &images {
-        for &(level, setup) in &setups {
-            let case = simulate_case(image, &setup, args.object_px, args.seed)?;
+        for &(level, ref setup) in &setups {
+            let case = simulate_case(image, setup, args.object_px, args.seed)?;
             let new = run_case(
                 image,
                 level,

@@ -68,7 +68,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         )
     })?;
     let stack = Stack::from_parts(data, meta, &args.stack)?;
-    let setup = args.physics.resolve_over(stack.meta.setup)?;
+    let setup = args.physics.resolve_over(stack.meta.setup.clone())?;
     let free = Free::from_names(&args.fit).context("--fit")?;
     let (start, counts) = time_profile(&stack)?;
     let c = calibrate(&counts, start, &setup, free)

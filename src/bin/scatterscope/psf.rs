@@ -45,7 +45,7 @@ pub fn run(args: &PsfArgs) -> anyhow::Result<()> {
     let (integrated, t_int) = timed(Sampling::Integrated)?;
     // Point samples cannot model an instrument response: with one, they
     // are not built for comparison (and refused when asked for).
-    let point = match (setup.irf, args.sampling) {
+    let point = match (&setup.irf, args.sampling) {
         (Some(_), Sampling::Integrated) => None,
         _ => Some(timed(Sampling::Point)?),
     };

@@ -66,7 +66,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     let (mut stack, mut setup) = match meta {
         Some(meta) => {
             let stack = Stack::from_parts(data, meta, &args.stack)?;
-            let setup = args.physics.resolve_over(stack.meta.setup)?;
+            let setup = args.physics.resolve_over(stack.meta.setup.clone())?;
             if stack.meta.setup.is_none()
                 && args.physics.preset.is_none()
                 && args.physics.config.is_none()
@@ -89,7 +89,10 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
                 format!("{} (no metadata)", args.stack.display()),
             )
             .with_context(|| format!("the physics for {}", args.stack.display()))?;
-            let setup = meta.setup.expect("consecutive metadata holds its physics");
+            let setup = meta
+                .setup
+                .clone()
+                .expect("consecutive metadata holds its physics");
             eprintln!(
                 "note: {} has {}; assumed: photon counts in {} consecutive bins of {} ps from {} ps (the physics' time window and photon budget), {} x {} pixels of {} cm, physics from {}",
                 args.stack.display(),

@@ -4,6 +4,7 @@
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use scatterscope::Named;
 use scatterscope::calibrate::irf_fit::irf_from_reference;
+use scatterscope::calibrate::measured_irf::measured_irf_from_reference;
 use scatterscope::config::{ConfigError, PhysicsOverrides, parse_cm, parse_ps};
 use scatterscope::physics::{MediumModel, Preset, Setup};
 use std::path::PathBuf;
@@ -75,12 +76,18 @@ pub struct PhysicsArgs {
     /// unit ps; 0: none).
     #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     pub irf_tail: Option<f64>,
-    /// Instrument response fitted to a reference recording without the
+    /// Instrument response measured in a reference recording without the
     /// medium (.sstags, .ptu, .pt3, .ht3 tag file or an .exr/.npy stack):
-    /// the Gaussian-plus-exponential form, by Poisson maximum likelihood;
-    /// the fit and its chi-square are printed.
+    /// its histogram less the background, as a table (time zero at the
+    /// centre of its fullest bin); the kernels are the ST-PSF convolved
+    /// with it.
     #[arg(long, value_name = "REF", conflicts_with_all = ["irf_fwhm", "irf_tail"])]
     pub irf_from: Option<PathBuf>,
+    /// With --irf-from: fit the Gaussian-plus-exponential form to the
+    /// reference (Poisson maximum likelihood; the fit and its chi-square
+    /// are printed) and use that instead of the measured table.
+    #[arg(long, requires = "irf_from")]
+    pub irf_parametric: bool,
 }
 
 impl PhysicsArgs {
@@ -116,7 +123,21 @@ impl PhysicsArgs {
     /// physics) instead of the default preset.
     pub fn resolve_over(&self, base: Option<Setup>) -> anyhow::Result<Setup> {
         let mut setup = self.resolve_flags_over(base)?;
-        if let Some(reference) = &self.irf_from {
+        if let (Some(reference), false) = (&self.irf_from, self.irf_parametric) {
+            let (measured, table) = measured_irf_from_reference(reference)?;
+            println!(
+                "instrument response measured in {}: {} bins of {} ps, FWHM {:.1} ps, mean delay {:.1} ps after its peak, time zero at {:.2} ps on its clock (the peak bin's centre), background {:.3} counts per bin subtracted, {:.0} counts in the response",
+                reference.display(),
+                measured.weights.len(),
+                measured.bin_width_ps,
+                measured.fwhm_ps(),
+                measured.mean_delay_ps(),
+                measured.zero_time_ps(),
+                measured.background_per_bin,
+                measured.signal_counts
+            );
+            setup.irf = Some(table.into());
+        } else if let Some(reference) = &self.irf_from {
             let fit = irf_from_reference(reference)?;
             let se = |v: Option<f64>| v.map_or(String::new(), |e| format!(" +- {e:.2}"));
             println!(
@@ -137,7 +158,7 @@ impl PhysicsArgs {
                     fit.chi2_per_dof
                 );
             }
-            setup.irf = Some(fit.irf);
+            setup.irf = Some(fit.irf.into());
         }
         Ok(setup)
     }
