@@ -323,10 +323,9 @@ impl IrfTable {
             .map_or(w.len() as f64 - 0.5, |k| {
                 (k - 1) as f64 + (w[k - 1] - half) / (w[k - 1] - w[k])
             });
-        let left = (0..peak)
-            .rev()
-            .find(|&k| w[k] < half)
-            .map_or(-0.5, |k| (k + 1) as f64 - (w[k + 1] - half) / (w[k + 1] - w[k]));
+        let left = (0..peak).rev().find(|&k| w[k] < half).map_or(-0.5, |k| {
+            (k + 1) as f64 - (w[k + 1] - half) / (w[k + 1] - w[k])
+        });
         (right - left) * self.bin_ps
     }
 

@@ -101,9 +101,13 @@ impl IrfFit {
 }
 
 /// [`fit_irf`] on the histogram of the reference recording at `path`
-/// (a tag file or a stack; see [`TimeHistogram::read`]).
-pub fn irf_from_reference(path: &std::path::Path) -> Result<IrfFit, CalibrateError> {
-    let histogram = TimeHistogram::read(path, DEFAULT_MAT_DATASET, None)
+/// (a tag file, a stack or a MATLAB file; see [`TimeHistogram::read`];
+/// `bin_ps` for a file that does not record its bin width).
+pub fn irf_from_reference(
+    path: &std::path::Path,
+    bin_ps: Option<f64>,
+) -> Result<IrfFit, CalibrateError> {
+    let histogram = TimeHistogram::read(path, DEFAULT_MAT_DATASET, bin_ps)
         .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
     fit_irf(&histogram)
         .map_err(|e| CalibrateError::Invalid(format!("fitting the IRF to {}: {e}", path.display())))

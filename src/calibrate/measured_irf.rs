@@ -176,12 +176,15 @@ impl MeasuredIrf {
     }
 }
 
-/// The measured response of the reference recording at `path` (a tag file
-/// or a stack; see [`TimeHistogram::read`]) and its table for the kernels.
+/// The measured response of the reference recording at `path` (a tag
+/// file, a stack or a MATLAB file; see [`TimeHistogram::read`]; `bin_ps`
+/// for a file that does not record its bin width) and its table for the
+/// kernels.
 pub fn measured_irf_from_reference(
     path: &std::path::Path,
+    bin_ps: Option<f64>,
 ) -> Result<(MeasuredIrf, IrfTable), CalibrateError> {
-    let histogram = TimeHistogram::read(path, DEFAULT_MAT_DATASET, None)
+    let histogram = TimeHistogram::read(path, DEFAULT_MAT_DATASET, bin_ps)
         .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
     let measured = MeasuredIrf::from_histogram(&histogram)
         .map_err(|e| CalibrateError::Invalid(e.to_string()))?;

@@ -287,13 +287,26 @@ pub fn calibrate(
     let (se, undetermined) = standard_errors(&model, &p);
     let chi2 = pearson_chi2(&fitted, counts);
     let dof = n - free_idx.len();
+    // A measured table is fixed; its FWHM is reported in the IRF's row.
+    let table_fwhm = match &model.setup.irf {
+        Some(InstrumentResponse::Measured(t)) => Some(t.fwhm_ps()),
+        _ => None,
+    };
     let parameters = NAMES
         .iter()
         .enumerate()
         .map(|(i, &(name, unit))| Parameter {
-            name,
+            name: if i == 3 && table_fwhm.is_some() {
+                "IRF FWHM (measured table)"
+            } else {
+                name
+            },
             unit,
-            value: p[i],
+            value: if i == 3 {
+                table_fwhm.unwrap_or(p[i])
+            } else {
+                p[i]
+            },
             standard_error: free_idx.iter().position(|&f| f == i).and_then(|j| se[j]),
             fitted: free_idx.contains(&i),
         })

@@ -77,7 +77,8 @@ pub struct PhysicsArgs {
     #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     pub irf_tail: Option<f64>,
     /// Instrument response measured in a reference recording without the
-    /// medium (.sstags, .ptu, .pt3, .ht3 tag file or an .exr/.npy stack):
+    /// medium (.sstags, .ptu, .pt3, .ht3 tag file, an .exr/.npy stack, or
+    /// a MATLAB .mat histogram with --irf-bin-ps):
     /// its histogram less the background, as a table (time zero at the
     /// centre of its fullest bin); the kernels are the ST-PSF convolved
     /// with it.
@@ -88,6 +89,10 @@ pub struct PhysicsArgs {
     /// are printed) and use that instead of the measured table.
     #[arg(long, requires = "irf_from")]
     pub irf_parametric: bool,
+    /// Bin width of an --irf-from reference that does not record one (a
+    /// MATLAB .mat histogram; default unit ps).
+    #[arg(long, value_name = "TIME", value_parser = parse_ps, requires = "irf_from")]
+    pub irf_bin_ps: Option<f64>,
 }
 
 impl PhysicsArgs {
@@ -124,7 +129,7 @@ impl PhysicsArgs {
     pub fn resolve_over(&self, base: Option<Setup>) -> anyhow::Result<Setup> {
         let mut setup = self.resolve_flags_over(base)?;
         if let (Some(reference), false) = (&self.irf_from, self.irf_parametric) {
-            let (measured, table) = measured_irf_from_reference(reference)?;
+            let (measured, table) = measured_irf_from_reference(reference, self.irf_bin_ps)?;
             println!(
                 "instrument response measured in {}: {} bins of {} ps, FWHM {:.1} ps, mean delay {:.1} ps after its peak, time zero at {:.2} ps on its clock (the peak bin's centre), background {:.3} counts per bin subtracted, {:.0} counts in the response",
                 reference.display(),
@@ -138,7 +143,7 @@ impl PhysicsArgs {
             );
             setup.irf = Some(table.into());
         } else if let Some(reference) = &self.irf_from {
-            let fit = irf_from_reference(reference)?;
+            let fit = irf_from_reference(reference, self.irf_bin_ps)?;
             let se = |v: Option<f64>| v.map_or(String::new(), |e| format!(" +- {e:.2}"));
             println!(
                 "instrument response fitted to {}: Gaussian FWHM {:.2}{} ps, exponential tail {:.2}{} ps, centre at {:.2} ps on its clock, background {:.3} counts per bin, chi-square per degree of freedom {:.2}",
