@@ -431,3 +431,46 @@ fn broken_matlab_files_give_errors_naming_the_file() {
         }
     }
 }
+
+#[test]
+fn the_real_reference_is_the_kernels_measured_table() {
+    use scatterscope::physics::InstrumentResponse;
+    use scatterscope::stack::Stack;
+    let Some(dir) = cdt() else { return };
+    let out = tempfile::tempdir().unwrap();
+    let reference = dir.join("capture_direct.mat");
+    let simulate = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+            .args([
+                "simulate", "--scene", "disks", "--size", "32", "--fov", "6.25cm",
+            ])
+            .arg("--irf-from")
+            .arg(&reference)
+            .args(extra)
+            .arg("--out")
+            .arg(out.path())
+            .output()
+            .unwrap()
+    };
+    // Without its bin width the reference is refused, naming the flag.
+    let o = simulate(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("capture_direct.mat") && err.contains("--irf-bin-ps"),
+        "{err}"
+    );
+    let o = simulate(&["--irf-bin-ps", "8"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stack = Stack::load(&out.path().join("counts.exr")).unwrap();
+    let Some(InstrumentResponse::Measured(table)) = stack.meta.setup.unwrap().irf else {
+        panic!("the stack records the measured table")
+    };
+    // The same response calibrate-slab measures, on its 8 ps bins, with
+    // time zero at the centre of the peak bin.
+    let direct = TimeHistogram::read(&reference, "out", Some(BIN_PS)).unwrap();
+    let measured = MeasuredIrf::from_histogram(&direct).unwrap();
+    assert_eq!(table.bin_ps(), BIN_PS);
+    assert_eq!(table.weights(), &measured.weights[..]);
+    assert_eq!(table.start_ps(), -(measured.peak as f64 + 0.5) * BIN_PS);
+    assert!((table.fwhm_ps() - measured.fwhm_ps()).abs() < 1e-9);
+}

@@ -175,7 +175,7 @@ impl TimeHistogram {
                 let width = bin_width_ps.ok_or_else(|| {
                     file_error(
                         path,
-                        "a MATLAB file does not record its bin width: give it (--bin-ps)",
+                        "a MATLAB file does not record its bin width: give it (--bin-ps to calibrate-slab, --irf-bin-ps with --irf-from)",
                     )
                 })?;
                 Self::read_mat(path, dataset, width)
