@@ -305,3 +305,21 @@ fn an_exr_declaring_more_pixels_than_it_could_hold_is_refused() {
         "{e}"
     );
 }
+
+#[test]
+fn a_measured_irf_of_the_largest_size_round_trips_through_exr_and_npy() {
+    use scatterscope::physics::{IrfTable, irf::MAX_TABLE_BINS};
+    let dir = tempfile::tempdir().unwrap();
+    let weights: Vec<f64> = (0..MAX_TABLE_BINS)
+        .map(|j| (-(j as f64) / 900.0).exp() * (1.0 + 0.3 * (j as f64 * 0.37).sin()))
+        .collect();
+    let mut s = sample_stack(ValueKind::Counts);
+    let mut setup = Preset::Paper.setup();
+    setup.irf = Some(IrfTable::new(0.25, -37.5, weights).unwrap().into());
+    s.meta.setup = Some(setup);
+    for name in ["s.exr", "s.npy"] {
+        let path = dir.path().join(name);
+        s.save(&path).unwrap();
+        assert_eq!(Stack::load(&path).unwrap(), s, "{name}");
+    }
+}
