@@ -223,3 +223,40 @@ fn bins_lit_only_by_the_irf_far_tail_are_left_out_not_overflowed() {
     let level = r.image.mean().unwrap();
     assert!((level - t).abs() < 0.1 * t, "{level} vs {t}");
 }
+
+#[test]
+fn measured_tables_narrower_than_a_bin_or_wider_than_the_window_stay_exact_and_finite() {
+    use scatterscope::physics::IrfTable;
+    let ideal = KernelStack::build(&setup(None), Sampling::Integrated).unwrap();
+    // One entry of 0.01 ps around time zero: the ideal instrument.
+    let mut narrow = setup(None);
+    narrow.irf = Some(IrfTable::new(0.01, -0.005, vec![1.0]).unwrap().into());
+    let k = KernelStack::build(&narrow, Sampling::Integrated).unwrap();
+    assert_eq!(k.len(), ideal.len());
+    for (x, y) in k.bins.iter().zip(&ideal.bins) {
+        assert!(
+            (x.photons - y.photons).abs() <= 1e-6 * narrow.total_photons,
+            "bin {}: {} vs {}",
+            x.index,
+            x.photons,
+            y.photons
+        );
+    }
+    // A flat table 3 ns wide against the 120 ps window: every bin gets
+    // about the same light, all finite.
+    let mut wide = setup(None);
+    wide.irf = Some(IrfTable::new(10.0, -1500.0, vec![1.0; 300]).unwrap().into());
+    let k = KernelStack::build(&wide, Sampling::Integrated).unwrap();
+    assert_eq!(k.len(), 30, "every bin receives light");
+    let masses: Vec<f64> = k.bins.iter().map(|b| b.photons).collect();
+    let (lo, hi) = masses
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), &m| (a.min(m), b.max(m)));
+    assert!(
+        lo > 0.0 && hi.is_finite() && hi < 1.1 * lo,
+        "masses from {lo} to {hi}"
+    );
+    assert!(k.kernels.iter().all(|v| v.is_finite() && *v >= 0.0));
+    let (stack, _) = measured(&wide, 0.0, 5);
+    levels(&stack, &wide, BackgroundChoice::None);
+}

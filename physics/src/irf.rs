@@ -362,6 +362,17 @@ impl IrfTable {
         self.remaining[j + 1] + (1.0 - f) * self.weights[j]
     }
 
+    /// Probability that a photon arriving at `s` is recorded in `[ta, tb)`:
+    /// `F(tb - s) - F(ta - s)`, each side from the end where it keeps its
+    /// digits.
+    pub fn bin_weight(&self, ta: f64, tb: f64, s: f64) -> f64 {
+        if self.cdf(ta - s) > 0.5 {
+            (self.survival(ta - s) - self.survival(tb - s)).max(0.0)
+        } else {
+            (self.cdf(tb - s) - self.cdf(ta - s)).max(0.0)
+        }
+    }
+
     /// Delay of a photon for a uniform draw `u` in [0, 1): the inverse of
     /// [`Self::cdf`] (uniform within each bin).
     pub fn delay_for(&self, u: f64) -> f64 {
@@ -377,28 +388,6 @@ impl IrfTable {
             0.5
         };
         self.start_ps + (j as f64 + f) * self.bin_ps
-    }
-
-    /// The table re-binned onto delay bins `[j step, (j + 1) step)` (`j`
-    /// any integer), conserving the share of each: returns the first `j`
-    /// and the shares. Exact where the table's own bin edges fall on
-    /// multiples of `step`; otherwise each share is the exact integral of
-    /// the piecewise-constant density over the new bin.
-    pub fn rebinned(&self, step: f64) -> (i64, Vec<f64>) {
-        let (lo, hi) = self.support_ps();
-        let first = (lo / step).floor() as i64;
-        let last = (hi / step).ceil() as i64;
-        let shares = (first..last)
-            .map(|j| {
-                let (a, b) = (j as f64 * step, (j + 1) as f64 * step);
-                if a - lo > hi - b {
-                    (self.survival(a) - self.survival(b)).max(0.0)
-                } else {
-                    (self.cdf(b) - self.cdf(a)).max(0.0)
-                }
-            })
-            .collect();
-        (first, shares)
     }
 }
 
@@ -491,14 +480,7 @@ impl InstrumentResponse {
     pub fn bin_weight(&self, ta: f64, tb: f64, s: f64) -> f64 {
         match self {
             InstrumentResponse::Parametric(irf) => irf.bin_weight(ta, tb, s),
-            InstrumentResponse::Measured(t) => {
-                // Each side from the end where it has its digits.
-                if t.cdf(ta - s) > 0.5 {
-                    (t.survival(ta - s) - t.survival(tb - s)).max(0.0)
-                } else {
-                    (t.cdf(tb - s) - t.cdf(ta - s)).max(0.0)
-                }
-            }
+            InstrumentResponse::Measured(t) => t.bin_weight(ta, tb, s),
         }
     }
 

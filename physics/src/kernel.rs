@@ -458,70 +458,75 @@ fn integrated_bin(
     })
 }
 
-/// Arrival-time cells per bin width for a measured response: the table is
-/// re-binned onto delays of `width / MEASURED_CELLS_PER_BIN`, and arrivals
-/// are integrated over cells of the same step, so that the chance of being
-/// recorded in a bin is linear in the arrival time inside every cell and
-/// the kernels are exact sums over cells. Two: a reference binned like the
-/// stack (its bins centred on its peak, half a bin off the stack's edges)
-/// then falls on the grid exactly.
-pub const MEASURED_CELLS_PER_BIN: usize = 2;
+/// Kinks of the recording chances closer than this (ps) are merged into
+/// one cell edge (they come from the same lattice, apart by round-off).
+pub const KINK_MERGE_PS: f64 = 1e-6;
 
-/// The arrival-time cells `[t_s + c g, t_s + (c + 1) g)` (`g` the step)
-/// whose light a measured response can put into the setup's bins, and the
-/// table re-binned onto delays `[j g, (j + 1) g)`.
+/// The arrival-time cells of a measured response `table` for the setup's
+/// bins. The chance that an arrival at `s` is recorded in bin `[ta, tb)`,
+/// `F(tb - s) - F(ta - s)` with `F` the table's piecewise-linear
+/// distribution, bends only where `ta - s` or `tb - s` crosses one of the
+/// table's bin edges: with those arrival times as the cells' edges, the
+/// chance is linear inside every cell, and each bin's kernel is an exact
+/// sum over cells of two integrals (the ST-PSF weighted by the position in
+/// the cell and by its complement). No resampling of the table: a
+/// reference binned on the stack's lattice gives one cell per bin width, a
+/// narrow or offset one short cells where its edges fall.
 struct ArrivalCells<'a> {
     d: &'a Diffusion,
-    start_ps: f64,
-    step: f64,
-    /// Cells per bin.
-    m: i64,
-    /// First delay index of `shares` and the re-binned shares.
-    first: i64,
-    shares: Vec<f64>,
-    /// Range of cell indices with light for some bin.
-    cells: std::ops::Range<i64>,
+    table: &'a IrfTable,
+    /// The setup's bin edges (ps).
+    bin_edges: Vec<f64>,
+    /// Cell edges (ps), increasing, from the earliest arrival that can be
+    /// recorded (not before 0) to the latest.
+    edges: Vec<f64>,
     /// Largest of the cells' log scales: the common scale of the sums.
     log_scale: f64,
 }
 
 /// One arrival cell's quadrature.
 struct Cell<'a> {
-    index: i64,
-    /// Start of the cell (ps) and the step.
+    index: usize,
+    /// Start of the cell (ps) and its length.
     u0: f64,
-    step: f64,
+    length: f64,
     time: BinTime<'a>,
 }
 
 impl Cell<'_> {
     /// Position of `t = v^2` in the cell, 0 at its start and 1 at its end.
     fn beta(&self, v: f64) -> f64 {
-        ((v * v - self.u0) / self.step).clamp(0.0, 1.0)
+        ((v * v - self.u0) / self.length).clamp(0.0, 1.0)
     }
 }
 
 impl<'a> ArrivalCells<'a> {
-    fn new(d: &'a Diffusion, setup: &Setup, table: &IrfTable) -> Self {
-        let m = MEASURED_CELLS_PER_BIN as i64;
-        let step = setup.bins.width_ps / m as f64;
-        let (first, shares) = table.rebinned(step);
-        let len = shares.len() as i64;
-        let bins = setup.bins.count as i64;
-        // Bin k takes delays [(k m - c) g, (k m + m - c) g) from cell c's
-        // start: some share for c in [k m - first - len + 1, k m + m - 1 -
-        // first]; the cell before also reaches its end. No cell before
-        // time zero.
-        let lo = (-first - len).max((-setup.bins.start_ps / step).floor() as i64);
-        let hi = (bins - 1) * m + m - first;
+    fn new(d: &'a Diffusion, setup: &Setup, table: &'a IrfTable) -> Self {
+        let bin_edges: Vec<f64> = (0..=setup.bins.count)
+            .map(|k| setup.bins.start_ps + k as f64 * setup.bins.width_ps)
+            .collect();
+        let table_edges: Vec<f64> = (0..=table.weights().len())
+            .map(|j| table.start_ps() + j as f64 * table.bin_ps())
+            .collect();
+        let (first_delay, last_delay) = table.support_ps();
+        let lo = (bin_edges[0] - last_delay).max(0.0);
+        let hi = bin_edges[bin_edges.len() - 1] - first_delay;
+        let mut edges: Vec<f64> = bin_edges
+            .iter()
+            .flat_map(|b| table_edges.iter().map(move |e| b - e))
+            .filter(|&t| t > lo && t < hi)
+            .chain([lo, hi])
+            .collect();
+        edges.sort_by(f64::total_cmp);
+        edges.dedup_by(|b, a| *b - *a < KINK_MERGE_PS);
+        if hi <= lo {
+            edges.clear();
+        }
         let mut cells = Self {
             d,
-            start_ps: setup.bins.start_ps,
-            step,
-            m,
-            first,
-            shares,
-            cells: lo..hi.max(lo),
+            table,
+            bin_edges,
+            edges,
             log_scale: f64::NEG_INFINITY,
         };
         cells.log_scale = cells
@@ -531,34 +536,30 @@ impl<'a> ArrivalCells<'a> {
         cells
     }
 
-    /// The cells that hold any arrival time after zero.
+    /// The cells, in time order.
     fn cells(&self) -> impl Iterator<Item = Cell<'a>> + '_ {
-        self.cells.clone().filter_map(move |c| {
-            let u0 = self.start_ps + c as f64 * self.step;
-            let time = BinTime::new(self.d, None, u0.max(0.0), u0 + self.step)?;
+        self.edges.windows(2).enumerate().filter_map(move |(c, w)| {
+            let time = BinTime::new(self.d, None, w[0], w[1])?;
             Some(Cell {
                 index: c,
-                u0,
-                step: self.step,
+                u0: w[0],
+                length: w[1] - w[0],
                 time,
             })
         })
     }
 
-    /// Chance that an arrival at the start of cell `c` is recorded in bin
-    /// `k`: the re-binned shares of delays `[(k m - c) g, (k m + m - c) g)`.
-    fn share_at(&self, k: usize, c: i64) -> f64 {
-        let from = k as i64 * self.m - c - self.first;
-        (from..from + self.m)
-            .filter(|&j| j >= 0 && (j as usize) < self.shares.len())
-            .map(|j| self.shares[j as usize])
-            .sum()
+    /// The chances that arrivals at cell `c`'s start and end are recorded
+    /// in bin `k`; in between the chance is linear.
+    fn shares(&self, k: usize, c: usize) -> (f64, f64) {
+        let (ta, tb) = (self.bin_edges[k], self.bin_edges[k + 1]);
+        let chance = |s: f64| self.table.bin_weight(ta, tb, s);
+        (chance(self.edges[c]), chance(self.edges[c + 1]))
     }
 
-    /// The chances at cell `c`'s start and end for bin `k`; in between
-    /// the chance is linear.
-    fn shares(&self, k: usize, c: i64) -> (f64, f64) {
-        (self.share_at(k, c), self.share_at(k, c + 1))
+    /// Latest arrival that bin `k` records (ps).
+    fn latest_for(&self, k: usize) -> f64 {
+        self.bin_edges[k + 1] - self.table.support_ps().0
     }
 }
 
@@ -568,13 +569,10 @@ impl<'a> ArrivalCells<'a> {
 /// with the chances at the cell's two ends ([`ArrivalCells`]).
 fn measured_bins(d: &Diffusion, setup: &Setup, table: &IrfTable) -> Vec<Option<LocalKernel>> {
     let cells = ArrivalCells::new(d, setup, table);
-    // The latest arrival that bin k takes ends a cell that starts at most
-    // `tb - first g`: the bin's support covers every cell's.
+    // Every cell that bin k takes ends by its latest arrival: the bin's
+    // support covers theirs.
     let radii: Vec<(usize, usize)> = (0..setup.bins.count)
-        .map(|k| {
-            let tb = setup.bins.edges_ps(k).1;
-            support_radius(d, setup, tb - (cells.first - 1) as f64 * cells.step)
-        })
+        .map(|k| support_radius(d, setup, cells.latest_for(k)))
         .collect();
     let mut sums: Vec<Array2<f64>> = radii
         .iter()
@@ -640,10 +638,17 @@ fn measured_bins(d: &Diffusion, setup: &Setup, table: &IrfTable) -> Vec<Option<L
         let b_img = separable_sum(radius, &late);
         for (k, a, b) in chances {
             let (by, bx) = radii[k];
-            // The cell's support lies inside the bin's (see `radii`).
-            let (oy, ox) = (by - ry, bx - rx);
-            let mut dst = sums[k].slice_mut(s![oy..oy + 2 * ry + 1, ox..ox + 2 * rx + 1]);
-            azip!((d in &mut dst, &x in &a_img, &y in &b_img) *d += a * x + b * y);
+            // The cell's support lies inside the bin's (see `radii`) but
+            // where round-off gives a cell beyond the bin's latest arrival a
+            // share of ~1e-16: the central overlap is added.
+            let (cy, cx) = (ry.min(by), rx.min(bx));
+            let dst_rows = by - cy..by + cy + 1;
+            let dst_cols = bx - cx..bx + cx + 1;
+            let src_rows = ry - cy..ry + cy + 1;
+            let src_cols = rx - cx..rx + cx + 1;
+            let mut dst = sums[k].slice_mut(s![dst_rows, dst_cols]);
+            let src = s![src_rows, src_cols];
+            azip!((d in &mut dst, &x in &a_img.slice(src), &y in &b_img.slice(src)) *d += a * x + b * y);
             nodes_used[k] += early.len();
         }
     }
