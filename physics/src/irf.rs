@@ -14,6 +14,10 @@
 //! ST-PSF convolved in time with the IRF and integrated over the bin, with no
 //! fine time grid needed (the kernel builder integrates `W` exactly inside
 //! its adaptive quadrature).
+//!
+//! A measured response is an [`IrfTable`]: the share of photons in each
+//! delay bin of a reference recording, a piecewise-constant density whose
+//! `F` is piecewise linear. [`InstrumentResponse`] is either.
 
 use serde::{Deserialize, Serialize};
 
@@ -159,7 +163,8 @@ pub const MAX_TABLE_BINS: usize = 1 << 16;
 /// of photons recorded with each delay, as a piecewise-constant density on
 /// equal delay bins. Entry `j` covers delays `[start_ps + j bin_ps,
 /// start_ps + (j + 1) bin_ps)`; time zero is wherever the reference put it
-/// (the centre of its fullest bin, for [`IrfTable::from_reference`]).
+/// (the centre of its fullest bin, for a table measured by the main
+/// crate's `MeasuredIrf::table`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "TableFields", into = "TableFields")]
 pub struct IrfTable {

@@ -12,7 +12,9 @@
 //! With an instrument response ([`crate::irf`]) the time integral runs over
 //! every arrival time that can be recorded in the bin, weighted by the
 //! probability that it is: the ST-PSF convolved in time with the IRF, then
-//! integrated over the bin, in one quadrature.
+//! integrated over the bin, in one quadrature. With a measured table the
+//! arrivals are cut into cells on which the chance of being recorded is
+//! linear, and each bin sums two integrals per cell (`ArrivalCells`).
 //!
 //! Work that cannot change the answer is left out: each bin is evaluated only
 //! within `SUPPORT_SIGMAS` lateral standard deviations of its centre, and
