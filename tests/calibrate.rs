@@ -198,3 +198,55 @@ fn calibration_recovers_the_medium_of_a_mock_acquisition() {
     }
     assert!((0.7..1.4).contains(&c.chi2_per_dof), "{}", c.chi2_per_dof);
 }
+
+#[test]
+fn a_measured_table_stays_fixed_while_the_medium_is_recovered() {
+    use scatterscope::physics::IrfTable;
+    // A sharp peak with a slow tail, on 8 ps bins: the instrument is
+    // known from its reference, only the medium is fitted.
+    let weights: Vec<f64> = (0..40)
+        .map(|j| {
+            let d = -40.0 + 8.0 * (j as f64 + 0.5);
+            (-0.5 * (d / 15.0).powi(2)).exp()
+                + if d > 0.0 {
+                    0.05 * (-d / 80.0).exp()
+                } else {
+                    0.0
+                }
+        })
+        .collect();
+    let mut t = truth();
+    t.irf = Some(IrfTable::new(8.0, -40.0, weights).unwrap().into());
+    let counts = profile(&t, 2e6, 5.0, 9);
+    let mut start = t.clone();
+    start.medium.mu_a_per_cm = 0.4;
+    start.medium.mu_s_per_cm = 60.0;
+    let medium = Free {
+        mu_a: true,
+        mu_s_reduced: true,
+        t0: false,
+        irf_fwhm: false,
+    };
+    let c = calibrate(&counts, t.bins.start_ps, &start, medium).unwrap();
+    for (i, want) in [(0, 0.2), (1, 10.0)] {
+        let p = &c.parameters[i];
+        let se = p.standard_error.unwrap();
+        assert!(
+            (p.value - want).abs() < 3.0 * se,
+            "{}: {} +- {se} vs {want}",
+            p.name,
+            p.value
+        );
+    }
+    let irf_row = &c.parameters[3];
+    assert!(!irf_row.fitted && irf_row.name.contains("measured table"));
+    assert!(matches!(
+        c.setup.irf,
+        Some(scatterscope::physics::InstrumentResponse::Measured(_))
+    ));
+    // Its width cannot be fitted: refused, saying why.
+    let e = calibrate(&counts, t.bins.start_ps, &start, MEDIUM_AND_IRF)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("measured table"), "{e}");
+}
