@@ -24,9 +24,11 @@ const G: [[f64; 3]; 6] = [
     [0.0, 0.0, 1.0],
 ];
 
-/// Tiles per block: two rows of 32 tiles for a 128-wide map. The block's
-/// transformed input and products (36 x 64 x 64 f32 each, 576 KiB) stay
-/// in L2/L3 between the three steps.
+/// Tiles per block, at most: whole rows of tiles (40 per row of a
+/// 160-wide map, the 320 x 320 grid unshuffled) so that a block owns whole
+/// output rows and writes them in place. The block's transformed input and
+/// products (36 x 64 x 64 f32 each at most, 576 KiB) stay in L2/L3 between
+/// the three steps.
 const BLOCK_TILES: usize = 64;
 
 /// Transformed weights of one layer: 36 row-major `cin x cout` matrices.
@@ -101,36 +103,25 @@ pub fn conv3x3_winograd(
     let (h, w, cin, cout) = (input.h, input.w, layer.cin, layer.cout);
     assert_eq!(input.c, cin);
     assert_eq!((output.h, output.w, output.c), (h, w, cout));
-    let (ty, tx) = (h.div_ceil(4), w.div_ceil(4));
-    let tiles = ty * tx;
-    let blocks = tiles.div_ceil(BLOCK_TILES);
-    // Each block writes only its own tiles' pixels; collect them per block
-    // and scatter afterwards to keep the parallel part free of shared writes.
-    let results: Vec<(usize, Vec<f32>)> = (0..blocks)
-        .into_par_iter()
-        .map_init(
-            || (Vec::new(), Vec::new(), Vec::new()),
-            |(v, m, scratch), b| {
-                let t0 = b * BLOCK_TILES;
-                let nt = BLOCK_TILES.min(tiles - t0);
-                let out = block(layer, wino, input, t0, nt, tx, v, m, scratch);
-                (t0, out)
-            },
-        )
-        .collect();
+    let tx = w.div_ceil(4);
+    // A block is `tile_rows` rows of tiles and owns the 4 * tile_rows output
+    // rows they cover (the last block fewer), so it writes them in place:
+    // no per-block output buffer and no serial scatter afterwards (they
+    // were a memset and a memmove of the whole map per layer).
+    let tile_rows = (BLOCK_TILES / tx).max(1);
     let row_len = (w + 2) * cout;
-    for (t0, out) in results {
-        for (k, tile) in out.chunks_exact(16 * cout).enumerate() {
-            let t = t0 + k;
-            let (y0, x0) = (4 * (t / tx), 4 * (t % tx));
-            for dy in 0..4.min(h - y0) {
-                let nx = 4.min(w - x0);
-                let dst = (y0 + dy + 1) * row_len + (x0 + 1) * cout;
-                output.data[dst..dst + nx * cout]
-                    .copy_from_slice(&tile[dy * 4 * cout..(dy * 4 + nx) * cout]);
-            }
-        }
-    }
+    let interior = &mut output.data[row_len..(h + 1) * row_len];
+    interior
+        .par_chunks_mut(4 * tile_rows * row_len)
+        .enumerate()
+        .for_each_init(
+            || (Vec::new(), Vec::new(), Vec::new()),
+            |(v, m, scratch), (b, out_rows)| {
+                let t0 = b * tile_rows * tx;
+                let nt = (out_rows.len() / row_len).div_ceil(4) * tx;
+                block(layer, wino, input, t0, nt, tx, v, m, scratch, out_rows);
+            },
+        );
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -144,7 +135,8 @@ fn block(
     v: &mut Vec<f32>,
     m: &mut Vec<f32>,
     scratch: &mut Vec<f32>,
-) -> Vec<f32> {
+    out_rows: &mut [f32],
+) {
     let (h, w, cin, cout) = (input.h, input.w, layer.cin, layer.cout);
     let c = cin.max(cout);
     v.resize(36 * nt * cin, 0.0);
@@ -180,8 +172,7 @@ fn block(
         };
         // Columns: tmp[i][j] = sum_r B^T[i][r] patch[r][j].
         for j in 0..6 {
-            let col: [&[f32]; 6] =
-                std::array::from_fn(|r| &src[r * row_stride + j * cin..][..cin]);
+            let col: [&[f32]; 6] = std::array::from_fn(|r| &src[r * row_stride + j * cin..][..cin]);
             let mut outs = split6(tmp, j, cin);
             bt6(col, outs.each_mut().map(|o| &mut **o));
         }
@@ -219,8 +210,12 @@ fn block(
             );
         }
     }
-    let mut out = vec![0f32; nt * 16 * cout];
-    let (tmp4, _) = scratch.split_at_mut(24 * c);
+    // scratch, reused: the 4x6 column-transformed products, then the 4x4
+    // output tile.
+    let (tmp4, rest) = scratch.split_at_mut(24 * c);
+    let tile = &mut rest[..16 * cout];
+    let row_len = (w + 2) * cout;
+    let rows = out_rows.len() / row_len;
     for k in 0..nt {
         // Columns: tmp4[a][j] = sum_r A^T[a][r] m[r][j]  (4 x 6).
         for j in 0..6 {
@@ -230,7 +225,6 @@ fn block(
             at4(col, outs.each_mut().map(|o| &mut **o));
         }
         // Rows: y[a][b] = sum_r tmp4[a][r] A[r][b].
-        let tile = &mut out[k * 16 * cout..][..16 * cout];
         for a in 0..4 {
             let row: [&[f32]; 6] = std::array::from_fn(|r| &tmp4[(a * 6 + r) * cout..][..cout]);
             let mut outs: [&mut [f32]; 4] = {
@@ -241,16 +235,28 @@ fn block(
             };
             at4(row, outs.each_mut().map(|o| &mut **o));
         }
-        for px in tile.chunks_exact_mut(cout) {
-            if let Some(b) = &layer.bias {
-                px.iter_mut().zip(b).for_each(|(o, &b)| *o += b);
-            }
-            if layer.relu {
-                px.iter_mut().for_each(|o| *o = o.max(0.0));
+        // Bias, ReLU and the store into this block's output rows (tile
+        // pixels past the map's edge are dropped).
+        let (y0, x0) = (4 * (k / tx), 4 * (k % tx));
+        let nx = 4.min(w - x0);
+        for dy in 0..4.min(rows - y0) {
+            let dst = &mut out_rows[(y0 + dy) * row_len + (x0 + 1) * cout..][..nx * cout];
+            let src = &tile[dy * 4 * cout..][..nx * cout];
+            for (o, s) in dst.chunks_exact_mut(cout).zip(src.chunks_exact(cout)) {
+                match &layer.bias {
+                    Some(b) => o
+                        .iter_mut()
+                        .zip(s)
+                        .zip(b)
+                        .for_each(|((o, &s), &b)| *o = s + b),
+                    None => o.copy_from_slice(s),
+                }
+                if layer.relu {
+                    o.iter_mut().for_each(|o| *o = o.max(0.0));
+                }
             }
         }
     }
-    out
 }
 
 // split6, split4 and split_row are kept apart on purpose: one generic
