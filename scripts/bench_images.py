@@ -16,6 +16,18 @@ images and must not change after looking at results:
   six scikit-image images that the embedded FFDNet was trained on (an image
   the prior has seen cannot be held out);
 - held-out (20 images): everything else, from five sources.
+
+Second round (2026-11-24), added before any reconstruction ran on them:
+the first tuning set is biased (six of its ten images are in the prior's
+training set, so a strong prior looks better on them than on unseen
+scenes). Six tuning images the prior has never seen and twelve new
+held-out images were added, keeping tuning at one third (16 of 48):
+- tuning: two pydicom scans (MR, CT), seeded binary blobs, a seeded sparse
+  point field, a seeded fractal terrain and scikit-image's checkerboard;
+- held-out: four more pydicom scans (ultrasound, CT, nuclear medicine,
+  a secondary capture), a liver segmentation mask, scikit-image's colour
+  wheel, matplotlib's logo, and five more seeded scenes (points, lines,
+  terrain, blobs, points).
 """
 
 import csv
@@ -82,6 +94,23 @@ def star_field(seed, size=384):
     return img
 
 
+def terrain(seed, size=384):
+    """A fractal surface: Gaussian noise with a 1/f^3 power spectrum
+    (smooth hills with detail at every scale, like a height map), seeded."""
+    rng = np.random.default_rng(seed)
+    f = np.hypot(*np.meshgrid(np.fft.fftfreq(size), np.fft.fftfreq(size)))
+    f[0, 0] = 1.0
+    spectrum = (rng.normal(size=(size, size)) + 1j * rng.normal(size=(size, size))) * f ** -1.5
+    spectrum[0, 0] = 0.0
+    return np.fft.ifft2(spectrum).real
+
+
+def blobs(seed, size=384):
+    """Binary blobs (scikit-image's generator), seeded."""
+    from skimage.data import binary_blobs
+    return binary_blobs(length=size, blob_size_fraction=0.08, volume_fraction=0.3, rng=seed).astype(float)
+
+
 def line_art(seed, size=384):
     """Thin random lines and rectangles outlines on black, seeded."""
     from skimage.draw import line_aa, rectangle_perimeter
@@ -142,6 +171,26 @@ IMAGES = [
     ("ct_small", lambda: pydicom_image("CT_small.dcm"), DCM, "medical/dark background", HELD_OUT),
     ("star_field", lambda: star_field(11), GEN, "sparse/dark background", HELD_OUT),
     ("line_art", lambda: line_art(12), GEN, "line art/sparse", HELD_OUT),
+    # Second round: tuning images the prior has never seen ...
+    ("mr_overlay", lambda: pydicom_image("examples_overlay.dcm"), DCM, "medical/dark background", TUNING),
+    ("ct_693", lambda: pydicom_image("693_J2KI.dcm"), DCM, "medical/dark background", TUNING),
+    ("blobs_21", lambda: blobs(21), GEN, "sparse/dark background", TUNING),
+    ("points_31", lambda: star_field(31), GEN, "sparse/dark background", TUNING),
+    ("terrain_41", lambda: terrain(41), GEN, "terrain", TUNING),
+    ("checkerboard", lambda: skimage_image("checkerboard"), SK, "line art", TUNING),
+    # ... and more held-out images.
+    ("us_palette", lambda: pydicom_image("examples_palette.dcm"), DCM, "medical/ultrasound", HELD_OUT),
+    ("ct_pixelrep", lambda: pydicom_image("J2K_pixelrep_mismatch.dcm"), DCM, "medical/dark background", HELD_OUT),
+    ("nm_jpeg2000", lambda: pydicom_image("JPEG2000.dcm"), DCM, "medical/dark background", HELD_OUT),
+    ("sc_dfl", lambda: pydicom_image("image_dfl.dcm"), DCM, "medical", HELD_OUT),
+    ("liver_mask", lambda: pydicom_image("liver_1frame.dcm"), DCM, "sparse/dark background", HELD_OUT),
+    ("colorwheel", lambda: skimage_image("colorwheel"), SK, "smooth synthetic", HELD_OUT),
+    ("mpl_logo", lambda: mpl_sample("logo2.png"), MPL, "line art", HELD_OUT),
+    ("points_51", lambda: star_field(51), GEN, "sparse/dark background", HELD_OUT),
+    ("lines_52", lambda: line_art(52), GEN, "line art/sparse", HELD_OUT),
+    ("terrain_53", lambda: terrain(53), GEN, "terrain", HELD_OUT),
+    ("blobs_54", lambda: blobs(54), GEN, "sparse/dark background", HELD_OUT),
+    ("points_55", lambda: star_field(55), GEN, "sparse/dark background", HELD_OUT),
 ]
 
 
