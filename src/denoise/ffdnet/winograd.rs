@@ -24,11 +24,12 @@ const G: [[f64; 3]; 6] = [
     [0.0, 0.0, 1.0],
 ];
 
-/// Tiles per block, at most: whole rows of tiles (40 per row of a
-/// 160-wide map, the 320 x 320 grid unshuffled) so that a block owns whole
-/// output rows and writes them in place. The block's transformed input and
-/// products (36 x 64 x 64 f32 each at most, 576 KiB) stay in L2/L3 between
-/// the three steps.
+/// Tile budget per block. A block is as many whole rows of tiles as fit
+/// in it, at least one (one row of 40 for a 160-wide map, the 320 x 320
+/// grid unshuffled), so that it owns whole output rows and writes them in
+/// place. Within the budget the block's transformed input and products
+/// (36 x 64 x 64 f32 each, 576 KiB) stay in L2/L3 between the three steps;
+/// a map wider than 256 pixels makes a one-row block larger.
 const BLOCK_TILES: usize = 64;
 
 /// Transformed weights of one layer: 36 row-major `cin x cout` matrices.
