@@ -131,19 +131,27 @@ fn band_conv(
     let row_len = (w + 2) * cout;
     for r in 0..rows {
         let out = &mut out_rows[r * row_len + cout..][..w * cout];
-        let src = &prod[r * w * cout..][..w * cout];
-        for (o, s) in out.chunks_exact_mut(cout).zip(src.chunks_exact(cout)) {
-            match &layer.bias {
-                Some(b) => o
-                    .iter_mut()
-                    .zip(s)
-                    .zip(b)
-                    .for_each(|((o, &s), &b)| *o = s + b),
-                None => o.copy_from_slice(s),
-            }
-            if layer.relu {
-                o.iter_mut().for_each(|v| *v = v.max(0.0));
-            }
+        store_activated(layer, out, &prod[r * w * cout..][..w * cout]);
+    }
+}
+
+/// Writes the layer's raw outputs `src` (whole pixels of `cout` channels)
+/// into `dst` with the bias added and, for a ReLU layer, clamped at zero:
+/// the last step of both convolution engines.
+#[inline]
+pub(super) fn store_activated(layer: &FoldedConv, dst: &mut [f32], src: &[f32]) {
+    let cout = layer.cout;
+    for (o, s) in dst.chunks_exact_mut(cout).zip(src.chunks_exact(cout)) {
+        match &layer.bias {
+            Some(b) => o
+                .iter_mut()
+                .zip(s)
+                .zip(b)
+                .for_each(|((o, &s), &b)| *o = s + b),
+            None => o.copy_from_slice(s),
+        }
+        if layer.relu {
+            o.iter_mut().for_each(|v| *v = v.max(0.0));
         }
     }
 }

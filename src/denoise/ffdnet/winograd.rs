@@ -11,7 +11,7 @@
 
 use rayon::prelude::*;
 
-use super::conv::FeatureMap;
+use super::conv::{FeatureMap, store_activated};
 use super::weights::FoldedConv;
 
 /// G (6x3): weight transform.
@@ -241,21 +241,11 @@ fn block(
         let (y0, x0) = (4 * (k / tx), 4 * (k % tx));
         let nx = 4.min(w - x0);
         for dy in 0..4.min(rows - y0) {
-            let dst = &mut out_rows[(y0 + dy) * row_len + (x0 + 1) * cout..][..nx * cout];
-            let src = &tile[dy * 4 * cout..][..nx * cout];
-            for (o, s) in dst.chunks_exact_mut(cout).zip(src.chunks_exact(cout)) {
-                match &layer.bias {
-                    Some(b) => o
-                        .iter_mut()
-                        .zip(s)
-                        .zip(b)
-                        .for_each(|((o, &s), &b)| *o = s + b),
-                    None => o.copy_from_slice(s),
-                }
-                if layer.relu {
-                    o.iter_mut().for_each(|o| *o = o.max(0.0));
-                }
-            }
+            store_activated(
+                layer,
+                &mut out_rows[(y0 + dy) * row_len + (x0 + 1) * cout..][..nx * cout],
+                &tile[dy * 4 * cout..][..nx * cout],
+            );
         }
     }
 }
