@@ -316,6 +316,17 @@ fn split_solver_is_finite_on_extreme_inputs() {
         // would overflow it unless scaled.
         ("far beyond any detector", Array3::from_elem(shape, 3e38)),
     ] {
+        // Started from Richardson-Lucy on the summed stack too.
+        let warm = SplitOptions {
+            warm_start: 50,
+            ..opts
+        };
+        let w = pnp_split(&model, &counts, &bins, &tv, &warm, None, |_| {})
+            .unwrap_or_else(|e| panic!("{name}, RL start: {e}"));
+        assert!(
+            w.image.iter().all(|v| v.is_finite() && *v >= 0.0),
+            "{name}, RL start"
+        );
         let r = pnp_split(&model, &counts, &bins, &tv, &opts, None, |_| {})
             .unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(r.image.dim(), (32, 32), "{name}");
@@ -340,4 +351,63 @@ fn split_solver_is_finite_on_extreme_inputs() {
     bad[[1, 2, 3]] = f64::NAN;
     let e = pnp_split(&model, &bad, &bins, &tv, &opts, None, |_| {}).unwrap_err();
     assert!(e.to_string().contains("bin 1, row 2, column 3"), "{e}");
+}
+
+#[test]
+fn split_solver_starts_from_richardson_lucy_on_the_summed_stack_when_asked() {
+    // A bright block on a sensor with edges: the warm start's first row is
+    // the estimate an independent Richardson-Lucy run gives after as many
+    // iterations, and the flat start's is not.
+    let k = KernelStack::build(&setup(32, 50.0 / 256.0, 5e5), Sampling::Integrated).unwrap();
+    let model = ForwardModel::new(&k, Boundary::Sensor);
+    let bins: Vec<usize> = (0..k.len()).collect();
+    let (gh, gw) = model.grid_shape();
+    let (oy, ox) = model.sensor_offset();
+    let grid = Array2::from_shape_fn((gh, gw), |(r, c)| {
+        let inside = (oy + 8..oy + 20).contains(&r) && (ox + 10..ox + 26).contains(&c);
+        if inside { 1.0 } else { 0.1 }
+    });
+    let truth = model.crop(grid.view());
+    let counts = poisson_counts(&model.expected(grid.view()).counts, 11);
+    let rl = scatterscope::reconstruct::richardson_lucy::richardson_lucy(
+        &model,
+        &counts,
+        &bins,
+        30,
+        Some(truth.view()),
+        |_| {},
+    )
+    .unwrap();
+    let rl_psnr = rl.trace.rows.last().unwrap().psnr.unwrap();
+    let first_row = |warm_start| {
+        let opts = SplitOptions {
+            warm_start,
+            max_iters: 1,
+            ..Default::default()
+        };
+        let r = pnp_split(
+            &model,
+            &counts,
+            &bins,
+            &NoPrior,
+            &opts,
+            Some(truth.view()),
+            |_| {},
+        )
+        .unwrap();
+        (r.trace.rows[0].psnr.unwrap(), r.trace.notes)
+    };
+    let (warm, notes) = first_row(30);
+    assert!((warm - rl_psnr).abs() < 1e-9, "{warm} vs {rl_psnr}");
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.starts_with("start: 30 Richardson-Lucy iterations")),
+        "{notes:?}"
+    );
+    let (flat, _) = first_row(0);
+    assert!(
+        rl_psnr > flat + 1.0,
+        "RL {rl_psnr} dB, flat start {flat} dB"
+    );
 }

@@ -24,10 +24,31 @@ pub fn richardson_lucy(
     bins: &[usize],
     iterations: usize,
     truth: Option<ArrayView2<f64>>,
-    mut on_iter: impl FnMut(&TraceRow),
+    on_iter: impl FnMut(&TraceRow),
 ) -> Result<Reconstruction, ReconstructError> {
     validate_counts(counts)?;
     let method = if bins.len() == 1 { "rl" } else { "rl-sum" };
+    let (h, w) = model.sensor_shape();
+    let mut trace = Trace::new(method);
+    let Some(o) = rl_grid(model, counts, bins, iterations, truth, &mut trace, on_iter) else {
+        return Ok(no_photons(trace, (h, w), truth));
+    };
+    let image = finish(model.crop(o.view()), method, iterations)?;
+    Ok(Reconstruction { image, trace })
+}
+
+/// The RL steps of [`richardson_lucy`] on the model's grid (beyond the
+/// sensor's edges too), from the flat object; rows and notes go to
+/// `trace`. `None` without photons or kernel mass.
+pub(crate) fn rl_grid(
+    model: &ForwardModel,
+    counts: &Array3<f64>,
+    bins: &[usize],
+    iterations: usize,
+    truth: Option<ArrayView2<f64>>,
+    trace: &mut Trace,
+    mut on_iter: impl FnMut(&TraceRow),
+) -> Option<Array2<f64>> {
     let start = Instant::now();
     let op = Convolution::from_bins(model, bins);
     let data = counts.sum_axis(Axis(0));
@@ -36,9 +57,8 @@ pub fn richardson_lucy(
     let m: Vec<f64> = data.iter().copied().collect();
     let total: f64 = m.iter().sum();
     let mass = op.mass();
-    let mut trace = Trace::new(method);
     if total == 0.0 || mass <= 0.0 {
-        return Ok(no_photons(trace, (h, w), truth));
+        return None;
     }
     // H^T 1 over the window: the normaliser of RL with a sensor of finite
     // size (Bertero and Boccacci 2005); the kernel mass for a periodic model.
@@ -54,7 +74,7 @@ pub fn richardson_lucy(
         "denominator guarded at {guard:.3e} ({DENOMINATOR_GUARD:e} x mean count); 4 FFTs per iteration; {}",
         grid_note(model)
     ));
-    note_background(&mut trace, model);
+    note_background(trace, model);
     let crop = |o: &[f64]| Array2::from_shape_vec((h, w), model.crop_vec(o)).expect("shape");
     for it in 1..=iterations {
         let y = op.apply(&o);
@@ -86,6 +106,5 @@ pub fn richardson_lucy(
         on_iter(&row);
         trace.rows.push(row);
     }
-    let image = finish(crop(&o), method, iterations)?;
-    Ok(Reconstruction { image, trace })
+    Some(Array2::from_shape_vec((gh, gw), o).expect("grid shape"))
 }

@@ -113,6 +113,10 @@ pub struct ReconArgs {
     /// Split solver: iterations at the target before stopping.
     #[arg(long, default_value_t = SplitOptions::default().patience)]
     pub split_patience: usize,
+    /// Split solver: start from this many Richardson-Lucy iterations on the
+    /// time-summed stack (0: from the flat object that explains the total).
+    #[arg(long, default_value_t = SplitOptions::default().warm_start)]
+    pub warm_start: usize,
     /// admm-lbfgs: initial penalty lambda_0.
     #[arg(long, default_value_t = 1.0)]
     pub lambda0: f64,
@@ -205,6 +209,7 @@ impl ReconArgs {
                 target_z: self.target_z,
                 patience: self.split_patience,
                 max_iters: self.max_iters.unwrap_or(split.max_iters),
+                warm_start: self.warm_start,
             },
             pnp: PnpOptions {
                 lambda0: self.lambda0,
