@@ -30,17 +30,18 @@ pub fn richardson_lucy(
     let method = if bins.len() == 1 { "rl" } else { "rl-sum" };
     let (h, w) = model.sensor_shape();
     let mut trace = Trace::new(method);
-    let Some(o) = rl_grid(model, counts, bins, iterations, truth, &mut trace, on_iter) else {
+    let Some(o) = rl_steps(model, counts, bins, iterations, truth, &mut trace, on_iter) else {
         return Ok(no_photons(trace, (h, w), truth));
     };
-    let image = finish(model.crop(o.view()), method, iterations)?;
+    let image = finish(o, method, iterations)?;
     Ok(Reconstruction { image, trace })
 }
 
-/// The RL steps of [`richardson_lucy`] on the model's grid (beyond the
-/// sensor's edges too), from the flat object; rows and notes go to
-/// `trace`. `None` without photons or kernel mass.
-pub(crate) fn rl_grid(
+/// The RL steps of [`richardson_lucy`] from the flat object: the estimate
+/// on the sensor window (the model's grid beyond it is iterated too, not
+/// returned); rows and notes go to `trace`. `None` without photons or
+/// kernel mass.
+pub(crate) fn rl_steps(
     model: &ForwardModel,
     counts: &Array3<f64>,
     bins: &[usize],
@@ -106,5 +107,5 @@ pub(crate) fn rl_grid(
         on_iter(&row);
         trace.rows.push(row);
     }
-    Some(Array2::from_shape_vec((gh, gw), o).expect("grid shape"))
+    Some(crop(&o))
 }

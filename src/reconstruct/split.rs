@@ -78,7 +78,7 @@ use ndarray::{Array2, Array3, ArrayView2, Axis};
 use rustfft::num_complex::{Complex32, Complex64};
 
 use super::discrepancy::{ExpectedDeviance, m_log_m};
-use super::richardson_lucy::rl_grid;
+use super::richardson_lucy::rl_steps;
 use super::trace::{Trace, TraceRow};
 use super::{
     ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, note_background,
@@ -193,13 +193,13 @@ fn warm_start(
     }
     let start = Instant::now();
     let mut rl = Trace::new("rl-sum");
-    match rl_grid(model, counts, bins, iterations, None, &mut rl, |_| {}) {
+    match rl_steps(model, counts, bins, iterations, None, &mut rl, |_| {}) {
         Some(o) if o.iter().all(|x| x.is_finite()) => {
             trace.notes.push(format!(
                 "start: {iterations} Richardson-Lucy iterations on the time-summed stack on the sensor window, the flat level beyond it ({:.2} s)",
                 start.elapsed().as_secs_f64()
             ));
-            model.embed(model.crop(o.view()).view(), flat)
+            model.embed(o.view(), flat)
         }
         _ => {
             trace.notes.push(
