@@ -11,6 +11,7 @@ use scatterscope::calibrate::histogram::TimeHistogram;
 use scatterscope::calibrate::measured_irf::MeasuredIrf;
 use scatterscope::calibrate::transmittance::{
     Capture, SlabFitOptions, expected_capture, fit_slab, parse_length_cm, predict_captures,
+    read_captures,
 };
 
 const BIN_PS: f64 = 8.0;
@@ -232,19 +233,17 @@ fn real_foam_captures_read_and_fit_near_the_published_medium() {
         "IRF FWHM {}",
         irf.fwhm_ps()
     );
-    let captures: Vec<Capture> = [("3_0", 3.0), ("3_5", 3.5)]
+    // Their per-second parts, without the seconds the 3.5 inch file
+    // shares with the 3.0 inch one.
+    let specs: Vec<String> = [("3_0", "3in"), ("3_5", "3.5in")]
         .iter()
-        .map(|(name, inches)| Capture {
-            histogram: TimeHistogram::read(
-                &dir.join(format!("capture_{name}_inch.mat")),
-                "out",
-                Some(BIN_PS),
-            )
-            .unwrap(),
-            thickness_cm: inches * 2.54,
-            label: (*name).into(),
+        .map(|(name, t)| {
+            let file = dir.join(format!("capture_{name}_inch.mat"));
+            format!("{}={t}", file.display())
         })
         .collect();
+    let specs: Vec<&str> = specs.iter().map(String::as_str).collect();
+    let (captures, _) = read_captures(&specs, "out", Some("accum"), Some(BIN_PS)).unwrap();
     let opts = SlabFitOptions {
         refractive_index: 1.12,
         mu_a_per_cm: 0.01,
@@ -266,6 +265,58 @@ fn real_foam_captures_read_and_fit_near_the_published_medium() {
         fit.mu_a.value
     );
     assert!(fit.chi2_per_dof.is_finite() && fit.chi2_per_dof > 0.0);
+}
+
+#[test]
+fn stale_seconds_shared_by_real_captures_are_dropped_where_they_do_not_belong() {
+    let Some(dir) = cdt() else { return };
+    let path = |name: &str| dir.join(format!("capture_{name}.mat"));
+    let read = |name: &str| TimeHistogram::read(&path(name), "out", Some(BIN_PS)).unwrap();
+    let parts = |name: &str| {
+        TimeHistogram::read_mat_parts(&path(name), "accum", BIN_PS)
+            .unwrap()
+            .unwrap()
+    };
+    // The per-second parts sum to `out` (60 seconds of the reference).
+    let direct = parts("direct");
+    assert_eq!(direct.len(), 60);
+    let out = read("direct");
+    let summed: Vec<f64> = (0..out.counts.len())
+        .map(|i| direct.iter().map(|p| p.counts[i]).sum())
+        .collect();
+    assert_eq!(summed, out.counts);
+    assert_eq!(
+        TimeHistogram::read_mat_parts(&path("direct"), "per_second", BIN_PS).unwrap(),
+        None
+    );
+    // Seconds 120-239 of the 3.0, 3.5 and 4.0 inch files are the same 120
+    // histograms; they match the 3.0 inch capture's own first 120 seconds
+    // and neither of the others'.
+    let specs: Vec<String> = [
+        ("3_0_inch", "3in"),
+        ("3_5_inch", "3.5in"),
+        ("4_0_inch", "4in"),
+    ]
+    .iter()
+    .map(|(n, t)| format!("{}={t}", path(n).display()))
+    .collect();
+    let specs: Vec<&str> = specs.iter().map(String::as_str).collect();
+    let (captures, notes) = read_captures(&specs, "out", Some("accum"), Some(BIN_PS)).unwrap();
+    assert!(
+        notes[0].contains("120 (120-239) also in") && notes[0].contains("kept"),
+        "{notes:?}"
+    );
+    assert_eq!(captures[0].histogram.counts, read("3_0_inch").counts);
+    for (i, name) in [(1, "3_5_inch"), (2, "4_0_inch")] {
+        assert!(notes[i].contains("dropped"), "{}", notes[i]);
+        let first: f64 = parts(name)[..120].iter().map(TimeHistogram::total).sum();
+        assert_eq!(captures[i].histogram.total(), first, "{name}");
+        assert!(read(name).total() > first * 1.3, "{name}");
+    }
+    // Without the check, the files' sums are used as they are.
+    let (plain, notes) = read_captures(&specs, "out", None, Some(BIN_PS)).unwrap();
+    assert!(notes.is_empty());
+    assert_eq!(plain[1].histogram.counts, read("3_5_inch").counts);
 }
 
 #[test]
@@ -301,7 +352,11 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     );
     assert!(
         stdout.contains("instrument response from")
-            && stdout.contains("prediction of captures left out"),
+            && stdout.contains("prediction of captures left out")
+            && stdout.contains(
+                "parts: capture_3_5_inch: 240 parts, 120 (120-239) also in capture_3_0_inch"
+            )
+            && stdout.contains("dropped: they belong to another capture"),
         "{stdout}"
     );
     for f in [

@@ -17,6 +17,11 @@ pub const BACKGROUND_BINS: usize = 1000;
 /// one the confocal diffuse tomography captures use).
 pub const DEFAULT_MAT_DATASET: &str = "out";
 
+/// The cell array of per-part histograms read from MATLAB captures unless
+/// another is named (the confocal diffuse tomography captures' one
+/// histogram per second, which `out` sums).
+pub const DEFAULT_MAT_PARTS: &str = "accum";
+
 /// Fewest bins before the light that give a background.
 pub const MIN_BACKGROUND_BINS: usize = 8;
 
@@ -45,6 +50,83 @@ pub enum HistogramError {
         /// What went wrong.
         message: String,
     },
+}
+
+/// Opens a MATLAB v7.3 (HDF5) file.
+fn open_mat(path: &Path) -> Result<hdf5_reader::Hdf5File, HistogramError> {
+    hdf5_reader::Hdf5File::open(path).map_err(|e| {
+        file_error(
+            path,
+            format!("not a MATLAB v7.3 (HDF5) file: {e} (older MATLAB formats are not read; save with -v7.3)"),
+        )
+    })
+}
+
+/// The numbers of a one-dimensional dataset (floating point or integer,
+/// as MATLAB stores counts), named `name` in errors.
+fn vector(path: &Path, name: &str, ds: &hdf5_reader::Dataset) -> Result<Vec<f64>, HistogramError> {
+    use hdf5_reader::messages::datatype::Datatype;
+    let shape = ds.shape().to_vec();
+    if shape.iter().filter(|&&d| d > 1).count() > 1 {
+        return Err(file_error(
+            path,
+            format!("dataset `{name}` has shape {shape:?}: a histogram is one vector"),
+        ));
+    }
+    fn all<T: hdf5_reader::H5Type + Copy>(
+        ds: &hdf5_reader::Dataset,
+        to: impl Fn(T) -> f64,
+    ) -> Result<Vec<f64>, String> {
+        ds.read_array::<T>()
+            .map(|a| a.iter().map(|&v| to(v)).collect())
+            .map_err(|e| e.to_string())
+    }
+    let values = match ds.dtype() {
+        Datatype::FloatingPoint { size: 8, .. } => all::<f64>(ds, |v| v),
+        Datatype::FloatingPoint { size: 4, .. } => all::<f32>(ds, f64::from),
+        Datatype::FixedPoint {
+            size: 1,
+            signed: false,
+            ..
+        } => all::<u8>(ds, f64::from),
+        Datatype::FixedPoint {
+            size: 2,
+            signed: false,
+            ..
+        } => all::<u16>(ds, f64::from),
+        Datatype::FixedPoint {
+            size: 4,
+            signed: false,
+            ..
+        } => all::<u32>(ds, f64::from),
+        Datatype::FixedPoint {
+            size: 8,
+            signed: false,
+            ..
+        } => all::<u64>(ds, |v| v as f64),
+        Datatype::FixedPoint {
+            size: 2,
+            signed: true,
+            ..
+        } => all::<i16>(ds, f64::from),
+        Datatype::FixedPoint {
+            size: 4,
+            signed: true,
+            ..
+        } => all::<i32>(ds, f64::from),
+        Datatype::FixedPoint {
+            size: 8,
+            signed: true,
+            ..
+        } => all::<i64>(ds, |v| v as f64),
+        other => Err(format!("type {other:?} is not a number")),
+    };
+    values.map_err(|e| {
+        file_error(
+            path,
+            format!("dataset `{name}` cannot be read as numbers: {e}"),
+        )
+    })
 }
 
 fn file_error(path: &Path, message: impl Into<String>) -> HistogramError {
@@ -94,12 +176,7 @@ impl TimeHistogram {
     /// confocal-diffuse-tomography captures) of a MATLAB v7.3 file. MATLAB
     /// files do not say the bin width, so the caller gives it.
     pub fn read_mat(path: &Path, dataset: &str, bin_width_ps: f64) -> Result<Self, HistogramError> {
-        let file = hdf5_reader::Hdf5File::open(path).map_err(|e| {
-            file_error(
-                path,
-                format!("not a MATLAB v7.3 (HDF5) file: {e} (older MATLAB formats are not read; save with -v7.3)"),
-            )
-        })?;
+        let file = open_mat(path)?;
         let ds = file.dataset(&format!("/{dataset}")).map_err(|_| {
             let names = file
                 .root_group()
@@ -111,20 +188,49 @@ impl TimeHistogram {
                 format!("no dataset `{dataset}` (datasets in the file: {names})"),
             )
         })?;
-        let shape = ds.shape().to_vec();
-        if shape.iter().filter(|&&d| d > 1).count() > 1 {
-            return Err(file_error(
-                path,
-                format!("dataset `{dataset}` has shape {shape:?}: a histogram is one vector"),
-            ));
-        }
-        let values: ndarray::ArrayD<f64> = ds.read_array().map_err(|e| {
-            file_error(
-                path,
-                format!("dataset `{dataset}` cannot be read as numbers: {e}"),
-            )
-        })?;
-        Self::new(values.iter().copied().collect(), bin_width_ps, 0.0, path)
+        let counts = vector(path, dataset, &ds)?;
+        Self::new(counts, bin_width_ps, 0.0, path)
+    }
+
+    /// The histograms of a MATLAB v7.3 cell array `dataset` of count
+    /// vectors (e.g. `accum` in the confocal-diffuse-tomography captures:
+    /// one histogram per second of acquisition, which `out` sums), in the
+    /// cell array's order; `None` when the file holds no such dataset.
+    pub fn read_mat_parts(
+        path: &Path,
+        dataset: &str,
+        bin_width_ps: f64,
+    ) -> Result<Option<Vec<Self>>, HistogramError> {
+        let file = open_mat(path)?;
+        let Ok(cells) = file.dataset(&format!("/{dataset}")) else {
+            return Ok(None);
+        };
+        let fail = |m: String| file_error(path, format!("cell array `{dataset}`: {m}"));
+        let raw = cells
+            .read_raw_bytes()
+            .map_err(|e| fail(format!("cannot be read: {e}")))?;
+        let offset_size = file.superblock().offset_size;
+        let addresses = hdf5_reader::reference::read_object_references(&raw, offset_size)
+            .map_err(|e| fail(format!("not a cell array of references: {e}")))?;
+        // MATLAB keeps a cell array's contents in the group `#refs#`.
+        let targets = file
+            .group("/#refs#")
+            .and_then(|g| g.datasets())
+            .map_err(|e| fail(format!("its contents (group `#refs#`) cannot be read: {e}")))?;
+        addresses
+            .iter()
+            .enumerate()
+            .map(|(i, &address)| {
+                let ds = targets
+                    .iter()
+                    .find(|d| d.address() == address)
+                    .ok_or_else(|| fail(format!("cell {i} refers to no dataset of `#refs#`")))?;
+                let counts = vector(path, &format!("{dataset}{{{i}}}"), ds)?;
+                let source = format!("{} ({dataset} part {i})", path.display());
+                Self::new(counts, bin_width_ps, 0.0, Path::new(&source))
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map(Some)
     }
 
     /// The counts of `stack` summed over the sensor per bin; its bins must

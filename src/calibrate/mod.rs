@@ -21,6 +21,7 @@ pub mod hessian;
 pub mod histogram;
 pub mod irf_fit;
 pub mod measured_irf;
+pub mod parts;
 pub mod search;
 pub mod transmittance;
 

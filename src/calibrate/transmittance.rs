@@ -30,6 +30,8 @@
 //! scaled by `sqrt(X)` (the quasi-likelihood correction for scatter the
 //! model does not explain).
 
+use std::path::{Path, PathBuf};
+
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::brent::BrentOpt;
 use rayon::prelude::*;
@@ -37,8 +39,9 @@ use scatterscope_physics::{Diffusion, Medium, MediumModel};
 
 use super::CalibrateError;
 use super::hessian::{invert, numerical_hessian, standard_error};
-use super::histogram::TimeHistogram;
+use super::histogram::{HistogramError, TimeHistogram};
 use super::measured_irf::MeasuredIrf;
+use super::parts::{check_parts, kept_sum};
 use super::search::{nelder_mead, pearson_chi2};
 
 /// Nodes of the Gauss-Legendre rule integrating `T` over one bin. The
@@ -105,23 +108,109 @@ impl Capture {
         dataset: &str,
         bin_width_ps: Option<f64>,
     ) -> Result<Self, CalibrateError> {
-        let fail = |m: String| CalibrateError::Invalid(format!("capture `{spec}`: {m}"));
-        let (file, thickness) = spec
-            .rsplit_once('=')
-            .ok_or_else(|| fail("expected FILE=THICKNESS".into()))?;
-        let thickness_cm = parse_length_cm(thickness).map_err(|e| fail(e.to_string()))?;
-        let path = std::path::Path::new(file);
-        let histogram = TimeHistogram::read(path, dataset, bin_width_ps)
+        let (path, thickness_cm, label) = parse_spec(spec)?;
+        let histogram = TimeHistogram::read(&path, dataset, bin_width_ps)
             .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
-        let label = path
-            .file_stem()
-            .map_or_else(|| file.to_string(), |s| s.to_string_lossy().into_owned());
         Ok(Self {
             histogram,
             thickness_cm,
             label,
         })
     }
+}
+
+/// The file, thickness (cm) and label of `FILE=THICKNESS`.
+fn parse_spec(spec: &str) -> Result<(PathBuf, f64, String), CalibrateError> {
+    let fail = |m: String| CalibrateError::Invalid(format!("capture `{spec}`: {m}"));
+    let (file, thickness) = spec
+        .rsplit_once('=')
+        .ok_or_else(|| fail("expected FILE=THICKNESS".into()))?;
+    let thickness_cm = parse_length_cm(thickness).map_err(|e| fail(e.to_string()))?;
+    let path = PathBuf::from(file);
+    let label = path
+        .file_stem()
+        .map_or_else(|| file.to_string(), |s| s.to_string_lossy().into_owned());
+    Ok((path, thickness_cm, label))
+}
+
+/// The captures `specs` (see [`Capture::from_spec`]), in order, and what
+/// was done to them. With `parts` named, a MATLAB capture holding that
+/// cell array of per-part histograms (the shared captures' `accum`, one
+/// per second) is the sum of its parts that [`check_parts`] keeps, checked
+/// across all the captures given, and the lines say what was kept and
+/// whether `dataset` held the sum of all parts.
+pub fn read_captures(
+    specs: &[&str],
+    dataset: &str,
+    parts: Option<&str>,
+    bin_width_ps: Option<f64>,
+) -> Result<(Vec<Capture>, Vec<String>), CalibrateError> {
+    let mut captures: Vec<Capture> = specs
+        .iter()
+        .map(|s| Capture::from_spec(s, dataset, bin_width_ps))
+        .collect::<Result<_, _>>()?;
+    let Some(parts_name) = parts else {
+        return Ok((captures, Vec::new()));
+    };
+    let invalid = |e: HistogramError| CalibrateError::Invalid(e.to_string());
+    let mut notes = Vec::new();
+    // (capture index, its parts) for the captures that have parts.
+    let mut parted: Vec<(usize, Vec<Vec<f64>>)> = Vec::new();
+    for (i, spec) in specs.iter().enumerate() {
+        let (path, _, _) = parse_spec(spec)?;
+        let is_mat = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("mat"));
+        let width = captures[i].histogram.bin_width_ps;
+        let found = if is_mat {
+            TimeHistogram::read_mat_parts(&path, parts_name, width).map_err(invalid)?
+        } else {
+            None
+        };
+        match found {
+            Some(p) if !p.is_empty() => {
+                let n = captures[i].histogram.counts.len();
+                if let Some(bad) = p.iter().find(|h| h.counts.len() != n) {
+                    return Err(CalibrateError::Invalid(format!(
+                        "{}: {} bins where `{dataset}` has {n}",
+                        bad.source,
+                        bad.counts.len()
+                    )));
+                }
+                parted.push((i, p.into_iter().map(|h| h.counts).collect()));
+            }
+            _ => notes.push(format!(
+                "{}: no per-part histograms `{parts_name}`; `{dataset}` used as it is",
+                captures[i].label
+            )),
+        }
+    }
+    let all: Vec<Vec<Vec<f64>>> = parted.iter().map(|(_, p)| p.clone()).collect();
+    let checks = check_parts(&all);
+    let labels: Vec<&str> = parted
+        .iter()
+        .map(|(i, _)| captures[*i].label.as_str())
+        .collect();
+    let mut rebuilt = Vec::new();
+    for ((i, p), check) in parted.iter().zip(&checks) {
+        let whole: f64 = p.iter().flatten().sum();
+        let stored = captures[*i].histogram.total();
+        let line = check.describe(&captures[*i].label, p.len(), &labels);
+        notes.push(if whole == stored {
+            format!("{line} (`{dataset}` is the sum of all {} parts)", p.len())
+        } else {
+            format!("{line} (`{dataset}` holds {stored} counts, the parts {whole})")
+        });
+        rebuilt.push((*i, kept_sum(p, check)));
+    }
+    for (i, counts) in rebuilt {
+        let h = &captures[i].histogram;
+        let source = format!("{} (sum of kept `{parts_name}` parts)", h.source);
+        captures[i].histogram =
+            TimeHistogram::new(counts, h.bin_width_ps, h.start_ps, Path::new(&source))
+                .map_err(invalid)?;
+    }
+    Ok((captures, notes))
 }
 
 /// What the fit assumes and where it starts.

@@ -5,10 +5,10 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use scatterscope::calibrate::histogram::{DEFAULT_MAT_DATASET, TimeHistogram};
+use scatterscope::calibrate::histogram::{DEFAULT_MAT_DATASET, DEFAULT_MAT_PARTS, TimeHistogram};
 use scatterscope::calibrate::measured_irf::MeasuredIrf;
 use scatterscope::calibrate::transmittance::{
-    Capture, SlabFit, SlabFitOptions, fit_slab, predict_captures,
+    SlabFit, SlabFitOptions, fit_slab, predict_captures, read_captures,
 };
 use scatterscope::report::plot::{Series, chart};
 
@@ -41,6 +41,14 @@ pub struct CalibrateSlabArgs {
     /// Dataset holding the histogram in MATLAB files.
     #[arg(long, default_value = DEFAULT_MAT_DATASET)]
     dataset: String,
+    /// Cell array of per-part histograms in MATLAB files (e.g. one per
+    /// second of acquisition), or `none`. Where a file has it, the capture
+    /// is the sum of its parts, after dropping parts that also occur in
+    /// another capture given here and do not match the capture's own
+    /// (a buffer not cleared between captures); the output says what was
+    /// kept.
+    #[arg(long, default_value = DEFAULT_MAT_PARTS)]
+    parts: String,
     /// Refractive index of the medium (not fitted).
     #[arg(long)]
     refractive_index: f64,
@@ -112,16 +120,18 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
         irf.mean_delay_ps(),
         irf.background_per_bin
     );
-    let captures: Vec<Capture> = args
+    let specs: Vec<&str> = args
         .captures
         .iter()
-        .map(|s| Capture::from_spec(s, &args.dataset, args.bin_ps))
-        .collect::<Result<_, _>>()?;
-    let held: Vec<Capture> = args
-        .predict
-        .iter()
-        .map(|s| Capture::from_spec(s, &args.dataset, args.bin_ps))
-        .collect::<Result<_, _>>()?;
+        .chain(&args.predict)
+        .map(String::as_str)
+        .collect();
+    let parts = (args.parts != "none").then_some(args.parts.as_str());
+    let (mut captures, notes) = read_captures(&specs, &args.dataset, parts, args.bin_ps)?;
+    for note in &notes {
+        println!("parts: {note}");
+    }
+    let held = captures.split_off(args.captures.len());
     let mut opts = SlabFitOptions {
         refractive_index: args.refractive_index,
         mu_a_per_cm: args.mu_a,
