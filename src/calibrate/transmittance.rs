@@ -185,14 +185,11 @@ pub fn read_captures(
             )),
         }
     }
-    let all: Vec<Vec<Vec<f64>>> = parted.iter().map(|(_, p)| p.clone()).collect();
+    let (which, all): (Vec<usize>, Vec<Vec<Vec<f64>>>) = parted.into_iter().unzip();
     let checks = check_parts(&all);
-    let labels: Vec<&str> = parted
-        .iter()
-        .map(|(i, _)| captures[*i].label.as_str())
-        .collect();
+    let labels: Vec<&str> = which.iter().map(|&i| captures[i].label.as_str()).collect();
     let mut rebuilt = Vec::new();
-    for ((i, p), check) in parted.iter().zip(&checks) {
+    for ((i, p), check) in which.iter().zip(&all).zip(&checks) {
         let whole: f64 = p.iter().flatten().sum();
         let stored = captures[*i].histogram.total();
         let line = check.describe(&captures[*i].label, p.len(), &labels);
