@@ -81,45 +81,22 @@ fn vector(path: &Path, name: &str, ds: &hdf5_reader::Dataset) -> Result<Vec<f64>
             .map(|a| a.iter().map(|&v| to(v)).collect())
             .map_err(|e| e.to_string())
     }
-    let values = match ds.dtype() {
+    let values = match *ds.dtype() {
         Datatype::FloatingPoint { size: 8, .. } => all::<f64>(ds, |v| v),
         Datatype::FloatingPoint { size: 4, .. } => all::<f32>(ds, f64::from),
-        Datatype::FixedPoint {
-            size: 1,
-            signed: false,
-            ..
-        } => all::<u8>(ds, f64::from),
-        Datatype::FixedPoint {
-            size: 2,
-            signed: false,
-            ..
-        } => all::<u16>(ds, f64::from),
-        Datatype::FixedPoint {
-            size: 4,
-            signed: false,
-            ..
-        } => all::<u32>(ds, f64::from),
-        Datatype::FixedPoint {
-            size: 8,
-            signed: false,
-            ..
-        } => all::<u64>(ds, |v| v as f64),
-        Datatype::FixedPoint {
-            size: 2,
-            signed: true,
-            ..
-        } => all::<i16>(ds, f64::from),
-        Datatype::FixedPoint {
-            size: 4,
-            signed: true,
-            ..
-        } => all::<i32>(ds, f64::from),
-        Datatype::FixedPoint {
-            size: 8,
-            signed: true,
-            ..
-        } => all::<i64>(ds, |v| v as f64),
-        other => Err(format!("type {other:?} is not a number")),
+        Datatype::FixedPoint { size, signed, .. } => match (size, signed) {
+            (1, false) => all::<u8>(ds, f64::from),
+            (2, false) => all::<u16>(ds, f64::from),
+            (4, false) => all::<u32>(ds, f64::from),
+            (8, false) => all::<u64>(ds, |v| v as f64),
+            (2, true) => all::<i16>(ds, f64::from),
+            (4, true) => all::<i32>(ds, f64::from),
+            (8, true) => all::<i64>(ds, |v| v as f64),
+            _ => Err(format!(
+                "{size}-byte integers (signed: {signed}) are not read"
+            )),
+        },
+        ref other => Err(format!("type {other:?} is not a number")),
     };
     values.map_err(|e| {
         file_error(
