@@ -8,7 +8,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Poisson};
 use scatterscope::calibrate::histogram::TimeHistogram;
-use scatterscope::calibrate::measured_irf::MeasuredIrf;
+use scatterscope::calibrate::measured_irf::{MeasuredIrf, recorded_range};
 use scatterscope::calibrate::transmittance::{
     Capture, SlabFitOptions, expected_capture, fit_slab, parse_length_cm, predict_captures,
     read_captures,
@@ -52,6 +52,46 @@ fn reference(seed: u64) -> TimeHistogram {
     TimeHistogram::new(poisson(&shape, seed), BIN_PS, 0.0, Path::new("reference")).unwrap()
 }
 
+/// Shared parameters at n = 1.12, none fitted.
+fn medium(mu_a: f64, mu_s: f64, offset_cm: f64) -> SlabFitOptions {
+    SlabFitOptions {
+        refractive_index: 1.12,
+        mu_a_per_cm: mu_a,
+        mu_s_reduced_per_cm: mu_s,
+        fit_mu_a: false,
+        fit_mu_s_reduced: false,
+        offset_cm,
+        fit_offset: false,
+    }
+}
+
+/// Poisson captures through 2, 3 and 4 inch slabs of `truth`, 3 000
+/// bins long, the pulses entering `delay_ps` after 0.9-1.1 ns.
+fn simulate(irf: &MeasuredIrf, truth: &SlabFitOptions, delay_ps: f64) -> Vec<Capture> {
+    [
+        (5.08, 1100.0, 2e6, 40.0),
+        (7.62, 1000.0, 3e6, 60.0),
+        (10.16, 900.0, 2e6, 25.0),
+    ]
+    .iter()
+    .enumerate()
+    .map(|(k, &(s, t0, a, b))| {
+        let mean = expected_capture(irf, truth, s, t0 + delay_ps, a, b, 3000).unwrap();
+        Capture {
+            histogram: TimeHistogram::new(
+                poisson(&mean, 10 + k as u64),
+                BIN_PS,
+                0.0,
+                Path::new("sim"),
+            )
+            .unwrap(),
+            thickness_cm: s,
+            label: format!("sim{k}"),
+        }
+    })
+    .collect()
+}
+
 #[test]
 fn a_simulated_medium_is_recovered_within_its_standard_errors() {
     let irf = MeasuredIrf::from_histogram(&reference(1)).unwrap();
@@ -69,35 +109,13 @@ fn a_simulated_medium_is_recovered_within_its_standard_errors() {
         "{}",
         irf.background_per_bin
     );
-    let (n, mu_a, mu_s) = (1.12, 0.0053, 2.62);
-    let captures: Vec<Capture> = [
-        (5.08, 1100.0, 2e6, 40.0),
-        (7.62, 1000.0, 3e6, 60.0),
-        (10.16, 900.0, 2e6, 25.0),
-    ]
-    .iter()
-    .enumerate()
-    .map(|(k, &(s, t0, a, b))| {
-        let mean = expected_capture(&irf, n, mu_a, mu_s, s, t0, a, b, 3000).unwrap();
-        Capture {
-            histogram: TimeHistogram::new(
-                poisson(&mean, 10 + k as u64),
-                BIN_PS,
-                0.0,
-                Path::new("sim"),
-            )
-            .unwrap(),
-            thickness_cm: s,
-            label: format!("sim{k}"),
-        }
-    })
-    .collect();
+    let (mu_a, mu_s) = (0.0053, 2.62);
+    let truth = medium(mu_a, mu_s, 0.0);
+    let captures = simulate(&irf, &truth, 0.0);
     let opts = SlabFitOptions {
-        refractive_index: n,
-        mu_a_per_cm: 0.02,
-        mu_s_reduced_per_cm: 5.0,
         fit_mu_a: true,
         fit_mu_s_reduced: true,
+        ..medium(0.02, 5.0, 0.0)
     };
     let fit = fit_slab(&captures, &irf, &opts).unwrap();
     assert!(fit.undetermined.is_empty(), "{:?}", fit.undetermined);
@@ -128,10 +146,132 @@ fn a_simulated_medium_is_recovered_within_its_standard_errors() {
         );
     }
     // A fixed wrong medium predicts a capture far worse than the right one.
-    let right = predict_captures(&captures[1..2], &irf, n, mu_a, mu_s).unwrap();
-    let wrong = predict_captures(&captures[1..2], &irf, n, mu_a, 1.2 * mu_s).unwrap();
+    let right = predict_captures(&captures[1..2], &irf, &truth).unwrap();
+    let wrong = predict_captures(&captures[1..2], &irf, &medium(mu_a, 1.2 * mu_s, 0.0)).unwrap();
     assert!(right.chi2_per_dof < 1.2, "{}", right.chi2_per_dof);
     assert!(wrong.chi2_per_dof > 3.0, "{}", wrong.chi2_per_dof);
+}
+
+/// A pulsed reference as the CDT one records it: one 2 500-bin (20 ns)
+/// laser period in a 4 096-bin range (the rest empty), a 40 ps Gaussian
+/// at bin 800, and a pedestal that follows the light: from 400 bins
+/// before the peak, `pedestal` of the light per bin, decaying with a
+/// 1 000-bin time constant; 30 dark counts per bin. Also returns the
+/// pedestal's share of the light in each bin of the period and the
+/// peak's bin.
+fn pulsed_reference(pedestal: f64, seed: u64) -> (TimeHistogram, Vec<f64>, usize) {
+    let (period, peak, light) = (2500usize, 800usize, 2e7);
+    let sigma = 40.0 / 2.354_820_045 / BIN_PS;
+    let gauss: Vec<f64> = (0..period)
+        .map(|i| (-((i as f64 - peak as f64) / sigma).powi(2) / 2.0).exp())
+        .collect();
+    let gauss_sum: f64 = gauss.iter().sum();
+    let ped: Vec<f64> = (0..period)
+        .map(|i| {
+            if i + 400 >= peak {
+                pedestal * (-((i + 400 - peak) as f64) / 1000.0).exp()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let share = ped.iter().sum::<f64>();
+    let mut mean: Vec<f64> = (0..period)
+        .map(|i| light * ((1.0 - share) * gauss[i] / gauss_sum + ped[i]) + 30.0)
+        .collect();
+    mean.resize(4096, 0.0);
+    let h = TimeHistogram::new(poisson(&mean, seed), BIN_PS, 0.0, Path::new("pulsed")).unwrap();
+    (h, ped, peak)
+}
+
+#[test]
+fn a_pedestal_that_follows_the_light_is_kept_by_the_period_response() {
+    let (reference, pedestal, peak) = pulsed_reference(2e-5, 3);
+    let period = MeasuredIrf::from_histogram_period(&reference).unwrap();
+    // The whole period, not the empty bins after it; the floor is the
+    // dark level; the pedestal's share is measured.
+    assert_eq!(period.weights.len(), 2500);
+    assert!(
+        (period.background_per_bin - 30.0).abs() < 1.0,
+        "floor {}",
+        period.background_per_bin
+    );
+    assert!((period.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    assert!(period.weights.iter().all(|w| *w >= 0.0));
+    // Farther than 1 ns (125 bins) from the peak there is only pedestal.
+    let measured = period.share_outside(1000.0, 1000.0);
+    let true_outside: f64 = pedestal
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| i.abs_diff(peak) > 125)
+        .map(|(_, p)| p)
+        .sum();
+    assert!(
+        (measured / true_outside - 1.0).abs() < 0.05,
+        "pedestal share {measured} vs {true_outside}"
+    );
+    // Captures through slabs of that instrument: the period response fits
+    // them to their noise and recovers the medium.
+    let truth = medium(0.0053, 2.62, 0.0);
+    let captures = simulate(&period, &truth, 4000.0);
+    let opts = SlabFitOptions {
+        fit_mu_a: true,
+        fit_mu_s_reduced: true,
+        ..medium(0.02, 5.0, 0.0)
+    };
+    let fit = fit_slab(&captures, &period, &opts).unwrap();
+    assert!(
+        (0.9..1.1).contains(&fit.chi2_per_dof),
+        "{}",
+        fit.chi2_per_dof
+    );
+    let se = fit.mu_s_reduced.standard_error.unwrap();
+    assert!((fit.mu_s_reduced.value - 2.62).abs() < 4.0 * se, "{fit:?}");
+}
+
+#[test]
+fn a_detector_off_the_laser_axis_is_recovered() {
+    let irf = MeasuredIrf::from_histogram(&reference(4)).unwrap();
+    let truth = medium(0.0053, 2.62, 1.5);
+    let captures = simulate(&irf, &truth, 0.0);
+    let opts = SlabFitOptions {
+        fit_mu_a: true,
+        fit_mu_s_reduced: true,
+        fit_offset: true,
+        ..medium(0.02, 5.0, 0.5)
+    };
+    let fit = fit_slab(&captures, &irf, &opts).unwrap();
+    assert!(fit.undetermined.is_empty(), "{:?}", fit.undetermined);
+    for (est, truth) in [
+        (fit.offset, 1.5),
+        (fit.mu_s_reduced, 2.62),
+        (fit.mu_a, 0.0053),
+    ] {
+        let se = est.standard_error.expect("determined");
+        assert!(
+            (est.value - truth).abs() < 4.0 * se,
+            "{} vs {truth} (se {se})",
+            est.value
+        );
+    }
+    assert!(
+        (0.9..1.1).contains(&fit.chi2_per_dof),
+        "{}",
+        fit.chi2_per_dof
+    );
+    // On the axis the same captures fit worse.
+    let on_axis = SlabFitOptions {
+        fit_offset: false,
+        offset_cm: 0.0,
+        ..opts
+    };
+    let axis = fit_slab(&captures, &irf, &on_axis).unwrap();
+    assert!(
+        axis.chi2_per_dof > fit.chi2_per_dof + 0.1,
+        "{} vs {}",
+        axis.chi2_per_dof,
+        fit.chi2_per_dof
+    );
 }
 
 #[test]
@@ -163,11 +303,9 @@ fn references_and_captures_without_light_are_refused_by_name() {
         label: "foam_2in".into(),
     };
     let opts = SlabFitOptions {
-        refractive_index: 1.12,
-        mu_a_per_cm: 0.01,
-        mu_s_reduced_per_cm: 2.0,
         fit_mu_a: true,
         fit_mu_s_reduced: true,
+        ..medium(0.01, 2.0, 0.0)
     };
     let err = fit_slab(&[capture], &irf, &opts).unwrap_err().to_string();
     assert!(
@@ -233,6 +371,14 @@ fn real_foam_captures_read_and_fit_near_the_published_medium() {
         "IRF FWHM {}",
         irf.fwhm_ps()
     );
+    // One 100 ns laser period (12 500 bins of 8 ps) of the 65 536 bins
+    // holds counts; its pedestal and tail (BENCHMARKS.md: about 2 parts per
+    // million of the light per bin) are 0.5-1.5 % of the light.
+    let period = MeasuredIrf::from_histogram_period(&direct).unwrap();
+    assert_eq!(recorded_range(&direct.counts), (0, 12500));
+    assert_eq!(period.weights.len(), 12500);
+    let share = period.share_outside(1000.0, 3000.0);
+    assert!((0.005..0.015).contains(&share), "pedestal share {share}");
     // Their per-second parts, without the seconds the 3.5 inch file
     // shares with the 3.0 inch one.
     let specs: Vec<String> = [("3_0", "3in"), ("3_5", "3.5in")]
@@ -245,11 +391,9 @@ fn real_foam_captures_read_and_fit_near_the_published_medium() {
     let specs: Vec<&str> = specs.iter().map(String::as_str).collect();
     let (captures, _) = read_captures(&specs, "out", Some("accum"), Some(BIN_PS)).unwrap();
     let opts = SlabFitOptions {
-        refractive_index: 1.12,
-        mu_a_per_cm: 0.01,
-        mu_s_reduced_per_cm: 5.0,
         fit_mu_a: true,
         fit_mu_s_reduced: true,
+        ..medium(0.01, 5.0, 0.0)
     };
     let fit = fit_slab(&captures, &irf, &opts).unwrap();
     // Published (Lindell and Wetzstein 2020, a fit over 1-8 inch): mu_s'
@@ -352,6 +496,7 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     );
     assert!(
         stdout.contains("instrument response from")
+            && stdout.contains("(whole recorded period): 12500 bins of 8 ps")
             && stdout.contains("prediction of captures left out")
             && stdout.contains(
                 "parts: capture_3_5_inch: 240 parts, 120 (120-239) also in capture_3_0_inch"

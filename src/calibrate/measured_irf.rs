@@ -9,6 +9,15 @@
 //! excess there, clipped at zero, is scaled to unit sum. Zero delay is the
 //! peak bin. Light later than the last significant block is left out; the
 //! output says how many counts that was at most.
+//!
+//! A pulsed source's response also has slow parts that follow the light
+//! but lie far from its peak: in the CDT reference (10 MHz, one 100 ns
+//! period recorded) a pedestal of about 2 parts per million of the light
+//! per 8 ps bin starts 12.5 ns before the peak and decays slowly through
+//! the period, and every foam capture carries the same pedestal in the
+//! same proportion (BENCHMARKS.md). [`MeasuredIrf::from_histogram_period`]
+//! keeps them: the response over the reference's whole recorded period,
+//! as excess over its lowest level.
 
 use scatterscope_physics::{IrfTable, ParamError};
 
@@ -28,6 +37,16 @@ pub const BACKGROUND_GAP: usize = 2 * BLOCK_BINS;
 /// Standard deviations of background noise the peak bin must exceed for
 /// the reference to count as holding a response at all.
 pub const PEAK_SIGNIFICANCE: f64 = 5.0;
+
+/// Bins averaged (outside the peak's run) to smooth the slow parts of a
+/// whole-period response: their Poisson noise falls eightfold, while the
+/// pedestal's step (about 125 bins wide) blurs by half a nanosecond,
+/// well inside the slab responses it is convolved with.
+pub const PERIOD_SMOOTH_BINS: usize = 64;
+
+/// Width of the blocks whose least mean is a whole-period response's
+/// floor (the level no light raises).
+pub const FLOOR_BLOCK_BINS: usize = 256;
 
 /// A tabulated instrument response.
 #[derive(Debug, Clone, PartialEq)]
@@ -124,6 +143,75 @@ impl MeasuredIrf {
         })
     }
 
+    /// The response over the reference's whole recorded period: the peak's
+    /// run as in [`Self::from_histogram`], and every other bin of the
+    /// recorded range as the mean of the [`PERIOD_SMOOTH_BINS`] bins
+    /// around it (outside the peak's run); both as excess over the floor,
+    /// the least mean of [`FLOOR_BLOCK_BINS`]-bin blocks, clipped at zero.
+    /// The recorded range is [`recorded_range`]'s (a TCSPC range longer
+    /// than the laser's period ends in empty bins). A capture's constant background then holds only what
+    /// the floor holds: dark counts and the light's level there.
+    pub fn from_histogram_period(reference: &TimeHistogram) -> Result<Self, IrfError> {
+        let core = Self::from_histogram(reference)?;
+        let counts = &reference.counts;
+        let peak = reference.peak_index();
+        let (core_start, core_end) = (peak - core.peak, peak - core.peak + core.weights.len());
+        let (first, end) = recorded_range(counts);
+        let (first, end) = (first.min(core_start), end.max(core_end));
+        let range = &counts[first..end];
+        let floor = range
+            .chunks_exact(FLOOR_BLOCK_BINS)
+            .map(|b| b.iter().sum::<f64>() / FLOOR_BLOCK_BINS as f64)
+            .fold(f64::INFINITY, f64::min);
+        if !floor.is_finite() {
+            return Err(IrfError {
+                source_name: reference.source.clone(),
+                message: format!(
+                    "the recorded period ({} bins) is shorter than one block of {FLOOR_BLOCK_BINS} bins to measure its floor",
+                    range.len()
+                ),
+            });
+        }
+        let half = PERIOD_SMOOTH_BINS / 2;
+        let outside = |j: usize| !(core_start..core_end).contains(&j);
+        let excess: Vec<f64> = (first..end)
+            .map(|j| {
+                let level = if outside(j) {
+                    let (sum, k) = (j.saturating_sub(half).max(first)..(j + half).min(end))
+                        .filter(|&i| outside(i))
+                        .fold((0.0, 0.0), |(s, k), i| (s + counts[i], k + 1.0));
+                    sum / k
+                } else {
+                    counts[j]
+                };
+                (level - floor).max(0.0)
+            })
+            .collect();
+        let signal: f64 = excess.iter().sum();
+        Ok(Self {
+            weights: excess.iter().map(|e| e / signal).collect(),
+            peak: peak - first,
+            background_per_bin: floor,
+            signal_counts: signal,
+            ..core
+        })
+    }
+
+    /// Share of the response outside `[-before_ps, after_ps]` around its
+    /// peak.
+    pub fn share_outside(&self, before_ps: f64, after_ps: f64) -> f64 {
+        let w = self.bin_width_ps;
+        self.weights
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| {
+                let d = (*j as f64 - self.peak as f64) * w;
+                d < -before_ps || d > after_ps
+            })
+            .map(|(_, v)| v)
+            .sum()
+    }
+
     /// Full width at half maximum (ps), by linear interpolation between
     /// bin centres.
     pub fn fwhm_ps(&self) -> f64 {
@@ -174,6 +262,36 @@ impl MeasuredIrf {
             .sum::<f64>()
             * self.bin_width_ps
     }
+}
+
+/// The bins `first..end` a histogram recorded: without its leading and
+/// trailing empty bins, nor the partial bins at either edge, those
+/// holding less than half the median of the [`FLOOR_BLOCK_BINS`] bins
+/// next to them (the bins the laser's period cuts through).
+pub fn recorded_range(counts: &[f64]) -> (usize, usize) {
+    let (Some(first), Some(last)) = (
+        counts.iter().position(|&c| c > 0.0),
+        counts.iter().rposition(|&c| c > 0.0),
+    ) else {
+        return (0, 0);
+    };
+    let half_median = |bins: &[f64]| {
+        let mut sorted = bins.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        0.5 * sorted[sorted.len() / 2]
+    };
+    let inner = (last + 1 - first).min(FLOOR_BLOCK_BINS);
+    let low_end = half_median(&counts[last + 1 - inner..=last]);
+    let end = counts[first..=last]
+        .iter()
+        .rposition(|&c| c >= low_end)
+        .map_or(last + 1, |i| first + i + 1);
+    let low_start = half_median(&counts[first..first + inner]);
+    let first = counts[first..end]
+        .iter()
+        .position(|&c| c >= low_start)
+        .map_or(first, |i| first + i);
+    (first, end)
 }
 
 /// The measured response of the reference recording at `path` (a tag

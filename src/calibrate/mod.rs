@@ -22,6 +22,7 @@ pub mod histogram;
 pub mod irf_fit;
 pub mod measured_irf;
 pub mod parts;
+pub mod response_convolution;
 pub mod search;
 pub mod transmittance;
 

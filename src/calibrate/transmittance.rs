@@ -42,6 +42,7 @@ use super::hessian::{invert, numerical_hessian, standard_error};
 use super::histogram::{HistogramError, TimeHistogram};
 use super::measured_irf::MeasuredIrf;
 use super::parts::{check_parts, kept_sum};
+use super::response_convolution::ResponseConvolution;
 use super::search::{nelder_mead, pearson_chi2};
 
 /// Nodes of the Gauss-Legendre rule integrating `T` over one bin. The
@@ -85,8 +86,17 @@ pub const T0_SEARCH_BINS: f64 = 40.0;
 /// error of `t0` at tens of millions of counts.
 pub const T0_TOLERANCE_PS: f64 = 1e-3;
 
-/// A fitted coefficient below this (1/cm) has run to its bound 0.
+/// A fitted coefficient below this (1/cm, or cm for the detector's
+/// offset) has run to its bound 0.
 pub const AT_ZERO_PER_CM: f64 = 1e-7;
+
+/// First step of the search over the detector's offset (cm).
+pub const OFFSET_STEP_CM: f64 = 0.3;
+
+/// Step of the offset in the Hessian's central differences (cm): the
+/// likelihood depends on the offset's square, so a relative step would
+/// vanish at an offset near 0.
+pub const OFFSET_HESSIAN_STEP_CM: f64 = 1e-3;
 
 /// One capture through a slab of known thickness.
 #[derive(Debug, Clone)]
@@ -223,24 +233,40 @@ pub struct SlabFitOptions {
     pub fit_mu_a: bool,
     /// Whether mu_s' is fitted.
     pub fit_mu_s_reduced: bool,
+    /// Starting (or fixed) distance of the detector from the laser's axis
+    /// on the far face (cm); 0 for a detector on the axis.
+    pub offset_cm: f64,
+    /// Whether the offset is fitted.
+    pub fit_offset: bool,
 }
 
 impl SlabFitOptions {
-    /// Frees the parameters named in `names` (`mu_a`, `mu_s`); the others
-    /// stay fixed at their starting values.
+    /// Frees the parameters named in `names` (`mu_a`, `mu_s`, `offset`);
+    /// the others stay fixed at their starting values.
     pub fn free_named<S: AsRef<str>>(&mut self, names: &[S]) -> Result<(), CalibrateError> {
         for name in names {
             match name.as_ref() {
                 "mu_a" => self.fit_mu_a = true,
                 "mu_s" => self.fit_mu_s_reduced = true,
+                "offset" => self.fit_offset = true,
                 other => {
                     return Err(CalibrateError::Invalid(format!(
-                        "unknown parameter `{other}` (use mu_a, mu_s)"
+                        "unknown parameter `{other}` (use mu_a, mu_s, offset)"
                     )));
                 }
             }
         }
         Ok(())
+    }
+
+    /// Starting (or fixed) mu_a, mu_s' and offset.
+    fn start(&self) -> [f64; 3] {
+        [self.mu_a_per_cm, self.mu_s_reduced_per_cm, self.offset_cm]
+    }
+
+    /// Whether mu_a, mu_s' and the offset are fitted.
+    fn free(&self) -> [bool; 3] {
+        [self.fit_mu_a, self.fit_mu_s_reduced, self.fit_offset]
     }
 }
 
@@ -283,12 +309,12 @@ impl CaptureFit {
     }
 }
 
-/// A fitted or fixed medium parameter.
+/// A fitted or fixed parameter shared by all captures.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MediumEstimate {
-    /// Value (1/cm).
+    /// Value (1/cm for mu_a and mu_s', cm for the detector's offset).
     pub value: f64,
-    /// Standard error from the Poisson likelihood (1/cm), when determined.
+    /// Standard error from the Poisson likelihood (same unit), when determined.
     pub standard_error: Option<f64>,
     /// Whether it was fitted.
     pub fitted: bool,
@@ -301,6 +327,8 @@ pub struct SlabFit {
     pub mu_a: MediumEstimate,
     /// Reduced scattering coefficient.
     pub mu_s_reduced: MediumEstimate,
+    /// Detector's distance from the laser's axis (cm).
+    pub offset: MediumEstimate,
     /// Refractive index assumed.
     pub refractive_index: f64,
     /// Extrapolation distance of the fitted medium's boundaries (cm).
@@ -323,6 +351,34 @@ impl SlabFit {
     pub fn scatter_factor(&self) -> f64 {
         self.chi2_per_dof.max(1.0).sqrt()
     }
+
+    /// Options fixing every shared parameter at this fit's value, for
+    /// [`predict_captures`].
+    pub fn fixed(&self) -> SlabFitOptions {
+        SlabFitOptions {
+            refractive_index: self.refractive_index,
+            mu_a_per_cm: self.mu_a.value,
+            mu_s_reduced_per_cm: self.mu_s_reduced.value,
+            fit_mu_a: false,
+            fit_mu_s_reduced: false,
+            offset_cm: self.offset.value,
+            fit_offset: false,
+        }
+    }
+}
+
+/// The transmittance reaching the detector: the slab's diffusion, seen
+/// `offset_cm` off the laser's axis on the far face.
+struct AtDetector {
+    diffusion: Diffusion,
+    r2_cm2: f64,
+}
+
+impl AtDetector {
+    /// ln of the transmittance density at `t_ps` after the pulse enters.
+    fn log_transmittance(&self, t_ps: f64) -> f64 {
+        self.diffusion.log_psf(self.r2_cm2, t_ps)
+    }
 }
 
 /// One capture prepared for the fit: its window and response.
@@ -334,13 +390,14 @@ struct Prepared<'a> {
     hist_start_ps: f64,
     thickness_cm: f64,
     irf: &'a MeasuredIrf,
+    convolution: ResponseConvolution,
     peak_time_ps: f64,
 }
 
 impl Prepared<'_> {
     /// Unit-sum model shape over the window for the medium and `t0`;
     /// `None` when the physics is invalid or carries no light there.
-    fn shape(&self, diffusion: &Diffusion, t0: f64) -> Option<Vec<f64>> {
+    fn shape(&self, model: &AtDetector, t0: f64) -> Option<Vec<f64>> {
         let n = self.counts.len();
         let m = self.irf.weights.len();
         let p = self.irf.peak;
@@ -356,20 +413,13 @@ impl Prepared<'_> {
                 let mid = a + half;
                 GL_X.iter()
                     .zip(GL_W)
-                    .map(|(x, wt)| wt * diffusion.log_psf(0.0, mid + half * x).exp())
+                    .map(|(x, wt)| wt * model.log_transmittance(mid + half * x).exp())
                     .sum::<f64>()
                     * half
             })
             .collect();
         // out[i] = sum_j r_j q(start + i - j + p); q index = i - j + m - 1.
-        let mut out = vec![0.0; n];
-        for (i, o) in out.iter_mut().enumerate() {
-            let mut acc = 0.0;
-            for (j, r) in self.irf.weights.iter().enumerate() {
-                acc += r * q[i + m - 1 - j];
-            }
-            *o = acc;
-        }
+        let mut out = self.convolution.apply(&q);
         let total: f64 = out.iter().sum();
         if !(total.is_finite() && total > 0.0) {
             return None;
@@ -452,12 +502,12 @@ pub(super) fn amplitudes(shape: &[f64], counts: &[f64]) -> (f64, f64, f64) {
 /// negative log-likelihood.
 fn profile(
     prepared: &[Prepared],
-    diffusion: &[Diffusion],
+    models: &[AtDetector],
     evaluations: &mut u64,
 ) -> Option<(Vec<[f64; 3]>, f64)> {
     let fits: Vec<Option<([f64; 3], f64, u64)>> = prepared
         .par_iter()
-        .zip(diffusion)
+        .zip(models)
         .map(|(cap, d)| best_t0(cap, d))
         .collect();
     let mut total = 0.0;
@@ -473,14 +523,14 @@ fn profile(
 
 struct T0Search<'a> {
     cap: &'a Prepared<'a>,
-    diffusion: &'a Diffusion,
+    model: &'a AtDetector,
 }
 
 impl CostFunction for T0Search<'_> {
     type Param = f64;
     type Output = f64;
     fn cost(&self, t0: &f64) -> Result<f64, argmin::core::Error> {
-        Ok(match self.cap.shape(self.diffusion, *t0) {
+        Ok(match self.cap.shape(self.model, *t0) {
             Some(s) => amplitudes(&s, self.cap.counts).2,
             None => f64::MAX,
         })
@@ -488,26 +538,26 @@ impl CostFunction for T0Search<'_> {
 }
 
 /// The `t0` (with its `A`, `B`) maximising one capture's likelihood.
-fn best_t0(cap: &Prepared, diffusion: &Diffusion) -> Option<([f64; 3], f64, u64)> {
-    let guess = cap.peak_time_ps - model_peak_ps(diffusion);
+fn best_t0(cap: &Prepared, model: &AtDetector) -> Option<([f64; 3], f64, u64)> {
+    let guess = cap.peak_time_ps - model_peak_ps(model);
     let half = T0_SEARCH_BINS * cap.bin_ps;
     let solver = BrentOpt::new(guess - half, guess + half).set_tolerance(1e-12, T0_TOLERANCE_PS);
-    let res = Executor::new(T0Search { cap, diffusion }, solver)
+    let res = Executor::new(T0Search { cap, model }, solver)
         .configure(|c| c.max_iters(200))
         .run()
         .ok()?;
     let evals = res.problem.counts.get("cost_count").copied().unwrap_or(0);
     let t0 = *res.state().get_best_param()?;
-    let shape = cap.shape(diffusion, t0)?;
+    let shape = cap.shape(model, t0)?;
     let (a, b, v) = amplitudes(&shape, cap.counts);
     v.is_finite().then_some(([t0, a, b], v, evals + 1))
 }
 
-/// Time of the on-axis transmittance's maximum after the pulse enters
-/// (ps), by golden-section search on its logarithm.
-fn model_peak_ps(d: &Diffusion) -> f64 {
-    let f = |t: f64| -d.log_psf(0.0, t);
-    let (mut lo, mut hi) = (1e-3, 10.0 * d.peak_time_ps().max(1.0));
+/// Time of the transmittance's maximum at the detector after the pulse
+/// enters (ps), by golden-section search on its logarithm.
+fn model_peak_ps(m: &AtDetector) -> f64 {
+    let f = |t: f64| -m.log_transmittance(t);
+    let (mut lo, mut hi) = (1e-3, 10.0 * m.diffusion.peak_time_ps().max(1.0));
     let g = 0.5 * (5f64.sqrt() - 1.0);
     for _ in 0..100 {
         let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
@@ -516,13 +566,12 @@ fn model_peak_ps(d: &Diffusion) -> f64 {
     0.5 * (lo + hi)
 }
 
-fn diffusion_for(
+fn at_detector(
     opts: &SlabFitOptions,
-    mu_a: f64,
-    mu_s: f64,
+    [mu_a, mu_s, offset_cm]: [f64; 3],
     thickness_cm: f64,
-) -> Option<Diffusion> {
-    Diffusion::new(&Medium {
+) -> Option<AtDetector> {
+    let diffusion = Diffusion::new(&Medium {
         mu_a_per_cm: mu_a,
         mu_s_per_cm: mu_s,
         g: 0.0,
@@ -530,7 +579,11 @@ fn diffusion_for(
         thickness_cm,
         model: MediumModel::Slab,
     })
-    .ok()
+    .ok()?;
+    offset_cm.is_finite().then_some(AtDetector {
+        diffusion,
+        r2_cm2: offset_cm * offset_cm,
+    })
 }
 
 /// The fitted window of one capture, and its peak time.
@@ -553,13 +606,8 @@ fn prepare<'a>(
             capture.thickness_cm
         )));
     }
-    let start_d = diffusion_for(
-        opts,
-        opts.mu_a_per_cm,
-        opts.mu_s_reduced_per_cm,
-        capture.thickness_cm,
-    )
-    .ok_or_else(|| fail("the starting medium is invalid for this slab".into()))?;
+    let start_d = at_detector(opts, opts.start(), capture.thickness_cm)
+        .ok_or_else(|| fail("the starting medium is invalid for this slab".into()))?;
     let peak = h.peak_index();
     let w = h.bin_width_ps;
     let rise_bins = (model_peak_ps(&start_d) / w).ceil() as usize;
@@ -592,6 +640,7 @@ fn prepare<'a>(
         hist_start_ps: h.start_ps,
         thickness_cm: capture.thickness_cm,
         irf,
+        convolution: ResponseConvolution::new(&irf.weights, end - start),
         peak_time_ps: h.start_ps + (peak as f64 + 0.5) * w,
     })
 }
@@ -603,25 +652,24 @@ struct Outer<'a> {
 }
 
 impl Outer<'_> {
-    fn medium(&self, x: &[f64]) -> (f64, f64) {
+    /// mu_a, mu_s' and the offset at the search's point `x` (ln mu_a,
+    /// ln mu_s', offset, for those fitted).
+    fn globals(&self, x: &[f64]) -> [f64; 3] {
         let mut it = x.iter();
-        let mu_a = if self.opts.fit_mu_a {
-            it.next().map_or(0.0, |v| v.exp())
-        } else {
-            self.opts.mu_a_per_cm
-        };
-        let mu_s = if self.opts.fit_mu_s_reduced {
-            it.next().map_or(0.0, |v| v.exp())
-        } else {
-            self.opts.mu_s_reduced_per_cm
-        };
-        (mu_a, mu_s)
+        let mut g = self.opts.start();
+        for (i, free) in self.opts.free().into_iter().enumerate() {
+            if free {
+                let v = it.next().copied().unwrap_or(0.0);
+                g[i] = if i < 2 { v.exp() } else { v.abs() };
+            }
+        }
+        g
     }
 
-    fn diffusions(&self, mu_a: f64, mu_s: f64) -> Option<Vec<Diffusion>> {
+    fn models(&self, g: [f64; 3]) -> Option<Vec<AtDetector>> {
         self.prepared
             .iter()
-            .map(|c| diffusion_for(&self.opts, mu_a, mu_s, c.thickness_cm))
+            .map(|c| at_detector(&self.opts, g, c.thickness_cm))
             .collect()
     }
 }
@@ -630,8 +678,7 @@ impl CostFunction for Outer<'_> {
     type Param = Vec<f64>;
     type Output = f64;
     fn cost(&self, x: &Vec<f64>) -> Result<f64, argmin::core::Error> {
-        let (mu_a, mu_s) = self.medium(x);
-        let Some(d) = self.diffusions(mu_a, mu_s) else {
+        let Some(d) = self.models(self.globals(x)) else {
             return Ok(f64::MAX);
         };
         let mut e = 0;
@@ -641,8 +688,9 @@ impl CostFunction for Outer<'_> {
     }
 }
 
-/// Fits the shared mu_s' and mu_a (those `opts` frees) and each capture's
-/// `t0`, signal and background; see the module's documentation.
+/// Fits the shared mu_s', mu_a and detector offset (those `opts` frees)
+/// and each capture's `t0`, signal and background; see the module's
+/// documentation.
 pub fn fit_slab(
     captures: &[Capture],
     irf: &MeasuredIrf,
@@ -671,42 +719,40 @@ pub fn fit_slab(
         opts: *opts,
         evaluations: std::cell::Cell::new(0),
     };
+    let start = opts.start();
     let mut x0 = Vec::new();
-    if opts.fit_mu_a {
-        x0.push(opts.mu_a_per_cm.ln());
-    }
-    if opts.fit_mu_s_reduced {
-        x0.push(opts.mu_s_reduced_per_cm.ln());
+    let mut steps = Vec::new();
+    for (i, free) in opts.free().into_iter().enumerate() {
+        if free {
+            x0.push(if i < 2 { start[i].ln() } else { start[i] });
+            steps.push(if i < 2 { 0.3 } else { OFFSET_STEP_CM });
+        }
     }
     let (x, outer) = if x0.is_empty() {
         (x0, outer)
     } else {
-        let steps = vec![0.3; x0.len()];
         let (x, outer, _) = nelder_mead(outer, x0, &steps, 400, "the fit")?;
         (x, outer)
     };
-    let (mu_a, mu_s) = outer.medium(&x);
-    finish(&prepared, opts, mu_a, mu_s, outer.evaluations.get())
+    let g = outer.globals(&x);
+    finish(&prepared, opts, g, outer.evaluations.get())
 }
 
-/// Each capture's `t0`, signal and background for a medium held fixed at
-/// `mu_a`, `mu_s'`: how well known parameters predict captures they were
-/// not fitted on.
+/// Each capture's `t0`, signal and background with the shared parameters
+/// held at `opts`' values (its fit flags are ignored): how well known
+/// parameters predict captures they were not fitted on.
 pub fn predict_captures(
     captures: &[Capture],
     irf: &MeasuredIrf,
-    refractive_index: f64,
-    mu_a_per_cm: f64,
-    mu_s_reduced_per_cm: f64,
+    opts: &SlabFitOptions,
 ) -> Result<SlabFit, CalibrateError> {
-    let opts = SlabFitOptions {
-        refractive_index,
-        mu_a_per_cm,
-        mu_s_reduced_per_cm,
+    let fixed = SlabFitOptions {
         fit_mu_a: false,
         fit_mu_s_reduced: false,
+        fit_offset: false,
+        ..*opts
     };
-    fit_slab(captures, irf, &opts)
+    fit_slab(captures, irf, &fixed)
 }
 
 /// Natural parameters of the full Hessian: the fitted medium parameters,
@@ -714,43 +760,42 @@ pub fn predict_captures(
 fn finish(
     prepared: &[Prepared],
     opts: &SlabFitOptions,
-    mu_a: f64,
-    mu_s: f64,
+    shared: [f64; 3],
     mut evaluations: u64,
 ) -> Result<SlabFit, CalibrateError> {
     let invalid = || CalibrateError::Invalid("the fitted medium is invalid".into());
-    let d: Vec<Diffusion> = prepared
+    let d: Vec<AtDetector> = prepared
         .iter()
-        .map(|c| diffusion_for(opts, mu_a, mu_s, c.thickness_cm))
+        .map(|c| at_detector(opts, shared, c.thickness_cm))
         .collect::<Option<_>>()
         .ok_or_else(invalid)?;
     let (nuisance, _) = profile(prepared, &d, &mut evaluations).ok_or_else(invalid)?;
-    let globals: Vec<usize> = [(opts.fit_mu_a, 0usize), (opts.fit_mu_s_reduced, 1)]
-        .into_iter()
-        .filter_map(|(f, i)| f.then_some(i))
-        .collect();
+    let globals: Vec<usize> = (0..3).filter(|&i| opts.free()[i]).collect();
     let g = globals.len();
     let k = g + 3 * prepared.len();
     // The Hessian is block-arrow shaped: captures couple only through the
-    // medium. Each capture's block comes from its own likelihood.
+    // shared parameters. Each capture's block comes from its own
+    // likelihood.
     let mut hess = vec![vec![0.0; k]; k];
     for (c, cap) in prepared.iter().enumerate() {
-        let base = [mu_a, mu_s, nuisance[c][0], nuisance[c][1], nuisance[c][2]];
-        let free: Vec<usize> = globals.iter().copied().chain([2, 3, 4]).collect();
+        let [t0, a, b] = nuisance[c];
+        let base = [shared[0], shared[1], shared[2], t0, a, b];
+        let free: Vec<usize> = globals.iter().copied().chain([3, 4, 5]).collect();
         let f = |v: &[f64]| {
             let mut p = base;
             for (&i, &x) in free.iter().zip(v) {
                 p[i] = x;
             }
-            diffusion_for(opts, p[0], p[1], cap.thickness_cm)
-                .and_then(|d| cap.shape(&d, p[2]))
-                .map_or(f64::INFINITY, |s| nll(&s, cap.counts, p[3], p[4]))
+            at_detector(opts, [p[0], p[1], p[2]], cap.thickness_cm)
+                .and_then(|d| cap.shape(&d, p[3]))
+                .map_or(f64::INFINITY, |s| nll(&s, cap.counts, p[4], p[5]))
         };
         let x: Vec<f64> = free.iter().map(|&i| base[i]).collect();
         let steps: Vec<f64> = free
             .iter()
             .map(|&i| match i {
-                2 => 1e-3 * cap.bin_ps,
+                2 => OFFSET_HESSIAN_STEP_CM,
+                3 => 1e-3 * cap.bin_ps,
                 _ => 1e-4 * base[i].abs().max(1e-12),
             })
             .collect();
@@ -766,7 +811,8 @@ fn finish(
     let inverse = invert(&hess);
     let se = |i: usize, bound: f64| standard_error(inverse.as_ref(), i, bound);
     let mut undetermined = Vec::new();
-    let mut medium = |index: usize, value: f64, fitted: bool, name: &str| {
+    let mut estimate = |index: usize, name: &str| {
+        let (value, fitted) = (shared[index], opts.free()[index]);
         let at_bound = fitted && value < AT_ZERO_PER_CM;
         let standard_error = globals
             .iter()
@@ -788,8 +834,9 @@ fn finish(
             fitted,
         }
     };
-    let mu_a_est = medium(0, mu_a, opts.fit_mu_a, "mu_a");
-    let mu_s_est = medium(1, mu_s, opts.fit_mu_s_reduced, "mu_s'");
+    let mu_a_est = estimate(0, "mu_a");
+    let mu_s_est = estimate(1, "mu_s'");
+    let offset_est = estimate(2, "detector offset");
     let mut chi2_total = 0.0;
     let mut bins = 0;
     let captures: Vec<CaptureFit> = prepared
@@ -821,8 +868,9 @@ fn finish(
     Ok(SlabFit {
         mu_a: mu_a_est,
         mu_s_reduced: mu_s_est,
+        offset: offset_est,
         refractive_index: opts.refractive_index,
-        extrapolation_cm: d[0].slab.map_or(0.0, |s| s.extrapolation_cm),
+        extrapolation_cm: d[0].diffusion.slab.map_or(0.0, |s| s.extrapolation_cm),
         captures,
         chi2_per_dof: chi2_total / dof as f64,
         dof,
@@ -862,29 +910,20 @@ pub fn parse_length_cm(text: &str) -> Result<f64, CalibrateError> {
 }
 
 /// Expected counts in bins `0..bins` (of the response's width, from time
-/// 0) of a capture through a slab `thickness_cm` thick: the model of the
-/// module's documentation, `signal` counts in all and `background` per
-/// bin. For simulating captures and checking fits.
-#[allow(clippy::too_many_arguments)]
+/// 0) of a capture through a slab `thickness_cm` thick with the shared
+/// parameters of `opts`: the model of the module's documentation,
+/// `signal` counts in all and `background` per bin. For simulating
+/// captures and checking fits.
 pub fn expected_capture(
     irf: &MeasuredIrf,
-    refractive_index: f64,
-    mu_a_per_cm: f64,
-    mu_s_reduced_per_cm: f64,
+    opts: &SlabFitOptions,
     thickness_cm: f64,
     t0_ps: f64,
     signal: f64,
     background: f64,
     bins: usize,
 ) -> Result<Vec<f64>, CalibrateError> {
-    let opts = SlabFitOptions {
-        refractive_index,
-        mu_a_per_cm,
-        mu_s_reduced_per_cm,
-        fit_mu_a: false,
-        fit_mu_s_reduced: false,
-    };
-    let d = diffusion_for(&opts, mu_a_per_cm, mu_s_reduced_per_cm, thickness_cm)
+    let d = at_detector(opts, opts.start(), thickness_cm)
         .ok_or_else(|| CalibrateError::Invalid("invalid medium for this slab".into()))?;
     let zeros = vec![0.0; bins];
     let window = Prepared {
@@ -895,6 +934,7 @@ pub fn expected_capture(
         hist_start_ps: 0.0,
         thickness_cm,
         irf,
+        convolution: ResponseConvolution::new(&irf.weights, bins),
         peak_time_ps: 0.0,
     };
     let shape = window

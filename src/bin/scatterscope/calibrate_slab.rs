@@ -35,6 +35,13 @@ pub struct CalibrateSlabArgs {
     /// The instrument response: a capture without the slab.
     #[arg(long)]
     irf_from: PathBuf,
+    /// How much of the reference is the response: `period` keeps its whole
+    /// recorded laser period (the peak plus the slow pedestal and tail
+    /// that follow the light, as excess over the reference's lowest
+    /// level); `peak` keeps the run of bins around the peak that stands
+    /// out of the background just before it.
+    #[arg(long, value_enum, default_value_t = IrfExtent::Period)]
+    irf_extent: IrfExtent,
     /// Bin width (ps) of MATLAB histograms, which do not record it.
     #[arg(long)]
     bin_ps: Option<f64>,
@@ -58,8 +65,13 @@ pub struct CalibrateSlabArgs {
     /// Starting mu_s' (1/cm).
     #[arg(long, default_value_t = 5.0)]
     mu_s: f64,
-    /// What to fit, comma-separated: mu_a, mu_s; the others stay at their
-    /// starting values.
+    /// Starting (or fixed) distance of the detector from the laser's axis
+    /// on the far face (cm).
+    #[arg(long, default_value_t = 0.0)]
+    offset_cm: f64,
+    /// What to fit, comma-separated: mu_a, mu_s, offset (the detector's
+    /// distance from the laser's axis); the others stay at their starting
+    /// values.
     #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s")]
     fit: Vec<String>,
     /// Output directory (created if missing).
@@ -67,18 +79,31 @@ pub struct CalibrateSlabArgs {
     out: PathBuf,
 }
 
+/// How much of the reference recording is the instrument response.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum IrfExtent {
+    /// The whole recorded period ([`MeasuredIrf::from_histogram_period`]).
+    Period,
+    /// The peak's run ([`MeasuredIrf::from_histogram`]).
+    Peak,
+}
+
 fn print_fit(title: &str, fit: &SlabFit) {
     println!("{title}");
-    for (name, est) in [("mu_a", fit.mu_a), ("mu_s'", fit.mu_s_reduced)] {
+    for (name, est, unit) in [
+        ("mu_a", fit.mu_a, "/cm"),
+        ("mu_s'", fit.mu_s_reduced, "/cm"),
+        ("offset", fit.offset, "cm (detector from the laser's axis)"),
+    ] {
         let value = match (est.fitted, est.standard_error) {
             (true, Some(se)) => format!(
-                "{:.5} +- {:.1e} /cm (Poisson), +- {:.1e} scaled by sqrt(chi2/dof)",
+                "{:.5} +- {:.1e} {unit} (Poisson), +- {:.1e} scaled by sqrt(chi2/dof)",
                 est.value,
                 se,
                 se * fit.scatter_factor()
             ),
-            (true, None) => format!("{:.5} /cm (not determined by the data)", est.value),
-            (false, _) => format!("{:.5} /cm (fixed)", est.value),
+            (true, None) => format!("{:.5} {unit} (not determined by the data)", est.value),
+            (false, _) => format!("{:.5} {unit} (fixed)", est.value),
         };
         println!("  {name:<6} {value}");
     }
@@ -110,15 +135,23 @@ fn print_fit(title: &str, fit: &SlabFit) {
 
 pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     let reference = TimeHistogram::read(&args.irf_from, &args.dataset, args.bin_ps)?;
-    let irf = MeasuredIrf::from_histogram(&reference)?;
+    let irf = match args.irf_extent {
+        IrfExtent::Period => MeasuredIrf::from_histogram_period(&reference)?,
+        IrfExtent::Peak => MeasuredIrf::from_histogram(&reference)?,
+    };
     println!(
-        "instrument response from {}: {} bins of {} ps, FWHM {:.1} ps, mean delay after the peak {:.1} ps, background {} counts per bin subtracted",
+        "instrument response from {} ({}): {} bins of {} ps, FWHM {:.1} ps, mean delay after the peak {:.1} ps, {:.2} counts per bin subtracted; {:.2} % of it lies more than 1 ns before or 3 ns after the peak",
         irf.source,
+        match args.irf_extent {
+            IrfExtent::Period => "whole recorded period",
+            IrfExtent::Peak => "the peak's run",
+        },
         irf.weights.len(),
         irf.bin_width_ps,
         irf.fwhm_ps(),
         irf.mean_delay_ps(),
-        irf.background_per_bin
+        irf.background_per_bin,
+        100.0 * irf.share_outside(1000.0, 3000.0)
     );
     let specs: Vec<&str> = args
         .captures
@@ -138,11 +171,24 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
         mu_s_reduced_per_cm: args.mu_s,
         fit_mu_a: false,
         fit_mu_s_reduced: false,
+        offset_cm: args.offset_cm,
+        fit_offset: false,
     };
     opts.free_named(&args.fit).context("--fit")?;
     println!(
-        "model: slab with extrapolated boundaries, n = {}, on-axis point detector, measured instrument response, constant background per capture",
-        args.refractive_index
+        "model: slab with extrapolated boundaries, n = {}, point detector {}, measured instrument response ({}), constant background per capture",
+        args.refractive_index,
+        if opts.fit_offset {
+            "at a fitted distance from the laser's axis".to_string()
+        } else if args.offset_cm == 0.0 {
+            "on the laser's axis".to_string()
+        } else {
+            format!("{} cm from the laser's axis", args.offset_cm)
+        },
+        match args.irf_extent {
+            IrfExtent::Period => "whole recorded period",
+            IrfExtent::Peak => "the peak's run",
+        }
     );
     let started = std::time::Instant::now();
     let fit = fit_slab(&captures, &irf, &opts)?;
@@ -157,13 +203,7 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     );
     let mut all = vec![(captures, fit.clone())];
     if !held.is_empty() {
-        let pred = predict_captures(
-            &held,
-            &irf,
-            args.refractive_index,
-            fit.mu_a.value,
-            fit.mu_s_reduced.value,
-        )?;
+        let pred = predict_captures(&held, &irf, &fit.fixed())?;
         print_fit(
             "prediction of captures left out of the fit (medium fixed):",
             &pred,
