@@ -149,8 +149,9 @@ impl MeasuredIrf {
     /// around it (outside the peak's run); both as excess over the floor,
     /// the least mean of [`FLOOR_BLOCK_BINS`]-bin blocks, clipped at zero.
     /// The recorded range is [`recorded_range`]'s (a TCSPC range longer
-    /// than the laser's period ends in empty bins). A capture's constant background then holds only what
-    /// the floor holds: dark counts and the light's level there.
+    /// than the laser's period ends in empty bins). A capture's constant
+    /// background then holds only what the floor holds: dark counts and
+    /// the light's level there.
     pub fn from_histogram_period(reference: &TimeHistogram) -> Result<Self, IrfError> {
         let core = Self::from_histogram(reference)?;
         let counts = &reference.counts;
