@@ -10,8 +10,8 @@ use rand_distr::{Distribution, Poisson};
 use scatterscope::calibrate::histogram::TimeHistogram;
 use scatterscope::calibrate::measured_irf::{MeasuredIrf, recorded_range};
 use scatterscope::calibrate::transmittance::{
-    Capture, SlabFitOptions, expected_capture, fit_slab, parse_length_cm, predict_captures,
-    read_captures,
+    Capture, RISING_EDGE_CONVENTION, SlabFitOptions, expected_capture, fit_slab, parse_length_cm,
+    predict_captures, read_captures,
 };
 
 const BIN_PS: f64 = 8.0;
@@ -62,6 +62,7 @@ fn medium(mu_a: f64, mu_s: f64, offset_cm: f64) -> SlabFitOptions {
         fit_mu_s_reduced: false,
         offset_cm,
         fit_offset: false,
+        rising_edge_share: 0.0,
     }
 }
 
@@ -150,6 +151,54 @@ fn a_simulated_medium_is_recovered_within_its_standard_errors() {
     let wrong = predict_captures(&captures[1..2], &irf, &medium(mu_a, 1.2 * mu_s, 0.0)).unwrap();
     assert!(right.chi2_per_dof < 1.2, "{}", right.chi2_per_dof);
     assert!(wrong.chi2_per_dof > 3.0, "{}", wrong.chi2_per_dof);
+
+    // Fitting from 80 % of the peak on the rising edge: the bins left out
+    // lie between the window's first 50 and the peak, each capture's
+    // window still holds them (with their chi-square), and the medium is
+    // still recovered.
+    let cut = SlabFitOptions {
+        rising_edge_share: RISING_EDGE_CONVENTION,
+        ..opts
+    };
+    let fit = fit_slab(&captures, &irf, &cut).unwrap();
+    for c in &fit.captures {
+        let peak = c
+            .measured
+            .iter()
+            .enumerate()
+            .fold((0, 0.0), |b, (i, &m)| if m > b.1 { (i, m) } else { b })
+            .0;
+        assert!(
+            c.left_out.start == 50 && c.left_out.end > 60 && c.left_out.end <= peak,
+            "{}: left out {:?}, peak at {peak}",
+            c.label,
+            c.left_out
+        );
+        assert_eq!(c.dof + c.left_out.len() + 3, c.measured.len());
+        assert!(c.chi2_window > c.chi2, "{c:?}");
+        assert!(c.chi2_per_dof_window() < 1.3, "{}", c.chi2_per_dof_window());
+    }
+    for (est, truth) in [(fit.mu_a, mu_a), (fit.mu_s_reduced, mu_s)] {
+        let se = est.standard_error.expect("determined");
+        assert!(
+            (est.value - truth).abs() < 4.0 * se,
+            "{} vs {truth}",
+            est.value
+        );
+    }
+    for bad in [1.0, -0.1, f64::NAN] {
+        let err = fit_slab(
+            &captures,
+            &irf,
+            &SlabFitOptions {
+                rising_edge_share: bad,
+                ..opts
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("rising-edge share"), "{err}");
+    }
 }
 
 /// A pulsed reference as the CDT one records it: one 2 500-bin (20 ns)
@@ -497,6 +546,7 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     assert!(
         stdout.contains("instrument response from")
             && stdout.contains("(whole recorded period): 12500 bins of 8 ps")
+            && stdout.contains("left out  chi2/dof  (all bins)")
             && stdout.contains("prediction of captures left out")
             && stdout.contains(
                 "parts: capture_3_5_inch: 240 parts, 120 (120-239) also in capture_3_0_inch"

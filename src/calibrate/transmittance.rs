@@ -1,28 +1,33 @@
 //! The medium's mu_s' and mu_a from time-resolved transmittance captures of
 //! slabs of known thickness: a point detector on the far face, on the
-//! laser's axis, recording a time histogram.
+//! laser's axis or `rho` off it, recording a time histogram.
 //!
 //! Model of capture bin `i` (bins of width `w` from the histogram's start
 //! `t_s`):
 //!
 //! ```text
 //! mu_i = A sum_j r_j q(i - j + p) + B
-//! q(k) = int over [t_s + k w - t0, t_s + (k + 1) w - t0] of T(rho = 0, t) dt
+//! q(k) = int over [t_s + k w - t0, t_s + (k + 1) w - t0] of T(rho, t) dt
 //! ```
 //!
-//! `T(rho = 0, t)` is the slab model's transmittance on the axis
+//! `T(rho, t)` is the slab model's transmittance
 //! ([`scatterscope_physics::Diffusion::log_psf`] with
 //! [`MediumModel::Slab`]: extrapolated boundaries, the reflection of the
 //! refractive-index mismatch), integrated over each bin by
 //! [`GAUSS_NODES`]-point Gauss-Legendre, `r` the measured instrument
-//! response with zero delay at index `p`, `t0` the time the pulse enters
-//! the slab on the capture's clock, `A` the signal and `B` the background
+//! response with zero delay at index `p` (the sum by FFT,
+//! [`super::response_convolution`]), `t0` the time the pulse enters the
+//! slab on the capture's clock, `A` the signal and `B` the background
 //! counts per bin. The shape `sum_j r_j q` is scaled to unit sum over the
-//! fitted window, so `A` is the capture's signal counts there.
+//! fitted window, so `A` is the capture's signal counts there. The window
+//! runs from [`PRE_LIGHT_BINS`] before the light to where the light falls
+//! under [`TAIL_SHARE`] of its peak; optionally the rising edge is left
+//! out of the likelihood ([`SlabFitOptions::rising_edge_share`]).
 //!
-//! mu_s' and mu_a are shared by every capture; `t0`, `A` and `B` are each
-//! capture's own. The fit maximises the Poisson likelihood: Nelder-Mead
-//! over ln mu_s' and ln mu_a, for each of its points a Brent search over
+//! mu_s', mu_a and `rho` are shared by every capture; `t0`, `A` and `B`
+//! are each capture's own. The fit maximises the Poisson likelihood:
+//! Nelder-Mead over ln mu_s', ln mu_a and `rho` (those fitted), for each
+//! of its points a Brent search over
 //! each capture's `t0`, and for each `t0` Newton's method on the convex
 //! likelihood in `A` and `B`. Standard errors come from the inverse of the
 //! full Hessian (all parameters, central differences) at the optimum; with
@@ -89,6 +94,12 @@ pub const T0_TOLERANCE_PS: f64 = 1e-3;
 /// A fitted coefficient below this (1/cm, or cm for the detector's
 /// offset) has run to its bound 0.
 pub const AT_ZERO_PER_CM: f64 = 1e-7;
+
+/// The share of the peak from which time-domain diffuse optics usually
+/// fits the rising edge (with 1 % of the peak on the falling edge, as
+/// [`TAIL_SHARE`]): the diffusion model is least accurate at the earliest
+/// times. Taken from that practice, not chosen on any capture here.
+pub const RISING_EDGE_CONVENTION: f64 = 0.8;
 
 /// First step of the search over the detector's offset (cm).
 pub const OFFSET_STEP_CM: f64 = 0.3;
@@ -238,6 +249,12 @@ pub struct SlabFitOptions {
     pub offset_cm: f64,
     /// Whether the offset is fitted.
     pub fit_offset: bool,
+    /// Rising-edge bins left out of the likelihood: those after the
+    /// window's [`PRE_LIGHT_BINS`] and before the first bin whose excess
+    /// over the background reaches this share of the peak's; 0 keeps
+    /// every bin. [`RISING_EDGE_CONVENTION`] is time-domain diffuse
+    /// optics' usual choice.
+    pub rising_edge_share: f64,
 }
 
 impl SlabFitOptions {
@@ -291,16 +308,28 @@ pub struct CaptureFit {
     pub measured: Vec<f64>,
     /// Fitted expected counts in the window.
     pub fitted: Vec<f64>,
-    /// Pearson chi-square over the window.
+    /// Window bins (indices into `measured`) left out of the likelihood:
+    /// the rising edge, see [`SlabFitOptions::rising_edge_share`].
+    pub left_out: std::ops::Range<usize>,
+    /// Pearson chi-square over the fitted bins.
     pub chi2: f64,
-    /// Bins in the window less this capture's own parameters.
+    /// Fitted bins less this capture's own parameters.
     pub dof: usize,
+    /// Pearson chi-square over every bin of the window, the left-out ones
+    /// included.
+    pub chi2_window: f64,
 }
 
 impl CaptureFit {
     /// Chi-square per degree of freedom of this capture alone.
     pub fn chi2_per_dof(&self) -> f64 {
         self.chi2 / self.dof.max(1) as f64
+    }
+
+    /// Chi-square per degree of freedom over the whole window, the
+    /// left-out bins included.
+    pub fn chi2_per_dof_window(&self) -> f64 {
+        self.chi2_window / self.measured.len().saturating_sub(3).max(1) as f64
     }
 
     /// Time of the window's first bin start (ps) on the capture's clock.
@@ -329,6 +358,8 @@ pub struct SlabFit {
     pub mu_s_reduced: MediumEstimate,
     /// Detector's distance from the laser's axis (cm).
     pub offset: MediumEstimate,
+    /// The rising-edge share the fit left out ([`SlabFitOptions`]).
+    pub rising_edge_share: f64,
     /// Refractive index assumed.
     pub refractive_index: f64,
     /// Extrapolation distance of the fitted medium's boundaries (cm).
@@ -363,6 +394,7 @@ impl SlabFit {
             fit_mu_s_reduced: false,
             offset_cm: self.offset.value,
             fit_offset: false,
+            rising_edge_share: self.rising_edge_share,
         }
     }
 }
@@ -384,7 +416,11 @@ impl AtDetector {
 /// One capture prepared for the fit: its window and response.
 struct Prepared<'a> {
     label: &'a str,
-    counts: &'a [f64],
+    /// The window's counts.
+    window: &'a [f64],
+    /// The fitted bins' counts: the window less `left_out`.
+    counts: Vec<f64>,
+    left_out: std::ops::Range<usize>,
     start: usize,
     bin_ps: f64,
     hist_start_ps: f64,
@@ -398,7 +434,7 @@ impl Prepared<'_> {
     /// Unit-sum model shape over the window for the medium and `t0`;
     /// `None` when the physics is invalid or carries no light there.
     fn shape(&self, model: &AtDetector, t0: f64) -> Option<Vec<f64>> {
-        let n = self.counts.len();
+        let n = self.window.len();
         let m = self.irf.weights.len();
         let p = self.irf.peak;
         // q(k) for k in [start - (m - 1 - p), start + n + p).
@@ -426,6 +462,17 @@ impl Prepared<'_> {
         }
         out.iter_mut().for_each(|v| *v /= total);
         Some(out)
+    }
+
+    /// [`Self::shape`] on the fitted bins only.
+    fn fitted_shape(&self, model: &AtDetector, t0: f64) -> Option<Vec<f64>> {
+        self.shape(model, t0).map(|s| self.fitted_bins(s))
+    }
+
+    /// `window_values` less the left-out bins.
+    fn fitted_bins(&self, mut window_values: Vec<f64>) -> Vec<f64> {
+        window_values.drain(self.left_out.clone());
+        window_values
     }
 }
 
@@ -530,8 +577,8 @@ impl CostFunction for T0Search<'_> {
     type Param = f64;
     type Output = f64;
     fn cost(&self, t0: &f64) -> Result<f64, argmin::core::Error> {
-        Ok(match self.cap.shape(self.model, *t0) {
-            Some(s) => amplitudes(&s, self.cap.counts).2,
+        Ok(match self.cap.fitted_shape(self.model, *t0) {
+            Some(s) => amplitudes(&s, &self.cap.counts).2,
             None => f64::MAX,
         })
     }
@@ -548,8 +595,8 @@ fn best_t0(cap: &Prepared, model: &AtDetector) -> Option<([f64; 3], f64, u64)> {
         .ok()?;
     let evals = res.problem.counts.get("cost_count").copied().unwrap_or(0);
     let t0 = *res.state().get_best_param()?;
-    let shape = cap.shape(model, t0)?;
-    let (a, b, v) = amplitudes(&shape, cap.counts);
+    let shape = cap.fitted_shape(model, t0)?;
+    let (a, b, v) = amplitudes(&shape, &cap.counts);
     v.is_finite().then_some(([t0, a, b], v, evals + 1))
 }
 
@@ -632,9 +679,25 @@ fn prepare<'a>(
         }
         end += 1;
     }
+    let window = &h.counts[start..end];
+    let left_out = if opts.rising_edge_share > 0.0 {
+        let from = PRE_LIGHT_BINS.min(peak - start);
+        let to = (from..=peak - start)
+            .find(|&i| window[i] - background >= opts.rising_edge_share * peak_excess)
+            .unwrap_or(peak - start);
+        from..to
+    } else {
+        0..0
+    };
     Ok(Prepared {
         label: &capture.label,
-        counts: &h.counts[start..end],
+        window,
+        counts: window[..left_out.start]
+            .iter()
+            .chain(&window[left_out.end..])
+            .copied()
+            .collect(),
+        left_out,
         start,
         bin_ps: w,
         hist_start_ps: h.start_ps,
@@ -709,6 +772,12 @@ pub fn fit_slab(
                 "{name} {v} must be positive and finite"
             )));
         }
+    }
+    if !(0.0..1.0).contains(&opts.rising_edge_share) {
+        return Err(CalibrateError::Invalid(format!(
+            "rising-edge share {} must be at least 0 and below 1",
+            opts.rising_edge_share
+        )));
     }
     let prepared: Vec<Prepared> = captures
         .iter()
@@ -787,8 +856,8 @@ fn finish(
                 p[i] = x;
             }
             at_detector(opts, [p[0], p[1], p[2]], cap.thickness_cm)
-                .and_then(|d| cap.shape(&d, p[3]))
-                .map_or(f64::INFINITY, |s| nll(&s, cap.counts, p[4], p[5]))
+                .and_then(|d| cap.fitted_shape(&d, p[3]))
+                .map_or(f64::INFINITY, |s| nll(&s, &cap.counts, p[4], p[5]))
         };
         let x: Vec<f64> = free.iter().map(|&i| base[i]).collect();
         let steps: Vec<f64> = free
@@ -846,7 +915,7 @@ fn finish(
             let [t0, a, b] = nuisance[c];
             let shape = cap.shape(&d[c], t0).unwrap_or_default();
             let fitted: Vec<f64> = shape.iter().map(|s| a * s + b).collect();
-            let chi2 = pearson_chi2(&fitted, cap.counts);
+            let chi2 = pearson_chi2(&cap.fitted_bins(fitted.clone()), &cap.counts);
             chi2_total += chi2;
             bins += fitted.len();
             CaptureFit {
@@ -857,8 +926,10 @@ fn finish(
                 signal: a,
                 background: b,
                 window_start: cap.start,
-                measured: cap.counts.to_vec(),
+                measured: cap.window.to_vec(),
+                chi2_window: pearson_chi2(&fitted, cap.window),
                 fitted,
+                left_out: cap.left_out.clone(),
                 chi2,
                 dof: cap.counts.len().saturating_sub(3),
             }
@@ -869,6 +940,7 @@ fn finish(
         mu_a: mu_a_est,
         mu_s_reduced: mu_s_est,
         offset: offset_est,
+        rising_edge_share: opts.rising_edge_share,
         refractive_index: opts.refractive_index,
         extrapolation_cm: d[0].diffusion.slab.map_or(0.0, |s| s.extrapolation_cm),
         captures,
@@ -928,7 +1000,9 @@ pub fn expected_capture(
     let zeros = vec![0.0; bins];
     let window = Prepared {
         label: "model",
-        counts: &zeros,
+        window: &zeros,
+        counts: Vec::new(),
+        left_out: 0..0,
         start: 0,
         bin_ps: irf.bin_width_ps,
         hist_start_ps: 0.0,

@@ -74,6 +74,13 @@ pub struct CalibrateSlabArgs {
     /// values.
     #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s")]
     fit: Vec<String>,
+    /// Leave the rising edge out of the fit: the bins after the window's
+    /// first 50 (kept for the background) and before the first whose
+    /// excess reaches this share of the peak's (time-domain diffuse
+    /// optics usually fits from 0.8; 0 fits every bin). The output gives
+    /// chi-square over the fitted bins and over the whole window.
+    #[arg(long, default_value_t = 0.0)]
+    rising_edge_share: f64,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/calibrate-slab")]
     out: PathBuf,
@@ -114,18 +121,20 @@ fn print_fit(title: &str, fit: &SlabFit) {
         fit.dof
     );
     println!(
-        "  capture              thickness   t0 (ps)        signal       background/bin  bins  chi2/dof"
+        "  capture              thickness   t0 (ps)        signal       background/bin  bins  left out  chi2/dof  (all bins)"
     );
     for c in &fit.captures {
         println!(
-            "  {:<20} {:>6.2} cm  {:>12.1}  {:>12.0}  {:>14.1}  {:>5}  {:>8.2}",
+            "  {:<20} {:>6.2} cm  {:>12.1}  {:>12.0}  {:>14.1}  {:>5}  {:>8}  {:>8.2}  {:>10.2}",
             c.label,
             c.thickness_cm,
             c.t0_ps,
             c.signal,
             c.background,
             c.measured.len(),
-            c.chi2_per_dof()
+            c.left_out.len(),
+            c.chi2_per_dof(),
+            c.chi2_per_dof_window()
         );
     }
     for u in &fit.undetermined {
@@ -173,6 +182,7 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
         fit_mu_s_reduced: false,
         offset_cm: args.offset_cm,
         fit_offset: false,
+        rising_edge_share: args.rising_edge_share,
     };
     opts.free_named(&args.fit).context("--fit")?;
     println!(
@@ -212,7 +222,7 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output directory {}", args.out.display()))?;
-    let mut csv = String::from("capture,role,bin_start_ps,measured,fitted\n");
+    let mut csv = String::from("capture,role,bin_start_ps,measured,fitted,in_fit\n");
     let mut pngs = Vec::new();
     for ((caps, f), role) in all.iter().zip(["fitted", "predicted"]) {
         for (cap, c) in caps.iter().zip(&f.captures) {
@@ -220,7 +230,8 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
             let first = c.window_start_ps(h.bin_width_ps, h.start_ps);
             let start = |i: usize| first + i as f64 * h.bin_width_ps;
             for (i, (m, u)) in c.measured.iter().zip(&c.fitted).enumerate() {
-                writeln!(csv, "{},{role},{},{m},{u}", c.label, start(i))
+                let in_fit = u8::from(!c.left_out.contains(&i));
+                writeln!(csv, "{},{role},{},{m},{u},{in_fit}", c.label, start(i))
                     .expect("writing to a String");
             }
             // Log counts against the time since the pulse entered the slab.
