@@ -192,7 +192,7 @@ pub(crate) fn read_first_layer(
 }
 
 /// Reads the first layer's time-bin channels (`t000`, `t001`, ...), as
-/// [`write`] or any other OpenEXR writer lays them out, and the metadata
+/// [`write()`] or any other OpenEXR writer lays them out, and the metadata
 /// attribute when there is one.
 pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
     let layer = read_first_layer(path).map_err(|e| exr_error(path, e))?;
