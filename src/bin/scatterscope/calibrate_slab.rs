@@ -234,10 +234,12 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
                 writeln!(csv, "{},{role},{},{m},{u},{in_fit}", c.label, start(i))
                     .expect("writing to a String");
             }
-            // Log counts against the time since the pulse entered the slab.
-            let points = |v: &[f64]| {
+            // Log counts against the time since the pulse entered the slab,
+            // of the window's bins that `keep` picks.
+            let points = |v: &[f64], keep: &dyn Fn(usize) -> bool| {
                 v.iter()
                     .enumerate()
+                    .filter(|(i, _)| keep(*i))
                     .map(|(i, &x)| {
                         (
                             start(i) + 0.5 * h.bin_width_ps - c.t0_ps,
@@ -246,6 +248,16 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
                     })
                     .collect()
             };
+            let mut measured = vec![Series {
+                label: "measured".into(),
+                points: points(&c.measured, &|i| !c.left_out.contains(&i)),
+            }];
+            if !c.left_out.is_empty() {
+                measured.push(Series {
+                    label: "measured, left out of the fit".into(),
+                    points: points(&c.measured, &|i| c.left_out.contains(&i)),
+                });
+            }
             let name = format!("fit_{}.png", c.label);
             let png = args.out.join(&name);
             chart(
@@ -258,13 +270,10 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
                 ),
                 "time after the pulse enters the slab (ps)",
                 "log10 counts per bin",
-                &[Series {
-                    label: "measured".into(),
-                    points: points(&c.measured),
-                }],
+                &measured,
                 &[Series {
                     label: "model".into(),
-                    points: points(&c.fitted),
+                    points: points(&c.fitted, &|_| true),
                 }],
                 false,
             )
