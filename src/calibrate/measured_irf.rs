@@ -56,6 +56,9 @@ pub struct MeasuredIrf {
     pub weights: Vec<f64>,
     /// Index in `weights` of zero delay (the reference's peak).
     pub peak: usize,
+    /// Indices in `weights` of the peak's run (all of them, unless the
+    /// response also holds the slow parts of the period).
+    pub peak_run: std::ops::Range<usize>,
     /// Bin width (ps), the reference's.
     pub bin_width_ps: f64,
     /// Background subtracted from every bin (counts).
@@ -133,6 +136,7 @@ impl MeasuredIrf {
         let weights: Vec<f64> = excess[start..end].iter().map(|e| e.max(0.0)).collect();
         let signal: f64 = weights.iter().sum();
         Ok(Self {
+            peak_run: 0..weights.len(),
             weights: weights.iter().map(|w| w / signal).collect(),
             peak: peak - start,
             bin_width_ps: reference.bin_width_ps,
@@ -192,6 +196,7 @@ impl MeasuredIrf {
         Ok(Self {
             weights: excess.iter().map(|e| e / signal).collect(),
             peak: peak - first,
+            peak_run: core_start - first..core_end - first,
             background_per_bin: floor,
             signal_counts: signal,
             ..core
