@@ -199,6 +199,19 @@ fn a_simulated_medium_is_recovered_within_its_standard_errors() {
         .to_string();
         assert!(err.contains("rising-edge share"), "{err}");
     }
+    for bad in [-1.0, f64::INFINITY] {
+        let err = fit_slab(
+            &captures,
+            &irf,
+            &SlabFitOptions {
+                offset_cm: bad,
+                ..opts
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("detector offset"), "{err}");
+    }
 }
 
 /// A pulsed reference as the CDT one records it: one 2 500-bin (20 ns)
@@ -258,6 +271,17 @@ fn a_pedestal_that_follows_the_light_is_kept_by_the_period_response() {
     assert!(
         (measured / true_outside - 1.0).abs() < 0.05,
         "pedestal share {measured} vs {true_outside}"
+    );
+    // A recording shorter than one floor block has no floor to measure.
+    let mut short = reference.clone();
+    let p = short.peak_index();
+    short.counts = short.counts[p - 100..p + 100].to_vec();
+    let err = MeasuredIrf::from_histogram_period(&short)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("pulsed") && err.contains("200 bins") && err.contains("floor"),
+        "{err}"
     );
     // Captures through slabs of that instrument: the period response fits
     // them to their noise and recovers the medium.

@@ -787,6 +787,12 @@ pub fn fit_slab(
             )));
         }
     }
+    if !(opts.offset_cm.is_finite() && opts.offset_cm >= 0.0) {
+        return Err(CalibrateError::Invalid(format!(
+            "detector offset {} cm must be finite and not negative",
+            opts.offset_cm
+        )));
+    }
     if !(0.0..1.0).contains(&opts.rising_edge_share) {
         return Err(CalibrateError::Invalid(format!(
             "rising-edge share {} must be at least 0 and below 1",
