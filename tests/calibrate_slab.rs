@@ -10,8 +10,8 @@ use rand_distr::{Distribution, Poisson};
 use scatterscope::calibrate::histogram::TimeHistogram;
 use scatterscope::calibrate::measured_irf::{MeasuredIrf, recorded_range};
 use scatterscope::calibrate::transmittance::{
-    Capture, RISING_EDGE_CONVENTION, SlabFitOptions, expected_capture, fit_slab, parse_length_cm,
-    predict_captures, read_captures,
+    Capture, MediumEstimate, RISING_EDGE_CONVENTION, SlabFitOptions, expected_capture, fit_slab,
+    parse_length_cm, predict_captures, read_captures,
 };
 
 const BIN_PS: f64 = 8.0;
@@ -50,6 +50,18 @@ fn reference(seed: u64) -> TimeHistogram {
     let total: f64 = shape.iter().sum();
     shape.iter_mut().for_each(|v| *v = 2e7 * *v / total + 30.0);
     TimeHistogram::new(poisson(&shape, seed), BIN_PS, 0.0, Path::new("reference")).unwrap()
+}
+
+/// Asserts that `est` was determined and lies within 4 of its standard
+/// errors of `truth`; returns the standard error.
+fn assert_recovered(est: MediumEstimate, truth: f64) -> f64 {
+    let se = est.standard_error.expect("determined");
+    assert!(
+        (est.value - truth).abs() < 4.0 * se,
+        "{} vs {truth} (se {se})",
+        est.value
+    );
+    se
 }
 
 /// Shared parameters at n = 1.12, none fitted.
@@ -121,12 +133,7 @@ fn a_simulated_medium_is_recovered_within_its_standard_errors() {
     let fit = fit_slab(&captures, &irf, &opts).unwrap();
     assert!(fit.undetermined.is_empty(), "{:?}", fit.undetermined);
     for (est, truth) in [(fit.mu_a, mu_a), (fit.mu_s_reduced, mu_s)] {
-        let se = est.standard_error.expect("determined");
-        assert!(
-            (est.value - truth).abs() < 4.0 * se,
-            "{} vs {truth} (se {se})",
-            est.value
-        );
+        let se = assert_recovered(est, truth);
         assert!(
             se < 0.05 * truth,
             "standard error {se} above 5 % of {truth}"
@@ -179,12 +186,7 @@ fn a_simulated_medium_is_recovered_within_its_standard_errors() {
         assert!(c.chi2_per_dof_window() < 1.3, "{}", c.chi2_per_dof_window());
     }
     for (est, truth) in [(fit.mu_a, mu_a), (fit.mu_s_reduced, mu_s)] {
-        let se = est.standard_error.expect("determined");
-        assert!(
-            (est.value - truth).abs() < 4.0 * se,
-            "{} vs {truth}",
-            est.value
-        );
+        assert_recovered(est, truth);
     }
     for bad in [1.0, -0.1, f64::NAN] {
         let err = fit_slab(
@@ -298,8 +300,7 @@ fn a_pedestal_that_follows_the_light_is_kept_by_the_period_response() {
         "{}",
         fit.chi2_per_dof
     );
-    let se = fit.mu_s_reduced.standard_error.unwrap();
-    assert!((fit.mu_s_reduced.value - 2.62).abs() < 4.0 * se, "{fit:?}");
+    assert_recovered(fit.mu_s_reduced, 2.62);
 }
 
 #[test]
@@ -320,12 +321,7 @@ fn a_detector_off_the_laser_axis_is_recovered() {
         (fit.mu_s_reduced, 2.62),
         (fit.mu_a, 0.0053),
     ] {
-        let se = est.standard_error.expect("determined");
-        assert!(
-            (est.value - truth).abs() < 4.0 * se,
-            "{} vs {truth} (se {se})",
-            est.value
-        );
+        assert_recovered(est, truth);
     }
     assert!(
         (0.9..1.1).contains(&fit.chi2_per_dof),

@@ -203,6 +203,16 @@ impl MeasuredIrf {
         })
     }
 
+    /// What the response spans, for the output: "whole recorded period"
+    /// ([`Self::from_histogram_period`]) or "the peak's run".
+    pub fn extent_name(&self) -> &'static str {
+        if self.peak_run == (0..self.weights.len()) {
+            "the peak's run"
+        } else {
+            "whole recorded period"
+        }
+    }
+
     /// Share of the response outside `[-before_ps, after_ps]` around its
     /// peak.
     pub fn share_outside(&self, before_ps: f64, after_ps: f64) -> f64 {

@@ -130,7 +130,17 @@ impl Capture {
         bin_width_ps: Option<f64>,
     ) -> Result<Self, CalibrateError> {
         let (path, thickness_cm, label) = parse_spec(spec)?;
-        let histogram = TimeHistogram::read(&path, dataset, bin_width_ps)
+        Self::read(&path, thickness_cm, label, dataset, bin_width_ps)
+    }
+
+    fn read(
+        path: &Path,
+        thickness_cm: f64,
+        label: String,
+        dataset: &str,
+        bin_width_ps: Option<f64>,
+    ) -> Result<Self, CalibrateError> {
+        let histogram = TimeHistogram::read(path, dataset, bin_width_ps)
             .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
         Ok(Self {
             histogram,
@@ -166,9 +176,15 @@ pub fn read_captures(
     parts: Option<&str>,
     bin_width_ps: Option<f64>,
 ) -> Result<(Vec<Capture>, Vec<String>), CalibrateError> {
-    let mut captures: Vec<Capture> = specs
+    let parsed: Vec<(PathBuf, f64, String)> = specs
         .iter()
-        .map(|s| Capture::from_spec(s, dataset, bin_width_ps))
+        .map(|s| parse_spec(s))
+        .collect::<Result<_, _>>()?;
+    let mut captures: Vec<Capture> = parsed
+        .iter()
+        .map(|(path, thickness, label)| {
+            Capture::read(path, *thickness, label.clone(), dataset, bin_width_ps)
+        })
         .collect::<Result<_, _>>()?;
     let Some(parts_name) = parts else {
         return Ok((captures, Vec::new()));
@@ -177,14 +193,13 @@ pub fn read_captures(
     let mut notes = Vec::new();
     // (capture index, its parts) for the captures that have parts.
     let mut parted: Vec<(usize, Vec<Vec<f64>>)> = Vec::new();
-    for (i, spec) in specs.iter().enumerate() {
-        let (path, _, _) = parse_spec(spec)?;
+    for (i, (path, _, _)) in parsed.iter().enumerate() {
         let is_mat = path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("mat"));
         let width = captures[i].histogram.bin_width_ps;
         let found = if is_mat {
-            TimeHistogram::read_mat_parts(&path, parts_name, width).map_err(invalid)?
+            TimeHistogram::read_mat_parts(path, parts_name, width).map_err(invalid)?
         } else {
             None
         };
@@ -274,6 +289,22 @@ impl SlabFitOptions {
             }
         }
         Ok(())
+    }
+
+    /// One line saying what the model assumes with the response `irf`.
+    pub fn describe_model(&self, irf: &MeasuredIrf) -> String {
+        let detector = if self.fit_offset {
+            "at a fitted distance from the laser's axis".to_string()
+        } else if self.offset_cm == 0.0 {
+            "on the laser's axis".to_string()
+        } else {
+            format!("{} cm from the laser's axis", self.offset_cm)
+        };
+        format!(
+            "slab with extrapolated boundaries, n = {}, point detector {detector}, measured instrument response ({}), constant background per capture",
+            self.refractive_index,
+            irf.extent_name()
+        )
     }
 
     /// Starting (or fixed) mu_a, mu_s' and offset.

@@ -151,10 +151,7 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     println!(
         "instrument response from {} ({}): {} bins of {} ps, FWHM {:.1} ps, mean delay after the peak {:.1} ps, {:.2} counts per bin subtracted; {:.2} % of it lies more than 1 ns before or 3 ns after the peak",
         irf.source,
-        match args.irf_extent {
-            IrfExtent::Period => "whole recorded period",
-            IrfExtent::Peak => "the peak's run",
-        },
+        irf.extent_name(),
         irf.weights.len(),
         irf.bin_width_ps,
         irf.fwhm_ps(),
@@ -185,21 +182,7 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
         rising_edge_share: args.rising_edge_share,
     };
     opts.free_named(&args.fit).context("--fit")?;
-    println!(
-        "model: slab with extrapolated boundaries, n = {}, point detector {}, measured instrument response ({}), constant background per capture",
-        args.refractive_index,
-        if opts.fit_offset {
-            "at a fitted distance from the laser's axis".to_string()
-        } else if args.offset_cm == 0.0 {
-            "on the laser's axis".to_string()
-        } else {
-            format!("{} cm from the laser's axis", args.offset_cm)
-        },
-        match args.irf_extent {
-            IrfExtent::Period => "whole recorded period",
-            IrfExtent::Peak => "the peak's run",
-        }
-    );
+    println!("model: {}", opts.describe_model(&irf));
     let started = std::time::Instant::now();
     let fit = fit_slab(&captures, &irf, &opts)?;
     print_fit(
