@@ -262,6 +262,9 @@ fn a_pedestal_that_follows_the_light_is_kept_by_the_period_response() {
     );
     assert!((period.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
     assert!(period.weights.iter().all(|w| *w >= 0.0));
+    // Nothing outside an infinite span: +0, which prints as "0.00".
+    let none = period.share_outside(f64::INFINITY, f64::INFINITY);
+    assert!(none == 0.0 && none.is_sign_positive(), "{none}");
     // Farther than 1 ns (125 bins) from the peak there is only pedestal.
     let measured = period.share_outside(1000.0, 1000.0);
     let true_outside: f64 = pedestal

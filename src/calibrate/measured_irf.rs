@@ -224,8 +224,9 @@ impl MeasuredIrf {
                 let d = (*j as f64 - self.peak as f64) * w;
                 d < -before_ps || d > after_ps
             })
-            .map(|(_, v)| v)
-            .sum()
+            // A fold from +0, not `sum` (which starts at -0 and prints an
+            // empty share as "-0.00").
+            .fold(0.0, |acc, (_, v)| acc + v)
     }
 
     /// Full width at half maximum (ps), by linear interpolation between
