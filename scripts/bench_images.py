@@ -28,6 +28,17 @@ held-out images were added, keeping tuning at one third (16 of 48):
   a secondary capture), a liver segmentation mask, scikit-image's colour
   wheel, matplotlib's logo, and five more seeded scenes (points, lines,
   terrain, blobs, points).
+
+Third round (2026-11-24, eleventh session), added before any
+reconstruction ran on them: the two largest held-out losses are very
+smooth scenes (the nuclear-medicine image and the colour wheel), and no
+tuning image was of that kind. Three smooth tuning images and six smooth
+held-out ones were added, keeping tuning at one third (19 of 57):
+- tuning: a seeded smooth random field, seeded wide glows on black and a
+  seeded smooth ramp in a disk;
+- held-out: two more of each generator with other seeds, and matplotlib's
+  15 x 15 bivariate-normal sample upsampled (a low-resolution smooth
+  image, as nuclear-medicine images are).
 """
 
 import csv
@@ -128,6 +139,45 @@ def line_art(seed, size=384):
     return img
 
 
+def smooth_field(seed, size=384):
+    """A very smooth random surface: Gaussian noise with a Gaussian power
+    spectrum (correlation length about a tenth of the image), seeded."""
+    rng = np.random.default_rng(seed)
+    f = np.hypot(*np.meshgrid(np.fft.fftfreq(size), np.fft.fftfreq(size)))
+    spectrum = (rng.normal(size=(size, size)) + 1j * rng.normal(size=(size, size))) * np.exp(-((f * 12) ** 2))
+    return np.fft.ifft2(spectrum).real
+
+
+def glows(seed, size=384):
+    """A few wide Gaussian glows of random size and brightness on black
+    (an uptake image: nuclear medicine, fluorescence at depth), seeded."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[:size, :size]
+    img = np.zeros((size, size))
+    for _ in range(rng.integers(3, 7)):
+        y, x = rng.uniform(0.2, 0.8, 2) * size
+        r = rng.uniform(0.04, 0.15) * size
+        img += rng.uniform(0.3, 1.0) * np.exp(-((yy - y) ** 2 + (xx - x) ** 2) / (2 * r * r))
+    return img
+
+
+def ramp(seed, size=384):
+    """A smooth angular and radial ramp inside a soft-edged disk on black,
+    at a random angle and centre, seeded."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[:size, :size] / size
+    cy, cx = rng.uniform(0.4, 0.6, 2)
+    r = np.hypot(yy - cy, xx - cx)
+    angle = np.arctan2(yy - cy, xx - cx) + rng.uniform(0, 2 * np.pi)
+    inside = 1 / (1 + np.exp((r - rng.uniform(0.3, 0.4)) * size / 4))
+    return inside * (0.6 + 0.4 * np.cos(angle)) * (1 - r)
+
+
+def mpl_array(name):
+    import matplotlib.cbook as cbook
+    return np.load(cbook.get_sample_data(name, asfileobj=False))
+
+
 SK = ("scikit-image", "scikit-image data licence (public domain or CC0 for these files)")
 PYWT = ("PyWavelets", "PyWavelets data (MIT licence; ascent from SciPy, BSD)")
 MPL = ("matplotlib", "matplotlib sample data (matplotlib licence / public domain)")
@@ -191,6 +241,17 @@ IMAGES = [
     ("terrain_53", lambda: terrain(53), GEN, "terrain", HELD_OUT),
     ("blobs_54", lambda: blobs(54), GEN, "sparse/dark background", HELD_OUT),
     ("points_55", lambda: star_field(55), GEN, "sparse/dark background", HELD_OUT),
+    # Third round: smooth scenes, tuning ...
+    ("smooth_61", lambda: smooth_field(61), GEN, "smooth", TUNING),
+    ("glows_62", lambda: glows(62), GEN, "smooth/dark background", TUNING),
+    ("ramp_63", lambda: ramp(63), GEN, "smooth/dark background", TUNING),
+    # ... and held out.
+    ("smooth_71", lambda: smooth_field(71), GEN, "smooth", HELD_OUT),
+    ("glows_72", lambda: glows(72), GEN, "smooth/dark background", HELD_OUT),
+    ("ramp_73", lambda: ramp(73), GEN, "smooth/dark background", HELD_OUT),
+    ("smooth_74", lambda: smooth_field(74), GEN, "smooth", HELD_OUT),
+    ("glows_75", lambda: glows(75), GEN, "smooth/dark background", HELD_OUT),
+    ("bivariate_normal", lambda: mpl_array("axes_grid/bivariate_normal.npy"), MPL, "smooth (low resolution)", HELD_OUT),
 ]
 
 
