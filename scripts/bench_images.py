@@ -141,10 +141,10 @@ def line_art(seed, size=384):
 
 def smooth_field(seed, size=384):
     """A very smooth random surface: Gaussian noise with a Gaussian power
-    spectrum (correlation length about a tenth of the image), seeded."""
+    spectrum (correlation length about 25 pixels at 384), seeded."""
     rng = np.random.default_rng(seed)
     f = np.hypot(*np.meshgrid(np.fft.fftfreq(size), np.fft.fftfreq(size)))
-    spectrum = (rng.normal(size=(size, size)) + 1j * rng.normal(size=(size, size))) * np.exp(-((f * 12) ** 2))
+    spectrum = (rng.normal(size=(size, size)) + 1j * rng.normal(size=(size, size))) * np.exp(-((f * 110) ** 2))
     return np.fft.ifft2(spectrum).real
 
 
