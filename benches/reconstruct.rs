@@ -13,10 +13,9 @@ use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::reconstruct::likelihood::PoissonLikelihood;
-use scatterscope::reconstruct::method::{Method, MethodOptions, Solver, run_method};
+use scatterscope::reconstruct::method::{Method, MethodOptions, RlStop, run_method};
 use scatterscope::reconstruct::pnp::{PnpOptions, StopRule, pnp_admm};
 use scatterscope::reconstruct::problem::Problem;
-use scatterscope::reconstruct::split::SplitOptions;
 use scatterscope::scene::Scene;
 
 fn benches(c: &mut Criterion) {
@@ -67,12 +66,7 @@ fn benches(c: &mut Criterion) {
         left_out: Vec::new(),
     };
     let ffdnet = Ffdnet::new(embedded(), "embedded");
-    let defaults = MethodOptions {
-        solver: Solver::Split,
-        split: SplitOptions::default(),
-        pnp: PnpOptions::default(),
-        rl_iters: 200,
-    };
+    let defaults = MethodOptions::default();
     group.bench_function("pnp_split_ffdnet_256x256x20_default", |b| {
         b.iter(|| {
             run_method(
@@ -81,6 +75,24 @@ fn benches(c: &mut Criterion) {
                 None,
                 &ffdnet,
                 &defaults,
+                None,
+                |_| {},
+            )
+            .unwrap()
+        })
+    });
+    let cv = MethodOptions {
+        rl_stop: RlStop::CrossValidated,
+        ..defaults
+    };
+    group.bench_function("rl_sum_cv_256x256x20", |b| {
+        b.iter(|| {
+            run_method(
+                &problem,
+                Method::RlSum,
+                None,
+                &scatterscope::denoise::NoPrior,
+                &cv,
                 None,
                 |_| {},
             )

@@ -40,7 +40,7 @@ pub(crate) use named;
 mod tests {
     use super::Named;
     use crate::forward::Boundary;
-    use crate::reconstruct::method::{Method, Solver};
+    use crate::reconstruct::method::{Method, RlStop, Solver};
     use crate::reconstruct::pnp::StopRule;
     use crate::stack::preview::SheetScale;
 
@@ -57,6 +57,7 @@ mod tests {
     fn names_are_unique_and_round_trip() {
         round_trips::<Method>();
         round_trips::<Solver>();
+        round_trips::<RlStop>();
         round_trips::<StopRule>();
         round_trips::<Boundary>();
         round_trips::<SheetScale>();

@@ -11,7 +11,7 @@ use scatterscope::physics::{KernelStack, Preset, Sampling, Setup, TimeBins};
 use scatterscope::reconstruct::likelihood::{PoissonLikelihood, SurrogateLog};
 use scatterscope::reconstruct::operator::Convolution;
 use scatterscope::reconstruct::pnp::{PnpOptions, pnp_admm};
-use scatterscope::reconstruct::richardson_lucy::richardson_lucy;
+use scatterscope::reconstruct::richardson_lucy::{richardson_lucy, richardson_lucy_cv};
 use scatterscope::reconstruct::trace::TraceRow;
 use scatterscope::reconstruct::{ReconstructError, validate_counts};
 use scatterscope::scene::Scene;
@@ -98,6 +98,104 @@ fn likelihood_matches_naive_sum_and_finite_differences() {
             e.gradient[j]
         );
     }
+}
+
+/// A case whose truth is given: smooth light or a built-in scene.
+fn case_of(size: usize, truth: Array2<f64>, seed: u64) -> Case {
+    let k = KernelStack::build(&setup(size), Sampling::Integrated).unwrap();
+    let model = ForwardModel::new(&k, Boundary::Periodic);
+    let counts = poisson_counts(&model.expected(truth.view()).counts, seed);
+    Case {
+        model,
+        truth,
+        counts,
+        bins: (0..k.len()).collect(),
+    }
+}
+
+/// The iteration the trace's notes name as the output.
+fn output_iteration(notes: &[String]) -> usize {
+    notes
+        .iter()
+        .find_map(|n| n.strip_prefix("output: iteration "))
+        .and_then(|n| n.parse().ok())
+        .expect("the trace names its output")
+}
+
+#[test]
+fn cross_validated_rl_stops_early_on_smooth_light_and_late_on_sharp_edges() {
+    let size = 48;
+    let smooth = Array2::from_shape_fn((size, size), |(r, c)| {
+        let (y, x) = (r as f64 - 20.0, c as f64 - 26.0);
+        0.2 + 0.8 * (-(y * y + x * x) / (2.0 * 12.0 * 12.0)).exp()
+    });
+    let disks = Scene::parse("disks").render(size, size).unwrap();
+    let mut stops = Vec::new();
+    for (name, truth) in [("smooth", smooth), ("disks", disks)] {
+        let c = case_of(size, truth, 5);
+        let cv = richardson_lucy_cv(
+            &c.model,
+            &c.counts,
+            &c.bins,
+            400,
+            Some(c.truth.view()),
+            |_| {},
+        )
+        .unwrap();
+        let k = output_iteration(&cv.trace.notes);
+        // The output is the iterate the trace names, and the sum of the two
+        // halves' estimates still explains every count (RL keeps sum(H o)
+        // = sum(m) on each half).
+        let row = cv.trace.rows.iter().find(|r| r.iteration == k).unwrap();
+        let psnr = scatterscope::metrics::psnr(cv.image.view(), c.truth.view());
+        assert!((row.psnr.unwrap() - psnr).abs() < 1e-9, "{name}");
+        let mass = Convolution::from_bins(&c.model, &c.bins).mass();
+        let total = c.counts.sum();
+        assert!(
+            (cv.image.sum() * mass - total).abs() < 1e-6 * total,
+            "{name}"
+        );
+        // Within a dB of plain RL's best iteration chosen with the truth.
+        let plain = richardson_lucy(
+            &c.model,
+            &c.counts,
+            &c.bins,
+            400,
+            Some(c.truth.view()),
+            |_| {},
+        )
+        .unwrap();
+        let best = plain.trace.best_psnr().unwrap();
+        assert!(
+            psnr > best.psnr.unwrap() - 1.0,
+            "{name}: cross-validated stop at {k} gives {psnr:.2} dB, the truth's best ({}) {:.2} dB",
+            best.iteration,
+            best.psnr.unwrap()
+        );
+        stops.push(k);
+    }
+    assert!(
+        stops[0] * 3 < stops[1],
+        "smooth light should stop far earlier than sharp disks: {stops:?}"
+    );
+}
+
+#[test]
+fn cross_validated_rl_refuses_fractional_counts_and_keeps_zero_light_zero() {
+    let c = case(24, "disks", 3);
+    let mut scaled = c.counts.clone();
+    scaled[[2, 5, 7]] += 0.5;
+    let err = richardson_lucy_cv(&c.model, &scaled, &c.bins, 50, None, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("whole photon counts") && err.contains("row 5, column 7"),
+        "{err}"
+    );
+    let zeros = Array3::zeros(c.counts.dim());
+    let r = richardson_lucy_cv(&c.model, &zeros, &c.bins, 50, None, |_| {}).unwrap();
+    assert!(r.image.iter().all(|v| *v == 0.0));
+    assert!(r.trace.notes.iter().any(|n| n.contains("no photons")));
 }
 
 #[test]

@@ -6,6 +6,8 @@
 //!   stopping rule ([`discrepancy`]).
 //! - [`richardson_lucy`]: the classical baseline, on one bin or on the
 //!   time-summed stack.
+//! - [`thinning`]: photon counts split into two independent halves, so
+//!   that Richardson-Lucy can choose its own iteration count.
 //! - [`scaled_counts`]: counts divided by kernel mass (no deblurring),
 //!   for reference.
 //!
@@ -20,6 +22,7 @@ pub mod problem;
 pub mod richardson_lucy;
 pub mod scaled_counts;
 pub mod split;
+pub mod thinning;
 pub mod trace;
 
 use ndarray::{Array2, Array3, ArrayView2, Axis};

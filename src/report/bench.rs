@@ -24,7 +24,7 @@ use crate::denoise::Denoiser;
 use crate::forward::{Boundary, ForwardModel, poisson_counts};
 use crate::metrics;
 use crate::physics::{KernelStack, Sampling, Setup};
-use crate::reconstruct::method::{Method, MethodOptions, Solver, run_method};
+use crate::reconstruct::method::{Method, MethodOptions, RlStop, Solver, run_method};
 use crate::reconstruct::problem::Problem;
 use crate::reconstruct::trace::Trace;
 use crate::scene::Scene;
@@ -34,9 +34,21 @@ use super::ReportError;
 /// Label of Richardson-Lucy's best iteration chosen with the truth.
 pub const RL_BEST: &str = "rl-sum (best iteration by truth)";
 
-/// Label of Richardson-Lucy's output after its default `iterations`.
-pub fn rl_default_label(iterations: usize) -> String {
+/// Label of Richardson-Lucy with its iteration count chosen by
+/// cross-validation on thinned halves of the counts (no truth).
+pub const RL_CV: &str = "rl-sum (cross-validated stop)";
+
+/// Label of Richardson-Lucy's output after a fixed count of `iterations`.
+pub fn rl_fixed_label(iterations: usize) -> String {
     format!("rl-sum ({iterations} iterations)")
+}
+
+/// Label of Richardson-Lucy's default output under `opts`: its stop.
+pub fn rl_default_label(opts: &MethodOptions) -> String {
+    match opts.rl_stop {
+        RlStop::CrossValidated => RL_CV.into(),
+        RlStop::Fixed => rl_fixed_label(opts.rl_iters),
+    }
 }
 
 /// One image of the benchmark.
@@ -264,7 +276,8 @@ pub fn pnp_entries<'a>(
 
 /// Runs every PnP entry and Richardson-Lucy on the time-summed stack
 /// (`rl_iters` iterations: the output at `opts.rl_iters` is RL's default,
-/// the best iteration by truth its oracle) on one case. `on_trace` gets each
+/// the best iteration by truth its oracle; and RL with its stop chosen by
+/// cross-validation, searched up to `opts.rl_max_iters`) on one case. `on_trace` gets each
 /// PnP trace (PSNR against wall time) with its label.
 pub fn run_case(
     image: &BenchImage,
@@ -319,7 +332,20 @@ pub fn run_case(
         rows.push(row(e.label.clone(), r.image.view(), &r.trace));
     }
     let mut o = *opts;
+    o.rl_stop = RlStop::CrossValidated;
+    let cv = run_method(
+        &case.problem,
+        Method::RlSum,
+        None,
+        &crate::denoise::NoPrior,
+        &o,
+        Some(truth),
+        |_| {},
+    )?;
+    rows.push(row(RL_CV.into(), cv.image.view(), &cv.trace));
+    let mut o = *opts;
     o.rl_iters = rl_iters.max(opts.rl_iters);
+    o.rl_stop = RlStop::Fixed;
     let rl = run_method(
         &case.problem,
         Method::RlSum,
@@ -342,7 +368,7 @@ pub fn run_case(
         .find(|r| r.iteration == opts.rl_iters)
         .expect("RL ran at least its default iterations");
     let mut default = best.clone();
-    default.method = rl_default_label(opts.rl_iters);
+    default.method = rl_fixed_label(opts.rl_iters);
     default.psnr = at_default.psnr.unwrap_or(f64::NAN);
     default.ssim = at_default.ssim.unwrap_or(f64::NAN);
     default.wall_s = at_default.wall_s;
@@ -380,10 +406,10 @@ pub fn rows_csv(rows: &[BenchRow]) -> String {
 }
 
 /// Markdown summary: per split and level, each method's mean PSNR and time,
-/// and the margins of `headline` over RL-sum's best iteration (mean, worst)
-/// and over RL-sum's output after its default `rl_iters` (worst).
-pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_iters: usize) -> String {
-    let rl_default = rl_default_label(rl_iters);
+/// and the margins of `headline` over RL-sum's best iteration (mean, worst),
+/// over RL-sum's default output labelled `rl_default` (worst) and over
+/// RL-sum with the cross-validated stop (mean, worst).
+pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> String {
     let mut md = String::new();
     let mut groups: Vec<(String, f64)> = Vec::new();
     for r in rows {
@@ -437,25 +463,34 @@ pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_iters: usize) -> S
         let find = |img: &str, m: &str| sel.iter().find(|r| r.image == img && r.method == m);
         let mut margins = Vec::new();
         md.push_str(&format!(
-            "\n| image | {headline} (dB) | rl-sum best (dB) | margin | rl-sum default (dB) | margin | deviance z | time (s) |\n|---|---|---|---|---|---|---|---|\n"
+            "\n| image | {headline} (dB) | rl-sum best (dB) | margin | rl-sum default (dB) | margin | rl-sum cv (dB) | margin | deviance z | time (s) |\n|---|---|---|---|---|---|---|---|---|---|\n"
         ));
         for img in &images {
             let (Some(p), Some(b), Some(d)) = (
                 find(img, headline),
                 find(img, RL_BEST),
-                find(img, &rl_default),
+                find(img, rl_default),
             ) else {
                 continue;
             };
-            margins.push((p.psnr - b.psnr, p.psnr - d.psnr, p.wall_s));
+            // Older runs' rows have no cross-validated RL.
+            let cv = find(img, RL_CV).map(|c| c.psnr);
+            margins.push((
+                p.psnr - b.psnr,
+                p.psnr - d.psnr,
+                p.wall_s,
+                cv.map(|c| p.psnr - c),
+            ));
             writeln!(
                 md,
-                "| {img} | {:.2} | {:.2} | {:+.2} | {:.2} | {:+.2} | {} | {:.2} |",
+                "| {img} | {:.2} | {:.2} | {:+.2} | {:.2} | {:+.2} | {} | {} | {} | {:.2} |",
                 p.psnr,
                 b.psnr,
                 p.psnr - b.psnr,
                 d.psnr,
                 p.psnr - d.psnr,
+                cv.map_or("-".into(), |c| format!("{c:.2}")),
+                cv.map_or("-".into(), |c| format!("{:+.2}", p.psnr - c)),
                 p.deviance_z.map_or("-".into(), |z| format!("{z:.1}")),
                 p.wall_s
             )
@@ -466,12 +501,22 @@ pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_iters: usize) -> S
             let mean_best = margins.iter().map(|m| m.0).sum::<f64>() / n;
             let worst_best = margins.iter().map(|m| m.0).fold(f64::INFINITY, f64::min);
             let worst_default = margins.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
+            let over_cv: Vec<f64> = margins.iter().filter_map(|m| m.3).collect();
+            let cv_line = if over_cv.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; over RL-sum with the cross-validated stop mean {:+.2} dB, worst {:+.2} dB",
+                    over_cv.iter().sum::<f64>() / over_cv.len() as f64,
+                    over_cv.iter().copied().fold(f64::INFINITY, f64::min)
+                )
+            };
             let mut times: Vec<f64> = margins.iter().map(|m| m.2).collect();
             times.sort_by(f64::total_cmp);
             let median = times[times.len() / 2];
             writeln!(
                 md,
-                "\n{headline}: margin over RL-sum's best iteration mean {mean_best:+.2} dB, worst {worst_best:+.2} dB; over RL-sum's default output worst {worst_default:+.2} dB; time median {median:.2} s, max {:.2} s ({:.2}x the median)",
+                "\n{headline}: margin over RL-sum's best iteration mean {mean_best:+.2} dB, worst {worst_best:+.2} dB; over RL-sum's default output worst {worst_default:+.2} dB{cv_line}; time median {median:.2} s, max {:.2} s ({:.2}x the median)",
                 times.last().copied().unwrap_or(0.0),
                 times.last().copied().unwrap_or(0.0) / median
             )

@@ -17,7 +17,7 @@ use serde::Serialize;
 use crate::denoise::Denoiser;
 use crate::forward::Boundary;
 use crate::physics::{Sampling, Setup};
-use crate::reconstruct::method::{Method, MethodOptions, Solver, run_method};
+use crate::reconstruct::method::{Method, MethodOptions, RlStop, Solver, run_method};
 use crate::reconstruct::problem::Problem;
 use crate::reconstruct::trace::Trace;
 use crate::reconstruct::{ReconstructError, Reconstruction};
@@ -112,6 +112,12 @@ pub fn run_scene(
     std::fs::create_dir_all(dir).map_err(|e| ReportError::Io(dir.display().to_string(), e))?;
     let name = scene.name();
     write_image(truth.view(), Some(1.0), &dir.join("truth.png"))?;
+    // The baselines are ranked by their best iteration chosen with the
+    // truth, so Richardson-Lucy runs its fixed count here.
+    let opts = &MethodOptions {
+        rl_stop: RlStop::Fixed,
+        ..*opts
+    };
     let run_with = |method: Method,
                     bin: Option<usize>,
                     denoiser: &dyn Denoiser|

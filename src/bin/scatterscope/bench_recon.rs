@@ -8,8 +8,8 @@ use clap::ValueEnum;
 use scatterscope::denoise::Denoiser;
 use scatterscope::reconstruct::method::Solver;
 use scatterscope::report::bench::{
-    level_setup, pnp_entries, read_manifest, rows_csv, run_case, select, simulate_case,
-    summary_markdown,
+    level_setup, pnp_entries, read_manifest, rl_default_label, rows_csv, run_case, select,
+    simulate_case, summary_markdown,
 };
 
 use crate::recon_args::{DenoiserChoice, PriorArgs, ReconArgs};
@@ -20,8 +20,9 @@ use crate::recon_args::{DenoiserChoice, PriorArgs, ReconArgs};
 /// scripts/bench_images.py DIR`), simulates each image at each light level
 /// with the object extending past the sensor, and runs PnP (each solver and
 /// prior given), PnP on the time-summed stack, and Richardson-Lucy on the
-/// time-summed stack (its default output and its best iteration chosen with
-/// the truth). Writes OUT/rows.csv, OUT/summary.md and the PnP traces (PSNR
+/// time-summed stack (its default output, its stop chosen by
+/// cross-validation on thinned halves of the counts, and its best iteration
+/// chosen with the truth). Writes OUT/rows.csv, OUT/summary.md and the PnP traces (PSNR
 /// against wall time) as OUT/traces/IMAGE_LEVEL_METHOD.csv.
 #[derive(Debug, clap::Args)]
 pub struct BenchReconArgs {
@@ -145,7 +146,7 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
             std::fs::write(args.out.join("rows.csv"), rows_csv(&rows))?;
         }
     }
-    let md = summary_markdown(&rows, &headline, opts.rl_iters);
+    let md = summary_markdown(&rows, &headline, &rl_default_label(&opts));
     std::fs::write(args.out.join("summary.md"), &md)?;
     println!("{md}");
     println!(

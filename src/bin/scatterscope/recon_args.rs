@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use scatterscope::denoise::ffdnet::source;
 use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::denoise::{Denoiser, NoPrior};
-use scatterscope::reconstruct::method::{MethodOptions, Solver};
+use scatterscope::reconstruct::method::{MethodOptions, RlStop, Solver};
 use scatterscope::reconstruct::pnp::{PnpOptions, StopRule};
 use scatterscope::reconstruct::split::SplitOptions;
 
@@ -153,9 +153,18 @@ pub struct ReconArgs {
     /// Switch point of the surrogate logarithm (Eq. 16).
     #[arg(long, default_value_t = 1e-10)]
     pub eps: f64,
-    /// Richardson-Lucy iterations.
-    #[arg(long, default_value_t = 200)]
+    /// Richardson-Lucy iterations (with --rl-stop fixed).
+    #[arg(long, default_value_t = MethodOptions::default().rl_iters)]
     pub rl_iters: usize,
+    /// When Richardson-Lucy stops: fixed (after --rl-iters) or cv (at the
+    /// iteration whose estimate best predicts photons it was not fitted to:
+    /// two-fold cross-validation on thinned halves of the counts; the
+    /// output is the sum of the halves' estimates).
+    #[arg(long, value_parser = choice::<RlStop>(), default_value = "cv")]
+    pub rl_stop: RlStop,
+    /// The most iterations --rl-stop cv searches.
+    #[arg(long, default_value_t = MethodOptions::default().rl_max_iters)]
+    pub rl_max_iters: usize,
 }
 
 impl ReconArgs {
@@ -226,6 +235,8 @@ impl ReconArgs {
                 eps: self.eps,
             },
             rl_iters: self.rl_iters,
+            rl_stop: self.rl_stop,
+            rl_max_iters: self.rl_max_iters,
         })
     }
 }

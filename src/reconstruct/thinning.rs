@@ -1,0 +1,78 @@
+//! Binomial thinning: photon counts split into two halves that are
+//! independent Poisson images of half the light each (each photon lands in
+//! either half with probability 1/2). One half scores an estimate made from
+//! the other, which is cross-validation without a truth.
+
+use ndarray::Array2;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Binomial, Distribution};
+
+use super::ReconstructError;
+
+/// Seed of the thinning in every method that uses it, so that a
+/// reconstruction is reproducible.
+pub const THINNING_SEED: u64 = 0x7417_2026;
+
+/// Splits `counts` (whole photon counts) into two halves whose sum is
+/// `counts`, each photon going to the first half with probability 1/2.
+/// A count that is not a whole number (a stack that was scaled or had its
+/// background subtracted) is refused by position and value.
+pub fn thin_halves(
+    counts: &Array2<f64>,
+    seed: u64,
+) -> Result<(Array2<f64>, Array2<f64>), ReconstructError> {
+    if let Some(((row, col), &value)) = counts
+        .indexed_iter()
+        .find(|(_, v)| !(v.is_finite() && **v >= 0.0 && v.fract() == 0.0 && **v < 2f64.powi(53)))
+    {
+        return Err(ReconstructError::Shape(format!(
+            "cross-validation by thinning needs whole photon counts: row {row}, column {col} of the time-summed counts is {value} (expected counts, or a scaled or background-subtracted stack: stop Richardson-Lucy after a fixed count instead, --rl-stop fixed)"
+        )));
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let first = counts.mapv(|m| {
+        Binomial::new(m as u64, 0.5)
+            .expect("p = 1/2 is a valid probability")
+            .sample(&mut rng) as f64
+    });
+    let second = counts - &first;
+    Ok((first, second))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn halves_sum_to_the_counts_and_share_them_evenly() {
+        let counts = Array2::from_shape_fn((64, 64), |(r, c)| ((r * 7 + c * 3) % 50) as f64);
+        let (a, b) = thin_halves(&counts, 1).unwrap();
+        assert_eq!(&a + &b, counts);
+        assert!(
+            a.iter()
+                .chain(b.iter())
+                .all(|&x| x >= 0.0 && x.fract() == 0.0)
+        );
+        // Binomial(N, 1/2): the first half holds N/2 +- sqrt(N)/2.
+        let total = counts.sum();
+        let z = (a.sum() - total / 2.0) / (total.sqrt() / 2.0);
+        assert!(z.abs() < 5.0, "first half {} of {total}: z = {z}", a.sum());
+        // The same seed gives the same split, another seed another.
+        assert_eq!(thin_halves(&counts, 1).unwrap().0, a);
+        assert_ne!(thin_halves(&counts, 2).unwrap().0, a);
+    }
+
+    #[test]
+    fn fractional_negative_and_nan_counts_are_refused_by_position() {
+        for bad in [2.5, -1.0, f64::NAN] {
+            let mut counts = Array2::from_elem((3, 4), 2.0);
+            counts[(1, 2)] = bad;
+            let err = thin_halves(&counts, 0).unwrap_err().to_string();
+            assert!(
+                err.contains("row 1, column 2") && err.contains(&format!("{bad}")),
+                "{err}"
+            );
+        }
+    }
+}
