@@ -4,6 +4,7 @@
 use std::time::Instant;
 
 use ndarray::{Array2, Array3, ArrayView2, Axis};
+use rayon::prelude::*;
 
 use super::operator::Convolution;
 use super::thinning::{THINNING_SEED, thin_halves};
@@ -153,31 +154,36 @@ pub fn richardson_lucy_cv(
     let mut searched = 0;
     for it in 0..=max_iters {
         searched = it;
-        let y: Vec<Vec<f64>> = o.iter().map(|x| rl.op.apply(x)).collect();
+        // The two halves are independent: one core each.
+        let y: Vec<Vec<f64>> = o.par_iter().map(|x| rl.op.apply(x)).collect();
         // Each half's estimate predicts the other half's counts.
         let score_cv = held_out_deviance(&y[0], &halves[1], bg, guard)
             + held_out_deviance(&y[1], &halves[0], bg, guard);
-        let estimate = crop_sum(&o);
+        let improved = score_cv < best.0;
         let mut row = TraceRow {
             iteration: it,
             wall_s: start.elapsed().as_secs_f64(),
             objective: Some(score_cv),
             ..Default::default()
         };
-        if truth.is_some() {
+        if improved || truth.is_some() {
+            let estimate = crop_sum(&o);
             score(&mut row, estimate.view(), truth);
+            if improved {
+                best = (score_cv, it, estimate);
+            }
         }
         on_iter(&row);
         trace.rows.push(row);
-        if score_cv < best.0 {
-            best = (score_cv, it, estimate);
-        }
         if it == max_iters || it >= best.1 + CV_PATIENCE.max(best.1 / 4) {
             break;
         }
-        for ((x, yx), m) in o.iter_mut().zip(&y).zip(&halves) {
-            rl.update(x, yx, m, bg, guard);
-        }
+        o.par_iter_mut()
+            .zip(y.par_iter())
+            .zip(halves.par_iter())
+            .for_each(|((x, yx), m)| {
+                rl.update(x, yx, m, bg, guard);
+            });
     }
     let (_, k, image) = best;
     trace.notes.push(format!(
