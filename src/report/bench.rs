@@ -406,9 +406,8 @@ pub fn rows_csv(rows: &[BenchRow]) -> String {
 }
 
 /// Markdown summary: per split and level, each method's mean PSNR and time,
-/// and the margins of `headline` over RL-sum's best iteration (mean, worst),
-/// over RL-sum's default output labelled `rl_default` (worst) and over
-/// RL-sum with the cross-validated stop (mean, worst).
+/// and the margins of `headline` over RL-sum's best iteration and over
+/// RL-sum's default output, the rows labelled `rl_default` (mean, worst).
 pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> String {
     let mut md = String::new();
     let mut groups: Vec<(String, f64)> = Vec::new();
@@ -463,7 +462,7 @@ pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> 
         let find = |img: &str, m: &str| sel.iter().find(|r| r.image == img && r.method == m);
         let mut margins = Vec::new();
         md.push_str(&format!(
-            "\n| image | {headline} (dB) | rl-sum best (dB) | margin | rl-sum default (dB) | margin | rl-sum cv (dB) | margin | deviance z | time (s) |\n|---|---|---|---|---|---|---|---|---|---|\n"
+            "\n| image | {headline} (dB) | rl-sum best (dB) | margin | {rl_default} (dB) | margin | deviance z | time (s) |\n|---|---|---|---|---|---|---|---|\n"
         ));
         for img in &images {
             let (Some(p), Some(b), Some(d)) = (
@@ -473,24 +472,15 @@ pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> 
             ) else {
                 continue;
             };
-            // Older runs' rows have no cross-validated RL.
-            let cv = find(img, RL_CV).map(|c| c.psnr);
-            margins.push((
-                p.psnr - b.psnr,
-                p.psnr - d.psnr,
-                p.wall_s,
-                cv.map(|c| p.psnr - c),
-            ));
+            margins.push((p.psnr - b.psnr, p.psnr - d.psnr, p.wall_s));
             writeln!(
                 md,
-                "| {img} | {:.2} | {:.2} | {:+.2} | {:.2} | {:+.2} | {} | {} | {} | {:.2} |",
+                "| {img} | {:.2} | {:.2} | {:+.2} | {:.2} | {:+.2} | {} | {:.2} |",
                 p.psnr,
                 b.psnr,
                 p.psnr - b.psnr,
                 d.psnr,
                 p.psnr - d.psnr,
-                cv.map_or("-".into(), |c| format!("{c:.2}")),
-                cv.map_or("-".into(), |c| format!("{:+.2}", p.psnr - c)),
                 p.deviance_z.map_or("-".into(), |z| format!("{z:.1}")),
                 p.wall_s
             )
@@ -501,22 +491,13 @@ pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> 
             let mean_best = margins.iter().map(|m| m.0).sum::<f64>() / n;
             let worst_best = margins.iter().map(|m| m.0).fold(f64::INFINITY, f64::min);
             let worst_default = margins.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
-            let over_cv: Vec<f64> = margins.iter().filter_map(|m| m.3).collect();
-            let cv_line = if over_cv.is_empty() {
-                String::new()
-            } else {
-                format!(
-                    "; over RL-sum with the cross-validated stop mean {:+.2} dB, worst {:+.2} dB",
-                    over_cv.iter().sum::<f64>() / over_cv.len() as f64,
-                    over_cv.iter().copied().fold(f64::INFINITY, f64::min)
-                )
-            };
+            let mean_default = margins.iter().map(|m| m.1).sum::<f64>() / n;
             let mut times: Vec<f64> = margins.iter().map(|m| m.2).collect();
             times.sort_by(f64::total_cmp);
             let median = times[times.len() / 2];
             writeln!(
                 md,
-                "\n{headline}: margin over RL-sum's best iteration mean {mean_best:+.2} dB, worst {worst_best:+.2} dB; over RL-sum's default output worst {worst_default:+.2} dB{cv_line}; time median {median:.2} s, max {:.2} s ({:.2}x the median)",
+                "\n{headline}: margin over RL-sum's best iteration mean {mean_best:+.2} dB, worst {worst_best:+.2} dB; over RL-sum's default output ({rl_default}) mean {mean_default:+.2} dB, worst {worst_default:+.2} dB; time median {median:.2} s, max {:.2} s ({:.2}x the median)",
                 times.last().copied().unwrap_or(0.0),
                 times.last().copied().unwrap_or(0.0) / median
             )
