@@ -1068,6 +1068,7 @@ fn bench_recon_scores_pnp_against_richardson_lucy_on_a_manifest() {
     for method in [
         "pnp split tv",
         "pnp-sum split tv",
+        "rl-sum (cross-validated stop)",
         "rl-sum (5 iterations)",
         "rl-sum (best iteration by truth)",
     ] {
@@ -1079,10 +1080,28 @@ fn bench_recon_scores_pnp_against_richardson_lucy_on_a_manifest() {
             );
         }
     }
+    // Columns: ..., psnr, ssim, wall_s, iterations, output_iteration,
+    // best_psnr, best_iteration, deviance_z (no field holds a comma).
+    let fields = |method: &str| -> Vec<Vec<String>> {
+        rows.lines()
+            .filter(|l| l.contains(&format!("\"{method}\"")))
+            .map(|l| l.split(',').map(String::from).collect())
+            .collect()
+    };
+    for f in fields("rl-sum (best iteration by truth)") {
+        // The oracle's row is its best iterate: PSNR and iteration agree.
+        assert_eq!(f[5], f[10], "{f:?}");
+        assert_eq!(f[9], f[11], "{f:?}");
+    }
+    for f in fields("rl-sum (cross-validated stop)") {
+        let (ran, chosen): (usize, usize) = (f[8].parse().unwrap(), f[9].parse().unwrap());
+        assert!(chosen < ran, "the stop searches past its choice: {f:?}");
+    }
     let summary = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(
         summary.contains("### held-out, light level 1x (1 images)")
-            && summary.contains("margin over RL-sum's best iteration"),
+            && summary.contains("margin over RL-sum's best iteration")
+            && summary.contains("over RL-sum's default output (rl-sum (cross-validated stop))"),
         "{summary}"
     );
     assert!(out.join("traces/wide_1_pnp_split_tv.csv").exists());

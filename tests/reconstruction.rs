@@ -113,15 +113,6 @@ fn case_of(size: usize, truth: Array2<f64>, seed: u64) -> Case {
     }
 }
 
-/// The iteration the trace's notes name as the output.
-fn output_iteration(notes: &[String]) -> usize {
-    notes
-        .iter()
-        .find_map(|n| n.strip_prefix("output: iteration "))
-        .and_then(|n| n.parse().ok())
-        .expect("the trace names its output")
-}
-
 #[test]
 fn cross_validated_rl_stops_early_on_smooth_light_and_late_on_sharp_edges() {
     let size = 48;
@@ -142,7 +133,10 @@ fn cross_validated_rl_stops_early_on_smooth_light_and_late_on_sharp_edges() {
             |_| {},
         )
         .unwrap();
-        let k = output_iteration(&cv.trace.notes);
+        let k = cv
+            .trace
+            .output_iteration()
+            .expect("the trace names its output");
         // The output is the iterate the trace names, and the sum of the two
         // halves' estimates still explains every count (RL keeps sum(H o)
         // = sum(m) on each half).

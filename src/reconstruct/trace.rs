@@ -102,4 +102,13 @@ impl Trace {
             .filter(|r| r.psnr.is_some())
             .max_by(|a, b| a.psnr.partial_cmp(&b.psnr).expect("PSNR is not NaN"))
     }
+
+    /// The iteration returned as the output, as the method's notes name it
+    /// (`output: iteration N`); `None` when they name none.
+    pub fn output_iteration(&self) -> Option<usize> {
+        self.notes
+            .iter()
+            .find_map(|n| n.strip_prefix("output: iteration "))
+            .and_then(|n| n.parse().ok())
+    }
 }

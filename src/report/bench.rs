@@ -223,6 +223,9 @@ pub struct BenchRow {
     pub wall_s: f64,
     /// Iterations run.
     pub iterations: usize,
+    /// The iteration returned as the output (the last unless a stopping
+    /// rule chose an earlier one).
+    pub output_iteration: usize,
     /// Best PSNR over the iterations, chosen with the truth (dB).
     pub best_psnr: f64,
     /// Iteration of that best PSNR.
@@ -292,12 +295,7 @@ pub fn run_case(
     let row = |method: String, image_out: ArrayView2<f64>, trace: &Trace| {
         let last = trace.rows.last().expect("every method records a row");
         let best = trace.best_psnr().expect("truth is known");
-        let output_iteration = trace
-            .notes
-            .iter()
-            .find_map(|n| n.strip_prefix("output: iteration "))
-            .and_then(|n| n.parse::<usize>().ok())
-            .unwrap_or(last.iteration);
+        let output_iteration = trace.output_iteration().unwrap_or(last.iteration);
         let out_row = trace.rows.iter().find(|r| r.iteration == output_iteration);
         BenchRow {
             image: image.name.clone(),
@@ -309,6 +307,7 @@ pub fn run_case(
             ssim: metrics::ssim(image_out, truth),
             wall_s: last.wall_s,
             iterations: last.iteration,
+            output_iteration,
             best_psnr: best.psnr.unwrap_or(f64::NAN),
             best_iteration: best.iteration,
             deviance_z: out_row
@@ -356,10 +355,17 @@ pub fn run_case(
         |_| {},
     )?;
     let mut best = row(RL_BEST.into(), rl.image.view(), &rl.trace);
-    let best_row = &rl.trace.rows[best.best_iteration.min(rl.trace.rows.len() - 1)];
+    // RL's rows start at iteration 1.
+    let best_row = rl
+        .trace
+        .rows
+        .iter()
+        .find(|r| r.iteration == best.best_iteration)
+        .expect("the best row is a row");
     best.psnr = best.best_psnr;
     best.ssim = best_row.ssim.unwrap_or(f64::NAN);
     best.iterations = best.best_iteration;
+    best.output_iteration = best.best_iteration;
     best.wall_s = best_row.wall_s;
     let at_default = rl
         .trace
@@ -373,6 +379,7 @@ pub fn run_case(
     default.ssim = at_default.ssim.unwrap_or(f64::NAN);
     default.wall_s = at_default.wall_s;
     default.iterations = opts.rl_iters;
+    default.output_iteration = opts.rl_iters;
     rows.push(default);
     rows.push(best);
     Ok(rows)
@@ -381,12 +388,12 @@ pub fn run_case(
 /// CSV of all rows.
 pub fn rows_csv(rows: &[BenchRow]) -> String {
     let mut csv = String::from(
-        "image,split,category,level,method,psnr,ssim,wall_s,iterations,best_psnr,best_iteration,deviance_z\n",
+        "image,split,category,level,method,psnr,ssim,wall_s,iterations,output_iteration,best_psnr,best_iteration,deviance_z\n",
     );
     for r in rows {
         writeln!(
             csv,
-            "{},{},\"{}\",{},\"{}\",{:.4},{:.5},{:.3},{},{:.4},{},{}",
+            "{},{},\"{}\",{},\"{}\",{:.4},{:.5},{:.3},{},{},{:.4},{},{}",
             r.image,
             r.split,
             r.category,
@@ -396,6 +403,7 @@ pub fn rows_csv(rows: &[BenchRow]) -> String {
             r.ssim,
             r.wall_s,
             r.iterations,
+            r.output_iteration,
             r.best_psnr,
             r.best_iteration,
             r.deviance_z.map_or(String::new(), |z| format!("{z:.2}"))
