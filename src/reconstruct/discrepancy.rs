@@ -45,6 +45,13 @@ const TABLE_LO: f64 = 1e-8;
 const TABLE_HI: f64 = 400.0;
 const TABLE_N: usize = 4000;
 
+/// One point's Poisson deviance `2 [m log(m/y) - (m - y)]` for count `m`
+/// and mean `y > 0`, with `m log m` ([`m_log_m`]) and `log y` given.
+#[inline]
+pub fn point_deviance(m: f64, m_log_m: f64, y: f64, log_y: f64) -> f64 {
+    2.0 * (m_log_m - m * log_y - (m - y))
+}
+
 impl ExpectedDeviance {
     /// The table, built once per process (about 4000 Poisson sums) and
     /// shared by every reconstruction.
@@ -142,9 +149,8 @@ impl ExpectedDeviance {
     pub fn point_with(&self, m: f64, m_log_m: f64, y: f64) -> (f64, f64, f64) {
         let y = y.max(1e-300);
         let log_y = y.ln();
-        let d = m_log_m - m * log_y - (m - y);
         let (f, g) = self.moments_log(y, log_y);
-        (2.0 * d, f, g)
+        (point_deviance(m, m_log_m, y, log_y), f, g)
     }
 
     /// Deviance of `estimate` (on the model's grid, plus the model's

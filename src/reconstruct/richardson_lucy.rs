@@ -8,6 +8,7 @@ use std::time::Instant;
 use ndarray::{Array2, Array3, ArrayView2, Axis};
 use rayon::prelude::*;
 
+use super::discrepancy::{m_log_m, point_deviance};
 use super::operator::Convolution;
 use super::thinning::{THINNING_SEED, thin_halves};
 use super::trace::{Trace, TraceRow};
@@ -31,7 +32,7 @@ pub fn richardson_lucy(
     on_iter: impl FnMut(&TraceRow),
 ) -> Result<Reconstruction, ReconstructError> {
     validate_counts(counts)?;
-    let method = if bins.len() == 1 { "rl" } else { "rl-sum" };
+    let method = method_name(bins);
     let (h, w) = model.sensor_shape();
     let mut trace = Trace::new(method);
     let Some(o) = rl_steps(model, counts, bins, iterations, truth, &mut trace, on_iter) else {
@@ -120,7 +121,7 @@ pub fn richardson_lucy_cv(
     mut on_iter: impl FnMut(&TraceRow),
 ) -> Result<Reconstruction, ReconstructError> {
     validate_counts(counts)?;
-    let method = if bins.len() == 1 { "rl" } else { "rl-sum" };
+    let method = method_name(bins);
     let start = Instant::now();
     let (h, w) = model.sensor_shape();
     let mut trace = Trace::new(method);
@@ -135,6 +136,9 @@ pub fn richardson_lucy_cv(
         first.iter().copied().collect(),
         second.iter().copied().collect(),
     ];
+    let halves_log = halves
+        .each_ref()
+        .map(|m| m.iter().map(|&x| m_log_m(x)).collect::<Vec<f64>>());
     // Each half holds half the light and half the background.
     let bg = model.background() * bins.len() as f64 / 2.0;
     let guard = DENOMINATOR_GUARD * total / 2.0 / (h * w) as f64;
@@ -160,8 +164,8 @@ pub fn richardson_lucy_cv(
         // The two halves are independent: one core each.
         let y: Vec<Vec<f64>> = o.par_iter().map(|x| rl.op.apply(x)).collect();
         // Each half's estimate predicts the other half's counts.
-        let score_cv = held_out_deviance(&y[0], &halves[1], bg, guard)
-            + held_out_deviance(&y[1], &halves[0], bg, guard);
+        let score_cv = held_out_deviance(&y[0], &halves[1], &halves_log[1], bg, guard)
+            + held_out_deviance(&y[1], &halves[0], &halves_log[0], bg, guard);
         let improved = score_cv < best.0;
         let mut row = TraceRow {
             iteration: it,
@@ -202,16 +206,23 @@ pub fn richardson_lucy_cv(
     Ok(Reconstruction { image, trace })
 }
 
-/// Poisson deviance of counts `m` against the prediction `y + bg` (guarded
-/// below by `guard`): the score of an estimate on counts it was not fitted to.
-fn held_out_deviance(y: &[f64], m: &[f64], bg: f64, guard: f64) -> f64 {
+/// Poisson deviance of counts `m` (with `m log m` per point, computed once)
+/// against the prediction `y + bg` (guarded below by `guard`): the score of
+/// an estimate on counts it was not fitted to.
+fn held_out_deviance(y: &[f64], m: &[f64], m_log_m: &[f64], bg: f64, guard: f64) -> f64 {
     y.iter()
         .zip(m)
-        .map(|(&yj, &mj)| {
+        .zip(m_log_m)
+        .map(|((&yj, &mj), &mlm)| {
             let d = (yj + bg).max(guard);
-            2.0 * (d - mj + if mj > 0.0 { mj * (mj / d).ln() } else { 0.0 })
+            point_deviance(mj, mlm, d, d.ln())
         })
         .sum()
+}
+
+/// The method's name in traces: `rl` on one bin, `rl-sum` on several.
+fn method_name(bins: &[usize]) -> &'static str {
+    if bins.len() == 1 { "rl" } else { "rl-sum" }
 }
 
 /// The operator of RL on a sum of bins, with its normaliser.

@@ -330,30 +330,27 @@ pub fn run_case(
         on_trace(&e.label, &r.trace);
         rows.push(row(e.label.clone(), r.image.view(), &r.trace));
     }
-    let mut o = *opts;
-    o.rl_stop = RlStop::CrossValidated;
-    let cv = run_method(
-        &case.problem,
-        Method::RlSum,
-        None,
-        &crate::denoise::NoPrior,
-        &o,
-        Some(truth),
-        |_| {},
-    )?;
+    let run_rl = |o: &MethodOptions| {
+        run_method(
+            &case.problem,
+            Method::RlSum,
+            None,
+            &crate::denoise::NoPrior,
+            o,
+            Some(truth),
+            |_| {},
+        )
+    };
+    let cv = run_rl(&MethodOptions {
+        rl_stop: RlStop::CrossValidated,
+        ..*opts
+    })?;
     rows.push(row(RL_CV.into(), cv.image.view(), &cv.trace));
-    let mut o = *opts;
-    o.rl_iters = rl_iters.max(opts.rl_iters);
-    o.rl_stop = RlStop::Fixed;
-    let rl = run_method(
-        &case.problem,
-        Method::RlSum,
-        None,
-        &crate::denoise::NoPrior,
-        &o,
-        Some(truth),
-        |_| {},
-    )?;
+    let rl = run_rl(&MethodOptions {
+        rl_iters: rl_iters.max(opts.rl_iters),
+        rl_stop: RlStop::Fixed,
+        ..*opts
+    })?;
     let mut best = row(RL_BEST.into(), rl.image.view(), &rl.trace);
     // RL's rows start at iteration 1.
     let best_row = rl
