@@ -292,3 +292,63 @@ fn odd_and_tiny_images_keep_their_shape_and_sigma_is_clamped() {
     assert_eq!(max_abs_diff(&at_max, &above), 0.0);
     assert!(net.name().starts_with("ffdnet(embedded"), "{}", net.name());
 }
+
+/// FFDNet's 2x2 unshuffle grid makes its output depend on where the grid
+/// starts; averaged over the grid's four positions it does not: denoising
+/// an image shifted by one pixel gives the shifted denoised image (away
+/// from the borders), where the single grid does not.
+#[test]
+fn grid_average_makes_the_prior_shift_equivariant() {
+    use scatterscope::denoise::{denoise_scaled, denoise_scaled_at, denoise_scaled_grid_average};
+    let d = Ffdnet::new(source::embedded(), "embedded");
+    assert!(d.unshuffles());
+    // A smooth field with a little texture, 128 x 128, values in [0.2,
+    // 0.9], its minimum and maximum pinned at the centre so that a shift
+    // keeps the denoiser's scaling.
+    let n = 128;
+    let mut img = Array2::from_shape_fn((n, n), |(i, j)| {
+        let (y, x) = (i as f64 / n as f64, j as f64 / n as f64);
+        0.55 + 0.25 * (5.0 * x + 2.0 * y).sin() * (3.0 * y).cos()
+            + 0.05 * ((i * 7 + j * 13) % 11) as f64 / 11.0
+    });
+    img[(n / 2, n / 2)] = 0.0;
+    img[(n / 2, n / 2 + 5)] = 1.0;
+    let sigma = 0.2;
+    // Shift by one pixel down and right: shifted[i+1, j+1] = img[i, j].
+    let shifted = Array2::from_shape_fn((n, n), |(i, j)| img[(i.max(1) - 1, j.max(1) - 1)]);
+    // The network sees about 30 pixels around each output pixel.
+    let inner = s![34..n - 34, 34..n - 34];
+    let inner_shifted = s![35..n - 33, 35..n - 33];
+    let gap = |a: &Array2<f64>, b: &Array2<f64>| {
+        a.slice(inner)
+            .iter()
+            .zip(b.slice(inner_shifted))
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    };
+    let single = denoise_scaled(&d, img.view(), sigma).image;
+    let single_shifted = denoise_scaled(&d, shifted.view(), sigma).image;
+    let averaged = denoise_scaled_grid_average(&d, img.view(), sigma);
+    let averaged_shifted = denoise_scaled_grid_average(&d, shifted.view(), sigma);
+    let (g_single, g_avg) = (
+        gap(&single, &single_shifted),
+        gap(&averaged, &averaged_shifted),
+    );
+    assert!(
+        g_avg < 1e-4,
+        "averaged prior moved by {g_avg} under a shift"
+    );
+    assert!(
+        g_single > 20.0 * g_avg.max(1e-6),
+        "single grid {g_single} against {g_avg}"
+    );
+    // Moving the grid by (1, 1) is the same as denoising the shifted image.
+    let at = denoise_scaled_at(&d, img.view(), sigma, (1, 1)).image;
+    let at_gap = at
+        .slice(inner)
+        .iter()
+        .zip(single_shifted.slice(inner_shifted))
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    assert!(at_gap < 1e-4, "grid moved by (1, 1) differs by {at_gap}");
+}

@@ -34,6 +34,13 @@ pub trait Denoiser: Sync {
     fn fades_to_identity(&self) -> bool {
         true
     }
+
+    /// Whether the denoiser works on a 2x2 pixel-unshuffled grid, so that
+    /// its output depends on where that grid starts (FFDNet); see
+    /// [`denoise_scaled_at`].
+    fn unshuffles(&self) -> bool {
+        false
+    }
 }
 
 /// No prior: the denoiser that returns its input (ADMM then reduces to a
@@ -86,4 +93,52 @@ pub fn denoise_scaled(d: &dyn Denoiser, img: ArrayView2<f64>, sigma: f64) -> Sca
             .mapv(|v| v * range + lo),
         unit_sigma: Some(unit_sigma),
     }
+}
+
+/// [`denoise_scaled`] with the image shifted by `phase = (rows, cols)`
+/// (each 0 or 1) before denoising: that many rows and columns are repeated
+/// at the top and left, and cropped off again. For a denoiser that
+/// [`Denoiser::unshuffles`], this moves its 2x2 grid by one pixel.
+pub fn denoise_scaled_at(
+    d: &dyn Denoiser,
+    img: ArrayView2<f64>,
+    sigma: f64,
+    phase: (usize, usize),
+) -> Scaled {
+    if phase == (0, 0) {
+        return denoise_scaled(d, img, sigma);
+    }
+    let (h, w) = img.dim();
+    let (dy, dx) = phase;
+    let padded = Array2::from_shape_fn((h + dy, w + dx), |(i, j)| {
+        img[(i.saturating_sub(dy), j.saturating_sub(dx))]
+    });
+    let out = denoise_scaled(d, padded.view(), sigma);
+    Scaled {
+        image: out.image.slice(ndarray::s![dy.., dx..]).to_owned(),
+        unit_sigma: out.unit_sigma,
+    }
+}
+
+/// The four positions of a 2x2 unshuffle grid, as `(rows, cols)` shifts.
+const GRID_POSITIONS: [(usize, usize); 4] = [(0, 0), (1, 1), (0, 1), (1, 0)];
+
+/// [`denoise_scaled`] averaged over the four positions of the denoiser's
+/// 2x2 grid ([`denoise_scaled_at`]) when it [`Denoiser::unshuffles`]; a
+/// single call otherwise. The average does not depend on where the grid
+/// starts, so it adds no fixed 2x2 pattern: in PnP such a pattern sits in
+/// the blur's null space, where the data cannot remove it.
+pub fn denoise_scaled_grid_average(
+    d: &dyn Denoiser,
+    img: ArrayView2<f64>,
+    sigma: f64,
+) -> Array2<f64> {
+    if !d.unshuffles() {
+        return denoise_scaled(d, img, sigma).image;
+    }
+    let mut sum = Array2::zeros(img.dim());
+    for &p in &GRID_POSITIONS {
+        sum += &denoise_scaled_at(d, img, sigma, p).image;
+    }
+    sum / GRID_POSITIONS.len() as f64
 }

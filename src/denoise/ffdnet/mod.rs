@@ -129,6 +129,10 @@ impl Denoiser for Ffdnet {
         self.weights.arch.sigma_max
     }
 
+    fn unshuffles(&self) -> bool {
+        true
+    }
+
     /// The network does not become the identity at small sigma: PnP's
     /// primal residual reaches a minimum and rises again (BENCHMARKS.md).
     fn fades_to_identity(&self) -> bool {
