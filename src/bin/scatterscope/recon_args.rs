@@ -118,9 +118,10 @@ pub struct ReconArgs {
     #[arg(long, default_value_t = SplitOptions::default().warm_start)]
     pub warm_start: usize,
     /// Split solver: the learned prior on its fixed 2x2 pixel-unshuffle
-    /// grid, or averaged over the grid's four positions (about 2-3x the
-    /// time; removes a 2x2 pattern the blur cannot see: up to +3 dB on
-    /// smooth scenes, BENCHMARKS.md)
+    /// grid, or averaged over the grid's four positions (about 3x the
+    /// time; removes a 2x2 pattern the blur cannot see: +0.3 dB on average
+    /// on the tuning images at the paper's light, up to +3 dB on smooth
+    /// scenes; BENCHMARKS.md)
     #[arg(long, default_value = "fixed", value_parser = ["fixed", "average"])]
     pub prior_grid: String,
     /// admm-lbfgs: initial penalty lambda_0.
