@@ -12,6 +12,12 @@
 //! a_k <- a_k + H_k o - z_k,   b <- b + o - v
 //! ```
 //!
+//! The output is `v`. A prior that works on a 2x2 pixel-unshuffled grid
+//! (FFDNet) leaves a faint 2x2 pattern there, at the Nyquist frequency,
+//! which the blur does not pass, so the data never correct it; with
+//! `average_prior_grid` the prior is averaged over the grid's four
+//! positions (4 denoiser calls per iteration; an option, BENCHMARKS.md).
+//!
 //! - The o-update is exact: every operator is a convolution on the grid, so
 //!   it is a division in the Fourier domain by `sum_k rho_k |K_k|^2 + gamma`
 //!   (the kernel part computed once).
