@@ -55,8 +55,13 @@ def natural_images():
     return out
 
 
-def dead_leaves(rng, size, rmin=1.0, rmax=None, alpha=3.0):
-    """Occluding discs with power-law radii (density r^-alpha) and random grey levels."""
+def dead_leaves(rng, size, rmin=1.0, rmax=None, alpha=3.0, shaded=False):
+    """Occluding discs with power-law radii (density r^-alpha) and random grey levels.
+
+    With `shaded`, each disc's grey level varies linearly across it and the whole
+    image is multiplied by a smooth illumination field: flat discs alone teach the
+    network that the world is piecewise constant.
+    """
     rmax = rmax or size / 2
     img = np.full((size, size), np.nan, dtype=np.float32)
     a1 = 1 - alpha
@@ -73,8 +78,18 @@ def dead_leaves(rng, size, rmin=1.0, rmax=None, alpha=3.0):
             continue
         yy, xx = np.mgrid[y0:y1, x0:x1]
         mask = ((xx - cx) ** 2 + (yy - cy) ** 2 <= r * r) & empty[y0:y1, x0:x1]
-        img[y0:y1, x0:x1][mask] = rng.random()
+        if shaded:
+            gx, gy = rng.uniform(-0.5, 0.5, 2)
+            value = rng.random() + (gx * (xx - cx) + gy * (yy - cy)) / max(r, 1.0)
+            img[y0:y1, x0:x1][mask] = value[mask]
+        else:
+            img[y0:y1, x0:x1][mask] = rng.random()
     img[np.isnan(img)] = rng.random()
+    if shaded:
+        from scipy.ndimage import gaussian_filter
+        light = gaussian_filter(rng.standard_normal((size, size)), rng.uniform(16, 64), mode="wrap")
+        light = (light - light.min()) / max(light.max() - light.min(), 1e-12)
+        img = np.clip(img, 0.0, 1.0) * (0.3 + 0.7 * light).astype(np.float32)
     # Mild blur on some leaves images so edges are not always pixel-sharp.
     if rng.random() < 0.5:
         from scipy.ndimage import gaussian_filter
@@ -105,6 +120,11 @@ def main():
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--init", help="continue from a safetensors file this script wrote")
+    ap.add_argument("--shaded-leaves", type=float, default=0.0,
+                    help="fraction of dead-leaves images with shaded discs and smooth illumination")
+    ap.add_argument("--shift-consistency", type=float, default=0.0,
+                    help="weight of the penalty on f(shift x) - shift f(x) for a one-pixel shift "
+                         "(FFDNet's 2x2 unshuffle grid is not shift-equivariant)")
     ap.add_argument("--out", required=True)
     args = ap.parse_args()
 
@@ -115,7 +135,8 @@ def main():
     device = "cuda" if torch.cuda.is_available() else "cpu"
 
     naturals = natural_images()
-    leaves = [dead_leaves(rng, 256) for _ in range(48)]
+    leaves = [dead_leaves(rng, 256, shaded=args.shaded_leaves > 0 and rng.random() < args.shaded_leaves)
+              for _ in range(48)]
     print(f"{len(naturals)} natural images, {len(leaves)} dead-leaves images", flush=True)
 
     model = FFDNet(args.layers, args.channels)
@@ -149,6 +170,12 @@ def main():
         mse = ((out - clean_t) ** 2).mean(dim=(1, 2, 3))
         weight = 1.0 / (sigma_t + 2.0 / 255.0) ** 2
         loss = (mse * weight).mean()
+        if args.shift_consistency > 0:
+            # One-pixel shift (down, right or both), cropped so no wrapped pixel counts.
+            dy, dx = [(1, 0), (0, 1), (1, 1)][rng.integers(3)]
+            shifted = model(torch.roll(noisy_t, (dy, dx), dims=(2, 3)), sigma_t)
+            diff = shifted[:, :, 2:-2, 2:-2] - torch.roll(out, (dy, dx), dims=(2, 3))[:, :, 2:-2, 2:-2]
+            loss = loss + args.shift_consistency * ((diff ** 2).mean(dim=(1, 2, 3)) * weight).mean()
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -168,7 +195,8 @@ def save(model, args, step, seconds):
         "scatterscope training/train_ffdnet.py",
         {"steps": step, "seconds": round(seconds), "init": args.init or "", "patch": args.patch, "batch": args.batch,
          "lr": args.lr, "seed": args.seed, "threads": torch.get_num_threads(),
-         "loss": "mse/(sigma+2/255)^2", "data": "dead leaves + skimage " + ",".join(TRAINING_IMAGES)},
+         "loss": "mse/(sigma+2/255)^2", "shift_consistency": args.shift_consistency,
+         "data": f"dead leaves ({args.shaded_leaves:g} shaded) + skimage " + ",".join(TRAINING_IMAGES)},
     )
     tensors = {k: v.cpu() for k, v in model.safetensors_dict().items()}
     save_file(tensors, args.out, metadata=meta)
