@@ -965,6 +965,48 @@ fn weights_import_show_and_priority() {
     );
 }
 
+/// `--weights embedded` (and the weights variable set to `embedded`) picks
+/// the built-in weights even when imported ones would win; without it the
+/// imported file does.
+#[test]
+fn the_word_embedded_picks_the_built_in_weights_over_imported_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    std::fs::create_dir(&data).unwrap();
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/ffdnet-gray-small.safetensors");
+    std::fs::copy(&file, data.join("ffdnet-gray.safetensors")).unwrap();
+    let o = scatterscope_with_data_dir(&["weights", "show"], &data);
+    assert!(o.status.success(), "{}", text(&o).1);
+    assert!(
+        text(&o).0.contains("prior: ffdnet(imported "),
+        "{}",
+        text(&o).0
+    );
+    let o = scatterscope_with_data_dir(&["weights", "show", "embedded"], &data);
+    assert!(o.status.success(), "{}", text(&o).1);
+    assert!(
+        text(&o).0.contains("prior: ffdnet(embedded; "),
+        "{}",
+        text(&o).0
+    );
+    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args(["weights", "show"])
+        .env("SCATTERSCOPE_FFDNET_WEIGHTS", "embedded")
+        .env("SCATTERSCOPE_DATA_DIR", &data)
+        .output()
+        .expect("binary runs");
+    assert!(o.status.success(), "{}", text(&o).1);
+    assert!(
+        text(&o).0.contains("prior: ffdnet(embedded; "),
+        "{}",
+        text(&o).0
+    );
+    // Any other missing name is still an error that names it.
+    let o = scatterscope_with_data_dir(&["weights", "show", "embeded"], &data);
+    assert!(!o.status.success());
+    assert!(text(&o).1.contains("embeded"), "{}", text(&o).1);
+}
+
 #[test]
 fn denoise_bench_scores_every_prior_on_the_same_noise() {
     let dir = tempfile::tempdir().unwrap();

@@ -28,7 +28,8 @@ pub struct PriorArgs {
     /// Prior for PnP-ADMM (the denoiser).
     #[arg(long, value_enum, default_value = "ffdnet")]
     pub denoiser: DenoiserChoice,
-    /// FFDNet weight file (the project's safetensors format).
+    /// FFDNet weight file (the project's safetensors format), or
+    /// `embedded` for the built-in weights even when imported ones exist.
     #[arg(long, value_name = "PATH")]
     pub weights: Option<PathBuf>,
     /// TV weight per unit of the denoiser's noise sigma.

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use scatterscope::denoise::Denoiser;
-use scatterscope::denoise::ffdnet::{Ffdnet, pth, source, weights::FfdnetWeights};
+use scatterscope::denoise::ffdnet::{pth, source, weights::FfdnetWeights};
 
 /// Manage the FFDNet weights used by the learned prior.
 #[derive(Debug, clap::Args)]
@@ -27,7 +27,8 @@ enum Action {
     },
     /// Show which weights the prior would use and what they are.
     Show {
-        /// A weight file to inspect instead of the default choice.
+        /// A weight file to inspect instead of the default choice, or
+        /// `embedded` for the built-in weights.
         path: Option<PathBuf>,
     },
 }
@@ -61,10 +62,7 @@ pub fn run(args: &WeightsArgs) -> anyhow::Result<()> {
             Ok(())
         }
         Action::Show { path } => {
-            let net = match path {
-                Some(p) => Ffdnet::from_file(p, p.display().to_string())?,
-                None => source::load(None)?,
-            };
+            let net = source::load(path.as_deref())?;
             println!("prior: {}", net.name());
             let a = &net.weights().arch;
             println!(

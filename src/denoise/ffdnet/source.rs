@@ -1,7 +1,9 @@
 //! Where FFDNet weights come from, in order of priority: an explicit path
 //! (`--weights`, else the environment variable [`WEIGHTS_ENV`]), weights
 //! imported into the user's data directory (`scatterscope weights import`),
-//! and the project's own weights embedded in the binary.
+//! and the project's own weights embedded in the binary. The explicit
+//! choice may also be the word [`EMBEDDED_NAME`], which picks the embedded
+//! weights even when imported ones exist.
 
 use std::path::{Path, PathBuf};
 
@@ -15,6 +17,9 @@ pub const WEIGHTS_ENV: &str = "SCATTERSCOPE_FFDNET_WEIGHTS";
 pub const DATA_DIR_ENV: &str = "SCATTERSCOPE_DATA_DIR";
 /// File name of imported weights inside the data directory.
 pub const IMPORTED_FILE: &str = "ffdnet-gray.safetensors";
+/// The explicit choice (`--weights`, [`WEIGHTS_ENV`]) that names the
+/// embedded weights; a file of that name is reached as `./embedded`.
+pub const EMBEDDED_NAME: &str = "embedded";
 
 /// The project's own weights, trained by `training/train_ffdnet.py` on
 /// dead-leaves and scikit-image images (see `training/README.md`).
@@ -40,22 +45,31 @@ pub fn embedded() -> FfdnetWeights {
 }
 
 /// Loads FFDNet by priority: `explicit`, then [`WEIGHTS_ENV`], then the
-/// imported file, then the embedded weights. An explicit or imported file
+/// imported file, then the embedded weights. An explicit choice of
+/// [`EMBEDDED_NAME`] is the embedded weights. An explicit or imported file
 /// that fails validation is an error, never a silent fallback.
 pub fn load(explicit: Option<&Path>) -> Result<Ffdnet, WeightsError> {
     let env = std::env::var_os(WEIGHTS_ENV)
         .filter(|v| !v.is_empty())
         .map(PathBuf::from);
     if let Some(p) = explicit {
-        return Ffdnet::from_file(p, p.display().to_string());
+        return load_explicit(p, p.display().to_string());
     }
     if let Some(p) = env {
         let label = format!("{} from {WEIGHTS_ENV}", p.display());
-        return Ffdnet::from_file(&p, label);
+        return load_explicit(&p, label);
     }
     if let Some(p) = imported_path().filter(|p| p.is_file()) {
         let label = format!("imported {}", p.display());
         return Ffdnet::from_file(&p, label);
     }
     Ok(Ffdnet::new(embedded(), "embedded"))
+}
+
+/// An explicit choice: the embedded weights by name, else a file.
+fn load_explicit(p: &Path, label: String) -> Result<Ffdnet, WeightsError> {
+    if p.as_os_str() == EMBEDDED_NAME {
+        return Ok(Ffdnet::new(embedded(), "embedded"));
+    }
+    Ffdnet::from_file(p, label)
 }
