@@ -970,36 +970,33 @@ fn weights_import_show_and_priority() {
 /// imported file does.
 #[test]
 fn the_word_embedded_picks_the_built_in_weights_over_imported_ones() {
+    use scatterscope::denoise::ffdnet::source::{IMPORTED_FILE, WEIGHTS_ENV};
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     std::fs::create_dir(&data).unwrap();
     let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/ffdnet-gray-small.safetensors");
-    std::fs::copy(&file, data.join("ffdnet-gray.safetensors")).unwrap();
-    let o = scatterscope_with_data_dir(&["weights", "show"], &data);
-    assert!(o.status.success(), "{}", text(&o).1);
-    assert!(
-        text(&o).0.contains("prior: ffdnet(imported "),
-        "{}",
-        text(&o).0
+    std::fs::copy(&file, data.join(IMPORTED_FILE)).unwrap();
+    let shows = |o: Output, prior: &str| {
+        let (stdout, stderr) = text(&o);
+        assert!(o.status.success(), "{stderr}");
+        assert!(stdout.contains(prior), "{stdout}");
+    };
+    shows(
+        scatterscope_with_data_dir(&["weights", "show"], &data),
+        "prior: ffdnet(imported ",
     );
-    let o = scatterscope_with_data_dir(&["weights", "show", "embedded"], &data);
-    assert!(o.status.success(), "{}", text(&o).1);
-    assert!(
-        text(&o).0.contains("prior: ffdnet(embedded; "),
-        "{}",
-        text(&o).0
+    shows(
+        scatterscope_with_data_dir(&["weights", "show", "embedded"], &data),
+        "prior: ffdnet(embedded; ",
     );
-    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
-        .args(["weights", "show"])
-        .env("SCATTERSCOPE_FFDNET_WEIGHTS", "embedded")
-        .env("SCATTERSCOPE_DATA_DIR", &data)
-        .output()
-        .expect("binary runs");
-    assert!(o.status.success(), "{}", text(&o).1);
-    assert!(
-        text(&o).0.contains("prior: ffdnet(embedded; "),
-        "{}",
-        text(&o).0
+    shows(
+        Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+            .args(["weights", "show"])
+            .env(WEIGHTS_ENV, "embedded")
+            .env("SCATTERSCOPE_DATA_DIR", &data)
+            .output()
+            .expect("binary runs"),
+        "prior: ffdnet(embedded; ",
     );
     // Any other missing name is still an error that names it.
     let o = scatterscope_with_data_dir(&["weights", "show", "embeded"], &data);
