@@ -185,6 +185,18 @@ fn a_simulated_medium_is_recovered_within_its_standard_errors() {
         assert!(c.chi2_window > c.chi2, "{c:?}");
         assert!(c.chi2_per_dof_window() < 1.3, "{}", c.chi2_per_dof_window());
     }
+    // The joint chi-square per degree of freedom counts the fitted bins
+    // only: each capture's fitted bins less the three nuisance parameters
+    // of every capture and the two shared ones.
+    let fitted_bins: usize = fit.captures.iter().map(|c| c.dof + 3).sum();
+    assert_eq!(fit.dof, fitted_bins - 3 * fit.captures.len() - 2);
+    let chi2: f64 = fit.captures.iter().map(|c| c.chi2).sum();
+    assert!(
+        (fit.chi2_per_dof - chi2 / fit.dof as f64).abs() < 1e-12 * fit.chi2_per_dof,
+        "{} vs {}",
+        fit.chi2_per_dof,
+        chi2 / fit.dof as f64
+    );
     for (est, truth) in [(fit.mu_a, mu_a), (fit.mu_s_reduced, mu_s)] {
         assert_recovered(est, truth);
     }
@@ -570,6 +582,7 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
         stdout.contains("instrument response from")
             && stdout.contains("(whole recorded period): 12500 bins of 8 ps")
             && stdout.contains("left out  chi2/dof  (all bins)")
+            && stdout.contains("fitted from 80 % of the peak on the rising edge")
             && stdout.contains("prediction of captures left out")
             && stdout.contains(
                 "parts: capture_3_5_inch: 240 parts, 120 (120-239) also in capture_3_0_inch"

@@ -21,8 +21,9 @@
 //! counts per bin. The shape `sum_j r_j q` is scaled to unit sum over the
 //! fitted window, so `A` is the capture's signal counts there. The window
 //! runs from [`PRE_LIGHT_BINS`] before the light to where the light falls
-//! under [`TAIL_SHARE`] of its peak; optionally the rising edge is left
-//! out of the likelihood ([`SlabFitOptions::rising_edge_share`]).
+//! under [`TAIL_SHARE`] of its peak; the rising edge may be left out of
+//! the likelihood ([`SlabFitOptions::rising_edge_share`]; `calibrate-slab`
+//! leaves it out by default, [`RISING_EDGE_CONVENTION`]).
 //!
 //! mu_s', mu_a and `rho` are shared by every capture; `t0`, `A` and `B`
 //! are each capture's own. The fit maximises the Poisson likelihood:
@@ -98,7 +99,10 @@ pub const AT_ZERO_PER_CM: f64 = 1e-7;
 /// The share of the peak from which time-domain diffuse optics usually
 /// fits the rising edge (with 1 % of the peak on the falling edge, as
 /// [`TAIL_SHARE`]): the diffusion model is least accurate at the earliest
-/// times. Taken from that practice, not chosen on any capture here.
+/// times. Taken from that practice, not chosen on any capture here;
+/// `calibrate-slab`'s default since it predicted seven foam captures none
+/// of the project's choices had seen better than fitting every bin did
+/// (BENCHMARKS.md, rule R10).
 pub const RISING_EDGE_CONVENTION: f64 = 0.8;
 
 /// First step of the search over the detector's offset (cm).
@@ -300,8 +304,16 @@ impl SlabFitOptions {
         } else {
             format!("{} cm from the laser's axis", self.offset_cm)
         };
+        let range = if self.rising_edge_share > 0.0 {
+            format!(
+                "fitted from {:.0} % of the peak on the rising edge (the window's first {PRE_LIGHT_BINS} bins kept for the background)",
+                100.0 * self.rising_edge_share
+            )
+        } else {
+            "every bin of the window fitted".to_string()
+        };
         format!(
-            "slab with extrapolated boundaries, n = {}, point detector {detector}, measured instrument response ({}), constant background per capture",
+            "slab with extrapolated boundaries, n = {}, point detector {detector}, measured instrument response ({}), constant background per capture; {range}",
             self.refractive_index,
             irf.extent_name()
         )
@@ -968,7 +980,9 @@ fn finish(
             let fitted: Vec<f64> = shape.iter().map(|s| a * s + b).collect();
             let chi2 = pearson_chi2(&cap.fitted_bins(fitted.clone()), &cap.counts);
             chi2_total += chi2;
-            bins += fitted.len();
+            // Only the fitted bins count: the left-out rising edge adds
+            // neither chi-square nor degrees of freedom.
+            bins += cap.counts.len();
             CaptureFit {
                 label: cap.label.to_string(),
                 thickness_cm: cap.thickness_cm,

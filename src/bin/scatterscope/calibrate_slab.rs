@@ -8,7 +8,7 @@ use anyhow::Context;
 use scatterscope::calibrate::histogram::{DEFAULT_MAT_DATASET, DEFAULT_MAT_PARTS, TimeHistogram};
 use scatterscope::calibrate::measured_irf::MeasuredIrf;
 use scatterscope::calibrate::transmittance::{
-    SlabFit, SlabFitOptions, fit_slab, predict_captures, read_captures,
+    RISING_EDGE_CONVENTION, SlabFit, SlabFitOptions, fit_slab, predict_captures, read_captures,
 };
 use scatterscope::report::plot::{Series, chart};
 
@@ -77,9 +77,10 @@ pub struct CalibrateSlabArgs {
     /// Leave the rising edge out of the fit: the bins after the window's
     /// first 50 (kept for the background) and before the first whose
     /// excess reaches this share of the peak's (time-domain diffuse
-    /// optics usually fits from 0.8; 0 fits every bin). The output gives
-    /// chi-square over the fitted bins and over the whole window.
-    #[arg(long, default_value_t = 0.0)]
+    /// optics' usual 0.8 by default, where diffusion is least accurate;
+    /// 0 fits every bin). The output gives chi-square over the fitted bins
+    /// and over the whole window.
+    #[arg(long, default_value_t = RISING_EDGE_CONVENTION)]
     rising_edge_share: f64,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/calibrate-slab")]
