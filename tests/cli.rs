@@ -218,6 +218,7 @@ fn reconstruct_a_simulated_stack_with_every_method() {
         ("pnp-slice", Some("10")),
         ("rl", Some("10")),
         ("rl-sum", None),
+        ("rl-stack", None),
         ("scaled-counts", None),
     ] {
         let out = dir.path().join(method);
@@ -1108,6 +1109,7 @@ fn bench_recon_scores_pnp_against_richardson_lucy_on_a_manifest() {
         "pnp split tv",
         "pnp-sum split tv",
         "rl-sum (cross-validated stop)",
+        "rl-stack (cross-validated stop)",
         "rl-sum (5 iterations)",
         "rl-sum (best iteration by truth)",
     ] {
@@ -1132,9 +1134,14 @@ fn bench_recon_scores_pnp_against_richardson_lucy_on_a_manifest() {
         assert_eq!(f[5], f[10], "{f:?}");
         assert_eq!(f[9], f[11], "{f:?}");
     }
-    for f in fields("rl-sum (cross-validated stop)") {
-        let (ran, chosen): (usize, usize) = (f[8].parse().unwrap(), f[9].parse().unwrap());
-        assert!(chosen < ran, "the stop searches past its choice: {f:?}");
+    for method in [
+        "rl-sum (cross-validated stop)",
+        "rl-stack (cross-validated stop)",
+    ] {
+        for f in fields(method) {
+            let (ran, chosen): (usize, usize) = (f[8].parse().unwrap(), f[9].parse().unwrap());
+            assert!(chosen < ran, "the stop searches past its choice: {f:?}");
+        }
     }
     let summary = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(

@@ -5,6 +5,7 @@ use ndarray::{Array3, ArrayView2, Axis};
 use super::pnp::{PnpOptions, pnp_admm};
 use super::problem::Problem;
 use super::richardson_lucy::{richardson_lucy, richardson_lucy_cv};
+use super::rl_stack::{richardson_lucy_stack, richardson_lucy_stack_cv};
 use super::scaled_counts::scaled_counts;
 use super::split::{SplitOptions, pnp_split};
 use super::trace::TraceRow;
@@ -27,6 +28,8 @@ pub enum Method {
     Rl,
     /// Richardson-Lucy on the time-summed stack with the time-summed kernel.
     RlSum,
+    /// Richardson-Lucy on the whole stack, every bin with its own kernel.
+    RlStack,
     /// Counts divided by kernel mass, no deblurring (one bin, or the sum
     /// of all bins when none is chosen).
     ScaledCounts,
@@ -38,6 +41,7 @@ named!(Method {
     PnpSum => "pnp-sum",
     Rl => "rl",
     RlSum => "rl-sum",
+    RlStack => "rl-stack",
     ScaledCounts => "scaled-counts",
 });
 
@@ -180,6 +184,19 @@ pub fn run_method(
             rl(&problem.single_bin(b), &[b], &mut on_iter)
         }
         Method::RlSum => rl(&problem.counts, &all, &mut on_iter),
+        Method::RlStack => match opts.rl_stop {
+            RlStop::Fixed => {
+                richardson_lucy_stack(model, &problem.counts, &all, opts.rl_iters, truth, on_iter)
+            }
+            RlStop::CrossValidated => richardson_lucy_stack_cv(
+                model,
+                &problem.counts,
+                &all,
+                opts.rl_max_iters,
+                truth,
+                on_iter,
+            ),
+        },
         Method::ScaledCounts => match bin {
             Some(b) => scaled_counts(model, &problem.single_bin(b), &[b], truth),
             None => scaled_counts(model, &problem.counts, &all, truth),

@@ -6,6 +6,8 @@
 //!   stopping rule ([`discrepancy`]).
 //! - [`richardson_lucy`]: the classical baseline, on one bin or on the
 //!   time-summed stack.
+//! - [`rl_stack`]: Richardson-Lucy on the whole stack, every bin with its
+//!   own kernel.
 //! - [`thinning`]: photon counts split into two independent halves, so
 //!   that Richardson-Lucy can choose its own iteration count.
 //! - [`scaled_counts`]: counts divided by kernel mass (no deblurring),
@@ -20,6 +22,7 @@ pub mod operator;
 pub mod pnp;
 pub mod problem;
 pub mod richardson_lucy;
+pub mod rl_stack;
 pub mod scaled_counts;
 pub mod split;
 pub mod thinning;
@@ -97,6 +100,13 @@ pub(crate) fn pnp_method(
     counts: &Array3<f64>,
     bins: &[usize],
 ) -> Result<&'static str, ReconstructError> {
+    validate_stack(counts, bins)?;
+    Ok(if bins.len() == 1 { "pnp-slice" } else { "pnp" })
+}
+
+/// Checks a stack's counts (finite, >= 0) and that it holds one image per
+/// listed bin.
+pub(crate) fn validate_stack(counts: &Array3<f64>, bins: &[usize]) -> Result<(), ReconstructError> {
     validate_counts(counts)?;
     if counts.shape()[0] != bins.len() {
         return Err(ReconstructError::Shape(format!(
@@ -105,7 +115,7 @@ pub(crate) fn pnp_method(
             bins.len()
         )));
     }
-    Ok(if bins.len() == 1 { "pnp-slice" } else { "pnp" })
+    Ok(())
 }
 
 /// Share of the total count kept as signal when the background explains

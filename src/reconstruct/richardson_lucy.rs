@@ -131,7 +131,7 @@ pub fn richardson_lucy_cv(
     if total == 0.0 || rl.mass <= 0.0 {
         return Ok(no_photons(trace, (h, w), truth));
     }
-    let (first, second) = thin_halves(&data, THINNING_SEED)?;
+    let (first, second) = thin_halves(&data, THINNING_SEED, "the time-summed counts")?;
     let halves: [Vec<f64>; 2] = [
         first.iter().copied().collect(),
         second.iter().copied().collect(),
@@ -142,7 +142,7 @@ pub fn richardson_lucy_cv(
     // Each half holds half the light and half the background.
     let bg = model.background() * bins.len() as f64 / 2.0;
     let guard = DENOMINATOR_GUARD * total / 2.0 / (h * w) as f64;
-    let mut o: Vec<Vec<f64>> = halves
+    let o: Vec<Vec<f64>> = halves
         .iter()
         .map(|m| vec![flat_level(m.iter().sum(), bg, 1, rl.mass, h * w); rl.sensitivity.len()])
         .collect();
@@ -153,6 +153,46 @@ pub fn richardson_lucy_cv(
         grid_note(model)
     ));
     note_background(&mut trace, model);
+    let (k, image) = cv_search(
+        model,
+        o,
+        max_iters,
+        truth,
+        start,
+        &mut trace,
+        |x| rl.op.apply(x),
+        |y, half| held_out_deviance(y, &halves[1 - half], &halves_log[1 - half], bg, guard),
+        |half, x, y| {
+            rl.update(x, y, &halves[half], bg, guard);
+        },
+        &mut on_iter,
+    );
+    let image = finish(image, method, k)?;
+    Ok(Reconstruction { image, trace })
+}
+
+/// The search both cross-validated Richardson-Lucy variants share: the two
+/// halves' estimates `o` (on the model's grid) step together; before each
+/// step `forward` predicts from each and `held_out(prediction, half)`
+/// scores half `half`'s prediction on the other half's counts. The search
+/// stops [`CV_PATIENCE`] iterations (or a quarter of the best count, if
+/// more) past the best summed score, or at `max_iters`. Returns the best
+/// iteration and the sum of the halves' estimates there on the sensor
+/// window, with the stop's notes in `trace`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn cv_search<Y: Send + Sync>(
+    model: &ForwardModel,
+    mut o: Vec<Vec<f64>>,
+    max_iters: usize,
+    truth: Option<ArrayView2<f64>>,
+    start: Instant,
+    trace: &mut Trace,
+    forward: impl Fn(&[f64]) -> Y + Sync,
+    held_out: impl Fn(&Y, usize) -> f64,
+    update: impl Fn(usize, &mut [f64], &Y) + Sync,
+    on_iter: &mut dyn FnMut(&TraceRow),
+) -> (usize, Array2<f64>) {
+    let (h, w) = model.sensor_shape();
     let crop_sum = |o: &[Vec<f64>]| {
         let sum: Vec<f64> = o[0].iter().zip(&o[1]).map(|(a, b)| a + b).collect();
         Array2::from_shape_vec((h, w), model.crop_vec(&sum)).expect("shape")
@@ -162,10 +202,8 @@ pub fn richardson_lucy_cv(
     for it in 0..=max_iters {
         searched = it;
         // The two halves are independent: one core each.
-        let y: Vec<Vec<f64>> = o.par_iter().map(|x| rl.op.apply(x)).collect();
-        // Each half's estimate predicts the other half's counts.
-        let score_cv = held_out_deviance(&y[0], &halves[1], &halves_log[1], bg, guard)
-            + held_out_deviance(&y[1], &halves[0], &halves_log[0], bg, guard);
+        let y: Vec<Y> = o.par_iter().map(|x| forward(x)).collect();
+        let score_cv = held_out(&y[0], 0) + held_out(&y[1], 1);
         let improved = score_cv < best.0;
         let mut row = TraceRow {
             iteration: it,
@@ -187,10 +225,8 @@ pub fn richardson_lucy_cv(
         }
         o.par_iter_mut()
             .zip(y.par_iter())
-            .zip(halves.par_iter())
-            .for_each(|((x, yx), m)| {
-                rl.update(x, yx, m, bg, guard);
-            });
+            .enumerate()
+            .for_each(|(half, (x, yx))| update(half, x, yx));
     }
     let (_, k, image) = best;
     trace.notes.push(format!(
@@ -202,8 +238,7 @@ pub fn richardson_lucy_cv(
         ));
     }
     trace.notes.push(format!("output: iteration {k}"));
-    let image = finish(image, method, k)?;
-    Ok(Reconstruction { image, trace })
+    (k, image)
 }
 
 /// Poisson deviance of counts `m` (with `m log m` per point, computed once)

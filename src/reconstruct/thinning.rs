@@ -17,17 +17,19 @@ pub const THINNING_SEED: u64 = 0x7417_2026;
 /// Splits `counts` (whole photon counts) into two halves whose sum is
 /// `counts`, each photon going to the first half with probability 1/2.
 /// A count that is not a whole number (a stack that was scaled or had its
-/// background subtracted) is refused by position and value.
+/// background subtracted) is refused by position and value; `what` names
+/// the image in that message (e.g. "the time-summed counts").
 pub fn thin_halves(
     counts: &Array2<f64>,
     seed: u64,
+    what: &str,
 ) -> Result<(Array2<f64>, Array2<f64>), ReconstructError> {
     if let Some(((row, col), &value)) = counts
         .indexed_iter()
         .find(|(_, v)| !(v.is_finite() && **v >= 0.0 && v.fract() == 0.0 && **v < 2f64.powi(53)))
     {
         return Err(ReconstructError::Shape(format!(
-            "cross-validation by thinning needs whole photon counts: row {row}, column {col} of the time-summed counts is {value} (expected counts, or a scaled or background-subtracted stack: stop Richardson-Lucy after a fixed count instead, --rl-stop fixed)"
+            "cross-validation by thinning needs whole photon counts: row {row}, column {col} of {what} is {value} (expected counts, or a scaled or background-subtracted stack: stop Richardson-Lucy after a fixed count instead, --rl-stop fixed)"
         )));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -47,7 +49,7 @@ mod tests {
     #[test]
     fn halves_sum_to_the_counts_and_share_them_evenly() {
         let counts = Array2::from_shape_fn((64, 64), |(r, c)| ((r * 7 + c * 3) % 50) as f64);
-        let (a, b) = thin_halves(&counts, 1).unwrap();
+        let (a, b) = thin_halves(&counts, 1, "test").unwrap();
         assert_eq!(&a + &b, counts);
         assert!(
             a.iter()
@@ -59,8 +61,8 @@ mod tests {
         let z = (a.sum() - total / 2.0) / (total.sqrt() / 2.0);
         assert!(z.abs() < 5.0, "first half {} of {total}: z = {z}", a.sum());
         // The same seed gives the same split, another seed another.
-        assert_eq!(thin_halves(&counts, 1).unwrap().0, a);
-        assert_ne!(thin_halves(&counts, 2).unwrap().0, a);
+        assert_eq!(thin_halves(&counts, 1, "test").unwrap().0, a);
+        assert_ne!(thin_halves(&counts, 2, "test").unwrap().0, a);
     }
 
     #[test]
@@ -68,7 +70,7 @@ mod tests {
         for bad in [2.5, -1.0, f64::NAN] {
             let mut counts = Array2::from_elem((3, 4), 2.0);
             counts[(1, 2)] = bad;
-            let err = thin_halves(&counts, 0).unwrap_err().to_string();
+            let err = thin_halves(&counts, 0, "test").unwrap_err().to_string();
             assert!(
                 err.contains("row 1, column 2") && err.contains(&format!("{bad}")),
                 "{err}"

@@ -38,6 +38,9 @@ pub const RL_BEST: &str = "rl-sum (best iteration by truth)";
 /// cross-validation on thinned halves of the counts (no truth).
 pub const RL_CV: &str = "rl-sum (cross-validated stop)";
 
+/// Label of whole-stack Richardson-Lucy with its cross-validated stop.
+pub const RL_STACK_CV: &str = "rl-stack (cross-validated stop)";
+
 /// Label of Richardson-Lucy's output after a fixed count of `iterations`.
 pub fn rl_fixed_label(iterations: usize) -> String {
     format!("rl-sum ({iterations} iterations)")
@@ -346,6 +349,19 @@ pub fn run_case(
         ..*opts
     })?;
     rows.push(row(RL_CV.into(), cv.image.view(), &cv.trace));
+    let stack = run_method(
+        &case.problem,
+        Method::RlStack,
+        None,
+        &crate::denoise::NoPrior,
+        &MethodOptions {
+            rl_stop: RlStop::CrossValidated,
+            ..*opts
+        },
+        Some(truth),
+        |_| {},
+    )?;
+    rows.push(row(RL_STACK_CV.into(), stack.image.view(), &stack.trace));
     let rl = run_rl(&MethodOptions {
         rl_iters: rl_iters.max(opts.rl_iters),
         rl_stop: RlStop::Fixed,

@@ -28,7 +28,9 @@ use scatterscope::calibrate::{Free, fit_stack_physics};
 pub struct ReconstructArgs {
     /// The stack file.
     stack: PathBuf,
-    /// Method: pnp (whole stack), pnp-slice, rl (one bin), rl-sum, raw.
+    /// Method: pnp (whole stack), pnp-sum (time-summed), pnp-slice (one
+    /// bin), rl (one bin), rl-sum (time-summed), rl-stack (whole stack),
+    /// scaled-counts.
     #[arg(long, value_parser = choice::<Method>(), default_value = "pnp")]
     method: Method,
     /// Bin (0-based, in stack order) for single-bin methods and raw.
