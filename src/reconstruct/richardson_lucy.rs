@@ -67,17 +67,47 @@ pub(crate) fn rl_steps(
     // Background of the summed bins, per pixel: the data are
     // Poisson(H o + bg) and RL divides by H o + bg.
     let bg = model.background() * bins.len() as f64;
-    let mut o = vec![flat_level(total, bg, 1, rl.mass, h * w); rl.sensitivity.len()];
+    let o = vec![flat_level(total, bg, 1, rl.mass, h * w); rl.sensitivity.len()];
     let guard = DENOMINATOR_GUARD * total / (h * w) as f64;
     trace.notes.push(format!(
         "denominator guarded at {guard:.3e} ({DENOMINATOR_GUARD:e} x mean count); 4 FFTs per iteration; {}",
         grid_note(model)
     ));
     note_background(trace, model);
+    let step = |o: &mut [f64]| {
+        let y = rl.op.apply(o);
+        rl.update(o, &y, &m, bg, guard)
+    };
+    Some(fixed_steps(
+        model,
+        o,
+        iterations,
+        truth,
+        start,
+        trace,
+        step,
+        &mut on_iter,
+    ))
+}
+
+/// `iterations` Richardson-Lucy steps of `o` (on the model's grid), each
+/// by `step`, which returns the negative log-likelihood before it; one
+/// trace row per step. Returns the estimate on the sensor window.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fixed_steps(
+    model: &ForwardModel,
+    mut o: Vec<f64>,
+    iterations: usize,
+    truth: Option<ArrayView2<f64>>,
+    start: Instant,
+    trace: &mut Trace,
+    mut step: impl FnMut(&mut [f64]) -> f64,
+    on_iter: &mut dyn FnMut(&TraceRow),
+) -> Array2<f64> {
+    let (h, w) = model.sensor_shape();
     let crop = |o: &[f64]| Array2::from_shape_vec((h, w), model.crop_vec(o)).expect("shape");
     for it in 1..=iterations {
-        let y = rl.op.apply(&o);
-        let nll = rl.update(&mut o, &y, &m, bg, guard);
+        let nll = step(&mut o);
         let mut row = TraceRow {
             iteration: it,
             wall_s: start.elapsed().as_secs_f64(),
@@ -90,7 +120,7 @@ pub(crate) fn rl_steps(
         on_iter(&row);
         trace.rows.push(row);
     }
-    Some(crop(&o))
+    crop(&o)
 }
 
 /// Iterations the cross-validated stop searches past its best so far:

@@ -8,17 +8,17 @@
 
 use std::time::Instant;
 
-use ndarray::{Array2, Array3, ArrayView2, Axis};
+use ndarray::{Array3, ArrayView2, Axis};
 use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 
 use super::discrepancy::{m_log_m, point_deviance};
-use super::richardson_lucy::{DENOMINATOR_GUARD, cv_search};
+use super::richardson_lucy::{DENOMINATOR_GUARD, cv_search, fixed_steps};
 use super::thinning::{THINNING_SEED, thin_halves};
 use super::trace::{Trace, TraceRow};
 use super::{
     ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, note_background,
-    score, validate_stack,
+    validate_stack,
 };
 use crate::forward::ForwardModel;
 
@@ -45,26 +45,24 @@ pub fn richardson_lucy_stack(
     }
     let bg = model.background();
     let guard = DENOMINATOR_GUARD * total / (bins.len() * h * w) as f64;
-    let mut o = vec![flat_level(total, bg, bins.len(), em.mass, h * w); em.sensitivity.len()];
+    let o = vec![flat_level(total, bg, bins.len(), em.mass, h * w); em.sensitivity.len()];
     trace.notes.push(em.note(model, guard));
     note_background(&mut trace, model);
-    let crop = |o: &[f64]| Array2::from_shape_vec((h, w), model.crop_vec(o)).expect("shape");
-    for it in 1..=iterations {
-        let y = em.forward(&o);
-        let nll = em.update(&mut o, &y, &m, bg, guard);
-        let mut row = TraceRow {
-            iteration: it,
-            wall_s: start.elapsed().as_secs_f64(),
-            objective: Some(nll),
-            ..Default::default()
-        };
-        if truth.is_some() {
-            score(&mut row, crop(&o).view(), truth);
-        }
-        on_iter(&row);
-        trace.rows.push(row);
-    }
-    let image = finish(crop(&o), METHOD, iterations)?;
+    let step = |o: &mut [f64]| {
+        let y = em.forward(o);
+        em.update(o, &y, &m, bg, guard)
+    };
+    let image = fixed_steps(
+        model,
+        o,
+        iterations,
+        truth,
+        start,
+        &mut trace,
+        step,
+        &mut on_iter,
+    );
+    let image = finish(image, METHOD, iterations)?;
     Ok(Reconstruction { image, trace })
 }
 
