@@ -274,7 +274,7 @@ pub(crate) fn cv_search<Y: Send + Sync>(
 /// Poisson deviance of counts `m` (with `m log m` per point, computed once)
 /// against the prediction `y + bg` (guarded below by `guard`): the score of
 /// an estimate on counts it was not fitted to.
-fn held_out_deviance(y: &[f64], m: &[f64], m_log_m: &[f64], bg: f64, guard: f64) -> f64 {
+pub(crate) fn held_out_deviance(y: &[f64], m: &[f64], m_log_m: &[f64], bg: f64, guard: f64) -> f64 {
     y.iter()
         .zip(m)
         .zip(m_log_m)

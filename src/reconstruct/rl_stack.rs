@@ -12,8 +12,8 @@ use ndarray::{Array3, ArrayView2, Axis};
 use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 
-use super::discrepancy::{m_log_m, point_deviance};
-use super::richardson_lucy::{DENOMINATOR_GUARD, cv_search, fixed_steps};
+use super::discrepancy::m_log_m;
+use super::richardson_lucy::{DENOMINATOR_GUARD, cv_search, fixed_steps, held_out_deviance};
 use super::thinning::{THINNING_SEED, thin_halves};
 use super::trace::{Trace, TraceRow};
 use super::{
@@ -38,7 +38,10 @@ pub fn richardson_lucy_stack(
     let em = StackEm::new(model, counts, bins)?;
     let (h, w) = model.sensor_shape();
     let mut trace = Trace::new(METHOD);
-    let m = em.images(counts);
+    let m: Vec<Vec<f64>> = counts
+        .axis_iter(Axis(0))
+        .map(|img| img.iter().copied().collect())
+        .collect();
     let total: f64 = counts.sum();
     if total == 0.0 || em.mass <= 0.0 {
         return Ok(no_photons(trace, (h, w), truth));
@@ -131,7 +134,7 @@ pub fn richardson_lucy_stack_cv(
         start,
         &mut trace,
         |x| em.forward(x),
-        |y, half| em.held_out_deviance(y, &halves[1 - half], &halves_log[1 - half], bg, guard),
+        |y, half| stack_held_out_deviance(y, &halves[1 - half], &halves_log[1 - half], bg, guard),
         |half, x, y| {
             em.update(x, y, &halves[half], bg, guard);
         },
@@ -172,14 +175,6 @@ impl<'a> StackEm<'a> {
             mass: bins.iter().map(|&k| model.mass(k)).sum(),
             sensitivity: model.sensitivity(bins),
         })
-    }
-
-    /// Each bin's counts as a row-major vector.
-    fn images(&self, counts: &Array3<f64>) -> Vec<Vec<f64>> {
-        counts
-            .axis_iter(Axis(0))
-            .map(|img| img.iter().copied().collect())
-            .collect()
     }
 
     /// The trace's note on the operator.
@@ -253,30 +248,20 @@ impl<'a> StackEm<'a> {
             .for_each(|((oj, b), s)| *oj *= (b / s).max(0.0));
         nll
     }
+}
 
-    /// Poisson deviance of every bin's counts `m` against the prediction
-    /// `y + bg` (guarded below by `guard`).
-    fn held_out_deviance(
-        &self,
-        y: &[Vec<f64>],
-        m: &[Vec<f64>],
-        m_log_m: &[Vec<f64>],
-        bg: f64,
-        guard: f64,
-    ) -> f64 {
-        y.par_iter()
-            .zip(m.par_iter())
-            .zip(m_log_m.par_iter())
-            .map(|((yk, mk), lk)| {
-                yk.iter()
-                    .zip(mk)
-                    .zip(lk)
-                    .map(|((&yj, &mj), &mlm)| {
-                        let d = (yj + bg).max(guard);
-                        point_deviance(mj, mlm, d, d.ln())
-                    })
-                    .sum::<f64>()
-            })
-            .sum()
-    }
+/// Poisson deviance of every bin's counts `m` against the prediction
+/// `y + bg` (guarded below by `guard`), summed over the bins.
+fn stack_held_out_deviance(
+    y: &[Vec<f64>],
+    m: &[Vec<f64>],
+    m_log_m: &[Vec<f64>],
+    bg: f64,
+    guard: f64,
+) -> f64 {
+    y.par_iter()
+        .zip(m.par_iter())
+        .zip(m_log_m.par_iter())
+        .map(|((yk, mk), lk)| held_out_deviance(yk, mk, lk, bg, guard))
+        .sum()
 }

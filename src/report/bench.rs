@@ -333,10 +333,10 @@ pub fn run_case(
         on_trace(&e.label, &r.trace);
         rows.push(row(e.label.clone(), r.image.view(), &r.trace));
     }
-    let run_rl = |o: &MethodOptions| {
+    let run_rl = |method: Method, o: &MethodOptions| {
         run_method(
             &case.problem,
-            Method::RlSum,
+            method,
             None,
             &crate::denoise::NoPrior,
             o,
@@ -344,29 +344,22 @@ pub fn run_case(
             |_| {},
         )
     };
-    let cv = run_rl(&MethodOptions {
+    let cross_validated = MethodOptions {
         rl_stop: RlStop::CrossValidated,
         ..*opts
-    })?;
-    rows.push(row(RL_CV.into(), cv.image.view(), &cv.trace));
-    let stack = run_method(
-        &case.problem,
-        Method::RlStack,
-        None,
-        &crate::denoise::NoPrior,
+    };
+    for (method, label) in [(Method::RlSum, RL_CV), (Method::RlStack, RL_STACK_CV)] {
+        let r = run_rl(method, &cross_validated)?;
+        rows.push(row(label.into(), r.image.view(), &r.trace));
+    }
+    let rl = run_rl(
+        Method::RlSum,
         &MethodOptions {
-            rl_stop: RlStop::CrossValidated,
+            rl_iters: rl_iters.max(opts.rl_iters),
+            rl_stop: RlStop::Fixed,
             ..*opts
         },
-        Some(truth),
-        |_| {},
     )?;
-    rows.push(row(RL_STACK_CV.into(), stack.image.view(), &stack.trace));
-    let rl = run_rl(&MethodOptions {
-        rl_iters: rl_iters.max(opts.rl_iters),
-        rl_stop: RlStop::Fixed,
-        ..*opts
-    })?;
     let mut best = row(RL_BEST.into(), rl.image.view(), &rl.trace);
     // RL's rows start at iteration 1.
     let best_row = rl
