@@ -531,6 +531,10 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
         stdout.contains("balance: every photon accounted for"),
         "{stdout}"
     );
+    assert!(
+        stdout.contains("ended: the device stopped by itself") && !stdout.contains("note:"),
+        "{stdout}"
+    );
     // Light reaches the paper's slab's far side from about 16 ps on: the
     // first four 4 ps bins see none.
     assert!(
@@ -675,6 +679,7 @@ fn acquire_stops_cleanly_on_ctrl_c() {
         serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap())
             .unwrap();
     assert_eq!(json["stop"], "interrupted", "{json}");
+    assert!(stdout.contains("ended: interrupted (Ctrl-C)"), "{stdout}");
     let received = json["accounting"]["received"].as_u64().unwrap();
     assert!(received > 100_000, "{json}");
     assert_eq!(
@@ -694,6 +699,47 @@ fn acquire_stops_cleanly_on_ctrl_c() {
         "{stdout}"
     );
     assert!(!stdout.contains("warning"), "{stdout}");
+}
+
+#[test]
+fn acquire_says_when_its_duration_ends_it_before_the_mocks_photon_quota() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("acq");
+    // Paced at the default 2 M photons per second, a billion photons take
+    // minutes: the 300 ms duration ends the run first.
+    let o = scatterscope(&[
+        "acquire",
+        "--size",
+        "64",
+        "--fov",
+        "12.5cm",
+        "--max-photons",
+        "1000000000",
+        "--duration",
+        "300ms",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("ended: the planned duration elapsed"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains(
+            "note: --duration 300ms ended the acquisition before the mock's --max-photons 1000000000 was reached"
+        ),
+        "{stdout}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["stop"], "duration", "{json}");
+    assert!(
+        stdout.contains("balance: every photon accounted for"),
+        "{stdout}"
+    );
 }
 
 #[test]

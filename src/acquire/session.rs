@@ -65,6 +65,21 @@ pub enum StopReason {
     NoStopAnswer,
 }
 
+impl StopReason {
+    /// Why the acquisition ended, in words for the acquisition's summary.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Duration => "the planned duration elapsed".into(),
+            Self::Interrupted => "interrupted (Ctrl-C)".into(),
+            Self::DeviceStopped => {
+                "the device stopped by itself (its exposure or photon quota)".into()
+            }
+            Self::Disconnected(e) => format!("the device disconnected: {e}"),
+            Self::NoStopAnswer => "the device did not confirm Stop in time".into(),
+        }
+    }
+}
+
 /// Live counters for a progress display.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Progress {

@@ -316,6 +316,17 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         plan.t_start_ps,
         plan.t0_ps
     );
+    println!("  ended: {}", outcome.stop.describe());
+    if args.device.is_mock()
+        && args.max_photons > 0
+        && outcome.stop == StopReason::Duration
+        && acc.received < args.max_photons
+    {
+        println!(
+            "  note: --duration {:?} ended the acquisition before the mock's --max-photons {} was reached; --duration 0 runs until the device stops",
+            args.duration, args.max_photons
+        );
+    }
     print!("{}", acc.table());
     if let Some(t) = truth {
         println!(
