@@ -1,8 +1,9 @@
 //! The reconstruction's hot path on the paper preset (256 x 256, 20 bins,
 //! a sensor with edges): one likelihood value + gradient against the FFTs it
-//! needs alone, a shortened Algorithm 1 run, and one full default
+//! needs alone, a shortened Algorithm 1 run, one full default
 //! reconstruction as `scatterscope reconstruct` runs it (split solver,
-//! embedded FFDNet prior, its own stopping rule).
+//! embedded FFDNet prior, its own stopping rule), and Richardson-Lucy's
+//! cross-validated stop on the time-summed and on the whole stack.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use ndarray::parallel::prelude::*;
@@ -90,6 +91,21 @@ fn benches(c: &mut Criterion) {
             run_method(
                 &problem,
                 Method::RlSum,
+                None,
+                &scatterscope::denoise::NoPrior,
+                &cv,
+                None,
+                |_| {},
+            )
+            .unwrap()
+        })
+    });
+    // The whole-stack variant: every bin with its own kernel, the same stop.
+    group.bench_function("rl_stack_cv_256x256x20", |b| {
+        b.iter(|| {
+            run_method(
+                &problem,
+                Method::RlStack,
                 None,
                 &scatterscope::denoise::NoPrior,
                 &cv,
