@@ -86,35 +86,27 @@ fn benches(c: &mut Criterion) {
         rl_stop: RlStop::CrossValidated,
         ..defaults
     };
-    group.bench_function("rl_sum_cv_256x256x20", |b| {
-        b.iter(|| {
-            run_method(
-                &problem,
-                Method::RlSum,
-                None,
-                &scatterscope::denoise::NoPrior,
-                &cv,
-                None,
-                |_| {},
-            )
-            .unwrap()
-        })
-    });
-    // The whole-stack variant: every bin with its own kernel, the same stop.
-    group.bench_function("rl_stack_cv_256x256x20", |b| {
-        b.iter(|| {
-            run_method(
-                &problem,
-                Method::RlStack,
-                None,
-                &scatterscope::denoise::NoPrior,
-                &cv,
-                None,
-                |_| {},
-            )
-            .unwrap()
-        })
-    });
+    // Richardson-Lucy on the time-summed stack, and on the whole stack
+    // (every bin with its own kernel), both with the cross-validated stop.
+    for (name, method) in [
+        ("rl_sum_cv_256x256x20", Method::RlSum),
+        ("rl_stack_cv_256x256x20", Method::RlStack),
+    ] {
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                run_method(
+                    &problem,
+                    method,
+                    None,
+                    &scatterscope::denoise::NoPrior,
+                    &cv,
+                    None,
+                    |_| {},
+                )
+                .unwrap()
+            })
+        });
+    }
     group.finish();
 }
 
