@@ -236,14 +236,18 @@ impl ForwardModel {
 
     /// `H_k^T r` on the grid for `r` on the sensor window (row-major).
     pub fn adjoint(&self, k: usize, r: &[f64]) -> Vec<f64> {
-        let prod = self
-            .fft
+        self.fft.inverse(self.adjoint_spectrum(k, r))
+    }
+
+    /// The spectrum of `H_k^T r` (so that several bins' back-projections
+    /// can be summed before one inverse transform).
+    pub fn adjoint_spectrum(&self, k: usize, r: &[f64]) -> Vec<Complex64> {
+        self.fft
             .forward(&self.embed_vec(r))
             .iter()
             .zip(&self.spectra[k])
             .map(|(a, b)| a * b.conj())
-            .collect();
-        self.fft.inverse(prod)
+            .collect()
     }
 
     /// `H_k x` on the sensor window (row-major) for `x` on the grid.

@@ -326,13 +326,21 @@ impl RlOperator {
                 mj / d
             })
             .collect();
-        let back = self.op.adjoint(&ratio);
-        let seen = 1e-9 * self.mass;
-        o.iter_mut()
-            .zip(&back)
-            .zip(&self.sensitivity)
-            .filter(|(_, s)| **s > seen)
-            .for_each(|((oj, b), s)| *oj *= (b / s).max(0.0));
+        em_multiply(o, &self.op.adjoint(&ratio), &self.sensitivity, self.mass);
         nll
     }
+}
+
+/// The multiplicative EM step shared by both Richardson-Lucy variants:
+/// `o <- o max(back / sensitivity, 0)` where `back` is the back-projected
+/// ratio `H^T(m / (H o + b))` and `sensitivity` is `H^T 1`. Object pixels
+/// the sensor does not see (sensitivity at most 1e-9 of the kernel mass
+/// `mass`) keep their value.
+pub(crate) fn em_multiply(o: &mut [f64], back: &[f64], sensitivity: &[f64], mass: f64) {
+    let seen = 1e-9 * mass;
+    o.iter_mut()
+        .zip(back)
+        .zip(sensitivity)
+        .filter(|(_, s)| **s > seen)
+        .for_each(|((oj, b), s)| *oj *= (b / s).max(0.0));
 }

@@ -13,7 +13,9 @@ use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 
 use super::discrepancy::m_log_m;
-use super::richardson_lucy::{DENOMINATOR_GUARD, cv_search, fixed_steps, held_out_deviance};
+use super::richardson_lucy::{
+    DENOMINATOR_GUARD, cv_search, em_multiply, fixed_steps, held_out_deviance,
+};
 use super::thinning::{THINNING_SEED, thin_halves};
 use super::trace::{Trace, TraceRow};
 use super::{
@@ -199,10 +201,6 @@ impl<'a> StackEm<'a> {
     /// sensor does not see keep their value. Returns the negative
     /// log-likelihood at `o` before the step.
     fn update(&self, o: &mut [f64], y: &[Vec<f64>], m: &[Vec<f64>], bg: f64, guard: f64) -> f64 {
-        let fft = self.model.fft();
-        let (gh, gw) = self.model.grid_shape();
-        let (oy, ox) = self.model.sensor_offset();
-        let (_, w) = self.model.sensor_shape();
         let parts: Vec<(f64, Option<Vec<Complex64>>)> = y
             .par_iter()
             .zip(m.par_iter())
@@ -210,27 +208,24 @@ impl<'a> StackEm<'a> {
             .map(|((yk, mk), &k)| {
                 let mut nll = 0.0;
                 let mut lit = false;
-                let mut grid = vec![0.0; gh * gw];
-                for (j, (&yj, &mj)) in yk.iter().zip(mk).enumerate() {
-                    let d = (yj + bg).max(guard);
-                    nll += d;
-                    if mj > 0.0 {
-                        lit = true;
-                        nll -= mj * d.ln();
-                        grid[(oy + j / w) * gw + ox + j % w] = mj / d;
-                    }
-                }
+                let ratio: Vec<f64> = yk
+                    .iter()
+                    .zip(mk)
+                    .map(|(&yj, &mj)| {
+                        let d = (yj + bg).max(guard);
+                        nll += d;
+                        if mj > 0.0 {
+                            lit = true;
+                            nll -= mj * d.ln();
+                        }
+                        mj / d
+                    })
+                    .collect();
                 // A bin without counts back-projects zero.
-                let spec = lit.then(|| {
-                    fft.forward(&grid)
-                        .iter()
-                        .zip(self.model.spectrum(k))
-                        .map(|(a, b)| a * b.conj())
-                        .collect()
-                });
-                (nll, spec)
+                (nll, lit.then(|| self.model.adjoint_spectrum(k, &ratio)))
             })
             .collect();
+        let fft = self.model.fft();
         let mut acc = vec![Complex64::default(); fft.spectrum_len()];
         let mut nll = 0.0;
         for (part, spec) in parts {
@@ -239,13 +234,7 @@ impl<'a> StackEm<'a> {
                 acc.iter_mut().zip(&spec).for_each(|(a, s)| *a += s);
             }
         }
-        let back = fft.inverse(acc);
-        let seen = 1e-9 * self.mass;
-        o.iter_mut()
-            .zip(&back)
-            .zip(&self.sensitivity)
-            .filter(|(_, s)| **s > seen)
-            .for_each(|((oj, b), s)| *oj *= (b / s).max(0.0));
+        em_multiply(o, &fft.inverse(acc), &self.sensitivity, self.mass);
         nll
     }
 }
