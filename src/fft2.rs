@@ -82,6 +82,23 @@ impl<T: FftFloat> Fft2<T> {
         (self.width / 2 + 1) * self.height
     }
 
+    /// Weight of each spectrum value in Parseval's sum over the whole
+    /// plane: 1 for the horizontal frequencies stored once (zero and, for
+    /// an even width, Nyquist), 2 for those that stand for a conjugate pair.
+    pub fn parseval_weights(&self) -> Vec<f64> {
+        let (h, w) = (self.height, self.width);
+        (0..self.spectrum_len())
+            .map(|i| {
+                let kx = i / h;
+                if kx == 0 || (w % 2 == 0 && kx == w / 2) {
+                    1.0
+                } else {
+                    2.0
+                }
+            })
+            .collect()
+    }
+
     /// Forward transform of a row-major `height * width` image.
     pub fn forward(&self, image: &[T]) -> Vec<Complex<T>> {
         let mut spectrum = vec![Complex::zero(); self.spectrum_len()];

@@ -79,6 +79,7 @@ pub mod scene;
 pub mod simulate;
 pub mod stack;
 pub mod tags;
+pub mod time_basis;
 
 pub use scatterscope_physics as physics;
 
