@@ -84,6 +84,10 @@ impl<'a> TimeBasis<'a> {
                 q.iter_mut().zip(p).for_each(|(x, y)| *x -= y * c);
             }
             let n = dot(&q, &q).sqrt();
+            if !n.is_normal() {
+                // Nothing left to add (round-off): the error stays as it is.
+                break;
+            }
             q.iter_mut().for_each(|x| *x /= n);
             residuals.par_iter_mut().for_each(|r| {
                 let c = dot(&q, r);
