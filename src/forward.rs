@@ -242,10 +242,16 @@ impl ForwardModel {
     /// The spectrum of `H_k^T r` (so that several bins' back-projections
     /// can be summed before one inverse transform).
     pub fn adjoint_spectrum(&self, k: usize, r: &[f64]) -> Vec<Complex64> {
+        self.adjoint_spectrum_with(&self.spectra[k], r)
+    }
+
+    /// [`Self::adjoint_spectrum`] for any kernel given by its spectrum on
+    /// this model's grid (e.g. a combination of bins' kernels).
+    pub fn adjoint_spectrum_with(&self, kernel: &[Complex64], r: &[f64]) -> Vec<Complex64> {
         self.fft
             .forward(&self.embed_vec(r))
             .iter()
-            .zip(&self.spectra[k])
+            .zip(kernel)
             .map(|(a, b)| a * b.conj())
             .collect()
     }
@@ -257,11 +263,13 @@ impl ForwardModel {
 
     /// `H_k x` on the sensor window, from the spectrum of `x`.
     pub fn apply_spectrum(&self, k: usize, x_spec: &[Complex64]) -> Vec<f64> {
-        let prod = x_spec
-            .iter()
-            .zip(&self.spectra[k])
-            .map(|(a, b)| a * b)
-            .collect();
+        self.apply_spectrum_with(&self.spectra[k], x_spec)
+    }
+
+    /// [`Self::apply_spectrum`] for any kernel given by its spectrum on this
+    /// model's grid.
+    pub fn apply_spectrum_with(&self, kernel: &[Complex64], x_spec: &[Complex64]) -> Vec<f64> {
+        let prod = x_spec.iter().zip(kernel).map(|(a, b)| a * b).collect();
         self.crop_vec(&self.fft.inverse(prod))
     }
 

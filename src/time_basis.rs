@@ -164,10 +164,7 @@ impl<'a> TimeBasis<'a> {
         let parts: Vec<Vec<f64>> = self
             .spectra
             .par_iter()
-            .map(|q| {
-                let prod = spec.iter().zip(q).map(|(a, b)| a * b).collect();
-                model.crop_vec(&model.fft().inverse(prod))
-            })
+            .map(|q| model.apply_spectrum_with(q, &spec))
             .collect();
         let parts: Vec<&[f64]> = parts.iter().map(Vec::as_slice).collect();
         mix(&parts, &self.coefficients)
@@ -202,13 +199,7 @@ impl<'a> TimeBasis<'a> {
             self.spectra
                 .par_iter()
                 .zip(&mixed)
-                .map(|(q, x)| {
-                    fft.forward(&model.embed_vec(x))
-                        .iter()
-                        .zip(q)
-                        .map(|(a, b)| a * b.conj())
-                        .collect()
-                })
+                .map(|(q, x)| model.adjoint_spectrum_with(q, x))
                 .collect()
         };
         let mut acc = vec![Complex64::default(); fft.spectrum_len()];

@@ -219,19 +219,14 @@ impl<'a> StackEm<'a> {
             .par_iter()
             .zip(m.par_iter())
             .map(|(yk, mk)| {
-                // A bin without counts back-projects zero.
-                if !mk.iter().any(|&mj| mj > 0.0) {
-                    let nll = if with_nll {
-                        yk.iter().map(|&yj| (yj + bg).max(guard)).sum()
-                    } else {
-                        0.0
-                    };
-                    return (nll, None);
-                }
+                let mut lit = false;
                 let ratio: Vec<f64> = yk
                     .iter()
                     .zip(mk)
-                    .map(|(&yj, &mj)| mj / (yj + bg).max(guard))
+                    .map(|(&yj, &mj)| {
+                        lit |= mj > 0.0;
+                        mj / (yj + bg).max(guard)
+                    })
                     .collect();
                 let nll = if with_nll {
                     yk.iter()
@@ -244,7 +239,8 @@ impl<'a> StackEm<'a> {
                 } else {
                     0.0
                 };
-                (nll, Some(ratio))
+                // A bin without counts back-projects zero.
+                (nll, lit.then_some(ratio))
             })
             .collect();
         let nll = parts.iter().map(|(part, _)| part).sum();
