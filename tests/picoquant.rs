@@ -1,8 +1,11 @@
-//! PicoQuant readers: real sample files (when ../shared is present), files
+//! PicoQuant readers: real sample files (tests ignored unless run with the
+//! shared data: they say what they need), files
 //! written with known content for every record type, and malformed input.
 
 #[path = "common/pt3.rs"]
 mod pt3;
+#[path = "common/shared_data.rs"]
+mod shared_data;
 
 use std::path::{Path, PathBuf};
 
@@ -16,19 +19,9 @@ use scatterscope::tags::picoquant::records::{Decoder, RecordType};
 use scatterscope::tags::picoquant::writer::{PtuWriter, WriterHeader};
 use scatterscope::tags::picoquant::{self, TtrError};
 
-fn sample(rel: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/picoquant-sample-data")
-        .join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!(
-            "skipping: {} not present (the shared sample data ships only beside the project repository)",
-            p.display()
-        );
-        None
-    }
+/// A PicoQuant sample file (`../shared/data/picoquant-sample-data/REL`).
+fn sample(rel: &str) -> PathBuf {
+    shared_data::shared_data(&format!("picoquant-sample-data/{rel}"))
 }
 
 /// Decodes every record; returns tags and the reader's final result.
@@ -56,6 +49,7 @@ fn macro_time(t: &Tag) -> u64 {
 }
 
 #[test]
+#[ignore = "needs ../shared/data/picoquant-sample-data"]
 fn real_ptu_files_decode_completely_with_monotonic_times() {
     for (rel, rt) in [
         ("hydraharp/v10_t3.ptu", RecordType::HydraHarpV1T3),
@@ -63,7 +57,7 @@ fn real_ptu_files_decode_completely_with_monotonic_times() {
         ("hydraharp/v20_t2.ptu", RecordType::HydraHarpV2T2),
         ("picoharp/v30_t2.ptu", RecordType::PicoHarpT2),
     ] {
-        let Some(path) = sample(rel) else { return };
+        let path = sample(rel);
         let (info, tags, end) = decode_all(&path);
         end.unwrap();
         assert_eq!(info.record_type, rt, "{rel}");
@@ -87,10 +81,9 @@ fn real_ptu_files_decode_completely_with_monotonic_times() {
 }
 
 #[test]
+#[ignore = "needs ../shared/data/picoquant-sample-data"]
 fn first_records_match_the_published_layout_by_hand() {
-    let Some(path) = sample("hydraharp/v20_t3.ptu") else {
-        return;
-    };
+    let path = sample("hydraharp/v20_t3.ptu");
     let bytes = std::fs::read(&path).unwrap();
     let (info, tags, _) = decode_all(&path);
     let raw = |i: usize| {
@@ -135,8 +128,10 @@ fn first_records_match_the_published_layout_by_hand() {
 }
 
 #[test]
+#[ignore = "needs ../shared/data/picoquant-sample-data"]
 fn legacy_ht3_files_decode_and_cut_files_say_how_much_was_read() {
-    if let Some(path) = sample("hydraharp/v20.ht3") {
+    {
+        let path = sample("hydraharp/v20.ht3");
         let (info, tags, end) = decode_all(&path);
         end.unwrap();
         assert_eq!(info.record_type, RecordType::HydraHarpV2T3);
@@ -150,7 +145,8 @@ fn legacy_ht3_files_decode_and_cut_files_say_how_much_was_read() {
                 .all(|w| macro_time(&w[0]) <= macro_time(&w[1]))
         );
     }
-    if let Some(path) = sample("hydraharp/v10.ht3") {
+    {
+        let path = sample("hydraharp/v10.ht3");
         // The sample is an excerpt of a longer measurement.
         let (info, tags, end) = decode_all(&path);
         assert_eq!(info.record_type, RecordType::HydraHarpV1T3);

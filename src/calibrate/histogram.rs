@@ -50,6 +50,12 @@ pub enum HistogramError {
         /// What went wrong.
         message: String,
     },
+    /// A file that does not record its bin width was given none.
+    #[error("{path}: a MATLAB file does not record its bin width: give it")]
+    BinWidthUnknown {
+        /// The file.
+        path: PathBuf,
+    },
 }
 
 /// Opens a MATLAB v7.3 (HDF5) file.
@@ -255,11 +261,8 @@ impl TimeHistogram {
             .map(str::to_ascii_lowercase);
         match ext.as_deref() {
             Some("mat") => {
-                let width = bin_width_ps.ok_or_else(|| {
-                    file_error(
-                        path,
-                        "a MATLAB file does not record its bin width: give it (--bin-ps to calibrate-slab, --irf-bin-ps with --irf-from)",
-                    )
+                let width = bin_width_ps.ok_or_else(|| HistogramError::BinWidthUnknown {
+                    path: path.to_path_buf(),
                 })?;
                 Self::read_mat(path, dataset, width)
             }

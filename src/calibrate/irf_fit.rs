@@ -107,8 +107,7 @@ pub fn irf_from_reference(
     path: &std::path::Path,
     bin_ps: Option<f64>,
 ) -> Result<IrfFit, CalibrateError> {
-    let histogram = TimeHistogram::read(path, DEFAULT_MAT_DATASET, bin_ps)
-        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+    let histogram = TimeHistogram::read(path, DEFAULT_MAT_DATASET, bin_ps)?;
     fit_irf(&histogram)
         .map_err(|e| CalibrateError::Invalid(format!("fitting the IRF to {}: {e}", path.display())))
 }

@@ -319,8 +319,7 @@ pub fn measured_irf_from_reference(
     path: &std::path::Path,
     bin_ps: Option<f64>,
 ) -> Result<(MeasuredIrf, IrfTable), CalibrateError> {
-    let histogram = TimeHistogram::read(path, DEFAULT_MAT_DATASET, bin_ps)
-        .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+    let histogram = TimeHistogram::read(path, DEFAULT_MAT_DATASET, bin_ps)?;
     let measured = MeasuredIrf::from_histogram(&histogram)
         .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
     let table = measured.table().map_err(|e| {

@@ -111,6 +111,9 @@ pub enum CalibrateError {
     /// The profile or the setup cannot be fitted.
     #[error("calibration: {0}")]
     Invalid(String),
+    /// A histogram file cannot be read.
+    #[error("calibration: {0}")]
+    Histogram(#[from] histogram::HistogramError),
 }
 
 /// Natural parameters in the order of [`Calibration::parameters`].

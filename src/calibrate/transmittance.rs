@@ -144,8 +144,7 @@ impl Capture {
         dataset: &str,
         bin_width_ps: Option<f64>,
     ) -> Result<Self, CalibrateError> {
-        let histogram = TimeHistogram::read(path, dataset, bin_width_ps)
-            .map_err(|e| CalibrateError::Invalid(e.to_string()))?;
+        let histogram = TimeHistogram::read(path, dataset, bin_width_ps)?;
         Ok(Self {
             histogram,
             thickness_cm,

@@ -51,6 +51,21 @@ pub enum ReconstructError {
         /// The offending value.
         value: f64,
     },
+    /// Cross-validation by thinning met a count that is not a whole number
+    /// of photons.
+    #[error(
+        "cross-validation by thinning needs whole photon counts: row {row}, column {col} of {what} is {value} (expected counts, or a scaled or background-subtracted stack: stop Richardson-Lucy after a fixed count instead)"
+    )]
+    NotWholeCounts {
+        /// The image (e.g. "the time-summed counts").
+        what: String,
+        /// Row.
+        row: usize,
+        /// Column.
+        col: usize,
+        /// The offending value.
+        value: f64,
+    },
     /// Stack and kernels do not fit together.
     #[error("{0}")]
     Shape(String),

@@ -264,7 +264,7 @@ pub(crate) fn cv_search<Y: Send + Sync>(
     ));
     if k == max_iters {
         trace.notes.push(format!(
-            "the cross-validated score was still falling at the cap of {max_iters} iterations: more may help (--rl-max-iters)"
+            "the cross-validated score was still falling at the cap of {max_iters} iterations: more may help (a higher cap: rl_max_iters)"
         ));
     }
     trace.notes.push(format!("output: iteration {k}"));

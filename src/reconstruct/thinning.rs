@@ -28,9 +28,12 @@ pub fn thin_halves(
         .indexed_iter()
         .find(|(_, v)| !(v.is_finite() && **v >= 0.0 && v.fract() == 0.0 && **v < 2f64.powi(53)))
     {
-        return Err(ReconstructError::Shape(format!(
-            "cross-validation by thinning needs whole photon counts: row {row}, column {col} of {what} is {value} (expected counts, or a scaled or background-subtracted stack: stop Richardson-Lucy after a fixed count instead, --rl-stop fixed)"
-        )));
+        return Err(ReconstructError::NotWholeCounts {
+            what: what.into(),
+            row,
+            col,
+            value,
+        });
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let first = counts.mapv(|m| {

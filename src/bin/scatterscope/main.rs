@@ -6,6 +6,7 @@ mod calibrate_cmd;
 mod calibrate_slab;
 mod denoise;
 mod denoise_bench;
+mod hints;
 mod physics_summary;
 mod psf;
 mod recon_args;
@@ -98,13 +99,16 @@ fn demo(args: &DemoArgs) -> anyhow::Result<()> {
 
 /// Exit status: 0 success; 1 the command failed (bad input, I/O, a device
 /// error), with one `error:` line naming the file, field and value and the
-/// causes after it; 2 the command line itself is wrong (clap's usage
+/// causes after it, then a `hint:` line per flag that changes it; 2 the command line itself is wrong (clap's usage
 /// errors). A panic (101) is a bug.
 fn main() -> std::process::ExitCode {
     match dispatch(Cli::parse().command) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
+            for hint in hints::flag_hints(&e) {
+                eprintln!("hint: {hint}");
+            }
             std::process::ExitCode::from(1)
         }
     }

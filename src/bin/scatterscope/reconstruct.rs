@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::forward::Boundary;
 use scatterscope::physics::{Preset, Sampling};
 use scatterscope::reconstruct::method::{Method, run_method};
-use scatterscope::reconstruct::problem::{BackgroundChoice, Problem, ProblemError};
+use scatterscope::reconstruct::problem::{BackgroundChoice, Problem};
 use scatterscope::scene::Scene;
 use scatterscope::stack::exr_file;
 use scatterscope::stack::preview::write_image;
@@ -137,14 +137,6 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         args.method.name()
     );
     let problem = Problem::new(&stack, &setup, sampling, boundary)
-        .map_err(|e| {
-            let flag = match e {
-                ProblemError::SensorSize { .. } => " (set --size)",
-                ProblemError::BinWidth { .. } => " (set --bin-width)",
-                _ => "",
-            };
-            anyhow::anyhow!("{e}{flag}")
-        })
         .with_context(|| format!("matching {} with its physics", args.stack.display()))?;
     let (problem, background) = problem
         .with_background(args.background)

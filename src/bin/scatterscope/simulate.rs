@@ -7,7 +7,7 @@ use anyhow::Context;
 use scatterscope::forward::Boundary;
 use scatterscope::physics::Sampling;
 use scatterscope::scene::Scene;
-use scatterscope::simulate::{SimulateError, simulate};
+use scatterscope::simulate::simulate;
 use scatterscope::stack::preview::{SheetScale, write_contact_sheet, write_image};
 use scatterscope::stack::{Stack, exr_file};
 
@@ -51,13 +51,7 @@ pub struct SimulateArgs {
 pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let setup = args.physics.resolve()?;
     let scene = Scene::parse(&args.scene);
-    let sim =
-        simulate(&setup, &scene, args.sampling, args.boundary, args.seed).map_err(|e| match e {
-            SimulateError::NoBins { .. } => {
-                anyhow::anyhow!("{e}; lower --min-bin-photons or raise --photons")
-            }
-            e => e.into(),
-        })?;
+    let sim = simulate(&setup, &scene, args.sampling, args.boundary, args.seed)?;
     print_setup(&setup, &sim.kernels);
     let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
     std::fs::create_dir_all(&args.out)
