@@ -13,10 +13,11 @@ use scatterscope::denoise::ffdnet::source::embedded;
 use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
+use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions, StopRule};
 use scatterscope::reconstruct::likelihood::PoissonLikelihood;
 use scatterscope::reconstruct::method::{Method, MethodOptions, RlStop, run_method};
-use scatterscope::reconstruct::pnp::{PnpOptions, StopRule, pnp_admm};
 use scatterscope::reconstruct::problem::Problem;
+use scatterscope::reconstruct::{Data, Reconstructor};
 use scatterscope::scene::Scene;
 
 fn benches(c: &mut Criterion) {
@@ -48,7 +49,7 @@ fn benches(c: &mut Criterion) {
             fft.inverse(acc)
         })
     });
-    let opts = PnpOptions {
+    let opts = AdmmLbfgsOptions {
         max_iters: 10,
         stop: StopRule::Iterations,
         ..Default::default()
@@ -57,7 +58,12 @@ fn benches(c: &mut Criterion) {
     let mut group = c.benchmark_group("reconstruction");
     group.sample_size(10);
     group.bench_function("pnp_tv_256x256x20_10_iterations", |b| {
-        b.iter(|| pnp_admm(&model, &counts, &bins, &tv, &opts, None, |_| {}).unwrap())
+        let method = AdmmLbfgs {
+            denoiser: &tv,
+            opts,
+        };
+        let data = Data::new(&model, &counts, &bins).unwrap();
+        b.iter(|| method.run(&data, None, &mut |_| {}).unwrap())
     });
     let problem = Problem {
         model,

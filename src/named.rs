@@ -40,8 +40,8 @@ pub(crate) use named;
 mod tests {
     use super::Named;
     use crate::forward::Boundary;
+    use crate::reconstruct::admm_lbfgs::StopRule;
     use crate::reconstruct::method::{Method, RlStop, Solver};
-    use crate::reconstruct::pnp::StopRule;
     use crate::stack::preview::SheetScale;
 
     fn round_trips<T: Named + PartialEq + std::fmt::Debug>() {

@@ -1,6 +1,10 @@
 //! Reconstruction: data term against independent formulas, baselines'
 //! invariants, and stability on extreme inputs.
 
+#[path = "common/reconstruct.rs"]
+mod common_reconstruct;
+
+use common_reconstruct::reconstruct;
 use ndarray::{Array2, Array3, Axis};
 use scatterscope::denoise::NoPrior;
 use scatterscope::denoise::ffdnet::Ffdnet;
@@ -8,13 +12,15 @@ use scatterscope::denoise::ffdnet::source::embedded;
 use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup, TimeBins};
+use scatterscope::reconstruct::ReconstructError;
+use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions};
+use scatterscope::reconstruct::data::validate_counts;
+use scatterscope::reconstruct::em::Stopping;
 use scatterscope::reconstruct::likelihood::{PoissonLikelihood, SurrogateLog};
 use scatterscope::reconstruct::operator::Convolution;
-use scatterscope::reconstruct::pnp::{PnpOptions, pnp_admm};
-use scatterscope::reconstruct::richardson_lucy::{richardson_lucy, richardson_lucy_cv};
-use scatterscope::reconstruct::rl_stack::{richardson_lucy_stack, richardson_lucy_stack_cv};
+use scatterscope::reconstruct::rl_stack::RlStack;
+use scatterscope::reconstruct::rl_sum::RlSum;
 use scatterscope::reconstruct::trace::TraceRow;
-use scatterscope::reconstruct::{ReconstructError, validate_counts};
 use scatterscope::scene::Scene;
 
 fn setup(size: usize) -> Setup {
@@ -125,13 +131,14 @@ fn cross_validated_rl_stops_early_on_smooth_light_and_late_on_sharp_edges() {
     let mut stops = Vec::new();
     for (name, truth) in [("smooth", smooth), ("disks", disks)] {
         let c = case_of(size, truth, 5);
-        let cv = richardson_lucy_cv(
+        let cv = reconstruct(
+            &RlSum {
+                stop: Stopping::CrossValidated { max_iters: 400 },
+            },
             &c.model,
             &c.counts,
             &c.bins,
-            400,
             Some(c.truth.view()),
-            |_| {},
         )
         .unwrap();
         let k = cv
@@ -151,13 +158,14 @@ fn cross_validated_rl_stops_early_on_smooth_light_and_late_on_sharp_edges() {
             "{name}"
         );
         // Within a dB of plain RL's best iteration chosen with the truth.
-        let plain = richardson_lucy(
+        let plain = reconstruct(
+            &RlSum {
+                stop: Stopping::After(400),
+            },
             &c.model,
             &c.counts,
             &c.bins,
-            400,
             Some(c.truth.view()),
-            |_| {},
         )
         .unwrap();
         let best = plain.trace.best_psnr().unwrap();
@@ -180,15 +188,32 @@ fn cross_validated_rl_refuses_fractional_counts_and_keeps_zero_light_zero() {
     let c = case(24, "disks", 3);
     let mut scaled = c.counts.clone();
     scaled[[2, 5, 7]] += 0.5;
-    let err = richardson_lucy_cv(&c.model, &scaled, &c.bins, 50, None, |_| {})
-        .unwrap_err()
-        .to_string();
+    let err = reconstruct(
+        &RlSum {
+            stop: Stopping::CrossValidated { max_iters: 50 },
+        },
+        &c.model,
+        &scaled,
+        &c.bins,
+        None,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(
         err.contains("whole photon counts") && err.contains("row 5, column 7"),
         "{err}"
     );
     let zeros = Array3::zeros(c.counts.dim());
-    let r = richardson_lucy_cv(&c.model, &zeros, &c.bins, 50, None, |_| {}).unwrap();
+    let r = reconstruct(
+        &RlSum {
+            stop: Stopping::CrossValidated { max_iters: 50 },
+        },
+        &c.model,
+        &zeros,
+        &c.bins,
+        None,
+    )
+    .unwrap();
     assert!(r.image.iter().all(|v| *v == 0.0));
     assert!(r.trace.notes.iter().any(|n| n.contains("no photons")));
 }
@@ -199,8 +224,26 @@ fn whole_stack_rl_on_one_bin_is_richardson_lucy_and_its_likelihood_falls() {
     // One bin: the whole-stack iteration is plain RL on that bin.
     let k = 3;
     let one = c.counts.slice(ndarray::s![k..k + 1, .., ..]).to_owned();
-    let stack = richardson_lucy_stack(&c.model, &one, &[k], 25, None, |_| {}).unwrap();
-    let plain = richardson_lucy(&c.model, &one, &[k], 25, None, |_| {}).unwrap();
+    let stack = reconstruct(
+        &RlStack {
+            stop: Stopping::After(25),
+        },
+        &c.model,
+        &one,
+        &[k],
+        None,
+    )
+    .unwrap();
+    let plain = reconstruct(
+        &RlSum {
+            stop: Stopping::After(25),
+        },
+        &c.model,
+        &one,
+        &[k],
+        None,
+    )
+    .unwrap();
     let scale = plain.image.iter().fold(0.0f64, |a, &v| a.max(v));
     let diff = (&stack.image - &plain.image)
         .iter()
@@ -208,7 +251,16 @@ fn whole_stack_rl_on_one_bin_is_richardson_lucy_and_its_likelihood_falls() {
     assert!(diff < 1e-9 * scale, "max difference {diff} of {scale}");
     // Every bin: EM never raises the negative log-likelihood, and each step
     // keeps sum_k sum(H_k o) = sum(m) (periodic model: H^T 1 is the mass).
-    let r = richardson_lucy_stack(&c.model, &c.counts, &c.bins, 40, None, |_| {}).unwrap();
+    let r = reconstruct(
+        &RlStack {
+            stop: Stopping::After(40),
+        },
+        &c.model,
+        &c.counts,
+        &c.bins,
+        None,
+    )
+    .unwrap();
     let nll: Vec<f64> = r
         .trace
         .rows
@@ -230,22 +282,24 @@ fn whole_stack_rl_on_one_bin_is_richardson_lucy_and_its_likelihood_falls() {
 #[test]
 fn whole_stack_rl_uses_the_time_axis_and_refuses_fractional_counts_by_bin() {
     let c = case(48, "disks", 3);
-    let stack = richardson_lucy_stack_cv(
+    let stack = reconstruct(
+        &RlStack {
+            stop: Stopping::CrossValidated { max_iters: 400 },
+        },
         &c.model,
         &c.counts,
         &c.bins,
-        400,
         Some(c.truth.view()),
-        |_| {},
     )
     .unwrap();
-    let summed = richardson_lucy_cv(
+    let summed = reconstruct(
+        &RlSum {
+            stop: Stopping::CrossValidated { max_iters: 400 },
+        },
         &c.model,
         &c.counts,
         &c.bins,
-        400,
         Some(c.truth.view()),
-        |_| {},
     )
     .unwrap();
     let psnr = |image: &Array2<f64>| scatterscope::metrics::psnr(image.view(), c.truth.view());
@@ -265,15 +319,32 @@ fn whole_stack_rl_uses_the_time_axis_and_refuses_fractional_counts_by_bin() {
     assert!((row.psnr.unwrap() - psnr(&stack.image)).abs() < 1e-9);
     let mut scaled = c.counts.clone();
     scaled[[2, 5, 7]] += 0.5;
-    let err = richardson_lucy_stack_cv(&c.model, &scaled, &c.bins, 50, None, |_| {})
-        .unwrap_err()
-        .to_string();
+    let err = reconstruct(
+        &RlStack {
+            stop: Stopping::CrossValidated { max_iters: 50 },
+        },
+        &c.model,
+        &scaled,
+        &c.bins,
+        None,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(
         err.contains("whole photon counts") && err.contains("row 5, column 7 of bin 2"),
         "{err}"
     );
     let zeros = Array3::zeros(c.counts.dim());
-    let r = richardson_lucy_stack_cv(&c.model, &zeros, &c.bins, 50, None, |_| {}).unwrap();
+    let r = reconstruct(
+        &RlStack {
+            stop: Stopping::CrossValidated { max_iters: 50 },
+        },
+        &c.model,
+        &zeros,
+        &c.bins,
+        None,
+    )
+    .unwrap();
     assert!(r.image.iter().all(|v| *v == 0.0));
 }
 
@@ -282,13 +353,14 @@ fn richardson_lucy_conserves_counts_and_improves_on_raw() {
     let c = case(32, "disks", 2);
     let total: f64 = c.counts.sum();
     let op = Convolution::from_bins(&c.model, &c.bins);
-    let r = richardson_lucy(
+    let r = reconstruct(
+        &RlSum {
+            stop: Stopping::After(30),
+        },
         &c.model,
         &c.counts,
         &c.bins,
-        30,
         Some(c.truth.view()),
-        |_| {},
     )
     .unwrap();
     // RL keeps sum(H o) = sum(m) after every step (H^T 1 = mass).
@@ -303,23 +375,25 @@ fn richardson_lucy_conserves_counts_and_improves_on_raw() {
 fn pnp_on_the_stack_beats_richardson_lucy_on_the_sum() {
     let c = case(48, "disks", 3);
     let tv = TotalVariation::default();
-    let pnp = pnp_admm(
+    let pnp = reconstruct(
+        &AdmmLbfgs {
+            denoiser: &tv,
+            opts: AdmmLbfgsOptions::default(),
+        },
         &c.model,
         &c.counts,
         &c.bins,
-        &tv,
-        &PnpOptions::default(),
         Some(c.truth.view()),
-        |_| {},
     )
     .unwrap();
-    let rl = richardson_lucy(
+    let rl = reconstruct(
+        &RlSum {
+            stop: Stopping::After(200),
+        },
         &c.model,
         &c.counts,
         &c.bins,
-        200,
         Some(c.truth.view()),
-        |_| {},
     )
     .unwrap();
     let p = scatterscope::metrics::psnr(pnp.image.view(), c.truth.view());
@@ -345,18 +419,19 @@ fn pnp_on_the_stack_beats_richardson_lucy_on_the_sum() {
 fn agreement_rule_returns_the_iterate_the_trace_says_it_should() {
     let c = case(32, "text", 5);
     let prior = Ffdnet::new(embedded(), "embedded");
-    let opts = PnpOptions {
+    let opts = AdmmLbfgsOptions {
         patience: Some(4),
         ..Default::default()
     };
-    let r = pnp_admm(
+    let r = reconstruct(
+        &AdmmLbfgs {
+            denoiser: &prior,
+            opts,
+        },
         &c.model,
         &c.counts,
         &c.bins,
-        &prior,
-        &opts,
         Some(c.truth.view()),
-        |_| {},
     )
     .unwrap();
     // The learned prior does not fade to the identity: auto picks agreement.
@@ -400,49 +475,104 @@ fn finite_non_negative(a: &Array2<f64>) -> bool {
 fn extreme_inputs_give_finite_images() {
     let c = case(24, "text", 4);
     let tv = TotalVariation::default();
-    let opts = PnpOptions {
+    let opts = AdmmLbfgsOptions {
         max_iters: 8,
         ..Default::default()
     };
-    let run = |counts: &Array3<f64>, opts: &PnpOptions| {
-        pnp_admm(&c.model, counts, &c.bins, &tv, opts, None, |_| {}).unwrap()
+    let run = |counts: &Array3<f64>, opts: &AdmmLbfgsOptions| {
+        reconstruct(
+            &AdmmLbfgs {
+                denoiser: &tv,
+                opts: *opts,
+            },
+            &c.model,
+            counts,
+            &c.bins,
+            None,
+        )
+        .unwrap()
     };
     // All-zero stack: the estimate is exactly 0 and no iteration runs.
     let zeros = Array3::zeros(c.counts.dim());
     let r = run(&zeros, &opts);
     assert!(r.image.iter().all(|v| *v == 0.0));
     assert!(r.trace.notes.iter().any(|n| n.contains("no photons")));
-    let rl = richardson_lucy(&c.model, &zeros, &c.bins, 5, None, |_| {}).unwrap();
+    let rl = reconstruct(
+        &RlSum {
+            stop: Stopping::After(5),
+        },
+        &c.model,
+        &zeros,
+        &c.bins,
+        None,
+    )
+    .unwrap();
     assert!(rl.image.iter().all(|v| *v == 0.0));
     // A single photon.
     let mut one = Array3::zeros(c.counts.dim());
     one[[5, 12, 12]] = 1.0;
     assert!(finite_non_negative(&run(&one, &opts).image));
     assert!(finite_non_negative(
-        &richardson_lucy(&c.model, &one, &c.bins, 20, None, |_| {})
-            .unwrap()
-            .image
+        &reconstruct(
+            &RlSum {
+                stop: Stopping::After(20)
+            },
+            &c.model,
+            &one,
+            &c.bins,
+            None
+        )
+        .unwrap()
+        .image
     ));
     // 1e9 photons per pixel.
     let bright = c.counts.mapv(|m| m * 1e9 / 20.0);
     assert!(finite_non_negative(&run(&bright, &opts).image));
     // Huge lambda: the o-update is pinned to v - u.
-    let stiff = PnpOptions {
+    let stiff = AdmmLbfgsOptions {
         lambda0: 1e12,
         ..opts
     };
     assert!(finite_non_negative(&run(&c.counts, &stiff).image));
     // Identity prior.
-    let r = pnp_admm(&c.model, &c.counts, &c.bins, &NoPrior, &opts, None, |_| {}).unwrap();
+    let r = reconstruct(
+        &AdmmLbfgs {
+            denoiser: &NoPrior,
+            opts,
+        },
+        &c.model,
+        &c.counts,
+        &c.bins,
+        None,
+    )
+    .unwrap();
     assert!(finite_non_negative(&r.image));
     // Whole-stack RL on one photon and on
     // 1e9 per pixel; its cross-validated stop on one photon.
     for counts in [&one, &bright] {
-        let r = richardson_lucy_stack(&c.model, counts, &c.bins, 20, None, |_| {}).unwrap();
+        let r = reconstruct(
+            &RlStack {
+                stop: Stopping::After(20),
+            },
+            &c.model,
+            counts,
+            &c.bins,
+            None,
+        )
+        .unwrap();
         assert!(finite_non_negative(&r.image));
         assert!(r.image.sum() > 0.0);
     }
-    let r = richardson_lucy_stack_cv(&c.model, &one, &c.bins, 50, None, |_| {}).unwrap();
+    let r = reconstruct(
+        &RlStack {
+            stop: Stopping::CrossValidated { max_iters: 50 },
+        },
+        &c.model,
+        &one,
+        &c.bins,
+        None,
+    )
+    .unwrap();
     assert!(finite_non_negative(&r.image));
 }
 
@@ -462,22 +592,31 @@ fn nearly_delta_kernel_recovers_the_object() {
     let truth = Scene::Disks.render(32, 32).unwrap();
     let counts = poisson_counts(&model.expected(truth.view()).counts, 9);
     let bins: Vec<usize> = (0..k.len()).collect();
-    let r = pnp_admm(
+    let r = reconstruct(
+        &AdmmLbfgs {
+            denoiser: &TotalVariation::default(),
+            opts: AdmmLbfgsOptions::default(),
+        },
         &model,
         &counts,
         &bins,
-        &TotalVariation::default(),
-        &PnpOptions::default(),
         Some(truth.view()),
-        |_| {},
     )
     .unwrap();
     let p = scatterscope::metrics::psnr(r.image.view(), truth.view());
     assert!(p > 25.0, "{p} dB");
     // Whole-stack RL with its own stop: no prior, so only the photon noise
     // limits it (measured 53.0 dB).
-    let rl =
-        richardson_lucy_stack_cv(&model, &counts, &bins, 200, Some(truth.view()), |_| {}).unwrap();
+    let rl = reconstruct(
+        &RlStack {
+            stop: Stopping::CrossValidated { max_iters: 200 },
+        },
+        &model,
+        &counts,
+        &bins,
+        Some(truth.view()),
+    )
+    .unwrap();
     let p = scatterscope::metrics::psnr(rl.image.view(), truth.view());
     assert!(p > 45.0, "{p} dB");
 }
@@ -504,17 +643,29 @@ fn nan_and_negative_counts_are_rejected_with_position() {
     bad[[2, 3, 4]] = f64::INFINITY;
     let tv = TotalVariation::default();
     assert!(
-        pnp_admm(
+        reconstruct(
+            &AdmmLbfgs {
+                denoiser: &tv,
+                opts: AdmmLbfgsOptions::default()
+            },
             &c.model,
             &bad,
             &c.bins,
-            &tv,
-            &PnpOptions::default(),
-            None,
-            |_| {}
+            None
         )
         .is_err()
     );
     bad[[2, 3, 4]] = -1.0;
-    assert!(richardson_lucy(&c.model, &bad, &c.bins, 3, None, |_| {}).is_err());
+    assert!(
+        reconstruct(
+            &RlSum {
+                stop: Stopping::After(3)
+            },
+            &c.model,
+            &bad,
+            &c.bins,
+            None
+        )
+        .is_err()
+    );
 }

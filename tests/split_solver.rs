@@ -3,6 +3,10 @@
 //! direct linear convolution and the adjoint identity for the padded model,
 //! and Newton's method on a small problem for the solver itself.
 
+#[path = "common/reconstruct.rs"]
+mod common_reconstruct;
+
+use common_reconstruct::reconstruct;
 use ndarray::{Array2, Array3, Axis};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -10,8 +14,10 @@ use scatterscope::denoise::NoPrior;
 use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::forward::{Boundary, EDGE_TAIL, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup};
+use scatterscope::reconstruct::em::Stopping;
 use scatterscope::reconstruct::likelihood::PoissonLikelihood;
-use scatterscope::reconstruct::split::{SplitOptions, pnp_split, poisson_prox};
+use scatterscope::reconstruct::rl_sum::RlSum;
+use scatterscope::reconstruct::split::{Split, SplitOptions, poisson_prox};
 
 fn setup(size: usize, pitch_cm: f64, photons: f64) -> Setup {
     let mut s = Preset::Paper.setup();
@@ -261,7 +267,17 @@ fn split_solver_with_no_prior_reaches_the_maximum_likelihood_of_newtons_method()
             patience: usize::MAX,
             ..Default::default()
         };
-        let r = pnp_split(&model, &counts, &[0, 1], &NoPrior, &opts, None, |_| {}).unwrap();
+        let r = reconstruct(
+            &Split {
+                denoiser: &NoPrior,
+                opts,
+            },
+            &model,
+            &counts,
+            &[0, 1],
+            None,
+        )
+        .unwrap();
         let got: Vec<f64> = r.image.iter().copied().collect();
         let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for (g, w) in got.iter().zip(&want) {
@@ -283,7 +299,17 @@ fn split_solver_with_no_prior_reaches_the_maximum_likelihood_of_newtons_method()
         if bg > 0.0 {
             // Ignoring the background gives a different, brighter object.
             let plain = ForwardModel::new(&k, Boundary::Periodic);
-            let wrong = pnp_split(&plain, &counts, &[0, 1], &NoPrior, &opts, None, |_| {}).unwrap();
+            let wrong = reconstruct(
+                &Split {
+                    denoiser: &NoPrior,
+                    opts,
+                },
+                &plain,
+                &counts,
+                &[0, 1],
+                None,
+            )
+            .unwrap();
             let (a, b) = (wrong.image.sum(), r.image.sum());
             assert!(a > 1.2 * b, "without background {a}, with {b}");
         }
@@ -321,14 +347,32 @@ fn split_solver_is_finite_on_extreme_inputs() {
             warm_start: 50,
             ..opts
         };
-        let w = pnp_split(&model, &counts, &bins, &tv, &warm, None, |_| {})
-            .unwrap_or_else(|e| panic!("{name}, RL start: {e}"));
+        let w = reconstruct(
+            &Split {
+                denoiser: &tv,
+                opts: warm,
+            },
+            &model,
+            &counts,
+            &bins,
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{name}, RL start: {e}"));
         assert!(
             w.image.iter().all(|v| v.is_finite() && *v >= 0.0),
             "{name}, RL start"
         );
-        let r = pnp_split(&model, &counts, &bins, &tv, &opts, None, |_| {})
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let r = reconstruct(
+            &Split {
+                denoiser: &tv,
+                opts,
+            },
+            &model,
+            &counts,
+            &bins,
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(r.image.dim(), (32, 32), "{name}");
         assert!(r.image.iter().all(|v| v.is_finite() && *v >= 0.0), "{name}");
         if name == "all zero" {
@@ -349,7 +393,17 @@ fn split_solver_is_finite_on_extreme_inputs() {
     }
     let mut bad = Array3::<f64>::zeros(shape);
     bad[[1, 2, 3]] = f64::NAN;
-    let e = pnp_split(&model, &bad, &bins, &tv, &opts, None, |_| {}).unwrap_err();
+    let e = reconstruct(
+        &Split {
+            denoiser: &tv,
+            opts,
+        },
+        &model,
+        &bad,
+        &bins,
+        None,
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("bin 1, row 2, column 3"), "{e}");
 }
 
@@ -369,13 +423,14 @@ fn split_solver_starts_from_richardson_lucy_on_the_summed_stack_when_asked() {
     });
     let truth = model.crop(grid.view());
     let counts = poisson_counts(&model.expected(grid.view()).counts, 11);
-    let rl = scatterscope::reconstruct::richardson_lucy::richardson_lucy(
+    let rl = reconstruct(
+        &RlSum {
+            stop: Stopping::After(30),
+        },
         &model,
         &counts,
         &bins,
-        30,
         Some(truth.view()),
-        |_| {},
     )
     .unwrap();
     let rl_psnr = rl.trace.rows.last().unwrap().psnr.unwrap();
@@ -385,14 +440,15 @@ fn split_solver_starts_from_richardson_lucy_on_the_summed_stack_when_asked() {
             max_iters: 1,
             ..Default::default()
         };
-        let r = pnp_split(
+        let r = reconstruct(
+            &Split {
+                denoiser: &NoPrior,
+                opts,
+            },
             &model,
             &counts,
             &bins,
-            &NoPrior,
-            &opts,
             Some(truth.view()),
-            |_| {},
         )
         .unwrap();
         (r.trace.rows[0].psnr.unwrap(), r.trace.notes)
@@ -439,13 +495,53 @@ fn prior_grid_average_touches_only_unshuffling_priors() {
     };
     let note = "averaged over its 2x2 grid";
     let tv = TotalVariation::default();
-    let a = pnp_split(&model, &counts, &bins, &tv, &fixed, None, |_| {}).unwrap();
-    let b = pnp_split(&model, &counts, &bins, &tv, &averaged, None, |_| {}).unwrap();
+    let a = reconstruct(
+        &Split {
+            denoiser: &tv,
+            opts: fixed,
+        },
+        &model,
+        &counts,
+        &bins,
+        None,
+    )
+    .unwrap();
+    let b = reconstruct(
+        &Split {
+            denoiser: &tv,
+            opts: averaged,
+        },
+        &model,
+        &counts,
+        &bins,
+        None,
+    )
+    .unwrap();
     assert_eq!(a.image, b.image, "TV has no grid to average");
     assert!(!b.trace.notes.iter().any(|n| n.contains(note)));
     let ffdnet = Ffdnet::new(source::embedded(), "embedded");
-    let c = pnp_split(&model, &counts, &bins, &ffdnet, &fixed, None, |_| {}).unwrap();
-    let d = pnp_split(&model, &counts, &bins, &ffdnet, &averaged, None, |_| {}).unwrap();
+    let c = reconstruct(
+        &Split {
+            denoiser: &ffdnet,
+            opts: fixed,
+        },
+        &model,
+        &counts,
+        &bins,
+        None,
+    )
+    .unwrap();
+    let d = reconstruct(
+        &Split {
+            denoiser: &ffdnet,
+            opts: averaged,
+        },
+        &model,
+        &counts,
+        &bins,
+        None,
+    )
+    .unwrap();
     assert!(d.trace.notes.iter().any(|n| n.contains(note)));
     assert!(!c.trace.notes.iter().any(|n| n.contains(note)));
     assert!(d.image.iter().all(|v| v.is_finite() && *v >= 0.0));

@@ -1,17 +1,19 @@
 //! The reconstruction methods by name, as the CLI and the report run them.
 
-use ndarray::{Array3, ArrayView2, Axis};
+use ndarray::{ArrayView2, Axis};
 
-use super::pnp::{PnpOptions, pnp_admm};
+use super::ReconstructError;
+use super::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions};
+use super::data::Data;
+use super::em::Stopping;
 use super::problem::Problem;
-use super::richardson_lucy::{richardson_lucy, richardson_lucy_cv};
-use super::rl_stack::{richardson_lucy_stack, richardson_lucy_stack_cv};
-use super::scaled_counts::scaled_counts;
-use super::split::{SplitOptions, pnp_split};
+use super::rl_stack::RlStack;
+use super::rl_sum::RlSum;
+use super::run::{Reconstruction, Reconstructor};
+use super::scaled_counts::ScaledCounts;
+use super::split::{Split, SplitOptions};
 use super::trace::TraceRow;
-use super::{ReconstructError, Reconstruction};
 use crate::denoise::Denoiser;
-use crate::forward::ForwardModel;
 use crate::named::{Named, named};
 
 /// A reconstruction method.
@@ -59,7 +61,7 @@ pub enum Solver {
     /// exact Fourier-domain o-update ([`super::split`]).
     Split,
     /// The paper's Algorithm 1: L-BFGS o-update on the surrogate
-    /// likelihood ([`super::pnp`]).
+    /// likelihood ([`super::admm_lbfgs`]).
     AdmmLbfgs,
 }
 
@@ -76,7 +78,7 @@ pub enum RlStop {
     Fixed,
     /// At the iteration chosen by two-fold cross-validation on thinned
     /// halves of the counts, searched up to `rl_max_iters`
-    /// ([`super::richardson_lucy::richardson_lucy_cv`]).
+    /// ([`super::rl_sum::RlSum`]).
     CrossValidated,
 }
 
@@ -93,7 +95,7 @@ pub struct MethodOptions {
     /// Settings of the exact-splitting solver.
     pub split: SplitOptions,
     /// Settings of Algorithm 1 (L-BFGS solver).
-    pub pnp: PnpOptions,
+    pub admm_lbfgs: AdmmLbfgsOptions,
     /// Richardson-Lucy iterations (with [`RlStop::Fixed`]).
     pub rl_iters: usize,
     /// When Richardson-Lucy stops.
@@ -115,10 +117,37 @@ impl Default for MethodOptions {
         Self {
             solver: Solver::Split,
             split: SplitOptions::default(),
-            pnp: PnpOptions::default(),
+            admm_lbfgs: AdmmLbfgsOptions::default(),
             rl_iters: 200,
             rl_stop: RlStop::CrossValidated,
             rl_max_iters: 1000,
+        }
+    }
+}
+
+impl MethodOptions {
+    /// When Richardson-Lucy stops, with its count.
+    pub fn rl_stopping(&self) -> Stopping {
+        match self.rl_stop {
+            RlStop::Fixed => Stopping::After(self.rl_iters),
+            RlStop::CrossValidated => Stopping::CrossValidated {
+                max_iters: self.rl_max_iters,
+            },
+        }
+    }
+
+    /// The PnP-ADMM solver these options choose, with `denoiser` as its
+    /// prior.
+    pub fn pnp<'a>(&self, denoiser: &'a dyn Denoiser) -> Box<dyn Reconstructor + 'a> {
+        match self.solver {
+            Solver::Split => Box::new(Split {
+                denoiser,
+                opts: self.split,
+            }),
+            Solver::AdmmLbfgs => Box::new(AdmmLbfgs {
+                denoiser,
+                opts: self.admm_lbfgs,
+            }),
         }
     }
 }
@@ -151,55 +180,46 @@ pub fn run_method(
     };
     let all = problem.all_bins();
     let model = &problem.model;
-    let pnp = |model: &ForwardModel,
-               counts: &Array3<f64>,
-               bins: &[usize],
-               on_iter: &mut dyn FnMut(&TraceRow)| match opts.solver {
-        Solver::Split => pnp_split(model, counts, bins, denoiser, &opts.split, truth, on_iter),
-        Solver::AdmmLbfgs => pnp_admm(model, counts, bins, denoiser, &opts.pnp, truth, on_iter),
-    };
-    let rl = |counts: &Array3<f64>, bins: &[usize], on_iter: &mut dyn FnMut(&TraceRow)| match opts
-        .rl_stop
-    {
-        RlStop::Fixed => richardson_lucy(model, counts, bins, opts.rl_iters, truth, on_iter),
-        RlStop::CrossValidated => {
-            richardson_lucy_cv(model, counts, bins, opts.rl_max_iters, truth, on_iter)
-        }
+    let on_iter: &mut dyn FnMut(&TraceRow) = &mut on_iter;
+    let rl = RlSum {
+        stop: opts.rl_stopping(),
     };
     match method {
-        Method::Pnp => pnp(model, &problem.counts, &all, &mut on_iter),
+        Method::Pnp => {
+            opts.pnp(denoiser)
+                .run(&Data::new(model, &problem.counts, &all)?, truth, on_iter)
+        }
         Method::PnpSlice => {
             let b = single(method)?;
-            pnp(model, &problem.single_bin(b), &[b], &mut on_iter)
+            let counts = problem.single_bin(b);
+            opts.pnp(denoiser)
+                .run(&Data::new(model, &counts, &[b])?, truth, on_iter)
         }
         Method::PnpSum => {
             let summed = model.summed(&all);
             let counts = problem.counts.sum_axis(Axis(0)).insert_axis(Axis(0));
-            let mut r = pnp(&summed, &counts, &[0], &mut on_iter)?;
+            let mut r =
+                opts.pnp(denoiser)
+                    .run(&Data::new(&summed, &counts, &[0])?, truth, on_iter)?;
             r.trace.method = method.name().into();
             Ok(r)
         }
         Method::Rl => {
             let b = single(method)?;
-            rl(&problem.single_bin(b), &[b], &mut on_iter)
+            let counts = problem.single_bin(b);
+            rl.run(&Data::new(model, &counts, &[b])?, truth, on_iter)
         }
-        Method::RlSum => rl(&problem.counts, &all, &mut on_iter),
-        Method::RlStack => match opts.rl_stop {
-            RlStop::Fixed => {
-                richardson_lucy_stack(model, &problem.counts, &all, opts.rl_iters, truth, on_iter)
-            }
-            RlStop::CrossValidated => richardson_lucy_stack_cv(
-                model,
-                &problem.counts,
-                &all,
-                opts.rl_max_iters,
-                truth,
-                on_iter,
-            ),
-        },
+        Method::RlSum => rl.run(&Data::new(model, &problem.counts, &all)?, truth, on_iter),
+        Method::RlStack => RlStack {
+            stop: opts.rl_stopping(),
+        }
+        .run(&Data::new(model, &problem.counts, &all)?, truth, on_iter),
         Method::ScaledCounts => match bin {
-            Some(b) => scaled_counts(model, &problem.single_bin(b), &[b], truth),
-            None => scaled_counts(model, &problem.counts, &all, truth),
+            Some(b) => {
+                let counts = problem.single_bin(b);
+                ScaledCounts.run(&Data::new(model, &counts, &[b])?, truth, on_iter)
+            }
+            None => ScaledCounts.run(&Data::new(model, &problem.counts, &all)?, truth, on_iter),
         },
     }
 }

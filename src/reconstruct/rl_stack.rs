@@ -10,94 +10,98 @@
 //! back-projection of all K bins take one transform per basis kernel
 //! (11 for the paper preset's 20 bins) instead of one per bin.
 
-use std::time::Instant;
-
-use ndarray::{Array3, ArrayView2, Axis};
+use ndarray::Axis;
 use rayon::prelude::*;
 
+use super::data::{Data, flat_level};
 use super::discrepancy::m_log_m;
-use super::richardson_lucy::{
-    DENOMINATOR_GUARD, cv_search, em_multiply, fixed_steps, held_out_deviance,
+use super::em::{
+    DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps, held_out_deviance,
 };
+use super::error::ReconstructError;
+use super::run::{Estimate, Reconstructor, Run, grid_note};
 use super::thinning::{THINNING_SEED, thin_halves};
-use super::trace::{Trace, TraceRow};
-use super::{
-    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, note_background,
-    validate_stack,
-};
 use crate::forward::ForwardModel;
 use crate::time_basis::{BASIS_TOLERANCE, TimeBasis};
 
-/// The method's name in traces.
-const METHOD: &str = "rl-stack";
+/// Whole-stack Richardson-Lucy.
+///
+/// With [`Stopping::CrossValidated`] it chooses its own iteration count
+/// without a truth: each bin's counts are thinned into two independent
+/// halves ([`thin_halves`], one seed per bin), the iteration runs on each
+/// half, and after every step each half's estimate predicts the other
+/// half's counts in every bin (their Poisson deviance is the score). The
+/// stop and the output are those of [`super::rl_sum::RlSum`]:
+/// [`super::em::CV_PATIENCE`] past the best score, the sum of the halves'
+/// estimates there.
+#[derive(Debug, Clone, Copy)]
+pub struct RlStack {
+    /// When it stops.
+    pub stop: Stopping,
+}
+
+impl Reconstructor for RlStack {
+    fn name(&self, _bins: usize) -> &'static str {
+        "rl-stack"
+    }
+
+    fn reconstruct(
+        &self,
+        data: &Data<'_>,
+        run: &mut Run<'_>,
+    ) -> Result<Estimate, ReconstructError> {
+        match self.stop {
+            Stopping::After(iterations) => fixed(data, iterations, run),
+            Stopping::CrossValidated { max_iters } => cross_validated(data, max_iters, run),
+        }
+    }
+}
 
 /// `iterations` whole-stack RL steps from the flat object.
-pub fn richardson_lucy_stack(
-    model: &ForwardModel,
-    counts: &Array3<f64>,
-    bins: &[usize],
+fn fixed(
+    data: &Data<'_>,
     iterations: usize,
-    truth: Option<ArrayView2<f64>>,
-    mut on_iter: impl FnMut(&TraceRow),
-) -> Result<Reconstruction, ReconstructError> {
-    let start = Instant::now();
-    let em = StackEm::new(model, counts, bins)?;
+    run: &mut Run<'_>,
+) -> Result<Estimate, ReconstructError> {
+    let (model, counts, bins) = (data.model, data.counts, data.bins);
+    let em = StackEm::new(model, bins);
     let (h, w) = model.sensor_shape();
-    let mut trace = Trace::new(METHOD);
     let m: Vec<Vec<f64>> = counts
         .axis_iter(Axis(0))
         .map(|img| img.iter().copied().collect())
         .collect();
     let total: f64 = counts.sum();
     if total == 0.0 || em.mass <= 0.0 {
-        return Ok(no_photons(trace, (h, w), truth));
+        return Ok(run.no_photons((h, w)));
     }
     let bg = model.background();
     let guard = DENOMINATOR_GUARD * total / (bins.len() * h * w) as f64;
     let o = vec![flat_level(total, bg, bins.len(), em.mass, h * w); em.sensitivity.len()];
-    trace.notes.push(em.note(model, guard));
-    note_background(&mut trace, model);
+    run.note(em.note(model, guard));
+    run.note_background(model);
     let step = |o: &mut [f64]| {
         let y = em.forward(o);
         em.update(o, &y, &m, bg, guard, true)
     };
-    let image = fixed_steps(
-        model,
-        o,
-        iterations,
-        truth,
-        start,
-        &mut trace,
-        step,
-        &mut on_iter,
-    );
-    let image = finish(image, METHOD, iterations)?;
-    Ok(Reconstruction { image, trace })
+    let image = fixed_steps(model, o, iterations, run, step);
+    Ok(Estimate {
+        image,
+        iteration: iterations,
+    })
 }
 
-/// Whole-stack RL that chooses its own iteration count without a truth:
-/// each bin's counts are thinned into two independent halves
-/// ([`thin_halves`], one seed per bin), the iteration runs on each half,
-/// and after every step each half's estimate predicts the other half's
-/// counts in every bin (their Poisson deviance is the score). The stop and
-/// the output are those of [`super::richardson_lucy::richardson_lucy_cv`]:
-/// [`super::richardson_lucy::CV_PATIENCE`] past the best score, the sum of
-/// the halves' estimates there.
-pub fn richardson_lucy_stack_cv(
-    model: &ForwardModel,
-    counts: &Array3<f64>,
-    bins: &[usize],
+/// The cross-validated stop (see [`RlStack`]).
+fn cross_validated(
+    data: &Data<'_>,
     max_iters: usize,
-    truth: Option<ArrayView2<f64>>,
-    mut on_iter: impl FnMut(&TraceRow),
-) -> Result<Reconstruction, ReconstructError> {
-    let start = Instant::now();
-    let em = StackEm::new(model, counts, bins)?;
+    run: &mut Run<'_>,
+) -> Result<Estimate, ReconstructError> {
+    let (model, counts, bins) = (data.model, data.counts, data.bins);
+    let em = StackEm::new(model, bins);
     let (h, w) = model.sensor_shape();
-    let mut trace = Trace::new(METHOD);
     let total: f64 = counts.sum();
     if total == 0.0 || em.mass <= 0.0 {
-        return Ok(no_photons(trace, (h, w), truth));
+        return Ok(run.no_photons((h, w)));
     }
     let mut firsts = Vec::with_capacity(bins.len());
     let mut seconds = Vec::with_capacity(bins.len());
@@ -126,19 +130,17 @@ pub fn richardson_lucy_stack_cv(
         .iter()
         .map(|&p| vec![flat_level(p, bg, bins.len(), em.mass, h * w); em.sensitivity.len()])
         .collect();
-    trace.notes.push(format!(
+    run.note(format!(
         "stop chosen by two-fold cross-validation: each bin's counts thinned into two halves ({} and {} photons, seed {THINNING_SEED:#x} plus the bin's index), the iteration run on each, each scored on the other's counts in every bin",
         photons[0], photons[1]
     ));
-    trace.notes.push(em.note(model, guard));
-    note_background(&mut trace, model);
-    let (k, image) = cv_search(
+    run.note(em.note(model, guard));
+    run.note_background(model);
+    let (iteration, image) = cv_search(
         model,
         o,
         max_iters,
-        truth,
-        start,
-        &mut trace,
+        run,
         |x| em.forward(x),
         |y, half| stack_held_out_deviance(y, &halves[1 - half], &halves_log[1 - half], bg, guard),
         |half, x, y| {
@@ -146,10 +148,8 @@ pub fn richardson_lucy_stack_cv(
             // this likelihood: its logarithms are left out.
             em.update(x, y, &halves[half], bg, guard, false);
         },
-        &mut on_iter,
     );
-    let image = finish(image, METHOD, k)?;
-    Ok(Reconstruction { image, trace })
+    Ok(Estimate { image, iteration })
 }
 
 /// The whole-stack EM operator: every kept bin's kernel (through a
@@ -172,18 +172,13 @@ struct StackEm<'a> {
 }
 
 impl<'a> StackEm<'a> {
-    fn new(
-        model: &'a ForwardModel,
-        counts: &Array3<f64>,
-        bins: &[usize],
-    ) -> Result<Self, ReconstructError> {
-        validate_stack(counts, bins)?;
-        Ok(Self {
+    fn new(model: &'a ForwardModel, bins: &[usize]) -> Self {
+        Self {
             basis: TimeBasis::new(model, bins, BASIS_TOLERANCE),
             bins: bins.len(),
             mass: bins.iter().map(|&k| model.mass(k)).sum(),
             sensitivity: model.sensitivity(bins),
-        })
+        }
     }
 
     /// The trace's note on the operator.

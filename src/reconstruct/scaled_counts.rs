@@ -1,44 +1,53 @@
 //! Scaled counts, the reference without deblurring: counts divided by the
 //! kernel mass.
 
-use ndarray::{Array3, ArrayView2, Axis};
+use ndarray::Axis;
 
+use super::data::Data;
+use super::error::ReconstructError;
 use super::operator::Convolution;
-use super::trace::{Trace, TraceRow};
-use super::{ReconstructError, Reconstruction, finish, score, validate_counts};
-use crate::forward::ForwardModel;
+use super::run::{Estimate, Reconstructor, Run};
+use super::trace::TraceRow;
 
-/// Sum of the counts of `bins`, less their background, divided by their
-/// kernel mass (at least 0): the object estimate a perfectly sharp PSF
-/// would give.
-pub fn scaled_counts(
-    model: &ForwardModel,
-    counts: &Array3<f64>,
-    bins: &[usize],
-    truth: Option<ArrayView2<f64>>,
-) -> Result<Reconstruction, ReconstructError> {
-    validate_counts(counts)?;
-    let mass = Convolution::from_bins(model, bins).mass();
-    // The background of the summed bins is subtracted first.
-    let bg = model.background() * bins.len() as f64;
-    let image = counts.sum_axis(Axis(0)).mapv(|m| {
-        if mass > 0.0 {
-            ((m - bg) / mass).max(0.0)
+/// Sum of the counts of the data's bins, less their background, divided
+/// by their kernel mass (at least 0): the object estimate a perfectly
+/// sharp PSF would give.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ScaledCounts;
+
+impl Reconstructor for ScaledCounts {
+    fn name(&self, bins: usize) -> &'static str {
+        if bins == 1 {
+            "scaled-counts"
         } else {
-            0.0
+            "scaled-counts-sum"
         }
-    });
-    let image = finish(image, "scaled-counts", 0)?;
-    let mut trace = Trace::new(if bins.len() == 1 {
-        "scaled-counts"
-    } else {
-        "scaled-counts-sum"
-    });
-    let mut row = TraceRow::default();
-    score(&mut row, image.view(), truth);
-    trace.rows.push(row);
-    trace.notes.push(format!(
-        "kernel mass {mass:.4} photons per unit object pixel"
-    ));
-    Ok(Reconstruction { image, trace })
+    }
+
+    fn reconstruct(
+        &self,
+        data: &Data<'_>,
+        run: &mut Run<'_>,
+    ) -> Result<Estimate, ReconstructError> {
+        let mass = Convolution::from_bins(data.model, data.bins).mass();
+        // The background of the summed bins is subtracted first.
+        let bg = data.model.background() * data.bins.len() as f64;
+        let image = data.counts.sum_axis(Axis(0)).mapv(|m| {
+            if mass > 0.0 {
+                ((m - bg) / mass).max(0.0)
+            } else {
+                0.0
+            }
+        });
+        let mut row = TraceRow::default();
+        run.score(&mut row, image.view());
+        run.push(row);
+        run.note(format!(
+            "kernel mass {mass:.4} photons per unit object pixel"
+        ));
+        Ok(Estimate {
+            image,
+            iteration: 0,
+        })
+    }
 }

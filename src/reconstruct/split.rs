@@ -80,16 +80,15 @@
 use std::time::Instant;
 
 use ndarray::parallel::prelude::*;
-use ndarray::{Array2, Array3, ArrayView2, Axis};
+use ndarray::{Array2, Array3, Axis};
 use rustfft::num_complex::{Complex32, Complex64};
 
+use super::data::{Data, flat_level};
 use super::discrepancy::{ExpectedDeviance, m_log_m};
-use super::richardson_lucy::rl_steps;
-use super::trace::{Trace, TraceRow};
-use super::{
-    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, note_background,
-    pnp_method, score,
-};
+use super::error::ReconstructError;
+use super::rl_sum::rl_steps;
+use super::run::{Estimate, Reconstructor, Run, grid_note};
+use super::trace::TraceRow;
 use crate::denoise::{Denoiser, denoise_scaled, denoise_scaled_grid_average};
 use crate::fft2::Fft2;
 use crate::forward::ForwardModel;
@@ -196,26 +195,26 @@ fn warm_start(
     bins: &[usize],
     iterations: usize,
     flat: f64,
-    trace: &mut Trace,
+    run: &mut Run<'_>,
 ) -> Array2<f64> {
     let flat_start = || Array2::from_elem(model.grid_shape(), flat);
     if iterations == 0 {
         return flat_start();
     }
     let start = Instant::now();
-    let mut rl = Trace::new("rl-sum");
-    match rl_steps(model, counts, bins, iterations, None, &mut rl, |_| {}) {
+    let mut quiet = |_: &TraceRow| {};
+    let mut rl = Run::new("rl-sum", None, &mut quiet);
+    match rl_steps(model, counts, bins, iterations, &mut rl) {
         Some(o) if o.iter().all(|x| x.is_finite()) => {
-            trace.notes.push(format!(
+            run.note(format!(
                 "start: {iterations} Richardson-Lucy iterations on the time-summed stack on the sensor window, the flat level beyond it ({:.2} s)",
                 start.elapsed().as_secs_f64()
             ));
             model.embed(o.view(), flat)
         }
         _ => {
-            trace.notes.push(
-                "start: the flat object (Richardson-Lucy on the time-summed stack gave no finite start)"
-                    .into(),
+            run.note(
+                "start: the flat object (Richardson-Lucy on the time-summed stack gave no finite start)",
             );
             flat_start()
         }
@@ -244,30 +243,46 @@ pub fn poisson_prox(m: f64, t: f64, rho: f64) -> f64 {
     if b >= 0.0 { upper } else { lower }
 }
 
-/// Runs the exact-splitting PnP-ADMM on bins `bins` of `model` with
-/// `counts` (one sensor image per listed bin).
-pub fn pnp_split(
-    model: &ForwardModel,
-    counts: &Array3<f64>,
-    bins: &[usize],
+/// The exact-splitting PnP-ADMM with `denoiser` as its prior.
+pub struct Split<'a> {
+    /// The prior.
+    pub denoiser: &'a dyn Denoiser,
+    /// Its settings.
+    pub opts: SplitOptions,
+}
+
+impl Reconstructor for Split<'_> {
+    fn name(&self, bins: usize) -> &'static str {
+        if bins == 1 { "pnp-slice" } else { "pnp" }
+    }
+
+    fn reconstruct(
+        &self,
+        data: &Data<'_>,
+        run: &mut Run<'_>,
+    ) -> Result<Estimate, ReconstructError> {
+        pnp_split(data, self.denoiser, &self.opts, run)
+    }
+}
+
+/// Runs the exact-splitting PnP-ADMM on `data`.
+fn pnp_split(
+    data: &Data<'_>,
     denoiser: &dyn Denoiser,
     opts: &SplitOptions,
-    truth: Option<ArrayView2<f64>>,
-    mut on_iter: impl FnMut(&TraceRow),
-) -> Result<Reconstruction, ReconstructError> {
-    let method = pnp_method(counts, bins)?;
-    let start = Instant::now();
+    run: &mut Run<'_>,
+) -> Result<Estimate, ReconstructError> {
+    let (model, counts, bins) = (data.model, data.counts, data.bins);
     let (h, w) = model.sensor_shape();
     let (gh, gw) = model.grid_shape();
     let n = gh * gw;
     let fft = model.fft();
-    let mut trace = Trace::new(method);
-    trace.prior = Some(denoiser.name());
-    trace.notes.push(grid_note(model));
+    run.set_prior(denoiser.name());
+    run.note(grid_note(model));
     let total: f64 = counts.sum();
     let total_mass: f64 = bins.iter().map(|&k| model.mass(k)).sum();
     if total == 0.0 {
-        return Ok(no_photons(trace, (h, w), truth));
+        return Ok(run.no_photons((h, w)));
     }
     // Bins whose kernels carry a negligible share of the light (the first
     // picoseconds, or IRF-spread tails) cannot change the answer when they
@@ -292,22 +307,22 @@ pub fn pnp_split(
         } else {
             "without a count"
         };
-        trace.notes.push(format!(
+        run.note(format!(
             "left out {} bin(s) {why}, whose kernels carry less than {NEGLIGIBLE_BIN:e} of the light each",
             bins.len() - used.len()
         ));
     }
     if unexplained > 0.0 {
-        trace.notes.push(format!(
+        run.note(format!(
             "left out {unexplained} counts in bins whose kernels carry less than {UNRESOLVED_BIN:e} of the light: no light of the model reaches them (a background not modelled, or a time window the physics does not match)"
         ));
     }
-    trace.notes.push(format!(
+    run.note(format!(
         "solver: exact splitting (P4IP), {} FFTs and one denoiser call per iteration",
         2 * used.len() + 2
     ));
     // Background counts per pixel and bin: the data are Poisson(H o + bg).
-    note_background(&mut trace, model);
+    run.note_background(model);
     let flat = flat_level(used_counts, bg, used.len(), total_mass, h * w);
     // Precision of the data split per frequency, without rho:
     // sum_k |K_k|^2 / (mass_k o_flat).
@@ -322,12 +337,11 @@ pub fn pnp_split(
     let gamma_unit = total_mass / flat;
     let average_grid = opts.average_prior_grid && denoiser.unshuffles();
     if average_grid {
-        trace.notes.push(
-            "the prior is averaged over its 2x2 grid's four positions (4 denoiser calls per iteration)"
-                .into(),
+        run.note(
+            "the prior is averaged over its 2x2 grid's four positions (4 denoiser calls per iteration)",
         );
     }
-    let o0 = warm_start(model, counts, bins, opts.warm_start, flat, &mut trace);
+    let o0 = warm_start(model, counts, bins, opts.warm_start, flat, run);
     let o0_spec = fft.forward(o0.as_slice().expect("standard layout"));
     let fft32 = Fft2::<f32>::new(gh, gw);
     // The per-bin single-precision images hold values / unit.
@@ -376,12 +390,9 @@ pub fn pnp_split(
     let mut stopped = format!("iteration cap {}", opts.max_iters);
     let mut last_z = f64::INFINITY;
     let deviance = ExpectedDeviance::shared();
-    let mut row0 = TraceRow {
-        wall_s: start.elapsed().as_secs_f64(),
-        ..Default::default()
-    };
-    score(&mut row0, model.crop(v.view()).view(), truth);
-    trace.rows.push(row0);
+    let mut row0 = run.row(0);
+    run.score(&mut row0, model.crop(v.view()).view());
+    run.push(row0);
     let (oy, ox) = model.sensor_offset();
     for it in 1..=opts.max_iters {
         // o-update: exact, in the Fourier domain.
@@ -484,14 +495,9 @@ pub fn pnp_split(
         }
         v = v_new;
         if v.iter().any(|x| !x.is_finite()) {
-            return Err(ReconstructError::NonFinite {
-                method: method.into(),
-                iteration: it,
-            });
+            return Err(run.non_finite(it));
         }
         let mut row = TraceRow {
-            iteration: it,
-            wall_s: start.elapsed().as_secs_f64(),
             primal_residual: Some((primal / n as f64).sqrt()),
             dual_residual: Some(gamma * (dual / n as f64).sqrt()),
             sigma: Some(sigma),
@@ -499,13 +505,12 @@ pub fn pnp_split(
             deviance: at_floor.then_some(dev),
             expected_deviance: at_floor.then_some(expected),
             deviance_sd: at_floor.then_some(variance.sqrt()),
-            ..Default::default()
+            ..run.row(it)
         };
-        if truth.is_some() {
-            score(&mut row, model.crop(v.view()).view(), truth);
+        if run.scores() {
+            run.score(&mut row, model.crop(v.view()).view());
         }
-        on_iter(&row);
-        trace.rows.push(row);
+        run.push(row);
         // The prior weakens to its floor; then the run stops once the data
         // step's estimate explains the counts as well as Poisson noise
         // allows for `patience` iterations.
@@ -527,18 +532,20 @@ pub fn pnp_split(
             }
         }
     }
-    trace.notes.push(format!("stopped: {stopped}"));
+    run.note(format!("stopped: {stopped}"));
     if last_z.is_infinite() {
-        trace.notes.push(format!(
+        run.note(format!(
             "sigma had not reached its floor {sigma_floor:.4} at the iteration cap; the deviance was not checked"
         ));
     } else if last_z > opts.target_z {
-        trace.notes.push(format!(
+        run.note(format!(
             "the deviance did not reach the noise level: {last_z:.1} noise standard deviations above its expectation at the last iteration (the model or the physics may not match the data, or more iterations are needed)"
         ));
     }
-    let iteration = trace.rows.len() - 1;
-    trace.notes.push(format!("output: iteration {iteration}"));
-    let image = finish(model.crop(v.view()), method, iteration)?;
-    Ok(Reconstruction { image, trace })
+    let iteration = run.rows().len() - 1;
+    run.note(format!("output: iteration {iteration}"));
+    Ok(Estimate {
+        image: model.crop(v.view()),
+        iteration,
+    })
 }

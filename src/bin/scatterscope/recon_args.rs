@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use scatterscope::denoise::ffdnet::source;
 use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::denoise::{Denoiser, NoPrior};
+use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgsOptions, StopRule};
 use scatterscope::reconstruct::method::{MethodOptions, RlStop, Solver};
-use scatterscope::reconstruct::pnp::{PnpOptions, StopRule};
 use scatterscope::reconstruct::split::SplitOptions;
 
 /// The prior plugged into PnP-ADMM.
@@ -133,7 +133,7 @@ pub struct ReconArgs {
     pub lambda_step: f64,
     /// admm-lbfgs: regularisation weight beta; the denoiser gets
     /// sigma^2 = beta / lambda.
-    #[arg(long, default_value_t = PnpOptions::default().beta)]
+    #[arg(long, default_value_t = AdmmLbfgsOptions::default().beta)]
     pub beta: f64,
     /// ADMM iteration cap [default: split 80, admm-lbfgs 100].
     #[arg(long)]
@@ -213,7 +213,7 @@ impl ReconArgs {
             self.sigma_decay
         );
         let split = SplitOptions::default();
-        let lbfgs = PnpOptions::default();
+        let lbfgs = AdmmLbfgsOptions::default();
         Ok(MethodOptions {
             solver: self.solver,
             split: SplitOptions {
@@ -229,7 +229,7 @@ impl ReconArgs {
                 warm_start: self.warm_start,
                 average_prior_grid: self.prior_grid == "average",
             },
-            pnp: PnpOptions {
+            admm_lbfgs: AdmmLbfgsOptions {
                 lambda0: self.lambda0,
                 lambda_step: self.lambda_step,
                 beta: self.beta,

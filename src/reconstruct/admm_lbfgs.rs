@@ -48,22 +48,19 @@
 //! chosen with the truth is measured in BENCHMARKS.md.
 
 use std::sync::Mutex;
-use std::time::Instant;
 
 use argmin::core::{CostFunction, Executor, Gradient, State};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::LBFGS;
-use ndarray::{Array2, Array3, ArrayView2};
+use ndarray::Array2;
 
+use super::data::{Data, flat_level};
 use super::discrepancy::ExpectedDeviance;
+use super::error::ReconstructError;
 use super::likelihood::PoissonLikelihood;
-use super::trace::{Trace, TraceRow};
-use super::{
-    ReconstructError, Reconstruction, finish, flat_level, grid_note, no_photons, note_background,
-    pnp_method, score,
-};
+use super::run::{Estimate, Reconstructor, Run, grid_note};
+use super::trace::TraceRow;
 use crate::denoise::{Denoiser, denoise_scaled};
-use crate::forward::ForwardModel;
 use crate::named::named;
 
 /// When ADMM stops, besides the iteration cap and residual tolerances.
@@ -91,7 +88,7 @@ named!(StopRule {
 
 /// Parameters of Algorithm 1 and of its o-update.
 #[derive(Debug, Clone, Copy)]
-pub struct PnpOptions {
+pub struct AdmmLbfgsOptions {
     /// Initial ADMM penalty lambda_0.
     pub lambda0: f64,
     /// Growth factor of lambda per iteration.
@@ -119,7 +116,7 @@ pub struct PnpOptions {
     pub eps: f64,
 }
 
-impl Default for PnpOptions {
+impl Default for AdmmLbfgsOptions {
     fn default() -> Self {
         Self {
             lambda0: 1.0,
@@ -162,7 +159,7 @@ struct OUpdate<'a> {
 
 /// Calls of value or gradient allowed per o-update: L-BFGS asks for both
 /// at 1-3 line-search points per iteration.
-fn evaluation_budget(opts: &PnpOptions) -> u64 {
+fn evaluation_budget(opts: &AdmmLbfgsOptions) -> u64 {
     20 * opts.lbfgs_iters + 20
 }
 
@@ -235,34 +232,50 @@ struct Pick {
     image: Array2<f64>,
 }
 
-/// Runs Algorithm 1 on bins `bins` of `model` with `counts` (one image per
-/// listed bin). `on_iter` sees every trace row as it is produced.
-pub fn pnp_admm(
-    model: &ForwardModel,
-    counts: &Array3<f64>,
-    bins: &[usize],
+/// The paper's Algorithm 1 with `denoiser` as its prior.
+pub struct AdmmLbfgs<'a> {
+    /// The prior.
+    pub denoiser: &'a dyn Denoiser,
+    /// Its settings.
+    pub opts: AdmmLbfgsOptions,
+}
+
+impl Reconstructor for AdmmLbfgs<'_> {
+    fn name(&self, bins: usize) -> &'static str {
+        if bins == 1 { "pnp-slice" } else { "pnp" }
+    }
+
+    fn reconstruct(
+        &self,
+        data: &Data<'_>,
+        run: &mut Run<'_>,
+    ) -> Result<Estimate, ReconstructError> {
+        admm_lbfgs(data, self.denoiser, &self.opts, run)
+    }
+}
+
+/// Runs Algorithm 1 on `data`.
+fn admm_lbfgs(
+    data: &Data<'_>,
     denoiser: &dyn Denoiser,
-    opts: &PnpOptions,
-    truth: Option<ArrayView2<f64>>,
-    mut on_iter: impl FnMut(&TraceRow),
-) -> Result<Reconstruction, ReconstructError> {
-    let method = pnp_method(counts, bins)?;
-    let start = Instant::now();
+    opts: &AdmmLbfgsOptions,
+    run: &mut Run<'_>,
+) -> Result<Estimate, ReconstructError> {
+    let (model, counts, bins) = (data.model, data.counts, data.bins);
     let (h, w) = model.sensor_shape();
     let (gh, gw) = model.grid_shape();
     let n = gh * gw;
     let likelihood = PoissonLikelihood::new(model, counts, bins, opts.eps);
-    let mut trace = Trace::new(method);
-    trace.prior = Some(denoiser.name());
-    trace.notes.push(format!(
+    run.set_prior(denoiser.name());
+    run.note(format!(
         "{} FFTs per likelihood gradient ({} of {} bins have counts; bins without counts only add the constant term)",
         likelihood.ffts_per_gradient(),
         bins.len() - likelihood.skipped_bins(),
         bins.len()
     ));
     let total: f64 = counts.sum();
-    trace.notes.push(grid_note(model));
-    note_background(&mut trace, model);
+    run.note(grid_note(model));
+    run.note_background(model);
     let flat = flat_level(
         total,
         model.background(),
@@ -271,7 +284,7 @@ pub fn pnp_admm(
         h * w,
     );
     if total == 0.0 {
-        return Ok(no_photons(trace, (h, w), truth));
+        return Ok(run.no_photons((h, w)));
     }
     let deviance = ExpectedDeviance::shared();
     let stop = match opts.stop {
@@ -284,7 +297,7 @@ pub fn pnp_admm(
         _ => 10,
     });
     if stop != StopRule::Iterations {
-        trace.notes.push(format!(
+        run.note(format!(
             "stopping rule: {} with patience {patience}",
             match stop {
                 StopRule::Agreement =>
@@ -297,12 +310,9 @@ pub fn pnp_admm(
     let mut v = Array2::from_elem((gh, gw), flat);
     let mut u = Array2::<f64>::zeros((gh, gw));
     let mut lambda = opts.lambda0;
-    let mut row0 = TraceRow {
-        wall_s: start.elapsed().as_secs_f64(),
-        ..Default::default()
-    };
-    score(&mut row0, model.crop(v.view()).view(), truth);
-    trace.rows.push(row0);
+    let mut row0 = run.row(0);
+    run.score(&mut row0, model.crop(v.view()).view());
+    run.push(row0);
     let mut stopped = format!("iteration cap {}", opts.max_iters);
     let mut budget_hits = 0usize;
     // Iterations whose sigma exceeded the denoiser's trained range.
@@ -358,15 +368,10 @@ pub fn pnp_admm(
         let dual = lambda * rms(&(&v_new - &v));
         v = v_new;
         if v.iter().any(|x| !x.is_finite()) {
-            return Err(ReconstructError::NonFinite {
-                method: method.into(),
-                iteration: it,
-            });
+            return Err(run.non_finite(it));
         }
         let check = deviance.check(model, counts, bins, v.view());
         let mut row = TraceRow {
-            iteration: it,
-            wall_s: start.elapsed().as_secs_f64(),
             objective: Some(objective),
             primal_residual: Some(primal),
             dual_residual: Some(dual),
@@ -376,13 +381,12 @@ pub fn pnp_admm(
             expected_deviance: Some(check.expected),
             deviance_sd: Some(check.sd),
             inner_iterations: Some(inner),
-            ..Default::default()
+            ..run.row(it)
         };
-        if truth.is_some() {
-            score(&mut row, model.crop(v.view()).view(), truth);
+        if run.scores() {
+            run.score(&mut row, model.crop(v.view()).view());
         }
-        on_iter(&row);
-        trace.rows.push(row);
+        run.push(row);
         lambda *= opts.lambda_step;
         if stop != StopRule::Iterations {
             smallest_deviance = smallest_deviance.min(check.deviance);
@@ -434,16 +438,16 @@ pub fn pnp_admm(
             break;
         }
     }
-    trace.notes.push(format!("stopped: {stopped}"));
+    run.note(format!("stopped: {stopped}"));
     if let (Some(first), Some(last)) = (clamped.first(), clamped.last()) {
-        trace.notes.push(format!(
+        run.note(format!(
             "sigma clamped to the prior's trained maximum {:.4} (on its [0, 1] scale) in {} iteration(s), {first} to {last}",
             denoiser.sigma_max(),
             clamped.len()
         ));
     }
     if budget_hits > 0 {
-        trace.notes.push(format!(
+        run.note(format!(
             "{budget_hits} o-update(s) ended on the evaluation budget ({} calls per update; the line search did not converge) with their best point",
             evaluation_budget(opts)
         ));
@@ -452,14 +456,16 @@ pub fn pnp_admm(
         Some(p) => (p.image, p.iteration),
         None => {
             if stop == StopRule::Agreement {
-                trace.notes.push(format!(
+                run.note(format!(
                     "no iterate passed the discrepancy test (deviance at most {DISCREPANCY_Z} noise standard deviations above its expectation); returning the last"
                 ));
             }
-            (v, trace.rows.len() - 1)
+            (v, run.rows().len() - 1)
         }
     };
-    trace.notes.push(format!("output: iteration {iteration}"));
-    let image = finish(model.crop(output.view()), method, iteration)?;
-    Ok(Reconstruction { image, trace })
+    run.note(format!("output: iteration {iteration}"));
+    Ok(Estimate {
+        image: model.crop(output.view()),
+        iteration,
+    })
 }

@@ -1,0 +1,49 @@
+//! Why a reconstruction cannot run.
+
+/// Why a reconstruction cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum ReconstructError {
+    /// A count is NaN, infinite or negative.
+    #[error(
+        "counts: bin {bin}, row {row}, column {col} is {value}; counts must be finite and >= 0"
+    )]
+    InvalidCount {
+        /// Bin index in the stack.
+        bin: usize,
+        /// Row.
+        row: usize,
+        /// Column.
+        col: usize,
+        /// The offending value.
+        value: f64,
+    },
+    /// Cross-validation by thinning met a count that is not a whole number
+    /// of photons.
+    #[error(
+        "cross-validation by thinning needs whole photon counts: row {row}, column {col} of {what} is {value} (expected counts, or a scaled or background-subtracted stack: stop Richardson-Lucy after a fixed count instead)"
+    )]
+    NotWholeCounts {
+        /// The image (e.g. "the time-summed counts").
+        what: String,
+        /// Row.
+        row: usize,
+        /// Column.
+        col: usize,
+        /// The offending value.
+        value: f64,
+    },
+    /// Stack and kernels do not fit together.
+    #[error("{0}")]
+    Shape(String),
+    /// The optimiser reported an error.
+    #[error("L-BFGS o-update: {0}")]
+    Optimiser(String),
+    /// A non-finite value appeared in the estimate.
+    #[error("{method}: the estimate became non-finite at iteration {iteration}")]
+    NonFinite {
+        /// Method name.
+        method: String,
+        /// Iteration at which it happened.
+        iteration: usize,
+    },
+}

@@ -1,0 +1,196 @@
+//! The one interface every reconstruction method implements
+//! ([`Reconstructor`]) and the run it reports to ([`Run`]): the trace, the
+//! timer, scoring against a known truth, notes, and the checked output.
+
+use std::time::Instant;
+
+use ndarray::{Array2, ArrayView2};
+
+use super::data::Data;
+use super::error::ReconstructError;
+use super::trace::{Trace, TraceRow};
+use crate::forward::{Boundary, ForwardModel};
+use crate::metrics;
+
+/// A reconstructed image and how it was obtained.
+#[derive(Debug, Clone)]
+pub struct Reconstruction {
+    /// The estimate of the object, finite and >= 0.
+    pub image: Array2<f64>,
+    /// Per-iteration trace.
+    pub trace: Trace,
+}
+
+/// What a method returns to its run: the estimate on the sensor window and
+/// the iteration it comes from.
+#[derive(Debug, Clone)]
+pub struct Estimate {
+    /// The estimate (checked and clamped to >= 0 by [`Run::finish`]).
+    pub image: Array2<f64>,
+    /// The iteration it was taken at.
+    pub iteration: usize,
+}
+
+/// A reconstruction method: Richardson-Lucy, PnP-ADMM, ...
+pub trait Reconstructor {
+    /// The method's name in traces for `bins` bins of data (e.g. `rl` on
+    /// one bin, `rl-sum` on several).
+    fn name(&self, bins: usize) -> &'static str;
+
+    /// Reconstructs the object from `data`, reporting every iteration and
+    /// note to `run`.
+    fn reconstruct(&self, data: &Data<'_>, run: &mut Run<'_>)
+    -> Result<Estimate, ReconstructError>;
+
+    /// Runs the method on `data`: scores every iteration against `truth`
+    /// when given, shows each trace row to `on_iter` as it is produced, and
+    /// returns the checked image with its trace.
+    fn run(
+        &self,
+        data: &Data<'_>,
+        truth: Option<ArrayView2<'_, f64>>,
+        on_iter: &mut dyn FnMut(&TraceRow),
+    ) -> Result<Reconstruction, ReconstructError> {
+        let mut run = Run::new(self.name(data.bins.len()), truth, on_iter);
+        let estimate = self.reconstruct(data, &mut run)?;
+        run.finish(estimate)
+    }
+}
+
+/// One method's run: its trace, its clock, and the truth it is scored on.
+pub struct Run<'a> {
+    trace: Trace,
+    start: Instant,
+    truth: Option<ArrayView2<'a, f64>>,
+    on_iter: &'a mut dyn FnMut(&TraceRow),
+}
+
+impl<'a> Run<'a> {
+    /// A run of `method`, started now.
+    pub fn new(
+        method: &str,
+        truth: Option<ArrayView2<'a, f64>>,
+        on_iter: &'a mut dyn FnMut(&TraceRow),
+    ) -> Self {
+        Self {
+            trace: Trace::new(method),
+            start: Instant::now(),
+            truth,
+            on_iter,
+        }
+    }
+
+    /// Seconds since the run started.
+    pub fn elapsed_s(&self) -> f64 {
+        self.start.elapsed().as_secs_f64()
+    }
+
+    /// Whether rows are scored against a truth (else estimates need not be
+    /// formed for scoring).
+    pub fn scores(&self) -> bool {
+        self.truth.is_some()
+    }
+
+    /// A row for `iteration`, stamped with the time since the start.
+    pub fn row(&self, iteration: usize) -> TraceRow {
+        TraceRow {
+            iteration,
+            wall_s: self.elapsed_s(),
+            ..Default::default()
+        }
+    }
+
+    /// Fills the truth-dependent columns of `row`, scoring the estimate
+    /// clamped to >= 0 as every method outputs it.
+    pub fn score(&self, row: &mut TraceRow, estimate: ArrayView2<f64>) {
+        if let Some(t) = self.truth {
+            let clamped = estimate.mapv(|v| v.max(0.0));
+            row.psnr = Some(metrics::psnr(clamped.view(), t));
+            row.ssim = Some(metrics::ssim(clamped.view(), t));
+        }
+    }
+
+    /// Shows `row` to the caller's callback and appends it to the trace.
+    pub fn push(&mut self, row: TraceRow) {
+        (self.on_iter)(&row);
+        self.trace.rows.push(row);
+    }
+
+    /// The rows so far.
+    pub fn rows(&self) -> &[TraceRow] {
+        &self.trace.rows
+    }
+
+    /// Adds a note to the trace (what was assumed, left out, why it stopped).
+    pub fn note(&mut self, note: impl Into<String>) {
+        self.trace.notes.push(note.into());
+    }
+
+    /// Records the prior the method uses.
+    pub fn set_prior(&mut self, prior: String) {
+        self.trace.prior = Some(prior);
+    }
+
+    /// Says in the trace which background the likelihood holds, if any.
+    pub fn note_background(&mut self, model: &ForwardModel) {
+        let bg = model.background();
+        if bg > 0.0 {
+            self.note(format!(
+                "background: {bg:.4e} counts per pixel and bin in the likelihood"
+            ));
+        }
+    }
+
+    /// The result for data without a single photon: the estimate is 0 and
+    /// no iteration can change it.
+    pub fn no_photons(&mut self, shape: (usize, usize)) -> Estimate {
+        self.note("no photons: the maximum-likelihood object is 0 and no iteration can change it");
+        let image = Array2::zeros(shape);
+        let mut row = TraceRow::default();
+        self.score(&mut row, image.view());
+        self.trace.rows.push(row);
+        Estimate {
+            image,
+            iteration: 0,
+        }
+    }
+
+    /// The checked output: the estimate clamped to >= 0, or an error naming
+    /// the iteration if any value is not finite.
+    pub fn finish(self, estimate: Estimate) -> Result<Reconstruction, ReconstructError> {
+        if estimate.image.iter().any(|v| !v.is_finite()) {
+            return Err(ReconstructError::NonFinite {
+                method: self.trace.method,
+                iteration: estimate.iteration,
+            });
+        }
+        Ok(Reconstruction {
+            image: estimate.image.mapv(|v| v.max(0.0)),
+            trace: self.trace,
+        })
+    }
+
+    /// An error for a non-finite value at `iteration` of this run.
+    pub fn non_finite(&self, iteration: usize) -> ReconstructError {
+        ReconstructError::NonFinite {
+            method: self.trace.method.clone(),
+            iteration,
+        }
+    }
+}
+
+/// What the model assumes of the sensor's edges, for a trace note.
+pub fn grid_note(model: &ForwardModel) -> String {
+    let (h, w) = model.sensor_shape();
+    let (gh, gw) = model.grid_shape();
+    match model.boundary() {
+        Boundary::Periodic => {
+            format!("boundary: periodic (wrap-around) on the {h} x {w} sensor grid")
+        }
+        Boundary::Sensor => format!(
+            "boundary: sensor with edges; object estimated on a {gh} x {gw} grid, {} px beyond each sensor edge (the kernels carry < {:e} of their light farther out; farther object points left out), output is the {h} x {w} sensor window",
+            model.margin(),
+            crate::forward::EDGE_TAIL
+        ),
+    }
+}
