@@ -15,7 +15,7 @@ use scatterscope::acquire::{DeviceSpec, MockSetup, Plan, acquire, open_device};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::scene::Scene;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, Region, TimeWindow};
-use scatterscope::tags::raw::bin_batch;
+use scatterscope::tags::wire::bin_batch;
 use scatterscope_drivers::pipeline::count_records;
 use scatterscope_mocks::{EmitterOptions, MockOptions};
 
@@ -88,7 +88,7 @@ fn run_mock(spec: &DeviceSpec, device: MockOptions) -> u64 {
         region: None,
         duration: None,
         resolution_fs: None,
-        raw: None,
+        tag_file: None,
         software: "bench".into(),
     };
     let opened = open_device(spec, Some(mock_setup(device))).unwrap();

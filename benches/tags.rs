@@ -7,10 +7,10 @@ mod photons;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use firmware_protocol::{Config, Identity};
+use scatterscope::formats::picoquant;
+use scatterscope::formats::picoquant::writer::write_synthetic_t3;
+use scatterscope::formats::sstags::{TagFileHeader, TagFileWriter};
 use scatterscope::tags::bin_file::{BinSpec, bin_file};
-use scatterscope::tags::picoquant;
-use scatterscope::tags::picoquant::writer::write_synthetic_t3;
-use scatterscope_drivers::raw::{RawHeader, RawWriter};
 
 const RECORDS: u64 = 20_000_000;
 
@@ -34,8 +34,8 @@ fn write_raw(path: &std::path::Path) {
         roi: None,
         exposure_ms: 0,
     };
-    let header = RawHeader::new("bench", &identity, &config, "bench");
-    let mut out = RawWriter::create(path, &header).unwrap();
+    let header = TagFileHeader::new("bench", &identity, &config, "bench");
+    let mut out = TagFileWriter::create(path, &header).unwrap();
     photons::batches(RECORDS, |payload| out.write_batch(payload));
     out.finish(None).unwrap();
 }

@@ -7,7 +7,7 @@ fn main() -> std::io::Result<()> {
     let records = args.next().map_or(20_000_000, |r| {
         r.parse().expect("RECORDS is a whole number")
     });
-    scatterscope::tags::picoquant::writer::write_synthetic_t3(
+    scatterscope::formats::picoquant::writer::write_synthetic_t3(
         std::path::Path::new(&path),
         records,
     )?;

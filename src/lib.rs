@@ -50,7 +50,7 @@
 //! # Bin a recorded PicoQuant file
 //!
 //! ```
-//! use scatterscope::tags::picoquant::writer::write_synthetic_t3;
+//! use scatterscope::formats::picoquant::writer::write_synthetic_t3;
 //! use scatterscope::{BinSpec, bin_file};
 //!
 //! let path = std::env::temp_dir().join(format!("scatterscope-doc-{}.ptu", std::process::id()));
@@ -70,6 +70,8 @@ pub mod calibrate;
 pub mod config;
 pub mod denoise;
 pub mod fft2;
+pub mod font;
+pub mod formats;
 pub mod forward;
 pub mod metrics;
 pub mod named;

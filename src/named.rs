@@ -39,10 +39,10 @@ pub(crate) use named;
 #[cfg(test)]
 mod tests {
     use super::Named;
+    use crate::formats::png::SheetScale;
     use crate::forward::Boundary;
     use crate::reconstruct::admm_lbfgs::StopRule;
     use crate::reconstruct::method::{Method, RlStop, Solver};
-    use crate::stack::preview::SheetScale;
 
     fn round_trips<T: Named + PartialEq + std::fmt::Debug>() {
         let names: Vec<_> = T::names().collect();

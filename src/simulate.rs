@@ -8,7 +8,7 @@ use ndarray::Array2;
 use scatterscope_physics::{KernelStack, ParamError, Sampling, Setup};
 
 use crate::forward::{Boundary, ForwardModel, poisson_counts};
-use crate::scene::{Scene, SceneLoadError};
+use crate::scene::{ImageError, Scene};
 use crate::stack::{Stack, StackMeta, ValueKind};
 
 /// A simulated measurement.
@@ -52,7 +52,7 @@ pub enum SimulateError {
     Param(#[from] ParamError),
     /// The scene cannot be rendered.
     #[error(transparent)]
-    Scene(#[from] SceneLoadError),
+    Scene(#[from] ImageError),
     /// Every bin falls below the light threshold.
     #[error("no bin carries at least {min_bin_photons} expected photons")]
     NoBins {

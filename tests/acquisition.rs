@@ -15,11 +15,11 @@ use ndarray::{Array3, Axis};
 use scatterscope::acquire::{
     DeviceSpec, MockSetup, Outcome, Plan, StopReason, acquire, open_device,
 };
+use scatterscope::formats::sstags::read_tag_file;
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup};
 use scatterscope::scene::Scene;
 use scatterscope::tags::bin_file::{BinSpec, Recording, bin_file};
 use scatterscope::tags::binning::Region;
-use scatterscope_drivers::raw::read_raw;
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions, Truth};
 
 /// The paper's medium and bins on a 64 x 64 sensor with the paper's pixel
@@ -61,7 +61,7 @@ fn plan(t0_ps: f64) -> Plan {
         region: None,
         duration: None,
         resolution_fs: None,
-        raw: None,
+        tag_file: None,
         software: "test".into(),
     }
 }
@@ -459,7 +459,7 @@ fn a_slow_host_makes_the_device_fifo_overflow_and_says_so() {
 
 /// Bins a raw tag file with the library's `bin_file` (what `scatterscope
 /// bin` runs) on the acquisition's window.
-fn bin_raw_file(path: &Path) -> (Array3<u32>, scatterscope_drivers::raw::RawSummary) {
+fn bin_raw_file(path: &Path) -> (Array3<u32>, scatterscope::formats::sstags::TagFileSummary) {
     let s = setup();
     let spec = BinSpec {
         bin_width_ps: Some(s.bins.width_ps),
@@ -485,13 +485,13 @@ fn raw_recordings_round_trip_and_survive_a_cut() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("tags.sstags");
     let mut p = plan(0.0);
-    p.raw = Some(path.clone());
+    p.tag_file = Some(path.clone());
     let (out, _) = run(
         DeviceSpec::Mock,
         mock(11, 100_000, Faults::default(), 0.0),
         &p,
     );
-    assert_eq!(out.raw.as_deref(), Some(path.as_path()));
+    assert_eq!(out.tag_file.as_deref(), Some(path.as_path()));
     let (counts, summary) = bin_raw_file(&path);
     assert_eq!(counts, out.counts);
     assert_eq!(summary.totals, out.totals);
@@ -518,13 +518,13 @@ fn raw_recordings_round_trip_and_survive_a_cut() {
     // Not a raw file: the error names the file and the magic.
     let bad = dir.path().join("bad.sstags");
     std::fs::write(&bad, b"PQTTTR\0\0 not ours").unwrap();
-    let err = read_raw(&bad, |_| {}).unwrap_err().to_string();
+    let err = read_tag_file(&bad, |_| {}).unwrap_err().to_string();
     assert!(err.contains("bad.sstags") && err.contains("magic"), "{err}");
 }
 
 #[test]
 fn t0_from_a_reference_recording_is_its_peak() {
-    use scatterscope_drivers::raw::{RawHeader, RawWriter};
+    use scatterscope::formats::sstags::{TagFileHeader, TagFileWriter};
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("ref.sstags");
     let identity = firmware_protocol::Identity {
@@ -539,8 +539,11 @@ fn t0_from_a_reference_recording_is_its_peak() {
         sync_period_fs: 12_500_000,
     };
     let config = scatterscope_mocks::firmware::default_config(&identity);
-    let mut w =
-        RawWriter::create(&path, &RawHeader::new("test", &identity, &config, "test")).unwrap();
+    let mut w = TagFileWriter::create(
+        &path,
+        &TagFileHeader::new("test", &identity, &config, "test"),
+    )
+    .unwrap();
     let mut enc = firmware_protocol::BatchEncoder::new();
     for (i, micro) in [
         (0u64, 100u32),
@@ -566,10 +569,13 @@ fn t0_from_a_reference_recording_is_its_peak() {
     assert!((t0 - 617.5 * 2.0).abs() < 1e-9, "{t0}");
     // A reference with no photons gives no t0, and says so by file.
     let empty = dir.path().join("empty.sstags");
-    RawWriter::create(&empty, &RawHeader::new("test", &identity, &config, "test"))
-        .unwrap()
-        .finish(None)
-        .unwrap();
+    TagFileWriter::create(
+        &empty,
+        &TagFileHeader::new("test", &identity, &config, "test"),
+    )
+    .unwrap()
+    .finish(None)
+    .unwrap();
     let err = scatterscope::acquire::calibration::t0_from_reference(&empty)
         .unwrap_err()
         .to_string();

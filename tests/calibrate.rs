@@ -158,7 +158,7 @@ fn mock_profile(photons: u64, irf: Option<Irf>, dark_rate_hz: f64) -> (Vec<f64>,
         region: None,
         duration: None,
         resolution_fs: None,
-        raw: None,
+        tag_file: None,
         software: "test".into(),
     };
     let opened = open_device(&DeviceSpec::Mock, Some(mock)).unwrap();

@@ -31,7 +31,7 @@ fn write_scene_png(scene: &str, size: usize, path: &Path) -> ndarray::Array2<f64
     let img = scatterscope::scene::Scene::parse(scene)
         .render(size, size)
         .unwrap();
-    scatterscope::stack::preview::write_image(img.view(), Some(1.0), path).unwrap();
+    scatterscope::formats::png::write_image(img.view(), Some(1.0), path).unwrap();
     img
 }
 
@@ -352,10 +352,10 @@ fn report_writes_tables_and_plots() {
 
 #[test]
 fn info_and_bin_on_recorded_files() {
+    use scatterscope::formats::picoquant::records::RecordType;
+    use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
     use scatterscope::tags::Imaging;
     use scatterscope::tags::Tag;
-    use scatterscope::tags::picoquant::records::RecordType;
-    use scatterscope::tags::picoquant::writer::{PtuWriter, WriterHeader};
     let dir = tempfile::tempdir().unwrap();
     // A 2 x 2 image, 3 photons per pixel at micro time 5 (bin 1 of 4 ps bins at 4 ps resolution... 20 ps).
     let img = Imaging {

@@ -11,13 +11,13 @@ use std::path::{Path, PathBuf};
 
 use pt3::write_pt3;
 
+use scatterscope::formats::picoquant::records::{Decoder, RecordType};
+use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
+use scatterscope::formats::picoquant::{self, TtrError};
 use scatterscope::tags::Imaging;
 use scatterscope::tags::Tag;
 use scatterscope::tags::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
-use scatterscope::tags::picoquant::records::{Decoder, RecordType};
-use scatterscope::tags::picoquant::writer::{PtuWriter, WriterHeader};
-use scatterscope::tags::picoquant::{self, TtrError};
 
 /// A PicoQuant sample file (`../shared/data/picoquant-sample-data/REL`).
 fn sample(rel: &str) -> PathBuf {

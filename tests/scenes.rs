@@ -63,7 +63,7 @@ fn image_files_load_as_grayscale_and_resize() {
     // EXR with values above 1 is scaled by its maximum.
     let exr = dir.path().join("hdr.exr");
     let data = ndarray::Array2::from_shape_fn((8, 8), |(r, _)| r as f32 * 2.0);
-    scatterscope::stack::exr_file::write_image(data.view(), &exr).unwrap();
+    scatterscope::formats::exr::write_image(data.view(), &exr).unwrap();
     let img = Scene::File(exr).render(8, 8).unwrap();
     assert!((img[[7, 0]] - 1.0).abs() < 1e-6 && (img[[1, 3]] - 2.0 / 14.0).abs() < 1e-6);
 

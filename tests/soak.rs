@@ -79,7 +79,7 @@ fn soak_with_every_fault_at_random_times_balances_and_stays_flat() {
         region: None,
         duration: Some(Duration::from_secs(seconds)),
         resolution_fs: None,
-        raw: None,
+        tag_file: None,
         software: "soak".into(),
     };
     let opened = open_device(&DeviceSpec::Mock, Some(mock)).unwrap();

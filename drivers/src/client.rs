@@ -11,8 +11,7 @@ use firmware_protocol::{
 };
 
 use crate::link::{ByteWriter, Link, LinkError};
-use crate::pipeline::{Delivery, LinkAccounting, Pipeline, start_on};
-use crate::raw::RawWriter;
+use crate::pipeline::{BatchRecorder, Delivery, LinkAccounting, Pipeline, start_on};
 
 /// Time a device gets to answer a control request.
 pub const RESPONSE_TIMEOUT: Duration = Duration::from_secs(3);
@@ -183,8 +182,8 @@ impl Device {
     }
 
     /// Records every accepted batch from now on (see [`Pipeline::record_to`]).
-    pub fn record_to(&self, writer: RawWriter) {
-        self.pipeline.record_to(writer);
+    pub fn record_to(&self, recorder: Box<dyn BatchRecorder>) {
+        self.pipeline.record_to(recorder);
     }
 
     /// Counters so far.
@@ -192,8 +191,8 @@ impl Device {
         self.pipeline.accounting()
     }
 
-    /// Stops the pipeline; returns the final counters and the raw recorder.
-    pub fn close(self) -> (LinkAccounting, Option<RawWriter>) {
+    /// Stops the pipeline; returns the final counters.
+    pub fn close(self) -> LinkAccounting {
         self.pipeline.close()
     }
 }

@@ -10,8 +10,8 @@
 //! - [`discovery`]: lists serial ports and known USB time taggers.
 //! - [`client`]: request/response control (identify, configure, start, stop).
 //! - [`pipeline`]: reader thread -> frame decoder -> batch checks -> consumer,
-//!   on bounded channels, and its [`pipeline::LinkAccounting`].
-//! - [`raw`]: the project's raw tag file (lossless recording of batches).
+//!   on bounded channels, its [`pipeline::LinkAccounting`], and the
+//!   [`pipeline::BatchRecorder`] the host's tag file writer implements.
 
 #![warn(missing_docs)]
 
@@ -19,7 +19,6 @@ pub mod client;
 pub mod discovery;
 pub mod link;
 pub mod pipeline;
-pub mod raw;
 pub mod serial;
 pub mod usb;
 

@@ -1,7 +1,7 @@
 //! The streaming pipeline: a reader thread moves bytes off the transport, a
 //! decoder thread finds frames, routes responses, checks every event batch
 //! (CRC, sequence, duplicates) and hands accepted batches to the consumer
-//! and to the raw recorder. All queues are bounded: a slow consumer slows
+//! and to a [`BatchRecorder`] (the host's tag file). All queues are bounded: a slow consumer slows
 //! the reader, which leaves data in the device, whose FIFO overflow is then
 //! reported in the stream as lost records. Nothing is dropped silently.
 
@@ -17,7 +17,22 @@ use firmware_protocol::{EventBatch, FrameDecoder, FromDevice, Response, Response
 use serde::Serialize;
 
 use crate::link::{ByteReader, Link, LinkError};
-use crate::raw::RawWriter;
+
+/// Where the pipeline records every accepted batch as it arrives, before
+/// the consumer sees it (the host's lossless tag file). The file format is
+/// the host's; the pipeline only hands over payloads.
+pub trait BatchRecorder: Send {
+    /// Appends one accepted batch payload (the frame's payload, unchanged).
+    fn record_batch(&mut self, payload: &[u8]);
+}
+
+/// A recorder shared with its owner, who takes it back to close it once
+/// the pipeline has let go of it.
+impl<R: BatchRecorder> BatchRecorder for Arc<Mutex<R>> {
+    fn record_batch(&mut self, payload: &[u8]) {
+        self.lock().expect("recorder lock").record_batch(payload);
+    }
+}
 
 /// Byte chunks queued between the reader and the decoder.
 const BYTE_QUEUE: usize = 64;
@@ -110,7 +125,7 @@ pub struct Pipeline {
     pub deliveries: Receiver<Delivery>,
     accounting: Arc<Mutex<LinkAccounting>>,
     shutdown: Arc<AtomicBool>,
-    raw: Arc<Mutex<Option<RawWriter>>>,
+    recorder: Arc<Mutex<Option<Box<dyn BatchRecorder>>>>,
     reader: Option<JoinHandle<()>>,
     decoder: Option<JoinHandle<()>>,
 }
@@ -119,7 +134,7 @@ impl Pipeline {
     /// Starts the reader and decoder threads. Up to `queue_depth` accepted
     /// batches wait for the consumer before the pipeline pushes back.
     pub fn start(reader: Box<dyn ByteReader>, queue_depth: usize) -> Self {
-        let raw = Arc::new(Mutex::new(None));
+        let recorder = Arc::new(Mutex::new(None));
         let (byte_tx, byte_rx) = bounded(BYTE_QUEUE);
         let (out_tx, out_rx) = bounded(queue_depth.max(1));
         let accounting = Arc::new(Mutex::new(LinkAccounting::default()));
@@ -133,26 +148,26 @@ impl Pipeline {
         };
         let decoder = {
             let accounting = accounting.clone();
-            let raw = raw.clone();
+            let recorder = recorder.clone();
             std::thread::Builder::new()
                 .name("frame-decoder".into())
-                .spawn(move || decode_loop(byte_rx, out_tx, &accounting, &raw))
+                .spawn(move || decode_loop(byte_rx, out_tx, &accounting, &recorder))
                 .expect("spawning the decoder thread")
         };
         Self {
             deliveries: out_rx,
             accounting,
             shutdown,
-            raw,
+            recorder,
             reader: Some(reader),
             decoder: Some(decoder),
         }
     }
 
-    /// From now on, appends every accepted batch to `writer` (flushed per
-    /// batch, so a crash loses at most the batch being written).
-    pub fn record_to(&self, writer: RawWriter) {
-        *self.raw.lock().expect("raw lock") = Some(writer);
+    /// From now on, hands every accepted batch to `recorder` before the
+    /// consumer sees it.
+    pub fn record_to(&self, recorder: Box<dyn BatchRecorder>) {
+        *self.recorder.lock().expect("recorder lock") = Some(recorder);
     }
 
     /// A snapshot of the counters.
@@ -160,9 +175,9 @@ impl Pipeline {
         *self.accounting.lock().expect("accounting lock")
     }
 
-    /// Stops the threads, waits for them, and returns the final counters
-    /// and the raw recorder (flushed) if there was one.
-    pub fn close(mut self) -> (LinkAccounting, Option<RawWriter>) {
+    /// Stops the threads, waits for them, lets go of the recorder, and
+    /// returns the final counters.
+    pub fn close(mut self) -> LinkAccounting {
         self.shutdown.store(true, Ordering::Relaxed);
         // Unblock a decoder waiting on a full queue.
         while self.deliveries.try_recv().is_ok() {}
@@ -174,8 +189,8 @@ impl Pipeline {
         if let Some(d) = self.decoder.take() {
             let _ = d.join();
         }
-        let raw = self.raw.lock().expect("raw lock").take();
-        (self.accounting(), raw)
+        self.recorder.lock().expect("recorder lock").take();
+        self.accounting()
     }
 }
 
@@ -272,7 +287,7 @@ fn decode_loop(
     rx: Receiver<Result<Vec<u8>, LinkError>>,
     tx: Sender<Delivery>,
     accounting: &Mutex<LinkAccounting>,
-    raw: &Mutex<Option<RawWriter>>,
+    recorder: &Mutex<Option<Box<dyn BatchRecorder>>>,
 ) {
     let mut decoder = FrameDecoder::new();
     let mut seqs = SeqTracker::default();
@@ -310,8 +325,8 @@ fn decode_loop(
                         .photons_sent_at_least
                         .max(batch.header.photon_offset + photons);
                     let payload = Arc::new(frame.payload.to_vec());
-                    if let Some(w) = raw.lock().expect("raw lock").as_mut() {
-                        w.write_batch(&payload);
+                    if let Some(r) = recorder.lock().expect("recorder lock").as_mut() {
+                        r.record_batch(&payload);
                     }
                     deliveries.push(Delivery::Batch(AcceptedBatch { payload }));
                 }

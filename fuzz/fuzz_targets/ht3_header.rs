@@ -3,6 +3,6 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = scatterscope::tags::picoquant::legacy::parse_hydraharp(&mut &data[..]);
-    let _ = scatterscope::tags::picoquant::legacy::parse_picoharp(&mut &data[..]);
+    let _ = scatterscope::formats::picoquant::legacy::parse_hydraharp(&mut &data[..]);
+    let _ = scatterscope::formats::picoquant::legacy::parse_picoharp(&mut &data[..]);
 });

@@ -3,5 +3,5 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = scatterscope::tags::picoquant::ptu::parse(&mut &data[..]);
+    let _ = scatterscope::formats::picoquant::ptu::parse(&mut &data[..]);
 });

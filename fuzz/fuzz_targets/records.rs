@@ -10,7 +10,7 @@ use std::sync::LazyLock;
 use libfuzzer_sys::fuzz_target;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
 use scatterscope::tags::Imaging;
-use scatterscope::tags::picoquant::records::{Decoder, RecordType};
+use scatterscope::formats::picoquant::records::{Decoder, RecordType};
 
 static BINNERS: LazyLock<Vec<(RecordType, Binner)>> = LazyLock::new(|| {
     let img = Imaging {

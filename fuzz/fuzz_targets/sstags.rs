@@ -5,8 +5,8 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
-use scatterscope::tags::raw::bin_batch;
-use scatterscope_drivers::raw::read_raw;
+use scatterscope::tags::wire::bin_batch;
+use scatterscope::formats::sstags::read_tag_file;
 
 #[path = "common/file.rs"]
 mod file;
@@ -15,7 +15,7 @@ fuzz_target!(|data: &[u8]| {
     let path = file::write("tags.sstags", data);
     let window = TimeWindow { start: 0.0, width: 1.0, bins: 8 };
     let mut binner = Binner::new(window, PixelMap::Channel { width: 4 }, None, FrameSelect::Sum);
-    if read_raw(&path, |batch| {
+    if read_tag_file(&path, |batch| {
         bin_batch(batch, &mut binner);
     })
     .is_ok()
@@ -23,7 +23,7 @@ fuzz_target!(|data: &[u8]| {
         let acc = binner.finish().1;
         assert!(acc.balances(), "{acc:?}");
     }
-    let small = scatterscope_drivers::raw::RawFile::open(&path)
+    let small = scatterscope::formats::sstags::TagFile::open(&path)
         .is_ok_and(|r| u32::from(r.header.pixels_x) * u32::from(r.header.pixels_y) <= 4096);
     if small {
         let spec = scatterscope::BinSpec {

@@ -8,12 +8,12 @@ use std::path::Path;
 use firmware_protocol::record::Record;
 
 use super::session::AcquireError;
-use scatterscope_drivers::raw::read_raw;
+use crate::formats::sstags::read_tag_file;
 
 /// t0 in picoseconds from a raw tag file of a reference measurement.
 pub fn t0_from_reference(path: &Path) -> Result<f64, AcquireError> {
     let mut hist: Vec<u64> = Vec::new();
-    let summary = read_raw(path, |batch| {
+    let summary = read_tag_file(path, |batch| {
         for raw in batch.raw_records() {
             if let Ok(Record::Photon { micro, .. }) = Record::decode(raw) {
                 let m = micro as usize;
@@ -24,7 +24,7 @@ pub fn t0_from_reference(path: &Path) -> Result<f64, AcquireError> {
             }
         }
     })
-    .map_err(AcquireError::Raw)?;
+    .map_err(AcquireError::TagFile)?;
     let Some((peak, _)) = hist
         .iter()
         .enumerate()

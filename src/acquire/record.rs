@@ -41,8 +41,10 @@ pub struct AcquisitionRecord {
     pub accounting: AcquisitionAccounting,
     /// The device's totals, when it sent them.
     pub device_totals: Option<Totals>,
-    /// The raw tag file written, if any.
-    pub raw: Option<PathBuf>,
+    /// The tag file written, if any (`raw` in records written before it
+    /// was renamed).
+    #[serde(alias = "raw")]
+    pub tag_file: Option<PathBuf>,
 }
 
 impl Outcome {
@@ -59,7 +61,7 @@ impl Outcome {
             elapsed_s: self.elapsed.as_secs_f64(),
             accounting: self.accounting,
             device_totals: self.totals,
-            raw: self.raw.clone(),
+            tag_file: self.tag_file.clone(),
         }
     }
 

@@ -4,19 +4,20 @@
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use crate::formats::sstags::{TagFileError, TagFileHeader, TagFileWriter};
 use firmware_protocol::{Config, EventBatch, Identity, Request, Response, Totals};
 use ndarray::Array3;
 use scatterscope_drivers::Link;
 use scatterscope_drivers::client::{ClientError, Device};
-use scatterscope_drivers::pipeline::Delivery;
-use scatterscope_drivers::raw::{RawError, RawHeader, RawWriter};
+use scatterscope_drivers::pipeline::{BatchRecorder, Delivery};
 use serde::{Deserialize, Serialize};
 
 use super::accounting::AcquisitionAccounting;
 use crate::tags::binning::{Binner, FrameSelect, PixelMap, Region, TimeWindow};
-use crate::tags::raw::{BatchCounts, bin_batch};
+use crate::tags::wire::{BatchCounts, bin_batch};
 
 /// Accepted batches that may wait for the binner before the pipeline
 /// pushes back on the device.
@@ -43,9 +44,9 @@ pub struct Plan {
     pub duration: Option<Duration>,
     /// Micro-time unit to configure, fs (`None`: the TDC resolution).
     pub resolution_fs: Option<u32>,
-    /// Record every batch losslessly to this raw tag file.
-    pub raw: Option<PathBuf>,
-    /// Name of the software, for the raw file header.
+    /// Record every batch losslessly to this tag file (`.sstags`).
+    pub tag_file: Option<PathBuf>,
+    /// Name of the software, for the tag file's header.
     pub software: String,
 }
 
@@ -116,8 +117,8 @@ pub struct Outcome {
     pub window_ps: (f64, f64),
     /// The pixels binned (the whole sensor unless the plan set a region).
     pub region: Region,
-    /// The raw tag file written, if any.
-    pub raw: Option<PathBuf>,
+    /// The tag file written, if any.
+    pub tag_file: Option<PathBuf>,
     /// The link.
     pub link: String,
 }
@@ -128,9 +129,9 @@ pub enum AcquireError {
     /// Control exchange or transport failure before streaming.
     #[error(transparent)]
     Client(#[from] ClientError),
-    /// The raw tag file.
+    /// The tag file.
     #[error(transparent)]
-    Raw(RawError),
+    TagFile(TagFileError),
     /// The plan does not fit the device.
     #[error("{0}")]
     Plan(String),
@@ -155,10 +156,16 @@ pub fn acquire(
         exposure_ms: 0,
     })?;
     let (mut binner, window_ps, region) = make_binner(plan, &identity, &applied)?;
-    if let Some(path) = &plan.raw {
-        let header = RawHeader::new(&link_name, &identity, &applied, &plan.software);
-        device.record_to(RawWriter::create(path, &header).map_err(AcquireError::Raw)?);
-    }
+    let tag_file = match &plan.tag_file {
+        Some(path) => {
+            let header = TagFileHeader::new(&link_name, &identity, &applied, &plan.software);
+            let writer = TagFileWriter::create(path, &header).map_err(AcquireError::TagFile)?;
+            let writer = Arc::new(Mutex::new(writer));
+            device.record_to(Box::new(writer.clone()));
+            Some(writer)
+        }
+        None => None,
+    };
     device.start()?;
     let started = Instant::now();
     let mut counts = BatchCounts::default();
@@ -209,9 +216,15 @@ pub fn acquire(
         }
     };
     let elapsed = last_batch.duration_since(started);
-    let (link_acc, raw) = device.close();
-    let raw = match raw {
-        Some(w) => Some(w.finish(totals).map_err(AcquireError::Raw)?),
+    let link_acc = device.close();
+    let tag_file = match tag_file {
+        Some(shared) => {
+            let writer = Arc::into_inner(shared)
+                .expect("the closed pipeline let go of the writer")
+                .into_inner()
+                .expect("writer lock");
+            Some(writer.finish(totals).map_err(AcquireError::TagFile)?)
+        }
         None => None,
     };
     let (mut stacks, bin_acc) = binner.finish();
@@ -244,7 +257,7 @@ pub fn acquire(
         elapsed,
         window_ps,
         region,
-        raw,
+        tag_file,
         link: link_name,
     })
 }
@@ -297,4 +310,11 @@ fn make_binner(
         (start_ps, plan.bin_width_ps),
         region,
     ))
+}
+
+/// The tag file records what the pipeline accepts, batch by batch.
+impl BatchRecorder for TagFileWriter {
+    fn record_batch(&mut self, payload: &[u8]) {
+        self.write_batch(payload);
+    }
 }

@@ -15,6 +15,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::denoise::Denoiser;
+use crate::formats::png::write_image;
 use crate::forward::Boundary;
 use crate::physics::{Sampling, Setup};
 use crate::reconstruct::method::{Method, MethodOptions, RlStop, Solver, run_method};
@@ -23,7 +24,6 @@ use crate::reconstruct::trace::Trace;
 use crate::reconstruct::{ReconstructError, Reconstruction};
 use crate::scene::Scene;
 use crate::simulate::{SimulateError, Simulation, simulate};
-use crate::stack::preview::write_image;
 use plot::Series;
 
 /// One method's result on one scene.
@@ -427,7 +427,7 @@ pub enum ReportError {
     Param(#[from] crate::physics::ParamError),
     /// A scene could not be rendered.
     #[error(transparent)]
-    Scene(#[from] crate::scene::SceneLoadError),
+    Scene(#[from] crate::scene::ImageError),
     /// A scene could not be simulated.
     #[error(transparent)]
     Simulate(#[from] SimulateError),

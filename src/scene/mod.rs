@@ -3,15 +3,13 @@
 //! A scene is a grayscale transmittance image in [0, 1], H x W, `f64`.
 
 mod draw;
-pub mod file;
-pub mod font;
 mod patterns;
 
 use std::path::{Path, PathBuf};
 
 use ndarray::Array2;
 
-pub use file::SceneLoadError;
+pub use crate::formats::image::ImageError;
 
 /// Which object to image.
 #[derive(Debug, Clone, PartialEq)]
@@ -55,13 +53,15 @@ impl Scene {
     }
 
     /// Renders the scene at `height` x `width`, values in [0, 1].
-    pub fn render(&self, height: usize, width: usize) -> Result<Array2<f64>, SceneLoadError> {
+    pub fn render(&self, height: usize, width: usize) -> Result<Array2<f64>, ImageError> {
         Ok(match self {
             Scene::Usaf => patterns::usaf(height, width),
             Scene::Star => patterns::siemens_star(height, width, 36),
             Scene::Text => patterns::text(height, width, &["SCATTER", "SCOPE", "2026"]),
             Scene::Disks => patterns::disks(height, width),
-            Scene::File(path) => file::load_grayscale(Path::new(path), height, width)?,
+            Scene::File(path) => {
+                crate::formats::image::read_grayscale(Path::new(path), height, width)?
+            }
         })
     }
 }

@@ -4,7 +4,7 @@
 use ndarray::Array2;
 
 use super::draw::{fill_rect, supersample};
-use super::font;
+use crate::font;
 
 /// Background transmittance of the chart-like scenes.
 const DARK: f64 = 0.05;

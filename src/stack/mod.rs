@@ -1,13 +1,10 @@
 //! The transient stack: K time bins of H x W images plus the metadata that
 //! every later stage needs (binning, pixel pitch, physics, provenance).
 //!
-//! Files: OpenEXR ([`exr_file`], one `f32` channel per bin) and `.npy` with a
-//! JSON sidecar ([`npy_file`]); PNG contact sheets for a quick look
-//! ([`preview`]).
-
-pub mod exr_file;
-pub mod npy_file;
-pub mod preview;
+//! Its files are in [`crate::formats`]: OpenEXR ([`crate::formats::exr`],
+//! one `f32` channel per bin) and `.npy` with a JSON sidecar
+//! ([`crate::formats::npy`]); PNG contact sheets for a quick look
+//! ([`crate::formats::png`]).
 
 use std::path::{Path, PathBuf};
 
@@ -195,8 +192,8 @@ impl Stack {
     /// Writes the stack; the format follows the extension (`.exr` or `.npy`).
     pub fn save(&self, path: &Path) -> Result<(), StackError> {
         match extension(path).as_deref() {
-            Some("exr") => exr_file::write(self, path),
-            Some("npy") => npy_file::write(self, path),
+            Some("exr") => crate::formats::exr::write(self, path),
+            Some("npy") => crate::formats::npy::write(self, path),
             _ => Err(StackError::format(
                 path,
                 "unknown stack format: use a .exr or .npy file name",
@@ -223,8 +220,8 @@ impl Stack {
     /// validated yet.
     pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
         match extension(path).as_deref() {
-            Some("exr") => exr_file::read(path),
-            Some("npy") => npy_file::read(path),
+            Some("exr") => crate::formats::exr::read(path),
+            Some("npy") => crate::formats::npy::read(path),
             _ => Err(StackError::format(
                 path,
                 "unknown stack format: use a .exr or .npy file name",
@@ -244,8 +241,11 @@ impl Stack {
 /// Where a file of this kind keeps its metadata, for error messages.
 pub fn missing_meta(path: &Path) -> String {
     match extension(path).as_deref() {
-        Some("npy") => format!("no sidecar {}", npy_file::sidecar_path(path).display()),
-        _ => format!("no `{}` attribute", exr_file::META_ATTRIBUTE),
+        Some("npy") => format!(
+            "no sidecar {}",
+            crate::formats::npy::sidecar_path(path).display()
+        ),
+        _ => format!("no `{}` attribute", crate::formats::exr::META_ATTRIBUTE),
     }
 }
 

@@ -16,16 +16,16 @@
 use std::path::Path;
 use std::time::Instant;
 
+use crate::formats::sstags::{TagFile, TagFileError, TagFileSummary, is_tag_file};
 use ndarray::{Array3, Axis, s};
-use scatterscope_drivers::raw::{RawError, RawFile, RawSummary, is_raw_file};
 
 use super::binning::{
     Accounting, Binner, FrameSelect, MAX_BINS, PastWindow, PixelMap, Region, TimeWindow,
     WindowError,
 };
-use super::picoquant::records::Decoder;
-use super::picoquant::{FileError, FileInfo, RecordReader, TtrError, open};
-use super::raw::{BatchCounts, bin_batch};
+use super::wire::{BatchCounts, bin_batch};
+use crate::formats::picoquant::records::Decoder;
+use crate::formats::picoquant::{FileError, FileInfo, RecordReader, TtrError, open};
 use crate::stack::{Stack, StackMeta};
 
 /// How input channels and markers become pixels.
@@ -104,7 +104,7 @@ pub enum Recording {
     /// A raw tag file: its header and frames, and the records' own counts.
     Raw {
         /// What the file holds.
-        summary: RawSummary,
+        summary: TagFileSummary,
         /// Photons the device reported lost, and records that did not decode.
         counts: BatchCounts,
     },
@@ -118,7 +118,7 @@ pub enum BinFileError {
     File(#[from] FileError),
     /// The raw tag file cannot be read.
     #[error(transparent)]
-    Raw(#[from] RawError),
+    Raw(#[from] TagFileError),
     /// The request does not fit the file.
     #[error("{path}: {reason}")]
     Spec {
@@ -132,7 +132,7 @@ pub enum BinFileError {
 /// Bins a recorded tag file into transient stacks: a project raw tag file
 /// (recognised by its magic) or a PicoQuant T3 file (PTU, PT3, HT3).
 pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
-    if is_raw_file(path) {
+    if is_tag_file(path) {
         bin_raw(path, spec)
     } else {
         bin_picoquant(path, spec)
@@ -319,7 +319,7 @@ fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
             "a raw tag file is binned onto its sensor with every frame summed; pixel and frame mappings do not apply".into(),
         ));
     }
-    let raw = RawFile::open(path)?;
+    let raw = TagFile::open(path)?;
     let header = raw.header.clone();
     let res_ps = f64::from(header.resolution_fs) / 1000.0;
     let width_ps = spec.bin_width_ps.unwrap_or(res_ps);
@@ -391,7 +391,7 @@ fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct RawFileRecord {
     /// The file's header.
-    pub raw_header: scatterscope_drivers::raw::RawHeader,
+    pub raw_header: crate::formats::sstags::TagFileHeader,
     /// Whether the file ends with the device's totals (else it was cut).
     pub totals_in_file: bool,
 }

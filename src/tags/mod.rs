@@ -1,20 +1,21 @@
 //! Photon time tags: the events every source (recorded file, device)
 //! produces before they are binned into a stack.
 //!
-//! - [`picoquant`]: PicoQuant PTU and legacy HT3 files.
-//! - [`raw`]: event batches of the wire protocol (live, or from the
-//!   project's raw tag files) -> the binner.
+//! The files that hold them are read in [`crate::formats`] (PicoQuant's
+//! and the project's own `.sstags`).
+//!
+//! - [`wire`]: event batches of the wire protocol (live, or from the
+//!   project's tag files) -> the binner.
 //! - [`binning`]: tags -> K x H x W transient stack (single pixel, pixel
 //!   per channel, scanned images from line/frame markers, or a sensor).
-//! - [`bin_file`]: a recorded file (PicoQuant or raw) -> stacks, in one
+//! - [`bin_file`]: a recorded file (PicoQuant or `.sstags`) -> stacks, in one
 //!   call.
 //! - [`survey`]: what a recorded file holds, counted by kind.
 
 pub mod bin_file;
 pub mod binning;
-pub mod picoquant;
-pub mod raw;
 pub mod survey;
+pub mod wire;
 
 /// One decoded event.
 ///

@@ -5,12 +5,12 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use crate::formats::sstags::{TagFileError, TagFileSummary, read_tag_file};
 use firmware_protocol::Event;
-use scatterscope_drivers::raw::{RawError, RawSummary, read_raw};
 
 use super::Tag;
-use super::picoquant::records::Decoder;
-use super::picoquant::{FileError, FileInfo, TtrError, open};
+use crate::formats::picoquant::records::Decoder;
+use crate::formats::picoquant::{FileError, FileInfo, TtrError, open};
 
 /// The records of a PicoQuant file, counted by kind.
 #[derive(Debug, Default)]
@@ -88,10 +88,10 @@ pub struct RawSurvey {
 }
 
 /// Counts the events of a raw tag file.
-pub fn survey_raw(path: &Path) -> Result<(RawSummary, RawSurvey), RawError> {
+pub fn survey_raw(path: &Path) -> Result<(TagFileSummary, RawSurvey), TagFileError> {
     let mut s = RawSurvey::default();
     let mut last_sync = 0u64;
-    let summary = read_raw(path, |batch| {
+    let summary = read_tag_file(path, |batch| {
         for e in batch.events() {
             match e {
                 Ok(Event::Photon { sync, .. }) => {

@@ -12,10 +12,10 @@ use scatterscope::acquire::{
     DeviceSpec, MockReference, MockSetup, Plan, StopReason, acquire, open_device,
 };
 use scatterscope::config::parse_ps;
+use scatterscope::formats::exr;
+use scatterscope::formats::png::{SheetScale, write_contact_sheet, write_image};
 use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::scene::Scene;
-use scatterscope::stack::exr_file;
-use scatterscope::stack::preview::{SheetScale, write_contact_sheet, write_image};
 use scatterscope::tags::binning::Region;
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
 
@@ -190,7 +190,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     let mock = if args.device.is_mock() {
         let scene = Scene::parse(&args.scene);
         let truth = scene.render(h, w)?;
-        exr_file::write_image(truth.mapv(|v| v as f32).view(), &args.out.join("truth.exr"))?;
+        exr::write_image(truth.mapv(|v| v as f32).view(), &args.out.join("truth.exr"))?;
         write_image(truth.view(), Some(1.0), &args.out.join("truth.png"))?;
         let kernels = KernelStack::build(&setup, Sampling::Integrated)?;
         Some(MockSetup {
@@ -231,7 +231,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         region: args.roi,
         duration: (!args.duration.is_zero()).then_some(args.duration),
         resolution_fs: args.resolution.map(|ps| (ps * 1000.0).round() as u32),
-        raw: args.raw.clone(),
+        tag_file: args.raw.clone(),
         software: format!("scatterscope {}", env!("CARGO_PKG_VERSION")),
     };
     let stop = Arc::new(AtomicBool::new(false));
@@ -351,7 +351,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         );
     }
     println!("wrote {}", args.out.join("stack.exr").display());
-    if let Some(raw) = &outcome.raw {
+    if let Some(raw) = &outcome.tag_file {
         println!("wrote {}", raw.display());
     }
     match &outcome.stop {

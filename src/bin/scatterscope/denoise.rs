@@ -8,10 +8,10 @@ use ndarray::Array2;
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
+use scatterscope::formats::exr;
+use scatterscope::formats::image::read_image;
+use scatterscope::formats::png::write_image;
 use scatterscope::metrics::{psnr, ssim};
-use scatterscope::scene::file::load_native;
-use scatterscope::stack::exr_file;
-use scatterscope::stack::preview::write_image;
 
 use crate::recon_args::PriorArgs;
 
@@ -77,7 +77,7 @@ fn extension(path: &Path) -> String {
 
 fn load(path: &Path) -> anyhow::Result<Array2<f64>> {
     if extension(path) != "npy" {
-        return Ok(load_native(path)?);
+        return Ok(read_image(path)?);
     }
     let open = || std::fs::File::open(path).with_context(|| format!("opening {}", path.display()));
     let img = match Array2::<f32>::read_npy(open()?) {
@@ -101,7 +101,7 @@ fn load(path: &Path) -> anyhow::Result<Array2<f64>> {
 fn save(img: &Array2<f64>, path: &Path) -> anyhow::Result<()> {
     match extension(path).as_str() {
         "png" => write_image(img.mapv(|v| v.clamp(0.0, 1.0)).view(), Some(1.0), path)?,
-        "exr" => exr_file::write_image(img.mapv(|v| v as f32).view(), path)?,
+        "exr" => exr::write_image(img.mapv(|v| v as f32).view(), path)?,
         "npy" => img
             .mapv(|v| v as f32)
             .write_npy(

@@ -10,7 +10,7 @@ use scatterscope::denoise::Denoiser;
 use scatterscope::denoise::benchmark::{self, BenchImage, BenchPrior};
 use scatterscope::denoise::ffdnet::{Ffdnet, source};
 use scatterscope::denoise::tv::TotalVariation;
-use scatterscope::scene::file::load_native;
+use scatterscope::formats::image::read_image;
 
 /// Denoising benchmark: PSNR and time of each prior at several noise levels.
 ///
@@ -74,7 +74,7 @@ fn collect_images(paths: &[PathBuf]) -> anyhow::Result<Vec<BenchImage>> {
                 name: f
                     .file_stem()
                     .map_or_else(String::new, |s| s.to_string_lossy().into_owned()),
-                clean: load_native(f)?,
+                clean: read_image(f)?,
             })
         })
         .collect()

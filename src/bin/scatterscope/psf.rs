@@ -7,8 +7,8 @@ use std::time::Instant;
 use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
 use ndarray::ArrayView2;
+use scatterscope::formats::png::{SheetScale, write_contact_sheet};
 use scatterscope::physics::{KernelStack, Sampling};
-use scatterscope::stack::preview::{SheetScale, write_contact_sheet};
 use scatterscope::stack::{Stack, StackMeta, ValueKind};
 
 use crate::physics_summary::{parse_sampling, print_setup};

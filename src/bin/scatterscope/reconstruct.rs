@@ -6,13 +6,13 @@ use std::path::PathBuf;
 use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
+use scatterscope::formats::exr;
+use scatterscope::formats::png::write_image;
 use scatterscope::forward::Boundary;
 use scatterscope::physics::{Preset, Sampling};
 use scatterscope::reconstruct::method::{Method, run_method};
 use scatterscope::reconstruct::problem::{BackgroundChoice, Problem};
 use scatterscope::scene::Scene;
-use scatterscope::stack::exr_file;
-use scatterscope::stack::preview::write_image;
 use scatterscope::stack::{Stack, StackMeta, ValueKind, missing_meta};
 
 use crate::calibrate_cmd::calibration_lines;
@@ -190,7 +190,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output directory {}", args.out.display()))?;
     let image = &result.image;
-    exr_file::write_image(
+    exr::write_image(
         image.mapv(|v| v as f32).view(),
         &args.out.join("reconstruction.exr"),
     )?;

@@ -4,12 +4,13 @@ use std::path::{Path, PathBuf};
 
 use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
+use scatterscope::formats::exr;
+use scatterscope::formats::png::{SheetScale, write_contact_sheet, write_image};
 use scatterscope::forward::Boundary;
 use scatterscope::physics::Sampling;
 use scatterscope::scene::Scene;
 use scatterscope::simulate::simulate;
-use scatterscope::stack::preview::{SheetScale, write_contact_sheet, write_image};
-use scatterscope::stack::{Stack, exr_file};
+use scatterscope::stack::Stack;
 
 use crate::physics_summary::{parse_sampling, print_setup};
 
@@ -59,7 +60,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let (truth, kernels) = (&sim.truth, &sim.kernels);
     let (expected_stack, counts_stack) = (&sim.expected, &sim.counts);
     let truth_f32 = truth.mapv(|v| v as f32);
-    exr_file::write_image(truth_f32.view(), &args.out.join("truth.exr"))?;
+    exr::write_image(truth_f32.view(), &args.out.join("truth.exr"))?;
     write_image(truth.view(), Some(1.0), &args.out.join("truth.png"))?;
     for (name, stack) in [("expected", expected_stack), ("counts", counts_stack)] {
         write_stack(stack, &args.out, name, args.npy, args.sheet_scale)?;

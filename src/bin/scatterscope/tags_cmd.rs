@@ -3,12 +3,12 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use scatterscope::stack::preview::{SheetScale, write_contact_sheet};
+use scatterscope::formats::picoquant::{Container, FileError, FileInfo, TtrError};
+use scatterscope::formats::png::{SheetScale, write_contact_sheet};
+use scatterscope::formats::sstags::is_tag_file;
 use scatterscope::tags::bin_file::{BinFileError, BinSpec, Pixels, Recording, bin_file};
 use scatterscope::tags::binning::FrameSelect;
-use scatterscope::tags::picoquant::{Container, FileError, FileInfo, TtrError};
 use scatterscope::tags::survey::{survey_picoquant, survey_raw};
-use scatterscope_drivers::raw::is_raw_file;
 
 /// Show what a PicoQuant file (PTU, HT3, HT2) holds.
 ///
@@ -57,7 +57,7 @@ pub struct BinArgs {
 }
 
 pub fn info(args: &InfoArgs) -> anyhow::Result<()> {
-    if is_raw_file(&args.file) {
+    if is_tag_file(&args.file) {
         return info_raw(args);
     }
     let (info, survey) = survey_picoquant(&args.file)?;

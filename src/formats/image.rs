@@ -9,7 +9,7 @@ use ndarray::Array2;
 
 /// Why an image file could not be used as a scene.
 #[derive(Debug, thiserror::Error)]
-pub enum SceneLoadError {
+pub enum ImageError {
     /// The file could not be opened or decoded.
     #[error("{path}: cannot read image: {reason}")]
     Decode {
@@ -30,7 +30,7 @@ pub enum SceneLoadError {
 
 /// Loads a PNG or JPEG file as grayscale in [0, 1], or an EXR file's
 /// luminance with its own values, at the file's size.
-pub fn load_native(path: &Path) -> Result<Array2<f64>, SceneLoadError> {
+pub fn read_image(path: &Path) -> Result<Array2<f64>, ImageError> {
     let gray = decode_luminance(path)?;
     let (w, h) = gray.dimensions();
     Ok(Array2::from_shape_fn((h as usize, w as usize), |(r, c)| {
@@ -39,8 +39,8 @@ pub fn load_native(path: &Path) -> Result<Array2<f64>, SceneLoadError> {
 }
 
 /// The file's luminance, every value finite.
-fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, SceneLoadError> {
-    let decode = |reason: String| SceneLoadError::Decode {
+fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, ImageError> {
+    let decode = |reason: String| ImageError::Decode {
         path: path.to_owned(),
         reason,
     };
@@ -69,7 +69,7 @@ fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, Sce
     };
     if let Some(bad) = gray.pixels().position(|p| !p.0[0].is_finite()) {
         let (w, _) = gray.dimensions();
-        return Err(SceneLoadError::Content {
+        return Err(ImageError::Content {
             path: path.to_owned(),
             reason: format!(
                 "pixel (row {}, column {}) is {}; images must be finite",
@@ -85,11 +85,7 @@ fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, Sce
 /// Loads a PNG, JPEG or EXR file as grayscale in [0, 1], resized to
 /// `height` x `width` (Lanczos-3, clamped after resampling). EXR data is
 /// scaled by its maximum when that exceeds 1.
-pub fn load_grayscale(
-    path: &Path,
-    height: usize,
-    width: usize,
-) -> Result<Array2<f64>, SceneLoadError> {
+pub fn read_grayscale(path: &Path, height: usize, width: usize) -> Result<Array2<f64>, ImageError> {
     let mut gray = decode_luminance(path)?;
     let max = gray.pixels().fold(0.0f32, |m, p| m.max(p.0[0]));
     if max > 1.0 {
@@ -108,7 +104,7 @@ pub fn load_grayscale(
 /// Luminance of the first layer of an EXR file: `Y`, Rec. 709 luminance of
 /// `R`, `G`, `B`, or its only channel.
 fn read_exr_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, String> {
-    let layer = crate::stack::exr_file::read_first_layer(path).map_err(|e| e.to_string())?;
+    let layer = crate::formats::exr::read_first_layer(path).map_err(|e| e.to_string())?;
     let size = layer.size;
     let find = |name: &str| {
         layer

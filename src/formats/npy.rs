@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use ndarray::Array3;
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
-use super::{Stack, StackError, StackMeta, ValueKind};
+use crate::stack::{Stack, StackError, StackMeta, ValueKind};
 
 /// Largest integer every `f32` represents exactly (2^24).
 const F32_EXACT_INT: u64 = 1 << 24;

@@ -1,7 +1,7 @@
 //! Event batches of the wire protocol (live, or read back from the
-//! project's raw tag files) -> the [`Binner`]. The file format, its writer
-//! and its reader live in `scatterscope_drivers::raw`; the format is
-//! specified there and in `firmware-protocol/PROTOCOL.md`.
+//! project's tag files) -> the [`Binner`]. The file format, its writer and
+//! its reader live in [`crate::formats::sstags`]; the format is specified
+//! there and in `firmware-protocol/PROTOCOL.md`.
 
 use firmware_protocol::EventBatch;
 use firmware_protocol::record::Record;

@@ -17,7 +17,7 @@ use exr::prelude::{
 };
 use ndarray::{Array3, Axis};
 
-use super::{Stack, StackError, StackMeta};
+use crate::stack::{Stack, StackError, StackMeta};
 
 /// Name of the attribute holding the JSON metadata.
 pub const META_ATTRIBUTE: &str = "scatterscope";

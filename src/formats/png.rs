@@ -5,9 +5,9 @@ use std::path::Path;
 use image::{GrayImage, Luma};
 use ndarray::{ArrayView2, Axis};
 
-use super::{Stack, StackError};
+use crate::font;
 use crate::named::named;
-use crate::scene::font;
+use crate::stack::{Stack, StackError};
 
 /// How contact-sheet tiles are scaled to 8 bits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

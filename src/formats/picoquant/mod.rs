@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use ptu::{HeaderTag, TagLookup};
 use records::RecordType;
 
-use super::Imaging;
+use crate::tags::Imaging;
 
 /// Why a file cannot be read; the file is named by [`FileError`].
 #[derive(Debug, thiserror::Error)]

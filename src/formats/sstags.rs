@@ -1,9 +1,10 @@
-//! The project's raw tag file: a lossless recording of a live acquisition.
+//! The project's tag file (`.sstags`): a lossless recording of a live
+//! acquisition, event batches exactly as the device sent them.
 //!
 //! ```text
 //! "SSTAGS01"                      8-byte magic
 //! header length L                 u32 LE
-//! header                          L bytes of JSON (RawHeader)
+//! header                          L bytes of JSON (TagFileHeader)
 //! frames                          event batches exactly as on the wire
 //!                                 (firmware-protocol frames of kind 03)
 //! end frame                       a response frame Stopped(Totals), id 0xFFFF
@@ -24,7 +25,7 @@ use firmware_protocol::{
 };
 use serde::{Deserialize, Serialize};
 
-/// First bytes of every raw tag file.
+/// First bytes of every tag file.
 pub const MAGIC: &[u8; 8] = b"SSTAGS01";
 /// Bytes read per chunk (constant memory for any file size).
 const CHUNK: usize = 1 << 20;
@@ -34,7 +35,7 @@ pub const MAX_HEADER: u32 = 1 << 20;
 
 /// What the file's JSON header records.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RawHeader {
+pub struct TagFileHeader {
     /// Format version (1).
     pub format_version: u32,
     /// The link the data came from.
@@ -59,7 +60,7 @@ pub struct RawHeader {
     pub software: String,
 }
 
-impl RawHeader {
+impl TagFileHeader {
     /// The header of a recording from `identity` configured with `config`.
     pub fn new(link: &str, identity: &Identity, config: &Config, software: &str) -> Self {
         Self {
@@ -78,9 +79,9 @@ impl RawHeader {
     }
 }
 
-/// Errors of raw files, naming the file.
+/// Errors of tag files, naming the file.
 #[derive(Debug, thiserror::Error)]
-pub enum RawError {
+pub enum TagFileError {
     /// Operating-system error.
     #[error("{path}: {source}")]
     Io {
@@ -89,7 +90,7 @@ pub enum RawError {
         /// The error.
         source: std::io::Error,
     },
-    /// Not a raw tag file, or a damaged header.
+    /// Not a tag file, or a damaged header.
     #[error("{path}: {reason}")]
     Format {
         /// The file.
@@ -99,21 +100,21 @@ pub enum RawError {
     },
 }
 
-/// Appends batches to a raw tag file, flushing after each.
-pub struct RawWriter {
+/// Appends batches to a tag file, flushing after each.
+pub struct TagFileWriter {
     path: PathBuf,
     out: BufWriter<File>,
     frame: Vec<u8>,
     /// First write error; later writes are skipped and the error reported
-    /// at [`RawWriter::finish`].
+    /// at [`TagFileWriter::finish`].
     error: Option<std::io::Error>,
     batches: u64,
 }
 
-impl RawWriter {
+impl TagFileWriter {
     /// Creates the file and writes the header.
-    pub fn create(path: &Path, header: &RawHeader) -> Result<Self, RawError> {
-        let io = |source| RawError::Io {
+    pub fn create(path: &Path, header: &TagFileHeader) -> Result<Self, TagFileError> {
+        let io = |source| TagFileError::Io {
             path: path.to_path_buf(),
             source,
         };
@@ -158,14 +159,14 @@ impl RawWriter {
     }
 
     /// Writes the end frame (the device's totals when known) and closes.
-    pub fn finish(mut self, totals: Option<Totals>) -> Result<PathBuf, RawError> {
+    pub fn finish(mut self, totals: Option<Totals>) -> Result<PathBuf, TagFileError> {
         if let Some(e) = self.error.take() {
-            return Err(RawError::Io {
+            return Err(TagFileError::Io {
                 path: self.path,
                 source: e,
             });
         }
-        let io = |path: &Path, source| RawError::Io {
+        let io = |path: &Path, source| TagFileError::Io {
             path: path.to_path_buf(),
             source,
         };
@@ -190,20 +191,23 @@ impl RawWriter {
     }
 }
 
-/// Reads the magic and header of a raw tag file; the reader is left at
+/// Reads the magic and header of a tag file; the reader is left at
 /// the first frame.
-pub fn read_header(path: &Path, input: &mut impl Read) -> Result<(RawHeader, u64), RawError> {
-    let fmt = |reason: String| RawError::Format {
+pub fn read_header(
+    path: &Path,
+    input: &mut impl Read,
+) -> Result<(TagFileHeader, u64), TagFileError> {
+    let fmt = |reason: String| TagFileError::Format {
         path: path.to_path_buf(),
         reason,
     };
     let mut magic = [0u8; 8];
-    input.read_exact(&mut magic).map_err(|_| {
-        fmt("shorter than the 8-byte magic; not a scatterscope raw tag file".into())
-    })?;
+    input
+        .read_exact(&mut magic)
+        .map_err(|_| fmt("shorter than the 8-byte magic; not a scatterscope tag file".into()))?;
     if &magic != MAGIC {
         return Err(fmt(format!(
-            "magic {:?} is not {:?}; not a scatterscope raw tag file",
+            "magic {:?} is not {:?}; not a scatterscope tag file",
             String::from_utf8_lossy(&magic),
             String::from_utf8_lossy(MAGIC)
         )));
@@ -222,7 +226,7 @@ pub fn read_header(path: &Path, input: &mut impl Read) -> Result<(RawHeader, u64
     input
         .read_exact(&mut json)
         .map_err(|_| fmt(format!("file ends inside the {len}-byte header")))?;
-    let header: RawHeader =
+    let header: TagFileHeader =
         serde_json::from_slice(&json).map_err(|e| fmt(format!("header JSON: {e}")))?;
     if header.format_version != 1 {
         return Err(fmt(format!(
@@ -233,13 +237,13 @@ pub fn read_header(path: &Path, input: &mut impl Read) -> Result<(RawHeader, u64
     Ok((header, 12 + u64::from(len)))
 }
 
-/// What a raw file holds, from one pass.
+/// What a tag file holds, from one pass.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct RawSummary {
+pub struct TagFileSummary {
     /// The file.
     pub path: PathBuf,
     /// Its header.
-    pub header: RawHeader,
+    pub header: TagFileHeader,
     /// Event batches.
     pub batches: u64,
     /// The device's totals from the end frame; `None` if the recording was
@@ -252,18 +256,18 @@ pub struct RawSummary {
     pub malformed_batches: u64,
 }
 
-/// An opened raw tag file: its header read, positioned at the first frame.
-pub struct RawFile {
+/// An opened tag file: its header read, positioned at the first frame.
+pub struct TagFile {
     path: PathBuf,
     file: File,
     /// The file's header.
-    pub header: RawHeader,
+    pub header: TagFileHeader,
 }
 
-impl RawFile {
+impl TagFile {
     /// Opens `path` and reads its magic and header.
-    pub fn open(path: &Path) -> Result<Self, RawError> {
-        let mut file = File::open(path).map_err(|source| RawError::Io {
+    pub fn open(path: &Path) -> Result<Self, TagFileError> {
+        let mut file = File::open(path).map_err(|source| TagFileError::Io {
             path: path.to_path_buf(),
             source,
         })?;
@@ -277,13 +281,16 @@ impl RawFile {
 
     /// Reads every frame, feeding each event batch to `on_batch`, in
     /// constant memory.
-    pub fn read(self, mut on_batch: impl FnMut(&EventBatch<'_>)) -> Result<RawSummary, RawError> {
+    pub fn read(
+        self,
+        mut on_batch: impl FnMut(&EventBatch<'_>),
+    ) -> Result<TagFileSummary, TagFileError> {
         let Self {
             path,
             mut file,
             header,
         } = self;
-        let io = |source| RawError::Io {
+        let io = |source| TagFileError::Io {
             path: path.clone(),
             source,
         };
@@ -291,7 +298,7 @@ impl RawFile {
         // Small files get a small buffer.
         let size = file.metadata().map_err(io)?.len();
         let mut buf = vec![0u8; CHUNK.min(usize::try_from(size).unwrap_or(CHUNK)).max(1)];
-        let mut summary = RawSummary {
+        let mut summary = TagFileSummary {
             path: path.clone(),
             header,
             batches: 0,
@@ -325,17 +332,17 @@ impl RawFile {
     }
 }
 
-/// Reads a raw tag file, feeding every event batch to `on_batch`, in
-/// constant memory ([`RawFile::open`] then [`RawFile::read`]).
-pub fn read_raw(
+/// Reads a tag file, feeding every event batch to `on_batch`, in
+/// constant memory ([`TagFile::open`] then [`TagFile::read`]).
+pub fn read_tag_file(
     path: &Path,
     on_batch: impl FnMut(&EventBatch<'_>),
-) -> Result<RawSummary, RawError> {
-    RawFile::open(path)?.read(on_batch)
+) -> Result<TagFileSummary, TagFileError> {
+    TagFile::open(path)?.read(on_batch)
 }
 
-/// Whether `path` starts with the raw tag file magic.
-pub fn is_raw_file(path: &Path) -> bool {
+/// Whether `path` starts with the tag file magic.
+pub fn is_tag_file(path: &Path) -> bool {
     let mut magic = [0u8; 8];
     File::open(path)
         .and_then(|mut f| f.read_exact(&mut magic))

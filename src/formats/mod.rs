@@ -1,0 +1,22 @@
+//! Every file format scatterscope reads or writes, side by side.
+//!
+//! Tags (what a source records):
+//! - [`sstags`]: the project's tag file, a lossless recording of a live
+//!   acquisition (event batches exactly as the device sent them).
+//! - [`picoquant`]: PicoQuant PTU and the legacy PT3/HT3/PT2/HT2 files,
+//!   read in constant memory, and a PTU writer.
+//!
+//! Stacks (what binning or simulation makes):
+//! - [`exr`]: OpenEXR, one `f32` channel per bin, with the metadata.
+//! - [`npy`]: NumPy `.npy` with a JSON sidecar.
+//!
+//! Images (scenes, truths, reconstructions, previews):
+//! - [`image`]: single images in and out (PNG, JPEG, EXR, `.npy`).
+//! - [`png`]: 8-bit PNG previews and labelled contact sheets of a stack.
+
+pub mod exr;
+pub mod image;
+pub mod npy;
+pub mod picoquant;
+pub mod png;
+pub mod sstags;
