@@ -21,6 +21,32 @@ pub fn parse_ps(s: &str) -> Result<f64, String> {
     )
 }
 
+/// Parses a duration with its unit: `ms`, `s` (default), `m` or `h`;
+/// finite and not negative.
+pub fn parse_duration(s: &str) -> Result<std::time::Duration, String> {
+    let t = s.trim();
+    let (num, scale) = if let Some(n) = t.strip_suffix("ms") {
+        (n, 1e-3)
+    } else if let Some(n) = t.strip_suffix('s') {
+        (n, 1.0)
+    } else if let Some(n) = t.strip_suffix('m') {
+        (n, 60.0)
+    } else if let Some(n) = t.strip_suffix('h') {
+        (n, 3600.0)
+    } else {
+        (t, 1.0)
+    };
+    let v: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a duration (e.g. 10s, 500ms, 2m)"))?;
+    if !(v >= 0.0 && v.is_finite()) {
+        return Err(format!("`{s}`: a duration must be finite and not negative"));
+    }
+    std::time::Duration::try_from_secs_f64(v * scale)
+        .map_err(|_| format!("`{s}`: longer than any clock counts"))
+}
+
 /// Parses a length with an optional unit (`um`, `mm`, `cm`, `m`); plain numbers are cm.
 pub fn parse_cm(s: &str) -> Result<f64, String> {
     parse_unit(

@@ -31,7 +31,7 @@ fn write_scene_png(scene: &str, size: usize, path: &Path) -> ndarray::Array2<f64
     let img = scatterscope::scene::Scene::parse(scene)
         .render(size, size)
         .unwrap();
-    scatterscope::formats::png::write_image(img.view(), Some(1.0), path).unwrap();
+    scatterscope::formats::png::write_png(img.view(), Some(1.0), path).unwrap();
     img
 }
 

@@ -44,6 +44,52 @@ pub struct Faults {
     pub random_seed: u64,
 }
 
+impl std::str::FromStr for Faults {
+    type Err = String;
+
+    /// Comma-separated `NAME=N`: `corrupt`, `drop-bytes`, `duplicate`,
+    /// `reorder`, `disconnect` (every n-th batch), `overflow=EVERY:PHOTONS`,
+    /// and `random=SEED` (each fault with probability 1/n per batch at
+    /// seeded random times instead). Empty: no faults.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let mut f = Faults::default();
+        for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+            let (name, value) = item
+                .split_once('=')
+                .ok_or_else(|| format!("fault `{item}`: expected NAME=N"))?;
+            let n = |v: &str| {
+                v.parse::<u32>()
+                    .map_err(|_| format!("fault `{item}`: `{v}` is not a count"))
+            };
+            match name {
+                "corrupt" => f.corrupt_every = n(value)?,
+                "drop-bytes" => f.drop_bytes_every = n(value)?,
+                "duplicate" => f.duplicate_every = n(value)?,
+                "reorder" => f.reorder_every = n(value)?,
+                "disconnect" => f.disconnect_after = n(value)?,
+                "random" => {
+                    f.random_seed = value
+                        .parse()
+                        .map_err(|_| format!("fault `{item}`: `{value}` is not a seed"))?
+                }
+                "overflow" => {
+                    let (every, photons) = value.split_once(':').ok_or_else(|| {
+                        format!("fault `{item}`: expected overflow=EVERY:PHOTONS")
+                    })?;
+                    f.overflow_every = n(every)?;
+                    f.overflow_photons = u64::from(n(photons)?);
+                }
+                other => {
+                    return Err(format!(
+                        "unknown fault `{other}` (corrupt, drop-bytes, duplicate, reorder, overflow, disconnect, random)"
+                    ));
+                }
+            }
+        }
+        Ok(f)
+    }
+}
+
 /// Everything about the emulated device.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MockOptions {

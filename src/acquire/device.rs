@@ -4,18 +4,12 @@
 
 use std::str::FromStr;
 
-use ndarray::Array2;
 pub use scatterscope_drivers::discovery::DeviceEntry;
 use scatterscope_drivers::discovery::{serial_ports, usb_devices};
 use scatterscope_drivers::usb::UsbSelector;
 use scatterscope_drivers::{Link, LinkError};
-use scatterscope_mocks::emitter::EmitterError;
-use scatterscope_mocks::{Emitter, EmitterOptions, MockDevice, MockHandle, MockOptions};
 
-use crate::physics::KernelStack;
-
-/// IN-endpoint buffer of the in-process USB mock, in 512-byte packets.
-const MOCK_USB_BUFFER_PACKETS: usize = 1024;
+pub use super::mock::{MockHandle, MockSetup};
 
 /// A device address as given to `--device`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -92,18 +86,6 @@ pub fn list_devices() -> (Vec<DeviceEntry>, usize) {
     (all, hardware)
 }
 
-/// What a mock device emits.
-pub struct MockSetup {
-    /// Scene intensity on the sensor grid.
-    pub scene: Array2<f64>,
-    /// ST-PSF kernels of the medium.
-    pub kernels: KernelStack,
-    /// Rates, sync period, delay, seed.
-    pub emitter: EmitterOptions,
-    /// Device behaviour (FIFO, pacing, faults).
-    pub device: MockOptions,
-}
-
 /// An opened link, and the mock behind it if any.
 pub struct OpenedDevice {
     /// The transport.
@@ -119,9 +101,9 @@ pub enum OpenError {
     #[error(transparent)]
     Link(#[from] LinkError),
     /// The mock's scene or physics is unusable.
-    #[error(transparent)]
-    Mock(#[from] EmitterError),
-    /// A mock was asked for without its set-up.
+    #[error("the mock's scene or physics: {0}")]
+    Mock(String),
+    /// A mock was asked for without its set-up, or in a build without mocks.
     #[error("{0}")]
     Usage(String),
     /// The pseudo-terminal could not be created.
@@ -131,37 +113,12 @@ pub enum OpenError {
 
 /// Opens `spec`; mocks are started from `mock` (required for them).
 pub fn open_device(spec: &DeviceSpec, mock: Option<MockSetup>) -> Result<OpenedDevice, OpenError> {
-    let start_mock = |m: MockSetup| -> Result<MockDevice, OpenError> {
-        let scene: Vec<f64> = m.scene.iter().copied().collect();
-        let period = m.emitter.sync_period_ps;
-        let emitter = Emitter::new(&scene, &m.kernels, m.emitter)?;
-        Ok(MockDevice::new(m.device, emitter, period))
-    };
-    let need = || OpenError::Usage("a mock device needs a scene and physics".into());
     match spec {
-        DeviceSpec::Mock => {
-            let device = start_mock(mock.ok_or_else(need)?)?;
-            let (port, ep_in, ep_out) = scatterscope_mocks::usb::endpoints(MOCK_USB_BUFFER_PACKETS);
-            let handle = device.spawn(Box::new(port));
-            let link = scatterscope_drivers::usb::link(
-                "mock (in-process USB)".into(),
-                Box::new(ep_in),
-                Box::new(ep_out),
-            );
-            Ok(OpenedDevice {
-                link,
-                mock: Some(handle),
-            })
-        }
-        DeviceSpec::MockSerial => {
-            let device = start_mock(mock.ok_or_else(need)?)?;
-            let (port, path) = scatterscope_mocks::pty::open().map_err(OpenError::Pty)?;
-            let handle = device.spawn(Box::new(port));
-            let mut link = scatterscope_drivers::serial::open(
-                &path.to_string_lossy(),
-                scatterscope_drivers::serial::DEFAULT_BAUD,
-            )?;
-            link.description = format!("mock-serial ({})", path.display());
+        DeviceSpec::Mock | DeviceSpec::MockSerial => {
+            let setup = mock.ok_or_else(|| {
+                OpenError::Usage("a mock device needs a scene and physics".into())
+            })?;
+            let (link, handle) = super::mock::open(spec, setup)?;
             Ok(OpenedDevice {
                 link,
                 mock: Some(handle),

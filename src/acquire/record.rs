@@ -5,17 +5,13 @@
 use std::path::PathBuf;
 
 use firmware_protocol::{Config, Identity, Totals};
-use ndarray::{Array3, s};
 use serde::{Deserialize, Serialize};
 
 use super::accounting::AcquisitionAccounting;
-use super::device::MockSetup;
 use super::session::{Outcome, Plan, StopReason};
-use crate::forward::{Boundary, ForwardModel};
 use crate::physics::{Sampling, Setup};
 use crate::stack::{Stack, StackMeta};
 use crate::tags::binning::Region;
-use scatterscope_mocks::Truth;
 
 /// What one acquisition was: the device, its configuration, the window,
 /// why it ended and where every photon went.
@@ -97,46 +93,4 @@ fn cropped(setup: &Setup, region: Region) -> Setup {
     s.sensor.width_px = region.width;
     s.sensor.height_px = region.height;
     s
-}
-
-/// A mock's known scene as the sensor sees it: the expected stack at the
-/// set-up's light budget, to put a mock acquisition's reconstruction in
-/// the scene's units.
-pub struct MockReference {
-    expected: Array3<f64>,
-}
-
-impl MockReference {
-    /// The expected stack of `mock` (its sensor has edges and its scene is
-    /// dark outside it).
-    pub fn new(mock: &MockSetup) -> Self {
-        let model = ForwardModel::new(&mock.kernels, Boundary::Sensor);
-        Self {
-            expected: model.expected_scene(mock.scene.view()).counts,
-        }
-    }
-
-    /// The light budget that makes `binned` photons in `region` (dark counts
-    /// removed, from the mock's truth) come out in the scene's units:
-    /// `total_photons` scaled by the signal over its expectation. `None`
-    /// when either is zero.
-    pub fn light_budget(
-        &self,
-        total_photons: f64,
-        region: Region,
-        binned: u64,
-        truth: &Truth,
-    ) -> Option<f64> {
-        let expected: f64 = self
-            .expected
-            .slice(s![
-                ..,
-                region.y..region.y + region.height,
-                region.x..region.x + region.width
-            ])
-            .sum();
-        let dark_fraction = truth.dark_counts as f64 / truth.photons_detected.max(1) as f64;
-        let signal = binned as f64 * (1.0 - dark_fraction);
-        (expected > 0.0 && signal > 0.0).then(|| total_photons * signal / expected)
-    }
 }

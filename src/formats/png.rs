@@ -28,7 +28,7 @@ const LABEL_H: u32 = font::GLYPH_HEIGHT as u32 + 3;
 
 /// Writes one image as an 8-bit PNG, scaled so that `max` is white
 /// (the image's own maximum when `max` is `None`).
-pub fn write_image(img: ArrayView2<f64>, max: Option<f64>, path: &Path) -> Result<(), StackError> {
+pub fn write_png(img: ArrayView2<f64>, max: Option<f64>, path: &Path) -> Result<(), StackError> {
     let (h, w) = img.dim();
     let top = max.unwrap_or_else(|| img.iter().fold(0.0f64, |m, &v| m.max(v)));
     let mut out = GrayImage::new(w as u32, h as u32);

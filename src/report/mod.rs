@@ -15,7 +15,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::denoise::Denoiser;
-use crate::formats::png::write_image;
+use crate::formats::png::write_png;
 use crate::forward::Boundary;
 use crate::physics::{Sampling, Setup};
 use crate::reconstruct::method::{Method, MethodOptions, RlStop, Solver, run_method};
@@ -111,7 +111,7 @@ pub fn run_scene(
     };
     std::fs::create_dir_all(dir).map_err(|e| ReportError::Io(dir.display().to_string(), e))?;
     let name = scene.name();
-    write_image(truth.view(), Some(1.0), &dir.join("truth.png"))?;
+    write_png(truth.view(), Some(1.0), &dir.join("truth.png"))?;
     // The baselines are ranked by their best iteration chosen with the
     // truth, so Richardson-Lucy runs its fixed count here.
     let opts = &MethodOptions {
@@ -152,7 +152,7 @@ pub fn run_scene(
     let mut traces = Vec::new();
     let save = |r: &Reconstruction, file: &str| -> Result<(), ReportError> {
         let top = r.image.iter().fold(1.0f64, |m, &v| m.max(v));
-        write_image(r.image.view(), Some(top), &dir.join(format!("{file}.png")))?;
+        write_png(r.image.view(), Some(top), &dir.join(format!("{file}.png")))?;
         r.trace
             .write(dir, &format!("trace_{file}"))
             .map_err(|e| ReportError::Io(dir.display().to_string(), e))

@@ -63,6 +63,30 @@ pub struct Region {
     pub height: usize,
 }
 
+impl std::str::FromStr for Region {
+    type Err = String;
+
+    /// `X,Y,WIDTH,HEIGHT` in whole pixels, with a non-empty size.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let v: Vec<usize> = s
+            .split(',')
+            .map(|p| p.trim().parse::<usize>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| format!("`{s}`: expected X,Y,WIDTH,HEIGHT as whole pixels"))?;
+        match v[..] {
+            [x, y, width, height] if width > 0 && height > 0 => Ok(Region {
+                x,
+                y,
+                width,
+                height,
+            }),
+            _ => Err(format!(
+                "`{s}`: expected X,Y,WIDTH,HEIGHT with a non-empty size"
+            )),
+        }
+    }
+}
+
 /// Which frames of a scanned image to keep.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FrameSelect {

@@ -10,7 +10,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use scatterscope::formats::exr;
 use scatterscope::formats::image::read_image;
-use scatterscope::formats::png::write_image;
+use scatterscope::formats::png::write_png;
 use scatterscope::metrics::{psnr, ssim};
 
 use crate::recon_args::PriorArgs;
@@ -100,7 +100,7 @@ fn load(path: &Path) -> anyhow::Result<Array2<f64>> {
 
 fn save(img: &Array2<f64>, path: &Path) -> anyhow::Result<()> {
     match extension(path).as_str() {
-        "png" => write_image(img.mapv(|v| v.clamp(0.0, 1.0)).view(), Some(1.0), path)?,
+        "png" => write_png(img.mapv(|v| v.clamp(0.0, 1.0)).view(), Some(1.0), path)?,
         "exr" => exr::write_image(img.mapv(|v| v as f32).view(), path)?,
         "npy" => img
             .mapv(|v| v as f32)

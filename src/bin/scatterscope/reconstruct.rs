@@ -7,7 +7,7 @@ use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::formats::exr;
-use scatterscope::formats::png::write_image;
+use scatterscope::formats::png::write_png;
 use scatterscope::forward::Boundary;
 use scatterscope::physics::{Preset, Sampling};
 use scatterscope::reconstruct::method::{Method, run_method};
@@ -195,7 +195,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         &args.out.join("reconstruction.exr"),
     )?;
     let top = image.iter().fold(1.0f64, |m, &v| m.max(v));
-    write_image(
+    write_png(
         image.view(),
         Some(top),
         &args.out.join("reconstruction.png"),

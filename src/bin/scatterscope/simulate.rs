@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use crate::shared_args::{PhysicsArgs, choice};
 use anyhow::Context;
 use scatterscope::formats::exr;
-use scatterscope::formats::png::{SheetScale, write_contact_sheet, write_image};
+use scatterscope::formats::png::{SheetScale, write_contact_sheet, write_png};
 use scatterscope::forward::Boundary;
 use scatterscope::physics::Sampling;
 use scatterscope::scene::Scene;
@@ -61,7 +61,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let (expected_stack, counts_stack) = (&sim.expected, &sim.counts);
     let truth_f32 = truth.mapv(|v| v as f32);
     exr::write_image(truth_f32.view(), &args.out.join("truth.exr"))?;
-    write_image(truth.view(), Some(1.0), &args.out.join("truth.png"))?;
+    write_png(truth.view(), Some(1.0), &args.out.join("truth.png"))?;
     for (name, stack) in [("expected", expected_stack), ("counts", counts_stack)] {
         write_stack(stack, &args.out, name, args.npy, args.sheet_scale)?;
     }
