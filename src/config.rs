@@ -187,6 +187,14 @@ pub struct PhysicsOverrides {
     pub irf_fwhm: Option<f64>,
     /// Time constant of the instrument response's exponential tail (ps).
     pub irf_tail: Option<f64>,
+    /// The instrument response measured in a reference recording without
+    /// the medium (a tag file, a stack or a MATLAB histogram): its table,
+    /// or with `irf_parametric` the Gaussian-plus-exponential fitted to it.
+    pub irf_from: Option<PathBuf>,
+    /// Fit the parametric form to `irf_from` instead of using its table.
+    pub irf_parametric: bool,
+    /// Bin width of an `irf_from` file that does not record one (ps).
+    pub irf_bin_ps: Option<f64>,
 }
 
 /// A configuration problem, naming the file or key and the value.
@@ -208,6 +216,9 @@ pub enum ConfigError {
         /// What is wrong.
         reason: String,
     },
+    /// The reference recording of the instrument response cannot be used.
+    #[error(transparent)]
+    Reference(#[from] crate::calibrate::CalibrateError),
     /// The resulting parameters are not physical.
     #[error("{error} (key `{key}`{})", config.as_ref().map_or(String::new(), |p| format!(" in {}", p.display())))]
     Param {
@@ -227,9 +238,65 @@ impl PhysicsOverrides {
     }
 
     /// Like [`Self::resolve`], starting from `base` (e.g. a stack's recorded
-    /// physics) instead of the default preset; an explicit `--preset` or a
+    /// physics) instead of the default preset; an explicit preset or a
     /// preset in the file still wins over `base`.
     pub fn resolve_over(&self, base: Option<Setup>) -> Result<Setup, ConfigError> {
+        self.resolve_noted(base).map(|(setup, _)| setup)
+    }
+
+    /// Like [`Self::resolve_over`], with what an instrument response taken
+    /// from a reference recording turned out to be, one line each.
+    pub fn resolve_noted(&self, base: Option<Setup>) -> Result<(Setup, Vec<String>), ConfigError> {
+        let mut setup = self.resolve_flags(base)?;
+        let mut notes = Vec::new();
+        let Some(reference) = &self.irf_from else {
+            return Ok((setup, notes));
+        };
+        if self.irf_parametric {
+            let fit = crate::calibrate::irf_fit::irf_from_reference(reference, self.irf_bin_ps)?;
+            let se = |v: Option<f64>| v.map_or(String::new(), |e| format!(" +- {e:.2}"));
+            notes.push(format!(
+                "instrument response fitted to {}: Gaussian FWHM {:.2}{} ps, exponential tail {:.2}{} ps, centre at {:.2} ps on its clock, background {:.3} counts per bin, chi-square per degree of freedom {:.2}",
+                reference.display(),
+                fit.irf.fwhm_ps,
+                se(fit.standard_errors_ps.0),
+                fit.irf.tail_ps,
+                se(fit.standard_errors_ps.1),
+                fit.centre_ps,
+                fit.background_per_bin,
+                fit.chi2_per_dof
+            ));
+            if !fit.describes_reference() {
+                notes.push(format!(
+                    "note: the Gaussian-plus-exponential form does not describe {} (chi-square per degree of freedom {:.1}); the kernels use it as an approximation",
+                    reference.display(),
+                    fit.chi2_per_dof
+                ));
+            }
+            setup.irf = Some(fit.irf.into());
+        } else {
+            let (measured, table) = crate::calibrate::measured_irf::measured_irf_from_reference(
+                reference,
+                self.irf_bin_ps,
+            )?;
+            notes.push(format!(
+                "instrument response measured in {}: {} bins of {} ps, FWHM {:.1} ps, mean delay {:.1} ps after its peak, time zero at {:.2} ps on its clock (the peak bin's centre), background {:.3} counts per bin subtracted, {:.0} counts in the response",
+                reference.display(),
+                measured.weights.len(),
+                measured.bin_width_ps,
+                measured.fwhm_ps(),
+                measured.mean_delay_ps(),
+                measured.zero_time_ps(),
+                measured.background_per_bin,
+                measured.signal_counts
+            ));
+            setup.irf = Some(table.into());
+        }
+        Ok((setup, notes))
+    }
+
+    /// Preset, file and the overrides other than the reference recording.
+    fn resolve_flags(&self, base: Option<Setup>) -> Result<Setup, ConfigError> {
         let file = match &self.config {
             Some(path) => Some((path.as_path(), read_file(path)?)),
             None => None,
@@ -405,6 +472,7 @@ fn file_as_overrides(path: &Path, f: &FileOverrides) -> Result<PhysicsOverrides,
         min_bin_photons: f.min_bin_photons,
         irf_fwhm: q("irf_fwhm", &f.irf_fwhm, parse_ps)?,
         irf_tail: q("irf_tail", &f.irf_tail, parse_ps)?,
+        ..PhysicsOverrides::default()
     })
 }
 

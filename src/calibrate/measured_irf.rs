@@ -204,6 +204,22 @@ impl MeasuredIrf {
     }
 
     /// What the response spans, for the output: "whole recorded period"
+    /// The response in words: its source and extent, bins, width, delay,
+    /// the background subtracted, and how much lies far from the peak.
+    pub fn describe(&self) -> String {
+        format!(
+            "instrument response from {} ({}): {} bins of {} ps, FWHM {:.1} ps, mean delay after the peak {:.1} ps, {:.2} counts per bin subtracted; {:.2} % of it lies more than 1 ns before or 3 ns after the peak",
+            self.source,
+            self.extent_name(),
+            self.weights.len(),
+            self.bin_width_ps,
+            self.fwhm_ps(),
+            self.mean_delay_ps(),
+            self.background_per_bin,
+            100.0 * self.share_outside(1000.0, 3000.0)
+        )
+    }
+
     /// ([`Self::from_histogram_period`]) or "the peak's run".
     pub fn extent_name(&self) -> &'static str {
         if self.peak_run == (0..self.weights.len()) {

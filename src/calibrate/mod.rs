@@ -21,6 +21,7 @@ pub mod hessian;
 pub mod histogram;
 pub mod irf_fit;
 pub mod measured_irf;
+pub mod outputs;
 pub mod parts;
 pub mod response_convolution;
 pub mod search;
@@ -66,6 +67,20 @@ impl Free {
         }
         Ok(free)
     }
+
+    /// The names of the fitted parameters, as [`Free::from_names`] takes
+    /// them.
+    pub fn names(&self) -> Vec<&'static str> {
+        [
+            (self.mu_a, "mu_a"),
+            (self.mu_s_reduced, "mu_s"),
+            (self.t0, "t0"),
+            (self.irf_fwhm, "irf"),
+        ]
+        .into_iter()
+        .filter_map(|(on, name)| on.then_some(name))
+        .collect()
+    }
 }
 
 /// One fitted or fixed parameter.
@@ -103,6 +118,32 @@ pub struct Calibration {
     pub evaluations: u64,
     /// Parameters the data do not determine, and why.
     pub undetermined: Vec<String>,
+}
+
+impl Calibration {
+    /// The fit's parameters, quality and notes, one printable line each.
+    pub fn lines(&self) -> Vec<String> {
+        let mut lines = vec![format!(
+            "fit of {} bins ({} counts), {} likelihood evaluations:",
+            self.measured.len(),
+            self.measured.iter().sum::<f64>(),
+            self.evaluations
+        )];
+        for p in &self.parameters {
+            let value = match (p.fitted, p.standard_error) {
+                (true, Some(se)) => format!("{:.6} +- {:.2e}", p.value, se),
+                (true, None) => format!("{:.6} (not determined by the data)", p.value),
+                (false, _) => format!("{:.6} (fixed)", p.value),
+            };
+            lines.push(format!("  {:<11} {value} {}", p.name, p.unit));
+        }
+        lines.push(format!(
+            "  chi-square per degree of freedom {:.3} ({} degrees of freedom)",
+            self.chi2_per_dof, self.dof
+        ));
+        lines.extend(self.undetermined.iter().map(|u| format!("  note: {u}")));
+        lines
+    }
 }
 
 /// Why a calibration cannot run.

@@ -4,7 +4,8 @@
 //! checked [`data::Data`] (a forward model and the counts of some of its
 //! bins) and reports to a [`run::Run`] (trace, clock, scoring against a
 //! known truth, notes), which returns the checked image with its trace.
-//! [`method`] names them for users and runs one on a [`problem::Problem`].
+//! [`method`] names them for users and runs one on a [`problem::Problem`];
+//! [`input`] makes a stack file into one, its physics resolved.
 //!
 //! - [`split`]: Poisson Plug-and-Play ADMM with exact splitting (P4IP), the
 //!   default PnP solver: closed-form Poisson prox, exact o-update.
@@ -27,6 +28,7 @@ pub mod data;
 pub mod discrepancy;
 pub mod em;
 pub mod error;
+pub mod input;
 pub mod likelihood;
 pub mod method;
 pub mod operator;

@@ -12,9 +12,10 @@ use crate::stack::{Stack, ValueKind};
 pub const DARK_COUNTS_PER_PIXEL: f64 = 1e-3;
 
 /// How the background per pixel and bin is chosen.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum BackgroundChoice {
     /// Estimated from the bins before the first light; none without such bins.
+    #[default]
     Auto,
     /// Not modelled.
     None,

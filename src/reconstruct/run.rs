@@ -2,6 +2,7 @@
 //! ([`Reconstructor`]) and the run it reports to ([`Run`]): the trace, the
 //! timer, scoring against a known truth, notes, and the checked output.
 
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use ndarray::{Array2, ArrayView2};
@@ -11,6 +12,7 @@ use super::error::ReconstructError;
 use super::trace::{Trace, TraceRow};
 use crate::forward::{Boundary, ForwardModel};
 use crate::metrics;
+use crate::stack::StackError;
 
 /// A reconstructed image and how it was obtained.
 #[derive(Debug, Clone)]
@@ -19,6 +21,58 @@ pub struct Reconstruction {
     pub image: Array2<f64>,
     /// Per-iteration trace.
     pub trace: Trace,
+}
+
+impl Reconstruction {
+    /// Writes the image as `reconstruction.exr` (values as they are) and
+    /// `reconstruction.png` (white at the larger of 1 and the image's
+    /// maximum) and the trace as `trace.csv` and `trace.json` into `dir`
+    /// (created if missing); returns the files written.
+    pub fn write(&self, dir: &Path) -> Result<Vec<PathBuf>, StackError> {
+        std::fs::create_dir_all(dir).map_err(|e| StackError::io(dir, e))?;
+        let exr = dir.join("reconstruction.exr");
+        crate::formats::exr::write_image(self.image.mapv(|v| v as f32).view(), &exr)?;
+        let png = dir.join("reconstruction.png");
+        let top = self.image.iter().fold(1.0f64, |m, &v| m.max(v));
+        crate::formats::png::write_png(self.image.view(), Some(top), &png)?;
+        self.trace
+            .write(dir, "trace")
+            .map_err(|e| StackError::io(&dir.join("trace.csv"), e))?;
+        Ok(vec![
+            exr,
+            png,
+            dir.join("trace.csv"),
+            dir.join("trace.json"),
+        ])
+    }
+
+    /// What the run did, one line each: the method and prior, iterations
+    /// and time, its notes from the `skip`-th on, and with a truth the
+    /// output's PSNR and SSIM and the best iteration by truth.
+    pub fn summary(&self, skip: usize, truth: Option<ArrayView2<f64>>) -> Vec<String> {
+        let t = &self.trace;
+        let last = t.rows.last();
+        let mut lines = vec![format!(
+            "{}{}: {} iterations in {:.2} s",
+            t.method,
+            t.prior
+                .as_ref()
+                .map_or(String::new(), |p| format!(" with prior {p}")),
+            last.map_or(0, |r| r.iteration),
+            last.map_or(0.0, |r| r.wall_s)
+        )];
+        lines.extend(t.notes.iter().skip(skip).map(|n| format!("  {n}")));
+        if let (Some(truth), Some(best)) = (truth, t.best_psnr()) {
+            lines.push(format!(
+                "  output PSNR {:.2} dB, SSIM {:.4}; best iteration by truth: {} ({:.2} dB)",
+                metrics::psnr(self.image.view(), truth),
+                metrics::ssim(self.image.view(), truth),
+                best.iteration,
+                best.psnr.unwrap_or(f64::NAN)
+            ));
+        }
+        lines
+    }
 }
 
 /// What a method returns to its run: the estimate on the sensor window and

@@ -181,9 +181,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         println!("{line}");
     }
     for file in done.files.iter().filter(|f| {
-        f.extension()
-            .is_some_and(|e| e == "exr" || e == "sstags")
-            && !f.ends_with("truth.exr")
+        f.extension().is_some_and(|e| e == "exr" || e == "sstags") && !f.ends_with("truth.exr")
     }) {
         println!("wrote {}", file.display());
     }

@@ -1,16 +1,15 @@
 //! `scatterscope calibrate-slab`: mu_s' and mu_a from time-resolved
 //! transmittance captures of slabs of known thickness.
 
-use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
 use scatterscope::calibrate::histogram::{DEFAULT_MAT_DATASET, DEFAULT_MAT_PARTS, TimeHistogram};
 use scatterscope::calibrate::measured_irf::MeasuredIrf;
+use scatterscope::calibrate::outputs::write_slab_fits;
 use scatterscope::calibrate::transmittance::{
-    RISING_EDGE_CONVENTION, SlabFit, SlabFitOptions, fit_slab, predict_captures, read_captures,
+    RISING_EDGE_CONVENTION, SlabFitOptions, fit_slab, predict_captures, read_captures,
 };
-use scatterscope::report::plot::{Series, chart};
 
 /// Fit mu_s' and mu_a to transmittance captures through slabs.
 ///
@@ -96,70 +95,13 @@ enum IrfExtent {
     Peak,
 }
 
-fn print_fit(title: &str, fit: &SlabFit) {
-    println!("{title}");
-    for (name, est, unit) in [
-        ("mu_a", fit.mu_a, "/cm"),
-        ("mu_s'", fit.mu_s_reduced, "/cm"),
-        ("offset", fit.offset, "cm (detector from the laser's axis)"),
-    ] {
-        let value = match (est.fitted, est.standard_error) {
-            (true, Some(se)) => format!(
-                "{:.5} +- {:.1e} {unit} (Poisson), +- {:.1e} scaled by sqrt(chi2/dof)",
-                est.value,
-                se,
-                se * fit.scatter_factor()
-            ),
-            (true, None) => format!("{:.5} {unit} (not determined by the data)", est.value),
-            (false, _) => format!("{:.5} {unit} (fixed)", est.value),
-        };
-        println!("  {name:<6} {value}");
-    }
-    println!(
-        "  extrapolation distance {:.2} mm; chi-square per degree of freedom {:.2} ({} degrees of freedom)",
-        10.0 * fit.extrapolation_cm,
-        fit.chi2_per_dof,
-        fit.dof
-    );
-    println!(
-        "  capture              thickness   t0 (ps)        signal       background/bin  bins  left out  chi2/dof  (all bins)"
-    );
-    for c in &fit.captures {
-        println!(
-            "  {:<20} {:>6.2} cm  {:>12.1}  {:>12.0}  {:>14.1}  {:>5}  {:>8}  {:>8.2}  {:>10.2}",
-            c.label,
-            c.thickness_cm,
-            c.t0_ps,
-            c.signal,
-            c.background,
-            c.measured.len(),
-            c.left_out.len(),
-            c.chi2_per_dof(),
-            c.chi2_per_dof_window()
-        );
-    }
-    for u in &fit.undetermined {
-        println!("  note: {u}");
-    }
-}
-
 pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     let reference = TimeHistogram::read(&args.irf_from, &args.dataset, args.bin_ps)?;
     let irf = match args.irf_extent {
         IrfExtent::Period => MeasuredIrf::from_histogram_period(&reference)?,
         IrfExtent::Peak => MeasuredIrf::from_histogram(&reference)?,
     };
-    println!(
-        "instrument response from {} ({}): {} bins of {} ps, FWHM {:.1} ps, mean delay after the peak {:.1} ps, {:.2} counts per bin subtracted; {:.2} % of it lies more than 1 ns before or 3 ns after the peak",
-        irf.source,
-        irf.extent_name(),
-        irf.weights.len(),
-        irf.bin_width_ps,
-        irf.fwhm_ps(),
-        irf.mean_delay_ps(),
-        irf.background_per_bin,
-        100.0 * irf.share_outside(1000.0, 3000.0)
-    );
+    println!("{}", irf.describe());
     let specs: Vec<&str> = args
         .captures
         .iter()
@@ -186,87 +128,33 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     println!("model: {}", opts.describe_model(&irf));
     let started = std::time::Instant::now();
     let fit = fit_slab(&captures, &irf, &opts)?;
-    print_fit(
-        &format!(
-            "joint fit of {} captures ({} single-capture model evaluations, {:.1} s):",
-            captures.len(),
-            fit.evaluations,
-            started.elapsed().as_secs_f64()
-        ),
-        &fit,
+    let title = format!(
+        "joint fit of {} captures ({} single-capture model evaluations, {:.1} s):",
+        captures.len(),
+        fit.evaluations,
+        started.elapsed().as_secs_f64()
     );
-    let mut all = vec![(captures, fit.clone())];
-    if !held.is_empty() {
+    for line in fit.lines(&title) {
+        println!("{line}");
+    }
+    let mut groups = vec![(&captures[..], &fit, "fitted")];
+    let prediction = if held.is_empty() {
+        None
+    } else {
         let pred = predict_captures(&held, &irf, &fit.fixed())?;
-        print_fit(
-            "prediction of captures left out of the fit (medium fixed):",
-            &pred,
-        );
-        all.push((held, pred));
-    }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating output directory {}", args.out.display()))?;
-    let mut csv = String::from("capture,role,bin_start_ps,measured,fitted,in_fit\n");
-    let mut pngs = Vec::new();
-    for ((caps, f), role) in all.iter().zip(["fitted", "predicted"]) {
-        for (cap, c) in caps.iter().zip(&f.captures) {
-            let h = &cap.histogram;
-            let first = c.window_start_ps(h.bin_width_ps, h.start_ps);
-            let start = |i: usize| first + i as f64 * h.bin_width_ps;
-            for (i, (m, u)) in c.measured.iter().zip(&c.fitted).enumerate() {
-                let in_fit = u8::from(!c.left_out.contains(&i));
-                writeln!(csv, "{},{role},{},{m},{u},{in_fit}", c.label, start(i))
-                    .expect("writing to a String");
-            }
-            // Log counts against the time since the pulse entered the slab,
-            // of the window's bins that `keep` picks.
-            let points = |v: &[f64], keep: &dyn Fn(usize) -> bool| {
-                v.iter()
-                    .enumerate()
-                    .filter(|(i, _)| keep(*i))
-                    .map(|(i, &x)| {
-                        (
-                            start(i) + 0.5 * h.bin_width_ps - c.t0_ps,
-                            x.max(0.5).log10(),
-                        )
-                    })
-                    .collect()
-            };
-            let mut measured = vec![Series {
-                label: "measured".into(),
-                points: points(&c.measured, &|i| !c.left_out.contains(&i)),
-            }];
-            if !c.left_out.is_empty() {
-                measured.push(Series {
-                    label: "measured, left out of the fit".into(),
-                    points: points(&c.measured, &|i| c.left_out.contains(&i)),
-                });
-            }
-            let name = format!("fit_{}.png", c.label);
-            let png = args.out.join(&name);
-            chart(
-                &png,
-                &format!(
-                    "{} ({role}, {:.2} cm): chi2/dof {:.2}",
-                    c.label,
-                    c.thickness_cm,
-                    c.chi2_per_dof()
-                ),
-                "time after the pulse enters the slab (ps)",
-                "log10 counts per bin",
-                &measured,
-                &[Series {
-                    label: "model".into(),
-                    points: points(&c.fitted, &|_| true),
-                }],
-                false,
-            )
-            .map_err(|e| anyhow::anyhow!("writing {}: {e}", png.display()))?;
-            pngs.push(name);
+        for line in pred.lines("prediction of captures left out of the fit (medium fixed):") {
+            println!("{line}");
         }
+        Some(pred)
+    };
+    if let Some(pred) = &prediction {
+        groups.push((&held[..], pred, "predicted"));
     }
-    let csv_path = args.out.join("fit.csv");
-    std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
+    let files = write_slab_fits(&args.out, &groups)?;
+    let pngs: Vec<String> = files[1..]
+        .iter()
+        .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
     println!(
         "wrote {}/{{fit.csv, {}}}",
         args.out.display(),

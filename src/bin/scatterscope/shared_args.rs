@@ -3,9 +3,7 @@
 
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use scatterscope::Named;
-use scatterscope::calibrate::irf_fit::irf_from_reference;
-use scatterscope::calibrate::measured_irf::measured_irf_from_reference;
-use scatterscope::config::{ConfigError, PhysicsOverrides, parse_cm, parse_ps};
+use scatterscope::config::{PhysicsOverrides, parse_cm, parse_ps};
 use scatterscope::physics::{MediumModel, Preset, Setup};
 use std::path::PathBuf;
 
@@ -97,7 +95,7 @@ pub struct PhysicsArgs {
 
 impl PhysicsArgs {
     /// The flags as the library's overrides.
-    fn overrides(&self) -> PhysicsOverrides {
+    pub fn overrides(&self) -> PhysicsOverrides {
         PhysicsOverrides {
             preset: self.preset,
             config: self.config.clone(),
@@ -116,10 +114,14 @@ impl PhysicsArgs {
             min_bin_photons: self.min_bin_photons,
             irf_fwhm: self.irf_fwhm,
             irf_tail: self.irf_tail,
+            irf_from: self.irf_from.clone(),
+            irf_parametric: self.irf_parametric,
+            irf_bin_ps: self.irf_bin_ps,
         }
     }
 
-    /// Resolves preset, config file and flags into a validated setup.
+    /// Resolves preset, config file and flags into a validated setup,
+    /// printing what a reference recording's instrument response is.
     pub fn resolve(&self) -> anyhow::Result<Setup> {
         self.resolve_over(None)
     }
@@ -127,55 +129,10 @@ impl PhysicsArgs {
     /// Like [`Self::resolve`], starting from `base` (a stack's recorded
     /// physics) instead of the default preset.
     pub fn resolve_over(&self, base: Option<Setup>) -> anyhow::Result<Setup> {
-        let mut setup = self.resolve_flags_over(base)?;
-        if let (Some(reference), false) = (&self.irf_from, self.irf_parametric) {
-            let (measured, table) = measured_irf_from_reference(reference, self.irf_bin_ps)?;
-            println!(
-                "instrument response measured in {}: {} bins of {} ps, FWHM {:.1} ps, mean delay {:.1} ps after its peak, time zero at {:.2} ps on its clock (the peak bin's centre), background {:.3} counts per bin subtracted, {:.0} counts in the response",
-                reference.display(),
-                measured.weights.len(),
-                measured.bin_width_ps,
-                measured.fwhm_ps(),
-                measured.mean_delay_ps(),
-                measured.zero_time_ps(),
-                measured.background_per_bin,
-                measured.signal_counts
-            );
-            setup.irf = Some(table.into());
-        } else if let Some(reference) = &self.irf_from {
-            let fit = irf_from_reference(reference, self.irf_bin_ps)?;
-            let se = |v: Option<f64>| v.map_or(String::new(), |e| format!(" +- {e:.2}"));
-            println!(
-                "instrument response fitted to {}: Gaussian FWHM {:.2}{} ps, exponential tail {:.2}{} ps, centre at {:.2} ps on its clock, background {:.3} counts per bin, chi-square per degree of freedom {:.2}",
-                reference.display(),
-                fit.irf.fwhm_ps,
-                se(fit.standard_errors_ps.0),
-                fit.irf.tail_ps,
-                se(fit.standard_errors_ps.1),
-                fit.centre_ps,
-                fit.background_per_bin,
-                fit.chi2_per_dof
-            );
-            if !fit.describes_reference() {
-                println!(
-                    "note: the Gaussian-plus-exponential form does not describe {} (chi-square per degree of freedom {:.1}); the kernels use it as an approximation",
-                    reference.display(),
-                    fit.chi2_per_dof
-                );
-            }
-            setup.irf = Some(fit.irf.into());
+        let (setup, notes) = self.overrides().resolve_noted(base)?;
+        for note in notes {
+            println!("{note}");
         }
         Ok(setup)
-    }
-
-    fn resolve_flags_over(&self, base: Option<Setup>) -> anyhow::Result<Setup> {
-        self.overrides().resolve_over(base).map_err(|e| match e {
-            ConfigError::Param { error, key, config } => anyhow::anyhow!(
-                "{error} (set it with --{} or `{key}` in {})",
-                key.replace('_', "-"),
-                config.map_or("a --config file".to_string(), |p| p.display().to_string())
-            ),
-            e => e.into(),
-        })
     }
 }

@@ -1,0 +1,202 @@
+//! What the two calibrations write and print: a stack's fitted time
+//! profile ([`Calibration`]) and the slab fit to transmittance captures
+//! ([`SlabFit`]): the measured and fitted counts as CSV, plots of both, the
+//! fitted physics as a TOML file, and the fit in words.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use super::transmittance::{Capture, SlabFit};
+use super::{CalibrateError, Calibration};
+use crate::config::medium_toml;
+use crate::report::plot::{Series, chart};
+
+fn io_error(path: &Path, e: impl std::fmt::Display) -> CalibrateError {
+    CalibrateError::Invalid(format!("writing {}: {e}", path.display()))
+}
+
+fn write(path: &Path, text: &str) -> Result<(), CalibrateError> {
+    std::fs::write(path, text).map_err(|e| io_error(path, e))
+}
+
+impl Calibration {
+    /// Writes `profile.csv` and `profile.png` (the measured and fitted time
+    /// profile, bins of `width_ps` from `start_ps`) and `physics.toml` (the
+    /// fitted medium and IRF, for a config file) into `dir`; `source` names
+    /// the calibrated stack in the TOML's header. Returns the files.
+    pub fn write(
+        &self,
+        dir: &Path,
+        start_ps: f64,
+        width_ps: f64,
+        source: &Path,
+    ) -> Result<Vec<PathBuf>, CalibrateError> {
+        std::fs::create_dir_all(dir).map_err(|e| io_error(dir, e))?;
+        let mut csv = String::from("bin_start_ps,measured,fitted\n");
+        for (i, (m, f)) in self.measured.iter().zip(&self.fitted).enumerate() {
+            writeln!(csv, "{},{m},{f}", start_ps + i as f64 * width_ps)
+                .expect("writing to a String");
+        }
+        let csv_path = dir.join("profile.csv");
+        write(&csv_path, &csv)?;
+        let series = |label: &str, values: &[f64]| Series {
+            label: label.into(),
+            points: values
+                .iter()
+                .enumerate()
+                .map(|(i, &v)| (start_ps + (i as f64 + 0.5) * width_ps, v))
+                .collect(),
+        };
+        let png = dir.join("profile.png");
+        chart(
+            &png,
+            "time profile",
+            "time (ps)",
+            "counts per bin",
+            &[series("measured", &self.measured)],
+            &[series("fitted", &self.fitted)],
+            false,
+        )
+        .map_err(|e| io_error(&png, e))?;
+        let toml_path = dir.join("physics.toml");
+        let shift = &self.parameters[2];
+        let mut header = format!(
+            "Medium and instrument fitted to the time profile of {} (chi-square per degree of freedom {:.3}).\nUse: scatterscope reconstruct STACK --config {}",
+            source.display(),
+            self.chi2_per_dof,
+            toml_path.display()
+        );
+        if shift.fitted {
+            header.push_str(&format!(
+                "\nNot in this file: the fitted time-zero shift of {:.3} ps (reconstruct --fit-physics t0 applies it).",
+                shift.value
+            ));
+        }
+        write(&toml_path, &medium_toml(&self.setup, &header))?;
+        Ok(vec![csv_path, png, toml_path])
+    }
+}
+
+impl SlabFit {
+    /// The fit in words under `title`: the medium with its errors, the
+    /// extrapolation distance, chi-square, and a row per capture.
+    pub fn lines(&self, title: &str) -> Vec<String> {
+        let mut lines = vec![title.to_string()];
+        for (name, est, unit) in [
+            ("mu_a", self.mu_a, "/cm"),
+            ("mu_s'", self.mu_s_reduced, "/cm"),
+            ("offset", self.offset, "cm (detector from the laser's axis)"),
+        ] {
+            let value = match (est.fitted, est.standard_error) {
+                (true, Some(se)) => format!(
+                    "{:.5} +- {:.1e} {unit} (Poisson), +- {:.1e} scaled by sqrt(chi2/dof)",
+                    est.value,
+                    se,
+                    se * self.scatter_factor()
+                ),
+                (true, None) => format!("{:.5} {unit} (not determined by the data)", est.value),
+                (false, _) => format!("{:.5} {unit} (fixed)", est.value),
+            };
+            lines.push(format!("  {name:<6} {value}"));
+        }
+        lines.push(format!(
+            "  extrapolation distance {:.2} mm; chi-square per degree of freedom {:.2} ({} degrees of freedom)",
+            10.0 * self.extrapolation_cm,
+            self.chi2_per_dof,
+            self.dof
+        ));
+        lines.push(
+            "  capture              thickness   t0 (ps)        signal       background/bin  bins  left out  chi2/dof  (all bins)".into(),
+        );
+        for c in &self.captures {
+            lines.push(format!(
+                "  {:<20} {:>6.2} cm  {:>12.1}  {:>12.0}  {:>14.1}  {:>5}  {:>8}  {:>8.2}  {:>10.2}",
+                c.label,
+                c.thickness_cm,
+                c.t0_ps,
+                c.signal,
+                c.background,
+                c.measured.len(),
+                c.left_out.len(),
+                c.chi2_per_dof(),
+                c.chi2_per_dof_window()
+            ));
+        }
+        lines.extend(self.undetermined.iter().map(|u| format!("  note: {u}")));
+        lines
+    }
+}
+
+/// Writes `fit.csv` (every capture's window: measured, fitted, whether
+/// the bin was in the fit) and a plot per capture, `fit_LABEL.png` (log
+/// counts against the time since the pulse entered the slab), into `dir`,
+/// for each group of captures with its fit and role (`fitted`,
+/// `predicted`). Returns the files.
+pub fn write_slab_fits(
+    dir: &Path,
+    groups: &[(&[Capture], &SlabFit, &str)],
+) -> Result<Vec<PathBuf>, CalibrateError> {
+    std::fs::create_dir_all(dir).map_err(|e| io_error(dir, e))?;
+    let mut csv = String::from("capture,role,bin_start_ps,measured,fitted,in_fit\n");
+    let mut files = Vec::new();
+    for &(caps, fit, role) in groups {
+        for (cap, c) in caps.iter().zip(&fit.captures) {
+            let h = &cap.histogram;
+            let first = c.window_start_ps(h.bin_width_ps, h.start_ps);
+            let start = |i: usize| first + i as f64 * h.bin_width_ps;
+            for (i, (m, u)) in c.measured.iter().zip(&c.fitted).enumerate() {
+                let in_fit = u8::from(!c.left_out.contains(&i));
+                writeln!(csv, "{},{role},{},{m},{u},{in_fit}", c.label, start(i))
+                    .expect("writing to a String");
+            }
+            // Log counts against the time since the pulse entered the slab,
+            // of the window's bins that `keep` picks.
+            let points = |v: &[f64], keep: &dyn Fn(usize) -> bool| {
+                v.iter()
+                    .enumerate()
+                    .filter(|(i, _)| keep(*i))
+                    .map(|(i, &x)| {
+                        (
+                            start(i) + 0.5 * h.bin_width_ps - c.t0_ps,
+                            x.max(0.5).log10(),
+                        )
+                    })
+                    .collect()
+            };
+            let mut measured = vec![Series {
+                label: "measured".into(),
+                points: points(&c.measured, &|i| !c.left_out.contains(&i)),
+            }];
+            if !c.left_out.is_empty() {
+                measured.push(Series {
+                    label: "measured, left out of the fit".into(),
+                    points: points(&c.measured, &|i| c.left_out.contains(&i)),
+                });
+            }
+            let png = dir.join(format!("fit_{}.png", c.label));
+            chart(
+                &png,
+                &format!(
+                    "{} ({role}, {:.2} cm): chi2/dof {:.2}",
+                    c.label,
+                    c.thickness_cm,
+                    c.chi2_per_dof()
+                ),
+                "time after the pulse enters the slab (ps)",
+                "log10 counts per bin",
+                &measured,
+                &[Series {
+                    label: "model".into(),
+                    points: points(&c.fitted, &|_| true),
+                }],
+                false,
+            )
+            .map_err(|e| io_error(&png, e))?;
+            files.push(png);
+        }
+    }
+    let csv_path = dir.join("fit.csv");
+    write(&csv_path, &csv)?;
+    files.insert(0, csv_path);
+    Ok(files)
+}
