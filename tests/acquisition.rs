@@ -471,7 +471,7 @@ fn bin_raw_file(path: &Path) -> (Array3<u32>, scatterscope::formats::sstags::Tag
     assert_eq!(binned.stacks.len(), 1);
     let counts = binned.stacks[0].data.mapv(|c| c as u32);
     match binned.recording {
-        Recording::Raw { summary, counts: c } => {
+        Recording::TagFile { summary, counts: c } => {
             assert_eq!(c.invalid_records, 0);
             assert_eq!(binned.truncated.is_some(), summary.totals.is_none());
             (counts, summary)
@@ -500,7 +500,7 @@ fn raw_recordings_round_trip_and_survive_a_cut() {
     assert_eq!(summary.header.pixels_x, 64);
     // What `info` shows: the file's events counted by kind agree with the
     // acquisition's ledger.
-    let (_, survey) = scatterscope::tags::survey::survey_raw(&path).unwrap();
+    let (_, survey) = scatterscope::tags::survey::survey_tag_file(&path).unwrap();
     assert_eq!(survey.photons, out.accounting.received);
     assert_eq!(survey.lost_in_device, out.accounting.lost_in_device);
     assert_eq!(survey.invalid_records, 0);

@@ -1,7 +1,7 @@
 //! A recorded tag file -> transient stacks: the one place that reads,
 //! decodes and bins a file, for the `bin` command, the benchmarks and the
 //! tests alike. Two kinds of file: PicoQuant T3 files (PTU, PT3, HT3) and
-//! the project's raw tag files (`.sstags`, from `acquire --raw`).
+//! the project's tag files (`.sstags`, from `acquire --tags`).
 //!
 //! The default window starts at `t_start_ps` and covers one sync period.
 //! In PicoQuant files, photons whose micro times reach past it (a TAC
@@ -9,11 +9,11 @@
 //! window is widened to hold the largest micro time present and the file
 //! binned again, and a note says so. A window the caller set is kept; a
 //! note says how many photons fell past it and how many bins would hold
-//! them. Raw files hold the device's whole sensor and micro times within
+//! them. Tag files hold the device's whole sensor and micro times within
 //! its sync period; they are binned onto the sensor in whole micro-time
 //! steps.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::formats::sstags::{TagFile, TagFileError, TagFileSummary, is_tag_file};
@@ -26,7 +26,8 @@ use super::binning::{
 use super::wire::{BatchCounts, bin_batch};
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, RecordReader, TtrError, open};
-use crate::stack::{Stack, StackMeta};
+use crate::formats::png::{SheetScale, write_contact_sheet};
+use crate::stack::{Stack, StackError, StackMeta};
 
 /// How input channels and markers become pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -39,6 +40,12 @@ pub enum Pixels {
     /// channel that saw a photon.
     Channel,
 }
+
+crate::named::named!(Pixels {
+    Auto => "auto",
+    Single => "single",
+    Channel => "channel",
+});
 
 /// What to bin: the time window and the pixel and frame mapping.
 #[derive(Debug, Clone, PartialEq)]
@@ -101,13 +108,76 @@ pub struct BinnedFile {
 pub enum Recording {
     /// A PicoQuant file and its header.
     PicoQuant(FileInfo),
-    /// A raw tag file: its header and frames, and the records' own counts.
-    Raw {
+    /// A tag file (`.sstags`): its header and frames, and the records'
+    /// own counts.
+    TagFile {
         /// What the file holds.
         summary: TagFileSummary,
         /// Photons the device reported lost, and records that did not decode.
         counts: BatchCounts,
     },
+}
+
+impl BinnedFile {
+    /// Writes every stack as EXR with a PNG contact sheet into `dir`
+    /// (created if missing): `stack.exr`, or `stack_f000.exr`, ... when
+    /// frames are kept apart. Returns the EXR files.
+    pub fn write(&self, dir: &Path) -> Result<Vec<PathBuf>, StackError> {
+        std::fs::create_dir_all(dir).map_err(|e| StackError::io(dir, e))?;
+        let many = self.stacks.len() > 1;
+        let mut files = Vec::new();
+        for (f, stack) in self.stacks.iter().enumerate() {
+            let stem = if many {
+                format!("stack_f{f:03}")
+            } else {
+                "stack".into()
+            };
+            let exr = dir.join(format!("{stem}.exr"));
+            stack.save(&exr)?;
+            write_contact_sheet(stack, SheetScale::Shared, &dir.join(format!("{stem}.png")))?;
+            files.push(exr);
+        }
+        Ok(files)
+    }
+
+    /// Where every record went, the notes and the window, one line each.
+    pub fn summary(&self) -> Vec<String> {
+        let acc = self.accounting;
+        let mut lines = vec![match &self.recording {
+            Recording::PicoQuant(_) => format!(
+                "{} records ({:.0} M records/s): {} photons, {} binned, {} outside the time window, {} on other channels, {} outside the image; {} markers, {} frames",
+                acc.records,
+                self.records_per_s / 1e6,
+                acc.received,
+                acc.binned,
+                acc.outside_window,
+                acc.other_channel,
+                acc.outside_region,
+                acc.markers,
+                acc.frames
+            ),
+            Recording::TagFile { counts, .. } => format!(
+                "{} records ({:.0} M records/s): {} photons, {} binned, {} outside the window, {} lost in the device, {} invalid",
+                acc.records,
+                self.records_per_s / 1e6,
+                acc.received,
+                acc.binned,
+                acc.outside_window,
+                counts.lost_in_device,
+                counts.invalid_records
+            ),
+        }];
+        lines.extend(self.notes.iter().map(|n| format!("note: {n}")));
+        lines.extend(self.truncated.iter().map(|t| format!("warning: {t}")));
+        let (k, h, w) = self.stacks[0].data.dim();
+        lines.push(format!(
+            "{} stack(s) of {k} x {h} x {w} ({} ps bins from {} ps)",
+            self.stacks.len(),
+            self.window.width_ps(self.resolution_ps),
+            self.window.start_ps(self.resolution_ps),
+        ));
+        lines
+    }
 }
 
 /// Why a file cannot be binned.
@@ -116,9 +186,9 @@ pub enum BinFileError {
     /// The PicoQuant file cannot be read.
     #[error(transparent)]
     File(#[from] FileError),
-    /// The raw tag file cannot be read.
+    /// The tag file cannot be read.
     #[error(transparent)]
-    Raw(#[from] TagFileError),
+    TagFile(#[from] TagFileError),
     /// The request does not fit the file.
     #[error("{path}: {reason}")]
     Spec {
@@ -129,11 +199,11 @@ pub enum BinFileError {
     },
 }
 
-/// Bins a recorded tag file into transient stacks: a project raw tag file
+/// Bins a recorded tag file into transient stacks: a project tag file
 /// (recognised by its magic) or a PicoQuant T3 file (PTU, PT3, HT3).
 pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
     if is_tag_file(path) {
-        bin_raw(path, spec)
+        bin_tag_file(path, spec)
     } else {
         bin_picoquant(path, spec)
     }
@@ -311,12 +381,12 @@ fn run_pass(
     })
 }
 
-/// A raw tag file: the device's whole sensor, micro time from the sync.
-fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
+/// A tag file: the device's whole sensor, micro time from the sync.
+fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
     let spec_err = |reason| spec_error(path, reason);
     if !matches!(spec.pixels, Pixels::Auto) || spec.frames != FrameSelect::Sum {
         return Err(spec_err(
-            "a raw tag file is binned onto its sensor with every frame summed; pixel and frame mappings do not apply".into(),
+            "a tag file is binned onto its sensor with every frame summed; pixel and frame mappings do not apply".into(),
         ));
     }
     let raw = TagFile::open(path)?;
@@ -357,8 +427,8 @@ fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
     let seconds = start.elapsed().as_secs_f64();
     let (mut stacks, accounting) = binner.finish();
     let source = format!("{} ({} {})", path.display(), header.model, header.serial);
-    let record = RawFileRecord {
-        raw_header: header,
+    let record = TagFileRecord {
+        tag_file_header: header,
         totals_in_file: summary.totals.is_some(),
     };
     let stack = Stack {
@@ -376,7 +446,7 @@ fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
         .is_none()
         .then(|| "no end frame: the recording was cut (crash or disconnect)".to_string());
     Ok(BinnedFile {
-        recording: Recording::Raw { summary, counts },
+        recording: Recording::TagFile { summary, counts },
         stacks: vec![stack],
         accounting,
         window,
@@ -387,11 +457,11 @@ fn bin_raw(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
     })
 }
 
-/// What a stack binned from a raw tag file records about its source.
+/// What a stack binned from a tag file records about its source.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct RawFileRecord {
+pub struct TagFileRecord {
     /// The file's header.
-    pub raw_header: crate::formats::sstags::TagFileHeader,
+    pub tag_file_header: crate::formats::sstags::TagFileHeader,
     /// Whether the file ends with the device's totals (else it was cut).
     pub totals_in_file: bool,
 }

@@ -98,6 +98,22 @@ pub enum FrameSelect {
     One(usize),
 }
 
+impl std::str::FromStr for FrameSelect {
+    type Err = String;
+
+    /// `sum`, `all` or a frame number.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "sum" => Ok(Self::Sum),
+            "all" => Ok(Self::All),
+            n => n
+                .parse()
+                .map(Self::One)
+                .map_err(|_| format!("`{n}`: use sum, all or a frame number")),
+        }
+    }
+}
+
 /// Micro-time binning: `bins` bins of `width` micro-time units from `start`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TimeWindow {

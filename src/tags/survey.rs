@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::formats::sstags::{TagFileError, TagFileSummary, read_tag_file};
+use crate::formats::sstags::{TagFileError, TagFileSummary, is_tag_file, read_tag_file};
 use firmware_protocol::Event;
 
 use super::Tag;
@@ -72,9 +72,9 @@ pub fn survey_picoquant(path: &Path) -> Result<(FileInfo, PicoQuantSurvey), File
     Ok((info, s))
 }
 
-/// The events of a raw tag file, counted by kind.
+/// The events of a tag file (`.sstags`), counted by kind.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct RawSurvey {
+pub struct TagFileSurvey {
     /// Photon records.
     pub photons: u64,
     /// Marker records.
@@ -87,9 +87,9 @@ pub struct RawSurvey {
     pub last_event_s: f64,
 }
 
-/// Counts the events of a raw tag file.
-pub fn survey_raw(path: &Path) -> Result<(TagFileSummary, RawSurvey), TagFileError> {
-    let mut s = RawSurvey::default();
+/// Counts the events of a tag file (`.sstags`).
+pub fn survey_tag_file(path: &Path) -> Result<(TagFileSummary, TagFileSurvey), TagFileError> {
+    let mut s = TagFileSurvey::default();
     let mut last_sync = 0u64;
     let summary = read_tag_file(path, |batch| {
         for e in batch.events() {
@@ -109,4 +109,107 @@ pub fn survey_raw(path: &Path) -> Result<(TagFileSummary, RawSurvey), TagFileErr
     })?;
     s.last_event_s = last_sync as f64 * summary.header.sync_period_fs as f64 * 1e-15;
     Ok((summary, s))
+}
+
+/// What `info` shows of a recorded file: its header and its events
+/// counted by kind.
+#[derive(Debug)]
+pub enum Survey {
+    /// A PicoQuant file.
+    PicoQuant(Box<FileInfo>, PicoQuantSurvey),
+    /// The project's tag file.
+    TagFile(Box<TagFileSummary>, TagFileSurvey),
+}
+
+/// Why a file cannot be surveyed.
+#[derive(Debug, thiserror::Error)]
+pub enum SurveyError {
+    /// The PicoQuant file cannot be read.
+    #[error(transparent)]
+    PicoQuant(#[from] FileError),
+    /// The tag file cannot be read.
+    #[error(transparent)]
+    TagFile(#[from] TagFileError),
+}
+
+/// Surveys a recorded file: a tag file (recognised by its magic) or a
+/// PicoQuant file.
+pub fn survey(path: &Path) -> Result<Survey, SurveyError> {
+    Ok(if is_tag_file(path) {
+        let (summary, s) = survey_tag_file(path)?;
+        Survey::TagFile(Box::new(summary), s)
+    } else {
+        let (info, s) = survey_picoquant(path)?;
+        Survey::PicoQuant(Box::new(info), s)
+    })
+}
+
+impl Survey {
+    /// The survey in words, one line each; warnings start with `warning:`.
+    pub fn lines(&self) -> Vec<String> {
+        match self {
+            Survey::PicoQuant(info, s) => {
+                let mut lines = info.describe();
+                lines.push(format!(
+                    "photons per channel: {:?}",
+                    s.photons_per_channel
+                ));
+                lines.push(format!(
+                    "markers: {}, syncs: {}, overflow records: {}",
+                    s.markers, s.syncs, s.overflows
+                ));
+                lines.push(format!(
+                    "measured duration: {:.6} s (last event)",
+                    s.last_event_s
+                ));
+                if let Some(e) = &s.cut {
+                    lines.push(format!("warning: {e}"));
+                }
+                lines
+            }
+            Survey::TagFile(summary, s) => {
+                let h = &summary.header;
+                let mut lines = vec![
+                    format!("file: {}", summary.path.display()),
+                    format!(
+                        "container: scatterscope tag file v{}; written by {}",
+                        h.format_version, h.software
+                    ),
+                    format!("device: {} {} via {}", h.model, h.serial, h.link),
+                    format!(
+                        "sensor: {} x {} pixels; micro-time unit {} fs; sync period {} fs (divider {})",
+                        h.pixels_x, h.pixels_y, h.resolution_fs, h.sync_period_fs, h.sync_divider
+                    ),
+                    format!(
+                        "batches: {}; photons: {}; markers: {}; lost in the device: {}; invalid records: {}",
+                        summary.batches, s.photons, s.markers, s.lost_in_device, s.invalid_records
+                    ),
+                    format!("measured duration: {:.6} s (last event)", s.last_event_s),
+                ];
+                lines.push(match summary.totals {
+                    Some(t) => format!(
+                        "device totals: {} batches, {} photons sent, {} lost in the device{}",
+                        t.batches,
+                        t.photons_sent,
+                        t.photons_lost,
+                        if t.photons_sent == s.photons {
+                            ""
+                        } else {
+                            " (the file misses some: lost in transit)"
+                        }
+                    ),
+                    None => {
+                        "warning: no end frame: the recording was cut (crash or disconnect)".into()
+                    }
+                });
+                if summary.bytes_skipped > 0 {
+                    lines.push(format!(
+                        "warning: {} bytes did not form valid frames (damage or a cut last batch)",
+                        summary.bytes_skipped
+                    ));
+                }
+                lines
+            }
+        }
+    }
 }

@@ -115,6 +115,55 @@ pub struct FileInfo {
 }
 
 impl FileInfo {
+    /// The header in words, one line each (what `info` prints first).
+    pub fn describe(&self) -> Vec<String> {
+        let container = match &self.container {
+            Container::Ptu(v) => format!("PTU {v}"),
+            Container::HydraHarpLegacy(v) => format!("HydraHarp HT3/HT2 {v}"),
+            Container::PicoHarpLegacy(v) => format!("PicoHarp PT3/PT2 {v}"),
+        };
+        let mut lines = vec![
+            format!("file: {}", self.path.display()),
+            format!("container: {container}; device: {}", self.device),
+            format!(
+                "record type: {} (0x{:08X})",
+                self.record_type.name(),
+                self.record_type.code()
+            ),
+            format!(
+                "resolution: {:.3} ps; macro unit: {:.6e} s{}",
+                self.resolution_s * 1e12,
+                self.macro_unit_s,
+                self.sync_rate_hz
+                    .map_or(String::new(), |r| format!("; sync rate {r} Hz"))
+            ),
+            format!(
+                "records: {} announced, {} present{}",
+                self.records_announced,
+                self.records_present,
+                if self.trailing_bytes > 0 {
+                    format!(", {} trailing bytes", self.trailing_bytes)
+                } else {
+                    String::new()
+                }
+            ),
+        ];
+        if let Some(d) = self.acquisition_time_s() {
+            lines.push(format!("acquisition time set: {d} s"));
+        }
+        if let Some(d) = self.stopped_after_s() {
+            lines.push(format!("stopped after: {d} s"));
+        }
+        lines.push(format!("measurement sub mode: {}", self.sub_mode));
+        if let Some(img) = &self.imaging {
+            lines.push(format!(
+                "image: {} x {} pixels, line start mask {}, line stop mask {}, frame mask {}, bidirectional {}",
+                img.pixels_x, img.pixels_y, img.line_start, img.line_stop, img.frame, img.bidirectional
+            ));
+        }
+        lines
+    }
+
     /// Acquisition time set in the software (s), when recorded.
     pub fn acquisition_time_s(&self) -> Option<f64> {
         self.tags
