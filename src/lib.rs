@@ -75,6 +75,7 @@ pub mod formats;
 pub mod forward;
 pub mod metrics;
 pub mod named;
+pub mod psf;
 pub mod reconstruct;
 pub mod report;
 pub mod scene;

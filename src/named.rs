@@ -36,6 +36,11 @@ macro_rules! named {
 }
 pub(crate) use named;
 
+named!(crate::physics::Sampling {
+    Integrated => "integrated",
+    Point => "point",
+});
+
 #[cfg(test)]
 mod tests {
     use super::Named;

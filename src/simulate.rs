@@ -2,14 +2,16 @@
 //! Poisson draw of it, each with its metadata. What `scatterscope
 //! simulate` writes and the report starts from.
 
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use ndarray::Array2;
 use scatterscope_physics::{KernelStack, ParamError, Sampling, Setup};
 
+use crate::formats::png::SheetScale;
 use crate::forward::{Boundary, ForwardModel, poisson_counts};
 use crate::scene::{ImageError, Scene};
-use crate::stack::{Stack, StackMeta, ValueKind};
+use crate::stack::{Stack, StackError, StackMeta, ValueKind};
 
 /// A simulated measurement.
 pub struct Simulation {
@@ -116,4 +118,86 @@ pub fn simulate(
             poisson_s,
         },
     })
+}
+
+impl Simulation {
+    /// Writes `truth.{exr,png}`, `expected.{exr,png}` and `counts.{exr,png}`
+    /// (and `.npy` copies of both stacks with `npy`) into `dir` (created if
+    /// missing); returns the files.
+    pub fn write(
+        &self,
+        dir: &Path,
+        npy: bool,
+        scale: SheetScale,
+    ) -> Result<Vec<PathBuf>, StackError> {
+        std::fs::create_dir_all(dir).map_err(|e| StackError::io(dir, e))?;
+        let truth = dir.join("truth.exr");
+        crate::formats::exr::write_image(self.truth.mapv(|v| v as f32).view(), &truth)?;
+        let png = dir.join("truth.png");
+        crate::formats::png::write_png(self.truth.view(), Some(1.0), &png)?;
+        let mut files = vec![truth, png];
+        for (name, stack) in [("expected", &self.expected), ("counts", &self.counts)] {
+            let exr = dir.join(format!("{name}.exr"));
+            stack.save(&exr)?;
+            let sheet = dir.join(format!("{name}.png"));
+            crate::formats::png::write_contact_sheet(stack, scale, &sheet)?;
+            files.extend([exr, sheet]);
+            if npy {
+                let file = dir.join(format!("{name}.npy"));
+                stack.save(&file)?;
+                files.push(file);
+            }
+        }
+        Ok(files)
+    }
+
+    /// What was simulated, one line each: the scene, bins and photons, a
+    /// table per bin, clamped round-off and the run times.
+    pub fn summary(&self, scene: &Scene, seed: u64) -> Vec<String> {
+        let setup = &self.kernels.setup;
+        let (expected, counts) = (&self.expected, &self.counts);
+        let mut lines = vec![
+            format!(
+                "scene {} at {}x{}: {} bins kept of {}, expected {:.1} photons, sampled {} (seed {seed})",
+                scene.name(),
+                setup.sensor.width_px,
+                setup.sensor.height_px,
+                self.kernels.len(),
+                setup.bins.count,
+                expected.total(),
+                counts.total(),
+            ),
+            format!(
+                "{:>3} {:>8} {:>12} {:>10} {:>10}",
+                "bin", "start ps", "expected", "counts", "max count"
+            ),
+        ];
+        let sum = |s: &Stack, k: usize| s.bin(k).iter().map(|&v| f64::from(v)).sum::<f64>();
+        for k in 0..counts.bins() {
+            let max = counts.bin(k).iter().fold(0.0f32, |m, &v| m.max(v));
+            lines.push(format!(
+                "{:>3} {:>8.1} {:>12.1} {:>10} {:>10}",
+                k,
+                counts.meta.bin_starts_ps[k],
+                sum(expected, k),
+                sum(counts, k),
+                max
+            ));
+        }
+        if self.clamped > 0 {
+            lines.push(format!(
+                "clamped {} expected-count values made negative by FFT round-off (most negative {:.3e}) to 0",
+                self.clamped, self.most_negative
+            ));
+        }
+        let t = self.timings;
+        lines.push(format!(
+            "run time: PSF {:.1} ms, kernel spectra {:.1} ms, forward model {:.1} ms, Poisson {:.1} ms",
+            t.psf_s * 1e3,
+            t.spectra_s * 1e3,
+            t.forward_s * 1e3,
+            t.poisson_s * 1e3
+        ));
+        lines
+    }
 }

@@ -67,3 +67,78 @@ pub fn diagnose(setup: &Setup, diffusion: &Diffusion) -> Vec<Diagnostic> {
     }
     out
 }
+
+/// What every physics-using command reports first, one line each: the
+/// medium and model, the sensor and bins, the diffusion-regime warnings
+/// (`warning [code]: ...`), and what the kernels left out (bins below the
+/// photon threshold, pixels beyond the support).
+pub fn describe_setup(setup: &Setup, kernels: &crate::KernelStack) -> Vec<String> {
+    let m = &setup.medium;
+    let d = &kernels.diffusion;
+    let mut lines = vec![format!(
+        "medium: mu_a {} /cm, mu_s {} /cm, g {}, n {}, thickness {} cm (D = {:.4} cm, light arrives from ~{:.0} ps, peak {:.1} ps)",
+        m.mu_a_per_cm,
+        m.mu_s_per_cm,
+        m.g,
+        m.refractive_index,
+        m.thickness_cm,
+        d.d_cm,
+        kernels
+            .bins
+            .iter()
+            .find(|b| b.photons >= 0.01)
+            .map_or(f64::NAN, |b| b.start_ps),
+        d.peak_time_ps(),
+    )];
+    lines.push(format!("model: {}", setup.model_summary()));
+    if let Some(s) = &d.slab {
+        lines.push(format!(
+            "slab: extrapolated boundaries {:.4} cm outside each face (n = {} against air), equivalent source {:.4} cm deep; transmitted flux",
+            s.extrapolation_cm, m.refractive_index, s.source_depth_cm
+        ));
+    }
+    lines.push(format!(
+        "sensor: {} x {} px over {} cm ({:.4} cm/px); bins: {} x {} ps from {} ps; light budget {} photons",
+        setup.sensor.width_px,
+        setup.sensor.height_px,
+        setup.sensor.fov_cm,
+        setup.sensor.pixel_pitch_cm(),
+        setup.bins.count,
+        setup.bins.width_ps,
+        setup.bins.start_ps,
+        setup.total_photons
+    ));
+    lines.extend(
+        diagnose(setup, d)
+            .into_iter()
+            .map(|w| format!("warning [{}]: {}", w.code, w.message)),
+    );
+    let dropped: Vec<_> = kernels.dropped_bins().collect();
+    if !dropped.is_empty() {
+        let photons: f64 = dropped.iter().map(|b| b.photons).sum();
+        lines.push(format!(
+            "left out: {} bin(s) with fewer than {} expected photons each ({}), {:.3} photons in total ({:.3}% of the budget)",
+            dropped.len(),
+            setup.min_bin_photons,
+            dropped
+                .iter()
+                .map(|b| format!("{}-{} ps", b.start_ps, b.end_ps))
+                .collect::<Vec<_>>()
+                .join(", "),
+            photons,
+            100.0 * photons / setup.total_photons
+        ));
+    }
+    let full = (setup.sensor.height_px * setup.sensor.width_px) as f64;
+    let evaluated: f64 = kernels
+        .kept_bins()
+        .map(|b| ((2 * b.support_radius_px + 1).pow(2) as f64).min(full))
+        .sum();
+    lines.push(format!(
+        "left out: kernel pixels beyond {} sigma (evaluated {:.1}% of the pixels of the {} kept bins)",
+        crate::kernel::SUPPORT_SIGMAS,
+        100.0 * evaluated / (full * kernels.len() as f64),
+        kernels.len()
+    ));
+    lines
+}

@@ -150,10 +150,7 @@ impl Survey {
         match self {
             Survey::PicoQuant(info, s) => {
                 let mut lines = info.describe();
-                lines.push(format!(
-                    "photons per channel: {:?}",
-                    s.photons_per_channel
-                ));
+                lines.push(format!("photons per channel: {:?}", s.photons_per_channel));
                 lines.push(format!(
                     "markers: {}, syncs: {}, overflow records: {}",
                     s.markers, s.syncs, s.overflows

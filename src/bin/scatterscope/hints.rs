@@ -8,6 +8,7 @@ use scatterscope::acquire::JobError;
 use scatterscope::calibrate::histogram::HistogramError;
 use scatterscope::config::ConfigError;
 use scatterscope::formats::picoquant::{FileError, TtrError};
+use scatterscope::psf::PsfError;
 use scatterscope::reconstruct::ReconstructError;
 use scatterscope::reconstruct::input::InputError;
 use scatterscope::reconstruct::problem::ProblemError;
@@ -72,6 +73,8 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
         "--allow-truncated bins the complete records"
     } else if let Some(SimulateError::NoBins { .. }) = cause.downcast_ref::<SimulateError>() {
         "lower --min-bin-photons or raise --photons"
+    } else if let Some(PsfError::NoBins(_)) = cause.downcast_ref::<PsfError>() {
+        "lower --min-bin-photons"
     } else if let Some(JobError::SensorTooLarge { .. }) = cause.downcast_ref::<JobError>() {
         "a smaller --size"
     } else {

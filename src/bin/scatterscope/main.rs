@@ -7,7 +7,6 @@ mod calibrate_slab;
 mod denoise;
 mod denoise_bench;
 mod hints;
-mod physics_summary;
 mod psf;
 mod recon_args;
 mod reconstruct;

@@ -1,18 +1,15 @@
 //! `scatterscope simulate`: truth image, expected stack and Poisson counts.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use crate::shared_args::{PhysicsArgs, choice};
-use anyhow::Context;
-use scatterscope::formats::exr;
-use scatterscope::formats::png::{SheetScale, write_contact_sheet, write_png};
+use scatterscope::formats::png::SheetScale;
 use scatterscope::forward::Boundary;
 use scatterscope::physics::Sampling;
+use scatterscope::physics::validity::describe_setup;
 use scatterscope::scene::Scene;
 use scatterscope::simulate::simulate;
-use scatterscope::stack::Stack;
 
-use crate::physics_summary::{parse_sampling, print_setup};
+use crate::shared_args::{PhysicsArgs, choice};
 
 /// Simulate a transient measurement of a scene through the scattering slab.
 ///
@@ -36,7 +33,7 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// ST-PSF discretisation: integrated (correct) or point (for comparison).
-    #[arg(long, default_value = "integrated", value_parser = parse_sampling)]
+    #[arg(long, default_value = "integrated", value_parser = choice::<Sampling>())]
     sampling: Sampling,
     /// Contact-sheet scaling.
     #[arg(long, value_parser = choice::<SheetScale>(), default_value = "shared")]
@@ -53,82 +50,13 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let setup = args.physics.resolve()?;
     let scene = Scene::parse(&args.scene);
     let sim = simulate(&setup, &scene, args.sampling, args.boundary, args.seed)?;
-    print_setup(&setup, &sim.kernels);
-    let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating output directory {}", args.out.display()))?;
-    let (truth, kernels) = (&sim.truth, &sim.kernels);
-    let (expected_stack, counts_stack) = (&sim.expected, &sim.counts);
-    let truth_f32 = truth.mapv(|v| v as f32);
-    exr::write_image(truth_f32.view(), &args.out.join("truth.exr"))?;
-    write_png(truth.view(), Some(1.0), &args.out.join("truth.png"))?;
-    for (name, stack) in [("expected", expected_stack), ("counts", counts_stack)] {
-        write_stack(stack, &args.out, name, args.npy, args.sheet_scale)?;
+    for line in describe_setup(&setup, &sim.kernels) {
+        eprintln!("{line}");
     }
-
-    println!(
-        "scene {} at {}x{}: {} bins kept of {}, expected {:.1} photons, sampled {} (seed {})",
-        scene.name(),
-        w,
-        h,
-        kernels.len(),
-        setup.bins.count,
-        expected_stack.total(),
-        counts_stack.total(),
-        args.seed
-    );
-    println!(
-        "{:>3} {:>8} {:>12} {:>10} {:>10}",
-        "bin", "start ps", "expected", "counts", "max count"
-    );
-    for k in 0..counts_stack.bins() {
-        let max = counts_stack.bin(k).iter().fold(0.0f32, |m, &v| m.max(v));
-        println!(
-            "{:>3} {:>8.1} {:>12.1} {:>10} {:>10}",
-            k,
-            counts_stack.meta.bin_starts_ps[k],
-            expected_stack
-                .bin(k)
-                .iter()
-                .map(|&v| f64::from(v))
-                .sum::<f64>(),
-            counts_stack
-                .bin(k)
-                .iter()
-                .map(|&v| f64::from(v))
-                .sum::<f64>(),
-            max
-        );
+    sim.write(&args.out, args.npy, args.sheet_scale)?;
+    for line in sim.summary(&scene, args.seed) {
+        println!("{line}");
     }
-    if sim.clamped > 0 {
-        println!(
-            "clamped {} expected-count values made negative by FFT round-off (most negative {:.3e}) to 0",
-            sim.clamped, sim.most_negative
-        );
-    }
-    let t = sim.timings;
-    println!(
-        "run time: PSF {:.1} ms, kernel spectra {:.1} ms, forward model {:.1} ms, Poisson {:.1} ms",
-        t.psf_s * 1e3,
-        t.spectra_s * 1e3,
-        t.forward_s * 1e3,
-        t.poisson_s * 1e3
-    );
     println!("wrote {}", args.out.display());
-    Ok(())
-}
-
-fn write_stack(
-    stack: &Stack,
-    dir: &Path,
-    name: &str,
-    npy: bool,
-    scale: SheetScale,
-) -> anyhow::Result<()> {
-    stack.save(&dir.join(format!("{name}.exr")))?;
-    write_contact_sheet(stack, scale, &dir.join(format!("{name}.png")))?;
-    if npy {
-        stack.save(&dir.join(format!("{name}.npy")))?;
-    }
     Ok(())
 }
