@@ -2,6 +2,8 @@
 //! Gaussian noise of known sigma, scored by PSNR/SSIM (data range 1) and
 //! timed per call.
 
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use ndarray::Array2;
@@ -9,6 +11,9 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use super::Denoiser;
+use super::ffdnet::Ffdnet;
+use super::tv::TotalVariation;
+use crate::formats::image::{ImageError, read_image, write_image};
 use crate::metrics::{psnr, ssim};
 
 /// One clean test image on the [0, 1] scale.
@@ -133,4 +138,152 @@ pub fn summarise(results: &[BenchResult]) -> Vec<(String, f64, f64, f64, f64)> {
             )
         })
         .collect()
+}
+
+/// The clean images at `paths`: files, or directories whose PNG and JPEG
+/// files are taken in name order.
+pub fn collect_images(paths: &[PathBuf]) -> Result<Vec<BenchImage>, ImageError> {
+    let mut files = Vec::new();
+    for p in paths {
+        if !p.is_dir() {
+            files.push(p.clone());
+            continue;
+        }
+        let listing = std::fs::read_dir(p).map_err(|e| ImageError::Decode {
+            path: p.clone(),
+            reason: e.to_string(),
+        })?;
+        let mut inner: Vec<PathBuf> = listing
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|f| {
+                let ext = f
+                    .extension()
+                    .map(|e| e.to_string_lossy().to_ascii_lowercase());
+                matches!(ext.as_deref(), Some("png" | "jpg" | "jpeg"))
+            })
+            .collect();
+        if inner.is_empty() {
+            return Err(ImageError::Content {
+                path: p.clone(),
+                reason: "no PNG/JPEG images".into(),
+            });
+        }
+        inner.sort();
+        files.extend(inner);
+    }
+    files
+        .iter()
+        .map(|f| {
+            Ok(BenchImage {
+                name: f
+                    .file_stem()
+                    .map_or_else(String::new, |s| s.to_string_lossy().into_owned()),
+                clean: read_image(f)?,
+            })
+        })
+        .collect()
+}
+
+/// The priors the benchmark compares: FFDNet with each of `nets`, TV at
+/// the gain PnP uses, and TV with the best of several gains chosen with
+/// the clean image (an oracle, labelled so).
+pub struct StandardPriors {
+    nets: Vec<(String, Ffdnet)>,
+    tv: TotalVariation,
+    tv_gains: Vec<TotalVariation>,
+}
+
+impl StandardPriors {
+    /// The standard set with these FFDNet weights, each with its label.
+    pub fn new(nets: Vec<(String, Ffdnet)>) -> Self {
+        Self {
+            nets,
+            tv: TotalVariation::default(),
+            tv_gains: [0.2, 0.3, 0.4, 0.5, 0.7, 1.0, 1.4]
+                .into_iter()
+                .map(|gain| TotalVariation {
+                    gain,
+                    ..Default::default()
+                })
+                .collect(),
+        }
+    }
+
+    /// The priors, in table order.
+    pub fn priors(&self) -> Vec<BenchPrior<'_>> {
+        let mut priors: Vec<BenchPrior<'_>> = self
+            .nets
+            .iter()
+            .map(|(label, n)| BenchPrior {
+                label: label.clone(),
+                candidates: vec![n as &dyn Denoiser],
+            })
+            .collect();
+        priors.push(BenchPrior {
+            label: format!("tv gain {}", self.tv.gain),
+            candidates: vec![&self.tv],
+        });
+        priors.push(BenchPrior {
+            label: "tv oracle gain".into(),
+            candidates: self.tv_gains.iter().map(|t| t as &dyn Denoiser).collect(),
+        });
+        priors
+    }
+}
+
+/// Writes each image's noisy input at each sigma (8-bit units) as
+/// `dir/IMAGE_sigmaS.npy` (float32), the noise every prior sees, so that
+/// another implementation can be scored on identical noise.
+pub fn write_noisy(
+    dir: &Path,
+    images: &[BenchImage],
+    sigmas_8bit: &[f64],
+    seed: u64,
+) -> Result<(), ImageError> {
+    std::fs::create_dir_all(dir).map_err(|e| ImageError::Write {
+        path: dir.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    for (i, img) in images.iter().enumerate() {
+        for &s in sigmas_8bit {
+            let noisy = add_noise(&img.clean, s / 255.0, noise_seed(seed, i, s));
+            write_image(
+                noisy.view(),
+                &dir.join(format!("{}_sigma{s}.npy", img.name)),
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// Every measurement as CSV.
+pub fn results_csv(results: &[BenchResult]) -> String {
+    let mut csv = String::from("prior,image,sigma_8bit,psnr_noisy_db,psnr_db,ssim,seconds\n");
+    for r in results {
+        writeln!(
+            csv,
+            "{},{},{},{:.4},{:.4},{:.5},{:.6}",
+            r.prior, r.image, r.sigma_8bit, r.psnr_noisy, r.psnr, r.ssim, r.seconds
+        )
+        .expect("writing to a String");
+    }
+    csv
+}
+
+/// The summary table (mean PSNR and SSIM, median time per call) as
+/// Markdown.
+pub fn summary_markdown(images: &[BenchImage], results: &[BenchResult]) -> String {
+    let mut md = format!(
+        "Images: {}. Mean PSNR (data range 1) / mean SSIM, median time per call.\n\n| prior | sigma | PSNR (dB) | SSIM | time (ms) |\n|---|---|---|---|---|\n",
+        images
+            .iter()
+            .map(|i| i.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    for (prior, s, p, ss, t) in summarise(results) {
+        writeln!(md, "| {prior} | {s} | {p:.2} | {ss:.4} | {:.1} |", t * 1e3)
+            .expect("writing to a String");
+    }
+    md
 }

@@ -6,6 +6,7 @@
 
 pub mod benchmark;
 pub mod ffdnet;
+pub mod prior;
 pub mod tv;
 
 use ndarray::{Array2, ArrayView2};

@@ -1,13 +1,17 @@
-//! Loading an image file as a scene.
+//! Single images in and out: PNG and JPEG (gray levels on a [0, 1]
+//! scale), EXR (luminance, values as stored) and 2-D `.npy` (float32 or
+//! float64), chosen by the file's extension; scenes, truths, denoiser
+//! inputs and outputs all go through here.
 
 use std::path::{Path, PathBuf};
 
 use exr::prelude::FlatSamples;
 use image::imageops::{FilterType, resize};
 use image::{ImageBuffer, Luma};
-use ndarray::Array2;
+use ndarray::{Array2, ArrayView2};
+use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
-/// Why an image file could not be used as a scene.
+/// Why an image file cannot be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum ImageError {
     /// The file could not be opened or decoded.
@@ -26,11 +30,88 @@ pub enum ImageError {
         /// What is wrong, with the value.
         reason: String,
     },
+    /// The image could not be written.
+    #[error("{path}: {reason}")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
 }
 
-/// Loads a PNG or JPEG file as grayscale in [0, 1], or an EXR file's
-/// luminance with its own values, at the file's size.
+/// The lower-case extension of `path` ("" without one).
+fn extension(path: &Path) -> String {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default()
+}
+
+/// Writes `img` as the extension of `path` says: `.png` (8 bits, [0, 1]
+/// to black and white, values outside clamped), `.exr` or `.npy` (float32,
+/// values as they are).
+pub fn write_image(img: ArrayView2<f64>, path: &Path) -> Result<(), ImageError> {
+    let fail = |reason: String| ImageError::Write {
+        path: path.to_owned(),
+        reason,
+    };
+    match extension(path).as_str() {
+        "png" => super::png::write_png(img.mapv(|v| v.clamp(0.0, 1.0)).view(), Some(1.0), path)
+            .map_err(|e| fail(e.to_string())),
+        "exr" => super::exr::write_image(img.mapv(|v| v as f32).view(), path)
+            .map_err(|e| fail(e.to_string())),
+        "npy" => {
+            let file = std::fs::File::create(path).map_err(|e| fail(e.to_string()))?;
+            img.mapv(|v| v as f32)
+                .write_npy(std::io::BufWriter::new(file))
+                .map_err(|e| fail(e.to_string()))
+        }
+        other => Err(fail(format!(
+            "unknown extension `{other}` (use .png, .exr or .npy)"
+        ))),
+    }
+}
+
+/// A 2-D float32 or float64 `.npy` image, every value finite.
+fn read_npy_image(path: &Path) -> Result<Array2<f64>, ImageError> {
+    let decode = |reason: String| ImageError::Decode {
+        path: path.to_owned(),
+        reason,
+    };
+    let open = || std::fs::File::open(path).map_err(|e| decode(e.to_string()));
+    let img = match Array2::<f32>::read_npy(open()?) {
+        Ok(a) => a.mapv(f64::from),
+        Err(_) => Array2::<f64>::read_npy(open()?)
+            .map_err(|_| decode("expected a 2-D float32 or float64 .npy array".into()))?,
+    };
+    if let Some(((r, c), v)) = img.indexed_iter().find(|(_, v)| !v.is_finite()) {
+        return Err(ImageError::Content {
+            path: path.to_owned(),
+            reason: format!("pixel (row {r}, column {c}) is {v}; images must be finite"),
+        });
+    }
+    Ok(img)
+}
+
+/// Reads a PNG or JPEG file as grayscale in [0, 1], an EXR file's
+/// luminance or a 2-D `.npy` array with its own values, at the file's size.
 pub fn read_image(path: &Path) -> Result<Array2<f64>, ImageError> {
+    let img = if extension(path) == "npy" {
+        read_npy_image(path)?
+    } else {
+        read_decoded(path)?
+    };
+    if img.is_empty() {
+        return Err(ImageError::Content {
+            path: path.to_owned(),
+            reason: "the image is empty".into(),
+        });
+    }
+    Ok(img)
+}
+
+/// A PNG, JPEG or EXR file's luminance at its size.
+fn read_decoded(path: &Path) -> Result<Array2<f64>, ImageError> {
     let gray = decode_luminance(path)?;
     let (w, h) = gray.dimensions();
     Ok(Array2::from_shape_fn((h as usize, w as usize), |(r, c)| {

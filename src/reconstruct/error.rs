@@ -32,6 +32,16 @@ pub enum ReconstructError {
         /// The offending value.
         value: f64,
     },
+    /// A method's setting is out of range.
+    #[error("{name} = {value} must be {want}")]
+    Setting {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// What it must be.
+        want: &'static str,
+    },
     /// Stack and kernels do not fit together.
     #[error("{0}")]
     Shape(String),

@@ -126,6 +126,57 @@ impl Default for MethodOptions {
 }
 
 impl MethodOptions {
+    /// Checks every setting: penalties, noise levels and tolerances are
+    /// finite and in range; the error names the setting and its value.
+    pub fn validate(&self) -> Result<(), ReconstructError> {
+        let bad = |name: &'static str, value: f64, want: &'static str| {
+            Err(ReconstructError::Setting { name, value, want })
+        };
+        let positive = |name, v: f64| {
+            if v > 0.0 && v.is_finite() {
+                Ok(())
+            } else {
+                bad(name, v, "a positive number")
+            }
+        };
+        let finite = |name, v: f64| {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                bad(name, v, "a finite number")
+            }
+        };
+        let (s, a) = (&self.split, &self.admm_lbfgs);
+        positive("lambda0", a.lambda0)?;
+        positive("rho", s.rho)?;
+        positive("gamma", s.gamma)?;
+        if !(s.sigma0 >= 0.0 && s.sigma0.is_finite()) {
+            bad("sigma0", s.sigma0, "a finite number >= 0")?;
+        }
+        positive("sigma_floor", s.sigma_floor)?;
+        finite("sigma_power", s.sigma_power)?;
+        finite("target_z", s.target_z)?;
+        positive("beta", a.beta)?;
+        positive("eps", a.eps)?;
+        if !(a.lambda_step >= 1.0 && a.lambda_step.is_finite()) {
+            bad("lambda_step", a.lambda_step, "at least 1")?;
+        }
+        if !(s.sigma_decay > 0.0 && s.sigma_decay <= 1.0) {
+            bad("sigma_decay", s.sigma_decay, "in (0, 1]")?;
+        }
+        if !(a.primal_tol >= 0.0 && a.dual_tol >= 0.0) {
+            bad(
+                "residual_tol",
+                a.primal_tol.min(a.dual_tol),
+                "a number >= 0",
+            )?;
+        }
+        if !(a.lbfgs_grad_tol >= 0.0) {
+            bad("lbfgs_tol", a.lbfgs_grad_tol, "a number >= 0")?;
+        }
+        Ok(())
+    }
+
     /// When Richardson-Lucy stops, with its count.
     pub fn rl_stopping(&self) -> Stopping {
         match self.rl_stop {
@@ -163,6 +214,7 @@ pub fn run_method(
     truth: Option<ArrayView2<f64>>,
     mut on_iter: impl FnMut(&TraceRow),
 ) -> Result<Reconstruction, ReconstructError> {
+    opts.validate()?;
     let k = problem.counts.shape()[0];
     if let Some(b) = bin.filter(|&b| b >= k) {
         return Err(ReconstructError::Shape(format!(

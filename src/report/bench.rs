@@ -21,6 +21,7 @@ use ndarray::{Array2, ArrayView2, s};
 use serde::Serialize;
 
 use crate::denoise::Denoiser;
+use crate::denoise::prior::{PriorError, PriorSpec};
 use crate::forward::{Boundary, ForwardModel, poisson_counts};
 use crate::metrics;
 use crate::physics::{KernelStack, Sampling, Setup};
@@ -519,4 +520,126 @@ pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> 
         }
     }
     md
+}
+
+/// Everything one run of the benchmark needs.
+#[derive(Debug, Clone)]
+pub struct BenchConfig {
+    /// Directory with `manifest.csv` and the images.
+    pub images: PathBuf,
+    /// Which images: `tuning`, `held-out` or `all`.
+    pub split: String,
+    /// Only these images (by manifest name; all of the split when empty).
+    pub only: Vec<String>,
+    /// Light levels relative to the setup's budget.
+    pub levels: Vec<f64>,
+    /// PnP solvers run on the whole stack.
+    pub solvers: Vec<Solver>,
+    /// Priors run with each solver (the first is the headline prior).
+    pub priors: Vec<PriorSpec>,
+    /// Also run PnP on the time-summed stack.
+    pub time_summed: bool,
+    /// Richardson-Lucy iterations searched for its best iteration.
+    pub rl_best_iters: usize,
+    /// Side of the simulated object grid; the sensor sees its centre.
+    pub object_px: usize,
+    /// The physics at level 1.
+    pub setup: Setup,
+    /// The methods' settings.
+    pub opts: MethodOptions,
+    /// Seed of the Poisson sampler.
+    pub seed: u64,
+    /// Output directory: `rows.csv`, `summary.md`, `traces/`.
+    pub out: PathBuf,
+}
+
+impl BenchRow {
+    /// The row as one printed line.
+    pub fn line(&self) -> String {
+        format!(
+            "{:<18} {:>5}x {:<36} {:>6.2} dB (best {:>6.2} @ {:>4}) {:>7.2} s{}",
+            self.image,
+            self.level,
+            self.method,
+            self.psnr,
+            self.best_psnr,
+            self.best_iteration,
+            self.wall_s,
+            self.deviance_z
+                .map_or(String::new(), |z| format!("  deviance z {z:.1}"))
+        )
+    }
+}
+
+/// Runs the benchmark: every selected image at every level through every
+/// method, the rows shown to `on_row` as they come and written to
+/// `rows.csv` after each case, the PnP traces to `traces/`; returns the
+/// rows and the summary (also written to `summary.md`).
+pub fn run_benchmark(
+    cfg: &BenchConfig,
+    mut on_row: impl FnMut(&BenchRow),
+) -> Result<(Vec<BenchRow>, String), ReportError> {
+    cfg.opts.validate()?;
+    let images = select(read_manifest(&cfg.images)?, &cfg.split, &cfg.only)?;
+    if images.is_empty() {
+        return Err(ReportError::Input(format!(
+            "no image of {} matches",
+            cfg.images.display()
+        )));
+    }
+    let setups = cfg
+        .levels
+        .iter()
+        .map(|&level| Ok((level, level_setup(&cfg.setup, level)?)))
+        .collect::<Result<Vec<_>, ReportError>>()?;
+    let priors: Vec<(String, Box<dyn Denoiser>)> = cfg
+        .priors
+        .iter()
+        .map(|p| Ok((p.kind.name().to_string(), p.build()?)))
+        .collect::<Result<_, PriorError>>()
+        .map_err(|e| ReportError::Input(e.to_string()))?;
+    let entries = pnp_entries(&cfg.solvers, &priors, cfg.time_summed);
+    let Some(headline) = entries.first().map(|e| e.label.clone()) else {
+        return Err(ReportError::Input("no solver or prior given".into()));
+    };
+    let traces = cfg.out.join("traces");
+    std::fs::create_dir_all(&traces)
+        .map_err(|e| ReportError::Io(traces.display().to_string(), e))?;
+    let rows_path = cfg.out.join("rows.csv");
+    let mut rows = Vec::new();
+    for image in &images {
+        for &(level, ref setup) in &setups {
+            let case = simulate_case(image, setup, cfg.object_px, cfg.seed)?;
+            let mut trace_error = None;
+            let new = run_case(
+                image,
+                level,
+                &case,
+                &entries,
+                &cfg.opts,
+                cfg.rl_best_iters,
+                |label, trace| {
+                    let file = traces.join(format!(
+                        "{}_{level}_{}.csv",
+                        image.name,
+                        label.replace(' ', "_")
+                    ));
+                    if let Err(e) = std::fs::write(&file, trace.to_csv()) {
+                        trace_error.get_or_insert(ReportError::Io(file.display().to_string(), e));
+                    }
+                },
+            )?;
+            if let Some(e) = trace_error {
+                return Err(e);
+            }
+            new.iter().for_each(&mut on_row);
+            rows.extend(new);
+            std::fs::write(&rows_path, rows_csv(&rows))
+                .map_err(|e| ReportError::Io(rows_path.display().to_string(), e))?;
+        }
+    }
+    let md = summary_markdown(&rows, &headline, &rl_default_label(&cfg.opts));
+    let md_path = cfg.out.join("summary.md");
+    std::fs::write(&md_path, &md).map_err(|e| ReportError::Io(md_path.display().to_string(), e))?;
+    Ok((rows, md))
 }

@@ -2,17 +2,12 @@
 
 use std::path::PathBuf;
 
-use crate::shared_args::{PhysicsArgs, choice};
-use anyhow::Context;
-use clap::ValueEnum;
-use scatterscope::denoise::Denoiser;
+use scatterscope::denoise::prior::{PriorKind, PriorSpec};
 use scatterscope::reconstruct::method::Solver;
-use scatterscope::report::bench::{
-    level_setup, pnp_entries, read_manifest, rl_default_label, rows_csv, run_case, select,
-    simulate_case, summary_markdown,
-};
+use scatterscope::report::bench::{BenchConfig, run_benchmark};
 
-use crate::recon_args::{DenoiserChoice, PriorArgs, ReconArgs};
+use crate::recon_args::ReconArgs;
+use crate::shared_args::{PhysicsArgs, choice};
 
 /// Reconstruction benchmark on images the methods were not tuned on.
 ///
@@ -46,8 +41,8 @@ pub struct BenchReconArgs {
     )]
     solvers: Vec<Solver>,
     /// Priors to run with each solver (the first is the headline prior).
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "ffdnet,tv")]
-    priors: Vec<DenoiserChoice>,
+    #[arg(long, value_parser = choice::<PriorKind>(), value_delimiter = ',', default_value = "ffdnet,tv")]
+    priors: Vec<PriorKind>,
     /// Skip PnP on the time-summed stack.
     #[arg(long)]
     no_sum: bool,
@@ -70,84 +65,29 @@ pub struct BenchReconArgs {
 }
 
 pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
-    let base = args.physics.resolve()?;
-    let opts = args.recon.options()?;
-    let images =
-        select(read_manifest(&args.images)?, &args.split, &args.only).context("--split")?;
-    anyhow::ensure!(
-        !images.is_empty(),
-        "no image of {} matches",
-        args.images.display()
-    );
-    let setups = args
-        .levels
-        .iter()
-        .map(|&level| Ok((level, level_setup(&base, level).context("--levels")?)))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    let priors: Vec<(String, Box<dyn Denoiser>)> = args
-        .priors
-        .iter()
-        .map(|&p| {
-            let prior = PriorArgs {
-                denoiser: p,
-                ..args.recon.prior.clone()
-            };
-            let name = p
-                .to_possible_value()
-                .expect("every prior has a name")
-                .get_name()
-                .to_string();
-            Ok((name, prior.denoiser()?))
-        })
-        .collect::<anyhow::Result<_>>()?;
-    let entries = pnp_entries(&args.solvers, &priors, !args.no_sum);
-    anyhow::ensure!(!entries.is_empty(), "no solver or prior given");
-    let headline = entries[0].label.clone();
-    let traces = args.out.join("traces");
-    std::fs::create_dir_all(&traces)
-        .with_context(|| format!("creating output directory {}", traces.display()))?;
-    let mut rows = Vec::new();
-    for image in &images {
-        for &(level, ref setup) in &setups {
-            let case = simulate_case(image, setup, args.object_px, args.seed)?;
-            let new = run_case(
-                image,
-                level,
-                &case,
-                &entries,
-                &opts,
-                args.rl_best_iters,
-                |label, trace| {
-                    let file = traces.join(format!(
-                        "{}_{level}_{}.csv",
-                        image.name,
-                        label.replace(' ', "_")
-                    ));
-                    if let Err(e) = std::fs::write(&file, trace.to_csv()) {
-                        eprintln!("could not write {}: {e}", file.display());
-                    }
-                },
-            )?;
-            for r in &new {
-                println!(
-                    "{:<18} {:>5}x {:<36} {:>6.2} dB (best {:>6.2} @ {:>4}) {:>7.2} s{}",
-                    r.image,
-                    r.level,
-                    r.method,
-                    r.psnr,
-                    r.best_psnr,
-                    r.best_iteration,
-                    r.wall_s,
-                    r.deviance_z
-                        .map_or(String::new(), |z| format!("  deviance z {z:.1}"))
-                );
-            }
-            rows.extend(new);
-            std::fs::write(args.out.join("rows.csv"), rows_csv(&rows))?;
-        }
-    }
-    let md = summary_markdown(&rows, &headline, &rl_default_label(&opts));
-    std::fs::write(args.out.join("summary.md"), &md)?;
+    let cfg = BenchConfig {
+        images: args.images.clone(),
+        split: args.split.clone(),
+        only: args.only.clone(),
+        levels: args.levels.clone(),
+        solvers: args.solvers.clone(),
+        priors: args
+            .priors
+            .iter()
+            .map(|&kind| PriorSpec {
+                kind,
+                ..args.recon.prior.spec()
+            })
+            .collect(),
+        time_summed: !args.no_sum,
+        rl_best_iters: args.rl_best_iters,
+        object_px: args.object_px,
+        setup: args.physics.resolve()?,
+        opts: args.recon.options()?,
+        seed: args.seed,
+        out: args.out.clone(),
+    };
+    let (_, md) = run_benchmark(&cfg, |row| println!("{}", row.line()))?;
     println!("{md}");
     println!(
         "wrote {}/{{rows.csv, summary.md, traces/}}",

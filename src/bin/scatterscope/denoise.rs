@@ -1,16 +1,10 @@
 //! `scatterscope denoise`: one denoiser on one image, to try a prior alone.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Context;
-use ndarray::Array2;
-use ndarray_npy::{ReadNpyExt, WriteNpyExt};
-use rand::SeedableRng;
-use rand_distr::{Distribution, Normal};
-use scatterscope::formats::exr;
-use scatterscope::formats::image::read_image;
-use scatterscope::formats::png::write_png;
+use scatterscope::denoise::benchmark::add_noise;
+use scatterscope::formats::image::{read_image, write_image};
 use scatterscope::metrics::{psnr, ssim};
 
 use crate::recon_args::PriorArgs;
@@ -69,68 +63,11 @@ fn parse_sigma(s: &str) -> Result<f64, String> {
     }
 }
 
-fn extension(path: &Path) -> String {
-    path.extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default()
-}
-
-fn load(path: &Path) -> anyhow::Result<Array2<f64>> {
-    if extension(path) != "npy" {
-        return Ok(read_image(path)?);
-    }
-    let open = || std::fs::File::open(path).with_context(|| format!("opening {}", path.display()));
-    let img = match Array2::<f32>::read_npy(open()?) {
-        Ok(a) => a.mapv(f64::from),
-        Err(_) => Array2::<f64>::read_npy(open()?).with_context(|| {
-            format!(
-                "{}: expected a 2-D float32 or float64 .npy array",
-                path.display()
-            )
-        })?,
-    };
-    if let Some(((r, c), v)) = img.indexed_iter().find(|(_, v)| !v.is_finite()) {
-        anyhow::bail!(
-            "{}: pixel (row {r}, column {c}) is {v}; images must be finite",
-            path.display()
-        );
-    }
-    Ok(img)
-}
-
-fn save(img: &Array2<f64>, path: &Path) -> anyhow::Result<()> {
-    match extension(path).as_str() {
-        "png" => write_png(img.mapv(|v| v.clamp(0.0, 1.0)).view(), Some(1.0), path)?,
-        "exr" => exr::write_image(img.mapv(|v| v as f32).view(), path)?,
-        "npy" => img
-            .mapv(|v| v as f32)
-            .write_npy(
-                std::fs::File::create(path)
-                    .with_context(|| format!("creating {}", path.display()))?,
-            )
-            .with_context(|| format!("writing {}", path.display()))?,
-        other => anyhow::bail!(
-            "--out {}: unknown extension `{other}` (use .png, .exr or .npy)",
-            path.display()
-        ),
-    }
-    Ok(())
-}
-
 pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {
     let denoiser = args.prior.denoiser()?;
-    let clean = load(&args.input)?;
-    anyhow::ensure!(
-        !clean.is_empty(),
-        "{}: the image is empty",
-        args.input.display()
-    );
+    let clean = read_image(&args.input)?;
     let noisy = match args.add_noise {
-        Some(seed) => {
-            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-            let noise = Normal::new(0.0, args.sigma).context("--sigma")?;
-            clean.mapv(|v| v + noise.sample(&mut rng))
-        }
+        Some(seed) => add_noise(&clean, args.sigma, seed),
         None => clean.clone(),
     };
     let t = Instant::now();
@@ -151,18 +88,15 @@ pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {
         secs * 1e3
     );
     if args.add_noise.is_some() {
-        println!(
-            "noisy:    PSNR {:.2} dB, SSIM {:.4}",
-            psnr(noisy.view(), clean.view()),
-            ssim(noisy.view(), clean.view())
-        );
-        println!(
-            "denoised: PSNR {:.2} dB, SSIM {:.4}",
-            psnr(out.view(), clean.view()),
-            ssim(out.view(), clean.view())
-        );
+        for (name, img) in [("noisy:   ", &noisy), ("denoised:", &out)] {
+            println!(
+                "{name} PSNR {:.2} dB, SSIM {:.4}",
+                psnr(img.view(), clean.view()),
+                ssim(img.view(), clean.view())
+            );
+        }
     }
-    save(&out, &args.out)?;
+    write_image(out.view(), &args.out)?;
     println!("wrote {}", args.out.display());
     Ok(())
 }

@@ -7,6 +7,7 @@ use std::error::Error;
 use scatterscope::acquire::JobError;
 use scatterscope::calibrate::histogram::HistogramError;
 use scatterscope::config::ConfigError;
+use scatterscope::denoise::prior::PriorError;
 use scatterscope::formats::picoquant::{FileError, TtrError};
 use scatterscope::psf::PsfError;
 use scatterscope::reconstruct::ReconstructError;
@@ -56,6 +57,12 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
             ProblemError::BinWidth { .. } => Some("set the bin width with --bin-width".into()),
             _ => None,
         };
+    }
+    if let Some(ReconstructError::Setting { name, .. }) = cause.downcast_ref::<ReconstructError>() {
+        return Some(format!("set it with --{}", name.replace('_', "-")));
+    }
+    if let Some(PriorError::Setting(_)) = cause.downcast_ref::<PriorError>() {
+        return Some("--tv-gain is TV's gain; --weights applies to --denoiser ffdnet".into());
     }
     let text = if let Some(ReconstructError::NotWholeCounts { .. }) =
         cause.downcast_ref::<ReconstructError>()

@@ -3,31 +3,21 @@
 use crate::shared_args::choice;
 use std::path::PathBuf;
 
-use scatterscope::denoise::ffdnet::source;
-use scatterscope::denoise::tv::TotalVariation;
-use scatterscope::denoise::{Denoiser, NoPrior};
+use scatterscope::denoise::Denoiser;
+use scatterscope::denoise::prior::{PriorKind, PriorSpec};
 use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgsOptions, StopRule};
 use scatterscope::reconstruct::method::{MethodOptions, RlStop, Solver};
 use scatterscope::reconstruct::split::SplitOptions;
 
-/// The prior plugged into PnP-ADMM.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum DenoiserChoice {
-    /// FFDNet, the learned prior (weights: --weights, else
-    /// $SCATTERSCOPE_FFDNET_WEIGHTS, else imported, else embedded).
-    Ffdnet,
-    /// Total variation (Chambolle), weight = gain * sigma.
-    Tv,
-    /// No prior.
-    Identity,
-}
-
 /// The denoiser and its settings (`reconstruct`, `report`, `denoise`).
 #[derive(Debug, Clone, clap::Args)]
 pub struct PriorArgs {
-    /// Prior for PnP-ADMM (the denoiser).
-    #[arg(long, value_enum, default_value = "ffdnet")]
-    pub denoiser: DenoiserChoice,
+    /// Prior for PnP-ADMM (the denoiser): ffdnet (the learned prior;
+    /// weights: --weights, else $SCATTERSCOPE_FFDNET_WEIGHTS, else
+    /// imported, else embedded), tv (total variation, weight = gain x
+    /// sigma) or identity (no prior).
+    #[arg(long, value_parser = choice::<PriorKind>(), default_value = "ffdnet")]
+    pub denoiser: PriorKind,
     /// FFDNet weight file (the project's safetensors format), or
     /// `embedded` for the built-in weights even when imported ones exist.
     #[arg(long, value_name = "PATH")]
@@ -38,41 +28,32 @@ pub struct PriorArgs {
 }
 
 impl PriorArgs {
+    /// The prior as the library specifies it.
+    pub fn spec(&self) -> PriorSpec {
+        PriorSpec {
+            kind: self.denoiser,
+            weights: self.weights.clone(),
+            tv_gain: self.tv_gain,
+        }
+    }
+
     /// The chosen denoiser, its settings checked.
     pub fn denoiser(&self) -> anyhow::Result<Box<dyn Denoiser>> {
-        anyhow::ensure!(
-            self.tv_gain > 0.0 && self.tv_gain.is_finite(),
-            "--tv-gain = {} must be a positive number",
-            self.tv_gain
-        );
-        anyhow::ensure!(
-            self.weights.is_none() || self.denoiser == DenoiserChoice::Ffdnet,
-            "--weights applies to --denoiser ffdnet only"
-        );
-        Ok(match self.denoiser {
-            DenoiserChoice::Ffdnet => Box::new(source::load(self.weights.as_deref())?),
-            DenoiserChoice::Tv => Box::new(TotalVariation {
-                gain: self.tv_gain,
-                ..Default::default()
-            }),
-            DenoiserChoice::Identity => Box::new(NoPrior),
-        })
+        Ok(self.spec().build()?)
     }
-}
 
-impl PriorArgs {
     /// For `report`: TV (at `--tv-gain`) as a second prior when the chosen
     /// one is not TV, so the learned prior is always shown beside it.
     pub fn tv_comparison(&self) -> anyhow::Result<Option<(String, Box<dyn Denoiser>)>> {
-        if self.denoiser == DenoiserChoice::Tv {
+        if self.denoiser == PriorKind::Tv {
             return Ok(None);
         }
-        let tv = PriorArgs {
-            denoiser: DenoiserChoice::Tv,
+        let tv = PriorSpec {
+            kind: PriorKind::Tv,
             weights: None,
             tv_gain: self.tv_gain,
         };
-        Ok(Some(("tv".to_string(), tv.denoiser()?)))
+        Ok(Some(("tv".to_string(), tv.build()?)))
     }
 }
 
@@ -176,45 +157,11 @@ pub struct ReconArgs {
 }
 
 impl ReconArgs {
-    /// The method settings, checked.
+    /// The method settings (checked where they are used).
     pub fn options(&self) -> anyhow::Result<MethodOptions> {
-        let positive = |name: &str, v: f64| {
-            anyhow::ensure!(
-                v > 0.0 && v.is_finite(),
-                "--{name} = {v} must be a positive number"
-            );
-            Ok(())
-        };
-        let finite = |name: &str, v: f64| {
-            anyhow::ensure!(v.is_finite(), "--{name} = {v} must be a finite number");
-            Ok(())
-        };
-        positive("lambda0", self.lambda0)?;
-        positive("rho", self.rho)?;
-        positive("gamma", self.gamma)?;
-        anyhow::ensure!(
-            self.sigma0 >= 0.0 && self.sigma0.is_finite(),
-            "--sigma0 = {} must be a finite number >= 0",
-            self.sigma0
-        );
-        positive("sigma-floor", self.sigma_floor)?;
-        finite("sigma-power", self.sigma_power)?;
-        finite("target-z", self.target_z)?;
-        positive("beta", self.beta)?;
-        positive("eps", self.eps)?;
-        anyhow::ensure!(
-            self.lambda_step >= 1.0 && self.lambda_step.is_finite(),
-            "--lambda-step = {} must be at least 1",
-            self.lambda_step
-        );
-        anyhow::ensure!(
-            self.sigma_decay > 0.0 && self.sigma_decay <= 1.0,
-            "--sigma-decay = {} must lie in (0, 1]",
-            self.sigma_decay
-        );
         let split = SplitOptions::default();
         let lbfgs = AdmmLbfgsOptions::default();
-        Ok(MethodOptions {
+        let opts = MethodOptions {
             solver: self.solver,
             split: SplitOptions {
                 rho: self.rho,
@@ -246,6 +193,8 @@ impl ReconArgs {
             rl_iters: self.rl_iters,
             rl_stop: self.rl_stop,
             rl_max_iters: self.rl_max_iters,
-        })
+        };
+        opts.validate()?;
+        Ok(opts)
     }
 }
