@@ -21,6 +21,25 @@ pub fn parse_ps(s: &str) -> Result<f64, String> {
     )
 }
 
+/// Parses a noise level on the [0, 1] scale: a number or a fraction such
+/// as `25/255`; finite and not negative.
+pub fn parse_noise_sigma(s: &str) -> Result<f64, String> {
+    let number = |t: &str| {
+        t.trim()
+            .parse::<f64>()
+            .map_err(|_| format!("`{s}`: `{t}` is not a number"))
+    };
+    let v = match s.split_once('/') {
+        Some((a, b)) => number(a)? / number(b)?,
+        None => number(s)?,
+    };
+    if v >= 0.0 && v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("`{s}`: sigma must be finite and not negative"))
+    }
+}
+
 /// Parses a duration with its unit: `ms`, `s` (default), `m` or `h`;
 /// finite and not negative.
 pub fn parse_duration(s: &str) -> Result<std::time::Duration, String> {

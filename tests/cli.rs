@@ -729,7 +729,7 @@ fn acquire_says_when_its_duration_ends_it_before_the_mocks_photon_quota() {
     );
     assert!(
         stdout.contains(
-            "note: --duration 300ms ended the acquisition before the mock's --max-photons 1000000000 was reached"
+            "note: the duration (300ms) ended the acquisition before the mock's photon quota (1000000000) was reached"
         ),
         "{stdout}"
     );

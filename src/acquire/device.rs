@@ -86,6 +86,17 @@ pub fn list_devices() -> (Vec<DeviceEntry>, usize) {
     (all, hardware)
 }
 
+/// The devices of [`list_devices`] as a table: how many are hardware,
+/// then one line per address.
+pub fn devices_table(all: &[DeviceEntry], hardware: usize) -> Vec<String> {
+    std::iter::once(format!("{hardware} hardware device(s)"))
+        .chain(
+            all.iter()
+                .map(|d| format!("  {:<28} {}", d.address, d.description)),
+        )
+        .collect()
+}
+
 /// An opened link, and the mock behind it if any.
 pub struct OpenedDevice {
     /// The transport.

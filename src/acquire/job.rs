@@ -84,6 +84,9 @@ pub struct Acquisition {
     /// The mock's own counts, for a mock.
     #[cfg(feature = "mock")]
     pub truth: Option<super::mock::Truth>,
+    /// The mock's photon quota, for a mock that has one.
+    #[cfg(feature = "mock")]
+    pub mock_quota: Option<u64>,
     /// The files written.
     pub files: Vec<PathBuf>,
 }
@@ -244,6 +247,9 @@ impl Job {
             stack,
             notes,
             #[cfg(feature = "mock")]
+            mock_quota: (self.device.is_mock() && self.mock.device.max_photons > 0)
+                .then_some(self.mock.device.max_photons),
+            #[cfg(feature = "mock")]
             truth,
             files,
         })
@@ -317,6 +323,15 @@ impl Acquisition {
             ),
             format!("  ended: {}", o.stop.describe()),
         ];
+        #[cfg(feature = "mock")]
+        if let (Some(quota), Some(duration)) = (self.mock_quota, self.plan.duration)
+            && o.stop == StopReason::Duration
+            && acc.received < quota
+        {
+            lines.push(format!(
+                "  note: the duration ({duration:?}) ended the acquisition before the mock's photon quota ({quota}) was reached; without a duration it runs until the device stops"
+            ));
+        }
         lines.extend(acc.table().lines().map(str::to_string));
         #[cfg(feature = "mock")]
         if let Some(t) = &self.truth {

@@ -88,12 +88,27 @@ pub struct Progress {
     pub elapsed: Duration,
     /// Photons received so far.
     pub received: u64,
+    /// Photons received per second since the previous report.
+    pub rate_hz: f64,
     /// Photons binned so far.
     pub binned: u64,
     /// Photons the device reported lost so far.
     pub lost_in_device: u64,
     /// Batches rejected or missing so far (CRC failures).
     pub damaged_frames: u64,
+}
+
+impl Progress {
+    /// The counters in words, for a progress display.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} photons, {:.2} Mcps, lost in device {}, damaged frames {}",
+            self.received,
+            self.rate_hz / 1e6,
+            self.lost_in_device,
+            self.damaged_frames
+        )
+    }
 }
 
 /// The result of an acquisition.
@@ -170,7 +185,7 @@ pub fn acquire(
     let started = Instant::now();
     let mut counts = BatchCounts::default();
     let mut stop_sent: Option<Instant> = None;
-    let mut last_progress = Instant::now();
+    let (mut last_progress, mut last_received) = (Instant::now(), 0);
     let mut totals = None;
     let mut last_batch = started;
     let reason = loop {
@@ -204,15 +219,18 @@ pub fn acquire(
             None => {}
         }
         if last_progress.elapsed() >= PROGRESS_EVERY {
-            last_progress = Instant::now();
             let acc = device.accounting();
+            let dt = last_progress.elapsed().as_secs_f64();
             progress(&Progress {
                 elapsed: started.elapsed(),
                 received: acc.photons_received,
+                rate_hz: (acc.photons_received - last_received) as f64 / dt,
                 binned: binner.accounting().binned,
                 lost_in_device: acc.photons_lost_in_device,
                 damaged_frames: acc.crc_errors,
             });
+            last_progress = Instant::now();
+            last_received = acc.photons_received;
         }
     };
     let elapsed = last_batch.duration_since(started);

@@ -155,6 +155,15 @@ pub enum CalibrateError {
     /// A histogram file cannot be read.
     #[error("calibration: {0}")]
     Histogram(#[from] histogram::HistogramError),
+    /// A reference recording does not give an instrument response.
+    #[error(transparent)]
+    Response(#[from] measured_irf::IrfError),
+    /// A stack file cannot be read.
+    #[error(transparent)]
+    Stack(#[from] crate::stack::StackError),
+    /// The starting physics is invalid.
+    #[error(transparent)]
+    Config(Box<crate::config::ConfigError>),
 }
 
 /// Natural parameters in the order of [`Calibration::parameters`].

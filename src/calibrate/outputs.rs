@@ -6,10 +6,17 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use super::transmittance::{Capture, SlabFit};
-use super::{CalibrateError, Calibration};
+use super::histogram::TimeHistogram;
+use super::measured_irf::MeasuredIrf;
+use super::transmittance::{
+    Capture, SlabFit, SlabFitOptions, fit_slab, predict_captures, read_captures,
+};
+use super::{CalibrateError, Calibration, Free, calibrate, time_profile};
+use crate::config::PhysicsOverrides;
 use crate::config::medium_toml;
+use crate::physics::Setup;
 use crate::report::plot::{Series, chart};
+use crate::stack::Stack;
 
 fn io_error(path: &Path, e: impl std::fmt::Display) -> CalibrateError {
     CalibrateError::Invalid(format!("writing {}: {e}", path.display()))
@@ -17,6 +24,48 @@ fn io_error(path: &Path, e: impl std::fmt::Display) -> CalibrateError {
 
 fn write(path: &Path, text: &str) -> Result<(), CalibrateError> {
     std::fs::write(path, text).map_err(|e| io_error(path, e))
+}
+
+/// A stack file's calibration: the stack (with metadata), the physics it
+/// started from, and the fit of its time profile.
+pub struct StackCalibration {
+    /// The stack as read.
+    pub stack: Stack,
+    /// The starting physics: the stack's record under the overrides.
+    pub start: Setup,
+    /// Start of the profile's first bin (ps).
+    pub start_ps: f64,
+    /// The fit.
+    pub fit: Calibration,
+}
+
+/// Fits `free` to the time profile of the stack at `path`, starting from
+/// its recorded physics under `physics`.
+pub fn calibrate_file(
+    path: &Path,
+    physics: &PhysicsOverrides,
+    free: Free,
+) -> Result<StackCalibration, CalibrateError> {
+    let (data, meta) = Stack::read(path)?;
+    let meta = meta.ok_or_else(|| {
+        CalibrateError::Invalid(format!(
+            "{} records no time bins; calibration needs a stack with metadata",
+            path.display()
+        ))
+    })?;
+    let stack = Stack::from_parts(data, meta, path)?;
+    let start = physics
+        .resolve_over(stack.meta.setup.clone())
+        .map_err(|e| CalibrateError::Config(Box::new(e)))?;
+    let (start_ps, counts) = time_profile(&stack)?;
+    let fit = calibrate(&counts, start_ps, &start, free)
+        .map_err(|e| CalibrateError::Invalid(format!("calibrating {}: {e}", path.display())))?;
+    Ok(StackCalibration {
+        stack,
+        start,
+        start_ps,
+        fit,
+    })
 }
 
 impl Calibration {
@@ -199,4 +248,125 @@ pub fn write_slab_fits(
     write(&csv_path, &csv)?;
     files.insert(0, csv_path);
     Ok(files)
+}
+
+/// How much of the reference recording is the instrument response.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum IrfExtent {
+    /// The whole recorded period ([`MeasuredIrf::from_histogram_period`]).
+    #[default]
+    Period,
+    /// The peak's run ([`MeasuredIrf::from_histogram`]).
+    Peak,
+}
+
+crate::named::named!(IrfExtent {
+    Period => "period",
+    Peak => "peak",
+});
+
+/// One slab calibration as `calibrate-slab` runs it: the response from a
+/// reference without the slab, captures through slabs of known thickness
+/// fitted jointly, and captures left out predicted by the fitted medium.
+#[derive(Debug, Clone)]
+pub struct SlabJob {
+    /// The reference recording (the instrument response).
+    pub irf_from: PathBuf,
+    /// How much of it is the response.
+    pub irf_extent: IrfExtent,
+    /// Captures to fit, each `FILE=THICKNESS` ([`read_captures`]).
+    pub captures: Vec<String>,
+    /// Captures the fitted medium predicts, `FILE=THICKNESS`.
+    pub predict: Vec<String>,
+    /// Dataset holding the histogram in MATLAB files.
+    pub dataset: String,
+    /// Cell array of per-part histograms in MATLAB files, if any.
+    pub parts: Option<String>,
+    /// Bin width (ps) of MATLAB histograms, which do not record it.
+    pub bin_ps: Option<f64>,
+    /// The model's settings and starting values.
+    pub options: SlabFitOptions,
+}
+
+/// A finished slab calibration.
+#[derive(Debug, Clone)]
+pub struct SlabCalibration {
+    /// The measured instrument response.
+    pub irf: MeasuredIrf,
+    /// What was read, kept or assumed before the fit, one line each.
+    pub notes: Vec<String>,
+    /// The fitted captures.
+    pub captures: Vec<Capture>,
+    /// The joint fit.
+    pub fit: SlabFit,
+    /// The captures left out of the fit and their prediction.
+    pub prediction: Option<(Vec<Capture>, SlabFit)>,
+    /// Wall time of the joint fit, seconds.
+    pub seconds: f64,
+}
+
+impl SlabJob {
+    /// Reads the reference and the captures, fits, and predicts.
+    pub fn run(&self) -> Result<SlabCalibration, CalibrateError> {
+        let reference = TimeHistogram::read(&self.irf_from, &self.dataset, self.bin_ps)?;
+        let irf = match self.irf_extent {
+            IrfExtent::Period => MeasuredIrf::from_histogram_period(&reference)?,
+            IrfExtent::Peak => MeasuredIrf::from_histogram(&reference)?,
+        };
+        let mut notes = vec![irf.describe()];
+        let specs: Vec<&str> = self
+            .captures
+            .iter()
+            .chain(&self.predict)
+            .map(String::as_str)
+            .collect();
+        let (mut captures, parts) =
+            read_captures(&specs, &self.dataset, self.parts.as_deref(), self.bin_ps)?;
+        notes.extend(parts.iter().map(|p| format!("parts: {p}")));
+        notes.push(format!("model: {}", self.options.describe_model(&irf)));
+        let held = captures.split_off(self.captures.len());
+        let started = std::time::Instant::now();
+        let fit = fit_slab(&captures, &irf, &self.options)?;
+        let seconds = started.elapsed().as_secs_f64();
+        let prediction = if held.is_empty() {
+            None
+        } else {
+            let pred = predict_captures(&held, &irf, &fit.fixed())?;
+            Some((held, pred))
+        };
+        Ok(SlabCalibration {
+            irf,
+            notes,
+            captures,
+            fit,
+            prediction,
+            seconds,
+        })
+    }
+}
+
+impl SlabCalibration {
+    /// The calibration in words: the notes, the joint fit, the prediction.
+    pub fn lines(&self) -> Vec<String> {
+        let mut lines = self.notes.clone();
+        lines.extend(self.fit.lines(&format!(
+            "joint fit of {} captures ({} single-capture model evaluations, {:.1} s):",
+            self.captures.len(),
+            self.fit.evaluations,
+            self.seconds
+        )));
+        if let Some((_, pred)) = &self.prediction {
+            lines.extend(pred.lines("prediction of captures left out of the fit (medium fixed):"));
+        }
+        lines
+    }
+
+    /// Writes `fit.csv` and the plots ([`write_slab_fits`]) into `dir`.
+    pub fn write(&self, dir: &Path) -> Result<Vec<PathBuf>, CalibrateError> {
+        let mut groups = vec![(&self.captures[..], &self.fit, "fitted")];
+        if let Some((held, pred)) = &self.prediction {
+            groups.push((&held[..], pred, "predicted"));
+        }
+        write_slab_fits(dir, &groups)
+    }
 }

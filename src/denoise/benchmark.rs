@@ -11,7 +11,8 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use super::Denoiser;
-use super::ffdnet::Ffdnet;
+use super::ffdnet::weights::WeightsError;
+use super::ffdnet::{Ffdnet, source};
 use super::tv::TotalVariation;
 use crate::formats::image::{ImageError, read_image, write_image};
 use crate::metrics::{psnr, ssim};
@@ -194,6 +195,23 @@ pub struct StandardPriors {
 }
 
 impl StandardPriors {
+    /// The standard set with the embedded FFDNet weights, the imported ones
+    /// if there are any, and `extra` if given.
+    pub fn with_weights(extra: Option<&Path>) -> Result<Self, WeightsError> {
+        let mut nets = vec![(
+            "ffdnet embedded".to_string(),
+            Ffdnet::new(source::embedded(), "embedded"),
+        )];
+        if let Some(p) = source::imported_path().filter(|p| p.is_file()) {
+            nets.push(("ffdnet imported".into(), Ffdnet::from_file(&p, "imported")?));
+        }
+        if let Some(p) = extra {
+            let label = p.display().to_string();
+            nets.push((format!("ffdnet {label}"), Ffdnet::from_file(p, label)?));
+        }
+        Ok(Self::new(nets))
+    }
+
     /// The standard set with these FFDNet weights, each with its label.
     pub fn new(nets: Vec<(String, Ffdnet)>) -> Self {
         Self {

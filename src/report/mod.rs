@@ -10,7 +10,7 @@ pub mod plot;
 
 use crate::named::Named;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
@@ -449,4 +449,106 @@ pub enum ReportError {
     /// An input file is unusable (names the file, line and value).
     #[error("{0}")]
     Input(String),
+}
+
+/// Everything one `report` needs.
+pub struct ReportConfig<'a> {
+    /// The scenes (built-in or image files).
+    pub scenes: Vec<Scene>,
+    /// The physics they are measured with.
+    pub setup: Setup,
+    /// How the sensor's edges are simulated and modelled.
+    pub boundary: Boundary,
+    /// Seed of the Poisson sampler.
+    pub seed: u64,
+    /// The headline prior.
+    pub denoiser: &'a dyn Denoiser,
+    /// A second prior shown beside it (TV when the headline is not TV).
+    pub comparison: Option<(&'a str, &'a dyn Denoiser)>,
+    /// The methods' settings.
+    pub opts: MethodOptions,
+    /// Run the single-bin methods on every n-th bin only.
+    pub slice_step: usize,
+    /// With a share: also measure each scene with an instrument response
+    /// and this background (a share of the mean expected count per pixel
+    /// and bin) and report what ignoring either costs.
+    pub realistic_background: Option<f64>,
+    /// Output directory: one folder per scene, `summary.{md,csv}`.
+    pub out: PathBuf,
+}
+
+/// The folder of `scene`'s outputs: its name, or a file's stem.
+pub fn scene_dir(scene: &Scene) -> String {
+    match scene {
+        Scene::File(p) => p
+            .file_stem()
+            .map_or("file".into(), |s| s.to_string_lossy().into_owned()),
+        other => other.name(),
+    }
+}
+
+/// Runs the report: every scene through every method (and with the
+/// realistic instrument when asked), `progress` told what is running;
+/// writes the per-scene folders and `summary.{md,csv}` and returns the
+/// Markdown summary.
+pub fn run_report(
+    cfg: &ReportConfig<'_>,
+    mut progress: impl FnMut(&str),
+) -> Result<String, ReportError> {
+    let io = |path: &Path| {
+        let name = path.display().to_string();
+        move |e| ReportError::Io(name, e)
+    };
+    std::fs::create_dir_all(&cfg.out).map_err(io(&cfg.out))?;
+    let mut reports = Vec::new();
+    for scene in &cfg.scenes {
+        let dir = cfg.out.join(scene_dir(scene));
+        progress(&format!("{}: simulating", scene.name()));
+        reports.push(run_scene(
+            scene,
+            &cfg.setup,
+            cfg.boundary,
+            cfg.seed,
+            cfg.denoiser,
+            cfg.comparison,
+            &cfg.opts,
+            cfg.slice_step,
+            &dir,
+            &mut progress,
+        )?);
+        progress(&format!(
+            "{}: done, files in {}",
+            scene.name(),
+            dir.display()
+        ));
+    }
+    let mut md = summary_markdown(&reports);
+    if let Some(share) = cfg.realistic_background {
+        let (mut backgrounds, mut rows) = (Vec::new(), Vec::new());
+        for scene in &cfg.scenes {
+            progress(&format!("{}: realistic instrument", scene.name()));
+            let (b, r) = instrument::instrument_costs(
+                scene,
+                &cfg.setup,
+                share,
+                cfg.boundary,
+                cfg.seed,
+                cfg.denoiser,
+                &cfg.opts,
+            )?;
+            backgrounds.push((scene.name(), b));
+            rows.extend(r);
+        }
+        md.push('\n');
+        md.push_str(&instrument::instrument_markdown(
+            &instrument::realistic(&cfg.setup),
+            &backgrounds,
+            &rows,
+        ));
+    }
+    let md_path = cfg.out.join("summary.md");
+    std::fs::write(&md_path, &md).map_err(io(&md_path))?;
+    let csv_path = cfg.out.join("summary.csv");
+    std::fs::write(&csv_path, summary_csv(&reports)).map_err(io(&csv_path))?;
+    Ok(md)
 }

@@ -5,11 +5,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use crate::shared_args::PhysicsArgs;
+use crate::shared_args::{PhysicsArgs, progress};
 use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
-use scatterscope::acquire::session::StopReason;
-use scatterscope::acquire::{DeviceSpec, Job, MockJob, TimeZero};
+use scatterscope::acquire::{DeviceSpec, Job, MockJob, TimeZero, device};
 use scatterscope::config::{parse_duration, parse_ps};
 use scatterscope::scene::Scene;
 use scatterscope::tags::binning::Region;
@@ -17,14 +15,11 @@ use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
 
 /// Acquire a transient stack from a time tagger (or the mock device).
 ///
-/// Identifies and configures the device, streams photon events, bins them
-/// by arrival time into --bins bins of --bin-width from --t-start after
-/// time zero (--t0), and writes stack.{exr,png} and acquisition.json with
-/// the device, its configuration and where every photon went (received,
-/// binned, outside the window or ROI, lost in the device or in transit).
-/// Ctrl-C stops cleanly: the device's last batches are binned and every
-/// file is closed and valid. The physics flags describe the sample; they go
-/// into the stack's metadata for `reconstruct` and drive the mock's ST-PSF.
+/// Streams photons into --bins bins of --bin-width from --t-start after
+/// time zero and writes stack.{exr,png} and acquisition.json (the device,
+/// its configuration, where every photon went). Ctrl-C stops cleanly. The
+/// physics flags describe the sample (the stack's metadata; the mock's
+/// ST-PSF).
 #[derive(Debug, clap::Args)]
 pub struct AcquireArgs {
     /// mock (in-process USB), mock-serial (pseudo-terminal),
@@ -64,8 +59,7 @@ pub struct AcquireArgs {
     /// Mock: dark counts per second over the sensor.
     #[arg(long, default_value_t = 0.0)]
     dark_rate: f64,
-    /// Mock: probability that a detection is followed by an afterpulse
-    /// (mean delay 50 ns) in the same pixel; 0 turns after-pulsing off.
+    /// Mock: probability of an afterpulse (mean delay 50 ns) per detection.
     #[arg(long, default_value_t = 0.0)]
     afterpulse: f64,
     /// Mock: random seed (same seed, same photons).
@@ -81,13 +75,11 @@ pub struct AcquireArgs {
     #[arg(long)]
     unpaced: bool,
     /// Mock: draw this many batches once and replay them (load tests at
-    /// hardware rates; with --rate above what the host takes, the device
-    /// FIFO overflows and says how much). 0: draw every photon.
+    /// hardware rates). 0: draw every photon.
     #[arg(long, default_value_t = 0)]
     replay: usize,
-    /// Mock: inject faults, e.g. corrupt=10,duplicate=7,reorder=5,drop-bytes=9,
-    /// overflow=4:1000,disconnect=50 (every n-th batch; with random=SEED,
-    /// each with probability 1/n per batch at seeded random times).
+    /// Mock: faults every n-th batch, e.g. corrupt=10,duplicate=7,reorder=5,
+    /// drop-bytes=9,overflow=4:1000,disconnect=50 (random=SEED: at random).
     #[arg(long, default_value = "")]
     faults: Faults,
     /// Output directory (created if missing).
@@ -135,63 +127,26 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
             .context("installing the Ctrl-C handler")?;
     }
-    let bar = match job.duration {
-        Some(d) => ProgressBar::new(d.as_millis() as u64).with_style(
-            ProgressStyle::with_template("{bar:30} {elapsed}/{duration} {msg}").expect("template"),
-        ),
-        None => ProgressBar::new_spinner().with_style(
-            ProgressStyle::with_template("{spinner} {elapsed} {msg}").expect("template"),
-        ),
-    };
-    let mut last = (Duration::ZERO, 0u64);
+    let bar = progress(job.duration.map(|d| d.as_millis()));
     let done = job.run(&stop, |p| {
-        let dt = (p.elapsed - last.0).as_secs_f64();
-        let rate = if dt > 0.0 {
-            (p.received - last.1) as f64 / dt
-        } else {
-            0.0
-        };
-        last = (p.elapsed, p.received);
         bar.set_position(p.elapsed.as_millis() as u64);
-        bar.set_message(format!(
-            "{} photons, {:.2} Mcps, lost in device {}, damaged frames {}",
-            p.received,
-            rate / 1e6,
-            p.lost_in_device,
-            p.damaged_frames
-        ));
+        bar.set_message(p.describe());
     })?;
     bar.finish_and_clear();
     for note in &done.notes {
         println!("{note}");
     }
-    let summary = done.summary();
-    println!("{}", summary[..2].join("\n"));
-    if args.device.is_mock()
-        && args.max_photons > 0
-        && done.outcome.stop == StopReason::Duration
-        && done.outcome.accounting.received < args.max_photons
-    {
-        println!(
-            "  note: --duration {:?} ended the acquisition before the mock's --max-photons {} was reached; --duration 0 runs until the device stops",
-            args.duration, args.max_photons
-        );
-    }
-    for line in &summary[2..] {
+    for line in done.summary() {
         println!("{line}");
     }
-    for file in done.files.iter().filter(|f| {
-        f.extension().is_some_and(|e| e == "exr" || e == "sstags") && !f.ends_with("truth.exr")
-    }) {
-        println!("wrote {}", file.display());
-    }
+    let names: Vec<String> = done.files.iter().map(|f| f.display().to_string()).collect();
+    println!("wrote {}", names.join(", "));
     done.verdict().map_err(anyhow::Error::msg)
 }
 
 /// List the devices `acquire --device` can open.
 ///
-/// Serial ports, USB time taggers with known ids, and the two mock devices.
-/// A machine with no hardware lists only the mocks.
+/// Serial ports, USB time taggers with known ids, and the two mocks.
 #[derive(Debug, clap::Args)]
 pub struct DevicesArgs {
     /// Print JSON instead of a table.
@@ -200,14 +155,10 @@ pub struct DevicesArgs {
 }
 
 pub fn devices(args: &DevicesArgs) -> anyhow::Result<()> {
-    let (all, hardware) = scatterscope::acquire::device::list_devices();
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&all)?);
-    } else {
-        println!("{hardware} hardware device(s)");
-        for d in &all {
-            println!("  {:<28} {}", d.address, d.description);
-        }
+    let (all, hardware) = device::list_devices();
+    match args.json {
+        true => println!("{}", serde_json::to_string_pretty(&all)?),
+        false => println!("{}", device::devices_table(&all, hardware).join("\n")),
     }
     Ok(())
 }

@@ -11,14 +11,9 @@ use crate::shared_args::{PhysicsArgs, choice};
 
 /// Reconstruction benchmark on images the methods were not tuned on.
 ///
-/// Reads DIR/manifest.csv and its images (write them with `python3
-/// scripts/bench_images.py DIR`), simulates each image at each light level
-/// with the object extending past the sensor, and runs PnP (each solver and
-/// prior given), PnP on the time-summed stack, and Richardson-Lucy on the
-/// time-summed stack (its default output, its stop chosen by
-/// cross-validation on thinned halves of the counts, and its best iteration
-/// chosen with the truth). Writes OUT/rows.csv, OUT/summary.md and the PnP traces (PSNR
-/// against wall time) as OUT/traces/IMAGE_LEVEL_METHOD.csv.
+/// Simulates each image of DIR/manifest.csv (`python3
+/// scripts/bench_images.py DIR`) at each light level and runs every method
+/// on it; writes OUT/rows.csv, OUT/summary.md and the traces in OUT/traces.
 #[derive(Debug, clap::Args)]
 pub struct BenchReconArgs {
     /// Directory with manifest.csv and the images.

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+use scatterscope::config::parse_noise_sigma;
 use scatterscope::denoise::benchmark::add_noise;
 use scatterscope::formats::image::{read_image, write_image};
 use scatterscope::metrics::{psnr, ssim};
@@ -11,21 +12,16 @@ use crate::recon_args::PriorArgs;
 
 /// Denoise one image with a Plug-and-Play prior.
 ///
-/// INPUT and --out are PNG/JPEG (gray levels on a [0, 1] scale), EXR
-/// (luminance, values as stored) or 2-D .npy (float32/float64). The image
-/// is handed to the denoiser as it is, taken to be on a [0, 1] scale, and
-/// --sigma is the noise standard deviation on that scale (e.g. 25/255 for
-/// sigma 25 of an 8-bit image). Sigma above the prior's trained range is
-/// clamped, and the output says so. With --add-noise the input is taken as
-/// clean, white Gaussian noise of --sigma is added first (seeded), and the
-/// PSNR/SSIM of the noisy and the denoised image against it are printed.
+/// INPUT and --out are PNG/JPEG (gray levels in [0, 1]), EXR or 2-D .npy;
+/// --sigma is on the [0, 1] scale (e.g. 25/255). With --add-noise the input
+/// is clean, noise is added (seeded) and PSNR/SSIM are printed.
 #[derive(Debug, clap::Args)]
 pub struct DenoiseArgs {
     /// Image to denoise.
     input: PathBuf,
     /// Noise standard deviation on the image's scale (a number or a
     /// fraction such as 25/255).
-    #[arg(long, value_parser = parse_sigma)]
+    #[arg(long, value_parser = parse_noise_sigma)]
     sigma: f64,
     #[command(flatten)]
     prior: PriorArgs,
@@ -36,31 +32,6 @@ pub struct DenoiseArgs {
     /// Output image (.png, .exr or .npy).
     #[arg(long)]
     out: PathBuf,
-}
-
-fn parse_sigma(s: &str) -> Result<f64, String> {
-    let v = match s.split_once('/') {
-        Some((a, b)) => {
-            let a: f64 = a
-                .trim()
-                .parse()
-                .map_err(|_| format!("`{s}`: `{a}` is not a number"))?;
-            let b: f64 = b
-                .trim()
-                .parse()
-                .map_err(|_| format!("`{s}`: `{b}` is not a number"))?;
-            a / b
-        }
-        None => s
-            .trim()
-            .parse()
-            .map_err(|_| format!("`{s}` is not a number or a fraction"))?,
-    };
-    if v >= 0.0 && v.is_finite() {
-        Ok(v)
-    } else {
-        Err(format!("`{s}`: sigma must be finite and not negative"))
-    }
 }
 
 pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {

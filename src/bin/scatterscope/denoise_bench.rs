@@ -5,18 +5,12 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use scatterscope::denoise::benchmark::{self, StandardPriors};
-use scatterscope::denoise::ffdnet::{Ffdnet, source};
 
 /// Denoising benchmark: PSNR and time of each prior at several noise levels.
 ///
-/// Adds seeded white Gaussian noise of each --sigmas level (8-bit units) to
-/// every clean image and runs: FFDNet with the embedded weights, FFDNet
-/// with imported weights (data directory) and with --weights if given, TV
-/// at the gain PnP uses, and TV with the best of several gains chosen with
-/// the clean image (an oracle, labelled so). Writes results.csv (every
-/// measurement) and summary.md (mean PSNR/SSIM, median time) to --out.
-/// `python3 training/export_eval_images.py DIR` writes the five natural
-/// test images used in BENCHMARKS.md.
+/// Seeded white noise of each --sigmas level (8-bit units) on every clean
+/// image; FFDNet (embedded, imported, --weights), TV and TV's oracle gain.
+/// Writes results.csv and summary.md to --out.
 #[derive(Debug, clap::Args)]
 pub struct DenoiseBenchArgs {
     /// Clean images (PNG/JPEG, gray or colour, read as luminance in [0, 1])
@@ -46,20 +40,7 @@ pub fn run(args: &DenoiseBenchArgs) -> anyhow::Result<()> {
         anyhow::ensure!(s > 0.0 && s <= 255.0, "--sigmas: {s} is not in (0, 255]");
     }
     let images = benchmark::collect_images(&args.images)?;
-    let mut nets: Vec<(String, Ffdnet)> = vec![(
-        "ffdnet embedded".into(),
-        Ffdnet::new(source::embedded(), "embedded"),
-    )];
-    if let Some(p) = source::imported_path().filter(|p| p.is_file()) {
-        nets.push(("ffdnet imported".into(), Ffdnet::from_file(&p, "imported")?));
-    }
-    if let Some(p) = &args.weights {
-        nets.push((
-            format!("ffdnet {}", p.display()),
-            Ffdnet::from_file(p, p.display().to_string())?,
-        ));
-    }
-    let standard = StandardPriors::new(nets);
+    let standard = StandardPriors::with_weights(args.weights.as_deref())?;
     let priors = standard.priors();
     println!(
         "{} image(s) x {} sigma(s) x {} prior(s)",

@@ -5,8 +5,10 @@
 use std::error::Error;
 
 use scatterscope::acquire::JobError;
+use scatterscope::calibrate::CalibrateError;
 use scatterscope::calibrate::histogram::HistogramError;
 use scatterscope::config::ConfigError;
+use scatterscope::denoise::ffdnet::source::ImportError;
 use scatterscope::denoise::prior::PriorError;
 use scatterscope::formats::picoquant::{FileError, TtrError};
 use scatterscope::psf::PsfError;
@@ -41,6 +43,9 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
     }
     if let Some(BinFileError::File(e)) = cause.downcast_ref::<BinFileError>() {
         return hint(e);
+    }
+    if let Some(CalibrateError::Config(e)) = cause.downcast_ref::<CalibrateError>() {
+        return hint(e.as_ref());
     }
     if let Some(e) = cause.downcast_ref::<ConfigError>() {
         return match e {
@@ -82,6 +87,8 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
         "lower --min-bin-photons or raise --photons"
     } else if let Some(PsfError::NoBins(_)) = cause.downcast_ref::<PsfError>() {
         "lower --min-bin-photons"
+    } else if let Some(ImportError::NoDataDir) = cause.downcast_ref::<ImportError>() {
+        "pass --out"
     } else if let Some(JobError::SensorTooLarge { .. }) = cause.downcast_ref::<JobError>() {
         "a smaller --size"
     } else {

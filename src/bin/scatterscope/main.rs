@@ -20,11 +20,9 @@ use clap::{Parser, Subcommand};
 
 /// Time-resolved imaging through scattering media.
 ///
-/// Light from an object behind a scattering slab (tissue, fog) reaches a
-/// time-resolving sensor spread in space and time. scatterscope models that
-/// blur with the diffusion approximation (the ST-PSF), simulates photon-count
-/// stacks, writes them as OpenEXR/.npy with PNG previews, and reconstructs the
-/// object with Poisson Plug-and-Play ADMM or Richardson-Lucy.
+/// Models the blur of a scattering slab with the diffusion approximation
+/// (the ST-PSF), acquires or simulates photon-count stacks, and
+/// reconstructs the object behind it.
 #[derive(Debug, Parser)]
 #[command(name = "scatterscope", version, about, long_about)]
 struct Cli {
@@ -53,10 +51,8 @@ enum Command {
 
 /// End-to-end demo on the mock device, no hardware needed.
 ///
-/// Runs `acquire --device mock --out OUT/acquire` (the USAF chart behind
-/// the paper's slab, 2 s at 2 million photons/s) and then `reconstruct
-/// OUT/acquire/stack.exr --truth OUT/acquire/truth.exr --out
-/// OUT/reconstruct`: the same code paths as the two commands.
+/// `acquire --device mock --out OUT/acquire`, then `reconstruct` of its
+/// stack against its truth into OUT/reconstruct.
 #[derive(Debug, clap::Args)]
 struct DemoArgs {
     /// Output directory.
@@ -65,41 +61,37 @@ struct DemoArgs {
 }
 
 fn demo(args: &DemoArgs) -> anyhow::Result<()> {
-    let acq = args.out.join("acquire");
-    let rec = args.out.join("reconstruct");
-    let steps: [Vec<std::ffi::OsString>; 2] = [
+    let (acq, rec) = (args.out.join("acquire"), args.out.join("reconstruct"));
+    let (stack, truth) = (acq.join("stack.exr"), acq.join("truth.exr"));
+    let steps = [
+        vec!["acquire", "--device", "mock", "--out", s(&acq)?],
         vec![
-            "acquire".into(),
-            "--device".into(),
-            "mock".into(),
-            "--out".into(),
-            acq.clone().into(),
-        ],
-        vec![
-            "reconstruct".into(),
-            acq.join("stack.exr").into(),
-            "--truth".into(),
-            acq.join("truth.exr").into(),
-            "--out".into(),
-            rec.into(),
+            "reconstruct",
+            s(&stack)?,
+            "--truth",
+            s(&truth)?,
+            "--out",
+            s(&rec)?,
         ],
     ];
     for step in steps {
-        let line: Vec<_> = step
-            .iter()
-            .map(|s| s.to_string_lossy().into_owned())
-            .collect();
-        println!("== scatterscope {}", line.join(" "));
-        let cli = Cli::try_parse_from(std::iter::once("scatterscope".into()).chain(step))?;
-        dispatch(cli.command)?;
+        println!("== scatterscope {}", step.join(" "));
+        dispatch(Cli::try_parse_from(std::iter::once("scatterscope").chain(step))?.command)?;
     }
     Ok(())
 }
 
+/// A path as a demo's argument.
+fn s(p: &std::path::Path) -> anyhow::Result<&str> {
+    p.to_str()
+        .ok_or_else(|| anyhow::anyhow!("{}: not a UTF-8 path", p.display()))
+}
+
 /// Exit status: 0 success; 1 the command failed (bad input, I/O, a device
 /// error), with one `error:` line naming the file, field and value and the
-/// causes after it, then a `hint:` line per flag that changes it; 2 the command line itself is wrong (clap's usage
-/// errors). A panic (101) is a bug.
+/// causes after it, then a `hint:` line per flag that changes it; 2 the
+/// command line itself is wrong (clap's usage errors). A panic (101) is a
+/// bug.
 fn main() -> std::process::ExitCode {
     match dispatch(Cli::parse().command) {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -11,10 +11,8 @@ use crate::shared_args::{PhysicsArgs, choice};
 
 /// Compute the ST-PSF for each time bin and write it with a per-bin table.
 ///
-/// Writes psf.exr (one channel per kept bin, centred kernels, expected
-/// photons per pixel from a unit object pixel), psf_bins.csv and
-/// psf_sheet.png. Both discretisations (pixel/bin-integrated and point
-/// sampled) are computed and their difference and run times are reported.
+/// Writes psf.exr (centred kernels of the kept bins), psf_bins.csv and
+/// psf_sheet.png, and compares the integrated and point-sampled kernels.
 #[derive(Debug, clap::Args)]
 pub struct PsfArgs {
     #[command(flatten)]

@@ -1,6 +1,6 @@
 //! Reconstruction settings shared by `reconstruct` and `report`.
 
-use crate::shared_args::choice;
+use crate::shared_args::{choice, same_fields};
 use std::path::PathBuf;
 
 use scatterscope::denoise::Denoiser;
@@ -12,14 +12,12 @@ use scatterscope::reconstruct::split::SplitOptions;
 /// The denoiser and its settings (`reconstruct`, `report`, `denoise`).
 #[derive(Debug, Clone, clap::Args)]
 pub struct PriorArgs {
-    /// Prior for PnP-ADMM (the denoiser): ffdnet (the learned prior;
-    /// weights: --weights, else $SCATTERSCOPE_FFDNET_WEIGHTS, else
-    /// imported, else embedded), tv (total variation, weight = gain x
-    /// sigma) or identity (no prior).
+    /// Prior for PnP: ffdnet (learned; weights: --weights, else
+    /// $SCATTERSCOPE_FFDNET_WEIGHTS, else imported, else embedded), tv or
+    /// identity.
     #[arg(long, value_parser = choice::<PriorKind>(), default_value = "ffdnet")]
     pub denoiser: PriorKind,
-    /// FFDNet weight file (the project's safetensors format), or
-    /// `embedded` for the built-in weights even when imported ones exist.
+    /// FFDNet weights (the project's safetensors), or `embedded`.
     #[arg(long, value_name = "PATH")]
     pub weights: Option<PathBuf>,
     /// TV weight per unit of the denoiser's noise sigma.
@@ -62,48 +60,38 @@ impl PriorArgs {
 pub struct ReconArgs {
     #[command(flatten)]
     pub prior: PriorArgs,
-    /// PnP solver: split (exact splitting, P4IP: closed-form Poisson prox
-    /// and Fourier-domain o-update) or admm-lbfgs (the paper's Algorithm 1).
+    /// PnP solver: split (exact splitting, P4IP) or admm-lbfgs (Algorithm 1).
     #[arg(long, value_parser = choice::<Solver>(), default_value = "split")]
     pub solver: Solver,
-    /// Split solver: data-split penalty rho, relative to the Poisson
-    /// curvature at the flat object's counts.
+    /// Split: data penalty rho, relative to the flat object's Poisson curvature.
     #[arg(long, default_value_t = SplitOptions::default().rho)]
     pub rho: f64,
-    /// Split solver: prior-split penalty gamma, relative to the data's
-    /// weight at zero frequency.
+    /// Split: prior penalty gamma, relative to the data's weight at frequency 0.
     #[arg(long, default_value_t = SplitOptions::default().gamma)]
     pub gamma: f64,
-    /// Split solver: the denoiser's first sigma, relative to the level of
-    /// the flat object that explains the total count.
+    /// Split: the prior's first sigma, relative to the flat object's level.
     #[arg(long, default_value_t = SplitOptions::default().sigma0)]
     pub sigma0: f64,
-    /// Split solver: sigma shrinks by this factor per iteration down to its floor.
+    /// Split: sigma shrinks by this factor per iteration down to its floor.
     #[arg(long, default_value_t = SplitOptions::default().sigma_decay)]
     pub sigma_decay: f64,
-    /// Split solver: the last sigma is sigma_floor x o_flat x n^-sigma_power,
-    /// n the photons per pixel of the flat object that explains the total.
+    /// Split: last sigma = sigma_floor o_flat n^-sigma_power (n photons per pixel).
     #[arg(long, default_value_t = SplitOptions::default().sigma_floor)]
     pub sigma_floor: f64,
-    /// Split solver: see --sigma-floor.
+    /// Split: see --sigma-floor.
     #[arg(long, default_value_t = SplitOptions::default().sigma_power)]
     pub sigma_power: f64,
-    /// Split solver: the deviance target, in noise standard deviations
-    /// above the deviance Poisson noise alone gives.
+    /// Split: deviance target, in noise SDs above Poisson noise's own.
     #[arg(long, default_value_t = SplitOptions::default().target_z)]
     pub target_z: f64,
-    /// Split solver: iterations at the target before stopping.
+    /// Split: iterations at the target before stopping.
     #[arg(long, default_value_t = SplitOptions::default().patience)]
     pub split_patience: usize,
-    /// Split solver: start from this many Richardson-Lucy iterations on the
-    /// time-summed stack (0: from the flat object that explains the total).
+    /// Split: start from this many RL iterations on the summed stack (0: flat).
     #[arg(long, default_value_t = SplitOptions::default().warm_start)]
     pub warm_start: usize,
-    /// Split solver: the learned prior on its fixed 2x2 pixel-unshuffle
-    /// grid, or averaged over the grid's four positions (about 3x the
-    /// time; removes a 2x2 pattern the blur cannot see: +0.3 dB on average
-    /// on the tuning images at the paper's light, up to +3 dB on smooth
-    /// scenes; BENCHMARKS.md)
+    /// Split: the learned prior on its fixed 2x2 grid, or averaged over its
+    /// four positions (3x the time; +0.3 dB on average, BENCHMARKS.md).
     #[arg(long, default_value = "fixed", value_parser = ["fixed", "average"])]
     pub prior_grid: String,
     /// admm-lbfgs: initial penalty lambda_0.
@@ -112,22 +100,17 @@ pub struct ReconArgs {
     /// admm-lbfgs: lambda grows by this factor per iteration.
     #[arg(long, default_value_t = 1.1)]
     pub lambda_step: f64,
-    /// admm-lbfgs: regularisation weight beta; the denoiser gets
-    /// sigma^2 = beta / lambda.
+    /// admm-lbfgs: prior weight beta (sigma^2 = beta / lambda).
     #[arg(long, default_value_t = AdmmLbfgsOptions::default().beta)]
     pub beta: f64,
     /// ADMM iteration cap [default: split 80, admm-lbfgs 100].
     #[arg(long)]
     pub max_iters: Option<usize>,
-    /// ADMM stopping rule besides the cap and residual tolerances, none of
-    /// which needs the truth: agreement (the smallest primal residual among
-    /// iterates whose Poisson deviance the noise can explain), deviance (the
-    /// smallest deviance), iterations (cap only), or auto (agreement for the
-    /// learned prior, deviance for TV and identity).
+    /// admm-lbfgs stopping rule: agreement (smallest primal residual the
+    /// noise allows), deviance, iterations, or auto (agreement for FFDNet).
     #[arg(long, value_parser = choice::<StopRule>(), default_value = "auto")]
     pub stop: StopRule,
-    /// Iterations without a new pick before the agreement or deviance rule
-    /// stops (default: 10 for agreement, 30 for deviance).
+    /// admm-lbfgs: iterations without a new pick [default: 10, deviance 30].
     #[arg(long)]
     pub patience: Option<usize>,
     /// ADMM primal and dual residual tolerance (RMS per pixel).
@@ -145,10 +128,8 @@ pub struct ReconArgs {
     /// Richardson-Lucy iterations (with --rl-stop fixed).
     #[arg(long, default_value_t = MethodOptions::default().rl_iters)]
     pub rl_iters: usize,
-    /// When Richardson-Lucy stops: fixed (after --rl-iters) or cv (at the
-    /// iteration whose estimate best predicts photons it was not fitted to:
-    /// two-fold cross-validation on thinned halves of the counts; the
-    /// output is the sum of the halves' estimates).
+    /// When Richardson-Lucy stops: fixed (--rl-iters) or cv (two-fold
+    /// cross-validation on thinned halves of the counts).
     #[arg(long, value_parser = choice::<RlStop>(), default_value = "cv")]
     pub rl_stop: RlStop,
     /// The most iterations --rl-stop cv searches.
@@ -157,43 +138,22 @@ pub struct ReconArgs {
 }
 
 impl ReconArgs {
-    /// The method settings (checked where they are used).
+    /// The method settings, checked.
     pub fn options(&self) -> anyhow::Result<MethodOptions> {
-        let split = SplitOptions::default();
-        let lbfgs = AdmmLbfgsOptions::default();
-        let opts = MethodOptions {
-            solver: self.solver,
-            split: SplitOptions {
-                rho: self.rho,
-                gamma: self.gamma,
-                sigma0: self.sigma0,
-                sigma_decay: self.sigma_decay,
-                sigma_floor: self.sigma_floor,
-                sigma_power: self.sigma_power,
-                target_z: self.target_z,
-                patience: self.split_patience,
-                max_iters: self.max_iters.unwrap_or(split.max_iters),
-                warm_start: self.warm_start,
-                average_prior_grid: self.prior_grid == "average",
-            },
-            admm_lbfgs: AdmmLbfgsOptions {
-                lambda0: self.lambda0,
-                lambda_step: self.lambda_step,
-                beta: self.beta,
-                max_iters: self.max_iters.unwrap_or(lbfgs.max_iters),
-                primal_tol: self.residual_tol,
-                dual_tol: self.residual_tol,
-                stop: self.stop,
-                patience: self.patience,
-                lbfgs_iters: self.lbfgs_iters,
-                lbfgs_memory: 7,
-                lbfgs_grad_tol: self.lbfgs_tol,
-                eps: self.eps,
-            },
-            rl_iters: self.rl_iters,
-            rl_stop: self.rl_stop,
-            rl_max_iters: self.rl_max_iters,
-        };
+        let split = same_fields!(self => SplitOptions { rho, gamma, sigma0, sigma_decay,
+            sigma_floor, sigma_power, target_z, warm_start }
+            patience: self.split_patience,
+            max_iters: self.max_iters.unwrap_or(SplitOptions::default().max_iters),
+            average_prior_grid: self.prior_grid == "average");
+        let admm_lbfgs = same_fields!(self => AdmmLbfgsOptions { lambda0, lambda_step, beta,
+            stop, patience, lbfgs_iters, eps }
+            max_iters: self.max_iters.unwrap_or(AdmmLbfgsOptions::default().max_iters),
+            primal_tol: self.residual_tol,
+            dual_tol: self.residual_tol,
+            lbfgs_memory: 7,
+            lbfgs_grad_tol: self.lbfgs_tol);
+        let opts = same_fields!(self => MethodOptions { solver, rl_iters, rl_stop, rl_max_iters }
+            split, admm_lbfgs);
         opts.validate()?;
         Ok(opts)
     }

@@ -3,7 +3,6 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::Named;
 use scatterscope::calibrate::Free;
 use scatterscope::forward::Boundary;
@@ -12,41 +11,34 @@ use scatterscope::reconstruct::method::{Method, run_method};
 use scatterscope::reconstruct::problem::BackgroundChoice;
 
 use crate::recon_args::ReconArgs;
-use crate::shared_args::{PhysicsArgs, choice};
+use crate::shared_args::{PhysicsArgs, choice, progress};
 
 /// Reconstruct the object from a transient stack (.exr or .npy).
 ///
-/// Physics comes from the stack's metadata; flags or --config override it
-/// (stacks without physics, e.g. from `bin`, need them). Writes
-/// reconstruction.{exr,png} and the per-iteration trace as trace.{csv,json}.
+/// Physics from the stack's metadata, overridden by flags or --config.
+/// Writes reconstruction.{exr,png} and trace.{csv,json}.
 #[derive(Debug, clap::Args)]
 pub struct ReconstructArgs {
     /// The stack file.
     stack: PathBuf,
-    /// Method: pnp (whole stack), pnp-sum (time-summed), pnp-slice (one
-    /// bin), rl (one bin), rl-sum (time-summed), rl-stack (whole stack),
-    /// scaled-counts.
+    /// Method: on the whole stack, the time-summed stack or one bin.
     #[arg(long, value_parser = choice::<Method>(), default_value = "pnp")]
     method: Method,
-    /// Bin (0-based, in stack order) for single-bin methods and raw.
+    /// Bin (0-based) for single-bin methods and scaled-counts.
     #[arg(long)]
     bin: Option<usize>,
-    /// How the sensor's edges are modelled: sensor (light off the sensor is
-    /// lost, light from outside its field reaches its edges; real sensors)
-    /// or periodic (wrap-around) [default: the stack's record, else sensor].
+    /// The sensor's edges: sensor (real sensors) or periodic (wrap-around)
+    /// [default: the stack's record, else sensor].
     #[arg(long, value_parser = choice::<Boundary>())]
     boundary: Option<Boundary>,
     /// Truth image (PNG/JPEG/EXR) to report PSNR and SSIM against.
     #[arg(long)]
     truth: Option<PathBuf>,
-    /// Background counts per pixel and bin (dark counts, ambient light) in
-    /// the likelihood of every method: auto (estimated from the stack's bins
-    /// before the first light, none if it has none), none, or a number.
+    /// Background counts per pixel and bin: auto (from the bins before the
+    /// first light), none, or a number.
     #[arg(long, value_parser = BackgroundChoice::parse, default_value = "auto")]
     background: BackgroundChoice,
-    /// Fit these to the stack's time profile first and reconstruct with the
-    /// fitted physics, comma-separated: mu_a, mu_s, t0, irf (as
-    /// `calibrate --fit`); the fit is printed and kept in trace.json.
+    /// Fit these to the stack's time profile first (as `calibrate --fit`).
     #[arg(long, value_delimiter = ',')]
     fit_physics: Vec<String>,
     #[command(flatten)]
@@ -86,8 +78,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     let truth = args.truth.as_ref().map(|p| input.truth(p)).transpose()?;
     let opts = args.recon.options()?;
     let denoiser = args.recon.prior.denoiser()?;
-    let bar = ProgressBar::new_spinner();
-    bar.set_style(ProgressStyle::with_template("{spinner} {elapsed} {msg}").expect("template"));
+    let bar = progress(None);
     let mut result = run_method(
         &input.problem,
         args.method,

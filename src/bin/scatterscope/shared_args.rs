@@ -2,10 +2,20 @@
 //! library takes as [`PhysicsOverrides`]) and named choices.
 
 use clap::builder::{PossibleValuesParser, TypedValueParser};
+use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::Named;
 use scatterscope::config::{PhysicsOverrides, parse_cm, parse_ps};
 use scatterscope::physics::{MediumModel, Preset, Setup};
 use std::path::PathBuf;
+
+/// A struct of the library's from the flags of the same names (cloned),
+/// and any further fields given after them.
+macro_rules! same_fields {
+    ($from:expr => $ty:ident { $($f:ident),* $(,)? } $($more:tt)*) => {
+        $ty { $($f: $from.$f.clone(),)* $($more)* }
+    };
+}
+pub(crate) use same_fields;
 
 /// A clap value parser for a [`Named`] choice: its names are the possible
 /// values.
@@ -17,8 +27,7 @@ pub fn choice<T: Named + Clone>() -> impl TypedValueParser<Value = T> {
 /// Physics flags shared by every command that needs an ST-PSF.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct PhysicsArgs {
-    /// Parameter set to start from (`paper`: the paper's skin-like 3 cm slab,
-    /// 50 cm field, 256x256, 30 bins of 4 ps, 450 photons).
+    /// Parameter set to start from (`paper`: the paper's 3 cm skin-like slab).
     #[arg(long, value_name = "NAME", value_parser = scatterscope::config::parse_preset)]
     pub preset: Option<Preset>,
     /// TOML file with any of the keys below (flags override it).
@@ -39,9 +48,8 @@ pub struct PhysicsArgs {
     /// Slab thickness z0 between object and sensor (default unit cm; e.g. 30mm).
     #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
     pub thickness: Option<f64>,
-    /// How the slab's faces are modelled: infinite (the paper's Eq. 6, no
-    /// faces) or slab (extrapolated boundaries with the refractive-index
-    /// mismatch, image sources; transmitted flux).
+    /// The medium: infinite (the paper's Eq. 6) or slab (extrapolated
+    /// boundaries, image sources; transmitted flux).
     #[arg(long, value_name = "MODEL", value_parser = scatterscope::config::parse_medium)]
     pub medium: Option<MediumModel>,
     /// Horizontal field of view (default unit cm).
@@ -65,30 +73,20 @@ pub struct PhysicsArgs {
     /// Drop bins whose ST-PSF carries fewer expected photons (0 keeps all).
     #[arg(long, value_name = "COUNT", allow_negative_numbers = true)]
     pub min_bin_photons: Option<f64>,
-    /// Instrument response: FWHM of its Gaussian part (default unit ps;
-    /// 0: ideal timing). The kernels are the ST-PSF convolved in time with
-    /// it; time zero is the Gaussian's centre.
+    /// Instrument response: FWHM of its Gaussian (default unit ps; 0: ideal).
     #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     pub irf_fwhm: Option<f64>,
-    /// Instrument response: time constant of its exponential tail (default
-    /// unit ps; 0: none).
+    /// Instrument response: its exponential tail (default unit ps; 0: none).
     #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     pub irf_tail: Option<f64>,
-    /// Instrument response measured in a reference recording without the
-    /// medium (.sstags, .ptu, .pt3, .ht3 tag file, an .exr/.npy stack, or
-    /// a MATLAB .mat histogram with --irf-bin-ps):
-    /// its histogram less the background, as a table (time zero at the
-    /// centre of its fullest bin); the kernels are the ST-PSF convolved
-    /// with it.
+    /// Instrument response measured without the medium (a tag file, a
+    /// stack, or a MATLAB histogram with --irf-bin-ps), as a table.
     #[arg(long, value_name = "REF", conflicts_with_all = ["irf_fwhm", "irf_tail"])]
     pub irf_from: Option<PathBuf>,
-    /// With --irf-from: fit the Gaussian-plus-exponential form to the
-    /// reference (Poisson maximum likelihood; the fit and its chi-square
-    /// are printed) and use that instead of the measured table.
+    /// With --irf-from: fit the Gaussian-plus-exponential form instead.
     #[arg(long, requires = "irf_from")]
     pub irf_parametric: bool,
-    /// Bin width of an --irf-from reference that does not record one (a
-    /// MATLAB .mat histogram; default unit ps).
+    /// Bin width of an --irf-from file that records none (default unit ps).
     #[arg(long, value_name = "TIME", value_parser = parse_ps, requires = "irf_from")]
     pub irf_bin_ps: Option<f64>,
 }
@@ -96,28 +94,9 @@ pub struct PhysicsArgs {
 impl PhysicsArgs {
     /// The flags as the library's overrides.
     pub fn overrides(&self) -> PhysicsOverrides {
-        PhysicsOverrides {
-            preset: self.preset,
-            config: self.config.clone(),
-            mu_a: self.mu_a,
-            mu_s: self.mu_s,
-            g: self.g,
-            n: self.n,
-            thickness: self.thickness,
-            medium: self.medium,
-            fov: self.fov,
-            size: self.size,
-            bin_width: self.bin_width,
-            t_start: self.t_start,
-            bins: self.bins,
-            photons: self.photons,
-            min_bin_photons: self.min_bin_photons,
-            irf_fwhm: self.irf_fwhm,
-            irf_tail: self.irf_tail,
-            irf_from: self.irf_from.clone(),
-            irf_parametric: self.irf_parametric,
-            irf_bin_ps: self.irf_bin_ps,
-        }
+        same_fields!(self => PhysicsOverrides { preset, config, mu_a, mu_s, g, n, thickness,
+            medium, fov, size, bin_width, t_start, bins, photons, min_bin_photons, irf_fwhm,
+            irf_tail, irf_from, irf_parametric, irf_bin_ps })
     }
 
     /// Resolves preset, config file and flags into a validated setup,
@@ -135,4 +114,17 @@ impl PhysicsArgs {
         }
         Ok(setup)
     }
+}
+
+/// A progress display: a bar over `millis` when the end is known, else a
+/// spinner; `{msg}` is the caller's.
+pub fn progress(millis: Option<u128>) -> ProgressBar {
+    let (bar, template) = match millis {
+        Some(ms) => (
+            ProgressBar::new(ms as u64),
+            "{bar:30} {elapsed}/{duration} {msg}",
+        ),
+        None => (ProgressBar::new_spinner(), "{spinner} {elapsed} {msg}"),
+    };
+    bar.with_style(ProgressStyle::with_template(template).expect("template"))
 }

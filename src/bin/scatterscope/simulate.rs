@@ -13,10 +13,8 @@ use crate::shared_args::{PhysicsArgs, choice};
 
 /// Simulate a transient measurement of a scene through the scattering slab.
 ///
-/// Writes truth.{exr,png}, expected.{exr,png} (noise-free expected counts)
-/// and counts.{exr,png} (Poisson-sampled photon counts), plus .npy/.json
-/// copies of both stacks with --npy. Bins whose ST-PSF carries fewer than
-/// --min-bin-photons are left out and listed.
+/// Writes truth.{exr,png}, expected.{exr,png} and counts.{exr,png} (and
+/// .npy copies with --npy).
 #[derive(Debug, clap::Args)]
 pub struct SimulateArgs {
     /// Object: a built-in scene (usaf, star, text, disks) or a PNG/JPEG/EXR file.

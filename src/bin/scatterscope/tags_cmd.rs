@@ -10,9 +10,7 @@ use crate::shared_args::choice;
 
 /// Show what a recorded file (PTU, HT3, PT3, .sstags) holds.
 ///
-/// Prints the header (device, record type, resolutions, sync rate, record
-/// counts, imaging tags) and, from one pass over the records, photons per
-/// channel, markers, overflows and the measured duration.
+/// The header, then events counted by kind in one pass.
 #[derive(Debug, clap::Args)]
 pub struct InfoArgs {
     /// The file.
@@ -21,9 +19,8 @@ pub struct InfoArgs {
 
 /// Bin a T3 file into a transient stack (counts per micro-time bin and pixel).
 ///
-/// Single-pixel files give a 1 x 1 stack; --pixels channel makes each input
-/// channel a pixel (SPAD arrays); imaging files (Measurement_SubMode 3) are
-/// binned into their scanned image from the line and frame markers.
+/// Single-pixel files give a 1 x 1 stack, --pixels channel a pixel per
+/// channel; imaging files bin into their scanned image.
 #[derive(Debug, clap::Args)]
 pub struct BinArgs {
     /// The file.

@@ -2,9 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
-use scatterscope::denoise::Denoiser;
-use scatterscope::denoise::ffdnet::{pth, source, weights::FfdnetWeights};
+use scatterscope::denoise::ffdnet::source;
 
 /// Manage the FFDNet weights used by the learned prior.
 #[derive(Debug, clap::Args)]
@@ -36,21 +34,7 @@ enum Action {
 pub fn run(args: &WeightsArgs) -> anyhow::Result<()> {
     match &args.action {
         Action::Import { path, out } => {
-            let bytes =
-                std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-            let converted = pth::import_ffdnet_gray(&bytes, path)?;
-            let out = match out {
-                Some(o) => o.clone(),
-                None => source::imported_path()
-                    .context("no data directory on this system: pass --out")?,
-            };
-            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir)
-                    .with_context(|| format!("creating {}", dir.display()))?;
-            }
-            std::fs::write(&out, &converted)
-                .with_context(|| format!("writing {}", out.display()))?;
-            let w = FfdnetWeights::from_file(&out)?;
+            let (out, w) = source::import(path, out.as_deref())?;
             println!(
                 "imported {} -> {} ({} layers, {} channels, sigma up to {:.4})",
                 path.display(),
@@ -62,18 +46,8 @@ pub fn run(args: &WeightsArgs) -> anyhow::Result<()> {
             Ok(())
         }
         Action::Show { path } => {
-            let net = source::load(path.as_deref())?;
-            println!("prior: {}", net.name());
-            let a = &net.weights().arch;
-            println!(
-                "{} layers, {} channels, sigma in [0, {:.4}], {:.2} GFLOP per 256x256 call",
-                a.layers,
-                a.channels,
-                a.sigma_max,
-                a.flops(256, 256) / 1e9
-            );
-            for (k, v) in &net.weights().metadata {
-                println!("  {k}: {v}");
+            for line in source::load(path.as_deref())?.describe() {
+                println!("{line}");
             }
             Ok(())
         }

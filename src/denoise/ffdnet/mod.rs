@@ -63,6 +63,29 @@ impl Ffdnet {
         Ok(Self::new(FfdnetWeights::from_file(path)?, label))
     }
 
+    /// The network in words: its name, architecture, trained sigma
+    /// range, cost per 256 x 256 call, and its weights' metadata.
+    pub fn describe(&self) -> Vec<String> {
+        let a = &self.weights().arch;
+        let mut lines = vec![
+            format!("prior: {}", self.name()),
+            format!(
+                "{} layers, {} channels, sigma in [0, {:.4}], {:.2} GFLOP per 256x256 call",
+                a.layers,
+                a.channels,
+                a.sigma_max,
+                a.flops(256, 256) / 1e9
+            ),
+        ];
+        lines.extend(
+            self.weights()
+                .metadata
+                .iter()
+                .map(|(k, v)| format!("  {k}: {v}")),
+        );
+        lines
+    }
+
     /// The weights in use.
     pub fn weights(&self) -> &FfdnetWeights {
         &self.weights

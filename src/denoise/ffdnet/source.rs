@@ -73,3 +73,51 @@ fn load_explicit(p: &Path, label: String) -> Result<Ffdnet, WeightsError> {
     }
     Ffdnet::from_file(p, label)
 }
+
+/// Why weights could not be imported.
+#[derive(Debug, thiserror::Error)]
+pub enum ImportError {
+    /// The legacy file cannot be converted.
+    #[error(transparent)]
+    Pth(#[from] super::pth::PthError),
+    /// The converted weights do not validate, or a file cannot be read.
+    #[error(transparent)]
+    Weights(#[from] WeightsError),
+    /// No output was given and this system has no data directory.
+    #[error("no data directory on this system: give an output file")]
+    NoDataDir,
+    /// The output cannot be written.
+    #[error("{path}: {source}")]
+    Write {
+        /// The file or directory.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+/// Converts the original FFDNet gray weights at `pth` (a legacy PyTorch
+/// `.pth`) into the project's format at `out`, or where imported weights
+/// are looked for ([`imported_path`]); returns the file and the weights,
+/// validated as the prior loads them.
+pub fn import(pth: &Path, out: Option<&Path>) -> Result<(PathBuf, FfdnetWeights), ImportError> {
+    let bytes = std::fs::read(pth).map_err(|source| WeightsError::Io {
+        path: pth.display().to_string(),
+        source,
+    })?;
+    let converted = super::pth::import_ffdnet_gray(&bytes, pth)?;
+    let out = match out {
+        Some(o) => o.to_path_buf(),
+        None => imported_path().ok_or(ImportError::NoDataDir)?,
+    };
+    let write = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| ImportError::Write { path, source }
+    };
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(write(dir))?;
+    }
+    std::fs::write(&out, &converted).map_err(write(&out))?;
+    let weights = FfdnetWeights::from_file(&out)?;
+    Ok((out, weights))
+}
