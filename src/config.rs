@@ -235,6 +235,9 @@ pub enum ConfigError {
         /// What is wrong.
         reason: String,
     },
+    /// The file cannot be read whole (a special file, or too large).
+    #[error(transparent)]
+    Read(#[from] crate::memory::ReadError),
     /// The reference recording of the instrument response cannot be used.
     #[error(transparent)]
     Reference(#[from] crate::calibrate::CalibrateError),
@@ -447,11 +450,13 @@ fn invalid(path: &Path, reason: impl Into<String>) -> ConfigError {
     }
 }
 
+/// Largest configuration file read (any real one is a few hundred bytes).
+const MAX_CONFIG: u64 = 1 << 20;
+
 fn read_file(path: &Path) -> Result<FileOverrides, ConfigError> {
-    let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Io {
-        path: path.to_owned(),
-        error,
-    })?;
+    let bytes = crate::memory::read_bounded(path, MAX_CONFIG, "configuration file")?;
+    let text =
+        String::from_utf8(bytes).map_err(|e| invalid(path, format!("not UTF-8 text: {e}")))?;
     toml::from_str(&text).map_err(|e| invalid(path, e.to_string()))
 }
 

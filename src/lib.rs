@@ -73,6 +73,7 @@ pub mod fft2;
 pub mod font;
 pub mod formats;
 pub mod forward;
+pub mod memory;
 pub mod metrics;
 pub mod named;
 pub mod psf;

@@ -30,6 +30,9 @@ pub struct PsfReport {
 /// Why the kernels cannot be reported.
 #[derive(Debug, thiserror::Error)]
 pub enum PsfError {
+    /// More memory than the budget.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::MemoryError),
     /// The physics is invalid.
     #[error(transparent)]
     Param(#[from] ParamError),
@@ -45,6 +48,8 @@ impl PsfReport {
     /// Builds both discretisations of `setup` (the point samples only
     /// without an instrument response, unless `sampling` asks for them).
     pub fn build(setup: &Setup, sampling: Sampling) -> Result<Self, PsfError> {
+        setup.validate()?;
+        crate::memory::check_setup(setup, crate::memory::PSF_BYTES, "the ST-PSF")?;
         let timed = |sampling| -> Result<(KernelStack, f64), ParamError> {
             let t = Instant::now();
             let k = KernelStack::build(setup, sampling)?;

@@ -49,6 +49,9 @@ pub struct SimulationTimings {
 /// Why a simulation cannot run.
 #[derive(Debug, thiserror::Error)]
 pub enum SimulateError {
+    /// More memory than the budget.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::MemoryError),
     /// The physics is invalid.
     #[error(transparent)]
     Param(#[from] ParamError),
@@ -72,6 +75,8 @@ pub fn simulate(
     boundary: Boundary,
     seed: u64,
 ) -> Result<Simulation, SimulateError> {
+    setup.validate()?;
+    crate::memory::check_setup(setup, crate::memory::SIMULATE_BYTES, "a simulation")?;
     let t = Instant::now();
     let kernels = KernelStack::build(setup, sampling)?;
     let psf_s = t.elapsed().as_secs_f64();

@@ -12,12 +12,14 @@ use std::path::{Path, PathBuf};
 use pt3::write_pt3;
 
 use scatterscope::formats::picoquant::records::{Decoder, RecordType};
+use scatterscope::formats::picoquant::writer::write_synthetic_t3;
 use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
 use scatterscope::formats::picoquant::{self, TtrError};
 use scatterscope::tags::Imaging;
 use scatterscope::tags::Tag;
 use scatterscope::tags::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
+use scatterscope::tags::survey::{Survey, survey};
 
 /// A PicoQuant sample file (`../shared/data/picoquant-sample-data/REL`).
 fn sample(rel: &str) -> PathBuf {
@@ -701,4 +703,62 @@ fn survey_counts_every_record_kind_and_reports_a_cut() {
     let (_, s) = survey_picoquant(&path).unwrap();
     assert!(s.cut.is_some());
     assert_eq!(s.photons_per_channel.values().sum::<u64>(), 2);
+}
+
+#[test]
+fn a_duplicated_header_is_an_error_not_bogus_records() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("once.ptu");
+    write_synthetic_t3(&path, 2_000).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let (info, _) = picoquant::open(&path).unwrap();
+    let header = &bytes[..info.data_offset as usize];
+    // The header written twice, then the records.
+    let twice = dir.path().join("twice.ptu");
+    let mut doubled = header.to_vec();
+    doubled.extend_from_slice(&bytes);
+    std::fs::write(&twice, doubled).unwrap();
+    let e = bin_file(&twice, &BinSpec::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("twice.ptu")
+            && e.contains("second PTU header")
+            && e.contains(&format!("byte {}", info.data_offset)),
+        "{e}"
+    );
+}
+
+#[test]
+fn records_past_the_announced_count_are_said_not_ignored() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("count.ptu");
+    write_synthetic_t3(&path, 2_000).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    // TTResult_NumberOfRecords: 32-byte name, index, type, then the value.
+    let name = b"TTResult_NumberOfRecords";
+    let at = bytes.windows(name.len()).position(|w| w == name).unwrap() + 40;
+    let announced = u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap());
+    bytes[at..at + 8].copy_from_slice(&(announced - 100).to_le_bytes());
+    std::fs::write(&path, &bytes).unwrap();
+    let binned = bin_file(&path, &BinSpec::default()).unwrap();
+    assert_eq!(binned.accounting.records, announced - 100);
+    assert!(
+        binned.notes.iter().any(|n| n.contains(&format!(
+            "announces {} records (TTResult_NumberOfRecords) but the file holds {announced}: the 100 after them are not read",
+            announced - 100
+        ))),
+        "{:?}",
+        binned.notes
+    );
+    let Survey::PicoQuant(_, _) = survey(&path).unwrap() else {
+        panic!("a PTU file")
+    };
+    assert!(
+        survey(&path)
+            .unwrap()
+            .lines()
+            .iter()
+            .any(|l| l.starts_with("warning: the header announces")),
+    );
 }

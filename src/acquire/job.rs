@@ -125,6 +125,9 @@ pub enum JobError {
     /// The physics cannot build the mock's kernels or its scene.
     #[error("the mock's physics or scene: {0}")]
     Mock(String),
+    /// More memory than the budget.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::MemoryError),
     /// An output could not be written.
     #[error(transparent)]
     Output(#[from] StackError),
@@ -205,25 +208,27 @@ impl Job {
                 device: device.clone(),
                 source,
             })?;
-        let mut stack_setup = self.setup.clone();
         #[cfg(feature = "mock")]
         let truth = opened.mock.map(|m| m.truth());
         #[cfg(feature = "mock")]
-        if let (Some(reference), Some(t)) = (&reference, &truth)
-            && let Some(budget) = reference.light_budget(
+        let budget = match (&reference, &truth) {
+            (Some(reference), Some(t)) => reference.light_budget(
                 self.setup.total_photons,
                 outcome.region,
                 outcome.accounting.binned,
                 t,
-            )
-        {
+            ),
+            _ => None,
+        };
+        #[cfg(not(feature = "mock"))]
+        let budget: Option<f64> = None;
+        let mut stack_setup = self.setup.clone();
+        if let Some(budget) = budget {
             stack_setup.total_photons = budget;
             notes.push(format!(
                 "light budget {budget:.4e} photons (mock: scaled so the object comes out in the scene's units)"
             ));
         }
-        #[cfg(not(feature = "mock"))]
-        drop(opened);
         let mut stack = outcome.stack(
             &plan,
             &stack_setup,
@@ -263,6 +268,7 @@ impl Job {
         if !self.device.is_mock() {
             return Ok(None);
         }
+        crate::memory::check_setup(&self.setup, crate::memory::PSF_BYTES, "the mock's kernels")?;
         let (h, w) = (self.setup.sensor.height_px, self.setup.sensor.width_px);
         let truth = self
             .mock
@@ -375,6 +381,12 @@ impl Acquisition {
                 return Err("the device did not confirm Stop; its totals are unknown".into());
             }
             _ => {}
+        }
+        if acc.received == 0 {
+            return Err(format!(
+                "nothing was received from the device ({} frames failed their CRC, {} batches were lost); the outputs hold an empty stack",
+                acc.crc_errors, acc.batches_lost
+            ));
         }
         if !acc.balances() {
             return Err(format!(

@@ -56,7 +56,7 @@ pub struct Plan {
 pub enum StopReason {
     /// The planned duration elapsed.
     Duration,
-    /// The user asked (Ctrl-C).
+    /// The user asked (Ctrl-C or SIGTERM).
     Interrupted,
     /// The device stopped by itself (exposure or photon quota).
     DeviceStopped,
@@ -71,7 +71,7 @@ impl StopReason {
     pub fn describe(&self) -> String {
         match self {
             Self::Duration => "the planned duration elapsed".into(),
-            Self::Interrupted => "interrupted (Ctrl-C)".into(),
+            Self::Interrupted => "interrupted (Ctrl-C or SIGTERM)".into(),
             Self::DeviceStopped => {
                 "the device stopped by itself (its exposure or photon quota)".into()
             }
@@ -323,6 +323,17 @@ fn make_binner(
     window
         .check_stack(&map)
         .map_err(|e| AcquireError::Plan(e.to_string()))?;
+    // The counts and, in the stack written, their float32 copy.
+    crate::memory::check(
+        crate::memory::bytes_of([window.bins, region.height, region.width], 8),
+        || {
+            format!(
+                "a stack of {} bins of {} x {} pixels",
+                window.bins, region.width, region.height
+            )
+        },
+    )
+    .map_err(|e| AcquireError::Plan(e.to_string()))?;
     Ok((
         Binner::new(window, map, None, FrameSelect::Sum),
         (start_ps, plan.bin_width_ps),

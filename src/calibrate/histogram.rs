@@ -60,12 +60,70 @@ pub enum HistogramError {
 
 /// Opens a MATLAB v7.3 (HDF5) file.
 fn open_mat(path: &Path) -> Result<hdf5_reader::Hdf5File, HistogramError> {
+    let meta = std::fs::metadata(path).map_err(|e| file_error(path, e.to_string()))?;
+    if !meta.is_file() {
+        return Err(file_error(
+            path,
+            format!(
+                "not a regular file ({}); a histogram must be one",
+                crate::memory::file_kind(&meta)
+            ),
+        ));
+    }
+    crate::memory::check(meta.len(), || format!("reading {}", path.display()))
+        .map_err(|e| file_error(path, e.to_string()))?;
+    if let Some(declared) = hdf5_declared_size(path)
+        && declared > meta.len()
+    {
+        return Err(file_error(
+            path,
+            format!(
+                "the file is cut: it holds {} bytes of the {declared} its HDF5 superblock declares",
+                meta.len()
+            ),
+        ));
+    }
     hdf5_reader::Hdf5File::open(path).map_err(|e| {
         file_error(
             path,
             format!("not a MATLAB v7.3 (HDF5) file: {e} (older MATLAB formats are not read; save with -v7.3)"),
         )
     })
+}
+
+/// The size an HDF5 file declares (its superblock's end-of-file address),
+/// when the file starts with an HDF5 superblock
+/// where one may sit (byte 0, or after a user block of 512, 1024 or 2048
+/// bytes, as MATLAB v7.3 writes them).
+fn hdf5_declared_size(path: &Path) -> Option<u64> {
+    const SIGNATURE: &[u8; 8] = b"\x89HDF\r\n\x1a\n";
+    let mut head = vec![0u8; 2048 + 64];
+    let mut file = std::fs::File::open(path).ok()?;
+    let got = std::io::Read::read(&mut file, &mut head).ok()?;
+    let head = &head[..got];
+    let at = [0usize, 512, 1024, 2048]
+        .into_iter()
+        .find(|&o| head.get(o..o + 8) == Some(SIGNATURE))?;
+    let sb = &head[at..];
+    let word = |o: usize, n: usize| -> Option<u64> {
+        let b = sb.get(o..o + n)?;
+        let mut v = [0u8; 8];
+        v[..n].copy_from_slice(b);
+        Some(u64::from_le_bytes(v))
+    };
+    let (offsets, base_at) = match *sb.get(8)? {
+        0 => (usize::from(*sb.get(13)?), 24),
+        1 => (usize::from(*sb.get(13)?), 28),
+        2 | 3 => (usize::from(*sb.get(9)?), 12),
+        _ => return None,
+    };
+    if !(offsets == 4 || offsets == 8) {
+        return None;
+    }
+    // After the base address: the free-space (v0, v1) or extension (v2,
+    // v3) address, then the end-of-file address. MATLAB writes it as the
+    // file's size, user block included (checked on the shared captures).
+    word(base_at + 2 * offsets, offsets)
 }
 
 /// The numbers of a one-dimensional dataset (floating point or integer,

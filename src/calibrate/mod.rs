@@ -340,6 +340,22 @@ pub fn calibrate(
         .expected(&p)
         .ok_or_else(|| CalibrateError::Invalid("the fitted physics is invalid".into()))?;
     let (se, undetermined) = standard_errors(&model, &p);
+    // Signal and background are always fitted; the physics asked for is
+    // indices 0 to 3. When the data determine none of it the fit is a
+    // guess (a stack of one photon gave mu_a 4e11), not a calibration.
+    let asked: Vec<usize> = free_idx.iter().copied().filter(|&i| i < 4).collect();
+    if !asked.is_empty()
+        && asked
+            .iter()
+            .all(|i| undetermined.iter().any(|&j| free_idx[j] == *i))
+    {
+        let names: Vec<&str> = asked.iter().map(|&i| NAMES[i].0).collect();
+        return Err(CalibrateError::Invalid(format!(
+            "the data ({} counts in {n} bins) determine none of the fitted parameters ({}): the fit would be a guess",
+            counts.iter().sum::<f64>(),
+            names.join(", ")
+        )));
+    }
     let chi2 = pearson_chi2(&fitted, counts);
     let dof = n - free_idx.len();
     // A measured table is fixed; its FWHM is reported in the IRF's row.

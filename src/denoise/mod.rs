@@ -42,6 +42,12 @@ pub trait Denoiser: Sync {
     fn unshuffles(&self) -> bool {
         false
     }
+
+    /// Bytes one call on an `h` x `w` image holds at once (an estimate for
+    /// the memory budget): by default a few copies of the image.
+    fn working_bytes(&self, h: usize, w: usize) -> u64 {
+        crate::memory::bytes_of([h, w], 64)
+    }
 }
 
 /// No prior: the denoiser that returns its input (ADMM then reduces to a
@@ -72,6 +78,21 @@ pub struct Scaled {
 
 /// Denoises `img` of any range: it is shifted and scaled to [0, 1] by its
 /// minimum and maximum, `sigma` is scaled by the same factor, and the result
+/// `d` on `img` (values on the [0, 1] scale) at noise level `sigma`, once
+/// its working memory is checked against the budget: the call a front end
+/// makes on an image of any size.
+pub fn denoise_image(
+    d: &dyn Denoiser,
+    img: ArrayView2<f64>,
+    sigma: f64,
+) -> Result<Array2<f64>, crate::memory::MemoryError> {
+    let (h, w) = img.dim();
+    crate::memory::check(d.working_bytes(h, w), || {
+        format!("{} on a {w} x {h} image", d.name())
+    })?;
+    Ok(d.denoise_unit(img, sigma))
+}
+
 /// is mapped back. A constant image is returned unchanged.
 pub fn denoise_scaled(d: &dyn Denoiser, img: ArrayView2<f64>, sigma: f64) -> Scaled {
     let (lo, hi) = img

@@ -17,6 +17,7 @@ use exr::prelude::{
 };
 use ndarray::{Array3, Axis};
 
+use crate::memory::{ReadError, bytes_of};
 use crate::stack::{Stack, StackError, StackMeta};
 
 /// Name of the attribute holding the JSON metadata.
@@ -158,13 +159,24 @@ const MAX_EXPANSION: u64 = 4096;
 /// Decoded bytes any file may declare, whatever its size.
 const MIN_BUDGET: u64 = 64 << 20;
 
-/// The first valid layer of an EXR file with all its channels and attributes.
-pub(crate) fn read_first_layer(
-    path: &Path,
-) -> Result<Layer<AnyChannels<FlatSamples>>, exr::error::Error> {
-    let size = std::fs::metadata(path)?.len();
+/// The first valid layer of an EXR file with all its channels and
+/// attributes. Refused before decoding: a special file, a header that
+/// declares more pixels than the file could hold, or more than the memory
+/// budget (the samples, a float32 copy of each channel and the stack).
+pub(crate) fn read_first_layer(path: &Path) -> Result<Layer<AnyChannels<FlatSamples>>, StackError> {
+    let io = |e| StackError::io(path, e);
+    let file = std::fs::metadata(path).map_err(io)?;
+    if !file.is_file() {
+        return Err(ReadError::NotAFile {
+            path: path.to_path_buf(),
+            kind: crate::memory::file_kind(&file),
+            what: "OpenEXR file",
+        }
+        .into());
+    }
+    let size = file.len();
     let budget = size.saturating_mul(MAX_EXPANSION).max(MIN_BUDGET);
-    let meta = exr::meta::MetaData::read_from_file(path, false)?;
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_error(path, e))?;
     for header in meta.headers.iter() {
         let (w, h) = (header.layer_size.0 as u64, header.layer_size.1 as u64);
         let declared = w
@@ -172,30 +184,36 @@ pub(crate) fn read_first_layer(
             .saturating_mul(header.channels.bytes_per_pixel as u64)
             .saturating_add((header.chunk_count as u64).saturating_mul(8));
         if declared > budget {
-            return Err(exr::error::Error::Invalid(
+            return Err(StackError::format(
+                path,
                 format!(
-                    "header declares {w} x {h} pixels of {} bytes ({declared} bytes decoded) in a file of {size} bytes",
+                    "OpenEXR: header declares {w} x {h} pixels of {} bytes ({declared} bytes decoded) in a file of {size} bytes",
                     header.channels.bytes_per_pixel
-                )
-                .into(),
+                ),
             ));
         }
+        let channels = header.channels.list.len();
+        crate::memory::check(bytes_of([w as usize, h as usize, channels], 12), || {
+            format!("the {w} x {h} x {channels} image of {}", path.display())
+        })
+        .map_err(ReadError::from)?;
     }
-    Ok(exr::prelude::read()
+    exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)?
-        .layer_data)
+        .from_file(path)
+        .map(|image| image.layer_data)
+        .map_err(|e| exr_error(path, e))
 }
 
 /// Reads the first layer's time-bin channels (`t000`, `t001`, ...), as
 /// [`write()`] or any other OpenEXR writer lays them out, and the metadata
 /// attribute when there is one.
 pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
-    let layer = read_first_layer(path).map_err(|e| exr_error(path, e))?;
+    let layer = read_first_layer(path)?;
     let meta = match layer.attributes.other.get(&Text::from(META_ATTRIBUTE)) {
         Some(AttributeValue::Text(t)) => Some(
             serde_json::from_str::<StackMeta>(&t.to_string()).map_err(|e| {

@@ -40,6 +40,12 @@ pub enum ImageError {
     },
 }
 
+/// An error's text without its leading `path: ` (the caller names it).
+fn strip_path(path: &Path, text: String) -> String {
+    text.strip_prefix(&format!("{}: ", path.display()))
+        .map_or(text.clone(), str::to_string)
+}
+
 /// The lower-case extension of `path` ("" without one).
 fn extension(path: &Path) -> String {
     path.extension()
@@ -78,6 +84,8 @@ fn read_npy_image(path: &Path) -> Result<Array2<f64>, ImageError> {
         path: path.to_owned(),
         reason,
     };
+    crate::formats::npy::checked_header(path, 2)
+        .map_err(|e| decode(strip_path(path, e.to_string())))?;
     let open = || std::fs::File::open(path).map_err(|e| decode(e.to_string()));
     let img = match Array2::<f32>::read_npy(open()?) {
         Ok(a) => a.mapv(f64::from),
@@ -131,7 +139,10 @@ fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, Ima
     let gray: ImageBuffer<Luma<f32>, Vec<f32>> = if is_exr {
         read_exr_luminance(path).map_err(decode)?
     } else {
-        let bytes = std::fs::read(path).map_err(|e| decode(e.to_string()))?;
+        let budget = crate::memory::budget().map_err(|e| decode(e.to_string()))?;
+        let bytes = crate::memory::read_bounded(path, budget.bytes, "image")
+            .map_err(|e| strip_path(path, e.to_string()))
+            .map_err(decode)?;
         // JPEG decoders fill a cut file's missing blocks with grey and say
         // nothing; a JPEG must end with its EOI marker (FF D9), trailing
         // zero padding aside.
@@ -144,7 +155,27 @@ fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, Ima
                 )));
             }
         }
-        image::load_from_memory(&bytes)
+        let reader = || {
+            image::ImageReader::new(std::io::Cursor::new(&bytes))
+                .with_guessed_format()
+                .map_err(|e| decode(e.to_string()))
+        };
+        let (w, h) = reader()?
+            .into_dimensions()
+            .map_err(|e| decode(e.to_string()))?;
+        // The decoded pixels (up to 8 bytes each), their float32 gray and
+        // the float64 image.
+        crate::memory::check(
+            crate::memory::bytes_of([w as usize, h as usize], 20),
+            || format!("the {w} x {h} image of {}", path.display()),
+        )
+        .map_err(|e| decode(e.to_string()))?;
+        let mut limits = image::Limits::default();
+        limits.max_alloc = Some(budget.bytes);
+        let mut reader = reader()?;
+        reader.limits(limits);
+        reader
+            .decode()
             .map_err(|e| decode(e.to_string()))?
             .to_luma32f()
     };

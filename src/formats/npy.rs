@@ -12,7 +12,11 @@ use std::path::{Path, PathBuf};
 use ndarray::Array3;
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
+use crate::memory::{ReadError, bytes_of, read_bounded};
 use crate::stack::{Stack, StackError, StackMeta, ValueKind};
+
+/// Largest sidecar read (the metadata of any stack is far smaller).
+const MAX_SIDECAR: u64 = 64 << 20;
 
 /// Largest integer every `f32` represents exactly (2^24).
 const F32_EXACT_INT: u64 = 1 << 24;
@@ -46,16 +50,15 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
 /// is one (a plain `np.save` array has none).
 pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
     let side = sidecar_path(path);
-    let meta = match std::fs::read_to_string(&side) {
+    let meta = match read_bounded(&side, MAX_SIDECAR, "stack's JSON sidecar") {
         Ok(json) => Some(
-            serde_json::from_str::<StackMeta>(&json)
+            serde_json::from_slice::<StackMeta>(&json)
                 .map_err(|e| StackError::format(&side, format!("metadata: {e}")))?,
         ),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-        Err(e) => return Err(StackError::io(&side, e)),
+        Err(ReadError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(e.into()),
     };
-    let (descr, shape, data_start) = read_header(path)?;
-    check_size(path, &descr, &shape, data_start)?;
+    let (descr, _) = checked_header(path, 3)?;
     let open = || {
         File::open(path)
             .map(BufReader::new)
@@ -104,19 +107,37 @@ fn exact_counts(path: &Path, counts: Array3<u64>) -> Result<Array3<f32>, StackEr
     Ok(counts.mapv(|c| c as f32))
 }
 
-/// Refuses arrays that are not 3-D or whose shape needs more bytes than
-/// the file holds after its header, before anything is allocated for them.
+/// The `descr` and `shape` of a `.npy` file of `ndim` dimensions, after
+/// checking that the file holds every byte its shape needs and that the
+/// array, its conversion and a float32 copy fit the memory budget: before
+/// anything is allocated for them.
+pub(crate) fn checked_header(path: &Path, ndim: usize) -> Result<(String, Vec<usize>), StackError> {
+    let (descr, shape, data_start) = read_header(path)?;
+    check_size(path, &descr, &shape, data_start, ndim)?;
+    let item: u64 = descr.get(2..).and_then(|n| n.parse().ok()).unwrap_or(1);
+    crate::memory::check(bytes_of(shape.iter().copied(), item + 12), || {
+        format!("the {shape:?} array of {}", path.display())
+    })
+    .map_err(ReadError::from)?;
+    Ok((descr, shape))
+}
+
+/// Refuses arrays that are not `ndim`-D or whose shape needs more bytes
+/// than the file holds after its header.
 fn check_size(
     path: &Path,
     descr: &str,
     shape: &[usize],
     data_start: u64,
+    ndim: usize,
 ) -> Result<(), StackError> {
-    if shape.len() != 3 {
-        return Err(StackError::format(
-            path,
-            format!("shape {shape:?}: a stack is a 3-D (bins, rows, columns) array"),
-        ));
+    if shape.len() != ndim {
+        let what = if ndim == 3 {
+            "a stack is a 3-D (bins, rows, columns) array"
+        } else {
+            "an image is a 2-D (rows, columns) array"
+        };
+        return Err(StackError::format(path, format!("shape {shape:?}: {what}")));
     }
     let item: u64 = descr.get(2..).and_then(|n| n.parse().ok()).unwrap_or(1);
     let held = std::fs::metadata(path)
@@ -142,6 +163,15 @@ fn check_size(
 /// `[20, 256, 256]`) and where the data start.
 fn read_header(path: &Path) -> Result<(String, Vec<usize>, u64), StackError> {
     let mut f = File::open(path).map_err(|e| StackError::io(path, e))?;
+    let meta = f.metadata().map_err(|e| StackError::io(path, e))?;
+    if !meta.is_file() {
+        return Err(ReadError::NotAFile {
+            path: path.to_path_buf(),
+            kind: crate::memory::file_kind(&meta),
+            what: "stack",
+        }
+        .into());
+    }
     let mut head = [0u8; 12];
     f.read_exact(&mut head)
         .map_err(|_| StackError::format(path, "too short for a .npy header"))?;

@@ -32,6 +32,9 @@ pub enum ReconstructError {
         /// The offending value.
         value: f64,
     },
+    /// More memory than the budget.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::MemoryError),
     /// A method's setting is out of range.
     #[error("{name} = {value} must be {want}")]
     Setting {

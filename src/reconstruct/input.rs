@@ -12,6 +12,7 @@ use ndarray::Array2;
 use super::problem::{BackgroundChoice, Problem, ProblemError};
 use crate::calibrate::{CalibrateError, Free, fit_stack_physics};
 use crate::config::{ConfigError, PhysicsOverrides};
+use crate::formats::image::read_image;
 use crate::forward::Boundary;
 use crate::physics::{Preset, Sampling, Setup};
 use crate::scene::{ImageError, Scene};
@@ -198,10 +199,18 @@ pub fn load(path: &Path, spec: &InputSpec) -> Result<Input, InputError> {
 }
 
 impl Input {
-    /// The truth image at `path` on the stack's sensor, to score against.
-    pub fn truth(&self, path: &Path) -> Result<Array2<f64>, ImageError> {
+    /// The truth image at `path` on the stack's sensor, to score against,
+    /// and a warning when it had to be resampled to the sensor's size.
+    pub fn truth(&self, path: &Path) -> Result<(Array2<f64>, Option<String>), ImageError> {
         let (_, h, w) = self.stack.data.dim();
-        Scene::File(path.to_path_buf()).render(h, w)
+        let (nh, nw) = read_image(path)?.dim();
+        let note = ((nh, nw) != (h, w)).then(|| {
+            format!(
+                "the truth {} is {nw} x {nh} pixels; resampled to the {w} x {h} sensor (Lanczos), so its PSNR and SSIM are against an approximation",
+                path.display()
+            )
+        });
+        Ok((Scene::File(path.to_path_buf()).render(h, w)?, note))
     }
 
     /// The setup the stack is matched with.

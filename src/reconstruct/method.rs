@@ -125,6 +125,10 @@ impl Default for MethodOptions {
     }
 }
 
+/// The most Richardson-Lucy iterations the split solver's start may take
+/// (its benefit ends within a few hundred).
+pub const MAX_WARM_START: usize = 100_000;
+
 impl MethodOptions {
     /// Checks every setting: penalties, noise levels and tolerances are
     /// finite and in range; the error names the setting and its value.
@@ -160,6 +164,13 @@ impl MethodOptions {
         positive("eps", a.eps)?;
         if !(a.lambda_step >= 1.0 && a.lambda_step.is_finite()) {
             bad("lambda_step", a.lambda_step, "at least 1")?;
+        }
+        if s.warm_start > MAX_WARM_START {
+            bad(
+                "warm_start",
+                s.warm_start as f64,
+                "at most 100000 iterations",
+            )?;
         }
         if !(s.sigma_decay > 0.0 && s.sigma_decay <= 1.0) {
             bad("sigma_decay", s.sigma_decay, "in (0, 1]")?;
@@ -216,6 +227,12 @@ pub fn run_method(
 ) -> Result<Reconstruction, ReconstructError> {
     opts.validate()?;
     let k = problem.counts.shape()[0];
+    let (gh, gw) = problem.model.grid_shape();
+    crate::memory::check(
+        crate::memory::bytes_of([k, gh, gw], crate::memory::RECONSTRUCT_BYTES)
+            .saturating_add(denoiser.working_bytes(gh, gw)),
+        || format!("{} on {k} bins of a {gw} x {gh} grid", method.name()),
+    )?;
     if let Some(b) = bin.filter(|&b| b >= k) {
         return Err(ReconstructError::Shape(format!(
             "bin {b} does not exist: the stack has bins 0 to {}",

@@ -73,6 +73,9 @@ pub struct Problem {
 /// Why a stack and a physics setup do not fit together.
 #[derive(Debug, thiserror::Error)]
 pub enum ProblemError {
+    /// More memory than the budget.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::MemoryError),
     /// The mismatch, naming both values.
     #[error("{0}")]
     Mismatch(String),
@@ -131,6 +134,8 @@ impl Problem {
                 physics_ps: width,
             });
         }
+        setup.validate()?;
+        crate::memory::check_setup(setup, crate::memory::RECONSTRUCT_BYTES, "a reconstruction")?;
         let mut all = setup.clone();
         all.min_bin_photons = 0.0;
         let kernels = KernelStack::build(&all, sampling)?;

@@ -134,6 +134,17 @@ impl<'a> Run<'a> {
         }
     }
 
+    /// A run of a preliminary step of this one (e.g. its start): its rows
+    /// reach the caller as progress, its trace is its own.
+    pub fn sub_run(&mut self, method: &str) -> Run<'_> {
+        Run {
+            trace: Trace::new(method),
+            start: self.start,
+            truth: None,
+            on_iter: &mut *self.on_iter,
+        }
+    }
+
     /// Seconds since the run started.
     pub fn elapsed_s(&self) -> f64 {
         self.start.elapsed().as_secs_f64()

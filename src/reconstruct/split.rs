@@ -202,9 +202,9 @@ fn warm_start(
         return flat_start();
     }
     let start = Instant::now();
-    let mut quiet = |_: &TraceRow| {};
-    let mut rl = Run::new("rl-sum", None, &mut quiet);
-    match rl_steps(model, counts, bins, iterations, &mut rl) {
+    let mut rl = run.sub_run("rl-sum");
+    let start_steps = rl_steps(model, counts, bins, iterations, &mut rl);
+    match start_steps {
         Some(o) if o.iter().all(|x| x.is_finite()) => {
             run.note(format!(
                 "start: {iterations} Richardson-Lucy iterations on the time-summed stack on the sensor window, the flat level beyond it ({:.2} s)",

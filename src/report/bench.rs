@@ -74,8 +74,9 @@ pub struct BenchImage {
 /// licence; the file empty for built-in scenes).
 pub fn read_manifest(dir: &Path) -> Result<Vec<BenchImage>, ReportError> {
     let path = dir.join("manifest.csv");
-    let text = std::fs::read_to_string(&path)
-        .map_err(|e| ReportError::Io(path.display().to_string(), e))?;
+    let bytes = crate::memory::read_bounded(&path, 16 << 20, "benchmark manifest")
+        .map_err(|e| ReportError::Input(e.to_string()))?;
+    let text = String::from_utf8_lossy(&bytes);
     let bad = |line: usize, why: String| {
         ReportError::Input(format!("{}: line {line}: {why}", path.display()))
     };
@@ -162,6 +163,11 @@ pub fn simulate_case(
     seed: u64,
 ) -> Result<BenchCase, ReportError> {
     let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
+    if object_px < h.max(w) {
+        return Err(ReportError::Input(format!(
+            "object grid {object_px} px is smaller than the {w} x {h} sensor"
+        )));
+    }
     let (oy, ox) = ((object_px - h) / 2, (object_px - w) / 2);
     let object = match &image.file {
         Some(path) => Scene::File(path.clone()).render(object_px, object_px)?,
@@ -176,6 +182,8 @@ pub fn simulate_case(
     wide.sensor.height_px = object_px;
     wide.sensor.width_px = object_px;
     wide.sensor.fov_cm = setup.sensor.fov_cm * object_px as f64 / w as f64;
+    crate::memory::check_setup(&wide, crate::memory::SIMULATE_BYTES, "a benchmark case")
+        .map_err(|e| ReportError::Input(e.to_string()))?;
     let sim_kernels = KernelStack::build(&wide, Sampling::Integrated)?;
     let reach = sim_kernels
         .kept_bins()

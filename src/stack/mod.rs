@@ -104,6 +104,10 @@ pub enum StackError {
         /// The cause.
         source: std::io::Error,
     },
+    /// The file would need more memory than the budget, or is a special
+    /// file or too large to read whole.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::ReadError),
     /// The file is not a valid stack; says which field and value.
     #[error("{path}: {reason}")]
     Format {

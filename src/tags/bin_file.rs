@@ -189,6 +189,9 @@ pub enum BinFileError {
     /// The tag file cannot be read.
     #[error(transparent)]
     TagFile(#[from] TagFileError),
+    /// More memory than the budget.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::MemoryError),
     /// The request does not fit the file.
     #[error("{path}: {reason}")]
     Spec {
@@ -207,6 +210,24 @@ pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError>
     } else {
         bin_picoquant(path, spec)
     }
+}
+
+/// Checks one stack of `window` over `map` (its counts and their float32
+/// copy) against the memory budget.
+fn check_stack_memory(
+    path: &Path,
+    window: &TimeWindow,
+    map: &PixelMap,
+) -> Result<(), BinFileError> {
+    let (h, w) = map.image_size();
+    crate::memory::check(crate::memory::bytes_of([window.bins, h, w], 8), || {
+        format!(
+            "a stack of {} bins of {w} x {h} pixels from {}",
+            window.bins,
+            path.display()
+        )
+    })?;
+    Ok(())
 }
 
 fn spec_error(path: &Path, reason: String) -> BinFileError {
@@ -241,7 +262,8 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
     window
         .check_stack(&map)
         .map_err(|e| spec_err(e.to_string()))?;
-    let mut notes = Vec::new();
+    check_stack_memory(path, &window, &map)?;
+    let mut notes: Vec<String> = info.unread_note().into_iter().collect();
     let mut pass = run_pass(path, &info, reader, window, map, spec)?;
     let past = pass.past;
     if past.photons > 0 {
@@ -284,6 +306,17 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
         truncated,
         ..
     } = pass;
+    if accounting.over_budget > 0 {
+        notes.push(format!(
+            "{} photon(s) of frames past the first {} were not kept: the memory budget holds {} stacks of {} bins of {} x {} pixels (bin the frames summed, or one at a time)",
+            accounting.over_budget,
+            stacks.len(),
+            stacks.len(),
+            window.bins,
+            map.image_size().1,
+            map.image_size().0,
+        ));
+    }
     let stacks = if let PixelMap::Channel { .. } = map {
         // Trim the channel row to the highest channel that saw a photon.
         let used = stacks[0]
@@ -420,6 +453,7 @@ fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError>
     window
         .check_stack(&map)
         .map_err(|e| spec_err(e.to_string()))?;
+    check_stack_memory(path, &window, &map)?;
     let mut binner = Binner::new(window, map, spec.channel, FrameSelect::Sum);
     let start = Instant::now();
     let mut counts = BatchCounts::default();

@@ -148,13 +148,20 @@ pub struct Accounting {
     pub markers: u64,
     /// Frames seen (scanned images).
     pub frames: u64,
+    /// Photons of frames kept apart (`FrameSelect::All`) past the most
+    /// stacks the memory budget holds.
+    pub over_budget: u64,
 }
 
 impl Accounting {
     /// Whether every photon is in exactly one category.
     pub fn balances(&self) -> bool {
         self.received
-            == self.binned + self.outside_window + self.other_channel + self.outside_region
+            == self.binned
+                + self.outside_window
+                + self.other_channel
+                + self.outside_region
+                + self.over_budget
     }
 }
 
@@ -328,6 +335,9 @@ pub struct Binner {
     /// Photons past the window's end, from [`Binner::push`] and
     /// [`Binner::bulk`].
     past: PastWindow,
+    /// The most stacks kept at once: frames kept apart past it are counted,
+    /// not binned (the memory budget; at least one).
+    max_stacks: usize,
 }
 
 /// Pixel-table entry of a sensor pixel outside the region of interest.
@@ -405,7 +415,21 @@ impl Binner {
             pixel_lut,
             offsets: Vec::new(),
             past: PastWindow::default(),
+            max_stacks: {
+                // Each count, and its float32 copy in the finished stack.
+                let per_stack = crate::memory::bytes_of([shape.0, shape.1, shape.2], 8).max(1);
+                let budget =
+                    crate::memory::budget().map_or(crate::memory::FALLBACK_BYTES, |b| b.bytes);
+                usize::try_from(budget / per_stack)
+                    .unwrap_or(usize::MAX)
+                    .max(1)
+            },
         }
+    }
+
+    /// The most frames kept apart at once under the memory budget.
+    pub fn max_stacks(&self) -> usize {
+        self.max_stacks
     }
 
     /// Photons so far whose micro time fell at or past the window's end
@@ -422,6 +446,9 @@ impl Binner {
             FrameSelect::One(n) if n == frame => 0,
             FrameSelect::One(_) => return None,
         };
+        if index >= self.max_stacks {
+            return None;
+        }
         if index >= self.stacks.len() {
             let (k, h, w) = self.shape;
             self.stacks.resize_with(index + 1, || vec![0; k * h * w]);
@@ -625,11 +652,13 @@ impl Binner {
     #[inline(always)]
     fn bin_at(&mut self, frame: usize, bin: usize, row: usize, col: usize) {
         let (_, h, w) = self.shape;
+        let all = self.frames == FrameSelect::All;
         match self.stack_for_frame(frame) {
             Some(stack) => {
                 stack[(bin * h + row) * w + col] += 1;
                 self.accounting.binned += 1;
             }
+            None if all => self.accounting.over_budget += 1,
             None => self.accounting.outside_region += 1,
         }
     }

@@ -150,6 +150,7 @@ impl Survey {
         match self {
             Survey::PicoQuant(info, s) => {
                 let mut lines = info.describe();
+                lines.extend(info.unread_note().map(|n| format!("warning: {n}")));
                 lines.push(format!("photons per channel: {:?}", s.photons_per_channel));
                 lines.push(format!(
                     "markers: {}, syncs: {}, overflow records: {}",

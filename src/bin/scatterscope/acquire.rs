@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use crate::shared_args::{PhysicsArgs, progress};
 use anyhow::Context;
+use scatterscope::acquire::session::StopReason;
 use scatterscope::acquire::{DeviceSpec, Job, MockJob, TimeZero, device};
 use scatterscope::config::{parse_duration, parse_ps};
 use scatterscope::scene::Scene;
@@ -141,8 +142,28 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     }
     let names: Vec<String> = done.files.iter().map(|f| f.display().to_string()).collect();
     println!("wrote {}", names.join(", "));
-    done.verdict().map_err(anyhow::Error::msg)
+    done.verdict().map_err(anyhow::Error::msg)?;
+    match done.outcome.stop {
+        StopReason::Interrupted => Err(Interrupted.into()),
+        _ => Ok(()),
+    }
 }
+
+/// An acquisition ended by a signal: its outputs are complete (exit
+/// status 3, so that a script can tell it from the planned end).
+#[derive(Debug)]
+pub struct Interrupted;
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "interrupted (Ctrl-C or SIGTERM): every output is complete and holds what was received"
+        )
+    }
+}
+
+impl std::error::Error for Interrupted {}
 
 /// List the devices `acquire --device` can open.
 ///

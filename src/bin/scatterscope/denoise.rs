@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use scatterscope::config::parse_noise_sigma;
 use scatterscope::denoise::benchmark::add_noise;
+use scatterscope::denoise::denoise_image;
 use scatterscope::formats::image::{read_image, write_image};
 use scatterscope::metrics::{psnr, ssim};
 
@@ -42,7 +43,7 @@ pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {
         None => clean.clone(),
     };
     let t = Instant::now();
-    let out = denoiser.denoise_unit(noisy.view(), args.sigma);
+    let out = denoise_image(denoiser.as_ref(), noisy.view(), args.sigma)?;
     let secs = t.elapsed().as_secs_f64();
     if args.sigma > denoiser.sigma_max() {
         println!(

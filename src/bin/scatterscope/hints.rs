@@ -11,6 +11,7 @@ use scatterscope::config::ConfigError;
 use scatterscope::denoise::ffdnet::source::ImportError;
 use scatterscope::denoise::prior::PriorError;
 use scatterscope::formats::picoquant::{FileError, TtrError};
+use scatterscope::memory::LIMIT_ENV;
 use scatterscope::psf::PsfError;
 use scatterscope::reconstruct::ReconstructError;
 use scatterscope::reconstruct::input::InputError;
@@ -68,6 +69,11 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
     }
     if let Some(PriorError::Setting(_)) = cause.downcast_ref::<PriorError>() {
         return Some("--tv-gain is TV's gain; --weights applies to --denoiser ffdnet".into());
+    }
+    // Many errors carry a memory error as their own text (transparently):
+    // the budget's variable in the text marks it.
+    if cause.to_string().contains(LIMIT_ENV) {
+        return Some("--memory-limit sets the budget".into());
     }
     let text = if let Some(ReconstructError::NotWholeCounts { .. }) =
         cause.downcast_ref::<ReconstructError>()

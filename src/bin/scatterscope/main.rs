@@ -17,6 +17,7 @@ mod tags_cmd;
 mod weights_cmd;
 
 use clap::{Parser, Subcommand};
+use scatterscope::memory::parse_size;
 
 /// Time-resolved imaging through scattering media.
 ///
@@ -28,6 +29,10 @@ use clap::{Parser, Subcommand};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Memory any input may ask for (e.g. 8GiB) [default:
+    /// $SCATTERSCOPE_MEMORY_LIMIT, else half the machine's memory].
+    #[arg(long, global = true, value_name = "SIZE", value_parser = parse_size)]
+    memory_limit: Option<u64>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -90,11 +95,18 @@ fn s(p: &std::path::Path) -> anyhow::Result<&str> {
 /// Exit status: 0 success; 1 the command failed (bad input, I/O, a device
 /// error), with one `error:` line naming the file, field and value and the
 /// causes after it, then a `hint:` line per flag that changes it; 2 the
-/// command line itself is wrong (clap's usage errors). A panic (101) is a
-/// bug.
+/// command line itself is wrong (clap's usage errors); 3 an acquisition
+/// ended by Ctrl-C or SIGTERM, its outputs complete with what was received.
+/// A panic (101) is a bug.
 fn main() -> std::process::ExitCode {
-    match dispatch(Cli::parse().command) {
+    let cli = Cli::parse();
+    scatterscope::memory::set_limit(cli.memory_limit);
+    match dispatch(cli.command) {
         Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) if e.is::<acquire::Interrupted>() => {
+            eprintln!("{e}");
+            std::process::ExitCode::from(3)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             for hint in hints::flag_hints(&e) {

@@ -75,7 +75,14 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     for line in &input.assumed {
         println!("{line}");
     }
-    let truth = args.truth.as_ref().map(|p| input.truth(p)).transpose()?;
+    let truth = match &args.truth {
+        Some(p) => {
+            let (truth, note) = input.truth(p)?;
+            note.iter().for_each(|n| eprintln!("note: {n}"));
+            Some(truth)
+        }
+        None => None,
+    };
     let opts = args.recon.options()?;
     let denoiser = args.recon.prior.denoiser()?;
     let bar = progress(None);

@@ -156,6 +156,14 @@ impl Denoiser for Ffdnet {
         true
     }
 
+    /// Two activations of `channels` on the half-resolution grid, the
+    /// im2col or Winograd buffers (about 9 more), and the image's copies.
+    fn working_bytes(&self, h: usize, w: usize) -> u64 {
+        let half = (h / 2 + 1) * (w / 2 + 1);
+        crate::memory::bytes_of([half, self.weights.arch.channels], 4 * 12)
+            .saturating_add(crate::memory::bytes_of([h, w], 32))
+    }
+
     /// The network does not become the identity at small sigma: PnP's
     /// primal residual reaches a minimum and rises again (BENCHMARKS.md).
     fn fades_to_identity(&self) -> bool {

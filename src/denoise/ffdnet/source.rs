@@ -101,10 +101,8 @@ pub enum ImportError {
 /// are looked for ([`imported_path`]); returns the file and the weights,
 /// validated as the prior loads them.
 pub fn import(pth: &Path, out: Option<&Path>) -> Result<(PathBuf, FfdnetWeights), ImportError> {
-    let bytes = std::fs::read(pth).map_err(|source| WeightsError::Io {
-        path: pth.display().to_string(),
-        source,
-    })?;
+    let bytes = crate::memory::read_bounded(pth, super::weights::MAX_WEIGHT_FILE, "weight file")
+        .map_err(|e| WeightsError::Read(e.to_string()))?;
     let converted = super::pth::import_ffdnet_gray(&bytes, pth)?;
     let out = match out {
         Some(o) => o.to_path_buf(),

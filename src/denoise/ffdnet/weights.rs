@@ -30,6 +30,9 @@ pub enum WeightsError {
         /// Underlying error.
         source: std::io::Error,
     },
+    /// The file cannot be read whole (a special file, or too large).
+    #[error("{0}")]
+    Read(String),
     /// The bytes are not a safetensors file.
     #[error("{origin}: not a safetensors file: {reason}")]
     NotSafetensors {
@@ -219,13 +222,14 @@ pub struct FfdnetWeights {
     pub metadata: BTreeMap<String, String>,
 }
 
+/// Largest weight file read (the original FFDNet's is 2 MB).
+pub const MAX_WEIGHT_FILE: u64 = 256 << 20;
+
 impl FfdnetWeights {
     /// Reads and validates a weight file.
     pub fn from_file(path: &Path) -> Result<Self, WeightsError> {
-        let bytes = std::fs::read(path).map_err(|source| WeightsError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
+        let bytes = crate::memory::read_bounded(path, MAX_WEIGHT_FILE, "weight file")
+            .map_err(|e| WeightsError::Read(e.to_string()))?;
         Self::from_bytes(&bytes, &path.display().to_string())
     }
 

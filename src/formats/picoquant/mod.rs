@@ -12,7 +12,7 @@ pub mod records;
 pub mod writer;
 
 use std::fs::File;
-use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use ptu::{HeaderTag, TagLookup};
@@ -164,6 +164,24 @@ impl FileInfo {
         lines
     }
 
+    /// Whole records in the file past the count its header announces
+    /// (`TTResult_NumberOfRecords`), which are not read; `None` when the
+    /// counts agree or the file is cut.
+    pub fn unread_records(&self) -> Option<u64> {
+        (self.records_present > self.records_announced)
+            .then(|| self.records_present - self.records_announced)
+    }
+
+    /// What the header's record count leaves unread, in words.
+    pub fn unread_note(&self) -> Option<String> {
+        self.unread_records().map(|n| {
+            format!(
+                "the header announces {} records (TTResult_NumberOfRecords) but the file holds {}: the {n} after them are not read",
+                self.records_announced, self.records_present
+            )
+        })
+    }
+
     /// Acquisition time set in the software (s), when recorded.
     pub fn acquisition_time_s(&self) -> Option<f64> {
         self.tags
@@ -229,7 +247,14 @@ pub fn open(path: &Path) -> Result<(FileInfo, RecordReader), FileError> {
 
 fn open_inner(path: &Path) -> Result<(FileInfo, RecordReader), TtrError> {
     let mut file = File::open(path)?;
-    let size = file.metadata()?.len();
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return Err(TtrError::Unsupported(format!(
+            "not a regular file ({}); a recording must be one",
+            crate::memory::file_kind(&meta)
+        )));
+    }
+    let size = meta.len();
     let mut magic = [0u8; 16];
     let got = file.read(&mut magic)?;
     file.seek(SeekFrom::Start(0))?;
@@ -250,6 +275,15 @@ fn open_inner(path: &Path) -> Result<(FileInfo, RecordReader), TtrError> {
             "not a PicoQuant file: no PQTTTR or HydraHarp magic",
         ));
     };
+    // A second header where the records should start (a file written
+    // twice, or two files joined) would decode as hundreds of bogus
+    // records: refused, not binned.
+    if reader.fill_buf()?.starts_with(ptu::MAGIC) {
+        return Err(TtrError::header(
+            info.data_offset,
+            "a second PTU header starts where the records should (a file written twice or two files joined); split the file at this byte",
+        ));
+    }
     let body = size.saturating_sub(info.data_offset);
     info.records_present = body / 4;
     info.trailing_bytes = body % 4;
