@@ -88,6 +88,21 @@ fn benches(c: &mut Criterion) {
             .unwrap()
         })
     });
+    // The per-stack choice between rl-stack and PnP (runs both).
+    group.bench_function("auto_256x256x20", |b| {
+        b.iter(|| {
+            run_method(
+                &problem,
+                Method::Auto,
+                None,
+                &ffdnet,
+                &defaults,
+                None,
+                |_| {},
+            )
+            .unwrap()
+        })
+    });
     let cv = MethodOptions {
         rl_stop: RlStop::CrossValidated,
         ..defaults

@@ -9,6 +9,8 @@
 //! - [`stack`]: the K x H x W transient stack with its metadata, and its
 //!   OpenEXR / .npy files and PNG previews.
 //! - [`reconstruct`]: Poisson PnP-ADMM, Richardson-Lucy and raw baselines.
+//! - [`confocal`]: confocal scans of hidden objects behind a slab,
+//!   reconstructed into volumes.
 //! - [`denoise`]: Gaussian denoisers plugged in as priors.
 //! - [`metrics`]: PSNR and SSIM against a known truth.
 //! - [`config`]: physics parameters from presets, TOML files and flags.
@@ -68,6 +70,7 @@
 pub mod acquire;
 pub mod calibrate;
 pub mod config;
+pub mod confocal;
 pub mod denoise;
 pub mod fft2;
 pub mod font;

@@ -58,78 +58,13 @@ pub enum HistogramError {
     },
 }
 
-/// Opens a MATLAB v7.3 (HDF5) file.
+/// Opens a MATLAB v7.3 file, the error naming it.
 fn open_mat(path: &Path) -> Result<hdf5_reader::Hdf5File, HistogramError> {
-    let meta = std::fs::metadata(path).map_err(|e| file_error(path, e.to_string()))?;
-    if !meta.is_file() {
-        return Err(file_error(
-            path,
-            format!(
-                "not a regular file ({}); a histogram must be one",
-                crate::memory::file_kind(&meta)
-            ),
-        ));
-    }
-    crate::memory::check(meta.len(), || format!("reading {}", path.display()))
-        .map_err(|e| file_error(path, e.to_string()))?;
-    if let Some(declared) = hdf5_declared_size(path)
-        && declared > meta.len()
-    {
-        return Err(file_error(
-            path,
-            format!(
-                "the file is cut: it holds {} bytes of the {declared} its HDF5 superblock declares",
-                meta.len()
-            ),
-        ));
-    }
-    hdf5_reader::Hdf5File::open(path).map_err(|e| {
-        file_error(
-            path,
-            format!("not a MATLAB v7.3 (HDF5) file: {e} (older MATLAB formats are not read; save with -v7.3)"),
-        )
-    })
+    crate::formats::mat::open(path).map_err(|m| file_error(path, m))
 }
 
-/// The size an HDF5 file declares (its superblock's end-of-file address),
-/// when the file starts with an HDF5 superblock
-/// where one may sit (byte 0, or after a user block of 512, 1024 or 2048
-/// bytes, as MATLAB v7.3 writes them).
-fn hdf5_declared_size(path: &Path) -> Option<u64> {
-    const SIGNATURE: &[u8; 8] = b"\x89HDF\r\n\x1a\n";
-    let mut head = vec![0u8; 2048 + 64];
-    let mut file = std::fs::File::open(path).ok()?;
-    let got = std::io::Read::read(&mut file, &mut head).ok()?;
-    let head = &head[..got];
-    let at = [0usize, 512, 1024, 2048]
-        .into_iter()
-        .find(|&o| head.get(o..o + 8) == Some(SIGNATURE))?;
-    let sb = &head[at..];
-    let word = |o: usize, n: usize| -> Option<u64> {
-        let b = sb.get(o..o + n)?;
-        let mut v = [0u8; 8];
-        v[..n].copy_from_slice(b);
-        Some(u64::from_le_bytes(v))
-    };
-    let (offsets, base_at) = match *sb.get(8)? {
-        0 => (usize::from(*sb.get(13)?), 24),
-        1 => (usize::from(*sb.get(13)?), 28),
-        2 | 3 => (usize::from(*sb.get(9)?), 12),
-        _ => return None,
-    };
-    if !(offsets == 4 || offsets == 8) {
-        return None;
-    }
-    // After the base address: the free-space (v0, v1) or extension (v2,
-    // v3) address, then the end-of-file address. MATLAB writes it as the
-    // file's size, user block included (checked on the shared captures).
-    word(base_at + 2 * offsets, offsets)
-}
-
-/// The numbers of a one-dimensional dataset (floating point or integer,
-/// as MATLAB stores counts), named `name` in errors.
+/// The numbers of a one-dimensional dataset, named `name` in errors.
 fn vector(path: &Path, name: &str, ds: &hdf5_reader::Dataset) -> Result<Vec<f64>, HistogramError> {
-    use hdf5_reader::messages::datatype::Datatype;
     let shape = ds.shape().to_vec();
     if shape.iter().filter(|&&d| d > 1).count() > 1 {
         return Err(file_error(
@@ -137,32 +72,7 @@ fn vector(path: &Path, name: &str, ds: &hdf5_reader::Dataset) -> Result<Vec<f64>
             format!("dataset `{name}` has shape {shape:?}: a histogram is one vector"),
         ));
     }
-    fn all<T: hdf5_reader::H5Type + Copy>(
-        ds: &hdf5_reader::Dataset,
-        to: impl Fn(T) -> f64,
-    ) -> Result<Vec<f64>, String> {
-        ds.read_array::<T>()
-            .map(|a| a.iter().map(|&v| to(v)).collect())
-            .map_err(|e| e.to_string())
-    }
-    let values = match *ds.dtype() {
-        Datatype::FloatingPoint { size: 8, .. } => all::<f64>(ds, |v| v),
-        Datatype::FloatingPoint { size: 4, .. } => all::<f32>(ds, f64::from),
-        Datatype::FixedPoint { size, signed, .. } => match (size, signed) {
-            (1, false) => all::<u8>(ds, f64::from),
-            (2, false) => all::<u16>(ds, f64::from),
-            (4, false) => all::<u32>(ds, f64::from),
-            (8, false) => all::<u64>(ds, |v| v as f64),
-            (2, true) => all::<i16>(ds, f64::from),
-            (4, true) => all::<i32>(ds, f64::from),
-            (8, true) => all::<i64>(ds, |v| v as f64),
-            _ => Err(format!(
-                "{size}-byte integers (signed: {signed}) are not read"
-            )),
-        },
-        ref other => Err(format!("type {other:?} is not a number")),
-    };
-    values.map_err(|e| {
+    crate::formats::mat::numbers(ds).map_err(|e| {
         file_error(
             path,
             format!("dataset `{name}` cannot be read as numbers: {e}"),
@@ -218,17 +128,7 @@ impl TimeHistogram {
     /// files do not say the bin width, so the caller gives it.
     pub fn read_mat(path: &Path, dataset: &str, bin_width_ps: f64) -> Result<Self, HistogramError> {
         let file = open_mat(path)?;
-        let ds = file.dataset(&format!("/{dataset}")).map_err(|_| {
-            let names = file
-                .root_group()
-                .and_then(|g| g.member_names())
-                .map(|(_, d)| d.join(", "))
-                .unwrap_or_default();
-            file_error(
-                path,
-                format!("no dataset `{dataset}` (datasets in the file: {names})"),
-            )
-        })?;
+        let ds = crate::formats::mat::dataset(&file, dataset).map_err(|m| file_error(path, m))?;
         let counts = vector(path, dataset, &ds)?;
         Self::new(counts, bin_width_ps, 0.0, path)
     }

@@ -83,6 +83,56 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
 
 /// Encodes one layer and writes it to `path`, header attributes in name
 /// order.
+/// Writes a volume as one layer named `layer` with one `f32` channel per
+/// slice along its first axis, named `prefix` and the slice index (`z000`,
+/// ...), with `numbers` as `f64` header attributes and `json` as the text
+/// attribute [`META_ATTRIBUTE`].
+pub fn write_volume(
+    volume: ndarray::ArrayView3<f32>,
+    layer: &str,
+    prefix: &str,
+    numbers: &[(&str, f64)],
+    json: &str,
+    path: &Path,
+) -> Result<(), StackError> {
+    let (k, h, w) = volume.dim();
+    if k == 0 || h == 0 || w == 0 {
+        return Err(StackError::format(
+            path,
+            format!("cannot write an empty {k} x {h} x {w} volume"),
+        ));
+    }
+    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = volume
+        .axis_iter(Axis(0))
+        .enumerate()
+        .map(|(i, img)| {
+            AnyChannel::new(
+                format!("{prefix}{i:03}").as_str(),
+                FlatSamples::F32(img.iter().copied().collect()),
+            )
+        })
+        .collect();
+    let mut attrs = LayerAttributes::named(layer);
+    let text = Text::new_or_none(json).ok_or_else(|| {
+        StackError::format(path, "metadata contains characters EXR text cannot hold")
+    })?;
+    attrs
+        .other
+        .insert(Text::from(META_ATTRIBUTE), AttributeValue::Text(text));
+    for (name, value) in numbers {
+        attrs
+            .other
+            .insert(Text::from(*name), AttributeValue::F64(*value));
+    }
+    let layer = Layer::new(
+        (w, h),
+        attrs,
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels),
+    );
+    write_layer(layer, path)
+}
+
 fn write_layer(layer: Layer<AnyChannels<FlatSamples>>, path: &Path) -> Result<(), StackError> {
     let mut bytes = Vec::new();
     Image::from_layer(layer)

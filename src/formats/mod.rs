@@ -10,12 +10,17 @@
 //! - [`exr`]: OpenEXR, one `f32` channel per bin, with the metadata.
 //! - [`npy`]: NumPy `.npy` with a JSON sidecar.
 //!
+//! Measurements of other instruments:
+//! - [`mat`]: MATLAB v7.3 (HDF5) datasets, e.g. the confocal diffuse
+//!   tomography captures and scans.
+//!
 //! Images (scenes, truths, reconstructions, previews):
 //! - [`image`]: single images in and out (PNG, JPEG, EXR, `.npy`).
 //! - [`png`]: 8-bit PNG previews and labelled contact sheets of a stack.
 
 pub mod exr;
 pub mod image;
+pub mod mat;
 pub mod npy;
 pub mod picoquant;
 pub mod png;

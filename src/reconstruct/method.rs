@@ -4,6 +4,7 @@ use ndarray::{ArrayView2, Axis};
 
 use super::ReconstructError;
 use super::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions};
+use super::auto::Auto;
 use super::data::Data;
 use super::em::Stopping;
 use super::problem::Problem;
@@ -19,6 +20,9 @@ use crate::named::{Named, named};
 /// A reconstruction method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Method {
+    /// The default: whole-stack Richardson-Lucy or PnP, chosen per stack
+    /// without the truth ([`super::auto`]).
+    Auto,
     /// Poisson PnP-ADMM on the whole stack (the paper's method).
     Pnp,
     /// PnP-ADMM on one bin (K = 1).
@@ -38,6 +42,7 @@ pub enum Method {
 }
 
 named!(Method {
+    Auto => "auto",
     Pnp => "pnp",
     PnpSlice => "pnp-slice",
     PnpSum => "pnp-sum",
@@ -254,6 +259,11 @@ pub fn run_method(
         stop: opts.rl_stopping(),
     };
     match method {
+        Method::Auto => Auto {
+            denoiser,
+            opts: *opts,
+        }
+        .run(&Data::new(model, &problem.counts, &all)?, truth, on_iter),
         Method::Pnp => {
             opts.pnp(denoiser)
                 .run(&Data::new(model, &problem.counts, &all)?, truth, on_iter)

@@ -7,6 +7,8 @@
 //! [`method`] names them for users and runs one on a [`problem::Problem`];
 //! [`input`] makes a stack file into one, its physics resolved.
 //!
+//! - [`auto`]: the default: per stack, whole-stack Richardson-Lucy or PnP
+//!   with the learned prior, chosen without the truth.
 //! - [`split`]: Poisson Plug-and-Play ADMM with exact splitting (P4IP), the
 //!   default PnP solver: closed-form Poisson prox, exact o-update.
 //! - [`admm_lbfgs`]: the paper's Algorithm 1 (L-BFGS o-update), with a
@@ -24,6 +26,7 @@
 //! and [`operator`].
 
 pub mod admm_lbfgs;
+pub mod auto;
 pub mod data;
 pub mod discrepancy;
 pub mod em;

@@ -59,7 +59,7 @@ impl Reconstruction {
                 .as_ref()
                 .map_or(String::new(), |p| format!(" with prior {p}")),
             last.map_or(0, |r| r.iteration),
-            last.map_or(0.0, |r| r.wall_s)
+            t.wall_s
         )];
         lines.extend(t.notes.iter().skip(skip).map(|n| format!("  {n}")));
         if let (Some(truth), Some(best)) = (truth, t.best_psnr()) {
@@ -134,15 +134,31 @@ impl<'a> Run<'a> {
         }
     }
 
-    /// A run of a preliminary step of this one (e.g. its start): its rows
-    /// reach the caller as progress, its trace is its own.
-    pub fn sub_run(&mut self, method: &str) -> Run<'_> {
+    /// A run of a part of this one (a start, a candidate): its rows reach
+    /// the caller as they come, timed from this run's start and scored
+    /// against the truth when `scored`; its trace is its own
+    /// ([`Run::into_trace`]).
+    pub fn sub_run(&mut self, method: &str, scored: bool) -> Run<'_> {
         Run {
             trace: Trace::new(method),
             start: self.start,
-            truth: None,
+            truth: if scored { self.truth } else { None },
             on_iter: &mut *self.on_iter,
         }
+    }
+
+    /// The trace so far.
+    pub fn into_trace(self) -> Trace {
+        self.trace
+    }
+
+    /// Takes a sub-run's trace as this run's own (its rows, prior and
+    /// notes), after `notes` of this run's own.
+    pub fn adopt(&mut self, trace: Trace, notes: Vec<String>) {
+        self.trace.rows = trace.rows;
+        self.trace.prior = trace.prior;
+        self.trace.notes.extend(notes);
+        self.trace.notes.extend(trace.notes);
     }
 
     /// Seconds since the run started.
@@ -222,7 +238,8 @@ impl<'a> Run<'a> {
 
     /// The checked output: the estimate clamped to >= 0, or an error naming
     /// the iteration if any value is not finite.
-    pub fn finish(self, estimate: Estimate) -> Result<Reconstruction, ReconstructError> {
+    pub fn finish(mut self, estimate: Estimate) -> Result<Reconstruction, ReconstructError> {
+        self.trace.wall_s = self.elapsed_s();
         if estimate.image.iter().any(|v| !v.is_finite()) {
             return Err(ReconstructError::NonFinite {
                 method: self.trace.method,

@@ -202,7 +202,7 @@ fn warm_start(
         return flat_start();
     }
     let start = Instant::now();
-    let mut rl = run.sub_run("rl-sum");
+    let mut rl = run.sub_run("rl-sum", false);
     let start_steps = rl_steps(model, counts, bins, iterations, &mut rl);
     match start_steps {
         Some(o) if o.iter().all(|x| x.is_finite()) => {

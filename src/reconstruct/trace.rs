@@ -45,6 +45,9 @@ pub struct Trace {
     pub prior: Option<String>,
     /// Notes: stopping reason, work left out, FFTs per gradient, clamping.
     pub notes: Vec<String>,
+    /// Wall time of the whole run (s), set when it finishes: what the
+    /// caller waited, including work after the last row.
+    pub wall_s: f64,
     /// One row per iteration.
     pub rows: Vec<TraceRow>,
 }

@@ -31,6 +31,7 @@ use crate::reconstruct::trace::Trace;
 use crate::scene::Scene;
 
 use super::ReportError;
+use super::plot::{Series, chart};
 
 /// Label of Richardson-Lucy's best iteration chosen with the truth.
 pub const RL_BEST: &str = "rl-sum (best iteration by truth)";
@@ -41,6 +42,8 @@ pub const RL_CV: &str = "rl-sum (cross-validated stop)";
 
 /// Label of whole-stack Richardson-Lucy with its cross-validated stop.
 pub const RL_STACK_CV: &str = "rl-stack (cross-validated stop)";
+/// Label of the default method's rows.
+pub const AUTO: &str = "auto (the default)";
 
 /// Label of Richardson-Lucy's output after a fixed count of `iterations`.
 pub fn rl_fixed_label(iterations: usize) -> String {
@@ -245,6 +248,8 @@ pub struct BenchRow {
     /// Output deviance minus its expectation under Poisson noise, in noise
     /// standard deviations (PnP only).
     pub deviance_z: Option<f64>,
+    /// What `auto` chose (its rows only).
+    pub chose: Option<String>,
 }
 
 /// A PnP configuration of the benchmark.
@@ -317,13 +322,14 @@ pub fn run_case(
             method,
             psnr: metrics::psnr(image_out, truth),
             ssim: metrics::ssim(image_out, truth),
-            wall_s: last.wall_s,
+            wall_s: trace.wall_s,
             iterations: last.iteration,
             output_iteration,
             best_psnr: best.psnr.unwrap_or(f64::NAN),
             best_iteration: best.iteration,
             deviance_z: out_row
                 .and_then(|r| Some((r.deviance? - r.expected_deviance?) / r.deviance_sd?)),
+            chose: None,
         }
     };
     let mut rows = Vec::new();
@@ -360,6 +366,22 @@ pub fn run_case(
     for (method, label) in [(Method::RlSum, RL_CV), (Method::RlStack, RL_STACK_CV)] {
         let r = run_rl(method, &cross_validated)?;
         rows.push(row(label.into(), r.image.view(), &r.trace));
+    }
+    // The default, with the headline prior.
+    if let Some(e) = entries.first() {
+        let r = run_method(
+            &case.problem,
+            Method::Auto,
+            None,
+            e.denoiser,
+            &cross_validated,
+            Some(truth),
+            |_| {},
+        )?;
+        on_trace(AUTO, &r.trace);
+        let mut auto = row(AUTO.into(), r.image.view(), &r.trace);
+        auto.chose = crate::reconstruct::auto::chosen(&r.trace).map(str::to_string);
+        rows.push(auto);
     }
     let rl = run_rl(
         Method::RlSum,
@@ -403,12 +425,12 @@ pub fn run_case(
 /// CSV of all rows.
 pub fn rows_csv(rows: &[BenchRow]) -> String {
     let mut csv = String::from(
-        "image,split,category,level,method,psnr,ssim,wall_s,iterations,output_iteration,best_psnr,best_iteration,deviance_z\n",
+        "image,split,category,level,method,psnr,ssim,wall_s,iterations,output_iteration,best_psnr,best_iteration,deviance_z,chose\n",
     );
     for r in rows {
         writeln!(
             csv,
-            "{},{},\"{}\",{},\"{}\",{:.4},{:.5},{:.3},{},{},{:.4},{},{}",
+            "{},{},\"{}\",{},\"{}\",{:.4},{:.5},{:.3},{},{},{:.4},{},{},{}",
             r.image,
             r.split,
             r.category,
@@ -421,11 +443,208 @@ pub fn rows_csv(rows: &[BenchRow]) -> String {
             r.output_iteration,
             r.best_psnr,
             r.best_iteration,
-            r.deviance_z.map_or(String::new(), |z| format!("{z:.2}"))
+            r.deviance_z.map_or(String::new(), |z| format!("{z:.2}")),
+            r.chose.as_deref().unwrap_or("")
         )
         .expect("String");
     }
     csv
+}
+
+/// Rows read back from [`rows_csv`]'s text (for `--resume`); errors name
+/// the line and field.
+pub fn rows_from_csv(text: &str) -> Result<Vec<BenchRow>, ReportError> {
+    let mut rows = Vec::new();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let bad = |field: &str, value: &str| {
+            ReportError::Input(format!(
+                "rows.csv line {}: field {field} = {value:?} is not readable",
+                i + 1
+            ))
+        };
+        let mut fields = Vec::new();
+        let (mut cur, mut quoted) = (String::new(), false);
+        for ch in line.chars() {
+            match ch {
+                '"' => quoted = !quoted,
+                ',' if !quoted => fields.push(std::mem::take(&mut cur)),
+                _ => cur.push(ch),
+            }
+        }
+        fields.push(cur);
+        if fields.len() != 14 {
+            return Err(ReportError::Input(format!(
+                "rows.csv line {}: {} fields, 14 expected",
+                i + 1,
+                fields.len()
+            )));
+        }
+        let num = |k: usize, name: &str| -> Result<f64, ReportError> {
+            fields[k].parse::<f64>().map_err(|_| bad(name, &fields[k]))
+        };
+        let int = |k: usize, name: &str| -> Result<usize, ReportError> {
+            fields[k]
+                .parse::<usize>()
+                .map_err(|_| bad(name, &fields[k]))
+        };
+        rows.push(BenchRow {
+            image: fields[0].clone(),
+            split: fields[1].clone(),
+            category: fields[2].clone(),
+            level: num(3, "level")?,
+            method: fields[4].clone(),
+            psnr: num(5, "psnr")?,
+            ssim: num(6, "ssim")?,
+            wall_s: num(7, "wall_s")?,
+            iterations: int(8, "iterations")?,
+            output_iteration: int(9, "output_iteration")?,
+            best_psnr: num(10, "best_psnr")?,
+            best_iteration: int(11, "best_iteration")?,
+            deviance_z: if fields[12].is_empty() {
+                None
+            } else {
+                Some(num(12, "deviance_z")?)
+            },
+            chose: (!fields[13].is_empty()).then(|| fields[13].clone()),
+        });
+    }
+    Ok(rows)
+}
+
+/// One method at one light level against RL-sum's best iteration chosen
+/// with the truth, over the images that have both rows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Verdict {
+    /// The method's label.
+    pub method: String,
+    /// The light level (x the preset's photon budget).
+    pub level: f64,
+    /// Images compared.
+    pub images: usize,
+    /// Mean PSNR margin over RL's best (dB).
+    pub mean_margin: f64,
+    /// Worst PSNR margin over RL's best (dB).
+    pub worst_margin: f64,
+    /// Worst PSNR margin over RL-sum's cross-validated output (dB).
+    pub worst_vs_rl_cv: f64,
+    /// Median wall time (s).
+    pub median_s: f64,
+}
+
+/// Each method's [`Verdict`] per light level, in the order the rows name
+/// them.
+pub fn verdict(rows: &[BenchRow]) -> Vec<Verdict> {
+    let find = |label: &str, r: &BenchRow| {
+        rows.iter()
+            .find(|b| b.method == label && b.image == r.image && b.level == r.level)
+            .map(|b| r.psnr - b.psnr)
+    };
+    let mut out: Vec<Verdict> = Vec::new();
+    let mut keys: Vec<(&str, f64)> = Vec::new();
+    for r in rows.iter().filter(|r| r.method != RL_BEST) {
+        if !keys.iter().any(|&(m, l)| m == r.method && l == r.level) {
+            keys.push((&r.method, r.level));
+        }
+    }
+    for (method, level) in keys {
+        let (mut margins, mut vs_cv, mut times) = (Vec::new(), Vec::new(), Vec::new());
+        for r in rows
+            .iter()
+            .filter(|r| r.method == method && r.level == level)
+        {
+            if let Some(m) = find(RL_BEST, r) {
+                margins.push(m);
+                vs_cv.extend(find(RL_CV, r));
+                times.push(r.wall_s);
+            }
+        }
+        if margins.is_empty() {
+            continue;
+        }
+        times.sort_by(f64::total_cmp);
+        let n = margins.len();
+        out.push(Verdict {
+            method: method.to_string(),
+            level,
+            images: n,
+            mean_margin: margins.iter().sum::<f64>() / n as f64,
+            worst_margin: margins.iter().copied().fold(f64::INFINITY, f64::min),
+            worst_vs_rl_cv: vs_cv.iter().copied().fold(f64::INFINITY, f64::min),
+            median_s: if n % 2 == 1 {
+                times[n / 2]
+            } else {
+                0.5 * (times[n / 2 - 1] + times[n / 2])
+            },
+        });
+    }
+    out
+}
+
+/// The verdict as a Markdown table.
+pub fn verdict_markdown(rows: &[BenchRow]) -> String {
+    let mut md = String::from(
+        "| method | level | images | mean margin over RL best | worst margin | worst vs RL-CV | median time |\n|---|---|---|---|---|---|---|\n",
+    );
+    for v in verdict(rows) {
+        writeln!(
+            md,
+            "| {} | {}x | {} | {:+.2} dB | {:+.2} dB | {:+.2} dB | {:.2} s |",
+            v.method,
+            v.level,
+            v.images,
+            v.mean_margin,
+            v.worst_margin,
+            v.worst_vs_rl_cv,
+            v.median_s
+        )
+        .expect("String");
+    }
+    md
+}
+
+/// Writes each method's mean PSNR margin over RL's best against its median
+/// wall time, one point per light level (time on a log axis), as a PNG;
+/// the legend gives every level's numbers.
+pub fn write_time_figure(rows: &[BenchRow], path: &Path) -> Result<(), ReportError> {
+    let mut series: Vec<Series> = Vec::new();
+    let mut labels: Vec<(String, Vec<String>)> = Vec::new();
+    for v in verdict(rows) {
+        let text = format!("{}x {:+.2} dB {:.1} s", v.level, v.mean_margin, v.median_s);
+        let point = (v.median_s.max(1e-3), v.mean_margin);
+        match series
+            .iter_mut()
+            .zip(labels.iter_mut())
+            .find(|(s, _)| s.label == v.method)
+        {
+            Some((s, (_, l))) => {
+                s.points.push(point);
+                l.push(text);
+            }
+            None => {
+                series.push(Series {
+                    label: v.method.clone(),
+                    points: vec![point],
+                });
+                labels.push((v.method, vec![text]));
+            }
+        }
+    }
+    for (s, (_, l)) in series.iter_mut().zip(&labels) {
+        s.label = format!("{}: {}", s.label, l.join(", "));
+    }
+    chart(
+        path,
+        "held-out: mean PSNR margin against median run time, one point per light level",
+        "median wall time (s)",
+        "mean PSNR minus RL's best iteration chosen with the truth (dB)",
+        &series,
+        &[],
+        true,
+    )
+    .map_err(ReportError::Plot)
 }
 
 /// Markdown summary: per split and level, each method's mean PSNR and time,
@@ -559,6 +778,9 @@ pub struct BenchConfig {
     pub seed: u64,
     /// Output directory: `rows.csv`, `summary.md`, `traces/`.
     pub out: PathBuf,
+    /// Keep the cases (image and level) `out/rows.csv` already holds and
+    /// run only the others (an interrupted run goes on).
+    pub resume: bool,
 }
 
 impl BenchRow {
@@ -615,8 +837,20 @@ pub fn run_benchmark(
         .map_err(|e| ReportError::Io(traces.display().to_string(), e))?;
     let rows_path = cfg.out.join("rows.csv");
     let mut rows = Vec::new();
+    if cfg.resume && rows_path.exists() {
+        let text = std::fs::read_to_string(&rows_path)
+            .map_err(|e| ReportError::Io(rows_path.display().to_string(), e))?;
+        rows = rows_from_csv(&text)?;
+    }
+    let kept = rows.len();
     for image in &images {
         for &(level, ref setup) in &setups {
+            if rows[..kept]
+                .iter()
+                .any(|r| r.image == image.name && r.level == level)
+            {
+                continue;
+            }
             let case = simulate_case(image, setup, cfg.object_px, cfg.seed)?;
             let mut trace_error = None;
             let new = run_case(
@@ -646,8 +880,61 @@ pub fn run_benchmark(
                 .map_err(|e| ReportError::Io(rows_path.display().to_string(), e))?;
         }
     }
-    let md = summary_markdown(&rows, &headline, &rl_default_label(&cfg.opts));
+    let mut md = summary_markdown(&rows, &headline, &rl_default_label(&cfg.opts));
+    md.push_str("\n### Every method against RL's best iteration chosen with the truth\n\n");
+    md.push_str(&verdict_markdown(&rows));
+    write_time_figure(&rows, &cfg.out.join("psnr_vs_time.png"))?;
     let md_path = cfg.out.join("summary.md");
     std::fs::write(&md_path, &md).map_err(|e| ReportError::Io(md_path.display().to_string(), e))?;
     Ok((rows, md))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(method: &str, chose: Option<&str>, z: Option<f64>) -> BenchRow {
+        BenchRow {
+            image: "camera".into(),
+            split: "held-out".into(),
+            category: "natural photo".into(),
+            level: 0.1,
+            method: method.into(),
+            psnr: 21.2785,
+            ssim: 0.54844,
+            wall_s: 2.419,
+            iterations: 80,
+            output_iteration: 80,
+            best_psnr: 21.2785,
+            best_iteration: 80,
+            deviance_z: z,
+            chose: chose.map(str::to_string),
+        }
+    }
+
+    /// What `rows_csv` writes, `rows_from_csv` reads back to the same text.
+    #[test]
+    fn rows_round_trip_through_csv() {
+        let rows = vec![
+            row("pnp split ffdnet", None, Some(43.99)),
+            row(AUTO, Some("rl-stack"), None),
+        ];
+        let text = rows_csv(&rows);
+        let back = rows_from_csv(&text).unwrap();
+        assert_eq!(back.len(), 2);
+        assert_eq!(back[1].chose.as_deref(), Some("rl-stack"));
+        assert_eq!(back[0].deviance_z, Some(43.99));
+        assert_eq!(rows_csv(&back), text);
+    }
+
+    #[test]
+    fn an_unreadable_row_names_its_line_and_field() {
+        let mut text = rows_csv(&[row("rl-sum", None, None)]);
+        text = text.replace(",21.2785,", ",twenty,");
+        let e = rows_from_csv(&text).unwrap_err().to_string();
+        assert!(
+            e.contains("line 2") && e.contains("psnr") && e.contains("twenty"),
+            "{e}"
+        );
+    }
 }

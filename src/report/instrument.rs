@@ -89,7 +89,7 @@ pub fn instrument_costs(
                             "rl-sum"
                         },
                         psnr: psnr(r.image.view(), sim.truth.view()),
-                        wall_s: r.trace.rows.last().map_or(0.0, |row| row.wall_s),
+                        wall_s: r.trace.wall_s,
                     })
                 })
                 .collect()

@@ -5,6 +5,8 @@
 //! the full-stack results as lines) and error-against-run-time curves.
 
 pub mod bench;
+pub mod hidden;
+pub mod hidden_bench;
 pub mod instrument;
 pub mod plot;
 
@@ -142,7 +144,7 @@ pub fn run_scene(
             prior: r.trace.prior.clone(),
             psnr: crate::metrics::psnr(r.image.view(), truth.view()),
             ssim: crate::metrics::ssim(r.image.view(), truth.view()),
-            wall_s: last.wall_s,
+            wall_s: r.trace.wall_s,
             iterations: last.iteration,
             oracle_psnr: best.psnr.unwrap_or(f64::NAN),
             oracle_iteration: best.iteration,

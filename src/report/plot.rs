@@ -115,10 +115,21 @@ pub fn chart(
         }};
     }
     if log_x {
-        let lo = x0.max(1e-3);
+        // Padded by a factor on the log axis, from the smallest positive x.
+        let positive = points
+            .iter()
+            .chain(lines)
+            .flat_map(|s| s.points.iter().map(|p| p.0))
+            .filter(|x| *x > 0.0 && x.is_finite());
+        let (lo, hi) = positive.fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(x), b.max(x)));
+        let (lo, hi) = if lo.is_finite() {
+            (lo / 1.5, hi * 1.5)
+        } else {
+            (1e-3, 1.0)
+        };
         draw!(
             builder
-                .build_cartesian_2d((lo..x1.max(lo * 10.0)).log_scale(), y0..y1)
+                .build_cartesian_2d((lo..hi.max(lo * 10.0)).log_scale(), y0..y1)
                 .map_err(|e| e.to_string())?
         );
     } else {
@@ -128,5 +139,68 @@ pub fn chart(
                 .map_err(|e| e.to_string())?
         );
     }
+    root.present().map_err(|e| e.to_string())
+}
+
+/// One image drawn as gray cells on metric axes.
+pub struct Heatmap<'a> {
+    /// Values, indexed (row, column); row 0 at the top.
+    pub values: ndarray::ArrayView2<'a, f64>,
+    /// Title above the plot.
+    pub title: &'a str,
+    /// Horizontal axis: label and the centres of the first and last column.
+    pub x: (&'a str, f64, f64),
+    /// Vertical axis: label and the centres of the first and last row.
+    pub y: (&'a str, f64, f64),
+}
+
+/// Draws `map` as a PNG: black at 0 (or the minimum when negative), white
+/// at the maximum, the cells centred on their coordinates.
+pub fn heatmap(path: &Path, map: &Heatmap) -> Result<(), String> {
+    register_font();
+    let (rows, cols) = map.values.dim();
+    let half = |(_, a, b): (&str, f64, f64), n: usize| {
+        let step = if n > 1 { (b - a) / (n - 1) as f64 } else { 1.0 };
+        (step, a - 0.5 * step, b + 0.5 * step)
+    };
+    let (xs, x0, x1) = half(map.x, cols);
+    let (ys, y0, y1) = half(map.y, rows);
+    let lo = map.values.iter().fold(0.0f64, |m, &v| m.min(v));
+    let hi = map.values.iter().fold(lo, |m, &v| m.max(v));
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let aspect = ((y1 - y0) / (x1 - x0)).abs().clamp(0.25, 4.0);
+    let width = 640u32;
+    let height = ((width - 80) as f64 * aspect) as u32 + 90;
+    let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    // The vertical axis runs downwards, as images are read.
+    let mut chart = ChartBuilder::on(&root)
+        .caption(map.title, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(56)
+        .build_cartesian_2d(x0.min(x1)..x0.max(x1), y1.max(y0)..y0.min(y1))
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(map.x.0)
+        .y_desc(map.y.0)
+        .label_style(("sans-serif", 13))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    chart
+        .draw_series(map.values.indexed_iter().map(|((r, c), &v)| {
+            let g = (255.0 * ((v - lo) / span).clamp(0.0, 1.0)).round() as u8;
+            let (cx, cy) = (map.x.1 + c as f64 * xs, map.y.1 + r as f64 * ys);
+            Rectangle::new(
+                [
+                    (cx - 0.5 * xs, cy - 0.5 * ys),
+                    (cx + 0.5 * xs, cy + 0.5 * ys),
+                ],
+                RGBColor(g, g, g).filled(),
+            )
+        }))
+        .map_err(|e| e.to_string())?;
     root.present().map_err(|e| e.to_string())
 }

@@ -57,6 +57,10 @@ pub struct BenchReconArgs {
     /// Output directory.
     #[arg(long, default_value = "out/bench-recon")]
     out: PathBuf,
+    /// Keep the cases OUT/rows.csv already holds (an interrupted run goes
+    /// on; the summary covers both).
+    #[arg(long)]
+    resume: bool,
 }
 
 pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
@@ -81,6 +85,7 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
         opts: args.recon.options()?,
         seed: args.seed,
         out: args.out.clone(),
+        resume: args.resume,
     };
     let (_, md) = run_benchmark(&cfg, |row| println!("{}", row.line()))?;
     println!("{md}");

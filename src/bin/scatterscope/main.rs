@@ -1,11 +1,13 @@
 //! The `scatterscope` command-line tool.
 
 mod acquire;
+mod bench_hidden;
 mod bench_recon;
 mod calibrate_cmd;
 mod calibrate_slab;
 mod denoise;
 mod denoise_bench;
+mod hidden;
 mod hints;
 mod psf;
 mod recon_args;
@@ -42,8 +44,10 @@ enum Command {
     Reconstruct(reconstruct::ReconstructArgs),
     Calibrate(calibrate_cmd::CalibrateArgs),
     CalibrateSlab(calibrate_slab::CalibrateSlabArgs),
+    Hidden(hidden::HiddenArgs),
     Report(report::ReportArgs),
     BenchRecon(bench_recon::BenchReconArgs),
+    BenchHidden(bench_hidden::BenchHiddenArgs),
     Info(tags_cmd::InfoArgs),
     Bin(tags_cmd::BinArgs),
     Acquire(acquire::AcquireArgs),
@@ -124,8 +128,10 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Reconstruct(args) => reconstruct::run(&args),
         Command::Calibrate(args) => calibrate_cmd::run(&args),
         Command::CalibrateSlab(args) => calibrate_slab::run(&args),
+        Command::Hidden(args) => hidden::run(&args),
         Command::Report(args) => report::run(&args),
         Command::BenchRecon(args) => bench_recon::run(&args),
+        Command::BenchHidden(args) => bench_hidden::run(&args),
         Command::Info(args) => tags_cmd::info(&args),
         Command::Bin(args) => tags_cmd::bin(&args),
         Command::Acquire(args) => acquire::run(&args),

@@ -22,7 +22,7 @@ pub struct ReconstructArgs {
     /// The stack file.
     stack: PathBuf,
     /// Method: on the whole stack, the time-summed stack or one bin.
-    #[arg(long, value_parser = choice::<Method>(), default_value = "pnp")]
+    #[arg(long, value_parser = choice::<Method>(), default_value = "auto")]
     method: Method,
     /// Bin (0-based) for single-bin methods and scaled-counts.
     #[arg(long)]

@@ -1,0 +1,59 @@
+//! Confocal scans of hidden objects behind a scattering slab.
+//!
+//! A pulsed laser and a single-photon detector look at the same point of
+//! the slab's near face; galvo mirrors move that point over a grid. Light
+//! diffuses through the slab, crosses free space to a hidden object, comes
+//! back and diffuses through the slab again; each scan point records a time
+//! histogram. The data flow: a [`scan::ConfocalScan`] (counts per scan point
+//! and bin) is reconstructed into a [`volume::HiddenVolume`] (x, y, depth
+//! behind the slab), which is read as projections and a depth map.
+//!
+//! - [`scan`]: the measurement and its checks (MATLAB files, project stacks).
+//! - [`slab_kernel`]: the slab's diffusion kernel for light going in and out.
+//! - [`fft3`]: three-dimensional FFTs.
+//! - [`light_cone`]: confocal free-space propagation as a linear operator
+//!   (light-cone transform) with its adjoint.
+//! - [`stolt`]: f-k (Stolt) migration of confocal free-space propagation.
+//! - [`published`]: the published reconstruction (Lindell and Wetzstein,
+//!   Nature Communications 11, 4517 (2020)): Wiener deconvolution of the
+//!   slab kernel, then f-k migration.
+//! - [`volume`]: the reconstructed volume, its projections and depth map.
+
+pub mod fft3;
+pub mod light_cone;
+pub mod published;
+pub mod scan;
+pub mod slab_kernel;
+pub mod stolt;
+pub mod volume;
+
+pub use published::{PublishedOptions, reconstruct_published};
+pub use scan::ConfocalScan;
+pub use slab_kernel::SlabOptics;
+pub use volume::HiddenVolume;
+
+/// Why a confocal scan cannot be read or reconstructed.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfocalError {
+    /// The scan, a file or a setting is not usable; the message names it.
+    #[error("{source_name}: {message}")]
+    Input {
+        /// The file or setting at fault.
+        source_name: String,
+        /// What is wrong, with the value.
+        message: String,
+    },
+    /// The work does not fit the memory budget.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::MemoryError),
+}
+
+impl ConfocalError {
+    /// An input error about `source_name`.
+    pub fn input(source_name: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::Input {
+            source_name: source_name.into(),
+            message: message.into(),
+        }
+    }
+}

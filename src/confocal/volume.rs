@@ -1,0 +1,187 @@
+//! A reconstructed hidden volume and what a person reads from it:
+//! maximum-intensity projections, a depth map and the depth of the object.
+
+use ndarray::{Array2, Array3, Axis};
+
+/// Values over (depth behind the slab, row, column).
+#[derive(Debug, Clone)]
+pub struct HiddenVolume {
+    /// Values, indexed (depth, row, column); non-negative.
+    pub data: Array3<f64>,
+    /// Depth between samples (m); sample `k` lies `k` steps behind the
+    /// slab's far face.
+    pub depth_step_m: f64,
+    /// Side of the scanned area (m), first to last row and column.
+    pub side_m: f64,
+    /// What was done and assumed, for the printed notes.
+    pub notes: Vec<String>,
+}
+
+/// Which maximum-intensity projection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Projection {
+    /// Over depth: rows by columns (the view through the slab).
+    Front,
+    /// Over rows: depth by columns (seen from above).
+    Top,
+    /// Over columns: depth by rows (seen from the side).
+    Side,
+}
+
+/// Fraction of the front projection's maximum above which a scan point
+/// belongs to the object (fixed before any scan was looked at; see
+/// docs/journal/2026-11-25-nineteenth-session.md).
+pub const OBJECT_LEVEL: f64 = 0.5;
+
+impl HiddenVolume {
+    /// The maximum of the volume along one axis.
+    pub fn projection(&self, which: Projection) -> Array2<f64> {
+        let axis = match which {
+            Projection::Front => 0,
+            Projection::Top => 1,
+            Projection::Side => 2,
+        };
+        self.data
+            .fold_axis(Axis(axis), f64::NEG_INFINITY, |m, &v| m.max(v))
+    }
+
+    /// Depth (m) of every scan point's brightest sample, refined to a
+    /// fraction of a sample by the parabola through it and its two
+    /// neighbours; the brightness at that depth beside it.
+    pub fn depth_map(&self) -> (Array2<f64>, Array2<f64>) {
+        let (nz, rows, cols) = self.data.dim();
+        let mut depth = Array2::zeros((rows, cols));
+        let mut peak = Array2::zeros((rows, cols));
+        for r in 0..rows {
+            for c in 0..cols {
+                let lane = self.data.slice(ndarray::s![.., r, c]);
+                let (k, &v) = lane
+                    .iter()
+                    .enumerate()
+                    .fold(
+                        (0, &f64::NEG_INFINITY),
+                        |b, x| if x.1 > b.1 { x } else { b },
+                    );
+                depth[[r, c]] =
+                    (k as f64 + parabola_offset(&lane.to_vec(), k, nz)) * self.depth_step_m;
+                peak[[r, c]] = v;
+            }
+        }
+        (depth, peak)
+    }
+
+    /// Depth of the object (m): the median refined depth over the scan
+    /// points whose front projection reaches [`OBJECT_LEVEL`] of its
+    /// maximum; `None` for an empty volume.
+    pub fn object_depth(&self) -> Option<f64> {
+        let (depth, peak) = self.depth_map();
+        let top = peak.iter().fold(0.0f64, |m, &v| m.max(v));
+        if top.is_nan() || top <= 0.0 {
+            return None;
+        }
+        let mut chosen: Vec<f64> = depth
+            .iter()
+            .zip(peak.iter())
+            .filter(|(_, p)| **p >= OBJECT_LEVEL * top)
+            .map(|(d, _)| *d)
+            .collect();
+        chosen.sort_by(f64::total_cmp);
+        let n = chosen.len();
+        Some(if n % 2 == 1 {
+            chosen[n / 2]
+        } else {
+            0.5 * (chosen[n / 2 - 1] + chosen[n / 2])
+        })
+    }
+
+    /// Depth of the single brightest voxel (m), unrefined.
+    pub fn brightest_depth(&self) -> f64 {
+        let (mut best, mut at) = (f64::NEG_INFINITY, 0);
+        for ((k, _, _), &v) in self.data.indexed_iter() {
+            if v > best {
+                (best, at) = (v, k);
+            }
+        }
+        at as f64 * self.depth_step_m
+    }
+}
+
+/// Offset (in samples, within ±0.5) of the vertex of the parabola through
+/// samples `k - 1`, `k`, `k + 1` of `lane`; 0 at the ends or when flat.
+fn parabola_offset(lane: &[f64], k: usize, n: usize) -> f64 {
+    if k == 0 || k + 1 >= n {
+        return 0.0;
+    }
+    let (a, b, c) = (lane[k - 1], lane[k], lane[k + 1]);
+    let curvature = a - 2.0 * b + c;
+    if curvature.is_nan() || curvature >= 0.0 {
+        return 0.0;
+    }
+    (0.5 * (a - c) / curvature).clamp(-0.5, 0.5)
+}
+
+/// Pearson correlation of two equally sized arrays; 0 when either is
+/// constant.
+pub fn correlation(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.sum() / n, b.sum() / n);
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b.iter()) {
+        let (dx, dy) = (x - ma, y - mb);
+        ab += dx * dy;
+        aa += dx * dx;
+        bb += dy * dy;
+    }
+    if aa > 0.0 && bb > 0.0 {
+        ab / (aa * bb).sqrt()
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The parabola's vertex is exact for samples of a parabola.
+    #[test]
+    fn parabola_vertex_is_exact_on_a_parabola() {
+        let vertex = 5.3;
+        let lane: Vec<f64> = (0..10)
+            .map(|k| 10.0 - (k as f64 - vertex).powi(2))
+            .collect();
+        let off = parabola_offset(&lane, 5, 10);
+        assert!((5.0 + off - vertex).abs() < 1e-12, "{off}");
+    }
+
+    /// A bright slab of voxels at one depth gives that depth everywhere
+    /// on the object, and the object's depth.
+    #[test]
+    fn object_depth_of_a_flat_object() {
+        let mut data = Array3::zeros((20, 4, 4));
+        for r in 1..3 {
+            for c in 1..3 {
+                data[[7, r, c]] = 2.0;
+                data[[6, r, c]] = 1.0;
+                data[[8, r, c]] = 1.0;
+            }
+        }
+        let vol = HiddenVolume {
+            data,
+            depth_step_m: 0.01,
+            side_m: 0.5,
+            notes: vec![],
+        };
+        assert!((vol.object_depth().unwrap() - 0.07).abs() < 1e-12);
+        assert_eq!(vol.projection(Projection::Front)[[1, 1]], 2.0);
+        assert_eq!(vol.projection(Projection::Top).dim(), (20, 4));
+    }
+
+    #[test]
+    fn correlation_of_affine_copies_is_one() {
+        let a = Array2::from_shape_fn((3, 4), |(i, j)| (i * 4 + j) as f64);
+        let b = a.mapv(|v| 3.0 * v + 1.0);
+        assert!((correlation(&a, &b) - 1.0).abs() < 1e-12);
+        assert_eq!(correlation(&a, &Array2::zeros((3, 4))), 0.0);
+    }
+}

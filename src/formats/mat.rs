@@ -1,0 +1,117 @@
+//! MATLAB v7.3 files (HDF5 inside), read with the pure-Rust `hdf5-reader`,
+//! so no system HDF5 library is needed. Errors are messages without the
+//! path; callers name the file.
+
+use std::path::Path;
+
+use hdf5_reader::{Dataset, Hdf5File};
+
+/// Opens a MATLAB v7.3 file after checking it is a regular file that fits
+/// the memory budget and is not cut short.
+pub fn open(path: &Path) -> Result<Hdf5File, String> {
+    let meta = std::fs::metadata(path).map_err(|e| e.to_string())?;
+    if !meta.is_file() {
+        return Err(format!(
+            "not a regular file ({}); a MATLAB file must be one",
+            crate::memory::file_kind(&meta)
+        ));
+    }
+    crate::memory::check(meta.len(), || format!("reading {}", path.display()))
+        .map_err(|e| e.to_string())?;
+    if let Some(declared) = hdf5_declared_size(path)
+        && declared > meta.len()
+    {
+        return Err(format!(
+            "the file is cut: it holds {} bytes of the {declared} its HDF5 superblock declares",
+            meta.len()
+        ));
+    }
+    Hdf5File::open(path).map_err(|e| {
+        format!(
+            "not a MATLAB v7.3 (HDF5) file: {e} (older MATLAB formats are not read; save with -v7.3)"
+        )
+    })
+}
+
+/// Dataset `name` of `file`; the error lists the datasets there are.
+pub fn dataset(file: &Hdf5File, name: &str) -> Result<Dataset, String> {
+    file.dataset(&format!("/{name}")).map_err(|_| {
+        let names = file
+            .root_group()
+            .and_then(|g| g.member_names())
+            .map(|(_, d)| d.join(", "))
+            .unwrap_or_default();
+        format!("no dataset `{name}` (datasets in the file: {names})")
+    })
+}
+
+/// The numbers of a dataset (floating point or integer, as MATLAB stores
+/// counts) in the order HDF5 stores them (C order over `ds.shape()`).
+pub fn numbers(ds: &Dataset) -> Result<Vec<f64>, String> {
+    use hdf5_reader::messages::datatype::Datatype;
+    fn all<T: hdf5_reader::H5Type + Copy>(
+        ds: &Dataset,
+        to: impl Fn(T) -> f64,
+    ) -> Result<Vec<f64>, String> {
+        ds.read_array::<T>()
+            .map(|a| a.iter().map(|&v| to(v)).collect())
+            .map_err(|e| e.to_string())
+    }
+    let elements: u64 = ds.shape().iter().product();
+    crate::memory::check(elements.saturating_mul(16), || {
+        format!("a dataset of shape {:?}", ds.shape())
+    })
+    .map_err(|e| e.to_string())?;
+    match *ds.dtype() {
+        Datatype::FloatingPoint { size: 8, .. } => all::<f64>(ds, |v| v),
+        Datatype::FloatingPoint { size: 4, .. } => all::<f32>(ds, f64::from),
+        Datatype::FixedPoint { size, signed, .. } => match (size, signed) {
+            (1, false) => all::<u8>(ds, f64::from),
+            (2, false) => all::<u16>(ds, f64::from),
+            (4, false) => all::<u32>(ds, f64::from),
+            (8, false) => all::<u64>(ds, |v| v as f64),
+            (2, true) => all::<i16>(ds, f64::from),
+            (4, true) => all::<i32>(ds, f64::from),
+            (8, true) => all::<i64>(ds, |v| v as f64),
+            _ => Err(format!(
+                "{size}-byte integers (signed: {signed}) are not read"
+            )),
+        },
+        ref other => Err(format!("type {other:?} is not a number")),
+    }
+}
+
+/// The size an HDF5 file declares (its superblock's end-of-file address),
+/// when the file starts with an HDF5 superblock
+/// where one may sit (byte 0, or after a user block of 512, 1024 or 2048
+/// bytes, as MATLAB v7.3 writes them).
+fn hdf5_declared_size(path: &Path) -> Option<u64> {
+    const SIGNATURE: &[u8; 8] = b"\x89HDF\r\n\x1a\n";
+    let mut head = vec![0u8; 2048 + 64];
+    let mut file = std::fs::File::open(path).ok()?;
+    let got = std::io::Read::read(&mut file, &mut head).ok()?;
+    let head = &head[..got];
+    let at = [0usize, 512, 1024, 2048]
+        .into_iter()
+        .find(|&o| head.get(o..o + 8) == Some(SIGNATURE))?;
+    let sb = &head[at..];
+    let word = |o: usize, n: usize| -> Option<u64> {
+        let b = sb.get(o..o + n)?;
+        let mut v = [0u8; 8];
+        v[..n].copy_from_slice(b);
+        Some(u64::from_le_bytes(v))
+    };
+    let (offsets, base_at) = match *sb.get(8)? {
+        0 => (usize::from(*sb.get(13)?), 24),
+        1 => (usize::from(*sb.get(13)?), 28),
+        2 | 3 => (usize::from(*sb.get(9)?), 12),
+        _ => return None,
+    };
+    if !(offsets == 4 || offsets == 8) {
+        return None;
+    }
+    // After the base address: the free-space (v0, v1) or extension (v2,
+    // v3) address, then the end-of-file address. MATLAB writes it as the
+    // file's size, user block included (checked on the shared captures).
+    word(base_at + 2 * offsets, offsets)
+}

@@ -1,0 +1,140 @@
+//! The files a person reads from a reconstructed hidden volume: the
+//! volume (`.npy` with a JSON sidecar, and OpenEXR), the depth map (`.npy`
+//! and a PNG), and the three maximum-intensity projections as PNGs on
+//! metric axes.
+
+use std::path::{Path, PathBuf};
+
+use ndarray::Array3;
+use ndarray_npy::WriteNpyExt;
+use serde::Serialize;
+
+use super::ReportError;
+use super::plot::{Heatmap, heatmap};
+use crate::confocal::volume::{HiddenVolume, Projection};
+
+/// The geometry travelling with a written volume (the JSON sidecar and
+/// the EXR's `scatterscope` attribute).
+#[derive(Debug, Serialize)]
+pub struct VolumeRecord<'a> {
+    /// Axis order of the array.
+    pub axes: &'a str,
+    /// Depth between samples (m); sample 0 is at the slab's far face.
+    pub depth_step_m: f64,
+    /// Scanned side (m), first to last row and column.
+    pub side_m: f64,
+    /// What was done and assumed.
+    pub notes: &'a [String],
+}
+
+/// Writes the volume and its readings into `dir`; returns the paths.
+pub fn write_hidden(volume: &HiddenVolume, dir: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    std::fs::create_dir_all(dir).map_err(|e| ReportError::Io(dir.display().to_string(), e))?;
+    let mut written = Vec::new();
+    let record = VolumeRecord {
+        axes: "depth, row, column",
+        depth_step_m: volume.depth_step_m,
+        side_m: volume.side_m,
+        notes: &volume.notes,
+    };
+    let json = serde_json::to_string_pretty(&record).expect("record serialises");
+    let data32: Array3<f32> = volume.data.mapv(|v| v as f32);
+
+    let npy = dir.join("volume.npy");
+    write_npy(&npy, |f| data32.write_npy(f))?;
+    let sidecar = dir.join("volume.json");
+    std::fs::write(&sidecar, &json)
+        .map_err(|e| ReportError::Io(sidecar.display().to_string(), e))?;
+    let exr = dir.join("volume.exr");
+    crate::formats::exr::write_volume(
+        data32.view(),
+        "volume",
+        "z",
+        &[
+            ("depthStepM", volume.depth_step_m),
+            ("scanSideM", volume.side_m),
+        ],
+        &json,
+        &exr,
+    )?;
+    written.extend([npy, sidecar, exr]);
+
+    let (depth, peak) = volume.depth_map();
+    let depth_npy = dir.join("depth.npy");
+    write_npy(&depth_npy, |f| depth.write_npy(f))?;
+    written.push(depth_npy);
+
+    let (nz, rows, cols) = volume.data.dim();
+    let half_cm = 50.0 * volume.side_m;
+    let depth_cm = 100.0 * volume.depth_step_m * (nz - 1) as f64;
+    let x = ("x on the slab (cm)", -half_cm, half_cm);
+    let y = ("y on the slab (cm)", -half_cm, half_cm);
+    let z = ("depth behind the slab (cm)", 0.0, depth_cm);
+    let front = volume.projection(Projection::Front);
+    let top = volume.projection(Projection::Top);
+    let side = volume.projection(Projection::Side);
+    // The depth map shows depth only where the object is (half the
+    // brightest point, as the object depth's rule), 0 elsewhere.
+    let top_peak = peak.iter().fold(0.0f64, |m, &v| m.max(v));
+    let shown_depth = ndarray::Zip::from(&depth).and(&peak).map_collect(|&d, &p| {
+        if p >= crate::confocal::volume::OBJECT_LEVEL * top_peak {
+            100.0 * d
+        } else {
+            0.0
+        }
+    });
+    let maps = [
+        (
+            "mip_front.png",
+            "maximum over depth (front view)",
+            front.view(),
+            x,
+            y,
+        ),
+        ("mip_top.png", "maximum over y (top view)", top.view(), x, z),
+        (
+            "mip_side.png",
+            "maximum over x (side view)",
+            side.view(),
+            y,
+            z,
+        ),
+        (
+            "depth.png",
+            "depth of the brightest point (cm; bright = far)",
+            shown_depth.view(),
+            x,
+            y,
+        ),
+    ];
+    debug_assert_eq!(front.dim(), (rows, cols));
+    for (name, title, values, x, y) in maps {
+        let path = dir.join(name);
+        heatmap(
+            &path,
+            &Heatmap {
+                values,
+                title,
+                x,
+                y,
+            },
+        )
+        .map_err(ReportError::Plot)?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+fn write_npy<E: std::fmt::Display>(
+    path: &Path,
+    write: impl FnOnce(std::io::BufWriter<std::fs::File>) -> Result<(), E>,
+) -> Result<(), ReportError> {
+    let file =
+        std::fs::File::create(path).map_err(|e| ReportError::Io(path.display().to_string(), e))?;
+    write(std::io::BufWriter::new(file)).map_err(|e| {
+        ReportError::Io(
+            path.display().to_string(),
+            std::io::Error::other(e.to_string()),
+        )
+    })
+}

@@ -1,0 +1,70 @@
+//! The default method's per-stack choice (`--method auto`) on two of the
+//! benchmark's tuning scenes at the paper preset's light (1x, sensor with
+//! edges, seed 0): PnP on a piecewise-flat one, whole-stack
+//! Richardson-Lucy on a textured one, and the same output on a rerun.
+
+use std::path::PathBuf;
+
+use scatterscope::denoise::ffdnet::{Ffdnet, source};
+use scatterscope::physics::Preset;
+use scatterscope::reconstruct::Reconstruction;
+use scatterscope::reconstruct::auto::{PNP_MISFIT_Z, chosen, deviance_z};
+use scatterscope::reconstruct::method::{Method, MethodOptions, run_method};
+use scatterscope::report::bench::{BenchImage, level_setup, simulate_case};
+
+fn run_auto(name: &str, file: Option<PathBuf>) -> Reconstruction {
+    let image = BenchImage {
+        name: name.into(),
+        file,
+        source: "test".into(),
+        category: "test".into(),
+        split: "tuning".into(),
+    };
+    let setup = level_setup(&Preset::Paper.setup(), 1.0).unwrap();
+    let case = simulate_case(&image, &setup, 384, 0).unwrap();
+    let ffdnet = Ffdnet::new(source::embedded(), "embedded");
+    run_method(
+        &case.problem,
+        Method::Auto,
+        None,
+        &ffdnet,
+        &MethodOptions::default(),
+        None,
+        |_| {},
+    )
+    .unwrap()
+}
+
+#[test]
+fn auto_picks_pnp_on_a_piecewise_flat_scene_and_repeats_itself() {
+    let file = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/bench/checkerboard.png");
+    let first = run_auto("checkerboard", Some(file.clone()));
+    assert_eq!(chosen(&first.trace), Some("pnp"), "{:?}", first.trace.notes);
+    let z = deviance_z(&first.trace).expect("PnP reached its noise floor");
+    assert!(z >= PNP_MISFIT_Z, "z = {z}");
+    let again = run_auto("checkerboard", Some(file));
+    assert_eq!(chosen(&again.trace), Some("pnp"));
+    assert_eq!(first.image, again.image, "same stack, same output");
+}
+
+#[test]
+fn auto_picks_whole_stack_richardson_lucy_on_a_textured_scene() {
+    let out = run_auto("text", None);
+    assert_eq!(
+        chosen(&out.trace),
+        Some("rl-stack"),
+        "{:?}",
+        out.trace.notes
+    );
+    // Each candidate's time and PnP's score are in the notes.
+    let notes = out.trace.notes.join("\n");
+    assert!(notes.contains("auto: rl-stack took"), "{notes}");
+    assert!(notes.contains("its output deviance z = "), "{notes}");
+    // The time reported covers both candidates, not only the chosen one.
+    let chosen_last = out.trace.rows.last().unwrap().wall_s;
+    assert!(
+        out.trace.wall_s > chosen_last,
+        "{} <= {chosen_last}",
+        out.trace.wall_s
+    );
+}
