@@ -14,19 +14,25 @@
 //! - [`light_cone`]: confocal free-space propagation as a linear operator
 //!   (light-cone transform) with its adjoint.
 //! - [`stolt`]: f-k (Stolt) migration of confocal free-space propagation.
+//! - [`forward`]: the forward model in counts (slab kernel, light cone,
+//!   background).
+//! - [`poisson`]: the Poisson reconstruction, stopped by cross-validation.
 //! - [`published`]: the published reconstruction (Lindell and Wetzstein,
 //!   Nature Communications 11, 4517 (2020)): Wiener deconvolution of the
 //!   slab kernel, then f-k migration.
 //! - [`volume`]: the reconstructed volume, its projections and depth map.
 
 pub mod fft3;
+pub mod forward;
 pub mod light_cone;
+pub mod poisson;
 pub mod published;
 pub mod scan;
 pub mod slab_kernel;
 pub mod stolt;
 pub mod volume;
 
+pub use poisson::{PoissonOptions, reconstruct_poisson};
 pub use published::{PublishedOptions, reconstruct_published};
 pub use scan::ConfocalScan;
 pub use slab_kernel::SlabOptics;

@@ -240,6 +240,7 @@ pub fn reconstruct_published(
     Ok(HiddenVolume {
         data,
         depth_step_m,
+        first_depth_m: 0.0,
         side_m: scan.side_m,
         notes: vec![
             format!(

@@ -8,9 +8,11 @@ use ndarray::{Array2, Array3, Axis};
 pub struct HiddenVolume {
     /// Values, indexed (depth, row, column); non-negative.
     pub data: Array3<f64>,
-    /// Depth between samples (m); sample `k` lies `k` steps behind the
-    /// slab's far face.
+    /// Depth between samples (m).
     pub depth_step_m: f64,
+    /// Depth of sample 0 behind the slab's far face (m); sample `k` lies
+    /// `k` steps farther.
+    pub first_depth_m: f64,
     /// Side of the scanned area (m), first to last row and column.
     pub side_m: f64,
     /// What was done and assumed, for the printed notes.
@@ -102,7 +104,7 @@ impl HiddenVolume {
                 (best, at) = (v, k);
             }
         }
-        at as f64 * self.depth_step_m
+        self.first_depth_m + at as f64 * self.depth_step_m
     }
 }
 
@@ -169,6 +171,7 @@ mod tests {
         let vol = HiddenVolume {
             data,
             depth_step_m: 0.01,
+            first_depth_m: 0.0,
             side_m: 0.5,
             notes: vec![],
         };

@@ -19,8 +19,10 @@ use crate::confocal::volume::{HiddenVolume, Projection};
 pub struct VolumeRecord<'a> {
     /// Axis order of the array.
     pub axes: &'a str,
-    /// Depth between samples (m); sample 0 is at the slab's far face.
+    /// Depth between samples (m).
     pub depth_step_m: f64,
+    /// Depth of sample 0 behind the slab's far face (m).
+    pub first_depth_m: f64,
     /// Scanned side (m), first to last row and column.
     pub side_m: f64,
     /// What was done and assumed.
@@ -34,6 +36,7 @@ pub fn write_hidden(volume: &HiddenVolume, dir: &Path) -> Result<Vec<PathBuf>, R
     let record = VolumeRecord {
         axes: "depth, row, column",
         depth_step_m: volume.depth_step_m,
+        first_depth_m: volume.first_depth_m,
         side_m: volume.side_m,
         notes: &volume.notes,
     };
@@ -52,6 +55,7 @@ pub fn write_hidden(volume: &HiddenVolume, dir: &Path) -> Result<Vec<PathBuf>, R
         "z",
         &[
             ("depthStepM", volume.depth_step_m),
+            ("firstDepthM", volume.first_depth_m),
             ("scanSideM", volume.side_m),
         ],
         &json,
@@ -66,10 +70,11 @@ pub fn write_hidden(volume: &HiddenVolume, dir: &Path) -> Result<Vec<PathBuf>, R
 
     let (nz, rows, cols) = volume.data.dim();
     let half_cm = 50.0 * volume.side_m;
-    let depth_cm = 100.0 * volume.depth_step_m * (nz - 1) as f64;
+    let first_cm = 100.0 * volume.first_depth_m;
+    let depth_cm = first_cm + 100.0 * volume.depth_step_m * (nz - 1) as f64;
     let x = ("x on the slab (cm)", -half_cm, half_cm);
     let y = ("y on the slab (cm)", -half_cm, half_cm);
-    let z = ("depth behind the slab (cm)", 0.0, depth_cm);
+    let z = ("depth behind the slab (cm)", first_cm, depth_cm);
     let front = volume.projection(Projection::Front);
     let top = volume.projection(Projection::Top);
     let side = volume.projection(Projection::Side);

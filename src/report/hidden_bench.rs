@@ -11,10 +11,16 @@ use std::time::Instant;
 use super::ReportError;
 use crate::confocal::published::authors_settings;
 use crate::confocal::volume::{HiddenVolume, Projection, correlation};
-use crate::confocal::{ConfocalScan, PublishedOptions, SlabOptics, reconstruct_published};
+use crate::confocal::{
+    ConfocalScan, PoissonOptions, PublishedOptions, SlabOptics, reconstruct_poisson,
+    reconstruct_published,
+};
 
 /// Label of the published method.
 pub const PUBLISHED: &str = "published (Wiener + f-k)";
+
+/// Label of the Poisson method.
+pub const POISSON: &str = "poisson (EM + f-k)";
 
 /// Settings of the benchmark.
 pub struct HiddenBenchConfig {
@@ -29,6 +35,8 @@ pub struct HiddenBenchConfig {
     pub seed: u64,
     /// Runs per row whose median is the time.
     pub repeats: usize,
+    /// Also run the Poisson method (once per row).
+    pub poisson: bool,
 }
 
 /// One scan at one count fraction through one method.
@@ -124,6 +132,22 @@ pub fn run_hidden_bench(
             );
             on_row(&row);
             rows.push(row);
+            if cfg.poisson {
+                let (volume, wall_s) = timed(1, || {
+                    reconstruct_poisson(
+                        &thinned,
+                        &SlabOptics::PUBLISHED_FOAM,
+                        &PoissonOptions::default(),
+                    )
+                    .map(|(v, _)| v)
+                    .map_err(|e| ReportError::Input(e.to_string()))
+                })?;
+                let row = row_of(
+                    &name, fraction, &thinned, POISSON, &volume, &reference, wall_s,
+                );
+                on_row(&row);
+                rows.push(row);
+            }
         }
     }
     let md = summary_markdown(&rows, cfg);
@@ -222,26 +246,33 @@ fn summary_markdown(rows: &[HiddenBenchRow], cfg: &HiddenBenchConfig) -> String 
         )
         .expect("String");
     }
-    let series = letter_u_series(rows, PUBLISHED);
-    if !series.is_empty() {
-        let median: Vec<(f64, f64)> = series.iter().map(|&(t, e, _)| (t, e)).collect();
-        let brightest: Vec<(f64, f64)> = series.iter().map(|&(t, _, b)| (t, b)).collect();
+    if rows.iter().any(|r| r.scan.starts_with("letter_u_")) {
         md.push_str("\n### Letter U depth (full counts, one fitted offset)\n\n| method | depth rule | scans | offset (cm) | RMS error (cm) |\n|---|---|---|---|---|\n");
-        for (rule, pairs) in [
-            ("median over the object, sub-voxel", median),
-            ("brightest voxel", brightest),
-        ] {
-            if let Some((rms, offset)) = rms_after_offset(&pairs) {
-                writeln!(
-                    md,
-                    "| {PUBLISHED} | {rule} | {} | {offset:+.2} | {rms:.2} |",
-                    pairs.len()
-                )
-                .expect("String");
-            }
+        for method in [PUBLISHED, POISSON] {
+            depth_rows(&mut md, rows, method);
         }
     }
     md
+}
+
+/// The letter-U depth rows of `method` (both depth rules).
+fn depth_rows(md: &mut String, rows: &[HiddenBenchRow], method: &str) {
+    let series = letter_u_series(rows, method);
+    let median: Vec<(f64, f64)> = series.iter().map(|&(t, e, _)| (t, e)).collect();
+    let brightest: Vec<(f64, f64)> = series.iter().map(|&(t, _, b)| (t, b)).collect();
+    for (rule, pairs) in [
+        ("median over the object, sub-voxel", median),
+        ("brightest voxel", brightest),
+    ] {
+        if let Some((rms, offset)) = rms_after_offset(&pairs) {
+            writeln!(
+                md,
+                "| {method} | {rule} | {} | {offset:+.2} | {rms:.2} |",
+                pairs.len()
+            )
+            .expect("String");
+        }
+    }
 }
 
 #[cfg(test)]

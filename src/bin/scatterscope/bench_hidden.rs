@@ -28,6 +28,9 @@ pub struct BenchHiddenArgs {
     /// Runs per row; the time is their median.
     #[arg(long, default_value_t = 5)]
     repeats: usize,
+    /// Also run the Poisson method (once per row, about 10 s each).
+    #[arg(long)]
+    poisson: bool,
     /// Output directory.
     #[arg(long, default_value = "out/bench-hidden")]
     out: PathBuf,
@@ -40,6 +43,7 @@ pub fn run(args: &BenchHiddenArgs) -> anyhow::Result<()> {
         fractions: args.fractions.clone(),
         seed: args.seed,
         repeats: args.repeats,
+        poisson: args.poisson,
     };
     let (rows, md) = run_hidden_bench(&cfg, |r| {
         println!(

@@ -1,0 +1,271 @@
+//! The confocal forward model in counts: a hidden volume's expected photon
+//! counts per scan point and time bin,
+//!
+//! ```text
+//! mu = K * (A rho) + b
+//! ```
+//!
+//! `A` the free-space light-cone operator ([`super::light_cone`]), `K` the
+//! slab's in-and-out kernel (a three-dimensional convolution over time and
+//! the scan's lateral offsets, by FFT), `b` a background per time bin
+//! shared by every scan point (dark counts and the slab's own late light).
+//!
+//! The in-and-out kernel follows from the physics crate's slab
+//! transmittance `T(t)` (the model `calibrate-slab` fits) at the medium's
+//! parameters: light spends `t1` in the slab going in and `t2` coming out,
+//! and its lateral spread is Gaussian with variance `2 D v (t1 + t2)` per
+//! axis, which depends only on the total `t`; so the kernel is the temporal
+//! self-convolution `(T * T)(t)` times that Gaussian, integrated over each
+//! time bin and each scan cell.
+
+use ndarray::{Array1, Array3, Zip, s};
+use ndrustfft::Complex;
+use scatterscope_physics::diffusion::gaussian_interval_fraction;
+use scatterscope_physics::slab::SlabTransmittance;
+
+use super::fft3::{Fft3, complex};
+use super::light_cone::{ConeGrid, LightCone};
+use super::slab_kernel::SlabOptics;
+
+/// Speed of light in vacuum (m/s).
+const LIGHT_SPEED: f64 = 299_792_458.0;
+
+/// Fine time samples per bin when the kernel is built.
+const KERNEL_SUBSAMPLES: usize = 8;
+
+/// The kernel is cut where the slab's transmittance has fallen below this
+/// fraction of its peak.
+const KERNEL_TAIL: f64 = 1e-7;
+
+/// The slab's transmittance model at `optics` (the physics crate's, with
+/// `optics`' source depth and extrapolation distance).
+pub fn slab_transmittance(optics: &SlabOptics) -> SlabTransmittance {
+    let v_cm_per_ps = LIGHT_SPEED / optics.refractive_index * 100.0 * 1e-12;
+    SlabTransmittance {
+        thickness_cm: optics.thickness_m * 100.0,
+        source_depth_cm: optics.source_depth_m * 100.0,
+        extrapolation_cm: optics.extrapolation_m * 100.0,
+        dc_cm2_per_ps: optics.diffusion_m() * 100.0 * v_cm_per_ps,
+        absorption_per_ps: optics.mu_a_per_m / 100.0 * v_cm_per_ps,
+    }
+}
+
+/// The in-and-out kernel on `bins` time bins of `bin_ps` and lateral
+/// offsets `spacing_m` apart, indexed (time, row offset, column offset)
+/// with offsets from `-(rows - 1)` to `rows - 1` stored at
+/// `offset + rows - 1`.
+pub fn in_and_out_kernel(
+    optics: &SlabOptics,
+    bins: usize,
+    bin_ps: f64,
+    rows: usize,
+    cols: usize,
+    spacing_m: f64,
+) -> Array3<f64> {
+    let slab = slab_transmittance(optics);
+    let fine = bin_ps / KERNEL_SUBSAMPLES as f64;
+    let peak = slab.peak_time_ps();
+    let top = slab.log_density(peak);
+    // Fine samples (at their centres) until the tail is negligible.
+    let mut once = Vec::new();
+    loop {
+        let t = (once.len() as f64 + 0.5) * fine;
+        let log = slab.log_density(t);
+        once.push(if log.is_finite() {
+            (log - top).exp()
+        } else {
+            0.0
+        });
+        if (t > peak && log - top < KERNEL_TAIL.ln()) || once.len() >= bins * KERNEL_SUBSAMPLES {
+            break;
+        }
+    }
+    // Self-convolution: sample n of the sum of two delays sits at
+    // (n + 1) fine steps.
+    let n = once.len();
+    let mut twice = vec![0.0; 2 * n - 1];
+    for (i, a) in once.iter().enumerate() {
+        for (j, b) in once.iter().enumerate() {
+            twice[i + j] += a * b;
+        }
+    }
+    let mut per_bin = Array1::<f64>::zeros(bins);
+    let mut mean_t = Array1::<f64>::zeros(bins);
+    for (k, w) in twice.iter().enumerate() {
+        let t = (k + 1) as f64 * fine;
+        let bin = (t / bin_ps).floor() as usize;
+        if bin < bins {
+            per_bin[bin] += w;
+            mean_t[bin] += w * t;
+        }
+    }
+    let total = per_bin.sum();
+    let d_c_cm2_per_ps = slab.dc_cm2_per_ps;
+    let (nr, nc) = (2 * rows - 1, 2 * cols - 1);
+    let mut kernel = Array3::<f64>::zeros((bins, nr, nc));
+    let spacing_cm = spacing_m * 100.0;
+    for i in 0..bins {
+        if per_bin[i] <= 0.0 {
+            continue;
+        }
+        let t = mean_t[i] / per_bin[i];
+        // exp(-x^2 / s^2) with s^2 = 4 D c t: variance 2 D c t per axis.
+        let s_cm = (4.0 * d_c_cm2_per_ps * t).sqrt();
+        let cell = |offset: i64| {
+            let x = offset as f64 * spacing_cm;
+            gaussian_interval_fraction(x - 0.5 * spacing_cm, x + 0.5 * spacing_cm, s_cm)
+        };
+        let gr: Vec<f64> = (0..nr)
+            .map(|a| cell(a as i64 - (rows as i64 - 1)))
+            .collect();
+        let gc: Vec<f64> = (0..nc)
+            .map(|b| cell(b as i64 - (cols as i64 - 1)))
+            .collect();
+        let weight = per_bin[i] / total;
+        for a in 0..nr {
+            for b in 0..nc {
+                kernel[[i, a, b]] = weight * gr[a] * gc[b];
+            }
+        }
+    }
+    kernel
+}
+
+/// The whole model on one scan grid.
+pub struct ConfocalModel {
+    cone: LightCone,
+    /// Spectrum of the in-and-out kernel on the padded grid.
+    slab: Array3<Complex<f64>>,
+    fft: Fft3,
+    /// Time bins where counts are observed (not gated off).
+    pub observed: Vec<bool>,
+}
+
+impl ConfocalModel {
+    /// The model on `grid` (time bins of `bin_ps`) through a slab of
+    /// `optics`, observing the bins where `observed` is true.
+    pub fn new(grid: ConeGrid, bin_ps: f64, optics: &SlabOptics, observed: Vec<bool>) -> Self {
+        let cone = LightCone::new(grid, 2);
+        let (m, rows, cols) = (grid.depths, grid.rows, grid.cols);
+        let kernel = in_and_out_kernel(optics, m, bin_ps, rows, cols, grid.spacing_m);
+        let dim = (2 * m, 2 * rows, 2 * cols);
+        let mut padded = Array3::<f64>::zeros(dim);
+        for ((i, a, b), &w) in kernel.indexed_iter() {
+            let ra = (a as i64 - (rows as i64 - 1)).rem_euclid(dim.1 as i64) as usize;
+            let cb = (b as i64 - (cols as i64 - 1)).rem_euclid(dim.2 as i64) as usize;
+            padded[[i, ra, cb]] += w;
+        }
+        let fft = Fft3::new(dim);
+        let mut slab = complex(&padded);
+        fft.forward(&mut slab);
+        Self {
+            cone,
+            slab,
+            fft,
+            observed,
+        }
+    }
+
+    /// The grid.
+    pub fn grid(&self) -> ConeGrid {
+        self.cone.grid()
+    }
+
+    fn slab_convolve(&self, x: &Array3<f64>, adjoint: bool) -> Array3<f64> {
+        let (m, rows, cols) = x.dim();
+        let mut padded = Array3::<Complex<f64>>::zeros(self.slab.dim());
+        Zip::from(padded.slice_mut(s![..m, ..rows, ..cols]))
+            .and(x)
+            .for_each(|d, &v| d.re = v);
+        self.fft.forward(&mut padded);
+        Zip::from(&mut padded)
+            .and(&self.slab)
+            .par_for_each(|p, &h| {
+                *p *= if adjoint { h.conj() } else { h };
+            });
+        self.fft.inverse(&mut padded);
+        padded.slice(s![..m, ..rows, ..cols]).mapv(|z| z.re)
+    }
+
+    /// `K * (A rho)`: the expected counts without background.
+    pub fn forward(&self, volume: &Array3<f64>) -> Array3<f64> {
+        let mut out = self.slab_convolve(&self.cone.forward(volume), false);
+        out.mapv_inplace(|v| v.max(0.0));
+        out
+    }
+
+    /// Expected counts with `background[i]` added to every point of bin
+    /// `i` (time bin 0 starts at time zero, the pulse at the slab's face).
+    pub fn expected_counts(&self, volume: &Array3<f64>, background: &[f64]) -> Array3<f64> {
+        let mut mu = self.forward(volume);
+        for (mut plane, &b) in mu.outer_iter_mut().zip(background) {
+            plane += b;
+        }
+        mu
+    }
+
+    /// The transpose of [`Self::forward`] (rounding aside).
+    pub fn adjoint(&self, transient: &Array3<f64>) -> Array3<f64> {
+        let mut out = self.cone.adjoint(&self.slab_convolve(transient, true));
+        out.mapv_inplace(|v| v.max(0.0));
+        out
+    }
+}
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use scatterscope_physics::{Diffusion, Medium, MediumModel};
+
+    /// The slab model here is the one `calibrate-slab` fits: the physics
+    /// crate's slab transmittance for the same medium, field for field and
+    /// value for value.
+    #[test]
+    fn slab_kernel_is_the_calibrate_slab_transmittance() {
+        let medium = Medium {
+            mu_a_per_cm: 0.0048,
+            mu_s_per_cm: 2.72,
+            g: 0.0,
+            refractive_index: 1.12,
+            thickness_cm: 2.54,
+            model: MediumModel::Slab,
+        };
+        let ours = slab_transmittance(&SlabOptics::from_medium(&medium).unwrap());
+        let theirs = Diffusion::new(&medium).unwrap().slab.unwrap();
+        for t_ps in [50.0, 200.0, 500.0, 1500.0, 5000.0] {
+            let (a, b) = (ours.log_density(t_ps), theirs.log_density(t_ps));
+            assert!((a - b).abs() < 1e-9, "t = {t_ps} ps: {a} vs {b}");
+        }
+    }
+
+    /// The in-and-out kernel has unit mass, its mean delay is twice the
+    /// slab's mean transit time, and its lateral spread per bin is the
+    /// diffusion Gaussian of the total time.
+    #[test]
+    fn in_and_out_kernel_doubles_the_transit() {
+        let optics = SlabOptics::PUBLISHED_FOAM;
+        let bin = 48.0;
+        let k = in_and_out_kernel(&optics, 200, bin, 9, 9, 0.02);
+        let profile: Vec<f64> = k.outer_iter().map(|p| p.sum()).collect();
+        let mass: f64 = profile.iter().sum();
+        assert!((mass - 1.0).abs() < 1e-3, "mass {mass}");
+        let mean = profile
+            .iter()
+            .enumerate()
+            .map(|(i, w)| (i as f64 + 0.5) * bin * w)
+            .sum::<f64>();
+        let slab = slab_transmittance(&optics);
+        let dt = 1.0;
+        let (mut m0, mut m1) = (0.0, 0.0);
+        for i in 1..20_000 {
+            let t = i as f64 * dt;
+            let w = slab.log_density(t).exp();
+            m0 += w;
+            m1 += w * t;
+        }
+        let transit = m1 / m0;
+        assert!(
+            (mean - 2.0 * transit).abs() < 0.5 * bin,
+            "{mean} vs 2 x {transit}"
+        );
+    }
+}
