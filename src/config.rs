@@ -450,6 +450,44 @@ fn invalid(path: &Path, reason: impl Into<String>) -> ConfigError {
     }
 }
 
+/// A medium as a configuration file states it (e.g. the `medium.toml`
+/// that `calibrate-slab` writes): `mu_a`, `mu_s` and `n` required, `g`
+/// (0 when absent) and `thickness` optional.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MediumFile {
+    /// Absorption coefficient (1/cm).
+    pub mu_a_per_cm: f64,
+    /// Scattering coefficient (1/cm).
+    pub mu_s_per_cm: f64,
+    /// Scattering anisotropy.
+    pub g: f64,
+    /// Refractive index.
+    pub refractive_index: f64,
+    /// Slab thickness the file names, if any (cm).
+    pub thickness_cm: Option<f64>,
+}
+
+/// Reads the medium keys of a configuration file; a missing required key
+/// is named.
+pub fn read_medium(path: &Path) -> Result<MediumFile, ConfigError> {
+    let o = file_as_overrides(path, &read_file(path)?)?;
+    let need = |key: &str, v: Option<f64>| {
+        v.ok_or_else(|| {
+            invalid(
+                path,
+                format!("key `{key}` is missing: a medium file states mu_a, mu_s and n"),
+            )
+        })
+    };
+    Ok(MediumFile {
+        mu_a_per_cm: need("mu_a", o.mu_a)?,
+        mu_s_per_cm: need("mu_s", o.mu_s)?,
+        g: o.g.unwrap_or(0.0),
+        refractive_index: need("n", o.n)?,
+        thickness_cm: o.thickness,
+    })
+}
+
 /// Largest configuration file read (any real one is a few hundred bytes).
 const MAX_CONFIG: u64 = 1 << 20;
 

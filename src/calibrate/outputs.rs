@@ -367,6 +367,32 @@ impl SlabCalibration {
         if let Some((held, pred)) = &self.prediction {
             groups.push((&held[..], pred, "predicted"));
         }
-        write_slab_fits(dir, &groups)
+        let mut written = write_slab_fits(dir, &groups)?;
+        let path = dir.join("medium.toml");
+        write(&path, &self.medium_toml())?;
+        written.push(path);
+        Ok(written)
+    }
+
+    /// The fitted material as a configuration file (`mu_a`, `mu_s` with
+    /// `g = 0` so that it is mu_s', `n`, `medium = "slab"`), without a
+    /// thickness: `scatterscope hidden --medium` reads it for a slab of
+    /// any thickness, `--config` for the reconstructions.
+    pub fn medium_toml(&self) -> String {
+        let f = &self.fit;
+        let thicknesses: Vec<String> = self
+            .captures
+            .iter()
+            .map(|c| format!("{} cm", c.thickness_cm))
+            .collect();
+        format!(
+            "# the material fitted by calibrate-slab to {} capture(s) ({}), IRF from {}\n# no thickness: give the slab's where the file is used\nmu_a = {:?}\nmu_s = {:?}\ng = 0.0\nn = {:?}\nmedium = \"slab\"\n",
+            self.captures.len(),
+            thicknesses.join(", "),
+            self.irf.source,
+            f.mu_a.value,
+            f.mu_s_reduced.value,
+            f.refractive_index
+        )
     }
 }

@@ -418,7 +418,7 @@ pub fn reconstruct_poisson(
             onset as f64 * model_bin_ps * 1e-3
         ),
         format!(
-            "model: counts ~ Poisson(K * tau + b), K the slab's in-and-out kernel from its diffusion transmittance ({:.2} cm, n {}, mu_a {} /m, mu_s' {} /m; lateral reach {reach} points beyond the scan's edge), b a background per bin shared by every point; tau then f-k migrated",
+            "model: counts ~ Poisson(K * tau + b), K the slab's in-and-out kernel from its diffusion transmittance ({:.2} cm, n {}, mu_a {:.3} /m, mu_s' {:.1} /m; lateral reach {reach} points beyond the scan's edge), b a background per bin shared by every point; tau then f-k migrated",
             optics.thickness_m * 100.0,
             optics.refractive_index,
             optics.mu_a_per_m,

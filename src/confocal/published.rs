@@ -248,7 +248,7 @@ pub fn reconstruct_published(
                 opts.depth_m, opts.snr, opts.trimmed_tail
             ),
             format!(
-                "slab: {:.2} cm, n {}, mu_a {} /m, mu_s' {} /m, z_e {:.2} mm",
+                "slab: {:.2} cm, n {}, mu_a {:.3} /m, mu_s' {:.1} /m, z_e {:.2} mm",
                 optics.thickness_m * 100.0,
                 optics.refractive_index,
                 optics.mu_a_per_m,

@@ -66,6 +66,42 @@ impl SlabOptics {
         })
     }
 
+    /// The optics of the medium in a configuration file (e.g. the
+    /// `medium.toml` that `calibrate-slab` writes) for a slab
+    /// `thickness_m` thick. A file that names another thickness is refused
+    /// with both.
+    pub fn from_medium_file(
+        path: &std::path::Path,
+        thickness_m: f64,
+    ) -> Result<Self, ConfocalError> {
+        let name = path.display().to_string();
+        let file = crate::config::read_medium(path)
+            .map_err(|e| ConfocalError::input(&name, e.to_string()))?;
+        if let Some(cm) = file.thickness_cm
+            && (cm / 100.0 - thickness_m).abs() > 1e-6 * thickness_m.max(1e-9)
+        {
+            return Err(ConfocalError::input(
+                &name,
+                format!(
+                    "the medium file is for a slab {cm} cm thick, the scan's slab is {} cm (--slab-thickness): remove its `thickness` key to use the material at another thickness",
+                    thickness_m * 100.0
+                ),
+            ));
+        }
+        Self::from_medium(&Medium {
+            mu_a_per_cm: file.mu_a_per_cm,
+            mu_s_per_cm: file.mu_s_per_cm,
+            g: file.g,
+            refractive_index: file.refractive_index,
+            thickness_cm: thickness_m * 100.0,
+            model: scatterscope_physics::MediumModel::Slab,
+        })
+        .map_err(|e| match e {
+            ConfocalError::Input { message, .. } => ConfocalError::input(&name, message),
+            other => other,
+        })
+    }
+
     /// Diffusion coefficient `D = 1 / (3 (mu_a + mu_s'))` (m).
     pub fn diffusion_m(&self) -> f64 {
         1.0 / (3.0 * (self.mu_a_per_m + self.mu_s_reduced_per_m))
@@ -172,6 +208,45 @@ pub fn in_and_out_spectrum(optics: &SlabOptics, grid: &KernelGrid) -> Array3<Com
 mod tests {
     use super::*;
     use scatterscope_physics::slab::SlabTransmittance;
+
+    fn medium_file(text: &str) -> std::path::PathBuf {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        static N: AtomicUsize = AtomicUsize::new(0);
+        let path = std::env::temp_dir().join(format!(
+            "scatterscope-medium-{}-{}.toml",
+            std::process::id(),
+            N.fetch_add(1, Ordering::Relaxed)
+        ));
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    /// A medium file without a thickness gives the physics crate's optics
+    /// at the scan's thickness; one for another thickness, or without
+    /// `n`, is refused with the reason.
+    #[test]
+    fn medium_files_are_read_and_checked() {
+        let ok = medium_file("mu_a = 0.0048\nmu_s = 2.72\ng = 0.0\nn = 1.12\nmedium = \"slab\"\n");
+        let optics = SlabOptics::from_medium_file(&ok, 0.0254).unwrap();
+        assert!((optics.mu_s_reduced_per_m - 272.0).abs() < 1e-9);
+        assert!((optics.thickness_m - 0.0254).abs() < 1e-12);
+        let other = medium_file("mu_a = 0.0048\nmu_s = 2.72\nn = 1.12\nthickness = 3.0\n");
+        let e = SlabOptics::from_medium_file(&other, 0.0254)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("3 cm thick") && e.contains("2.54 cm") && e.contains("--slab-thickness"),
+            "{e}"
+        );
+        let missing = medium_file("mu_a = 0.0048\nmu_s = 2.72\n");
+        let e = SlabOptics::from_medium_file(&missing, 0.0254)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("key `n` is missing"), "{e}");
+        for p in [ok, other, missing] {
+            std::fs::remove_file(p).ok();
+        }
+    }
 
     /// The published kernel's time profile (integrated over the far face)
     /// is the physics crate's slab transmittance at the same constants.

@@ -35,6 +35,11 @@ pub struct HiddenArgs {
     /// Slab thickness with its unit (e.g. 1in, 2.54cm).
     #[arg(long, value_name = "LENGTH")]
     slab_thickness: String,
+    /// The slab's material: a medium file (e.g. calibrate-slab's
+    /// OUT/medium.toml: mu_a, mu_s, n). Without it the published foam fit
+    /// is assumed (n 1.12, mu_a 0.53 /m, mu_s' 262 /m, z_e 3.6 mm).
+    #[arg(long, value_name = "FILE")]
+    medium: Option<PathBuf>,
     /// Bin width (ps) of MATLAB scans, which do not record it.
     #[arg(long)]
     bin_ps: Option<f64>,
@@ -62,9 +67,12 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
     let thickness_m = parse_length_cm(&args.slab_thickness).context("--slab-thickness")? / 100.0;
     let depth_m = parse_length_cm(&args.depth).context("--depth")? / 100.0;
     let scan = ConfocalScan::open(&args.scan, &args.dataset, args.bin_ps, side_m)?;
-    let optics = SlabOptics {
-        thickness_m,
-        ..SlabOptics::PUBLISHED_FOAM
+    let optics = match &args.medium {
+        Some(path) => SlabOptics::from_medium_file(path, thickness_m)?,
+        None => SlabOptics {
+            thickness_m,
+            ..SlabOptics::PUBLISHED_FOAM
+        },
     };
     let published = PublishedOptions {
         snr: args.snr,
@@ -83,9 +91,21 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
         scan.bin_width_ps,
         scan.total()
     );
-    println!(
-        "medium: the published foam fit (n 1.12, mu_a 0.53 /m, mu_s' 262 /m, z_e 3.6 mm); assumed, not measured here"
-    );
+    match &args.medium {
+        Some(path) => println!(
+            "medium: {} (n {}, mu_a {:.3} /m, mu_s' {:.1} /m, z_e {:.2} mm from n), slab {:.2} cm",
+            path.display(),
+            optics.refractive_index,
+            optics.mu_a_per_m,
+            optics.mu_s_reduced_per_m,
+            optics.extrapolation_m * 1000.0,
+            thickness_m * 100.0
+        ),
+        None => println!(
+            "medium: the published foam fit (n 1.12, mu_a 0.53 /m, mu_s' 262 /m, z_e 3.6 mm), slab {:.2} cm; assumed, not measured here (--medium)",
+            thickness_m * 100.0
+        ),
+    }
     let started = Instant::now();
     let (volume, trace) = match args.method.as_str() {
         "published" => (reconstruct_published(&scan, &optics, &published)?, None),
