@@ -286,6 +286,24 @@ pub enum ReadError {
     Memory(#[from] MemoryError),
 }
 
+/// Refuses what `meta` describes unless it is a regular file: a device,
+/// FIFO or folder at `path` would hang or fail a reader that expects a
+/// `what`.
+pub fn require_regular_file(
+    path: &Path,
+    meta: &std::fs::Metadata,
+    what: &'static str,
+) -> Result<(), ReadError> {
+    if meta.is_file() {
+        return Ok(());
+    }
+    Err(ReadError::NotAFile {
+        path: path.to_path_buf(),
+        kind: file_kind(meta),
+        what,
+    })
+}
+
 /// Reads the regular file at `path` whole, refusing special files and
 /// files over `max` bytes (or over the budget); a file that grows past
 /// the cap while it is read is refused too. `what` names the file's role
@@ -296,14 +314,7 @@ pub fn read_bounded(path: &Path, max: u64, what: &'static str) -> Result<Vec<u8>
         source,
     };
     let meta = std::fs::metadata(path).map_err(io)?;
-    let kind = file_kind(&meta);
-    if kind != "regular file" {
-        return Err(ReadError::NotAFile {
-            path: path.to_path_buf(),
-            kind,
-            what,
-        });
-    }
+    require_regular_file(path, &meta, what)?;
     let too_large = |len| ReadError::TooLarge {
         path: path.to_path_buf(),
         len,

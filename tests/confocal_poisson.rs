@@ -23,7 +23,7 @@ fn grid() -> ConeGrid {
 }
 
 fn model(g: ConeGrid) -> ConfocalModel {
-    ConfocalModel::new(g, BIN_PS, &SlabOptics::PUBLISHED_FOAM, vec![true; g.depths])
+    ConfocalModel::new(g, BIN_PS, &SlabOptics::PUBLISHED_FOAM)
 }
 
 /// <M x, y> = <x, M^T y>: the operator from a hidden volume to counts and

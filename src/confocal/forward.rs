@@ -25,10 +25,9 @@ use scatterscope_physics::slab::SlabTransmittance;
 
 use super::fft3::{Fft3, complex};
 use super::light_cone::{ConeGrid, LightCone};
+use super::published::LIGHT_SPEED;
 use super::slab_kernel::SlabOptics;
-
-/// Speed of light in vacuum (m/s).
-const LIGHT_SPEED: f64 = 299_792_458.0;
+use crate::forward::fft_size;
 
 /// Fine time samples per bin when the kernel is built.
 const KERNEL_SUBSAMPLES: usize = 8;
@@ -131,67 +130,160 @@ pub fn in_and_out_kernel(
     kernel
 }
 
-/// The whole model on one scan grid.
+/// The kernel's lateral reach ends where an offset carries less than this
+/// fraction of its light.
+const LATERAL_TAIL: f64 = 1e-3;
+
+/// The slab's blur as a linear map from a transient on the widened grid
+/// (time, rows + 2 reach, cols + 2 reach) to expected counts on the scan
+/// grid, by FFT on a grid large enough that nothing wraps.
+pub struct SlabBlur {
+    /// Time bins of the transient.
+    bins: usize,
+    /// Time bins of the counts (the transient's and up to the kernel's
+    /// length more, where the scan has them).
+    pub count_bins: usize,
+    rows: usize,
+    cols: usize,
+    /// Scan points the transient's grid reaches beyond each edge.
+    pub reach: usize,
+    spectrum: Array3<Complex<f64>>,
+    fft: Fft3,
+}
+
+impl SlabBlur {
+    /// The in-and-out kernel of `optics` on `bins` time bins of `bin_ps`
+    /// and scan points `spacing_m` apart, counts observed on up to
+    /// `available` bins (at least `bins`, at most a kernel's length more).
+    pub fn new(
+        optics: &SlabOptics,
+        bins: usize,
+        available: usize,
+        bin_ps: f64,
+        rows: usize,
+        cols: usize,
+        spacing_m: f64,
+    ) -> Self {
+        let full = in_and_out_kernel(optics, bins, bin_ps, rows, cols, spacing_m);
+        let kt = full.dim().0;
+        let (cr, cc) = (rows - 1, cols - 1);
+        // Lateral reach: offsets that carry at least LATERAL_TAIL of the
+        // kernel's light (summed over time and the other axis).
+        let along = |a: usize| full.slice(s![.., cr + a, ..]).sum();
+        let total = full.sum().max(1e-300);
+        let reach = (0..=cr.min(cc))
+            .rev()
+            .find(|&a| along(a) > LATERAL_TAIL * total)
+            .unwrap_or(0);
+        let length = (0..kt)
+            .rev()
+            .find(|&i| full[[i, cr, cc]] > 0.0)
+            .map_or(1, |i| i + 1);
+        let dim = (
+            fft_size(bins + length),
+            fft_size(rows + 4 * reach),
+            fft_size(cols + 4 * reach),
+        );
+        let mut padded = Array3::<f64>::zeros(dim);
+        for i in 0..length {
+            for a in -(reach as i64)..=reach as i64 {
+                for b in -(reach as i64)..=reach as i64 {
+                    let w = full[[i, (cr as i64 + a) as usize, (cc as i64 + b) as usize]];
+                    padded[[
+                        i,
+                        a.rem_euclid(dim.1 as i64) as usize,
+                        b.rem_euclid(dim.2 as i64) as usize,
+                    ]] += w;
+                }
+            }
+        }
+        let fft = Fft3::new(dim);
+        let mut spectrum = complex(&padded);
+        fft.forward(&mut spectrum);
+        Self {
+            bins,
+            count_bins: available.clamp(bins, bins + length),
+            rows,
+            cols,
+            reach,
+            spectrum,
+            fft,
+        }
+    }
+
+    /// Shape of the transient: (bins, rows + 2 reach, cols + 2 reach).
+    pub fn transient_dim(&self) -> (usize, usize, usize) {
+        (
+            self.bins,
+            self.rows + 2 * self.reach,
+            self.cols + 2 * self.reach,
+        )
+    }
+
+    /// Expected counts (scan grid) of `tau` (widened grid), background
+    /// left out.
+    pub fn forward(&self, tau: &Array3<f64>) -> Array3<f64> {
+        let (m, wr, wc) = self.transient_dim();
+        let mut padded = Array3::<Complex<f64>>::zeros(self.spectrum.dim());
+        Zip::from(padded.slice_mut(s![..m, ..wr, ..wc]))
+            .and(tau)
+            .for_each(|d, &v| d.re = v);
+        self.fft.forward(&mut padded);
+        Zip::from(&mut padded)
+            .and(&self.spectrum)
+            .par_for_each(|p, &h| *p *= h);
+        self.fft.inverse(&mut padded);
+        let r = self.reach;
+        padded
+            .slice(s![..self.count_bins, r..r + self.rows, r..r + self.cols])
+            .mapv(|z| z.re.max(0.0))
+    }
+
+    /// The transpose of [`Self::forward`].
+    pub fn adjoint(&self, counts: &Array3<f64>) -> Array3<f64> {
+        let (m, wr, wc) = self.transient_dim();
+        let r = self.reach;
+        let mut padded = Array3::<Complex<f64>>::zeros(self.spectrum.dim());
+        Zip::from(padded.slice_mut(s![..self.count_bins, r..r + self.rows, r..r + self.cols]))
+            .and(counts)
+            .for_each(|d, &v| d.re = v);
+        self.fft.forward(&mut padded);
+        Zip::from(&mut padded)
+            .and(&self.spectrum)
+            .par_for_each(|p, &h| *p *= h.conj());
+        self.fft.inverse(&mut padded);
+        padded.slice(s![..m, ..wr, ..wc]).mapv(|z| z.re.max(0.0))
+    }
+}
+
+/// The whole model on one scan grid: the light cone, then the slab's blur
+/// of its transient (no light enters beyond the scan's edge).
 pub struct ConfocalModel {
     cone: LightCone,
-    /// Spectrum of the in-and-out kernel on the padded grid.
-    slab: Array3<Complex<f64>>,
-    fft: Fft3,
-    /// Time bins where counts are observed (not gated off).
-    pub observed: Vec<bool>,
+    blur: SlabBlur,
 }
 
 impl ConfocalModel {
     /// The model on `grid` (time bins of `bin_ps`) through a slab of
-    /// `optics`, observing the bins where `observed` is true.
-    pub fn new(grid: ConeGrid, bin_ps: f64, optics: &SlabOptics, observed: Vec<bool>) -> Self {
-        let cone = LightCone::new(grid, 2);
+    /// `optics`.
+    pub fn new(grid: ConeGrid, bin_ps: f64, optics: &SlabOptics) -> Self {
         let (m, rows, cols) = (grid.depths, grid.rows, grid.cols);
-        let kernel = in_and_out_kernel(optics, m, bin_ps, rows, cols, grid.spacing_m);
-        let dim = (2 * m, 2 * rows, 2 * cols);
-        let mut padded = Array3::<f64>::zeros(dim);
-        for ((i, a, b), &w) in kernel.indexed_iter() {
-            let ra = (a as i64 - (rows as i64 - 1)).rem_euclid(dim.1 as i64) as usize;
-            let cb = (b as i64 - (cols as i64 - 1)).rem_euclid(dim.2 as i64) as usize;
-            padded[[i, ra, cb]] += w;
-        }
-        let fft = Fft3::new(dim);
-        let mut slab = complex(&padded);
-        fft.forward(&mut slab);
         Self {
-            cone,
-            slab,
-            fft,
-            observed,
+            cone: LightCone::new(grid, 2),
+            blur: SlabBlur::new(optics, m, m, bin_ps, rows, cols, grid.spacing_m),
         }
-    }
-
-    /// The grid.
-    pub fn grid(&self) -> ConeGrid {
-        self.cone.grid()
-    }
-
-    fn slab_convolve(&self, x: &Array3<f64>, adjoint: bool) -> Array3<f64> {
-        let (m, rows, cols) = x.dim();
-        let mut padded = Array3::<Complex<f64>>::zeros(self.slab.dim());
-        Zip::from(padded.slice_mut(s![..m, ..rows, ..cols]))
-            .and(x)
-            .for_each(|d, &v| d.re = v);
-        self.fft.forward(&mut padded);
-        Zip::from(&mut padded)
-            .and(&self.slab)
-            .par_for_each(|p, &h| {
-                *p *= if adjoint { h.conj() } else { h };
-            });
-        self.fft.inverse(&mut padded);
-        padded.slice(s![..m, ..rows, ..cols]).mapv(|z| z.re)
     }
 
     /// `K * (A rho)`: the expected counts without background.
     pub fn forward(&self, volume: &Array3<f64>) -> Array3<f64> {
-        let mut out = self.slab_convolve(&self.cone.forward(volume), false);
-        out.mapv_inplace(|v| v.max(0.0));
-        out
+        let transient = self.cone.forward(volume);
+        let (m, rows, cols) = transient.dim();
+        let r = self.blur.reach;
+        let mut widened = Array3::<f64>::zeros(self.blur.transient_dim());
+        widened
+            .slice_mut(s![..m, r..r + rows, r..r + cols])
+            .assign(&transient);
+        self.blur.forward(&widened)
     }
 
     /// Expected counts with `background[i]` added to every point of bin
@@ -205,12 +297,17 @@ impl ConfocalModel {
     }
 
     /// The transpose of [`Self::forward`] (rounding aside).
-    pub fn adjoint(&self, transient: &Array3<f64>) -> Array3<f64> {
-        let mut out = self.cone.adjoint(&self.slab_convolve(transient, true));
+    pub fn adjoint(&self, counts: &Array3<f64>) -> Array3<f64> {
+        let (_, rows, cols) = counts.dim();
+        let r = self.blur.reach;
+        let widened = self.blur.adjoint(counts);
+        let transient = widened.slice(s![.., r..r + rows, r..r + cols]).to_owned();
+        let mut out = self.cone.adjoint(&transient);
         out.mapv_inplace(|v| v.max(0.0));
         out
     }
 }
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -48,8 +48,6 @@ pub struct ConeGrid {
 /// The light-cone operator on one grid.
 pub struct LightCone {
     grid: ConeGrid,
-    /// Bins of `u` and of `v` (`depths` times the oversampling).
-    u_bins: usize,
     /// Per depth sample: (u bin, weight).
     depth_to_u: Vec<[(usize, f64); 2]>,
     /// Per v bin: (time bin, weight including `v^-2`).
@@ -122,7 +120,6 @@ impl LightCone {
         fft.forward(&mut spectrum);
         Self {
             grid,
-            u_bins,
             depth_to_u,
             v_to_time,
             cone: spectrum,
@@ -130,84 +127,81 @@ impl LightCone {
         }
     }
 
-    /// The grid.
-    pub fn grid(&self) -> ConeGrid {
-        self.grid
-    }
-
     /// Expected transient (time, row, column) of `volume` (depth, row,
     /// column).
     pub fn forward(&self, volume: &Array3<f64>) -> Array3<f64> {
-        let g = self.grid;
-        let dim = self.cone.dim();
-        let mut padded = Array3::<Complex<f64>>::zeros(dim);
-        for (k, split) in self.depth_to_u.iter().enumerate() {
-            for &(j, w) in split {
-                if w != 0.0 {
-                    let mut dst = padded.slice_mut(s![j, ..g.rows, ..g.cols]);
-                    Zip::from(&mut dst)
-                        .and(volume.slice(s![k, .., ..]))
-                        .for_each(|d, &v| d.re += w * v);
-                }
-            }
-        }
-        self.fft.forward(&mut padded);
-        Zip::from(&mut padded)
-            .and(&self.cone)
-            .par_for_each(|x, &h| *x *= h);
-        self.fft.inverse(&mut padded);
-        let mut out = Array3::<f64>::zeros((g.depths, g.rows, g.cols));
-        for (j, split) in self.v_to_time.iter().enumerate() {
-            for &(i, w) in split {
-                if w != 0.0 {
-                    let mut dst = out.slice_mut(s![i, .., ..]);
-                    Zip::from(&mut dst)
-                        .and(padded.slice(s![j, ..g.rows, ..g.cols]))
-                        .for_each(|d, v| *d += w * v.re);
-                }
-            }
-        }
-        out
+        self.apply(
+            volume,
+            links(&self.depth_to_u, false),
+            links(&self.v_to_time, true),
+            false,
+        )
     }
 
     /// The transpose of [`Self::forward`]: a volume from a transient.
     pub fn adjoint(&self, transient: &Array3<f64>) -> Array3<f64> {
+        self.apply(
+            transient,
+            links(&self.v_to_time, true),
+            links(&self.depth_to_u, false),
+            true,
+        )
+    }
+
+    /// Resamples `input` onto the padded grid along `into` (padded slice,
+    /// input slice, weight), convolves with the cone (its transpose when
+    /// `transpose`), and resamples back along `from` (padded slice, output
+    /// slice, weight).
+    fn apply(
+        &self,
+        input: &Array3<f64>,
+        into: impl Iterator<Item = (usize, usize, f64)>,
+        from: impl Iterator<Item = (usize, usize, f64)>,
+        transpose: bool,
+    ) -> Array3<f64> {
         let g = self.grid;
-        let dim = self.cone.dim();
-        let mut padded = Array3::<Complex<f64>>::zeros(dim);
-        for (j, split) in self.v_to_time.iter().enumerate() {
-            for &(i, w) in split {
-                if w != 0.0 {
-                    let mut dst = padded.slice_mut(s![j, ..g.rows, ..g.cols]);
-                    Zip::from(&mut dst)
-                        .and(transient.slice(s![i, .., ..]))
-                        .for_each(|d, &v| d.re += w * v);
-                }
-            }
+        let mut padded = Array3::<Complex<f64>>::zeros(self.cone.dim());
+        for (j, k, w) in into {
+            let mut dst = padded.slice_mut(s![j, ..g.rows, ..g.cols]);
+            Zip::from(&mut dst)
+                .and(input.slice(s![k, .., ..]))
+                .for_each(|d, &v| d.re += w * v);
         }
         self.fft.forward(&mut padded);
         Zip::from(&mut padded)
             .and(&self.cone)
-            .par_for_each(|x, &h| *x *= h.conj());
+            .par_for_each(|x, &h| *x *= if transpose { h.conj() } else { h });
         self.fft.inverse(&mut padded);
         let mut out = Array3::<f64>::zeros((g.depths, g.rows, g.cols));
-        for (k, split) in self.depth_to_u.iter().enumerate() {
-            for &(j, w) in split {
-                if w != 0.0 {
-                    let mut dst = out.slice_mut(s![k, .., ..]);
-                    Zip::from(&mut dst)
-                        .and(padded.slice(s![j, ..g.rows, ..g.cols]))
-                        .for_each(|d, v| *d += w * v.re);
-                }
-            }
+        for (j, i, w) in from {
+            let mut dst = out.slice_mut(s![i, .., ..]);
+            Zip::from(&mut dst)
+                .and(padded.slice(s![j, ..g.rows, ..g.cols]))
+                .for_each(|d, v| *d += w * v.re);
         }
         out
     }
+}
 
-    /// Bins of `u` and `v`.
-    pub fn u_bins(&self) -> usize {
-        self.u_bins
-    }
+/// The non-zero links of a resampling map as (padded slice, other slice,
+/// weight), in the map's order; `outer_is_padded` says which index the
+/// map's outer one is.
+fn links(
+    map: &[[(usize, f64); 2]],
+    outer_is_padded: bool,
+) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
+    map.iter().enumerate().flat_map(move |(outer, split)| {
+        split
+            .iter()
+            .filter(|(_, w)| *w != 0.0)
+            .map(move |&(inner, w)| {
+                if outer_is_padded {
+                    (outer, inner, w)
+                } else {
+                    (inner, outer, w)
+                }
+            })
+    })
 }
 
 /// The same model evaluated point by point: every hidden sample's `r^-4`

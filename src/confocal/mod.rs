@@ -38,6 +38,38 @@ pub use scan::ConfocalScan;
 pub use slab_kernel::SlabOptics;
 pub use volume::HiddenVolume;
 
+/// How a hidden volume is reconstructed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HiddenMethod {
+    /// [`published::reconstruct_published`].
+    Published,
+    /// [`poisson::reconstruct_poisson`].
+    Poisson,
+}
+
+crate::named::named!(HiddenMethod {
+    Published => "published",
+    Poisson => "poisson",
+});
+
+/// Reconstructs `scan` through a slab of `optics` by `method` with its
+/// settings; the Poisson method's search trace beside the volume.
+pub fn reconstruct_hidden(
+    scan: &ConfocalScan,
+    optics: &SlabOptics,
+    method: HiddenMethod,
+    published: &PublishedOptions,
+    poisson: &PoissonOptions,
+) -> Result<(HiddenVolume, Option<Vec<poisson::PoissonTraceRow>>), ConfocalError> {
+    Ok(match method {
+        HiddenMethod::Published => (reconstruct_published(scan, optics, published)?, None),
+        HiddenMethod::Poisson => {
+            let (volume, trace) = reconstruct_poisson(scan, optics, poisson)?;
+            (volume, Some(trace))
+        }
+    })
+}
+
 /// Why a confocal scan cannot be read or reconstructed.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfocalError {

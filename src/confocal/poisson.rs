@@ -27,25 +27,16 @@
 use std::time::Instant;
 
 use ndarray::{Array1, Array3, Axis, Zip, s};
-use ndrustfft::Complex;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use rand_distr::{Binomial, Distribution};
 
-use super::fft3::{Fft3, complex};
-use super::forward::in_and_out_kernel;
+use super::forward::SlabBlur;
 use super::published::{LIGHT_SPEED, crop_bins};
+use super::scan::keep_photons;
 use super::slab_kernel::SlabOptics;
 use super::volume::HiddenVolume;
 use super::{ConfocalError, ConfocalScan, stolt};
-use crate::forward::fft_size;
 
 /// Seed of the halves' thinning.
 pub const HALVES_SEED: u64 = 0x5ca7_2026;
-
-/// The kernel's lateral reach ends where an offset carries less than this
-/// fraction of its light.
-const LATERAL_TAIL: f64 = 1e-3;
 
 /// Fraction of the largest sensitivity below which a transient element is
 /// not estimated.
@@ -88,136 +79,9 @@ pub struct PoissonTraceRow {
 /// Splits whole counts into two halves, each photon to the first with
 /// probability 1/2.
 fn halves(counts: &Array3<f64>, seed: u64) -> (Array3<f64>, Array3<f64>) {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let first = counts.mapv(|m| {
-        if m <= 0.0 {
-            0.0
-        } else {
-            Binomial::new(m as u64, 0.5)
-                .expect("p = 1/2 is a valid probability")
-                .sample(&mut rng) as f64
-        }
-    });
+    let first = keep_photons(counts, 0.5, seed);
     let second = counts - &first;
     (first, second)
-}
-
-/// The slab's blur as a linear map from a transient on the widened grid
-/// (time, rows + 2 reach, cols + 2 reach) to expected counts on the scan
-/// grid, by FFT on a grid large enough that nothing wraps.
-struct SlabBlur {
-    bins: usize,
-    /// Time bins of the counts (the transient's and up to the kernel's
-    /// length more, where the scan has them).
-    count_bins: usize,
-    rows: usize,
-    cols: usize,
-    reach: usize,
-    spectrum: Array3<Complex<f64>>,
-    fft: Fft3,
-}
-
-impl SlabBlur {
-    fn new(
-        optics: &SlabOptics,
-        bins: usize,
-        available: usize,
-        bin_ps: f64,
-        rows: usize,
-        cols: usize,
-        spacing_m: f64,
-    ) -> Self {
-        let full = in_and_out_kernel(optics, bins, bin_ps, rows, cols, spacing_m);
-        let (kt, kr, kc) = full.dim();
-        let (cr, cc) = (rows - 1, cols - 1);
-        // Lateral reach: offsets that carry at least LATERAL_TAIL of the
-        // kernel's light (summed over time and the other axis).
-        let along = |a: usize| full.slice(s![.., cr + a, ..]).sum();
-        let total = full.sum().max(1e-300);
-        let reach = (0..=cr.min(cc))
-            .rev()
-            .find(|&a| along(a) > LATERAL_TAIL * total)
-            .unwrap_or(0);
-        let length = (0..kt)
-            .rev()
-            .find(|&i| full[[i, cr, cc]] > 0.0)
-            .map_or(1, |i| i + 1);
-        let dim = (
-            fft_size(bins + length),
-            fft_size(rows + 4 * reach),
-            fft_size(cols + 4 * reach),
-        );
-        let mut padded = Array3::<f64>::zeros(dim);
-        for i in 0..length {
-            for a in -(reach as i64)..=reach as i64 {
-                for b in -(reach as i64)..=reach as i64 {
-                    let w = full[[i, (cr as i64 + a) as usize, (cc as i64 + b) as usize]];
-                    padded[[
-                        i,
-                        a.rem_euclid(dim.1 as i64) as usize,
-                        b.rem_euclid(dim.2 as i64) as usize,
-                    ]] += w;
-                }
-            }
-        }
-        let _ = (kr, kc);
-        let fft = Fft3::new(dim);
-        let mut spectrum = complex(&padded);
-        fft.forward(&mut spectrum);
-        Self {
-            bins,
-            count_bins: available.clamp(bins, bins + length),
-            rows,
-            cols,
-            reach,
-            spectrum,
-            fft,
-        }
-    }
-
-    /// Shape of the transient: (bins, rows + 2 reach, cols + 2 reach).
-    fn transient_dim(&self) -> (usize, usize, usize) {
-        (
-            self.bins,
-            self.rows + 2 * self.reach,
-            self.cols + 2 * self.reach,
-        )
-    }
-
-    /// Expected counts (scan grid) of `tau` (widened grid), background
-    /// left out.
-    fn forward(&self, tau: &Array3<f64>) -> Array3<f64> {
-        let (m, wr, wc) = self.transient_dim();
-        let mut padded = Array3::<Complex<f64>>::zeros(self.spectrum.dim());
-        Zip::from(padded.slice_mut(s![..m, ..wr, ..wc]))
-            .and(tau)
-            .for_each(|d, &v| d.re = v);
-        self.fft.forward(&mut padded);
-        Zip::from(&mut padded)
-            .and(&self.spectrum)
-            .par_for_each(|p, &h| *p *= h);
-        self.fft.inverse(&mut padded);
-        let r = self.reach;
-        padded
-            .slice(s![..self.count_bins, r..r + self.rows, r..r + self.cols])
-            .mapv(|z| z.re.max(0.0))
-    }
-
-    /// The transpose of [`Self::forward`].
-    fn adjoint(&self, counts: &Array3<f64>) -> Array3<f64> {
-        let (m, wr, wc) = self.transient_dim();
-        let r = self.reach;
-        let mut padded = Array3::<Complex<f64>>::zeros(self.spectrum.dim());
-        Zip::from(padded.slice_mut(s![..self.count_bins, r..r + self.rows, r..r + self.cols]))
-            .and(counts)
-            .for_each(|d, &v| d.re = v);
-        self.fft.forward(&mut padded);
-        Zip::from(&mut padded)
-            .and(&self.spectrum)
-            .par_for_each(|p, &h| *p *= h.conj());
-        self.fft.inverse(&mut padded);
-        padded.slice(s![..m, ..wr, ..wc]).mapv(|z| z.re.max(0.0))
-    }
 }
 
 /// One half's estimate: transient and background per bin.
@@ -276,16 +140,12 @@ fn em_step(
 /// The scan's counts from time zero, bins summed `group` at a time, for
 /// `bins` model bins (bins the scan lacks count 0).
 fn grouped(scan: &ConfocalScan, group: usize, bins: usize) -> Array3<f64> {
-    let (rows, cols, scan_bins) = scan.dim();
-    let zero = (-scan.start_ps / scan.bin_width_ps).round() as i64;
+    let (rows, cols, _) = scan.dim();
     let mut out = Array3::<f64>::zeros((bins, rows, cols));
     for i in 0..bins {
-        for g in 0..group {
-            let k = zero + (i * group + g) as i64;
-            if k >= 0 && (k as usize) < scan_bins {
-                let mut dst = out.index_axis_mut(Axis(0), i);
-                dst += &scan.counts.index_axis(Axis(0), k as usize);
-            }
+        for k in (0..group).filter_map(|g| scan.bin_after_zero(i * group + g)) {
+            let mut dst = out.index_axis_mut(Axis(0), i);
+            dst += &scan.counts.index_axis(Axis(0), k);
         }
     }
     out
@@ -327,8 +187,7 @@ pub fn reconstruct_poisson(
     crate::memory::check(elements * 16 * 4, || {
         format!("the Poisson reconstruction on {bins} x {rows} x {cols}")
     })?;
-    let zero = (-scan.start_ps / scan.bin_width_ps).round() as i64;
-    let available = ((scan.dim().2 as i64 - zero).max(0) as usize) / group;
+    let available = ((scan.dim().2 as i64 - scan.zero_bin()).max(0) as usize) / group;
     let step_m = LIGHT_SPEED * bin_s * group as f64 / 2.0;
     let spacing_m = scan.side_m / (rows.max(cols) - 1) as f64;
     let model_bin_ps = scan.bin_width_ps * group as f64;
@@ -418,11 +277,8 @@ pub fn reconstruct_poisson(
             onset as f64 * model_bin_ps * 1e-3
         ),
         format!(
-            "model: counts ~ Poisson(K * tau + b), K the slab's in-and-out kernel from its diffusion transmittance ({:.2} cm, n {}, mu_a {:.3} /m, mu_s' {:.1} /m; lateral reach {reach} points beyond the scan's edge), b a background per bin shared by every point; tau then f-k migrated",
-            optics.thickness_m * 100.0,
-            optics.refractive_index,
-            optics.mu_a_per_m,
-            optics.mu_s_reduced_per_m
+            "model: counts ~ Poisson(K * tau + b), K the slab's in-and-out kernel from its diffusion transmittance ({}; lateral reach {reach} points beyond the scan's edge), b a background per bin shared by every point; tau then f-k migrated",
+            optics.describe()
         ),
         format!(
             "stop: iteration {chosen} predicted the held-back halves best (searched to {searched} of at most {}); the transient is the sum of the two halves' there",

@@ -133,7 +133,7 @@ pub fn cropped_resampled(
     depth_m: f64,
     samples: usize,
 ) -> Result<Array3<f64>, ConfocalError> {
-    let (rows, cols, bins) = scan.dim();
+    let (rows, cols, _) = scan.dim();
     let crop = crop_bins(depth_m, scan.bin_width_ps);
     if crop < 2 {
         return Err(ConfocalError::input(
@@ -144,15 +144,10 @@ pub fn cropped_resampled(
             ),
         ));
     }
-    // Bin index of time zero; earlier bins are dropped, missing ones are 0.
-    let zero = (-scan.start_ps / scan.bin_width_ps).round() as i64;
+    // Bins before time zero are dropped, missing ones are 0.
     let at = |k: usize, r: usize, c: usize| {
-        let i = zero + k as i64;
-        if i >= 0 && (i as usize) < bins {
-            scan.counts[[i as usize, r, c]]
-        } else {
-            0.0
-        }
+        scan.bin_after_zero(k)
+            .map_or(0.0, |i| scan.counts[[i, r, c]])
     };
     let step = (crop - 1) as f64 / (samples - 1) as f64;
     let mut out = Array3::<f64>::zeros((samples, rows, cols));
@@ -247,14 +242,7 @@ pub fn reconstruct_published(
                 "published method: first {crop} bins ({} m of depth) resampled to {nz}, Wiener constant 1/{:e}, f-k migration; last {} depth samples zeroed",
                 opts.depth_m, opts.snr, opts.trimmed_tail
             ),
-            format!(
-                "slab: {:.2} cm, n {}, mu_a {:.3} /m, mu_s' {:.1} /m, z_e {:.2} mm",
-                optics.thickness_m * 100.0,
-                optics.refractive_index,
-                optics.mu_a_per_m,
-                optics.mu_s_reduced_per_m,
-                optics.extrapolation_m * 1000.0
-            ),
+            format!("slab: {}", optics.describe()),
         ],
     })
 }

@@ -198,6 +198,18 @@ impl ConfocalScan {
         self.counts.sum()
     }
 
+    /// Index of the bin that starts at time zero (negative when the scan
+    /// starts later), to the nearest bin.
+    pub fn zero_bin(&self) -> i64 {
+        (-self.start_ps / self.bin_width_ps).round() as i64
+    }
+
+    /// Bin `k` after time zero as an index of `counts`, if the scan has it.
+    pub fn bin_after_zero(&self, k: usize) -> Option<usize> {
+        let i = self.zero_bin() + k as i64;
+        (i >= 0 && (i as usize) < self.counts.dim().0).then_some(i as usize)
+    }
+
     /// Every count kept with probability `fraction` (binomial thinning,
     /// seeded): the same scan at a `fraction` of the exposure. Counts must
     /// be whole numbers.
@@ -218,22 +230,27 @@ impl ConfocalScan {
                 format!("count {v} is not a whole number: only photon counts can be thinned"),
             ));
         }
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let counts = self.counts.mapv(|v| {
-            if v == 0.0 {
-                0.0
-            } else {
-                Binomial::new(v as u64, fraction)
-                    .expect("fraction checked to lie in (0, 1]")
-                    .sample(&mut rng) as f64
-            }
-        });
         Self::new(
-            counts,
+            keep_photons(&self.counts, fraction, seed),
             self.bin_width_ps,
             self.start_ps,
             self.side_m,
             &format!("{} thinned to {fraction} (seed {seed})", self.source),
         )
     }
+}
+
+/// Each photon of `counts` (whole numbers, `fraction` in (0, 1]) kept with
+/// probability `fraction`, seeded; empty elements draw nothing.
+pub fn keep_photons(counts: &Array3<f64>, fraction: f64, seed: u64) -> Array3<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    counts.mapv(|v| {
+        if v <= 0.0 {
+            0.0
+        } else {
+            Binomial::new(v as u64, fraction)
+                .expect("fraction lies in (0, 1]")
+                .sample(&mut rng) as f64
+        }
+    })
 }

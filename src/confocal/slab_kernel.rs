@@ -6,7 +6,7 @@
 
 use ndarray::Array3;
 use ndrustfft::Complex;
-use scatterscope_physics::{Medium, slab::effective_reflection};
+use scatterscope_physics::{Diffusion, Medium};
 
 use super::ConfocalError;
 use super::fft3::{Fft3, complex};
@@ -48,21 +48,24 @@ impl SlabOptics {
 
     /// The optics of a slab medium as the physics crate models it (source
     /// one transport mean free path deep, `z_e = 2 A D` from the effective
-    /// reflection of the index mismatch).
+    /// reflection of the index mismatch): its `Diffusion`'s slab, in metres.
     pub fn from_medium(medium: &Medium) -> Result<Self, ConfocalError> {
-        medium
-            .validate()
+        let slab_medium = Medium {
+            model: scatterscope_physics::MediumModel::Slab,
+            ..*medium
+        };
+        let diffusion = Diffusion::new(&slab_medium)
             .map_err(|e| ConfocalError::input("medium", e.to_string()))?;
-        let mu_s_reduced = (1.0 - medium.g) * medium.mu_s_per_cm;
-        let d_cm = 1.0 / (3.0 * (medium.mu_a_per_cm + mu_s_reduced));
-        let r = effective_reflection(medium.refractive_index);
+        let slab = diffusion
+            .slab
+            .expect("a slab medium's diffusion has its slab geometry");
         Ok(Self {
             thickness_m: medium.thickness_cm / 100.0,
             refractive_index: medium.refractive_index,
             mu_a_per_m: medium.mu_a_per_cm * 100.0,
-            mu_s_reduced_per_m: mu_s_reduced * 100.0,
-            extrapolation_m: 2.0 * (1.0 + r) / (1.0 - r) * d_cm / 100.0,
-            source_depth_m: 3.0 * d_cm / 100.0,
+            mu_s_reduced_per_m: (1.0 - medium.g) * medium.mu_s_per_cm * 100.0,
+            extrapolation_m: slab.extrapolation_cm / 100.0,
+            source_depth_m: slab.source_depth_cm / 100.0,
         })
     }
 
@@ -100,6 +103,34 @@ impl SlabOptics {
             ConfocalError::Input { message, .. } => ConfocalError::input(&name, message),
             other => other,
         })
+    }
+
+    /// The optics of a slab `thickness_m` thick: the material of
+    /// `medium_file` ([`Self::from_medium_file`]), or the published foam's
+    /// when there is none.
+    pub fn for_slab(
+        medium_file: Option<&std::path::Path>,
+        thickness_m: f64,
+    ) -> Result<Self, ConfocalError> {
+        match medium_file {
+            Some(path) => Self::from_medium_file(path, thickness_m),
+            None => Ok(Self {
+                thickness_m,
+                ..Self::PUBLISHED_FOAM
+            }),
+        }
+    }
+
+    /// The slab in words: thickness, index, mu_a, mu_s', z_e.
+    pub fn describe(&self) -> String {
+        format!(
+            "{:.2} cm, n {}, mu_a {:.3} /m, mu_s' {:.1} /m, z_e {:.2} mm",
+            self.thickness_m * 100.0,
+            self.refractive_index,
+            self.mu_a_per_m,
+            self.mu_s_reduced_per_m,
+            self.extrapolation_m * 1000.0
+        )
     }
 
     /// Diffusion coefficient `D = 1 / (3 (mu_a + mu_s'))` (m).
@@ -207,7 +238,6 @@ pub fn in_and_out_spectrum(optics: &SlabOptics, grid: &KernelGrid) -> Array3<Com
 #[cfg(test)]
 mod tests {
     use super::*;
-    use scatterscope_physics::slab::SlabTransmittance;
 
     fn medium_file(text: &str) -> std::path::PathBuf {
         use std::sync::atomic::{AtomicUsize, Ordering};
@@ -254,13 +284,7 @@ mod tests {
     fn equals_physics_slab_transmittance() {
         let o = SlabOptics::PUBLISHED_FOAM;
         let v = 299_792_458.0 / o.refractive_index;
-        let slab = SlabTransmittance {
-            thickness_cm: o.thickness_m * 100.0,
-            source_depth_cm: o.source_depth_m * 100.0,
-            extrapolation_cm: o.extrapolation_m * 100.0,
-            dc_cm2_per_ps: o.diffusion_m() * 100.0 * v * 100.0 * 1e-12,
-            absorption_per_ps: o.mu_a_per_m * v * 1e-12,
-        };
+        let slab = crate::confocal::forward::slab_transmittance(&o);
         // Integrated over the plane the lateral Gaussian gives 4 pi D v t.
         let d = o.diffusion_m();
         let ratio = |t_s: f64| {

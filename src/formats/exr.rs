@@ -25,64 +25,50 @@ pub const META_ATTRIBUTE: &str = "scatterscope";
 
 /// Channel name of bin `k`.
 pub fn channel_name(k: usize) -> String {
-    format!("t{k:03}")
+    format!("{STACK_CHANNEL_PREFIX}{k:03}")
 }
+
+/// What the stack's channel names start with.
+const STACK_CHANNEL_PREFIX: &str = "t";
 
 /// Writes `stack` to `path`.
 pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
-    let (k, h, w) = stack.data.dim();
-    if k == 0 || h == 0 || w == 0 {
-        return Err(StackError::format(
-            path,
-            format!("cannot write an empty {k} x {h} x {w} stack"),
-        ));
-    }
-    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = stack
-        .data
-        .axis_iter(Axis(0))
-        .enumerate()
-        .map(|(i, img)| {
-            AnyChannel::new(
-                channel_name(i).as_str(),
-                FlatSamples::F32(img.iter().copied().collect()),
-            )
-        })
-        .collect();
-    let meta = &stack.meta;
-    let json = serde_json::to_string(meta).expect("metadata serialises");
-    let text = |s: &str| {
-        Text::new_or_none(s).ok_or_else(|| {
-            StackError::format(path, "metadata contains characters EXR text cannot hold")
-        })
+    let attributes = || {
+        let meta = &stack.meta;
+        let json = serde_json::to_string(meta).expect("metadata serialises");
+        let text = |s: &str| {
+            Text::new_or_none(s).ok_or_else(|| {
+                StackError::format(path, "metadata contains characters EXR text cannot hold")
+            })
+        };
+        let mut attrs = LayerAttributes::named("stack");
+        let mut put = |name: &str, value: AttributeValue| {
+            attrs.other.insert(Text::from(name), value);
+        };
+        put(META_ATTRIBUTE, AttributeValue::Text(text(&json)?));
+        put("valueKind", AttributeValue::Text(text(meta.kind.name())?));
+        put("binStartPs", AttributeValue::F64(meta.bin_starts_ps[0]));
+        put("binWidthPs", AttributeValue::F64(meta.bin_width_ps));
+        put("pixelPitchCm", AttributeValue::F64(meta.pixel_pitch_cm));
+        if let Some(setup) = &meta.setup {
+            let m = &setup.medium;
+            put("muAPerCm", AttributeValue::F64(m.mu_a_per_cm));
+            put("muSPerCm", AttributeValue::F64(m.mu_s_per_cm));
+            put("anisotropyG", AttributeValue::F64(m.g));
+            put("refractiveIndex", AttributeValue::F64(m.refractive_index));
+            put("thicknessCm", AttributeValue::F64(m.thickness_cm));
+        }
+        Ok(attrs)
     };
-    let mut attrs = LayerAttributes::named("stack");
-    let mut put = |name: &str, value: AttributeValue| {
-        attrs.other.insert(Text::from(name), value);
-    };
-    put(META_ATTRIBUTE, AttributeValue::Text(text(&json)?));
-    put("valueKind", AttributeValue::Text(text(meta.kind.name())?));
-    put("binStartPs", AttributeValue::F64(meta.bin_starts_ps[0]));
-    put("binWidthPs", AttributeValue::F64(meta.bin_width_ps));
-    put("pixelPitchCm", AttributeValue::F64(meta.pixel_pitch_cm));
-    if let Some(setup) = &meta.setup {
-        let m = &setup.medium;
-        put("muAPerCm", AttributeValue::F64(m.mu_a_per_cm));
-        put("muSPerCm", AttributeValue::F64(m.mu_s_per_cm));
-        put("anisotropyG", AttributeValue::F64(m.g));
-        put("refractiveIndex", AttributeValue::F64(m.refractive_index));
-        put("thicknessCm", AttributeValue::F64(m.thickness_cm));
-    }
-    let layer = Layer::new(
-        (w, h),
-        attrs,
-        Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(channels),
-    );
-    write_layer(layer, path)
+    write_slices(
+        stack.data.view(),
+        "stack",
+        STACK_CHANNEL_PREFIX,
+        attributes,
+        path,
+    )
 }
 
-/// Encodes one layer and writes it to `path`, header attributes in name
-/// order.
 /// Writes a volume as one layer named `layer` with one `f32` channel per
 /// slice along its first axis, named `prefix` and the slice index (`z000`,
 /// ...), with `numbers` as `f64` header attributes and `json` as the text
@@ -95,11 +81,40 @@ pub fn write_volume(
     json: &str,
     path: &Path,
 ) -> Result<(), StackError> {
+    let attributes = || {
+        let mut attrs = LayerAttributes::named(layer);
+        let text = Text::new_or_none(json).ok_or_else(|| {
+            StackError::format(path, "metadata contains characters EXR text cannot hold")
+        })?;
+        attrs
+            .other
+            .insert(Text::from(META_ATTRIBUTE), AttributeValue::Text(text));
+        for (name, value) in numbers {
+            attrs
+                .other
+                .insert(Text::from(*name), AttributeValue::F64(*value));
+        }
+        Ok(attrs)
+    };
+    write_slices(volume, layer, prefix, attributes, path)
+}
+
+/// One layer whose channels are the slices of `volume` along its first
+/// axis, named `prefix` and the slice index, with the attributes
+/// `attributes` makes once the volume is known not to be empty (`what`
+/// names it then).
+fn write_slices(
+    volume: ndarray::ArrayView3<f32>,
+    what: &str,
+    prefix: &str,
+    attributes: impl FnOnce() -> Result<LayerAttributes, StackError>,
+    path: &Path,
+) -> Result<(), StackError> {
     let (k, h, w) = volume.dim();
     if k == 0 || h == 0 || w == 0 {
         return Err(StackError::format(
             path,
-            format!("cannot write an empty {k} x {h} x {w} volume"),
+            format!("cannot write an empty {k} x {h} x {w} {what}"),
         ));
     }
     let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = volume
@@ -112,27 +127,17 @@ pub fn write_volume(
             )
         })
         .collect();
-    let mut attrs = LayerAttributes::named(layer);
-    let text = Text::new_or_none(json).ok_or_else(|| {
-        StackError::format(path, "metadata contains characters EXR text cannot hold")
-    })?;
-    attrs
-        .other
-        .insert(Text::from(META_ATTRIBUTE), AttributeValue::Text(text));
-    for (name, value) in numbers {
-        attrs
-            .other
-            .insert(Text::from(*name), AttributeValue::F64(*value));
-    }
     let layer = Layer::new(
         (w, h),
-        attrs,
+        attributes()?,
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels),
     );
     write_layer(layer, path)
 }
 
+/// Encodes one layer and writes it to `path`, header attributes in name
+/// order.
 fn write_layer(layer: Layer<AnyChannels<FlatSamples>>, path: &Path) -> Result<(), StackError> {
     let mut bytes = Vec::new();
     Image::from_layer(layer)
@@ -216,14 +221,7 @@ const MIN_BUDGET: u64 = 64 << 20;
 pub(crate) fn read_first_layer(path: &Path) -> Result<Layer<AnyChannels<FlatSamples>>, StackError> {
     let io = |e| StackError::io(path, e);
     let file = std::fs::metadata(path).map_err(io)?;
-    if !file.is_file() {
-        return Err(ReadError::NotAFile {
-            path: path.to_path_buf(),
-            kind: crate::memory::file_kind(&file),
-            what: "OpenEXR file",
-        }
-        .into());
-    }
+    crate::memory::require_regular_file(path, &file, "OpenEXR file")?;
     let size = file.len();
     let budget = size.saturating_mul(MAX_EXPANSION).max(MIN_BUDGET);
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_error(path, e))?;

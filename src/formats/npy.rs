@@ -164,14 +164,7 @@ fn check_size(
 fn read_header(path: &Path) -> Result<(String, Vec<usize>, u64), StackError> {
     let mut f = File::open(path).map_err(|e| StackError::io(path, e))?;
     let meta = f.metadata().map_err(|e| StackError::io(path, e))?;
-    if !meta.is_file() {
-        return Err(ReadError::NotAFile {
-            path: path.to_path_buf(),
-            kind: crate::memory::file_kind(&meta),
-            what: "stack",
-        }
-        .into());
-    }
+    crate::memory::require_regular_file(path, &meta, "stack")?;
     let mut head = [0u8; 12];
     f.read_exact(&mut head)
         .map_err(|_| StackError::format(path, "too short for a .npy header"))?;

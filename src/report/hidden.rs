@@ -11,6 +11,7 @@ use serde::Serialize;
 
 use super::ReportError;
 use super::plot::{Heatmap, heatmap};
+use crate::confocal::poisson::PoissonTraceRow;
 use crate::confocal::volume::{HiddenVolume, Projection};
 
 /// The geometry travelling with a written volume (the JSON sidecar and
@@ -29,8 +30,13 @@ pub struct VolumeRecord<'a> {
     pub notes: &'a [String],
 }
 
-/// Writes the volume and its readings into `dir`; returns the paths.
-pub fn write_hidden(volume: &HiddenVolume, dir: &Path) -> Result<Vec<PathBuf>, ReportError> {
+/// Writes the volume and its readings into `dir`, and the Poisson
+/// method's search as `trace.csv` when there is one; returns the paths.
+pub fn write_hidden(
+    volume: &HiddenVolume,
+    trace: Option<&[PoissonTraceRow]>,
+    dir: &Path,
+) -> Result<Vec<PathBuf>, ReportError> {
     std::fs::create_dir_all(dir).map_err(|e| ReportError::Io(dir.display().to_string(), e))?;
     let mut written = Vec::new();
     let record = VolumeRecord {
@@ -125,6 +131,18 @@ pub fn write_hidden(volume: &HiddenVolume, dir: &Path) -> Result<Vec<PathBuf>, R
             },
         )
         .map_err(ReportError::Plot)?;
+        written.push(path);
+    }
+    if let Some(trace) = trace {
+        let path = dir.join("trace.csv");
+        let mut csv = String::from("iteration,wall_s,held_out_deviance\n");
+        for r in trace {
+            csv.push_str(&format!(
+                "{},{:.4},{:.3}\n",
+                r.iteration, r.wall_s, r.held_out_deviance
+            ));
+        }
+        std::fs::write(&path, csv).map_err(|e| ReportError::Io(path.display().to_string(), e))?;
         written.push(path);
     }
     Ok(written)

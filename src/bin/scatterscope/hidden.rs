@@ -8,10 +8,11 @@ use anyhow::Context;
 use scatterscope::calibrate::transmittance::parse_length_cm;
 use scatterscope::confocal::scan::DEFAULT_MAT_DATASET;
 use scatterscope::confocal::{
-    ConfocalScan, PoissonOptions, PublishedOptions, SlabOptics, reconstruct_poisson,
-    reconstruct_published,
+    ConfocalScan, HiddenMethod, PoissonOptions, PublishedOptions, SlabOptics, reconstruct_hidden,
 };
 use scatterscope::report::hidden::write_hidden;
+
+use crate::shared_args::choice;
 
 /// Reconstruct what hides behind a slab from a confocal scan of its face.
 ///
@@ -48,8 +49,8 @@ pub struct HiddenArgs {
     dataset: String,
     /// Reconstruction method: published, or poisson (in progress: slower
     /// and not yet better; see the guide).
-    #[arg(long, default_value = "published")]
-    method: String,
+    #[arg(long, value_parser = choice::<HiddenMethod>(), default_value = "published")]
+    method: HiddenMethod,
     /// Wiener constant of the published method (the authors used 2.5e3
     /// to 2e4 per scene).
     #[arg(long, default_value_t = PublishedOptions::default().snr)]
@@ -67,13 +68,7 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
     let thickness_m = parse_length_cm(&args.slab_thickness).context("--slab-thickness")? / 100.0;
     let depth_m = parse_length_cm(&args.depth).context("--depth")? / 100.0;
     let scan = ConfocalScan::open(&args.scan, &args.dataset, args.bin_ps, side_m)?;
-    let optics = match &args.medium {
-        Some(path) => SlabOptics::from_medium_file(path, thickness_m)?,
-        None => SlabOptics {
-            thickness_m,
-            ..SlabOptics::PUBLISHED_FOAM
-        },
-    };
+    let optics = SlabOptics::for_slab(args.medium.as_deref(), thickness_m)?;
     let published = PublishedOptions {
         snr: args.snr,
         depth_m,
@@ -92,29 +87,14 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
         scan.total()
     );
     match &args.medium {
-        Some(path) => println!(
-            "medium: {} (n {}, mu_a {:.3} /m, mu_s' {:.1} /m, z_e {:.2} mm from n), slab {:.2} cm",
-            path.display(),
-            optics.refractive_index,
-            optics.mu_a_per_m,
-            optics.mu_s_reduced_per_m,
-            optics.extrapolation_m * 1000.0,
-            thickness_m * 100.0
-        ),
+        Some(path) => println!("medium: {} ({})", path.display(), optics.describe()),
         None => println!(
-            "medium: the published foam fit (n 1.12, mu_a 0.53 /m, mu_s' 262 /m, z_e 3.6 mm), slab {:.2} cm; assumed, not measured here (--medium)",
-            thickness_m * 100.0
+            "medium: the published foam fit ({}); assumed, not measured here (--medium)",
+            optics.describe()
         ),
     }
     let started = Instant::now();
-    let (volume, trace) = match args.method.as_str() {
-        "published" => (reconstruct_published(&scan, &optics, &published)?, None),
-        "poisson" => {
-            let (volume, trace) = reconstruct_poisson(&scan, &optics, &poisson)?;
-            (volume, Some(trace))
-        }
-        other => anyhow::bail!("--method {other}: not a method (poisson, published)"),
-    };
+    let (volume, trace) = reconstruct_hidden(&scan, &optics, args.method, &published, &poisson)?;
     let wall_s = started.elapsed().as_secs_f64();
     for note in &volume.notes {
         println!("{note}");
@@ -126,19 +106,7 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
         );
     }
     println!("reconstructed in {wall_s:.3} s");
-    let mut written = write_hidden(&volume, &args.out)?;
-    if let Some(trace) = trace {
-        let path = args.out.join("trace.csv");
-        let mut csv = String::from("iteration,wall_s,held_out_deviance\n");
-        for r in &trace {
-            csv.push_str(&format!(
-                "{},{:.4},{:.3}\n",
-                r.iteration, r.wall_s, r.held_out_deviance
-            ));
-        }
-        std::fs::write(&path, csv).with_context(|| path.display().to_string())?;
-        written.push(path);
-    }
+    let written = write_hidden(&volume, trace.as_deref(), &args.out)?;
     println!(
         "wrote {}",
         written
