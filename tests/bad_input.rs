@@ -185,6 +185,7 @@ fn valid_ptu(dir: &Path) -> Vec<u8> {
         sync_rate_hz: 80e6,
         device: "TestHarp".into(),
         imaging: None,
+        extra: Vec::new(),
     };
     let mut w = PtuWriter::create(&path, RecordType::PicoHarpT3, &h).unwrap();
     for i in 0..200u64 {

@@ -371,6 +371,7 @@ fn info_and_bin_on_recorded_files() {
         sync_rate_hz: 80e6,
         device: "TestHarp".into(),
         imaging: Some(img),
+        extra: Vec::new(),
     };
     let file = dir.path().join("flim.ptu");
     let mut w = PtuWriter::create(&file, RecordType::GenericT3, &h).unwrap();

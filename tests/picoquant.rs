@@ -164,6 +164,7 @@ fn header() -> WriterHeader {
         sync_rate_hz: 80e6,
         device: "TestHarp".into(),
         imaging: None,
+        extra: Vec::new(),
     }
 }
 

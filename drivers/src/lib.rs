@@ -7,6 +7,8 @@
 //! - [`serial`]: serial ports and USB-CDC devices (`serialport`).
 //! - [`usb`]: USB bulk endpoints (`nusb`; `rusb` behind the `rusb` feature),
 //!   with several transfers in flight.
+//! - [`picoquant`]: PicoQuant time taggers (MultiHarp, HydraHarp) through
+//!   the vendor's library, loaded at run time.
 //! - [`discovery`]: lists serial ports and known USB time taggers.
 //! - [`client`]: request/response control (identify, configure, start, stop).
 //! - [`pipeline`]: reader thread -> frame decoder -> batch checks -> consumer,
@@ -18,6 +20,7 @@
 pub mod client;
 pub mod discovery;
 pub mod link;
+pub mod picoquant;
 pub mod pipeline;
 pub mod serial;
 pub mod usb;

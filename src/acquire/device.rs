@@ -22,6 +22,8 @@ pub enum DeviceSpec {
     Serial(String),
     /// A USB time tagger.
     Usb(UsbSelector),
+    /// A PicoQuant time tagger through the vendor's library.
+    PicoQuant(super::picoquant::PicoQuantSpec),
 }
 
 impl FromStr for DeviceSpec {
@@ -37,11 +39,23 @@ impl FromStr for DeviceSpec {
                         return Err("`serial:` needs a port path, e.g. serial:/dev/ttyACM0".into());
                     }
                     Ok(Self::Serial(path.to_string()))
+                } else if let Some(rest) = s.strip_prefix("picoquant") {
+                    match rest {
+                        "" => Ok(Self::PicoQuant(Default::default())),
+                        _ => match rest.strip_prefix(':') {
+                            Some(r) => {
+                                super::picoquant::PicoQuantSpec::parse(r).map(Self::PicoQuant)
+                            }
+                            None => Err(format!(
+                                "unknown device `{s}`: did you mean picoquant:{rest}?"
+                            )),
+                        },
+                    }
                 } else if let Some(rest) = s.strip_prefix("usb:") {
                     rest.parse().map(Self::Usb)
                 } else {
                     Err(format!(
-                        "unknown device `{s}`: use mock, mock-serial, serial:PATH or usb:VID:PID[:SERIAL] (see `scatterscope devices`)"
+                        "unknown device `{s}`: use mock, mock-serial, serial:PATH, usb:VID:PID[:SERIAL] or picoquant[:FAMILY][:SERIAL] (see `scatterscope devices`)"
                     ))
                 }
             }
@@ -57,6 +71,7 @@ impl std::fmt::Display for DeviceSpec {
             Self::MockSerial => write!(f, "mock-serial"),
             Self::Serial(p) => write!(f, "serial:{p}"),
             Self::Usb(sel) => write!(f, "{sel}"),
+            Self::PicoQuant(spec) => write!(f, "{spec}"),
         }
     }
 }
@@ -68,12 +83,32 @@ impl DeviceSpec {
     }
 }
 
-/// Every device [`open_device`] can open here: USB time taggers with
-/// known ids, serial ports, then the two mocks. Returns the list and how
-/// many of its entries are hardware. Listing never fails.
-pub fn list_devices() -> (Vec<DeviceEntry>, usize) {
+/// What `devices` finds.
+#[derive(Debug, Clone, Default)]
+pub struct DeviceList {
+    /// Every address, hardware first, then the two mocks.
+    pub all: Vec<DeviceEntry>,
+    /// How many of them are hardware.
+    pub hardware: usize,
+    /// Vendor libraries that did not load, and why (where it looked).
+    pub notes: Vec<String>,
+}
+
+/// Every device `acquire --device` can open here: USB time taggers with
+/// known ids, serial ports, PicoQuant devices the vendor's libraries (or
+/// `picoquant_library`) find, then the two mocks. Listing never fails.
+pub fn list_devices(picoquant_library: Option<&std::path::Path>) -> DeviceList {
     let mut all = usb_devices();
     all.extend(serial_ports());
+    let (picoquant, notes) = super::picoquant::list_picoquant(picoquant_library);
+    all.extend(
+        picoquant
+            .into_iter()
+            .map(|(address, description)| DeviceEntry {
+                address,
+                description,
+            }),
+    );
     let hardware = all.len();
     all.push(DeviceEntry {
         address: DeviceSpec::Mock.to_string(),
@@ -83,18 +118,26 @@ pub fn list_devices() -> (Vec<DeviceEntry>, usize) {
         address: DeviceSpec::MockSerial.to_string(),
         description: "emulated time tagger behind a pseudo-terminal".into(),
     });
-    (all, hardware)
+    DeviceList {
+        all,
+        hardware,
+        notes,
+    }
 }
 
-/// The devices of [`list_devices`] as a table: how many are hardware,
-/// then one line per address.
-pub fn devices_table(all: &[DeviceEntry], hardware: usize) -> Vec<String> {
-    std::iter::once(format!("{hardware} hardware device(s)"))
-        .chain(
-            all.iter()
-                .map(|d| format!("  {:<28} {}", d.address, d.description)),
-        )
-        .collect()
+impl DeviceList {
+    /// As a table: how many are hardware, one line per address, then the
+    /// libraries that did not load.
+    pub fn table(&self) -> Vec<String> {
+        std::iter::once(format!("{} hardware device(s)", self.hardware))
+            .chain(
+                self.all
+                    .iter()
+                    .map(|d| format!("  {:<28} {}", d.address, d.description)),
+            )
+            .chain(self.notes.iter().map(|n| format!("note: {n}")))
+            .collect()
+    }
 }
 
 /// An opened link, and the mock behind it if any.
@@ -142,6 +185,9 @@ pub fn open_device(spec: &DeviceSpec, mock: Option<MockSetup>) -> Result<OpenedD
             )?,
             mock: None,
         }),
+        DeviceSpec::PicoQuant(_) => Err(OpenError::Usage(
+            "a PicoQuant device is not opened as a protocol link: run it as an acquire::picoquant::PicoQuantJob".into(),
+        )),
         DeviceSpec::Usb(sel) => {
             #[cfg(feature = "rusb")]
             if std::env::var_os("SCATTERSCOPE_USB_BACKEND").is_some_and(|v| v == "rusb") {

@@ -6,6 +6,8 @@
 //! - [`mock`]: the emulated time tagger (the `mock` feature).
 //! - [`job`]: one acquisition as the `acquire` command runs it, outputs
 //!   included.
+//! - [`picoquant`]: a PicoQuant device through the vendor's library, its
+//!   records streamed to a PTU file and binned.
 //! - [`session`]: one acquisition from Start to the device's totals.
 //! - [`accounting`]: where every photon went; the totals balance exactly.
 //! - [`record`]: the outcome as a stack, with the typed record of the
@@ -17,6 +19,7 @@ pub mod calibration;
 pub mod device;
 pub mod job;
 pub mod mock;
+pub mod picoquant;
 pub mod record;
 pub mod session;
 

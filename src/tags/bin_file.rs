@@ -237,6 +237,29 @@ fn spec_error(path: &Path, reason: String) -> BinFileError {
     }
 }
 
+/// The time window and pixel map `spec` asks for, on T3 records of
+/// `resolution_ps` micro-time unit and `period_ps` sync period, scanned as
+/// `imaging` describes (if at all): the defaults of [`BinSpec`] resolved.
+pub fn window_and_map(
+    spec: &BinSpec,
+    resolution_ps: f64,
+    period_ps: f64,
+    imaging: Option<crate::tags::Imaging>,
+) -> Result<(TimeWindow, PixelMap), WindowError> {
+    let width_ps = spec.bin_width_ps.unwrap_or(resolution_ps);
+    let bins = spec.bins.unwrap_or_else(|| {
+        TimeWindow::period_bins(period_ps, spec.t_start_ps, width_ps).min(MAX_BINS)
+    });
+    let window = TimeWindow::from_ps(spec.t_start_ps, width_ps, bins, resolution_ps)?;
+    let map = match (spec.pixels, imaging) {
+        (Pixels::Auto, Some(img)) => PixelMap::Scan(img),
+        (Pixels::Auto | Pixels::Single, _) => PixelMap::Single,
+        (Pixels::Channel, _) => PixelMap::Channel { width: 64 },
+    };
+    window.check_stack(&map)?;
+    Ok((window, map))
+}
+
 /// A PicoQuant T3 file.
 fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
     let spec_err = |reason| spec_error(path, reason);
@@ -248,19 +271,7 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
         )));
     }
     let res_ps = info.resolution_s * 1e12;
-    let width_ps = spec.bin_width_ps.unwrap_or(res_ps);
-    let bins = spec.bins.unwrap_or_else(|| {
-        TimeWindow::period_bins(info.macro_unit_s * 1e12, spec.t_start_ps, width_ps).min(MAX_BINS)
-    });
-    let window = TimeWindow::from_ps(spec.t_start_ps, width_ps, bins, res_ps)
-        .map_err(|e: WindowError| spec_err(e.to_string()))?;
-    let map = match (spec.pixels, info.imaging) {
-        (Pixels::Auto, Some(img)) => PixelMap::Scan(img),
-        (Pixels::Auto | Pixels::Single, _) => PixelMap::Single,
-        (Pixels::Channel, _) => PixelMap::Channel { width: 64 },
-    };
-    window
-        .check_stack(&map)
+    let (window, map) = window_and_map(spec, res_ps, info.macro_unit_s * 1e12, info.imaging)
         .map_err(|e| spec_err(e.to_string()))?;
     check_stack_memory(path, &window, &map)?;
     let mut notes: Vec<String> = info.unread_note().into_iter().collect();

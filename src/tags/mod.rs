@@ -11,9 +11,11 @@
 //! - [`bin_file`]: a recorded file (PicoQuant or `.sstags`) -> stacks, in one
 //!   call.
 //! - [`survey`]: what a recorded file holds, counted by kind.
+//! - [`convert`]: a recorded file -> PTU, photon for photon.
 
 pub mod bin_file;
 pub mod binning;
+pub mod convert;
 pub mod survey;
 pub mod wire;
 

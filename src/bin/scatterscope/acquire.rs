@@ -5,12 +5,15 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use crate::shared_args::{PhysicsArgs, progress};
+use crate::shared_args::{PhysicsArgs, choice, progress};
 use anyhow::Context;
+use scatterscope::acquire::picoquant::{PicoQuantJob, PicoQuantStop, SettingsRequest};
 use scatterscope::acquire::session::StopReason;
 use scatterscope::acquire::{DeviceSpec, Job, MockJob, TimeZero, device};
 use scatterscope::config::{parse_duration, parse_ps};
 use scatterscope::scene::Scene;
+use scatterscope::tags::Imaging;
+use scatterscope::tags::bin_file::{BinSpec, Pixels};
 use scatterscope::tags::binning::Region;
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
 
@@ -24,7 +27,9 @@ use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
 #[derive(Debug, clap::Args)]
 pub struct AcquireArgs {
     /// mock (in-process USB), mock-serial (pseudo-terminal),
-    /// serial:PATH or usb:VID:PID[:SERIAL]; see `scatterscope devices`.
+    /// serial:PATH, usb:VID:PID[:SERIAL], or picoquant[:FAMILY][:SERIAL]
+    /// (FAMILY multiharp or hydraharp, through the vendor's library); see
+    /// `scatterscope devices`.
     #[arg(long, default_value = "mock")]
     device: DeviceSpec,
     /// How long to acquire (e.g. 10s, 500ms, 2m); 0 runs until the device
@@ -83,12 +88,189 @@ pub struct AcquireArgs {
     /// drop-bytes=9,overflow=4:1000,disconnect=50 (random=SEED: at random).
     #[arg(long, default_value = "")]
     faults: Faults,
+    #[command(flatten)]
+    picoquant: PicoQuantArgs,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/acquire")]
     out: PathBuf,
 }
 
+/// Settings of a PicoQuant device (`--device picoquant...`); unset ones
+/// take the vendor demos' values. The stack's window is --bin-width,
+/// --t-start and --bins (default: the device's micro-time unit over one
+/// sync period).
+#[derive(Debug, clap::Args)]
+#[command(next_help_heading = "PicoQuant devices")]
+struct PicoQuantArgs {
+    /// The vendor library file (default: $SCATTERSCOPE_MHLIB or
+    /// $SCATTERSCOPE_HHLIB, then libmh150.so / libhh400.so and
+    /// /usr/local/lib64/{mh150,hh400}/).
+    #[arg(long, value_name = "FILE")]
+    vendor_lib: Option<PathBuf>,
+    /// Sync divider.
+    #[arg(long, value_name = "N")]
+    sync_divider: Option<i32>,
+    /// Sync trigger level (MultiHarp) or CFD level (HydraHarp), mV.
+    #[arg(long, value_name = "MV", allow_negative_numbers = true)]
+    sync_level: Option<i32>,
+    /// Sync trigger edge (MultiHarp): rising or falling.
+    #[arg(long, value_name = "EDGE", value_parser = parse_edge)]
+    sync_edge: Option<bool>,
+    /// Sync CFD zero cross (HydraHarp), mV.
+    #[arg(long, value_name = "MV")]
+    sync_zero_cross: Option<i32>,
+    /// Sync channel offset (default unit ps).
+    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    sync_offset: Option<f64>,
+    /// Input trigger level (MultiHarp) or CFD level (HydraHarp), mV; every input.
+    #[arg(long, value_name = "MV", allow_negative_numbers = true)]
+    input_level: Option<i32>,
+    /// Input trigger edge (MultiHarp): rising or falling.
+    #[arg(long, value_name = "EDGE", value_parser = parse_edge)]
+    input_edge: Option<bool>,
+    /// Input CFD zero cross (HydraHarp), mV.
+    #[arg(long, value_name = "MV")]
+    input_zero_cross: Option<i32>,
+    /// Per-input offsets, comma-separated (default unit ps), e.g. 0,120ps.
+    #[arg(long, value_name = "TIMES", value_delimiter = ',', value_parser = parse_ps, allow_negative_numbers = true)]
+    input_offsets: Vec<f64>,
+    /// Binning code: micro-time unit = base resolution x 2^N.
+    #[arg(long, value_name = "N")]
+    binning: Option<i32>,
+    /// T3 offset (default unit ps).
+    #[arg(long, value_name = "TIME", value_parser = parse_ps)]
+    offset: Option<f64>,
+    /// A galvo scan of WxH points clocked by markers 1 (line start), 2
+    /// (line stop) and 3 (frame); the stack is its image.
+    #[arg(long, value_name = "WxH", value_parser = parse_scan)]
+    scan: Option<Imaging>,
+    /// Keep only photons of this input (as numbered in the records).
+    #[arg(long)]
+    channel: Option<u16>,
+    /// Pixel mapping: auto (the scan's image, else single), single, channel.
+    #[arg(long, value_parser = choice::<Pixels>(), default_value = "auto")]
+    pixels: Pixels,
+    /// Write every record to this PTU file (default OUT/acquisition.ptu).
+    #[arg(long, value_name = "FILE")]
+    ptu: Option<PathBuf>,
+    /// Do not write a PTU file.
+    #[arg(long, conflicts_with = "ptu")]
+    no_ptu: bool,
+}
+
+fn parse_edge(s: &str) -> Result<bool, String> {
+    match s {
+        "rising" => Ok(true),
+        "falling" => Ok(false),
+        _ => Err(format!("edge `{s}`: use rising or falling")),
+    }
+}
+
+fn parse_scan(s: &str) -> Result<Imaging, String> {
+    let bad = || format!("scan `{s}`: give WIDTHxHEIGHT in points, e.g. 64x64");
+    let (w, h) = s.split_once('x').ok_or_else(bad)?;
+    let (w, h): (usize, usize) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
+    if w == 0 || h == 0 {
+        return Err(bad());
+    }
+    Ok(Imaging {
+        pixels_x: w,
+        pixels_y: h,
+        line_start: 1,
+        line_stop: 2,
+        frame: 4,
+        bidirectional: false,
+    })
+}
+
+/// Whole picoseconds for the library's integer settings.
+fn whole_ps(v: f64, flag: &str) -> anyhow::Result<i32> {
+    let r = v.round();
+    anyhow::ensure!(
+        (r - v).abs() < 1e-9 && r.abs() <= f64::from(i32::MAX),
+        "--{flag} {v} ps: the device takes whole picoseconds"
+    );
+    Ok(r as i32)
+}
+
+fn picoquant_job(
+    args: &AcquireArgs,
+    spec: scatterscope::acquire::picoquant::PicoQuantSpec,
+) -> anyhow::Result<PicoQuantJob> {
+    let p = &args.picoquant;
+    Ok(PicoQuantJob {
+        spec,
+        library: p.vendor_lib.clone(),
+        settings: SettingsRequest {
+            sync_divider: p.sync_divider,
+            sync_level_mv: p.sync_level,
+            sync_rising: p.sync_edge,
+            sync_zero_cross_mv: p.sync_zero_cross,
+            sync_offset_ps: p
+                .sync_offset
+                .map(|v| whole_ps(v, "sync-offset"))
+                .transpose()?,
+            input_level_mv: p.input_level,
+            input_rising: p.input_edge,
+            input_zero_cross_mv: p.input_zero_cross,
+            input_offsets_ps: p
+                .input_offsets
+                .iter()
+                .map(|&v| whole_ps(v, "input-offsets"))
+                .collect::<anyhow::Result<_>>()?,
+            binning: p.binning,
+            offset_ps: p.offset.map(|v| whole_ps(v, "offset")).transpose()?,
+        },
+        duration: (!args.duration.is_zero()).then_some(args.duration),
+        bin: BinSpec {
+            bin_width_ps: args.physics.bin_width,
+            t_start_ps: args.physics.t_start.unwrap_or(0.0),
+            bins: args.physics.bins,
+            channel: p.channel,
+            pixels: p.pixels,
+            ..BinSpec::default()
+        },
+        scan: p.scan,
+        ptu: match (&p.ptu, p.no_ptu) {
+            (_, true) => None,
+            (Some(f), false) => Some(f.clone()),
+            (None, false) => Some(args.out.join("acquisition.ptu")),
+        },
+        software: format!("scatterscope {}", env!("CARGO_PKG_VERSION")),
+        out: args.out.clone(),
+    })
+}
+
+fn run_picoquant(job: &PicoQuantJob, stop: &AtomicBool) -> anyhow::Result<()> {
+    let bar = progress(job.duration.map(|d| d.as_millis()));
+    let done = job.run(stop, |p| {
+        bar.set_position(p.elapsed.as_millis() as u64);
+        bar.set_message(format!("{} records", p.records));
+    })?;
+    bar.finish_and_clear();
+    for line in done.summary() {
+        println!("{line}");
+    }
+    let names: Vec<String> = done.files.iter().map(|f| f.display().to_string()).collect();
+    println!("wrote {}", names.join(", "));
+    done.verdict().map_err(anyhow::Error::msg)?;
+    match done.stop {
+        PicoQuantStop::Interrupted => Err(Interrupted.into()),
+        _ => Ok(()),
+    }
+}
+
 pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        // A second Ctrl-C while stopping is ignored: the files must close.
+        ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
+            .context("installing the Ctrl-C handler")?;
+    }
+    if let DeviceSpec::PicoQuant(spec) = &args.device {
+        return run_picoquant(&picoquant_job(args, spec.clone())?, &stop);
+    }
     let job = Job {
         device: args.device.clone(),
         setup: args.physics.resolve()?,
@@ -121,13 +303,6 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         },
         out: args.out.clone(),
     };
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // A second Ctrl-C while stopping is ignored: the files must close.
-        ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
-            .context("installing the Ctrl-C handler")?;
-    }
     let bar = progress(job.duration.map(|d| d.as_millis()));
     let done = job.run(&stop, |p| {
         bar.set_position(p.elapsed.as_millis() as u64);
@@ -167,19 +342,30 @@ impl std::error::Error for Interrupted {}
 
 /// List the devices `acquire --device` can open.
 ///
-/// Serial ports, USB time taggers with known ids, and the two mocks.
+/// Serial ports, USB time taggers with known ids, PicoQuant devices the
+/// vendor's libraries find (with where each library was looked for), and
+/// the two mocks.
 #[derive(Debug, clap::Args)]
 pub struct DevicesArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
+    /// The PicoQuant library file to ask (default: the installer's places).
+    #[arg(long, value_name = "FILE")]
+    vendor_lib: Option<PathBuf>,
+    /// Fail (exit non-zero) when no PicoQuant vendor library loads.
+    #[arg(long)]
+    picoquant: bool,
 }
 
 pub fn devices(args: &DevicesArgs) -> anyhow::Result<()> {
-    let (all, hardware) = device::list_devices();
+    let list = device::list_devices(args.vendor_lib.as_deref());
     match args.json {
-        true => println!("{}", serde_json::to_string_pretty(&all)?),
-        false => println!("{}", device::devices_table(&all, hardware).join("\n")),
+        true => println!("{}", serde_json::to_string_pretty(&list.all)?),
+        false => println!("{}", list.table().join("\n")),
+    }
+    if args.picoquant && list.notes.len() == scatterscope_drivers::picoquant::Family::ALL.len() {
+        anyhow::bail!("no PicoQuant library loaded:\n{}", list.notes.join("\n"));
     }
     Ok(())
 }

@@ -1,9 +1,10 @@
-//! `scatterscope info` and `scatterscope bin`: recorded time-tag files.
+//! `scatterscope info`, `bin` and `convert`: recorded time-tag files.
 
 use std::path::PathBuf;
 
 use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file};
 use scatterscope::tags::binning::FrameSelect;
+use scatterscope::tags::convert::convert_to_ptu;
 use scatterscope::tags::survey::survey;
 
 use crate::shared_args::choice;
@@ -76,5 +77,28 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
         println!("{line}");
     }
     println!("wrote {last} to {}", args.out.display());
+    Ok(())
+}
+
+/// Convert a recorded file (PTU, HT3, PT3, .sstags) to PTU, photon for photon.
+///
+/// PicoQuant files keep their record type; a tag file becomes Generic T3
+/// with each photon's sensor pixel as its input channel (sensors of at
+/// most 63 pixels).
+#[derive(Debug, clap::Args)]
+pub struct ConvertArgs {
+    /// The recorded file.
+    input: PathBuf,
+    /// The PTU file to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// Convert the complete records of a cut file instead of failing.
+    #[arg(long)]
+    allow_truncated: bool,
+}
+
+pub fn convert(args: &ConvertArgs) -> anyhow::Result<()> {
+    let done = convert_to_ptu(&args.input, &args.out, args.allow_truncated)?;
+    println!("{}", done.summary(&args.out));
     Ok(())
 }

@@ -1,6 +1,12 @@
-//! Writes PTU files with known content: used by tests to build files of
-//! every record type and edge case, and by anyone who wants to hand
-//! simulated tags to PicoQuant-compatible tools.
+//! Writes PTU files that PicoQuant's software, ptufile and tttrlib open:
+//! live acquisitions from PicoQuant devices stream their raw records here
+//! (`acquire --device picoquant`), `convert` re-encodes recorded tags, and
+//! tests build files of every record type and edge case.
+//!
+//! The header is written first with `TTResult_NumberOfRecords` 0 and
+//! patched by [`PtuWriter::finish`]; a file whose writer never finished
+//! (a crash, a full disk) still opens, its readers counting the records
+//! from the file's length.
 
 use std::fs::File;
 use std::io::{self, BufWriter, Seek, SeekFrom, Write};
@@ -25,6 +31,22 @@ pub struct WriterHeader {
     pub device: String,
     /// Scan description; makes the file an imaging file (sub mode 3).
     pub imaging: Option<Imaging>,
+    /// Further tags: the measurement's settings (`HWSync_Divider`,
+    /// `HW_SerialNo`, ...), written after the required ones.
+    pub extra: Vec<(String, HeaderEntry)>,
+}
+
+/// The value of an extra header tag.
+#[derive(Debug, Clone, PartialEq)]
+pub enum HeaderEntry {
+    /// `tyInt8`.
+    Int(i64),
+    /// `tyFloat8`.
+    Float(f64),
+    /// `tyBool8`.
+    Bool(bool),
+    /// `tyAnsiString` (NUL-terminated).
+    Text(String),
 }
 
 /// Streams tags into a PTU file, inserting overflow records as needed.
@@ -34,6 +56,16 @@ pub struct PtuWriter {
     base: u64,
     records: u64,
     count_offset: u64,
+}
+
+/// `text` NUL-terminated and padded with NULs to a multiple of 8 bytes, as
+/// PicoQuant's software writes strings (readers such as ptufile expect
+/// every tag to start 8-byte aligned).
+fn padded(text: &str) -> Vec<u8> {
+    let mut bytes = text.as_bytes().to_vec();
+    bytes.push(0);
+    bytes.resize(bytes.len().div_ceil(8) * 8, 0);
+    bytes
 }
 
 fn invalid(msg: String) -> io::Error {
@@ -66,14 +98,13 @@ impl PtuWriter {
         };
         let int = |v: i64| v.to_le_bytes();
         let float = |v: f64| v.to_le_bytes();
-        // Odd-length string payload: readers must not assume 8-byte alignment.
-        let device = h.device.as_bytes();
+        let device = padded(&h.device);
         tag(
             &mut out,
             "HW_Type",
             ty::ANSI_STRING,
-            int(device.len() as i64 + 1),
-            &[device, b"\0"].concat(),
+            int(device.len() as i64),
+            &device,
         )?;
         tag(
             &mut out,
@@ -170,6 +201,28 @@ impl PtuWriter {
                 &[],
             )?;
         }
+        for (ident, entry) in &h.extra {
+            if ident.is_empty() || ident.len() > 31 {
+                return Err(invalid(format!(
+                    "header tag name `{ident}` must be 1 to 31 bytes"
+                )));
+            }
+            match entry {
+                HeaderEntry::Int(v) => tag(&mut out, ident, ty::INT8, int(*v), &[])?,
+                HeaderEntry::Float(v) => tag(&mut out, ident, ty::FLOAT8, float(*v), &[])?,
+                HeaderEntry::Bool(v) => tag(&mut out, ident, ty::BOOL8, int(i64::from(*v)), &[])?,
+                HeaderEntry::Text(t) => {
+                    let bytes = padded(t);
+                    tag(
+                        &mut out,
+                        ident,
+                        ty::ANSI_STRING,
+                        int(bytes.len() as i64),
+                        &bytes,
+                    )?
+                }
+            };
+        }
         let count_offset = tag(&mut out, "TTResult_NumberOfRecords", ty::INT8, int(0), &[])?;
         tag(&mut out, "Header_End", ty::EMPTY8, int(0), &[])?;
         Ok(Self {
@@ -185,6 +238,26 @@ impl PtuWriter {
     pub fn write_raw(&mut self, rec: u32) -> io::Result<()> {
         self.records += 1;
         self.out.write_all(&rec.to_le_bytes())
+    }
+
+    /// Writes records exactly as a device of this file's record type sent
+    /// them (a FIFO read): the overflow records are theirs, so the writer's
+    /// own time base no longer applies and [`Self::write_tag`] must not be
+    /// mixed in after it.
+    pub fn write_records(&mut self, records: &[u32]) -> io::Result<()> {
+        self.records += records.len() as u64;
+        if cfg!(target_endian = "little") {
+            self.out.write_all(bytemuck::cast_slice(records))
+        } else {
+            records
+                .iter()
+                .try_for_each(|r| self.out.write_all(&r.to_le_bytes()))
+        }
+    }
+
+    /// Records written so far.
+    pub fn records(&self) -> u64 {
+        self.records
     }
 
     fn advance_to(&mut self, time: u64) -> io::Result<u64> {
@@ -328,10 +401,9 @@ pub fn write_synthetic_t3(path: &Path, records: u64) -> io::Result<()> {
     let h = WriterHeader {
         resolution_s: 4e-12,
         sync_rate_hz: 80e6,
-        // 23 characters + NUL: string payloads 8-byte aligned, as PicoQuant
-        // software writes them (some readers rely on it).
-        device: "scatterscope synthetic.".into(),
+        device: "scatterscope synthetic".into(),
         imaging: None,
+        extra: Vec::new(),
     };
     let mut w = PtuWriter::create(path, RecordType::GenericT3, &h)?;
     let mut t = 0u64;

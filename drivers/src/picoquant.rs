@@ -1,0 +1,768 @@
+//! PicoQuant time taggers through the vendor's programming library, loaded
+//! at run time: MHLib (MultiHarp 150/160) and HHLib v3 (HydraHarp 400).
+//!
+//! Nothing links against the vendor's library: the project builds and its
+//! tests run where none is installed, and [`VendorLib::load`] says which
+//! files it looked for. The stand-in library in `mocks/picoquant` exports
+//! the same C functions, so tests go through this same loader.
+//!
+//! The two libraries differ where the hardware does: MultiHarp inputs have
+//! edge triggers (a level and an edge), HydraHarp inputs constant-fraction
+//! discriminators (a level and a zero cross), and `HH_ReadFiFo` takes the
+//! buffer's length where `MH_ReadFiFo` assumes its fixed one. T3 mode only:
+//! every record carries the sync count and the micro time.
+
+use std::ffi::{CStr, c_char, c_double, c_int, c_uint};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Device indices the libraries address (`MAXDEVNUM`).
+pub const MAX_DEVICES: i32 = 8;
+/// `Initialize` mode for time tagging with micro times.
+const MODE_T3: c_int = 3;
+/// `GetFlags`: the FIFO overran; records were lost and the run is over.
+pub const FLAG_FIFO_FULL: i32 = 0x0002;
+/// `GetFlags`: the sync signal was lost.
+pub const FLAG_SYNC_LOST: i32 = 0x0004;
+/// `GetFlags`: the reference clock was lost.
+pub const FLAG_REF_LOST: i32 = 0x0008;
+/// `GetFlags`: a hardware error.
+pub const FLAG_SYS_ERROR: i32 = 0x0010;
+/// The libraries' "no device at this index" error.
+const ERROR_DEVICE_OPEN_FAIL: c_int = -1;
+
+/// Which vendor library, and so which device family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Family {
+    /// MultiHarp 150/160 (MHLib, edge triggers, Generic T3 records).
+    MultiHarp,
+    /// HydraHarp 400 (HHLib v3, CFD inputs, HydraHarp v2 T3 records).
+    HydraHarp,
+}
+
+impl Family {
+    /// Both families, in the order `devices` searches them.
+    pub const ALL: [Family; 2] = [Family::MultiHarp, Family::HydraHarp];
+
+    /// The family's name as `--device picoquant:NAME` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::MultiHarp => "multiharp",
+            Family::HydraHarp => "hydraharp",
+        }
+    }
+
+    fn prefix(self) -> &'static str {
+        match self {
+            Family::MultiHarp => "MH_",
+            Family::HydraHarp => "HH_",
+        }
+    }
+
+    /// Where the vendor's installer puts the library, in search order:
+    /// the linker-style name first (found on the library path), then the
+    /// installer's own folder.
+    pub fn library_candidates(self) -> Vec<PathBuf> {
+        let names: &[&str] = match (self, cfg!(windows)) {
+            (Family::MultiHarp, false) => &["libmh150.so", "/usr/local/lib64/mh150/mhlib.so"],
+            (Family::HydraHarp, false) => &["libhh400.so", "/usr/local/lib64/hh400/hhlib.so"],
+            (Family::MultiHarp, true) => &["mhlib64.dll"],
+            (Family::HydraHarp, true) => &["hhlib64.dll"],
+        };
+        names.iter().map(PathBuf::from).collect()
+    }
+
+    /// The PTU record type code of the family's T3 records.
+    pub fn t3_record_type(self) -> u32 {
+        match self {
+            Family::MultiHarp => 0x0001_0307,
+            Family::HydraHarp => 0x0101_0304,
+        }
+    }
+
+    /// Records one `ReadFiFo` may return (`TTREADMAX`).
+    pub fn fifo_read_max(self) -> usize {
+        match self {
+            Family::MultiHarp => 1_048_576,
+            Family::HydraHarp => 131_072,
+        }
+    }
+
+    /// What the environment variable naming this family's library is.
+    pub fn library_env(self) -> &'static str {
+        match self {
+            Family::MultiHarp => "SCATTERSCOPE_MHLIB",
+            Family::HydraHarp => "SCATTERSCOPE_HHLIB",
+        }
+    }
+}
+
+/// Why the vendor library or a device failed.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum VendorError {
+    /// No library file could be loaded.
+    #[error(
+        "no {family} library found: tried {tried}. Install PicoQuant's programming library for Linux (its `install` script puts it in /usr/local/lib64 and links {linker_name}), or name the file with --vendor-lib or {env}"
+    )]
+    NotInstalled {
+        /// The family searched.
+        family: &'static str,
+        /// Every file tried, with why it failed.
+        tried: String,
+        /// The linker-style name the installer creates.
+        linker_name: String,
+        /// The environment variable that names the file.
+        env: &'static str,
+    },
+    /// The library lacks a function this driver calls.
+    #[error("{path}: not a {family} library: {reason}")]
+    Symbols {
+        /// The library file.
+        path: String,
+        /// The family expected.
+        family: &'static str,
+        /// The missing symbol.
+        reason: String,
+    },
+    /// A library call returned an error code.
+    #[error("{call} returned error {code} ({text})")]
+    Call {
+        /// The function.
+        call: String,
+        /// The library's error code.
+        code: i32,
+        /// The library's error text.
+        text: String,
+    },
+    /// A setting the family does not have, or out of its range.
+    #[error("{0}")]
+    Setting(String),
+}
+
+type DevFn = unsafe extern "C" fn(c_int) -> c_int;
+type DevIntFn = unsafe extern "C" fn(c_int, c_int) -> c_int;
+type DevIntIntFn = unsafe extern "C" fn(c_int, c_int, c_int) -> c_int;
+type DevIntIntIntFn = unsafe extern "C" fn(c_int, c_int, c_int, c_int) -> c_int;
+type DevOutFn = unsafe extern "C" fn(c_int, *mut c_int) -> c_int;
+type DevStrFn = unsafe extern "C" fn(c_int, *mut c_char) -> c_int;
+type DevDoubleFn = unsafe extern "C" fn(c_int, *mut c_double) -> c_int;
+
+/// The functions this driver calls, resolved once.
+struct Functions {
+    get_library_version: unsafe extern "C" fn(*mut c_char) -> c_int,
+    get_error_string: unsafe extern "C" fn(*mut c_char, c_int) -> c_int,
+    open_device: DevStrFn,
+    close_device: DevFn,
+    initialize: DevIntIntFn,
+    get_hardware_info: unsafe extern "C" fn(c_int, *mut c_char, *mut c_char, *mut c_char) -> c_int,
+    get_num_of_input_channels: DevOutFn,
+    calibrate: Option<DevFn>,
+    set_sync_div: DevIntFn,
+    set_sync_trigger: DevIntIntFn,
+    set_sync_channel_offset: DevIntFn,
+    set_input_trigger: DevIntIntIntFn,
+    set_input_channel_offset: DevIntIntFn,
+    set_binning: DevIntFn,
+    set_offset: DevIntFn,
+    set_marker_enable: unsafe extern "C" fn(c_int, c_int, c_int, c_int, c_int) -> c_int,
+    get_resolution: DevDoubleFn,
+    get_sync_rate: DevOutFn,
+    get_count_rate: unsafe extern "C" fn(c_int, c_int, *mut c_int) -> c_int,
+    get_flags: DevOutFn,
+    get_warnings: DevOutFn,
+    get_warnings_text: unsafe extern "C" fn(c_int, *mut c_char, c_int) -> c_int,
+    start_meas: DevIntFn,
+    stop_meas: DevFn,
+    ctc_status: DevOutFn,
+    read_fifo: ReadFifo,
+}
+
+/// The two shapes of `ReadFiFo`.
+#[derive(Clone, Copy)]
+enum ReadFifo {
+    /// `MH_ReadFiFo(devidx, buffer, *nactual)`: the buffer holds `TTREADMAX`.
+    Fixed(unsafe extern "C" fn(c_int, *mut c_uint, *mut c_int) -> c_int),
+    /// `HH_ReadFiFo(devidx, buffer, count, *nactual)`.
+    Counted(unsafe extern "C" fn(c_int, *mut c_uint, c_int, *mut c_int) -> c_int),
+}
+
+/// A loaded vendor library.
+pub struct VendorLib {
+    family: Family,
+    path: PathBuf,
+    functions: Functions,
+    // Keeps the code the function pointers point into mapped; dropped last.
+    _library: libloading::Library,
+}
+
+impl std::fmt::Debug for VendorLib {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("VendorLib")
+            .field("family", &self.family)
+            .field("path", &self.path)
+            .finish()
+    }
+}
+
+/// Reads a NUL-terminated string the library wrote into `buf`.
+fn text(buf: &[u8]) -> String {
+    CStr::from_bytes_until_nul(buf)
+        .map(|s| s.to_string_lossy().trim().to_string())
+        .unwrap_or_else(|_| String::from_utf8_lossy(buf).trim().to_string())
+}
+
+impl VendorLib {
+    /// Loads `family`'s library: the file `explicit` names, else the one
+    /// the family's environment variable names, else the installer's
+    /// locations ([`Family::library_candidates`]).
+    pub fn load(family: Family, explicit: Option<&Path>) -> Result<Arc<Self>, VendorError> {
+        let candidates: Vec<PathBuf> = match explicit {
+            Some(p) => vec![p.to_path_buf()],
+            None => match std::env::var_os(family.library_env()) {
+                Some(p) => vec![PathBuf::from(p)],
+                None => family.library_candidates(),
+            },
+        };
+        let mut tried = Vec::new();
+        for path in &candidates {
+            // SAFETY: loading runs the library's initialisers; this is the
+            // vendor's library (or its stand-in) that the user named or
+            // installed for this purpose.
+            match unsafe { libloading::Library::new(path) } {
+                Ok(library) => return Self::resolve(family, path.clone(), library).map(Arc::new),
+                Err(e) => {
+                    let why =
+                        std::error::Error::source(&e).map_or(e.to_string(), |s| s.to_string());
+                    tried.push(format!("{} ({why})", path.display()))
+                }
+            }
+        }
+        Err(VendorError::NotInstalled {
+            family: family.name(),
+            tried: tried.join("; "),
+            linker_name: family.library_candidates()[0].display().to_string(),
+            env: family.library_env(),
+        })
+    }
+
+    fn resolve(
+        family: Family,
+        path: PathBuf,
+        library: libloading::Library,
+    ) -> Result<Self, VendorError> {
+        let prefix = family.prefix();
+        let missing = |name: &str, e: libloading::Error| VendorError::Symbols {
+            path: path.display().to_string(),
+            family: family.name(),
+            reason: format!("{prefix}{name}: {e}"),
+        };
+        macro_rules! sym {
+            ($name:literal) => {{
+                let full = format!("{prefix}{}\0", $name);
+                // SAFETY: the symbol's type is the one the vendor's header
+                // declares for this name.
+                unsafe { library.get(full.as_bytes()) }
+                    .map(|s: libloading::Symbol<'_, _>| *s)
+                    .map_err(|e| missing($name, e))?
+            }};
+        }
+        let (set_sync_trigger, set_input_trigger) = match family {
+            Family::MultiHarp => (sym!("SetSyncEdgeTrg"), sym!("SetInputEdgeTrg")),
+            Family::HydraHarp => (sym!("SetSyncCFD"), sym!("SetInputCFD")),
+        };
+        let (calibrate, read_fifo) = match family {
+            Family::MultiHarp => (None, ReadFifo::Fixed(sym!("ReadFiFo"))),
+            Family::HydraHarp => (Some(sym!("Calibrate")), ReadFifo::Counted(sym!("ReadFiFo"))),
+        };
+        let functions = Functions {
+            get_library_version: sym!("GetLibraryVersion"),
+            get_error_string: sym!("GetErrorString"),
+            open_device: sym!("OpenDevice"),
+            close_device: sym!("CloseDevice"),
+            initialize: sym!("Initialize"),
+            get_hardware_info: sym!("GetHardwareInfo"),
+            get_num_of_input_channels: sym!("GetNumOfInputChannels"),
+            calibrate,
+            set_sync_div: sym!("SetSyncDiv"),
+            set_sync_trigger,
+            set_sync_channel_offset: sym!("SetSyncChannelOffset"),
+            set_input_trigger,
+            set_input_channel_offset: sym!("SetInputChannelOffset"),
+            set_binning: sym!("SetBinning"),
+            set_offset: sym!("SetOffset"),
+            set_marker_enable: sym!("SetMarkerEnable"),
+            get_resolution: sym!("GetResolution"),
+            get_sync_rate: sym!("GetSyncRate"),
+            get_count_rate: sym!("GetCountRate"),
+            get_flags: sym!("GetFlags"),
+            get_warnings: sym!("GetWarnings"),
+            get_warnings_text: sym!("GetWarningsText"),
+            start_meas: sym!("StartMeas"),
+            stop_meas: sym!("StopMeas"),
+            ctc_status: sym!("CTCStatus"),
+            read_fifo,
+        };
+        Ok(Self {
+            family,
+            path,
+            functions,
+            _library: library,
+        })
+    }
+
+    /// The family this library drives.
+    pub fn family(&self) -> Family {
+        self.family
+    }
+
+    /// The file it was loaded from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The library's version string.
+    pub fn version(&self) -> String {
+        let mut buf = [0u8; 64];
+        // SAFETY: the header asks for an 8-byte buffer; this one is larger.
+        unsafe { (self.functions.get_library_version)(buf.as_mut_ptr().cast()) };
+        text(&buf)
+    }
+
+    /// The library's text for `code`.
+    pub fn error_text(&self, code: i32) -> String {
+        let mut buf = [0u8; 128];
+        // SAFETY: the header asks for a 40-byte buffer; this one is larger.
+        unsafe { (self.functions.get_error_string)(buf.as_mut_ptr().cast(), code) };
+        text(&buf)
+    }
+
+    fn check(&self, call: &str, code: c_int) -> Result<(), VendorError> {
+        if code < 0 {
+            Err(VendorError::Call {
+                call: format!("{}{call}", self.family.prefix()),
+                code,
+                text: self.error_text(code),
+            })
+        } else {
+            Ok(())
+        }
+    }
+
+    /// The devices this library can open: (index, serial). Each is closed
+    /// again after the look.
+    pub fn list(&self) -> Vec<(i32, String)> {
+        let mut found = Vec::new();
+        for index in 0..MAX_DEVICES {
+            let mut serial = [0u8; 16];
+            // SAFETY: the header asks for an 8-byte serial buffer.
+            let code = unsafe { (self.functions.open_device)(index, serial.as_mut_ptr().cast()) };
+            if code == 0 {
+                found.push((index, text(&serial)));
+                // SAFETY: the index was just opened.
+                unsafe { (self.functions.close_device)(index) };
+            } else if code != ERROR_DEVICE_OPEN_FAIL {
+                found.push((index, format!("busy or failing: {}", self.error_text(code))));
+            }
+        }
+        found
+    }
+}
+
+/// How an input discriminates pulses: an edge trigger (MultiHarp) or a
+/// constant-fraction discriminator (HydraHarp).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Trigger {
+    /// Trigger level (mV, -1200 to 1200) and edge.
+    Edge {
+        /// Level, mV.
+        level_mv: i32,
+        /// Rising (else falling) edge.
+        rising: bool,
+    },
+    /// CFD discriminator level (mV, 0 to 1000) and zero cross (mV, 0 to 40).
+    Cfd {
+        /// Level, mV.
+        level_mv: i32,
+        /// Zero cross, mV.
+        zero_cross_mv: i32,
+    },
+}
+
+impl Trigger {
+    /// The family's usual setting for a negative detector pulse (the
+    /// vendor demos' values).
+    pub fn default_for(family: Family) -> Self {
+        match family {
+            Family::MultiHarp => Trigger::Edge {
+                level_mv: -50,
+                rising: false,
+            },
+            Family::HydraHarp => Trigger::Cfd {
+                level_mv: 50,
+                zero_cross_mv: 10,
+            },
+        }
+    }
+
+    fn args(self, family: Family, what: &str) -> Result<(c_int, c_int), VendorError> {
+        match (family, self) {
+            (Family::MultiHarp, Trigger::Edge { level_mv, rising }) => {
+                if !(-1200..=1200).contains(&level_mv) {
+                    return Err(VendorError::Setting(format!(
+                        "{what} trigger level {level_mv} mV is outside -1200 to 1200 mV"
+                    )));
+                }
+                Ok((level_mv, c_int::from(rising)))
+            }
+            (
+                Family::HydraHarp,
+                Trigger::Cfd {
+                    level_mv,
+                    zero_cross_mv,
+                },
+            ) => {
+                if !(0..=1000).contains(&level_mv) || !(0..=40).contains(&zero_cross_mv) {
+                    return Err(VendorError::Setting(format!(
+                        "{what} CFD level {level_mv} mV / zero cross {zero_cross_mv} mV: the level must be 0 to 1000 mV, the zero cross 0 to 40 mV"
+                    )));
+                }
+                Ok((level_mv, zero_cross_mv))
+            }
+            (Family::MultiHarp, Trigger::Cfd { .. }) => Err(VendorError::Setting(format!(
+                "{what}: a MultiHarp has edge triggers (level and edge), not a CFD"
+            ))),
+            (Family::HydraHarp, Trigger::Edge { .. }) => Err(VendorError::Setting(format!(
+                "{what}: a HydraHarp has CFD inputs (level and zero cross), not edge triggers"
+            ))),
+        }
+    }
+}
+
+/// The settings a lab sets before a T3 measurement.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    /// Sync divider (1 to 16 on a HydraHarp; powers of two on a MultiHarp).
+    pub sync_divider: i32,
+    /// The sync input's discriminator.
+    pub sync_trigger: Trigger,
+    /// Sync channel offset, ps (a cable delay).
+    pub sync_offset_ps: i32,
+    /// Every input's discriminator.
+    pub input_trigger: Trigger,
+    /// Per-input offsets, ps (missing inputs: 0).
+    pub input_offsets_ps: Vec<i32>,
+    /// Binning code: the micro time unit is the base resolution times
+    /// 2^binning.
+    pub binning: i32,
+    /// T3 offset, ps.
+    pub offset_ps: i32,
+    /// Enable the four marker inputs (line and frame clocks of a scanner).
+    pub markers: bool,
+}
+
+impl Settings {
+    /// The vendor demos' settings for `family`.
+    pub fn default_for(family: Family) -> Self {
+        Self {
+            sync_divider: 1,
+            sync_trigger: Trigger::default_for(family),
+            sync_offset_ps: 0,
+            input_trigger: Trigger::default_for(family),
+            input_offsets_ps: Vec::new(),
+            binning: 0,
+            offset_ps: 0,
+            markers: false,
+        }
+    }
+}
+
+/// What an opened device is.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct DeviceInfo {
+    /// Device index in the library.
+    pub index: i32,
+    /// Serial number.
+    pub serial: String,
+    /// Model, part number and version as the library reports them.
+    pub model: String,
+    /// Part number.
+    pub part: String,
+    /// Hardware version.
+    pub version: String,
+    /// Input channels.
+    pub inputs: i32,
+    /// The library's version.
+    pub library_version: String,
+    /// The library file.
+    pub library: String,
+}
+
+/// An opened, initialised device in T3 mode; closed on drop.
+pub struct Device {
+    lib: Arc<VendorLib>,
+    info: DeviceInfo,
+}
+
+/// Status of a running measurement, read between FIFO reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Flags(pub i32);
+
+impl Flags {
+    /// The FIFO overran: records were lost.
+    pub fn fifo_full(self) -> bool {
+        self.0 & FLAG_FIFO_FULL != 0
+    }
+
+    /// The conditions other than an overrun, in words.
+    pub fn problems(self) -> Vec<&'static str> {
+        [
+            (FLAG_SYNC_LOST, "sync lost"),
+            (FLAG_REF_LOST, "reference clock lost"),
+            (
+                FLAG_SYS_ERROR,
+                "hardware error (the vendor asks to contact support)",
+            ),
+        ]
+        .into_iter()
+        .filter(|(bit, _)| self.0 & bit != 0)
+        .map(|(_, words)| words)
+        .collect()
+    }
+}
+
+impl Device {
+    /// Opens the device with `serial` (or the first one) and initialises it
+    /// in T3 mode with the internal clock.
+    pub fn open(lib: Arc<VendorLib>, serial: Option<&str>) -> Result<Self, VendorError> {
+        let f = &lib.functions;
+        let listed = lib.list();
+        let Some((index, found)) = listed
+            .iter()
+            .find(|(_, s)| serial.is_none_or(|want| s == want) && !s.starts_with("busy"))
+            .cloned()
+        else {
+            let seen: Vec<String> = listed.iter().map(|(i, s)| format!("#{i} {s}")).collect();
+            return Err(VendorError::Setting(format!(
+                "no {} {} found by {} (devices seen: {})",
+                lib.family.name(),
+                serial.map_or("device".into(), |s| format!("with serial {s}")),
+                lib.path.display(),
+                if seen.is_empty() {
+                    "none".into()
+                } else {
+                    seen.join(", ")
+                }
+            )));
+        };
+        let mut buf = [0u8; 16];
+        // SAFETY: an 8-byte serial buffer is asked for; 16 are given.
+        lib.check("OpenDevice", unsafe {
+            (f.open_device)(index, buf.as_mut_ptr().cast())
+        })?;
+        let mut device = Self {
+            info: DeviceInfo {
+                index,
+                serial: found,
+                model: String::new(),
+                part: String::new(),
+                version: String::new(),
+                inputs: 0,
+                library_version: lib.version(),
+                library: lib.path.display().to_string(),
+            },
+            lib: lib.clone(),
+        };
+        // SAFETY: the index is open.
+        lib.check("Initialize", unsafe { (f.initialize)(index, MODE_T3, 0) })?;
+        let (mut model, mut part, mut version) = ([0u8; 64], [0u8; 16], [0u8; 32]);
+        // SAFETY: buffers at least the header's sizes (32, 8, 16).
+        lib.check("GetHardwareInfo", unsafe {
+            (f.get_hardware_info)(
+                index,
+                model.as_mut_ptr().cast(),
+                part.as_mut_ptr().cast(),
+                version.as_mut_ptr().cast(),
+            )
+        })?;
+        let mut inputs = 0;
+        // SAFETY: one int out.
+        lib.check("GetNumOfInputChannels", unsafe {
+            (f.get_num_of_input_channels)(index, &mut inputs)
+        })?;
+        device.info.model = text(&model);
+        device.info.part = text(&part);
+        device.info.version = text(&version);
+        device.info.inputs = inputs;
+        if let Some(calibrate) = f.calibrate {
+            // SAFETY: the device is initialised.
+            lib.check("Calibrate", unsafe { calibrate(index) })?;
+        }
+        Ok(device)
+    }
+
+    /// What the device is.
+    pub fn info(&self) -> &DeviceInfo {
+        &self.info
+    }
+
+    /// The family's record layout and read size.
+    pub fn family(&self) -> Family {
+        self.lib.family
+    }
+
+    /// Applies `s`; returns the micro-time resolution (ps) it gives.
+    pub fn configure(&mut self, s: &Settings) -> Result<f64, VendorError> {
+        let (lib, i) = (&self.lib, self.info.index);
+        let f = &lib.functions;
+        let family = lib.family;
+        let (sync_a, sync_b) = s.sync_trigger.args(family, "sync")?;
+        let (in_a, in_b) = s.input_trigger.args(family, "input")?;
+        if s.input_offsets_ps.len() > self.info.inputs as usize {
+            return Err(VendorError::Setting(format!(
+                "{} input offsets given; the device has {} inputs",
+                s.input_offsets_ps.len(),
+                self.info.inputs
+            )));
+        }
+        // SAFETY (every call below): plain integer arguments on an open,
+        // initialised device.
+        unsafe {
+            lib.check("SetSyncDiv", (f.set_sync_div)(i, s.sync_divider))?;
+            let sync_call = match family {
+                Family::MultiHarp => "SetSyncEdgeTrg",
+                Family::HydraHarp => "SetSyncCFD",
+            };
+            lib.check(sync_call, (f.set_sync_trigger)(i, sync_a, sync_b))?;
+            lib.check(
+                "SetSyncChannelOffset",
+                (f.set_sync_channel_offset)(i, s.sync_offset_ps),
+            )?;
+            let input_call = match family {
+                Family::MultiHarp => "SetInputEdgeTrg",
+                Family::HydraHarp => "SetInputCFD",
+            };
+            for ch in 0..self.info.inputs {
+                lib.check(input_call, (f.set_input_trigger)(i, ch, in_a, in_b))?;
+                let offset = s.input_offsets_ps.get(ch as usize).copied().unwrap_or(0);
+                lib.check(
+                    "SetInputChannelOffset",
+                    (f.set_input_channel_offset)(i, ch, offset),
+                )?;
+            }
+            lib.check("SetBinning", (f.set_binning)(i, s.binning))?;
+            lib.check("SetOffset", (f.set_offset)(i, s.offset_ps))?;
+            let m = c_int::from(s.markers);
+            lib.check("SetMarkerEnable", (f.set_marker_enable)(i, m, m, m, m))?;
+            let mut resolution = 0.0;
+            lib.check("GetResolution", (f.get_resolution)(i, &mut resolution))?;
+            Ok(resolution)
+        }
+    }
+
+    /// Sync rate (Hz) and per-input count rates (counts/s).
+    pub fn rates(&self) -> Result<(i32, Vec<i32>), VendorError> {
+        let (lib, i) = (&self.lib, self.info.index);
+        let mut sync = 0;
+        // SAFETY: one int out.
+        lib.check("GetSyncRate", unsafe {
+            (lib.functions.get_sync_rate)(i, &mut sync)
+        })?;
+        let mut rates = Vec::new();
+        for ch in 0..self.info.inputs {
+            let mut r = 0;
+            // SAFETY: one int out.
+            lib.check("GetCountRate", unsafe {
+                (lib.functions.get_count_rate)(i, ch, &mut r)
+            })?;
+            rates.push(r);
+        }
+        Ok((sync, rates))
+    }
+
+    /// The library's warnings about the current rates and settings, as
+    /// its text (empty when none). Call after [`Device::rates`].
+    pub fn warnings(&self) -> Result<String, VendorError> {
+        let (lib, i) = (&self.lib, self.info.index);
+        let mut bits = 0;
+        // SAFETY: one int out.
+        lib.check("GetWarnings", unsafe {
+            (lib.functions.get_warnings)(i, &mut bits)
+        })?;
+        if bits == 0 {
+            return Ok(String::new());
+        }
+        let mut buf = vec![0u8; 16384];
+        // SAFETY: the header asks for a 16384-byte buffer.
+        lib.check("GetWarningsText", unsafe {
+            (lib.functions.get_warnings_text)(i, buf.as_mut_ptr().cast(), bits)
+        })?;
+        Ok(text(&buf))
+    }
+
+    /// Starts a measurement of `duration_ms` (the device stops by itself
+    /// after it).
+    pub fn start(&mut self, duration_ms: i32) -> Result<(), VendorError> {
+        // SAFETY: plain arguments.
+        self.lib.check("StartMeas", unsafe {
+            (self.lib.functions.start_meas)(self.info.index, duration_ms)
+        })
+    }
+
+    /// Stops the measurement.
+    pub fn stop(&mut self) -> Result<(), VendorError> {
+        // SAFETY: plain arguments.
+        self.lib.check("StopMeas", unsafe {
+            (self.lib.functions.stop_meas)(self.info.index)
+        })
+    }
+
+    /// The status flags.
+    pub fn flags(&self) -> Result<Flags, VendorError> {
+        let mut flags = 0;
+        // SAFETY: one int out.
+        self.lib.check("GetFlags", unsafe {
+            (self.lib.functions.get_flags)(self.info.index, &mut flags)
+        })?;
+        Ok(Flags(flags))
+    }
+
+    /// Whether the measurement time has elapsed.
+    pub fn finished(&self) -> Result<bool, VendorError> {
+        let mut status = 0;
+        // SAFETY: one int out.
+        self.lib.check("CTCStatus", unsafe {
+            (self.lib.functions.ctc_status)(self.info.index, &mut status)
+        })?;
+        Ok(status != 0)
+    }
+
+    /// Reads the records waiting in the FIFO into `buf` (resized to the
+    /// family's read size) and returns how many there were.
+    pub fn read_fifo(&mut self, buf: &mut Vec<u32>) -> Result<usize, VendorError> {
+        let max = self.lib.family.fifo_read_max();
+        buf.resize(max, 0);
+        let mut n: c_int = 0;
+        let i = self.info.index;
+        // SAFETY: the buffer holds the family's TTREADMAX records.
+        let code = unsafe {
+            match self.lib.functions.read_fifo {
+                ReadFifo::Fixed(read) => read(i, buf.as_mut_ptr(), &mut n),
+                ReadFifo::Counted(read) => read(i, buf.as_mut_ptr(), max as c_int, &mut n),
+            }
+        };
+        self.lib.check("ReadFiFo", code)?;
+        let n = usize::try_from(n).unwrap_or(0).min(max);
+        buf.truncate(n);
+        Ok(n)
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        // SAFETY: the index was opened by this handle.
+        unsafe {
+            (self.lib.functions.stop_meas)(self.info.index);
+            (self.lib.functions.close_device)(self.info.index);
+        }
+    }
+}

@@ -1,0 +1,143 @@
+//! What the stand-in emulates, from the environment variable
+//! `SCATTERSCOPE_PQ_MOCK` (a C library has no other way in): comma-separated
+//! `key=value` items, e.g. `rate=5e6,scan=32x32,fault=overrun@1000000`.
+//!
+//! - `devices=N`: devices attached (default 1; 0 for none).
+//! - `rate=HZ`: detected photons per second (default 2e6); `rate=max`
+//!   delivers full FIFO reads as fast as they are asked for (load tests).
+//! - `dark=HZ`: dark counts per second (default 0).
+//! - `sync=HZ`: laser sync rate (default 80e6).
+//! - `scan=WxH`: a galvo scan of W x H points with line and frame markers
+//!   (default: a point detector).
+//! - `fault=overrun@N`, `fault=error@N`, `fault=vanish@N`: after N records
+//!   the FIFO overruns, a read fails, or the device disappears.
+//! - `seed=S`: photon sampling seed (default 0).
+//! - `truth=PATH`: on StopMeas, write what was delivered (records, photons,
+//!   markers, overflows, per-pixel photons of a scan) to PATH as JSON.
+
+use std::path::PathBuf;
+
+/// The variable the stand-in reads.
+pub const ENV: &str = "SCATTERSCOPE_PQ_MOCK";
+
+/// A fault injected after a number of delivered records.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fault {
+    /// The FIFO overruns: the device stops and sets the FIFO-full flag.
+    Overrun(u64),
+    /// A FIFO read returns an error (the device stays).
+    ReadError(u64),
+    /// The device disappears: every later call fails.
+    Vanish(u64),
+}
+
+/// The stand-in's configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MockConfig {
+    /// Devices attached.
+    pub devices: usize,
+    /// Detected photons per second.
+    pub rate_hz: f64,
+    /// Deliver as fast as asked.
+    pub unpaced: bool,
+    /// Dark counts per second.
+    pub dark_hz: f64,
+    /// Sync rate, Hz.
+    pub sync_hz: f64,
+    /// Scan points (width, height).
+    pub scan: Option<(usize, usize)>,
+    /// The fault, if any.
+    pub fault: Option<Fault>,
+    /// Sampling seed.
+    pub seed: u64,
+    /// Where to write the delivered totals.
+    pub truth: Option<PathBuf>,
+}
+
+impl Default for MockConfig {
+    fn default() -> Self {
+        Self {
+            devices: 1,
+            rate_hz: 2e6,
+            unpaced: false,
+            dark_hz: 0.0,
+            sync_hz: 80e6,
+            scan: None,
+            fault: None,
+            seed: 0,
+            truth: None,
+        }
+    }
+}
+
+impl MockConfig {
+    /// Reads [`ENV`]; the default when unset.
+    pub fn from_env() -> Result<Self, String> {
+        match std::env::var(ENV) {
+            Ok(v) => Self::parse(&v),
+            Err(_) => Ok(Self::default()),
+        }
+    }
+
+    /// Parses the `key=value,...` list.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let mut c = Self::default();
+        for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (key, value) = item
+                .split_once('=')
+                .ok_or_else(|| format!("{ENV}: `{item}` is not key=value"))?;
+            let bad = || format!("{ENV}: {key}={value} is not valid");
+            let number = |v: &str| v.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0);
+            match key {
+                "devices" => c.devices = value.parse().map_err(|_| bad())?,
+                "rate" if value == "max" => c.unpaced = true,
+                "rate" => c.rate_hz = number(value).filter(|r| *r > 0.0).ok_or_else(bad)?,
+                "dark" => c.dark_hz = number(value).ok_or_else(bad)?,
+                "sync" => c.sync_hz = number(value).filter(|r| *r >= 1e3).ok_or_else(bad)?,
+                "seed" => c.seed = value.parse().map_err(|_| bad())?,
+                "truth" => c.truth = Some(PathBuf::from(value)),
+                "scan" => {
+                    let (w, h) = value.split_once('x').ok_or_else(bad)?;
+                    let (w, h): (usize, usize) =
+                        (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
+                    if !(1..=1024).contains(&w) || !(1..=1024).contains(&h) {
+                        return Err(bad());
+                    }
+                    c.scan = Some((w, h));
+                }
+                "fault" => {
+                    let (kind, at) = value.split_once('@').ok_or_else(bad)?;
+                    let at: u64 = at.parse().map_err(|_| bad())?;
+                    c.fault = Some(match kind {
+                        "overrun" => Fault::Overrun(at),
+                        "error" => Fault::ReadError(at),
+                        "vanish" => Fault::Vanish(at),
+                        _ => return Err(bad()),
+                    });
+                }
+                _ => return Err(format!("{ENV}: unknown key `{key}`")),
+            }
+        }
+        Ok(c)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn items_parse_and_bad_ones_name_themselves() {
+        let c = MockConfig::parse("rate=max, scan=32x16,fault=vanish@10,devices=2,seed=3").unwrap();
+        assert!(c.unpaced);
+        assert_eq!(c.scan, Some((32, 16)));
+        assert_eq!(c.fault, Some(Fault::Vanish(10)));
+        assert_eq!(c.devices, 2);
+        assert_eq!(c.seed, 3);
+        assert_eq!(MockConfig::parse("").unwrap(), MockConfig::default());
+        for bad in ["rate=-1", "scan=0x4", "fault=melt@3", "colour=blue", "rate"] {
+            let e = MockConfig::parse(bad).unwrap_err();
+            assert!(e.contains(ENV), "{bad}: {e}");
+        }
+    }
+}

@@ -1,0 +1,767 @@
+//! A stand-in for PicoQuant's programming libraries (MHLib for MultiHarp,
+//! HHLib v3 for HydraHarp 400): a shared library exporting the C functions
+//! `scatterscope_drivers::picoquant` calls, with both prefixes, so that the
+//! driver, the acquisition and the tests go through the same run-time
+//! loader as with the vendor's library. Not the vendor's code: its
+//! behaviour follows the published API (the vendor's demos), with T3
+//! records sampled from the ST-PSF of a built-in scene, overflow records,
+//! line and frame markers for scans, dark counts, pacing at the photon rate
+//! and fault modes ([`config`] says how to choose them).
+
+#![allow(non_snake_case, clippy::missing_safety_doc)]
+
+pub mod config;
+pub mod pool;
+
+use std::ffi::{c_char, c_double, c_int, c_uint};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Instant;
+
+use config::{Fault, MockConfig};
+use pool::Pool;
+
+const MAX_DEVICES: usize = 8;
+const FLAG_FIFO_FULL: c_int = 0x0002;
+const FLAG_ACTIVE: c_int = 0x0020;
+const WARNING_INPUT_RATE_HIGH: c_int = 0x0040;
+
+/// Error codes (negative, as the vendor's libraries return them).
+pub mod code {
+    /// No device at this index.
+    pub const DEVICE_OPEN_FAIL: i32 = -1;
+    /// The device is not open or not initialised.
+    pub const NOT_READY: i32 = -3;
+    /// An argument is out of range.
+    pub const INVALID_ARGUMENT: i32 = -5;
+    /// A FIFO read failed (fault `error`).
+    pub const READ_FAIL: i32 = -90;
+    /// The device disappeared (fault `vanish`).
+    pub const DEVICE_LOST: i32 = -91;
+    /// `SCATTERSCOPE_PQ_MOCK` could not be read.
+    pub const CONFIG: i32 = -99;
+}
+
+/// Which library's functions were called.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Family {
+    MultiHarp,
+    HydraHarp,
+}
+
+impl Family {
+    fn base_resolution_ps(self) -> f64 {
+        match self {
+            Family::MultiHarp => 5.0,
+            Family::HydraHarp => 1.0,
+        }
+    }
+
+    fn read_max(self) -> usize {
+        match self {
+            Family::MultiHarp => 1_048_576,
+            Family::HydraHarp => 131_072,
+        }
+    }
+}
+
+/// A running measurement.
+struct Measurement {
+    pool: Arc<Pool>,
+    started: Instant,
+    end_syncs: u64,
+    pos: usize,
+    replays: u64,
+    delivered: u64,
+    photons: u64,
+    markers: u64,
+    pixel_counts: Vec<u64>,
+    ended: bool,
+    truth_written: bool,
+}
+
+#[derive(Default)]
+struct Device {
+    open: bool,
+    initialized: bool,
+    gone: bool,
+    family: Option<Family>,
+    binning: i32,
+    sync_divider: i32,
+    flags: c_int,
+    pool: Option<(f64, Arc<Pool>)>,
+    measurement: Option<Measurement>,
+}
+
+struct State {
+    config: Result<MockConfig, String>,
+    devices: Vec<Device>,
+}
+
+static STATE: Mutex<Option<State>> = Mutex::new(None);
+
+fn state() -> MutexGuard<'static, Option<State>> {
+    let mut guard = STATE.lock().unwrap_or_else(|p| p.into_inner());
+    if guard.is_none() {
+        *guard = Some(State {
+            config: MockConfig::from_env(),
+            devices: (0..MAX_DEVICES).map(|_| Device::default()).collect(),
+        });
+    }
+    guard
+}
+
+/// Runs `f` on device `index` with the configuration, or returns the
+/// error code.
+fn with_device(index: c_int, f: impl FnOnce(&mut Device, &MockConfig) -> c_int) -> c_int {
+    let mut guard = state();
+    let st = guard.as_mut().expect("initialised by state()");
+    let config = match &st.config {
+        Ok(c) => c.clone(),
+        Err(e) => {
+            eprintln!("{e}");
+            return code::CONFIG;
+        }
+    };
+    let Some(dev) = usize::try_from(index)
+        .ok()
+        .filter(|&i| i < config.devices.min(MAX_DEVICES))
+        .and_then(|i| st.devices.get_mut(i))
+    else {
+        return code::DEVICE_OPEN_FAIL;
+    };
+    if dev.gone {
+        return code::DEVICE_LOST;
+    }
+    f(dev, &config)
+}
+
+/// Like [`with_device`] for a device that must be initialised.
+fn with_ready(index: c_int, f: impl FnOnce(&mut Device, &MockConfig) -> c_int) -> c_int {
+    with_device(index, |d, c| {
+        if d.open && d.initialized {
+            f(d, c)
+        } else {
+            code::NOT_READY
+        }
+    })
+}
+
+/// Writes `s` NUL-terminated into `out`, at most `cap` bytes in all.
+unsafe fn write_str(out: *mut c_char, s: &str, cap: usize) {
+    if out.is_null() {
+        return;
+    }
+    let bytes = &s.as_bytes()[..s.len().min(cap - 1)];
+    // SAFETY: the caller's buffer holds `cap` bytes (the vendor header's size).
+    unsafe {
+        std::ptr::copy_nonoverlapping(bytes.as_ptr(), out.cast::<u8>(), bytes.len());
+        *out.add(bytes.len()) = 0;
+    }
+}
+
+unsafe fn put<T>(out: *mut T, v: T) -> c_int {
+    if out.is_null() {
+        return code::INVALID_ARGUMENT;
+    }
+    // SAFETY: a non-null out-pointer from the caller.
+    unsafe { *out = v };
+    0
+}
+
+fn error_text(code: c_int) -> &'static str {
+    match code {
+        code::DEVICE_OPEN_FAIL => "no device at this index",
+        code::NOT_READY => "device not open or initialised",
+        code::INVALID_ARGUMENT => "argument out of range",
+        code::READ_FAIL => "FIFO read failed (stand-in)",
+        code::DEVICE_LOST => "device lost (stand-in)",
+        code::CONFIG => "SCATTERSCOPE_PQ_MOCK invalid",
+        _ => "unknown error",
+    }
+}
+
+fn serial(index: c_int) -> String {
+    format!("{:07}", 1_000_001 + index)
+}
+
+fn sync_period_ps(dev: &Device, config: &MockConfig) -> f64 {
+    1e12 * f64::from(dev.sync_divider.max(1)) / config.sync_hz
+}
+
+fn resolution_ps(dev: &Device) -> f64 {
+    dev.family.map_or(1.0, Family::base_resolution_ps) * f64::from(1u32 << dev.binning)
+}
+
+fn write_truth(m: &mut Measurement, config: &MockConfig) {
+    let Some(path) = &config.truth else { return };
+    if m.truth_written {
+        return;
+    }
+    m.truth_written = true;
+    let pixels: Vec<String> = m.pixel_counts.iter().map(u64::to_string).collect();
+    let json = format!(
+        "{{\"records\": {}, \"photons\": {}, \"markers\": {}, \"overflows\": {}, \"pixel_photons\": [{}]}}\n",
+        m.delivered,
+        m.photons,
+        m.markers,
+        m.delivered - m.photons - m.markers,
+        pixels.join(", ")
+    );
+    if let Err(e) = std::fs::write(path, json) {
+        eprintln!("stand-in: writing {}: {e}", path.display());
+    }
+}
+
+/// Copies the records due into `out`; returns how many.
+fn deliver(dev: &mut Device, config: &MockConfig, out: &mut [u32]) -> Result<usize, c_int> {
+    let period_ps = sync_period_ps(dev, config);
+    let Some(m) = dev.measurement.as_mut() else {
+        return Ok(0);
+    };
+    if m.ended {
+        return Ok(0);
+    }
+    let mut limit = out.len() as u64;
+    match config.fault {
+        Some(Fault::Overrun(n)) if m.delivered >= n => {
+            dev.flags |= FLAG_FIFO_FULL;
+            dev.flags &= !FLAG_ACTIVE;
+            m.ended = true;
+            return Ok(0);
+        }
+        Some(Fault::ReadError(n)) if m.delivered >= n => return Err(code::READ_FAIL),
+        Some(Fault::Vanish(n)) if m.delivered >= n => {
+            write_truth(m, config);
+            dev.gone = true;
+            return Err(code::DEVICE_LOST);
+        }
+        Some(Fault::Overrun(n) | Fault::ReadError(n) | Fault::Vanish(n)) => {
+            limit = limit.min(n - m.delivered)
+        }
+        None => {}
+    }
+    let due_syncs = if config.unpaced {
+        m.end_syncs
+    } else {
+        let elapsed_ps = m.started.elapsed().as_secs_f64() * 1e12;
+        ((elapsed_ps / period_ps) as u64).min(m.end_syncs)
+    };
+    let pool = m.pool.clone();
+    let mut n = 0usize;
+    while (n as u64) < limit {
+        let offset = m.replays * pool.span;
+        if offset + pool.sync_at[m.pos] >= due_syncs {
+            if due_syncs >= m.end_syncs {
+                m.ended = true;
+                dev.flags &= !FLAG_ACTIVE;
+            }
+            break;
+        }
+        // Records of this replay due now, up to the limit.
+        let bound = due_syncs - offset;
+        let end_in_pool = pool.sync_at[m.pos..].partition_point(|&s| s < bound) + m.pos;
+        let take = (end_in_pool - m.pos).min(limit as usize - n);
+        let range = m.pos..m.pos + take;
+        out[n..n + take].copy_from_slice(&pool.records[range.clone()]);
+        for (&rec, i) in pool.records[range.clone()].iter().zip(range) {
+            if pool::is_photon(rec) {
+                m.photons += 1;
+                if let Some(&p) = pool.pixel_of.get(i) {
+                    m.pixel_counts[p as usize] += 1;
+                }
+            } else if pool::is_marker(rec) {
+                m.markers += 1;
+            }
+        }
+        n += take;
+        m.pos += take;
+        if m.pos == pool.records.len() {
+            m.pos = 0;
+            m.replays += 1;
+        }
+    }
+    m.delivered += n as u64;
+    Ok(n)
+}
+
+macro_rules! library {
+    ($family:expr, $version:literal, $model:literal,
+     $GetLibraryVersion:ident, $GetErrorString:ident, $OpenDevice:ident, $CloseDevice:ident,
+     $Initialize:ident, $GetHardwareInfo:ident, $GetSerialNumber:ident,
+     $GetNumOfInputChannels:ident, $GetBaseResolution:ident, $SetSyncDiv:ident,
+     $SetSyncChannelOffset:ident, $SetInputChannelOffset:ident, $SetBinning:ident,
+     $SetOffset:ident, $SetMarkerEnable:ident, $SetMarkerEdges:ident, $GetResolution:ident,
+     $GetSyncRate:ident, $GetCountRate:ident, $GetFlags:ident, $GetWarnings:ident,
+     $GetWarningsText:ident, $StartMeas:ident, $StopMeas:ident, $CTCStatus:ident) => {
+        /// The library's version string.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetLibraryVersion(vers: *mut c_char) -> c_int {
+            unsafe { write_str(vers, $version, 8) };
+            0
+        }
+
+        /// The text of an error code.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetErrorString(text: *mut c_char, code: c_int) -> c_int {
+            unsafe { write_str(text, error_text(code), 40) };
+            0
+        }
+
+        /// Opens device `index`, writing its serial number.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $OpenDevice(index: c_int, serial_out: *mut c_char) -> c_int {
+            unsafe { write_str(serial_out, "", 8) };
+            with_device(index, |d, _| {
+                d.open = true;
+                d.family = Some($family);
+                unsafe { write_str(serial_out, &serial(index), 8) };
+                0
+            })
+        }
+
+        /// Closes device `index`.
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $CloseDevice(index: c_int) -> c_int {
+            with_device(index, |d, c| {
+                if let Some(m) = d.measurement.as_mut() {
+                    write_truth(m, c);
+                }
+                *d = Device::default();
+                0
+            })
+        }
+
+        /// Initialises the device (mode 3 = T3 only).
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $Initialize(index: c_int, mode: c_int, _refsource: c_int) -> c_int {
+            with_device(index, |d, _| {
+                if !d.open {
+                    return code::NOT_READY;
+                }
+                if mode != 3 {
+                    return code::INVALID_ARGUMENT;
+                }
+                d.initialized = true;
+                d.sync_divider = 1;
+                0
+            })
+        }
+
+        /// Model, part number and version.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetHardwareInfo(
+            index: c_int,
+            model: *mut c_char,
+            part: *mut c_char,
+            version: *mut c_char,
+        ) -> c_int {
+            with_ready(index, |_, _| {
+                unsafe {
+                    write_str(model, $model, 16);
+                    write_str(part, "SSMOCK", 8);
+                    write_str(version, "1.0", 8);
+                }
+                0
+            })
+        }
+
+        /// Serial number.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetSerialNumber(index: c_int, out: *mut c_char) -> c_int {
+            with_ready(index, |_, _| {
+                unsafe { write_str(out, &serial(index), 8) };
+                0
+            })
+        }
+
+        /// Four inputs.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetNumOfInputChannels(index: c_int, n: *mut c_int) -> c_int {
+            with_ready(index, |_, _| unsafe { put(n, 4) })
+        }
+
+        /// Base resolution (ps) and binning steps.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetBaseResolution(
+            index: c_int,
+            res: *mut c_double,
+            steps: *mut c_int,
+        ) -> c_int {
+            with_ready(index, |d, _| unsafe {
+                put(steps, 24);
+                put(res, d.family.map_or(1.0, Family::base_resolution_ps))
+            })
+        }
+
+        /// Sync divider 1 to 16.
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetSyncDiv(index: c_int, div: c_int) -> c_int {
+            with_ready(index, |d, _| {
+                if !(1..=16).contains(&div) {
+                    return code::INVALID_ARGUMENT;
+                }
+                d.sync_divider = div;
+                0
+            })
+        }
+
+        /// Sync offset, ps (accepted).
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetSyncChannelOffset(index: c_int, ps: c_int) -> c_int {
+            with_ready(index, |_, _| in_range(ps, -99_999, 99_999))
+        }
+
+        /// Input offset, ps (accepted).
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetInputChannelOffset(index: c_int, ch: c_int, ps: c_int) -> c_int {
+            with_ready(index, |_, _| {
+                if !(0..4).contains(&ch) {
+                    return code::INVALID_ARGUMENT;
+                }
+                in_range(ps, -99_999, 99_999)
+            })
+        }
+
+        /// Binning code 0 to 24.
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetBinning(index: c_int, binning: c_int) -> c_int {
+            with_ready(index, |d, _| {
+                if !(0..=24).contains(&binning) {
+                    return code::INVALID_ARGUMENT;
+                }
+                d.binning = binning;
+                0
+            })
+        }
+
+        /// T3 offset, ps (accepted).
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetOffset(index: c_int, ps: c_int) -> c_int {
+            with_ready(index, |_, _| in_range(ps, 0, 100_000_000))
+        }
+
+        /// Marker inputs (accepted; a scan always sends its markers).
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetMarkerEnable(
+            index: c_int,
+            _e1: c_int,
+            _e2: c_int,
+            _e3: c_int,
+            _e4: c_int,
+        ) -> c_int {
+            with_ready(index, |_, _| 0)
+        }
+
+        /// Marker edges (accepted).
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetMarkerEdges(
+            index: c_int,
+            _e1: c_int,
+            _e2: c_int,
+            _e3: c_int,
+            _e4: c_int,
+        ) -> c_int {
+            with_ready(index, |_, _| 0)
+        }
+
+        /// Micro-time unit, ps.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetResolution(index: c_int, res: *mut c_double) -> c_int {
+            with_ready(index, |d, _| unsafe { put(res, resolution_ps(d)) })
+        }
+
+        /// Sync rate after the divider, Hz.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetSyncRate(index: c_int, rate: *mut c_int) -> c_int {
+            with_ready(index, |d, c| unsafe {
+                put(rate, (c.sync_hz / f64::from(d.sync_divider.max(1))) as c_int)
+            })
+        }
+
+        /// Count rate of input `ch` (the detector is on input 0).
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetCountRate(
+            index: c_int,
+            ch: c_int,
+            rate: *mut c_int,
+        ) -> c_int {
+            with_ready(index, |_, c| {
+                let r = if ch == 0 { c.rate_hz + c.dark_hz } else { 0.0 };
+                unsafe { put(rate, r.min(f64::from(c_int::MAX)) as c_int) }
+            })
+        }
+
+        /// Status flags.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetFlags(index: c_int, flags: *mut c_int) -> c_int {
+            with_ready(index, |d, _| unsafe { put(flags, d.flags) })
+        }
+
+        /// Warning bits: input rate above 5 % of the sync rate (pile-up).
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetWarnings(index: c_int, warnings: *mut c_int) -> c_int {
+            with_ready(index, |_, c| {
+                let w = if !c.unpaced && c.rate_hz + c.dark_hz > 0.05 * c.sync_hz {
+                    WARNING_INPUT_RATE_HIGH
+                } else {
+                    0
+                };
+                unsafe { put(warnings, w) }
+            })
+        }
+
+        /// The warnings' text.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetWarningsText(
+            index: c_int,
+            text: *mut c_char,
+            warnings: c_int,
+        ) -> c_int {
+            with_ready(index, |_, _| {
+                let t = if warnings & WARNING_INPUT_RATE_HIGH != 0 {
+                    "WARNING: the input count rate exceeds 5 % of the sync rate: pile-up distorts the histogram\n"
+                } else {
+                    ""
+                };
+                unsafe { write_str(text, t, 16384) };
+                0
+            })
+        }
+
+        /// Starts a measurement of `tacq` ms.
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $StartMeas(index: c_int, tacq: c_int) -> c_int {
+            with_ready(index, |d, c| {
+                if !(1..=360_000_000).contains(&tacq) {
+                    return code::INVALID_ARGUMENT;
+                }
+                let res = resolution_ps(d);
+                let period = sync_period_ps(d, c);
+                let pool = match &d.pool {
+                    Some((r, p)) if *r == res => p.clone(),
+                    _ => match pool::build(c, res, period) {
+                        Ok(p) => {
+                            let p = Arc::new(p);
+                            d.pool = Some((res, p.clone()));
+                            p
+                        }
+                        Err(e) => {
+                            eprintln!("stand-in: {e}");
+                            return code::INVALID_ARGUMENT;
+                        }
+                    },
+                };
+                let pixels = c.scan.map_or(0, |(w, h)| w * h);
+                let mut end_syncs = (f64::from(tacq) * 1e9 / period) as u64;
+                if c.scan.is_some() {
+                    // A scanner finishes the frame it is in.
+                    end_syncs = end_syncs.div_ceil(pool.span) * pool.span;
+                }
+                d.flags = FLAG_ACTIVE;
+                d.measurement = Some(Measurement {
+                    pool,
+                    started: Instant::now(),
+                    end_syncs,
+                    pos: 0,
+                    replays: 0,
+                    delivered: 0,
+                    photons: 0,
+                    markers: 0,
+                    pixel_counts: vec![0; pixels],
+                    ended: false,
+                    truth_written: false,
+                });
+                0
+            })
+        }
+
+        /// Stops the measurement (writes the truth file when asked).
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $StopMeas(index: c_int) -> c_int {
+            with_ready(index, |d, c| {
+                d.flags &= !FLAG_ACTIVE;
+                if let Some(m) = d.measurement.as_mut() {
+                    m.ended = true;
+                    write_truth(m, c);
+                }
+                0
+            })
+        }
+
+        /// 1 once the measurement time has elapsed (or the run ended).
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $CTCStatus(index: c_int, status: *mut c_int) -> c_int {
+            with_ready(index, |d, _| {
+                let done = d.measurement.as_ref().is_none_or(|m| m.ended);
+                unsafe { put(status, c_int::from(done)) }
+            })
+        }
+    };
+}
+
+fn in_range(v: c_int, lo: c_int, hi: c_int) -> c_int {
+    if (lo..=hi).contains(&v) {
+        0
+    } else {
+        code::INVALID_ARGUMENT
+    }
+}
+
+library!(
+    Family::MultiHarp,
+    "3.1",
+    "MultiHarp 150",
+    MH_GetLibraryVersion,
+    MH_GetErrorString,
+    MH_OpenDevice,
+    MH_CloseDevice,
+    MH_Initialize,
+    MH_GetHardwareInfo,
+    MH_GetSerialNumber,
+    MH_GetNumOfInputChannels,
+    MH_GetBaseResolution,
+    MH_SetSyncDiv,
+    MH_SetSyncChannelOffset,
+    MH_SetInputChannelOffset,
+    MH_SetBinning,
+    MH_SetOffset,
+    MH_SetMarkerEnable,
+    MH_SetMarkerEdges,
+    MH_GetResolution,
+    MH_GetSyncRate,
+    MH_GetCountRate,
+    MH_GetFlags,
+    MH_GetWarnings,
+    MH_GetWarningsText,
+    MH_StartMeas,
+    MH_StopMeas,
+    MH_CTCStatus
+);
+
+library!(
+    Family::HydraHarp,
+    "3.0",
+    "HydraHarp 400",
+    HH_GetLibraryVersion,
+    HH_GetErrorString,
+    HH_OpenDevice,
+    HH_CloseDevice,
+    HH_Initialize,
+    HH_GetHardwareInfo,
+    HH_GetSerialNumber,
+    HH_GetNumOfInputChannels,
+    HH_GetBaseResolution,
+    HH_SetSyncDiv,
+    HH_SetSyncChannelOffset,
+    HH_SetInputChannelOffset,
+    HH_SetBinning,
+    HH_SetOffset,
+    HH_SetMarkerEnable,
+    HH_SetMarkerEdges,
+    HH_GetResolution,
+    HH_GetSyncRate,
+    HH_GetCountRate,
+    HH_GetFlags,
+    HH_GetWarnings,
+    HH_GetWarningsText,
+    HH_StartMeas,
+    HH_StopMeas,
+    HH_CTCStatus
+);
+
+/// MultiHarp edge trigger of the sync input.
+#[unsafe(no_mangle)]
+pub extern "C" fn MH_SetSyncEdgeTrg(index: c_int, level: c_int, edge: c_int) -> c_int {
+    with_ready(index, |_, _| edge_trigger(level, edge))
+}
+
+/// MultiHarp edge trigger of an input.
+#[unsafe(no_mangle)]
+pub extern "C" fn MH_SetInputEdgeTrg(index: c_int, ch: c_int, level: c_int, edge: c_int) -> c_int {
+    with_ready(index, |_, _| {
+        if !(0..4).contains(&ch) {
+            return code::INVALID_ARGUMENT;
+        }
+        edge_trigger(level, edge)
+    })
+}
+
+/// HydraHarp CFD of the sync input.
+#[unsafe(no_mangle)]
+pub extern "C" fn HH_SetSyncCFD(index: c_int, level: c_int, zero_cross: c_int) -> c_int {
+    with_ready(index, |_, _| cfd(level, zero_cross))
+}
+
+/// HydraHarp CFD of an input.
+#[unsafe(no_mangle)]
+pub extern "C" fn HH_SetInputCFD(
+    index: c_int,
+    ch: c_int,
+    level: c_int,
+    zero_cross: c_int,
+) -> c_int {
+    with_ready(index, |_, _| {
+        if !(0..4).contains(&ch) {
+            return code::INVALID_ARGUMENT;
+        }
+        cfd(level, zero_cross)
+    })
+}
+
+/// HydraHarp calibration (instant here).
+#[unsafe(no_mangle)]
+pub extern "C" fn HH_Calibrate(index: c_int) -> c_int {
+    with_ready(index, |_, _| 0)
+}
+
+fn edge_trigger(level: c_int, edge: c_int) -> c_int {
+    if (-1200..=1200).contains(&level) && (0..=1).contains(&edge) {
+        0
+    } else {
+        code::INVALID_ARGUMENT
+    }
+}
+
+fn cfd(level: c_int, zero_cross: c_int) -> c_int {
+    if (0..=1000).contains(&level) && (0..=40).contains(&zero_cross) {
+        0
+    } else {
+        code::INVALID_ARGUMENT
+    }
+}
+
+/// `MH_ReadFiFo`: up to 1,048,576 records into `buffer`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn MH_ReadFiFo(index: c_int, buffer: *mut c_uint, n: *mut c_int) -> c_int {
+    unsafe { read_fifo(index, buffer, Family::MultiHarp.read_max(), n) }
+}
+
+/// `HH_ReadFiFo`: up to `count` (at most 131,072) records into `buffer`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn HH_ReadFiFo(
+    index: c_int,
+    buffer: *mut c_uint,
+    count: c_int,
+    n: *mut c_int,
+) -> c_int {
+    let max = Family::HydraHarp.read_max();
+    if !(128..=max as c_int).contains(&count) {
+        return code::INVALID_ARGUMENT;
+    }
+    unsafe { read_fifo(index, buffer, count as usize, n) }
+}
+
+unsafe fn read_fifo(index: c_int, buffer: *mut c_uint, cap: usize, n: *mut c_int) -> c_int {
+    if buffer.is_null() || n.is_null() {
+        return code::INVALID_ARGUMENT;
+    }
+    // SAFETY: the caller's buffer holds `cap` records (the API's contract).
+    let out = unsafe { std::slice::from_raw_parts_mut(buffer, cap) };
+    with_ready(index, |d, c| match deliver(d, c, out) {
+        Ok(k) => unsafe { put(n, k as c_int) },
+        Err(e) => {
+            unsafe { put(n, 0) };
+            e
+        }
+    })
+}

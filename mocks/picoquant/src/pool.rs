@@ -1,0 +1,268 @@
+//! The records the stand-in device replays: photons sampled from the
+//! ST-PSF of a built-in scene (a point detector, or a galvo scan with line
+//! and frame markers), encoded as T3 records with overflow records, spanning
+//! a whole number of overflow periods so that replaying them continues the
+//! time base exactly.
+
+use scatterscope_mocks::{Emitter, EmitterOptions};
+use scatterscope_physics::kernel::{KernelStack, Sampling};
+use scatterscope_physics::params::Preset;
+
+use crate::config::MockConfig;
+
+/// Syncs per overflow record of the T3 layout both families use.
+pub const WRAP: u64 = 1024;
+/// Marker bits of the scanner's clocks (line start, line stop, frame).
+pub const LINE_START: u32 = 1;
+/// Line stop marker bit.
+pub const LINE_STOP: u32 = 2;
+/// Frame marker bit.
+pub const FRAME: u32 = 4;
+/// Syncs a scanned point is dwelt on.
+pub const DWELL_SYNCS: u64 = 800;
+/// Syncs of the scanner's return between lines.
+const RETRACE_SYNCS: u64 = 1600;
+/// Delay of the pulse's arrival after the sync, ps (cables).
+pub const PULSE_DELAY_PS: f64 = 1000.0;
+/// Photons in the point detector's pool.
+const POINT_POOL_PHOTONS: usize = 1 << 21;
+
+/// One replay unit.
+pub struct Pool {
+    /// The records.
+    pub records: Vec<u32>,
+    /// Sync count at each record (its time), from the pool's start.
+    pub sync_at: Vec<u64>,
+    /// Syncs the pool spans (a multiple of [`WRAP`]).
+    pub span: u64,
+    /// Scan pixel of each photon record (`u32::MAX` for other records);
+    /// empty for a point detector.
+    pub pixel_of: Vec<u32>,
+}
+
+/// An event before encoding: sync count, and a photon's (channel, micro
+/// time) or a marker's bits.
+#[derive(Clone, Copy)]
+enum Event {
+    Photon { sync: u64, micro: u32, pixel: u32 },
+    Marker { sync: u64, bits: u32 },
+}
+
+impl Event {
+    fn sync(&self) -> u64 {
+        match *self {
+            Event::Photon { sync, .. } | Event::Marker { sync, .. } => sync,
+        }
+    }
+}
+
+/// The built-in scene on a `w` x `h` grid: a bright bar, a dimmer disc
+/// and a faint background, so that scanned images have structure.
+pub fn scene(w: usize, h: usize) -> Vec<f64> {
+    let mut s = vec![0.02; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (fx, fy) = (x as f64 / w as f64, y as f64 / h as f64);
+            let bar = (0.2..0.35).contains(&fx) && (0.15..0.85).contains(&fy);
+            let disc = (fx - 0.65).powi(2) + (fy - 0.5).powi(2) < 0.04;
+            s[y * w + x] += if bar {
+                1.0
+            } else if disc {
+                0.5
+            } else {
+                0.0
+            };
+        }
+    }
+    s
+}
+
+fn emitter(cfg: &MockConfig, w: usize, h: usize, period_ps: f64) -> Result<Emitter, String> {
+    let mut setup = Preset::Paper.setup();
+    setup.sensor.width_px = w;
+    setup.sensor.height_px = h;
+    let kernels = KernelStack::build(&setup, Sampling::Integrated).map_err(|e| e.to_string())?;
+    Emitter::new(
+        &scene(w, h),
+        &kernels,
+        EmitterOptions {
+            rate_hz: cfg.rate_hz,
+            dark_rate_hz: cfg.dark_hz,
+            sync_period_ps: period_ps,
+            t0_delay_ps: PULSE_DELAY_PS,
+            seed: cfg.seed,
+            ..EmitterOptions::default()
+        },
+    )
+    .map_err(|e| e.to_string())
+}
+
+/// Builds the pool for `cfg` at a micro-time unit of `resolution_ps` and a
+/// sync period of `period_ps`.
+pub fn build(cfg: &MockConfig, resolution_ps: f64, period_ps: f64) -> Result<Pool, String> {
+    let micro = |delay_ps: f64| ((delay_ps / resolution_ps) as u32).min(0x7FFF);
+    let mut events = Vec::new();
+    match cfg.scan {
+        None => {
+            // A point detector: every photon on input 0.
+            let mut e = emitter(cfg, 16, 16, period_ps)?;
+            for _ in 0..POINT_POOL_PHOTONS {
+                let d = e.next_detection();
+                events.push(Event::Photon {
+                    sync: d.sync,
+                    micro: micro(d.delay_ps),
+                    pixel: u32::MAX,
+                });
+            }
+        }
+        Some((w, h)) => {
+            let mut e = emitter(cfg, w, h, period_ps)?;
+            let line = w as u64 * DWELL_SYNCS + RETRACE_SYNCS;
+            let frame_syncs = h as u64 * line;
+            // Photons drawn over one frame's time, each placed in its
+            // pixel's dwell (a point is seen only while the scan is on it).
+            let mut drawn = Vec::new();
+            loop {
+                let d = e.next_detection();
+                if d.sync >= frame_syncs {
+                    break;
+                }
+                drawn.push(d);
+            }
+            events.push(Event::Marker {
+                sync: 0,
+                bits: FRAME,
+            });
+            for y in 0..h as u64 {
+                let start = y * line + 1;
+                events.push(Event::Marker {
+                    sync: start,
+                    bits: LINE_START,
+                });
+                events.push(Event::Marker {
+                    sync: start + w as u64 * DWELL_SYNCS,
+                    bits: LINE_STOP,
+                });
+            }
+            for d in drawn {
+                let (x, y) = (d.pixel as u64 % w as u64, d.pixel as u64 / w as u64);
+                let within = d.sync % DWELL_SYNCS;
+                events.push(Event::Photon {
+                    sync: y * line + 1 + x * DWELL_SYNCS + within,
+                    micro: micro(d.delay_ps),
+                    pixel: d.pixel,
+                });
+            }
+            events.sort_by_key(Event::sync);
+        }
+    }
+    Ok(encode(&events, cfg.scan.is_some()))
+}
+
+fn encode(events: &[Event], scanned: bool) -> Pool {
+    let mut pool = Pool {
+        records: Vec::with_capacity(events.len() * 21 / 20),
+        sync_at: Vec::with_capacity(events.len() * 21 / 20),
+        span: 0,
+        pixel_of: Vec::new(),
+    };
+    let mut base = 0u64;
+    let push = |pool: &mut Pool, rec: u32, sync: u64, pixel: u32| {
+        pool.records.push(rec);
+        pool.sync_at.push(sync);
+        if scanned {
+            pool.pixel_of.push(pixel);
+        }
+    };
+    let overflow = |n: u64| (1u32 << 31) | (63 << 25) | n as u32;
+    for ev in events {
+        let s = ev.sync();
+        while s - base >= WRAP {
+            let n = ((s - base) / WRAP).min(1023);
+            base += n * WRAP;
+            push(&mut pool, overflow(n), base, u32::MAX);
+        }
+        let nsync = (s - base) as u32;
+        match *ev {
+            Event::Photon { micro, pixel, .. } => {
+                push(&mut pool, (micro << 10) | nsync, s, pixel);
+            }
+            Event::Marker { bits, .. } => {
+                push(&mut pool, (1 << 31) | (bits << 25) | nsync, s, u32::MAX)
+            }
+        }
+    }
+    // Close the pool on an overflow boundary past its last event.
+    base += WRAP;
+    push(&mut pool, overflow(1), base, u32::MAX);
+    pool.span = base;
+    pool
+}
+
+/// Whether `rec` is a photon record (not special).
+pub fn is_photon(rec: u32) -> bool {
+    rec >> 31 == 0
+}
+
+/// Whether `rec` is a marker record.
+pub fn is_marker(rec: u32) -> bool {
+    rec >> 31 == 1 && (rec >> 25) & 63 != 63 && (rec >> 25) & 63 != 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Decodes a pool's records back to (sync, record) for photons and
+    /// markers, with the wide T3 layout's overflow rule.
+    fn decode(records: &[u32]) -> Vec<(u64, u32)> {
+        let mut base = 0u64;
+        let mut out = Vec::new();
+        for &r in records {
+            let special = r >> 31 == 1;
+            let ch = (r >> 25) & 63;
+            let nsync = u64::from(r & 1023);
+            if special && ch == 63 {
+                base += WRAP * nsync.max(1);
+            } else {
+                out.push((base + nsync, r));
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn records_decode_to_their_times_and_the_pool_ends_on_a_wrap() {
+        let cfg = MockConfig {
+            scan: Some((4, 3)),
+            ..MockConfig::default()
+        };
+        let pool = build(&cfg, 5.0, 12_500.0).unwrap();
+        assert_eq!(pool.span % WRAP, 0);
+        let decoded = decode(&pool.records);
+        let times: Vec<u64> = pool
+            .records
+            .iter()
+            .zip(&pool.sync_at)
+            .filter(|(r, _)| !(*r >> 31 == 1 && (*r >> 25) & 63 == 63))
+            .map(|(_, &s)| s)
+            .collect();
+        assert_eq!(decoded.iter().map(|d| d.0).collect::<Vec<_>>(), times);
+        assert!(times.windows(2).all(|w| w[0] <= w[1]));
+        assert!(*times.last().unwrap() < pool.span);
+        let markers = pool.records.iter().filter(|&&r| is_marker(r)).count();
+        assert_eq!(markers, 1 + 2 * 3, "a frame marker and two per line");
+        // Every photon lies in its pixel's dwell.
+        let line = 4 * DWELL_SYNCS + RETRACE_SYNCS;
+        for ((&r, &s), &p) in pool.records.iter().zip(&pool.sync_at).zip(&pool.pixel_of) {
+            if is_photon(r) {
+                let (x, y) = (u64::from(p) % 4, u64::from(p) / 4);
+                let start = y * line + 1 + x * DWELL_SYNCS;
+                assert!(
+                    (start..start + DWELL_SYNCS).contains(&s),
+                    "pixel {p} at {s}"
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,288 @@
+//! Recorded tags -> PTU, photon for photon: PicoQuant files of any
+//! supported type (PTU, PT3, HT3; T2 and T3) keep their record type, and
+//! the project's own tag files (`.sstags`) become Generic T3 records with
+//! the sensor pixel as the input channel (a T3 record has room for 63
+//! channels, so larger sensors are refused with a message). Every photon,
+//! marker and sync keeps its channel, macro time and micro time; overflow
+//! records are re-made by the writer.
+
+use std::path::{Path, PathBuf};
+
+use firmware_protocol::Event;
+
+use crate::formats::picoquant::records::{Decoder, RecordType};
+use crate::formats::picoquant::writer::{HeaderEntry, PtuWriter, WriterHeader};
+use crate::formats::picoquant::{FileError, TtrError, open};
+use crate::formats::sstags::{TagFile, TagFileError, is_tag_file};
+use crate::tags::Tag;
+
+/// Channels a Generic T3 record can name (63 marks an overflow).
+pub const MAX_T3_CHANNELS: usize = 63;
+
+/// What a conversion did.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Conversion {
+    /// Records read.
+    pub records_in: u64,
+    /// Photons carried over.
+    pub photons: u64,
+    /// Markers carried over.
+    pub markers: u64,
+    /// Sync events carried over (T2).
+    pub syncs: u64,
+    /// Records written (overflows re-made).
+    pub records_out: u64,
+    /// Photons the recording device reported lost (a tag file's FIFO
+    /// overflows): absent from the source, so from the PTU too.
+    pub lost_in_device: u64,
+    /// The record type written.
+    pub record_type: String,
+    /// Why the input ended early, when a cut file's complete records were
+    /// converted.
+    pub truncated: Option<String>,
+}
+
+/// Why a conversion failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ConvertError {
+    /// The PicoQuant input cannot be read.
+    #[error(transparent)]
+    Input(#[from] FileError),
+    /// The tag file cannot be read.
+    #[error(transparent)]
+    TagFile(#[from] TagFileError),
+    /// The input holds what PTU cannot, or is out of order.
+    #[error("{path}: {reason}")]
+    Unsupported {
+        /// The input.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+    /// The output cannot be written.
+    #[error("{path}: {source}")]
+    Output {
+        /// The output.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+}
+
+fn out_err(path: &Path) -> impl Fn(std::io::Error) -> ConvertError + '_ {
+    move |source| ConvertError::Output {
+        path: path.to_owned(),
+        source,
+    }
+}
+
+/// Converts `input` (a PicoQuant file or a tag file) into the PTU file
+/// `output`; with `allow_truncated`, a cut PicoQuant file's complete
+/// records are converted (and the conversion says so) instead of failing.
+pub fn convert_to_ptu(
+    input: &Path,
+    output: &Path,
+    allow_truncated: bool,
+) -> Result<Conversion, ConvertError> {
+    if input == output {
+        return Err(ConvertError::Unsupported {
+            path: input.to_owned(),
+            reason: "the output would overwrite the input".into(),
+        });
+    }
+    if is_tag_file(input) {
+        from_tag_file(input, output)
+    } else {
+        from_picoquant(input, output, allow_truncated)
+    }
+}
+
+fn count(c: &mut Conversion, tag: &Tag) {
+    match tag {
+        Tag::Photon { .. } => c.photons += 1,
+        Tag::Marker { .. } => c.markers += 1,
+        Tag::Sync { .. } => c.syncs += 1,
+    }
+}
+
+fn from_picoquant(
+    input: &Path,
+    output: &Path,
+    allow_truncated: bool,
+) -> Result<Conversion, ConvertError> {
+    let (info, mut reader) = open(input)?;
+    let header = WriterHeader {
+        resolution_s: info.resolution_s,
+        sync_rate_hz: if info.record_type.is_t3() {
+            1.0 / info.macro_unit_s
+        } else {
+            info.sync_rate_hz.unwrap_or(0.0)
+        },
+        device: info.device.clone(),
+        imaging: info.imaging,
+        extra: vec![(
+            "File_Comment".into(),
+            HeaderEntry::Text(format!("converted from {}", input.display())),
+        )],
+    };
+    let mut w = PtuWriter::create(output, info.record_type, &header).map_err(out_err(output))?;
+    let mut decoder = Decoder::new(info.record_type);
+    let mut c = Conversion {
+        record_type: info.record_type.name().into(),
+        ..Conversion::default()
+    };
+    let mut chunk = Vec::new();
+    loop {
+        match reader.next_chunk(&mut chunk) {
+            Ok(true) => {}
+            Ok(false) => break,
+            Err(e @ TtrError::Truncated { .. }) if allow_truncated => {
+                c.truncated = Some(e.to_string());
+                break;
+            }
+            Err(error) => {
+                return Err(FileError {
+                    path: input.to_owned(),
+                    error,
+                }
+                .into());
+            }
+        }
+        for &rec in &chunk {
+            c.records_in += 1;
+            if let Some(tag) = decoder.decode(rec) {
+                count(&mut c, &tag);
+                w.write_tag(tag).map_err(out_err(output))?;
+            }
+        }
+    }
+    c.records_out = w.finish().map_err(out_err(output))?;
+    Ok(c)
+}
+
+fn from_tag_file(input: &Path, output: &Path) -> Result<Conversion, ConvertError> {
+    let file = TagFile::open(input)?;
+    let h = file.header.clone();
+    let pixels = usize::from(h.pixels_x) * usize::from(h.pixels_y);
+    let unsupported = |reason: String| ConvertError::Unsupported {
+        path: input.to_owned(),
+        reason,
+    };
+    if pixels > MAX_T3_CHANNELS {
+        return Err(unsupported(format!(
+            "its sensor has {} x {} = {pixels} pixels; a PTU T3 record names at most {MAX_T3_CHANNELS} input channels, so the pixel of each photon cannot be kept (bin the file with `bin`, or record a sensor of at most {MAX_T3_CHANNELS} pixels)",
+            h.pixels_x, h.pixels_y
+        )));
+    }
+    let header = WriterHeader {
+        resolution_s: f64::from(h.resolution_fs) * 1e-15,
+        sync_rate_hz: 1e15 / h.sync_period_fs as f64,
+        device: format!("{} {}", h.model, h.serial),
+        imaging: None,
+        extra: vec![
+            (
+                "File_Comment".into(),
+                HeaderEntry::Text(format!(
+                    "converted from {}: input channel = sensor pixel (row-major, {} x {})",
+                    input.display(),
+                    h.pixels_x,
+                    h.pixels_y
+                )),
+            ),
+            (
+                "HWSync_Divider".into(),
+                HeaderEntry::Int(i64::from(h.sync_divider)),
+            ),
+        ],
+    };
+    let record_type = RecordType::GenericT3;
+    let mut w = PtuWriter::create(output, record_type, &header).map_err(out_err(output))?;
+    let mut c = Conversion {
+        record_type: record_type.name().into(),
+        ..Conversion::default()
+    };
+    let mut failure: Option<ConvertError> = None;
+    file.read(|batch| {
+        if failure.is_some() {
+            return;
+        }
+        for event in batch.events() {
+            c.records_in += 1;
+            let tag = match event {
+                Ok(Event::Photon { pixel, micro, sync }) => {
+                    if micro > 0x7FFF {
+                        failure = Some(unsupported(format!(
+                            "micro time {micro} of batch {} exceeds the 15 bits of a T3 record",
+                            batch.header.seq
+                        )));
+                        return;
+                    }
+                    Tag::Photon {
+                        channel: pixel,
+                        macro_time: sync,
+                        micro_time: micro,
+                    }
+                }
+                Ok(Event::Marker { bits, sync }) => Tag::Marker {
+                    bits,
+                    macro_time: sync,
+                },
+                Ok(Event::Lost { count }) => {
+                    c.lost_in_device += count;
+                    continue;
+                }
+                Err(e) => {
+                    failure = Some(unsupported(format!(
+                        "record {:#018x} of batch {} does not decode",
+                        e.raw, batch.header.seq
+                    )));
+                    return;
+                }
+            };
+            count(&mut c, &tag);
+            if let Err(e) = w.write_tag(tag) {
+                failure = Some(match e.kind() {
+                    std::io::ErrorKind::InvalidInput => unsupported(format!(
+                        "batch {}: {e} (batches out of order in the recording)",
+                        batch.header.seq
+                    )),
+                    _ => out_err(output)(e),
+                });
+                return;
+            }
+        }
+    })?;
+    if let Some(f) = failure {
+        return Err(f);
+    }
+    c.records_out = w.finish().map_err(out_err(output))?;
+    Ok(c)
+}
+
+impl Conversion {
+    /// One line for the terminal.
+    pub fn summary(&self, output: &Path) -> String {
+        let mut s = format!(
+            "{}: {} records in, {} photons, {} markers, {} syncs -> {} {} records",
+            output.display(),
+            self.records_in,
+            self.photons,
+            self.markers,
+            self.syncs,
+            self.records_out,
+            self.record_type
+        );
+        if let Some(t) = &self.truncated {
+            s.push_str(&format!(
+                "; the input was cut ({t}): its complete records were converted"
+            ));
+        }
+        if self.lost_in_device > 0 {
+            s.push_str(&format!(
+                "; {} photons the device reported lost are not in the source either",
+                self.lost_in_device
+            ));
+        }
+        s
+    }
+}

@@ -1,0 +1,526 @@
+//! `acquire --device picoquant` against the stand-in vendor library
+//! (`mocks/picoquant`), loaded through the same run-time loader as
+//! PicoQuant's MHLib and HHLib: the PTU it writes reads back into the same
+//! stack, fault modes land in the ledger with the totals of what the device
+//! delivered, scans bin into the scanner's image, a missing library or an
+//! unwritable PTU is a clear error with the stack kept; and `convert` to
+//! PTU is lossless.
+
+#[path = "common/shared_data.rs"]
+mod shared_data;
+#[path = "common/standin.rs"]
+mod standin;
+
+use std::path::Path;
+use std::process::Command;
+
+use scatterscope::formats::picoquant::open;
+use scatterscope::formats::picoquant::records::Decoder;
+use scatterscope::formats::sstags::TagFile;
+use scatterscope::stack::Stack;
+use scatterscope::tags::Tag;
+use standin::{scatterscope_pq, standin_library, truth};
+
+fn text(o: &std::process::Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// Acquires from the stand-in; returns the output folder's path and the
+/// command's output.
+fn acquire(
+    dir: &Path,
+    device: &str,
+    mock: &str,
+    extra: &[&str],
+) -> (std::path::PathBuf, std::process::Output) {
+    let out = dir.join("acq");
+    let lib = standin_library();
+    let mut args = vec![
+        "acquire",
+        "--device",
+        device,
+        "--vendor-lib",
+        lib.to_str().unwrap(),
+        "--duration",
+        "300ms",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let o = scatterscope_pq(&args, mock);
+    (out, o)
+}
+
+/// Every tag of a PicoQuant file, in order.
+fn ptu_tags(path: &Path) -> Vec<Tag> {
+    let (info, mut reader) = open(path).unwrap();
+    let mut decoder = Decoder::new(info.record_type);
+    let mut chunk = Vec::new();
+    let mut tags = Vec::new();
+    while reader.next_chunk(&mut chunk).unwrap() {
+        tags.extend(chunk.iter().filter_map(|&r| decoder.decode(r)));
+    }
+    tags
+}
+
+#[test]
+fn acquisition_ptu_bins_back_into_the_same_stack_for_both_families() {
+    for family in ["multiharp", "hydraharp"] {
+        let dir = tempfile::tempdir().unwrap();
+        let truth_file = dir.path().join("truth.json");
+        let mock = format!("truth={}", truth_file.display());
+        let (out, o) = acquire(dir.path(), &format!("picoquant:{family}"), &mock, &[]);
+        assert!(o.status.success(), "{family}: {}", text(&o));
+        let record = json(&out.join("acquisition.json"));
+        let t = truth(&truth_file);
+        let ledger = &record["ledger"];
+        assert_eq!(ledger["records_read"], t["records"], "{family}");
+        assert_eq!(ledger["photons"], t["photons"], "{family}");
+        assert_eq!(ledger["records_in_ptu"], t["records"], "{family}");
+        assert!(t["photons"].as_u64().unwrap() > 100_000, "{family}: {t}");
+        assert_eq!(record["stop"], "duration");
+        let binned = out.join("binned");
+        let b = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+            .args(["bin", out.join("acquisition.ptu").to_str().unwrap()])
+            .args(["--out", binned.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(b.status.success(), "{}", text(&b));
+        let live = Stack::load(&out.join("stack.exr")).unwrap();
+        let again = Stack::load(&binned.join("stack.exr")).unwrap();
+        assert_eq!(live.data.dim(), again.data.dim(), "{family}");
+        assert_eq!(live.data, again.data, "{family}: bin for bin");
+        assert_eq!(
+            live.data.sum() as u64,
+            ledger["binned"].as_u64().unwrap(),
+            "{family}"
+        );
+    }
+}
+
+#[test]
+fn every_fault_mode_ends_the_run_with_the_ledger_balanced_and_the_stack_saved() {
+    let cases = [
+        ("overrun", "FIFO overrun", "fifo_overrun"),
+        ("error", "FIFO read failed", "device_error"),
+        ("vanish", "device lost", "device_error"),
+    ];
+    for (fault, words, stop) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let truth_file = dir.path().join("truth.json");
+        let mock = format!(
+            "rate=max,fault={fault}@300000,truth={}",
+            truth_file.display()
+        );
+        let (out, o) = acquire(dir.path(), "picoquant", &mock, &[]);
+        let all = text(&o);
+        assert!(!o.status.success(), "{fault}: a fault is a failure: {all}");
+        assert!(all.contains(words), "{fault}: {all}");
+        let record = json(&out.join("acquisition.json"));
+        let stop_value = &record["stop"];
+        let stop_name = stop_value.as_str().map(String::from).unwrap_or_else(|| {
+            stop_value
+                .as_object()
+                .unwrap()
+                .keys()
+                .next()
+                .unwrap()
+                .clone()
+        });
+        assert_eq!(stop_name, stop, "{fault}");
+        let t = truth(&truth_file);
+        let ledger = &record["ledger"];
+        assert_eq!(t["records"], 300_000, "{fault}: the stand-in delivered");
+        assert_eq!(ledger["records_read"], t["records"], "{fault}");
+        assert_eq!(ledger["records_decoded"], t["records"], "{fault}");
+        assert_eq!(ledger["photons"], t["photons"], "{fault}");
+        assert_eq!(ledger["records_in_ptu"], t["records"], "{fault}");
+        let photons = ledger["photons"].as_u64().unwrap();
+        let placed: u64 = [
+            "binned",
+            "outside_window",
+            "other_channel",
+            "outside_region",
+        ]
+        .iter()
+        .map(|k| ledger[*k].as_u64().unwrap())
+        .sum();
+        assert_eq!(placed, photons, "{fault}: every photon in one place");
+        assert_eq!(ledger["fifo_overrun"], fault == "overrun");
+        let stack = Stack::load(&out.join("stack.exr")).unwrap();
+        assert_eq!(stack.data.sum() as u64, ledger["binned"].as_u64().unwrap());
+        assert_eq!(ptu_tags(&out.join("acquisition.ptu")).len() as u64, {
+            // Tags decoded from the PTU: photons and markers (overflows
+            // carry none).
+            photons + ledger["markers"].as_u64().unwrap()
+        });
+    }
+}
+
+#[test]
+fn a_scanned_acquisition_bins_into_the_scanners_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth_file = dir.path().join("truth.json");
+    let mock = format!("scan=16x12,truth={}", truth_file.display());
+    let (out, o) = acquire(
+        dir.path(),
+        "picoquant:hydraharp",
+        &mock,
+        &["--scan", "16x12", "--bins", "200", "--bin-width", "8ps"],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let t = truth(&truth_file);
+    let expected: Vec<u64> = t["pixel_photons"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    assert_eq!(expected.len(), 16 * 12);
+    let stack = Stack::load(&out.join("stack.exr")).unwrap();
+    assert_eq!(stack.data.dim().1, 12, "rows are lines");
+    assert_eq!(stack.data.dim().2, 16, "columns are points of a line");
+    let record = json(&out.join("acquisition.json"));
+    assert_eq!(
+        record["ledger"]["outside_window"], 0,
+        "the window holds every photon"
+    );
+    assert_eq!(
+        record["ledger"]["outside_region"], 0,
+        "the scan ends on whole frames"
+    );
+    for y in 0..12 {
+        for x in 0..16 {
+            let got = stack.data.slice(ndarray::s![.., y, x]).sum() as u64;
+            assert_eq!(got, expected[y * 16 + x], "pixel ({x}, {y})");
+        }
+    }
+    assert!(
+        expected.iter().max() > expected.iter().min(),
+        "the scene has structure"
+    );
+}
+
+#[test]
+fn without_a_vendor_library_the_message_names_the_files_and_the_install() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("acq");
+    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args(["acquire", "--device", "picoquant", "--duration", "100ms"])
+        .args(["--out", out.to_str().unwrap()])
+        .env_remove("SCATTERSCOPE_MHLIB")
+        .env_remove("SCATTERSCOPE_HHLIB")
+        .output()
+        .unwrap();
+    let all = text(&o);
+    assert!(!o.status.success(), "{all}");
+    for words in ["libmh150.so", "libhh400.so", "install", "--vendor-lib"] {
+        assert!(all.contains(words), "`{words}` missing: {all}");
+    }
+    assert!(!out.join("stack.exr").exists());
+    let d = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args(["devices", "--picoquant"])
+        .env_remove("SCATTERSCOPE_MHLIB")
+        .env_remove("SCATTERSCOPE_HHLIB")
+        .output()
+        .unwrap();
+    assert!(!d.status.success(), "{}", text(&d));
+    assert!(
+        text(&d).contains("/usr/local/lib64/mh150/mhlib.so"),
+        "{}",
+        text(&d)
+    );
+    let plain = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .arg("devices")
+        .env_remove("SCATTERSCOPE_MHLIB")
+        .env_remove("SCATTERSCOPE_HHLIB")
+        .output()
+        .unwrap();
+    assert!(
+        plain.status.success(),
+        "plain `devices` still lists the rest"
+    );
+    assert!(text(&plain).contains("mock-serial"));
+}
+
+#[test]
+fn devices_lists_the_standin_devices() {
+    let lib = standin_library();
+    let o = scatterscope_pq(
+        &["devices", "--json", "--vendor-lib", lib.to_str().unwrap()],
+        "devices=2",
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let list: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let addresses: Vec<&str> = list
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["address"].as_str().unwrap())
+        .collect();
+    assert!(
+        addresses.contains(&"picoquant:multiharp:1000001"),
+        "{addresses:?}"
+    );
+    assert!(
+        addresses.contains(&"picoquant:multiharp:1000002"),
+        "{addresses:?}"
+    );
+}
+
+#[test]
+fn settings_of_the_other_family_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, o) = acquire(
+        dir.path(),
+        "picoquant:hydraharp",
+        "",
+        &["--sync-edge", "rising"],
+    );
+    assert!(!o.status.success());
+    assert!(text(&o).contains("--sync-edge"), "{}", text(&o));
+    let (_, o) = acquire(
+        dir.path(),
+        "picoquant:multiharp",
+        "",
+        &["--input-level", "-5000"],
+    );
+    assert!(!o.status.success());
+    assert!(text(&o).contains("-5000 mV"), "{}", text(&o));
+}
+
+#[test]
+fn an_unwritable_ptu_is_a_clear_error_and_the_stack_is_still_saved() {
+    for (target, words) in [
+        ("/dev/full", "No space left"),
+        ("/nonexistent/dir/a.ptu", "creating"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let (out, o) = acquire(dir.path(), "picoquant", "", &["--ptu", target]);
+        let all = text(&o);
+        assert!(!o.status.success(), "{target}: {all}");
+        assert!(
+            all.contains(words) && all.contains(target),
+            "{target}: {all}"
+        );
+        let stack = Stack::load(&out.join("stack.exr")).unwrap();
+        let record = json(&out.join("acquisition.json"));
+        assert_eq!(
+            stack.data.sum() as u64,
+            record["ledger"]["binned"].as_u64().unwrap()
+        );
+        assert!(record["ledger"]["binned"].as_u64().unwrap() > 0);
+    }
+}
+
+/// Photons, markers and syncs of a PicoQuant file, as (kind, channel or
+/// bits, macro time, micro time).
+fn tag_tuples(tags: &[Tag]) -> Vec<(u8, u16, u64, u32)> {
+    tags.iter()
+        .map(|t| match *t {
+            Tag::Photon {
+                channel,
+                macro_time,
+                micro_time,
+            } => (0, channel, macro_time, micro_time),
+            Tag::Marker { bits, macro_time } => (1, u16::from(bits), macro_time, 0),
+            Tag::Sync { macro_time } => (2, 0, macro_time, 0),
+        })
+        .collect()
+}
+
+#[test]
+fn a_mock_tag_file_converts_to_ptu_photon_for_photon() {
+    let dir = tempfile::tempdir().unwrap();
+    let tags = dir.path().join("m.sstags");
+    let ptu = dir.path().join("m.ptu");
+    let run = |args: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{args:?}: {}", text(&o));
+        o
+    };
+    run(&[
+        "acquire",
+        "--size",
+        "7",
+        "--duration",
+        "300ms",
+        "--tags",
+        tags.to_str().unwrap(),
+        "--out",
+        dir.path().join("acq").to_str().unwrap(),
+    ]);
+    run(&[
+        "convert",
+        tags.to_str().unwrap(),
+        "--out",
+        ptu.to_str().unwrap(),
+    ]);
+    let mut from_tags = Vec::new();
+    TagFile::open(&tags)
+        .unwrap()
+        .read(|batch| {
+            for e in batch.events() {
+                match e.unwrap() {
+                    firmware_protocol::Event::Photon { pixel, micro, sync } => {
+                        from_tags.push((0u8, pixel, sync, micro))
+                    }
+                    firmware_protocol::Event::Marker { bits, sync } => {
+                        from_tags.push((1, u16::from(bits), sync, 0))
+                    }
+                    firmware_protocol::Event::Lost { .. } => {}
+                }
+            }
+        })
+        .unwrap();
+    let from_ptu = tag_tuples(&ptu_tags(&ptu));
+    assert!(from_tags.len() > 10_000, "{}", from_tags.len());
+    assert_eq!(from_ptu, from_tags);
+    // A sensor too large for T3 channels is refused, naming why.
+    let big = dir.path().join("big.sstags");
+    run(&[
+        "acquire",
+        "--duration",
+        "100ms",
+        "--tags",
+        big.to_str().unwrap(),
+        "--out",
+        dir.path().join("acq2").to_str().unwrap(),
+    ]);
+    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args(["convert", big.to_str().unwrap(), "--out"])
+        .arg(dir.path().join("big.ptu"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(text(&o).contains("63 input channels"), "{}", text(&o));
+}
+
+#[test]
+#[ignore = "needs ../shared/data/picoquant-sample-data"]
+fn the_shared_picoquant_samples_convert_to_ptu_photon_for_photon() {
+    let dir = tempfile::tempdir().unwrap();
+    for rel in [
+        "hydraharp/v10_t3.ptu",
+        "hydraharp/v20.ht3",
+        "hydraharp/v20_t2.ptu",
+        "hydraharp/v20_t3.ptu",
+        "picoharp/v30_t2.ptu",
+    ] {
+        let input = shared_data::shared_data(&format!("picoquant-sample-data/{rel}"));
+        let out = dir.path().join(format!("{}.ptu", rel.replace('/', "_")));
+        let c = scatterscope::tags::convert::convert_to_ptu(&input, &out, false).unwrap();
+        let (a, b) = (ptu_tags(&input), ptu_tags(&out));
+        assert!(!a.is_empty(), "{rel}");
+        assert_eq!(tag_tuples(&a), tag_tuples(&b), "{rel}");
+        assert_eq!(c.photons + c.markers + c.syncs, a.len() as u64, "{rel}");
+        let (ia, _) = open(&input).unwrap();
+        let (ib, _) = open(&out).unwrap();
+        assert_eq!(ia.record_type, ib.record_type, "{rel}");
+        assert_eq!(ia.resolution_s, ib.resolution_s, "{rel}");
+    }
+}
+
+#[test]
+#[ignore = "needs ptufile and numpy under target/pydeps (scripts/fetch_python_deps.sh)"]
+fn ptufile_decodes_the_acquisitions_records_and_histogram() {
+    let pydeps = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/pydeps");
+    for family in ["multiharp", "hydraharp"] {
+        let dir = tempfile::tempdir().unwrap();
+        let (out, o) = acquire(dir.path(), &format!("picoquant:{family}"), "", &[]);
+        assert!(o.status.success(), "{}", text(&o));
+        let ptu = out.join("acquisition.ptu");
+        let script = r#"
+import json, sys
+import numpy as np
+import ptufile
+with ptufile.PtuFile(sys.argv[1]) as p:
+    rec = p.decode_records()
+    photons = rec[rec['channel'] >= 0]
+    hist = np.bincount(photons['dtime'].astype(np.int64))
+    print(json.dumps({"records": int(p.number_records),
+                      "photons": int(len(photons)),
+                      "resolution": float(p.tcspc_resolution),
+                      "hist": hist.tolist()}))
+"#;
+        let py = Command::new("python3")
+            .arg("-c")
+            .arg(script)
+            .arg(&ptu)
+            .env("PYTHONPATH", &pydeps)
+            .output()
+            .expect("python3 runs");
+        assert!(py.status.success(), "{}", text(&py));
+        let got: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
+        let record = json(&out.join("acquisition.json"));
+        assert_eq!(got["records"], record["ledger"]["records_read"], "{family}");
+        assert_eq!(got["photons"], record["ledger"]["photons"], "{family}");
+        let res_ps = record["resolution_ps"].as_f64().unwrap();
+        assert!((got["resolution"].as_f64().unwrap() * 1e12 - res_ps).abs() < 1e-6);
+        // Our stack: one bin per micro-time unit over the sync period.
+        let stack = Stack::load(&out.join("stack.exr")).unwrap();
+        let ours: Vec<u64> = stack.data.iter().map(|&v| v as u64).collect();
+        let theirs: Vec<u64> = got["hist"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        assert!(theirs.len() <= ours.len(), "{family}");
+        assert_eq!(&ours[..theirs.len()], &theirs[..], "{family}: bin for bin");
+        assert!(ours[theirs.len()..].iter().all(|&v| v == 0), "{family}");
+    }
+}
+
+#[test]
+fn ctrl_c_ends_a_picoquant_run_with_everything_read_saved() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("acq");
+    let truth_file = dir.path().join("truth.json");
+    let lib = standin_library();
+    let child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args(["acquire", "--device", "picoquant", "--duration", "0"])
+        .args(["--vendor-lib", lib.to_str().unwrap()])
+        .args(["--out", out.to_str().unwrap()])
+        .env(
+            "SCATTERSCOPE_PQ_MOCK",
+            format!("truth={}", truth_file.display()),
+        )
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The PTU is created once the device is set up, right before Start.
+    let ptu = out.join("acquisition.ptu");
+    let t0 = std::time::Instant::now();
+    while !ptu.exists() && t0.elapsed() < std::time::Duration::from_secs(60) {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGINT,
+    )
+    .unwrap();
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(3), "{}", text(&o));
+    let record = json(&out.join("acquisition.json"));
+    assert_eq!(record["stop"], "interrupted");
+    let t = truth(&truth_file);
+    assert_eq!(record["ledger"]["records_read"], t["records"]);
+    assert_eq!(record["ledger"]["records_in_ptu"], t["records"]);
+    assert!(t["records"].as_u64().unwrap() > 100_000, "{t}");
+    let (info, _) = open(&ptu).unwrap();
+    assert_eq!(info.records_announced, t["records"].as_u64().unwrap());
+}
