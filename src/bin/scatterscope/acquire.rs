@@ -245,7 +245,12 @@ fn run_picoquant(job: &PicoQuantJob, stop: &AtomicBool) -> anyhow::Result<()> {
     let bar = progress(job.duration.map(|d| d.as_millis()));
     let done = job.run(stop, |p| {
         bar.set_position(p.elapsed.as_millis() as u64);
-        bar.set_message(format!("{} records", p.records));
+        let secs = p.elapsed.as_secs_f64().max(1e-3);
+        bar.set_message(format!(
+            "{} records ({:.1} M records/s)",
+            p.records,
+            p.records as f64 / secs / 1e6
+        ));
     })?;
     bar.finish_and_clear();
     for line in done.summary() {
