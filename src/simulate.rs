@@ -58,6 +58,9 @@ pub enum SimulateError {
     /// The scene cannot be rendered.
     #[error(transparent)]
     Scene(#[from] ImageError),
+    /// A caller's image does not fit the sensor or holds bad values.
+    #[error("{0}")]
+    Image(String),
     /// Every bin falls below the light threshold.
     #[error("no bin carries at least {min_bin_photons} expected photons")]
     NoBins {
@@ -86,6 +89,55 @@ pub fn simulate(
         });
     }
     let truth = scene.render(setup.sensor.height_px, setup.sensor.width_px)?;
+    let source = format!("simulated scene {}", scene.name());
+    through_kernels(kernels, truth, boundary, seed, psf_s, source)
+}
+
+/// Simulates the image `truth` (the sensor's `setup` size, values >= 0)
+/// as [`simulate`] does a scene; `source` names it in the stacks' records.
+pub fn simulate_image(
+    setup: &Setup,
+    truth: Array2<f64>,
+    sampling: Sampling,
+    boundary: Boundary,
+    seed: u64,
+    source: String,
+) -> Result<Simulation, SimulateError> {
+    setup.validate()?;
+    let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
+    if truth.dim() != (h, w) {
+        return Err(SimulateError::Image(format!(
+            "the image is {} x {} (rows x columns); the sensor is {h} x {w}",
+            truth.dim().0,
+            truth.dim().1
+        )));
+    }
+    if let Some(v) = truth.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+        return Err(SimulateError::Image(format!(
+            "the image holds {v}: intensities must be finite and >= 0"
+        )));
+    }
+    crate::memory::check_setup(setup, crate::memory::SIMULATE_BYTES, "a simulation")?;
+    let t = Instant::now();
+    let kernels = KernelStack::build(setup, sampling)?;
+    let psf_s = t.elapsed().as_secs_f64();
+    if kernels.is_empty() {
+        return Err(SimulateError::NoBins {
+            min_bin_photons: setup.min_bin_photons,
+        });
+    }
+    through_kernels(kernels, truth, boundary, seed, psf_s, source)
+}
+
+/// The expected and Poisson counts of `truth` through `kernels`.
+fn through_kernels(
+    kernels: KernelStack,
+    truth: Array2<f64>,
+    boundary: Boundary,
+    seed: u64,
+    psf_s: f64,
+    source: String,
+) -> Result<Simulation, SimulateError> {
     let t = Instant::now();
     let model = ForwardModel::new(&kernels, boundary);
     let spectra_s = t.elapsed().as_secs_f64();
@@ -95,7 +147,6 @@ pub fn simulate(
     let t = Instant::now();
     let counts = poisson_counts(&expected.counts, seed);
     let poisson_s = t.elapsed().as_secs_f64();
-    let source = format!("simulated scene {}", scene.name());
     let mut meta = StackMeta::simulated(&kernels, ValueKind::ExpectedCounts, source);
     meta.clamped_negative = expected.clamped as u64;
     meta.boundary = Some(boundary);

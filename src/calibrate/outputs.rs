@@ -309,11 +309,6 @@ impl SlabJob {
     /// Reads the reference and the captures, fits, and predicts.
     pub fn run(&self) -> Result<SlabCalibration, CalibrateError> {
         let reference = TimeHistogram::read(&self.irf_from, &self.dataset, self.bin_ps)?;
-        let irf = match self.irf_extent {
-            IrfExtent::Period => MeasuredIrf::from_histogram_period(&reference)?,
-            IrfExtent::Peak => MeasuredIrf::from_histogram(&reference)?,
-        };
-        let mut notes = vec![irf.describe()];
         let specs: Vec<&str> = self
             .captures
             .iter()
@@ -322,27 +317,55 @@ impl SlabJob {
             .collect();
         let (mut captures, parts) =
             read_captures(&specs, &self.dataset, self.parts.as_deref(), self.bin_ps)?;
-        notes.extend(parts.iter().map(|p| format!("parts: {p}")));
-        notes.push(format!("model: {}", self.options.describe_model(&irf)));
         let held = captures.split_off(self.captures.len());
-        let started = std::time::Instant::now();
-        let fit = fit_slab(&captures, &irf, &self.options)?;
-        let seconds = started.elapsed().as_secs_f64();
-        let prediction = if held.is_empty() {
-            None
-        } else {
-            let pred = predict_captures(&held, &irf, &fit.fixed())?;
-            Some((held, pred))
-        };
-        Ok(SlabCalibration {
-            irf,
-            notes,
+        let notes = parts.iter().map(|p| format!("parts: {p}")).collect();
+        calibrate_slab(
+            &reference,
+            self.irf_extent,
             captures,
-            fit,
-            prediction,
-            seconds,
-        })
+            held,
+            &self.options,
+            notes,
+        )
     }
+}
+
+/// Fits the medium to `captures` through the instrument response measured
+/// in `reference` (over `extent`) and predicts `held` with it: the step
+/// `calibrate-slab` runs after reading its files, for histograms from
+/// anywhere (arrays, stacks, tag files). `notes` come first in the result's.
+pub fn calibrate_slab(
+    reference: &TimeHistogram,
+    extent: IrfExtent,
+    captures: Vec<Capture>,
+    held: Vec<Capture>,
+    options: &SlabFitOptions,
+    notes: Vec<String>,
+) -> Result<SlabCalibration, CalibrateError> {
+    let irf = match extent {
+        IrfExtent::Period => MeasuredIrf::from_histogram_period(reference)?,
+        IrfExtent::Peak => MeasuredIrf::from_histogram(reference)?,
+    };
+    let mut all_notes = vec![irf.describe()];
+    all_notes.extend(notes);
+    all_notes.push(format!("model: {}", options.describe_model(&irf)));
+    let started = std::time::Instant::now();
+    let fit = fit_slab(&captures, &irf, options)?;
+    let seconds = started.elapsed().as_secs_f64();
+    let prediction = if held.is_empty() {
+        None
+    } else {
+        let pred = predict_captures(&held, &irf, &fit.fixed())?;
+        Some((held, pred))
+    };
+    Ok(SlabCalibration {
+        irf,
+        notes: all_notes,
+        captures,
+        fit,
+        prediction,
+        seconds,
+    })
 }
 
 impl SlabCalibration {

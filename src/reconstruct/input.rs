@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use ndarray::Array2;
+use ndarray::{Array2, Array3};
 
 use super::problem::{BackgroundChoice, Problem, ProblemError};
 use crate::calibrate::{CalibrateError, Free, fit_stack_physics};
@@ -94,6 +94,18 @@ pub enum InputError {
 /// says.
 pub fn load(path: &Path, spec: &InputSpec) -> Result<Input, InputError> {
     let (data, meta) = Stack::read(path)?;
+    prepare(data, meta, path, spec)
+}
+
+/// Makes counts `data` with their metadata (if any) ready to reconstruct
+/// as `spec` says; `path` names their source in messages (a file, or a
+/// caller's array).
+pub fn prepare(
+    data: Array3<f32>,
+    meta: Option<StackMeta>,
+    path: &Path,
+    spec: &InputSpec,
+) -> Result<Input, InputError> {
     let mut warnings = Vec::new();
     let mut assumed = Vec::new();
     let physics = &spec.physics;

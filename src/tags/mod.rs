@@ -12,11 +12,13 @@
 //!   call.
 //! - [`survey`]: what a recorded file holds, counted by kind.
 //! - [`convert`]: a recorded file -> PTU, photon for photon.
+//! - [`table`]: a recorded file's tags as columns (array front ends).
 
 pub mod bin_file;
 pub mod binning;
 pub mod convert;
 pub mod survey;
+pub mod table;
 pub mod wire;
 
 /// One decoded event.

@@ -1,0 +1,328 @@
+"""scatterscope: time-resolved imaging through scattering media, from Python.
+
+The same library as the ``scatterscope`` command, numpy in and out:
+
+- time tags: :func:`read_tags` (every photon of a PTU, PT3, HT3 or .sstags
+  file as columns) and :func:`bin_file` (tags -> ``(bins, rows, cols)``
+  count stacks, as ``scatterscope bin``);
+- stacks: :func:`load_stack` and :func:`save_stack` (EXR, or npy with its
+  JSON sidecar), their metadata as a dict;
+- physics: :func:`psf_kernels` (the ST-PSF kernels) and :func:`simulate`
+  (an image through the medium, with Poisson counts);
+- reconstruction: :func:`reconstruct` (every method of ``scatterscope
+  reconstruct`` by name), returning the image, the trace and the notes;
+- calibration: :func:`calibrate_slab` (a slab's mu_a and mu_s' from
+  transmittance captures);
+- acquisition: :func:`acquire_mock` (the emulated time tagger).
+
+Physics keywords use the library's units: ``mu_a`` and ``mu_s`` in 1/cm,
+``thickness_cm``, ``fov_cm``, times in ps (``bin_width_ps``,
+``t_start_ps``, ``irf_fwhm_ps``), ``size`` in pixels, ``photons``.
+Errors raise :class:`ScatterscopeError` with the library's message. Long
+calls release the GIL; Ctrl-C (KeyboardInterrupt) stops a reconstruction
+at its next iteration and an acquisition cleanly.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from . import _native
+from ._native import ScatterscopeError
+
+__all__ = [
+    "ScatterscopeError",
+    "read_tags",
+    "bin_file",
+    "load_stack",
+    "save_stack",
+    "load_image",
+    "measured_meta",
+    "psf_kernels",
+    "simulate",
+    "reconstruct",
+    "acquire_mock",
+    "calibrate_slab",
+    "__version__",
+]
+
+__version__ = _native.version()
+
+
+def _path(p: "os.PathLike[str] | str") -> str:
+    return os.fspath(p)
+
+
+def read_tags(path: "os.PathLike[str] | str") -> Dict[str, Any]:
+    """Every tag of a recorded file as numpy columns.
+
+    ``path`` is a PicoQuant file (PTU, PT3, HT3; T2 or T3) or the project's
+    tag file (``.sstags``, where ``channel`` is the sensor pixel).
+
+    Returns a dict: ``channel`` (uint16), ``macro_time`` (uint64, syncs in
+    T3), ``micro_time`` (uint32, units of ``resolution_s``) per photon;
+    ``marker_bits`` (uint8) and ``marker_time`` (uint64) per marker;
+    ``sync_time`` (uint64, T2 syncs); ``resolution_s``, ``macro_unit_s``
+    (seconds) and ``header`` (the header in words, one line each).
+    """
+    return _native.read_tags(_path(path))
+
+
+def bin_file(
+    path: "os.PathLike[str] | str",
+    bin_width_ps: Optional[float] = None,
+    t_start_ps: float = 0.0,
+    bins: Optional[int] = None,
+    channel: Optional[int] = None,
+    pixels: str = "auto",
+    frames: "str | int" = "sum",
+    allow_truncated: bool = False,
+) -> Dict[str, Any]:
+    """Bin a recorded file into transient stacks, as ``scatterscope bin``.
+
+    ``bin_width_ps`` defaults to the file's micro-time unit, ``bins`` to
+    one sync period (widened to every micro time present); ``pixels`` is
+    ``auto`` (the scanned image of imaging files, else one pixel),
+    ``single`` or ``channel``; ``frames`` is ``sum``, ``all`` or a frame
+    number.
+
+    Returns a dict: ``stacks`` (list of float32 arrays ``(bins, rows,
+    cols)``, one per kept frame), ``meta`` (their metadata dicts),
+    ``ledger`` (where every photon went: ``received = binned +
+    outside_window + other_channel + outside_region``) and ``summary`` (the
+    lines the command prints).
+    """
+    stacks, metas, ledger, summary = _native.bin_file(
+        _path(path),
+        bin_width_ps,
+        float(t_start_ps),
+        bins,
+        channel,
+        pixels,
+        str(frames),
+        allow_truncated,
+    )
+    return {
+        "stacks": list(stacks),
+        "meta": [json.loads(m) for m in metas],
+        "ledger": json.loads(ledger),
+        "summary": list(summary),
+    }
+
+
+def load_stack(path: "os.PathLike[str] | str") -> Tuple[np.ndarray, Optional[Dict[str, Any]]]:
+    """Read a stack file (EXR, or npy with its JSON sidecar).
+
+    Returns ``(data, meta)``: float32 counts ``(bins, rows, cols)`` and the
+    metadata dict (``None`` for a plain array without one).
+    """
+    data, meta = _native.load_stack(_path(path))
+    return data, (json.loads(meta) if meta is not None else None)
+
+
+def save_stack(path: "os.PathLike[str] | str", data: np.ndarray, meta: Dict[str, Any]) -> None:
+    """Write counts ``(bins, rows, cols)`` with their metadata dict.
+
+    The extension picks the format: ``.exr`` (metadata in the header) or
+    ``.npy`` (metadata in ``.json`` beside it). The library's checks apply:
+    finite, non-negative counts whose shape matches the metadata.
+    """
+    array = np.ascontiguousarray(data, dtype=np.float32)
+    if array.ndim != 3:
+        raise ScatterscopeError(f"a stack is (bins, rows, cols); this array has shape {array.shape}")
+    _native.save_stack(_path(path), array, json.dumps(meta))
+
+
+def load_image(path: "os.PathLike[str] | str") -> np.ndarray:
+    """Read a 2-D image (EXR, PNG, JPEG or npy) as float64, e.g. the
+    ``reconstruction.exr`` of ``scatterscope reconstruct``."""
+    return _native.load_image(_path(path))
+
+
+def measured_meta(t_start_ps: float, bin_width_ps: float, bins: int, source: str = "python") -> Dict[str, Any]:
+    """Metadata for measured counts: ``bins`` bins of ``bin_width_ps`` from
+    ``t_start_ps`` (no physics recorded)."""
+    return json.loads(_native.measured_meta(float(t_start_ps), float(bin_width_ps), int(bins), source))
+
+
+def psf_kernels(sampling: str = "integrated", **physics: Any) -> Dict[str, Any]:
+    """The ST-PSF kernel stack of the physics (default: the paper preset).
+
+    ``sampling`` is ``integrated`` (over pixel area and bin duration) or
+    ``point``. Returns ``kernels`` (float64 ``(kept bins, rows, cols)``),
+    ``bins`` (one dict per time bin: start, end, expected photons, kept,
+    lateral sigma) and ``setup`` (the resolved physics).
+    """
+    kernels, bins, setup = _native.psf_kernels(sampling, **physics)
+    return {"kernels": kernels, "bins": json.loads(bins), "setup": json.loads(setup)}
+
+
+def simulate(
+    image: "np.ndarray | str", seed: int = 0, boundary: str = "sensor", **physics: Any
+) -> Dict[str, Any]:
+    """Simulate an object through the medium onto the sensor.
+
+    ``image`` is a square array (rows x cols, finite, >= 0; the sensor
+    takes its size unless ``size`` is given), or the name of a built-in
+    scene (``usaf``, ``star``, ``text``, ``disks``) or an image file, as
+    ``scatterscope simulate --scene`` takes it. ``boundary`` is ``sensor``
+    (edges) or ``periodic``. Returns ``counts`` (Poisson, deterministic
+    for ``seed``) and ``expected`` (noise-free), float32 ``(bins, rows,
+    cols)``, ``meta`` (the counts' metadata, for :func:`reconstruct` and
+    :func:`save_stack`) and ``truth`` (the object on the sensor grid).
+    """
+    if isinstance(image, (str, os.PathLike)):
+        counts, expected, meta, truth = _native.simulate_scene(_path(image), int(seed), boundary, **physics)
+        return {"counts": counts, "expected": expected, "meta": json.loads(meta), "truth": truth}
+    array = np.ascontiguousarray(image, dtype=np.float64)
+    if array.ndim != 2:
+        raise ScatterscopeError(f"an image is (rows, cols); this array has shape {array.shape}")
+    counts, expected, meta = _native.simulate(array, int(seed), boundary, **physics)
+    return {"counts": counts, "expected": expected, "meta": json.loads(meta), "truth": array}
+
+
+def _trace(trace: Dict[str, Any]) -> Dict[str, Any]:
+    rows = trace.pop("rows", [])
+    keys: List[str] = sorted({k for r in rows for k in r})
+    trace["rows"] = {
+        k: np.array([np.nan if r.get(k) is None else r.get(k) for r in rows], dtype=np.float64) for k in keys
+    }
+    return trace
+
+
+def reconstruct(
+    data: np.ndarray,
+    meta: Optional[Dict[str, Any]] = None,
+    method: str = "auto",
+    bin: Optional[int] = None,
+    boundary: Optional[str] = None,
+    background: str = "auto",
+    denoiser: str = "ffdnet",
+    weights: "os.PathLike[str] | str | None" = None,
+    tv_gain: float = 0.5,
+    solver: str = "split",
+    max_iters: Optional[int] = None,
+    **physics: Any,
+) -> Tuple[np.ndarray, Dict[str, Any], List[str]]:
+    """Reconstruct the object from counts, as ``scatterscope reconstruct``.
+
+    ``data`` is ``(bins, rows, cols)`` photon counts and ``meta`` their
+    metadata (from :func:`simulate`, :func:`bin_file` or
+    :func:`load_stack`); without it the physics keywords describe the
+    counts. ``method`` is one of ``auto`` (the default: ``rl-stack`` or PnP,
+    chosen by PnP's output deviance), ``pnp``, ``pnp-sum``, ``pnp-slice``,
+    ``rl``, ``rl-sum``, ``rl-stack``, ``scaled-counts`` (the single-bin
+    methods need ``bin``). ``denoiser`` (``ffdnet``, ``tv``, ``identity``),
+    ``weights``, ``tv_gain`` and ``solver`` (``split``, ``admm-lbfgs``) are
+    the CLI's flags of the same names; ``background`` is ``auto``, ``none``
+    or counts per pixel and bin.
+
+    Returns ``(image, trace, notes)``: the float64 image, the trace
+    (``method``, ``prior``, ``wall_s`` and ``rows``: per-iteration arrays
+    such as ``wall_s``, ``deviance``, ``objective``; NaN where a method has
+    none) and the notes (what was assumed and left out, the stop).
+    Ctrl-C stops it at the next iteration.
+    """
+    array = np.ascontiguousarray(data, dtype=np.float32)
+    if array.ndim != 3:
+        raise ScatterscopeError(f"counts are (bins, rows, cols); this array has shape {array.shape}")
+    image, trace, notes = _native.reconstruct(
+        array,
+        None if meta is None else json.dumps(meta),
+        method,
+        bin,
+        boundary,
+        str(background),
+        denoiser,
+        None if weights is None else _path(weights),
+        float(tv_gain),
+        solver,
+        max_iters,
+        **physics,
+    )
+    return image, _trace(json.loads(trace)), list(notes)
+
+
+def acquire_mock(
+    duration_s: float,
+    out: "os.PathLike[str] | str",
+    scene: str = "usaf",
+    rate_hz: float = 2e6,
+    dark_rate_hz: float = 0.0,
+    seed: int = 0,
+    **physics: Any,
+) -> Dict[str, Any]:
+    """Acquire from the emulated time tagger for ``duration_s`` seconds.
+
+    The mock samples photons from the ST-PSF of ``scene`` (``usaf``,
+    ``star``, ``text``, ``disks`` or an image file) through the physics;
+    ``out`` receives the command's files (stack, record, contact sheet).
+    Returns ``stack`` (float32 ``(bins, rows, cols)``), ``meta``, ``record``
+    (the acquisition's record: device, photon accounting, why it ended) and
+    ``summary`` (the lines ``scatterscope acquire`` prints). Ctrl-C ends it
+    cleanly, then raises KeyboardInterrupt.
+    """
+    stack, meta, record, summary = _native.acquire_mock(
+        float(duration_s), _path(out), scene, float(rate_hz), float(dark_rate_hz), int(seed), **physics
+    )
+    return {"stack": stack, "meta": json.loads(meta), "record": json.loads(record), "summary": list(summary)}
+
+
+def calibrate_slab(
+    reference: Any,
+    captures: List[Tuple[Any, float]],
+    refractive_index: float,
+    predict: Optional[List[Tuple[Any, float]]] = None,
+    bin_ps: Optional[float] = None,
+    dataset: str = "out",
+    irf_extent: str = "period",
+    mu_a: float = 0.01,
+    mu_s: float = 5.0,
+    fit: Tuple[str, ...] = ("mu_a", "mu_s"),
+    offset_cm: float = 0.0,
+    rising_edge_share: Optional[float] = None,
+) -> Dict[str, Any]:
+    """Fit a slab's absorption and reduced scattering to transmittance
+    captures, as ``scatterscope calibrate-slab``.
+
+    ``reference`` is the instrument response measured without the slab and
+    each capture a ``(histogram, thickness_cm)`` pair; a histogram is a file
+    (MATLAB dataset ``dataset``, a stack, a tag file) or a 1-D array of
+    counts (then ``bin_ps`` is needed). ``predict`` captures are left out of
+    the fit and predicted with the fitted medium. ``fit`` names the free
+    parameters (``mu_a``, ``mu_s``, ``offset``); ``mu_a`` and ``mu_s`` (1/cm)
+    are their starts or fixed values.
+
+    Returns ``mu_a_per_cm``, ``mu_s_reduced_per_cm`` and ``offset_cm`` (each
+    ``value``, ``standard_error``, ``fitted``), ``chi2_per_dof``,
+    ``seconds``, ``lines`` (what the command prints) and ``medium_toml``
+    (the file ``scatterscope hidden --medium`` reads).
+    """
+
+    def arg(h: Any) -> Any:
+        if isinstance(h, (str, os.PathLike)):
+            return _path(h)
+        return np.ascontiguousarray(h, dtype=np.float64)
+
+    kwargs: Dict[str, Any] = {}
+    if rising_edge_share is not None:
+        kwargs["rising_edge_share"] = float(rising_edge_share)
+    out = _native.calibrate_slab(
+        arg(reference),
+        [(arg(h), float(t)) for h, t in captures],
+        float(refractive_index),
+        [(arg(h), float(t)) for h, t in (predict or [])],
+        bin_ps,
+        dataset,
+        irf_extent,
+        float(mu_a),
+        float(mu_s),
+        list(fit),
+        float(offset_cm),
+        **kwargs,
+    )
+    return json.loads(out)

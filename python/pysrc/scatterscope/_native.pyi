@@ -1,0 +1,65 @@
+"""Type stubs of the compiled module; the documented API is `scatterscope`."""
+
+from typing import Any, Dict, List, Optional, Tuple
+
+import numpy as np
+
+class ScatterscopeError(Exception):
+    """An error of the scatterscope library; its message names the file, field and value."""
+
+def version() -> str: ...
+def read_tags(path: str) -> Dict[str, Any]: ...
+def bin_file(
+    path: str,
+    bin_width_ps: Optional[float] = ...,
+    t_start_ps: float = ...,
+    bins: Optional[int] = ...,
+    channel: Optional[int] = ...,
+    pixels: str = ...,
+    frames: str = ...,
+    allow_truncated: bool = ...,
+) -> Tuple[List[np.ndarray], List[str], str, List[str]]: ...
+def load_stack(path: str) -> Tuple[np.ndarray, Optional[str]]: ...
+def load_image(path: str) -> np.ndarray: ...
+def save_stack(path: str, data: np.ndarray, meta_json: str) -> None: ...
+def measured_meta(t_start_ps: float, bin_width_ps: float, bins: int, source: str) -> str: ...
+def psf_kernels(sampling: str = ..., **physics: Any) -> Tuple[np.ndarray, str, str]: ...
+def simulate(image: np.ndarray, seed: int = ..., boundary: str = ..., **physics: Any) -> Tuple[np.ndarray, np.ndarray, str]: ...
+def simulate_scene(scene: str, seed: int = ..., boundary: str = ..., **physics: Any) -> Tuple[np.ndarray, np.ndarray, str, np.ndarray]: ...
+def reconstruct(
+    data: np.ndarray,
+    meta_json: Optional[str] = ...,
+    method: str = ...,
+    bin: Optional[int] = ...,
+    boundary: Optional[str] = ...,
+    background: str = ...,
+    denoiser: str = ...,
+    weights: Optional[str] = ...,
+    tv_gain: float = ...,
+    solver: str = ...,
+    max_iters: Optional[int] = ...,
+    **physics: Any,
+) -> Tuple[np.ndarray, str, List[str]]: ...
+def acquire_mock(
+    duration_s: float,
+    out: str,
+    scene: str = ...,
+    rate_hz: float = ...,
+    dark_rate_hz: float = ...,
+    seed: int = ...,
+    **physics: Any,
+) -> Tuple[np.ndarray, str, str, List[str]]: ...
+def calibrate_slab(
+    reference: Any,
+    captures: List[Tuple[Any, float]],
+    refractive_index: float,
+    predict: List[Tuple[Any, float]] = ...,
+    bin_ps: Optional[float] = ...,
+    dataset: str = ...,
+    irf_extent: str = ...,
+    mu_a: float = ...,
+    mu_s: float = ...,
+    fit: List[str] = ...,
+    offset_cm: float = ...,
+    rising_edge_share: float = ...,
+) -> str: ...

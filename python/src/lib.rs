@@ -1,0 +1,658 @@
+//! `scatterscope._native`: the library's functions over numpy arrays. The
+//! Python package (`pysrc/scatterscope`) wraps these in documented
+//! functions; this module only converts (arrays, dicts as JSON, names) and
+//! calls the library, releasing the GIL for the work and turning errors
+//! into `ScatterscopeError` with the library's message.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use ndarray::{Array2, Array3};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
+use pyo3::exceptions::{PyException, PyKeyError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use scatterscope::Named;
+use scatterscope::calibrate::histogram::TimeHistogram;
+use scatterscope::calibrate::outputs::{IrfExtent, calibrate_slab as lib_calibrate_slab};
+use scatterscope::calibrate::transmittance::{Capture, RISING_EDGE_CONVENTION, SlabFitOptions};
+use scatterscope::config::PhysicsOverrides;
+use scatterscope::denoise::prior::{PriorKind, PriorSpec};
+use scatterscope::forward::Boundary;
+use scatterscope::physics::{KernelStack, MediumModel, Preset, Sampling};
+use scatterscope::reconstruct::input::{InputSpec, prepare};
+use scatterscope::reconstruct::method::{Method, MethodOptions, Solver, run_method};
+use scatterscope::reconstruct::problem::BackgroundChoice;
+use scatterscope::stack::{Stack, StackMeta};
+use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file as lib_bin_file};
+use scatterscope::tags::binning::FrameSelect;
+
+pyo3::create_exception!(
+    _native,
+    ScatterscopeError,
+    PyException,
+    "An error of the scatterscope library; its message names the file, field and value."
+);
+
+/// The error and its sources, as one exception.
+fn err<E: std::error::Error>(e: E) -> PyErr {
+    ScatterscopeError::new_err(err_text(&e))
+}
+
+fn msg(text: impl Into<String>) -> PyErr {
+    ScatterscopeError::new_err(text.into())
+}
+
+/// A computation abandoned because Python asked (KeyboardInterrupt).
+struct Cancelled;
+
+/// Runs `work` on its own thread with the GIL released, checking Python's
+/// signals every 50 ms. On KeyboardInterrupt `cancel` is set; work that
+/// watches it ends early, and the interrupt is raised once it has.
+fn interruptible<T: Send + 'static>(
+    py: Python<'_>,
+    cancel: Arc<AtomicBool>,
+    work: impl FnOnce() -> T + Send + 'static,
+) -> PyResult<T> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work));
+        let _ = tx.send(out);
+    });
+    let mut interrupt: Option<PyErr> = None;
+    let mut rx = rx;
+    loop {
+        // The receiver goes into the GIL-free wait and comes back.
+        let (got, back) = py.detach(move || (rx.recv_timeout(Duration::from_millis(50)), rx));
+        rx = back;
+        match got {
+            Ok(Ok(v)) => {
+                return match interrupt {
+                    Some(e) => Err(e),
+                    None => Ok(v),
+                };
+            }
+            Ok(Err(payload)) => {
+                if payload.is::<Cancelled>() {
+                    return Err(interrupt.unwrap_or_else(|| msg("cancelled")));
+                }
+                let text = payload
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| payload.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_else(|| "unknown".into());
+                return Err(msg(format!("internal error (please report): {text}")));
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                if interrupt.is_none()
+                    && let Err(e) = py.check_signals()
+                {
+                    cancel.store(true, Ordering::Relaxed);
+                    interrupt = Some(e);
+                }
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                return Err(msg("the worker thread ended without a result"));
+            }
+        }
+    }
+}
+
+/// The physics overrides named in `kw` (the CLI's physics flags, in the
+/// library's units: 1/cm, cm, ps, pixels, photons); unknown keys are an
+/// error naming them.
+fn overrides(kw: Option<&Bound<'_, PyDict>>) -> PyResult<PhysicsOverrides> {
+    let mut o = PhysicsOverrides::default();
+    let Some(kw) = kw else { return Ok(o) };
+    for (key, value) in kw.iter() {
+        let key: String = key.extract()?;
+        if value.is_none() {
+            continue;
+        }
+        let f = || value.extract::<f64>();
+        let u = || value.extract::<usize>();
+        match key.as_str() {
+            "preset" => {
+                let name: String = value.extract()?;
+                o.preset = Some(
+                    Preset::ALL
+                        .iter()
+                        .copied()
+                        .find(|p| p.name() == name)
+                        .ok_or_else(|| msg(format!("preset `{name}`: use paper")))?,
+                );
+            }
+            "config" => o.config = Some(PathBuf::from(value.extract::<String>()?)),
+            "mu_a" => o.mu_a = Some(f()?),
+            "mu_s" => o.mu_s = Some(f()?),
+            "g" => o.g = Some(f()?),
+            "n" => o.n = Some(f()?),
+            "thickness_cm" => o.thickness = Some(f()?),
+            "medium" => {
+                let name: String = value.extract()?;
+                o.medium = Some(
+                    MediumModel::ALL
+                        .iter()
+                        .copied()
+                        .find(|m| m.name() == name)
+                        .ok_or_else(|| msg(format!("medium `{name}`: use infinite or slab")))?,
+                );
+            }
+            "fov_cm" => o.fov = Some(f()?),
+            "size" => o.size = Some(u()?),
+            "bin_width_ps" => o.bin_width = Some(f()?),
+            "t_start_ps" => o.t_start = Some(f()?),
+            "bins" => o.bins = Some(u()?),
+            "photons" => o.photons = Some(f()?),
+            "min_bin_photons" => o.min_bin_photons = Some(f()?),
+            "irf_fwhm_ps" => o.irf_fwhm = Some(f()?),
+            "irf_tail_ps" => o.irf_tail = Some(f()?),
+            "irf_from" => o.irf_from = Some(PathBuf::from(value.extract::<String>()?)),
+            "irf_parametric" => o.irf_parametric = value.extract()?,
+            "irf_bin_ps" => o.irf_bin_ps = Some(f()?),
+            other => {
+                return Err(PyKeyError::new_err(format!(
+                    "unknown physics keyword `{other}` (known: preset, config, mu_a, mu_s, g, n, thickness_cm, medium, fov_cm, size, bin_width_ps, t_start_ps, bins, photons, min_bin_photons, irf_fwhm_ps, irf_tail_ps, irf_from, irf_parametric, irf_bin_ps)"
+                )));
+            }
+        }
+    }
+    Ok(o)
+}
+
+fn named<T: Named>(what: &str, name: &str) -> PyResult<T> {
+    T::from_name(name).ok_or_else(|| {
+        msg(format!(
+            "{what} `{name}`: use one of {}",
+            T::names().collect::<Vec<_>>().join(", ")
+        ))
+    })
+}
+
+fn to_json<T: serde::Serialize>(v: &T) -> String {
+    serde_json::to_string(v).expect("the library's records serialise")
+}
+
+/// Every tag of a recorded file as columns.
+#[pyfunction]
+fn read_tags<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>> {
+    let table = py
+        .detach(|| scatterscope::tags::table::read_tags(&path))
+        .map_err(err)?;
+    let d = PyDict::new(py);
+    d.set_item("channel", PyArray1::from_vec(py, table.channel))?;
+    d.set_item("macro_time", PyArray1::from_vec(py, table.macro_time))?;
+    d.set_item("micro_time", PyArray1::from_vec(py, table.micro_time))?;
+    d.set_item("marker_bits", PyArray1::from_vec(py, table.marker_bits))?;
+    d.set_item("marker_time", PyArray1::from_vec(py, table.marker_time))?;
+    d.set_item("sync_time", PyArray1::from_vec(py, table.sync_time))?;
+    d.set_item("resolution_s", table.resolution_s)?;
+    d.set_item("macro_unit_s", table.macro_unit_s)?;
+    d.set_item("header", table.header)?;
+    Ok(d)
+}
+
+/// Bins a recorded file: (stacks, metadata JSON per stack, ledger JSON,
+/// summary lines).
+#[pyfunction]
+#[pyo3(signature = (path, bin_width_ps=None, t_start_ps=0.0, bins=None, channel=None, pixels="auto", frames="sum", allow_truncated=false))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn bin_file<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    bin_width_ps: Option<f64>,
+    t_start_ps: f64,
+    bins: Option<usize>,
+    channel: Option<u16>,
+    pixels: &str,
+    frames: &str,
+    allow_truncated: bool,
+) -> PyResult<(
+    Vec<Bound<'py, PyArray3<f32>>>,
+    Vec<String>,
+    String,
+    Vec<String>,
+)> {
+    let spec = BinSpec {
+        bin_width_ps,
+        t_start_ps,
+        bins,
+        channel,
+        pixels: named::<Pixels>("pixels", pixels)?,
+        frames: frames.parse::<FrameSelect>().map_err(msg)?,
+        allow_truncated,
+    };
+    let binned = py.detach(|| lib_bin_file(&path, &spec)).map_err(err)?;
+    let summary = binned.summary();
+    let ledger = to_json(&binned.accounting);
+    let mut arrays = Vec::new();
+    let mut metas = Vec::new();
+    for stack in binned.stacks {
+        metas.push(to_json(&stack.meta));
+        arrays.push(stack.data.into_pyarray(py));
+    }
+    Ok((arrays, metas, ledger, summary))
+}
+
+/// A stack file's counts and metadata JSON (None for a plain array).
+#[pyfunction]
+fn load_stack<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+) -> PyResult<(Bound<'py, PyArray3<f32>>, Option<String>)> {
+    let (data, meta) = py.detach(|| Stack::read(&path)).map_err(err)?;
+    if let Some(m) = &meta {
+        // The same checks as every reader of the library.
+        Stack::from_parts(data.clone(), m.clone(), &path).map_err(err)?;
+    }
+    Ok((data.into_pyarray(py), meta.map(|m| to_json(&m))))
+}
+
+/// A 2-D image (EXR, PNG, npy, ...), e.g. a reconstruction.
+#[pyfunction]
+fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let img = py
+        .detach(|| scatterscope::formats::image::read_image(&path))
+        .map_err(err)?;
+    Ok(img.into_pyarray(py))
+}
+
+/// Writes counts with their metadata (JSON) as EXR or npy + JSON.
+#[pyfunction]
+fn save_stack(
+    py: Python<'_>,
+    path: PathBuf,
+    data: PyReadonlyArray3<'_, f32>,
+    meta_json: &str,
+) -> PyResult<()> {
+    let meta: StackMeta = serde_json::from_str(meta_json)
+        .map_err(|e| msg(format!("{}: the metadata: {e}", path.display())))?;
+    let stack = Stack::from_parts(data.as_array().to_owned(), meta, &path).map_err(err)?;
+    py.detach(|| stack.save(&path)).map_err(err)
+}
+
+/// Metadata JSON of measured counts in `bins` bins of `bin_width_ps` from
+/// `t_start_ps` (no physics recorded).
+#[pyfunction]
+fn measured_meta(t_start_ps: f64, bin_width_ps: f64, bins: usize, source: String) -> String {
+    to_json(&StackMeta::measured(
+        t_start_ps,
+        bin_width_ps,
+        bins,
+        source,
+        None,
+    ))
+}
+
+/// The ST-PSF kernels of the physics: (kernels (bins, rows, cols), bin
+/// table JSON, the setup JSON).
+#[pyfunction]
+#[pyo3(signature = (sampling="integrated", **physics))]
+fn psf_kernels<'py>(
+    py: Python<'py>,
+    sampling: &str,
+    physics: Option<&Bound<'py, PyDict>>,
+) -> PyResult<(Bound<'py, PyArray3<f64>>, String, String)> {
+    let setup = overrides(physics)?.resolve().map_err(err)?;
+    let sampling = named::<Sampling>("sampling", sampling)?;
+    let k = py
+        .detach(|| KernelStack::build(&setup, sampling))
+        .map_err(err)?;
+    let bins = to_json(&k.bins);
+    let setup = to_json(&k.setup);
+    Ok((k.kernels.into_pyarray(py), bins, setup))
+}
+
+/// Simulates an image: (counts, expected counts, metadata JSON of the
+/// counts).
+#[pyfunction]
+#[pyo3(signature = (image, seed=0, boundary="sensor", **physics))]
+#[allow(clippy::type_complexity)]
+fn simulate<'py>(
+    py: Python<'py>,
+    image: PyReadonlyArray2<'py, f64>,
+    seed: u64,
+    boundary: &str,
+    physics: Option<&Bound<'py, PyDict>>,
+) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray3<f32>>, String)> {
+    let mut o = overrides(physics)?;
+    let truth: Array2<f64> = image.as_array().to_owned();
+    let (h, w) = truth.dim();
+    if h != w {
+        return Err(msg(format!(
+            "the image is {h} x {w}: the sensor is square (give a square image)"
+        )));
+    }
+    o.size.get_or_insert(h);
+    let setup = o.resolve().map_err(err)?;
+    let boundary = named::<Boundary>("boundary", boundary)?;
+    let sim = py
+        .detach(|| {
+            scatterscope::simulate::simulate_image(
+                &setup,
+                truth,
+                Sampling::Integrated,
+                boundary,
+                seed,
+                "an array from Python".into(),
+            )
+        })
+        .map_err(err)?;
+    let meta = to_json(&sim.counts.meta);
+    Ok((
+        sim.counts.data.into_pyarray(py),
+        sim.expected.data.into_pyarray(py),
+        meta,
+    ))
+}
+
+/// Simulates a built-in scene or an image file (as `scatterscope
+/// simulate --scene`): (counts, expected counts, metadata JSON, truth).
+#[pyfunction]
+#[pyo3(signature = (scene, seed=0, boundary="sensor", **physics))]
+#[allow(clippy::type_complexity)]
+fn simulate_scene<'py>(
+    py: Python<'py>,
+    scene: &str,
+    seed: u64,
+    boundary: &str,
+    physics: Option<&Bound<'py, PyDict>>,
+) -> PyResult<(
+    Bound<'py, PyArray3<f32>>,
+    Bound<'py, PyArray3<f32>>,
+    String,
+    Bound<'py, PyArray2<f64>>,
+)> {
+    let setup = overrides(physics)?.resolve().map_err(err)?;
+    let boundary = named::<Boundary>("boundary", boundary)?;
+    let scene = scatterscope::scene::Scene::parse(scene);
+    let sim = py
+        .detach(|| {
+            scatterscope::simulate::simulate(&setup, &scene, Sampling::Integrated, boundary, seed)
+        })
+        .map_err(err)?;
+    let meta = to_json(&sim.counts.meta);
+    Ok((
+        sim.counts.data.into_pyarray(py),
+        sim.expected.data.into_pyarray(py),
+        meta,
+        sim.truth.into_pyarray(py),
+    ))
+}
+
+/// Reconstructs counts: (image, trace JSON, notes).
+#[pyfunction]
+#[pyo3(signature = (data, meta_json=None, method="auto", bin=None, boundary=None, background="auto", denoiser="ffdnet", weights=None, tv_gain=0.5, solver="split", max_iters=None, **physics))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn reconstruct<'py>(
+    py: Python<'py>,
+    data: PyReadonlyArray3<'py, f32>,
+    meta_json: Option<&str>,
+    method: &str,
+    bin: Option<usize>,
+    boundary: Option<&str>,
+    background: &str,
+    denoiser: &str,
+    weights: Option<PathBuf>,
+    tv_gain: f64,
+    solver: &str,
+    max_iters: Option<usize>,
+    physics: Option<&Bound<'py, PyDict>>,
+) -> PyResult<(Bound<'py, PyArray2<f64>>, String, Vec<String>)> {
+    let meta: Option<StackMeta> = meta_json
+        .map(serde_json::from_str)
+        .transpose()
+        .map_err(|e| msg(format!("the metadata: {e}")))?;
+    let spec = InputSpec {
+        physics: overrides(physics)?,
+        fit_physics: None,
+        boundary: boundary
+            .map(|b| named::<Boundary>("boundary", b))
+            .transpose()?,
+        background: BackgroundChoice::parse(background).map_err(msg)?,
+    };
+    let method = named::<Method>("method", method)?;
+    if method.needs_bin() && bin.is_none() {
+        return Err(msg(format!("method {} needs bin=K", method.name())));
+    }
+    let prior = PriorSpec {
+        kind: named::<PriorKind>("denoiser", denoiser)?,
+        weights,
+        tv_gain,
+    };
+    let mut opts = MethodOptions {
+        solver: named::<Solver>("solver", solver)?,
+        ..MethodOptions::default()
+    };
+    if let Some(m) = max_iters {
+        opts.split.max_iters = m;
+        opts.admm_lbfgs.max_iters = m;
+    }
+    let data: Array3<f32> = data.as_array().to_owned();
+    let cancel = Arc::new(AtomicBool::new(false));
+    let watch = cancel.clone();
+    let done = interruptible(py, cancel, move || -> Result<_, String> {
+        let text = |e: &dyn std::error::Error| err_text(e);
+        let input =
+            prepare(data, meta, Path::new("<array from Python>"), &spec).map_err(|e| text(&e))?;
+        let denoiser = prior.build().map_err(|e| text(&e))?;
+        let mut result = run_method(
+            &input.problem,
+            method,
+            bin,
+            denoiser.as_ref(),
+            &opts,
+            None,
+            |_| {
+                if watch.load(Ordering::Relaxed) {
+                    std::panic::resume_unwind(Box::new(Cancelled));
+                }
+            },
+        )
+        .map_err(|e| text(&e))?;
+        // As the CLI's record: what was assumed first, then the method's.
+        result.trace.notes.splice(0..0, input.assumed);
+        let mut notes = input.warnings;
+        notes.extend(result.trace.notes.iter().cloned());
+        Ok((result.image, to_json(&result.trace), notes))
+    })?;
+    let (image, trace, notes) = done.map_err(msg)?;
+    Ok((image.into_pyarray(py), trace, notes))
+}
+
+/// The error and its sources, as one message.
+fn err_text(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        let more = s.to_string();
+        if !text.contains(&more) {
+            text.push_str(&format!(": {more}"));
+        }
+        source = s.source();
+    }
+    text
+}
+
+/// Acquires from the emulated device: (stack, metadata JSON, record JSON,
+/// summary lines).
+#[pyfunction]
+#[pyo3(signature = (duration_s, out, scene="usaf", rate_hz=2e6, dark_rate_hz=0.0, seed=0, **physics))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn acquire_mock<'py>(
+    py: Python<'py>,
+    duration_s: f64,
+    out: PathBuf,
+    scene: &str,
+    rate_hz: f64,
+    dark_rate_hz: f64,
+    seed: u64,
+    physics: Option<&Bound<'py, PyDict>>,
+) -> PyResult<(Bound<'py, PyArray3<f32>>, String, String, Vec<String>)> {
+    use scatterscope::acquire::{DeviceSpec, Job, MockJob, TimeZero};
+    if !(duration_s.is_finite() && duration_s > 0.0) {
+        return Err(msg(format!(
+            "duration_s = {duration_s}: give a positive number of seconds"
+        )));
+    }
+    let setup = overrides(physics)?.resolve().map_err(err)?;
+    let job = Job {
+        device: DeviceSpec::Mock,
+        setup,
+        t0: TimeZero::At(0.0),
+        region: None,
+        duration: Some(Duration::from_secs_f64(duration_s)),
+        resolution_ps: None,
+        tag_file: None,
+        software: format!("scatterscope python {}", env!("CARGO_PKG_VERSION")),
+        mock: MockJob {
+            scene: scatterscope::scene::Scene::parse(scene),
+            emitter: scatterscope_mocks::EmitterOptions {
+                rate_hz,
+                dark_rate_hz,
+                seed,
+                ..scatterscope_mocks::EmitterOptions::default()
+            },
+            device: scatterscope_mocks::MockOptions::default(),
+        },
+        out,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let done = interruptible(py, stop, move || {
+        job.run(&flag, |_| {}).map_err(|e| err_text(&e))
+    })?
+    .map_err(msg)?;
+    let record = done
+        .files
+        .iter()
+        .find(|f| f.ends_with("acquisition.json"))
+        .and_then(|f| std::fs::read_to_string(f).ok())
+        .unwrap_or_else(|| "{}".into());
+    let summary = done.summary();
+    let meta = to_json(&done.stack.meta);
+    Ok((done.stack.data.into_pyarray(py), meta, record, summary))
+}
+
+/// One histogram argument: a file (MATLAB, stack, tag file) or a 1-D
+/// array of counts with `bin_ps`.
+fn histogram(
+    value: &Bound<'_, PyAny>,
+    dataset: &str,
+    bin_ps: Option<f64>,
+    label: &str,
+) -> PyResult<TimeHistogram> {
+    if let Ok(path) = value.extract::<PathBuf>() {
+        return TimeHistogram::read(&path, dataset, bin_ps).map_err(err);
+    }
+    let counts: Vec<f64> = value
+        .extract::<numpy::PyReadonlyArray1<'_, f64>>()
+        .map(|a| a.as_array().to_vec())
+        .or_else(|_| value.extract::<Vec<f64>>())
+        .map_err(|_| {
+            msg(format!(
+                "{label}: give a file path or a 1-D array of counts"
+            ))
+        })?;
+    let bin_ps = bin_ps.ok_or_else(|| msg(format!("{label}: an array of counts needs bin_ps")))?;
+    TimeHistogram::new(counts, bin_ps, 0.0, Path::new(label)).map_err(err)
+}
+
+/// Fits a slab's mu_a and mu_s' to transmittance captures: (result JSON
+/// with the estimates, lines, medium.toml text).
+#[pyfunction]
+#[pyo3(signature = (reference, captures, refractive_index, predict=Vec::new(), bin_ps=None, dataset="out", irf_extent="period", mu_a=0.01, mu_s=5.0, fit=vec!["mu_a".to_string(), "mu_s".to_string()], offset_cm=0.0, rising_edge_share=RISING_EDGE_CONVENTION))]
+#[allow(clippy::too_many_arguments)]
+fn calibrate_slab<'py>(
+    py: Python<'py>,
+    reference: &Bound<'py, PyAny>,
+    captures: Vec<(Bound<'py, PyAny>, f64)>,
+    refractive_index: f64,
+    predict: Vec<(Bound<'py, PyAny>, f64)>,
+    bin_ps: Option<f64>,
+    dataset: &str,
+    irf_extent: &str,
+    mu_a: f64,
+    mu_s: f64,
+    fit: Vec<String>,
+    offset_cm: f64,
+    rising_edge_share: f64,
+) -> PyResult<String> {
+    let reference = histogram(reference, dataset, bin_ps, "reference")?;
+    let read = |list: &[(Bound<'py, PyAny>, f64)], what: &str| -> PyResult<Vec<Capture>> {
+        list.iter()
+            .enumerate()
+            .map(|(i, (h, thickness_cm))| {
+                let label = match h.extract::<PathBuf>() {
+                    Ok(p) => p
+                        .file_stem()
+                        .map_or(format!("{what} {i}"), |s| s.to_string_lossy().into_owned()),
+                    Err(_) => format!("{what} {i}"),
+                };
+                Ok(Capture {
+                    histogram: histogram(h, dataset, bin_ps, &label)?,
+                    thickness_cm: *thickness_cm,
+                    label,
+                })
+            })
+            .collect()
+    };
+    let fitted = read(&captures, "capture")?;
+    let held = read(&predict, "predicted")?;
+    let mut options = SlabFitOptions {
+        refractive_index,
+        mu_a_per_cm: mu_a,
+        mu_s_reduced_per_cm: mu_s,
+        fit_mu_a: false,
+        fit_mu_s_reduced: false,
+        offset_cm,
+        fit_offset: false,
+        rising_edge_share,
+    };
+    options.free_named(&fit).map_err(err)?;
+    let extent = named::<IrfExtent>("irf_extent", irf_extent)?;
+    let done = py
+        .detach(|| lib_calibrate_slab(&reference, extent, fitted, held, &options, Vec::new()))
+        .map_err(err)?;
+    let f = &done.fit;
+    let est = |e: &scatterscope::calibrate::transmittance::MediumEstimate| serde_json::json!({"value": e.value, "standard_error": e.standard_error, "fitted": e.fitted});
+    let out = serde_json::json!({
+        "mu_a_per_cm": est(&f.mu_a),
+        "mu_s_reduced_per_cm": est(&f.mu_s_reduced),
+        "offset_cm": est(&f.offset),
+        "refractive_index": f.refractive_index,
+        "chi2_per_dof": f.chi2_per_dof,
+        "seconds": done.seconds,
+        "lines": done.lines(),
+        "medium_toml": done.medium_toml(),
+    });
+    Ok(out.to_string())
+}
+
+/// The library's version.
+#[pyfunction]
+fn version() -> &'static str {
+    env!("CARGO_PKG_VERSION")
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("ScatterscopeError", m.py().get_type::<ScatterscopeError>())?;
+    m.add_function(wrap_pyfunction!(read_tags, m)?)?;
+    m.add_function(wrap_pyfunction!(bin_file, m)?)?;
+    m.add_function(wrap_pyfunction!(load_stack, m)?)?;
+    m.add_function(wrap_pyfunction!(save_stack, m)?)?;
+    m.add_function(wrap_pyfunction!(load_image, m)?)?;
+    m.add_function(wrap_pyfunction!(measured_meta, m)?)?;
+    m.add_function(wrap_pyfunction!(psf_kernels, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
+    m.add_function(wrap_pyfunction!(acquire_mock, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate_slab, m)?)?;
+    m.add_function(wrap_pyfunction!(version, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,257 @@
+"""The Python package against the command line on the same input, round
+trips through numpy, the shared PicoQuant samples against ptufile, and
+errors as exceptions with the library's message.
+
+The command is $SCATTERSCOPE_CLI, else this repository's
+target/release/scatterscope, built with cargo the first time it is missing
+(a fresh clone: `pip install ./python` needs the Rust toolchain anyway).
+Tests that need ../shared or ptufile skip with the reason when they are
+absent (CI has both).
+"""
+
+import json
+import os
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import scatterscope
+from scatterscope import ScatterscopeError
+
+REPO = Path(__file__).resolve().parents[2]
+SHARED = REPO.parent / "shared" / "data"
+SAMPLES = SHARED / "picoquant-sample-data"
+
+
+def cli_path() -> Path:
+    env = os.environ.get("SCATTERSCOPE_CLI")
+    if env:
+        return Path(env)
+    p = REPO / "target" / "release" / "scatterscope"
+    if not p.exists():
+        built = subprocess.run(
+            ["cargo", "build", "--release", "--bin", "scatterscope"], cwd=REPO, capture_output=True, text=True
+        )
+        assert built.returncode == 0, "building the command for the comparisons failed:\n" + built.stderr
+    return p
+
+
+def cli(*args: str) -> str:
+    out = subprocess.run([str(cli_path()), *args], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr
+    return out.stdout
+
+
+def need_samples() -> None:
+    if not SAMPLES.exists():
+        pytest.skip(f"needs {SAMPLES} (the shared PicoQuant samples)")
+
+
+def mock_ptu(tmp_path: Path) -> Path:
+    """A PTU of a mock acquisition: 7 x 7 pixels recorded as tags, then
+    converted (pixel = input channel)."""
+    tags = tmp_path / "m.sstags"
+    cli("acquire", "--size", "7", "--duration", "300ms", "--tags", str(tags), "--out", str(tmp_path / "acq"))
+    ptu = tmp_path / "m.ptu"
+    cli("convert", str(tags), "--out", str(ptu))
+    return ptu
+
+
+def test_bin_file_equals_the_command_bin_for_bin(tmp_path):
+    ptu = mock_ptu(tmp_path)
+    cli("bin", str(ptu), "--pixels", "channel", "--bin-width", "8ps", "--out", str(tmp_path / "bin"))
+    ours = scatterscope.bin_file(ptu, pixels="channel", bin_width_ps=8.0)
+    theirs, meta = scatterscope.load_stack(tmp_path / "bin" / "stack.exr")
+    assert len(ours["stacks"]) == 1
+    np.testing.assert_array_equal(ours["stacks"][0], theirs)
+    assert ours["meta"][0] == meta
+    ledger = ours["ledger"]
+    assert ledger["received"] == ledger["binned"] + ledger["outside_window"] + ledger["other_channel"] + ledger[
+        "outside_region"
+    ]
+    assert ours["stacks"][0].sum() == ledger["binned"] > 10_000
+
+
+def test_read_tags_agrees_with_bin_file(tmp_path):
+    ptu = mock_ptu(tmp_path)
+    tags = scatterscope.read_tags(ptu)
+    assert tags["channel"].dtype == np.uint16 and tags["macro_time"].dtype == np.uint64
+    assert len(tags["channel"]) == len(tags["macro_time"]) == len(tags["micro_time"])
+    assert np.all(np.diff(tags["macro_time"].astype(np.int64)) >= 0)
+    binned = scatterscope.bin_file(ptu, pixels="channel")
+    assert binned["ledger"]["received"] == len(tags["channel"])
+    # The stack's time profile is the histogram of the micro times.
+    profile = binned["stacks"][0].sum(axis=(1, 2))
+    hist = np.bincount(tags["micro_time"], minlength=len(profile))
+    np.testing.assert_array_equal(profile, hist[: len(profile)])
+
+
+@pytest.mark.parametrize("name", ["hydraharp/v20_t3.ptu", "hydraharp/v10_t3.ptu"])
+def test_shared_t3_samples_bin_as_ptufile_histograms_them(name):
+    need_samples()
+    ptufile = pytest.importorskip("ptufile", reason="needs ptufile (pip install ptufile)")
+    path = SAMPLES / name
+    ours = scatterscope.bin_file(path, pixels="channel")["stacks"][0]
+    with ptufile.PtuFile(path) as ptu:
+        records = ptu.decode_records()
+        theirs = ptu.decode_histogram(dtype=np.uint32)
+    photons = records[records["channel"] >= 0]
+    # ptufile: (channels, micro-time bins); ours: (bins, 1, channels).
+    assert ours.shape[1] == 1
+    for ch in range(theirs.shape[0]):
+        mine = ours[:, 0, ch] if ch < ours.shape[2] else np.zeros(ours.shape[0])
+        n = min(len(mine), theirs.shape[1])
+        np.testing.assert_array_equal(mine[:n], theirs[ch, :n], err_msg=f"{name} channel {ch}")
+        assert mine[n:].sum() == 0 and theirs[ch, n:].sum() == 0
+    assert ours.sum() == len(photons)
+    tags = scatterscope.read_tags(path)
+    np.testing.assert_array_equal(tags["channel"], photons["channel"])
+    np.testing.assert_array_equal(tags["micro_time"], photons["dtime"])
+    np.testing.assert_array_equal(tags["macro_time"], photons["time"])
+
+
+@pytest.mark.parametrize("ext", [".npy", ".exr"])
+def test_stacks_round_trip_through_numpy_unchanged(tmp_path, ext):
+    sim = scatterscope.simulate("disks", seed=4, size=32)
+    path = tmp_path / f"counts{ext}"
+    scatterscope.save_stack(path, sim["counts"], sim["meta"])
+    data, meta = scatterscope.load_stack(path)
+    np.testing.assert_array_equal(data, sim["counts"])
+    assert data.dtype == np.float32
+    assert meta == sim["meta"]
+
+
+def test_simulate_equals_the_command(tmp_path):
+    cli("simulate", "--scene", "text", "--size", "48", "--seed", "7", "--out", str(tmp_path))
+    sim = scatterscope.simulate("text", seed=7, size=48)
+    counts, meta = scatterscope.load_stack(tmp_path / "counts.exr")
+    np.testing.assert_array_equal(sim["counts"], counts)
+    assert sim["meta"] == meta
+    expected, _ = scatterscope.load_stack(tmp_path / "expected.exr")
+    np.testing.assert_array_equal(sim["expected"], expected)
+
+
+def test_simulate_an_array_matches_the_same_scene_rendered():
+    scene = scatterscope.simulate("disks", seed=2, size=32)
+    again = scatterscope.simulate(scene["truth"], seed=2)
+    np.testing.assert_array_equal(again["expected"], scene["expected"])
+    np.testing.assert_array_equal(again["counts"], scene["counts"])
+
+
+def test_psf_kernels_equal_the_command(tmp_path):
+    cli("psf", "--size", "32", "--out", str(tmp_path))
+    k = scatterscope.psf_kernels(size=32)
+    theirs, meta = scatterscope.load_stack(tmp_path / "psf.exr")
+    np.testing.assert_array_equal(k["kernels"].astype(np.float32), theirs)
+    kept = [b for b in k["bins"] if b["kept"]]
+    assert len(kept) == k["kernels"].shape[0] == theirs.shape[0]
+    assert k["setup"]["sensor"]["width_px"] == 32
+
+
+@pytest.mark.parametrize("method,extra", [("rl-stack", []), ("pnp", ["--denoiser", "tv"])])
+def test_reconstruct_equals_the_command_bit_for_bit(tmp_path, method, extra):
+    cli("simulate", "--scene", "usaf", "--size", "48", "--seed", "1", "--out", str(tmp_path / "sim"))
+    counts, meta = scatterscope.load_stack(tmp_path / "sim" / "counts.exr")
+    cli("reconstruct", str(tmp_path / "sim" / "counts.exr"), "--method", method, *extra, "--out", str(tmp_path / "rec"))
+    kwargs = {"denoiser": "tv"} if extra else {}
+    image, trace, notes = scatterscope.reconstruct(counts, meta, method=method, **kwargs)
+    theirs = scatterscope.load_image(tmp_path / "rec" / "reconstruction.exr")
+    # The EXR holds float32: ours rounded the same way, bit for bit.
+    np.testing.assert_array_equal(image.astype(np.float32).astype(np.float64), theirs)
+    record = json.loads((tmp_path / "rec" / "trace.json").read_text())
+    assert trace["method"] == record["method"]
+    assert len(trace["rows"]["iteration"]) == len(record["rows"])
+    np.testing.assert_array_equal(trace["rows"]["iteration"], [r["iteration"] for r in record["rows"]])
+    assert notes[-len(record["notes"]) :] == record["notes"]
+
+
+def test_calibrate_slab_equals_the_command_from_files_and_from_arrays(tmp_path):
+    cal = SHARED / "cdt-calibration"
+    if not cal.exists():
+        pytest.skip(f"needs {cal} (the shared transmittance captures)")
+    out = cli(
+        "calibrate-slab", "--bin-ps", "8", "--refractive-index", "1.12", "--parts", "none",
+        "--irf-from", str(cal / "capture_direct.mat"),
+        "--capture", f"{cal / 'capture_3_0_inch.mat'}=3in",
+        "--predict", f"{cal / 'capture_3_5_inch.mat'}=3.5in",
+        "--out", str(tmp_path / "cli"),
+    )
+    files = scatterscope.calibrate_slab(
+        cal / "capture_direct.mat", [(cal / "capture_3_0_inch.mat", 7.62)], 1.12,
+        predict=[(cal / "capture_3_5_inch.mat", 8.89)], bin_ps=8.0,
+    )
+    assert files["medium_toml"] == (tmp_path / "cli" / "medium.toml").read_text()
+    for line in files["lines"]:
+        if "s)" not in line:  # wall times differ
+            assert line in out, line
+    assert 100 < files["mu_s_reduced_per_cm"]["value"] * 100 < 1000  # per metre, foam
+    h5py = pytest.importorskip("h5py", reason="needs h5py for the arrays")
+
+    def counts(name):
+        with h5py.File(cal / name, "r") as f:
+            return np.asarray(f["out"][()], dtype=np.float64).ravel()
+
+    arrays = scatterscope.calibrate_slab(
+        counts("capture_direct.mat"), [(counts("capture_3_0_inch.mat"), 7.62)], 1.12,
+        predict=[(counts("capture_3_5_inch.mat"), 8.89)], bin_ps=8.0,
+    )
+    for key in ("mu_a_per_cm", "mu_s_reduced_per_cm", "chi2_per_dof"):
+        assert arrays[key] == files[key], key
+
+
+def test_acquire_mock_accounts_for_every_photon(tmp_path):
+    done = scatterscope.acquire_mock(0.3, tmp_path / "acq", scene="star", size=32, seed=3)
+    stack = done["stack"]
+    assert stack.shape[1:] == (32, 32)
+    acc = done["record"]["accounting"]
+    assert acc["received"] == acc["binned"] + acc["outside_window"] + acc["outside_region"]
+    assert stack.sum() == acc["binned"] > 10_000
+    assert (tmp_path / "acq" / "stack.exr").exists()
+    assert any("photons" in line for line in done["summary"])
+
+
+def test_bad_input_raises_with_the_librarys_message(tmp_path):
+    sim = scatterscope.simulate("disks", seed=0, size=16)
+    bad = sim["counts"].copy()
+    bad[0, 3, 4] = np.nan
+    with pytest.raises(ScatterscopeError, match="NaN|not finite|finite"):
+        scatterscope.reconstruct(bad, sim["meta"], method="rl-stack")
+    with pytest.raises(ScatterscopeError, match="shape"):
+        scatterscope.reconstruct(np.zeros((4, 4)), None)
+    with pytest.raises(ScatterscopeError, match="missing.ptu"):
+        scatterscope.bin_file(tmp_path / "missing.ptu")
+    with pytest.raises(ScatterscopeError, match="No such file"):
+        scatterscope.load_stack(tmp_path / "none.exr")
+    with pytest.raises(KeyError, match="thickness_m"):
+        scatterscope.psf_kernels(thickness_m=0.03)
+    with pytest.raises(ScatterscopeError, match="method `magic`"):
+        scatterscope.reconstruct(sim["counts"], sim["meta"], method="magic")
+    with pytest.raises(ScatterscopeError, match="mu_a"):
+        scatterscope.psf_kernels(mu_a=-1.0)
+    wrong = np.zeros((3, 16, 16), dtype=np.float32)
+    with pytest.raises(ScatterscopeError):
+        scatterscope.save_stack(tmp_path / "w.exr", wrong, sim["meta"])
+
+
+def test_ctrl_c_stops_a_reconstruction():
+    sim = scatterscope.simulate("usaf", seed=0, size=128)
+    timer = threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGINT))
+    started = time.monotonic()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        scatterscope.reconstruct(sim["counts"], sim["meta"], method="pnp", denoiser="tv", max_iters=100000)
+    assert time.monotonic() - started < 30
+
+
+def test_help_reads_well():
+    doc = scatterscope.__doc__
+    assert "numpy in and out" in doc
+    for name in scatterscope.__all__:
+        obj = getattr(scatterscope, name)
+        if callable(obj):
+            assert obj.__doc__ and len(obj.__doc__) > 40, name
