@@ -66,14 +66,14 @@ def main():
                         str(synthetic), "20000000"], cwd=REPO, check=True, capture_output=True)
         files = [REPO.parent / "shared/data/picoquant-sample-data/hydraharp" / n for n in ("v20_t3.ptu", "v10_t3.ptu")]
         files = [f for f in files if f.exists()] + [synthetic]
-        print("| file | records | scatterscope.bin_file (s) | ptufile decode_histogram (s) | ratio |")
+        print("| file | records | scatterscope.bin_file (ms) | ptufile decode_histogram (ms) | ratio |")
         print("| --- | --- | --- | --- | --- |")
         for f in files:
             f.read_bytes()  # into the page cache
             t_ours, ours = median_time(lambda: scatterscope.bin_file(f, pixels="channel"), args.runs)
             t_theirs, theirs = median_time(lambda: ptufile_histogram(f), args.runs)
             check_equal(ours["stacks"][0], theirs, f.name)
-            print(f"| {f.name} | {ours['ledger']['records']} | {t_ours:.4f} | {t_theirs:.4f} | {t_theirs / t_ours:.2f}x |")
+            print(f"| {f.name} | {ours['ledger']['records']} | {t_ours * 1e3:.3f} | {t_theirs * 1e3:.3f} | {t_theirs / t_ours:.2f}x |")
 
         sim = tmp / "sim"
         subprocess.run([str(CLI), "simulate", "--preset", "paper", "--scene", "usaf", "--seed", "1", "--out", str(sim)],

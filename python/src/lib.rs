@@ -30,6 +30,11 @@ use scatterscope::stack::{Stack, StackMeta};
 use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file as lib_bin_file};
 use scatterscope::tags::binning::FrameSelect;
 
+/// The extension's allocator (see the dependency's comment in Cargo.toml:
+/// glibc malloc inside a Python process doubled the time of rl-stack).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 pyo3::create_exception!(
     _native,
     ScatterscopeError,

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::formats::sstags::{TagFile, TagFileError, TagFileSummary, is_tag_file};
-use ndarray::{Array3, Axis, s};
+use ndarray::{Array3, s};
 
 use super::binning::{
     Accounting, Binner, FrameSelect, MAX_BINS, PastWindow, PixelMap, Region, TimeWindow,
@@ -273,18 +273,41 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
     let res_ps = info.resolution_s * 1e12;
     let (window, map) = window_and_map(spec, res_ps, info.macro_unit_s * 1e12, info.imaging)
         .map_err(|e| spec_err(e.to_string()))?;
-    check_stack_memory(path, &window, &map)?;
+    // A default window gets a margin past the sync period, so that micro
+    // times just past it (a TAC range a little longer than the period, the
+    // last step of a period) bin in one pass instead of two.
+    let margin = if spec.bins.is_none() {
+        (window.bins / 64 + 8).min(MAX_BINS.saturating_sub(window.bins))
+    } else {
+        0
+    };
+    let with_margin = TimeWindow {
+        bins: window.bins + margin,
+        ..window
+    };
+    let first = if margin > 0 && with_margin.check_stack(&map).is_ok() {
+        with_margin
+    } else {
+        window
+    };
+    check_stack_memory(path, &first, &map)?;
     let mut notes: Vec<String> = info.unread_note().into_iter().collect();
-    let mut pass = run_pass(path, &info, reader, window, map, spec)?;
-    let past = pass.past;
-    if past.photons > 0 {
-        let needed = window.bins_to_hold(past.max_micro);
+    let mut pass = run_pass(path, &info, reader, first, map, spec)?;
+    // Photons past the period: in the margin (binned) and past it.
+    let (in_margin, last_bin) = photons_from(&pass.stacks, window.bins);
+    let past_photons = pass.past.photons + in_margin;
+    if past_photons > 0 {
+        let max_micro = if pass.past.photons > 0 {
+            pass.past.max_micro
+        } else {
+            let k = last_bin.expect("photons in the margin have a bin") as f64;
+            ((window.start + (k + 1.0) * window.width).ceil() - 1.0) as u32
+        };
+        let needed = window.bins_to_hold(max_micro);
         let where_ = format!(
-            "{} photon(s) had micro times past the window's end ({:.6} ps), up to {} ({:.6} ps)",
-            past.photons,
+            "{past_photons} photon(s) had micro times past the window's end ({:.6} ps), up to {max_micro} ({:.6} ps)",
             (window.start + window.width * window.bins as f64) * res_ps,
-            past.max_micro,
-            f64::from(past.max_micro) * res_ps
+            f64::from(max_micro) * res_ps
         );
         let wider = TimeWindow {
             bins: needed,
@@ -293,21 +316,32 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
         let fits = needed <= MAX_BINS && wider.check_stack(&map).is_ok();
         if spec.bins.is_none() && fits {
             // The default window holds every micro time present.
-            let (_, reader) = open(path)?;
-            pass = run_pass(path, &info, reader, wider, map, spec)?;
+            if needed <= pass.window.bins {
+                trim(&mut pass, needed);
+            } else {
+                let (_, reader) = open(path)?;
+                pass = run_pass(path, &info, reader, wider, map, spec)?;
+            }
             notes.push(format!(
                 "{where_}: the default window (one sync period, {} bins) was widened to {needed} bins to hold them",
                 window.bins
             ));
-        } else if spec.bins.is_none() {
-            notes.push(format!(
-                "{where_}: holding them would take {needed} bins, more than {MAX_BINS} or a stack of more than 2^30 counts; they are counted outside the window"
-            ));
         } else {
-            notes.push(format!(
-                "{where_}: they are counted outside the window; {needed} bins would hold them"
-            ));
+            if pass.window.bins != window.bins {
+                // Count the margin's photons outside, as the window says.
+                let (_, reader) = open(path)?;
+                pass = run_pass(path, &info, reader, window, map, spec)?;
+            }
+            notes.push(if spec.bins.is_none() {
+                format!(
+                    "{where_}: holding them would take {needed} bins, more than {MAX_BINS} or a stack of more than 2^30 counts; they are counted outside the window"
+                )
+            } else {
+                format!("{where_}: they are counted outside the window; {needed} bins would hold them")
+            });
         }
+    } else if pass.window.bins != window.bins {
+        trim(&mut pass, window.bins);
     }
     let Pass {
         stacks,
@@ -329,11 +363,19 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
         ));
     }
     let stacks = if let PixelMap::Channel { .. } = map {
-        // Trim the channel row to the highest channel that saw a photon.
-        let used = stacks[0]
-            .axis_iter(Axis(2))
-            .rposition(|c| c.iter().any(|&v| v > 0))
-            .map_or(1, |p| p + 1);
+        // Trim the channel row to the highest channel that saw a photon in
+        // any kept frame (rows scanned contiguously: a column-wise scan of
+        // the empty channels cost a sixth of the binning on small files).
+        let width = stacks[0].dim().2;
+        let mut seen = vec![0u32; width];
+        for row in stacks.iter().flat_map(|s| {
+            s.as_slice()
+                .expect("the binner's stacks are contiguous")
+                .chunks_exact(width)
+        }) {
+            seen.iter_mut().zip(row).for_each(|(a, &v)| *a |= v);
+        }
+        let used = seen.iter().rposition(|&v| v > 0).map_or(1, |p| p + 1);
         stacks
             .iter()
             .map(|s| s.slice(s![.., .., ..used]).to_owned())
@@ -370,6 +412,31 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
         notes,
         truncated,
     })
+}
+
+/// Photons in bins `from` and later of every stack, and the last such bin
+/// that holds any.
+fn photons_from(stacks: &[Array3<u32>], from: usize) -> (u64, Option<usize>) {
+    let mut total = 0u64;
+    let mut last = None;
+    for s in stacks {
+        for (k, plane) in s.outer_iter().enumerate().skip(from) {
+            let n: u64 = plane.iter().map(|&v| u64::from(v)).sum();
+            if n > 0 {
+                total += n;
+                last = last.max(Some(k));
+            }
+        }
+    }
+    (total, last)
+}
+
+/// Keeps the first `bins` bins of a pass (the rest are empty).
+fn trim(pass: &mut Pass, bins: usize) {
+    for s in &mut pass.stacks {
+        *s = s.slice(s![..bins, .., ..]).to_owned();
+    }
+    pass.window.bins = bins;
 }
 
 /// One read -> decode -> bin pass over the records.
