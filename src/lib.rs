@@ -14,6 +14,7 @@
 //! - [`denoise`]: Gaussian denoisers plugged in as priors.
 //! - [`metrics`]: PSNR and SSIM against a known truth.
 //! - [`config`]: physics parameters from presets, TOML files and flags.
+//! - [`batch`]: many commands from a manifest, locally or as a Slurm array.
 //!
 //! The physics itself lives in the `scatterscope-physics` crate, re-exported
 //! as [`physics`]; the main types are re-exported here.
@@ -68,6 +69,7 @@
 #![warn(missing_docs)]
 
 pub mod acquire;
+pub mod batch;
 pub mod calibrate;
 pub mod config;
 pub mod confocal;

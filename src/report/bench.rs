@@ -880,12 +880,82 @@ pub fn run_benchmark(
                 .map_err(|e| ReportError::Io(rows_path.display().to_string(), e))?;
         }
     }
-    let mut md = summary_markdown(&rows, &headline, &rl_default_label(&cfg.opts));
+    let md = write_summary(&rows, &headline, cfg)?;
+    Ok((rows, md))
+}
+
+/// The summary of `rows` (table, verdict, figure) written into `cfg.out`.
+fn write_summary(
+    rows: &[BenchRow],
+    headline: &str,
+    cfg: &BenchConfig,
+) -> Result<String, ReportError> {
+    let mut md = summary_markdown(rows, headline, &rl_default_label(&cfg.opts));
     md.push_str("\n### Every method against RL's best iteration chosen with the truth\n\n");
-    md.push_str(&verdict_markdown(&rows));
-    write_time_figure(&rows, &cfg.out.join("psnr_vs_time.png"))?;
+    md.push_str(&verdict_markdown(rows));
+    write_time_figure(rows, &cfg.out.join("psnr_vs_time.png"))?;
     let md_path = cfg.out.join("summary.md");
     std::fs::write(&md_path, &md).map_err(|e| ReportError::Io(md_path.display().to_string(), e))?;
+    Ok(md)
+}
+
+/// The benchmark as a batch: one job per selected image, each running
+/// `bench-recon IMAGES --image NAME ARGS...` (`args`: the run's other
+/// flags); [`merge_benchmark`] gathers their rows into the one summary.
+pub fn batch_jobs(
+    cfg: &BenchConfig,
+    args: &[String],
+) -> Result<Vec<crate::batch::JobSpec>, ReportError> {
+    let images = select(read_manifest(&cfg.images)?, &cfg.split, &cfg.only)?;
+    let dir = std::path::absolute(&cfg.images).unwrap_or_else(|_| cfg.images.clone());
+    Ok(images
+        .iter()
+        .map(|image| crate::batch::JobSpec {
+            name: image.name.clone(),
+            command: "bench-recon".into(),
+            input: Some(dir.display().to_string()),
+            args: ["--image".to_string(), image.name.clone()]
+                .into_iter()
+                .chain(args.iter().cloned())
+                .collect(),
+        })
+        .collect())
+}
+
+/// The rows the jobs of [`batch_jobs`] wrote (`cfg.out/NAME/rows.csv`, in
+/// the selection's order) and their summary, written into `cfg.out` as a
+/// single run writes it. An image without rows is an error naming it.
+pub fn merge_benchmark(cfg: &BenchConfig) -> Result<(Vec<BenchRow>, String), ReportError> {
+    let images = select(read_manifest(&cfg.images)?, &cfg.split, &cfg.only)?;
+    let mut rows = Vec::new();
+    for image in &images {
+        let path = cfg.out.join(&image.name).join("rows.csv");
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            ReportError::Io(
+                format!(
+                    "{} (has the batch job of {} finished?)",
+                    path.display(),
+                    image.name
+                ),
+                e,
+            )
+        })?;
+        rows.extend(rows_from_csv(&text)?);
+    }
+    let priors: Vec<(String, Box<dyn Denoiser>)> = cfg
+        .priors
+        .iter()
+        .map(|p| Ok((p.kind.name().to_string(), p.build()?)))
+        .collect::<Result<_, PriorError>>()
+        .map_err(|e| ReportError::Input(e.to_string()))?;
+    let entries = pnp_entries(&cfg.solvers, &priors, cfg.time_summed);
+    let headline = entries
+        .first()
+        .map(|e| e.label.clone())
+        .ok_or_else(|| ReportError::Input("no solver or prior given".into()))?;
+    std::fs::write(cfg.out.join("rows.csv"), rows_csv(&rows))
+        .map_err(|e| ReportError::Io(cfg.out.join("rows.csv").display().to_string(), e))?;
+    let md = write_summary(&rows, &headline, cfg)?;
     Ok((rows, md))
 }
 

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use scatterscope::denoise::prior::{PriorKind, PriorSpec};
 use scatterscope::reconstruct::method::Solver;
-use scatterscope::report::bench::{BenchConfig, run_benchmark};
+use scatterscope::report::bench::{BenchConfig, batch_jobs, merge_benchmark, run_benchmark};
 
 use crate::recon_args::ReconArgs;
 use crate::shared_args::{PhysicsArgs, choice};
@@ -61,6 +61,37 @@ pub struct BenchReconArgs {
     /// on; the summary covers both).
     #[arg(long)]
     resume: bool,
+    /// Write the benchmark as a batch manifest instead of running it: one
+    /// job per image, the other flags passed on (run it with `batch`
+    /// --out OUT, locally or with --slurm; then --merge with --out OUT).
+    #[arg(long, value_name = "MANIFEST", conflicts_with_all = ["merge", "resume"])]
+    write_batch: Option<PathBuf>,
+    /// Gather the rows of a batch's jobs (OUT/IMAGE/rows.csv) into the one
+    /// summary a single run writes.
+    #[arg(long)]
+    merge: bool,
+}
+
+/// This run's flags without the positional folder, --image, --out and the
+/// batch flags: what each job of a batch runs with.
+fn forwarded_args(images: &std::path::Path) -> Vec<String> {
+    let all: Vec<String> = std::env::args().skip(2).collect();
+    let mut out = Vec::new();
+    let mut skip_next = false;
+    for a in all {
+        if skip_next {
+            skip_next = false;
+            continue;
+        }
+        let flag = a.split('=').next().unwrap_or("");
+        match flag {
+            "--image" | "--out" | "--write-batch" => skip_next = !a.contains('='),
+            "--merge" | "--resume" => {}
+            _ if std::path::Path::new(&a) == images => {}
+            _ => out.push(a),
+        }
+    }
+    out
 }
 
 pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
@@ -87,6 +118,24 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
         out: args.out.clone(),
         resume: args.resume,
     };
+    if let Some(manifest) = &args.write_batch {
+        let jobs = batch_jobs(&cfg, &forwarded_args(&args.images))?;
+        scatterscope::batch::write_manifest(manifest, &jobs)?;
+        println!(
+            "wrote {} ({} jobs): run it with `scatterscope batch {} --out OUT` (or --slurm), then `scatterscope bench-recon {} --merge --out OUT` with the same flags",
+            manifest.display(),
+            jobs.len(),
+            manifest.display(),
+            args.images.display()
+        );
+        return Ok(());
+    }
+    if args.merge {
+        let (_, md) = merge_benchmark(&cfg)?;
+        println!("{md}");
+        println!("wrote {}/{{rows.csv, summary.md}}", args.out.display());
+        return Ok(());
+    }
     let (_, md) = run_benchmark(&cfg, |row| println!("{}", row.line()))?;
     println!("{md}");
     println!(

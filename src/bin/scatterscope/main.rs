@@ -1,6 +1,7 @@
 //! The `scatterscope` command-line tool.
 
 mod acquire;
+mod batch;
 mod bench_hidden;
 mod bench_recon;
 mod calibrate_cmd;
@@ -53,6 +54,7 @@ enum Command {
     Convert(tags_cmd::ConvertArgs),
     Acquire(acquire::AcquireArgs),
     Devices(acquire::DevicesArgs),
+    Batch(batch::BatchArgs),
     Denoise(denoise::DenoiseArgs),
     DenoiseBench(denoise_bench::DenoiseBenchArgs),
     Weights(weights_cmd::WeightsArgs),
@@ -135,6 +137,7 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::BenchHidden(args) => bench_hidden::run(&args),
         Command::Info(args) => tags_cmd::info(&args),
         Command::Bin(args) => tags_cmd::bin(&args),
+        Command::Batch(args) => batch::run(&args),
         Command::Convert(args) => tags_cmd::convert(&args),
         Command::Acquire(args) => acquire::run(&args),
         Command::Devices(args) => acquire::devices(&args),

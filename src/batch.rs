@@ -1,0 +1,543 @@
+//! Many jobs at once (`scatterscope batch`): a TOML manifest of commands,
+//! run on this machine by a bounded pool of workers or as a Slurm job
+//! array, resumable, with one summary.
+//!
+//! ```toml
+//! [[job]]
+//! name = "v20"                     # optional; default job-000, job-001, ...
+//! command = "bin"                  # any scatterscope command
+//! input = "data/v20_t3.ptu"        # optional first argument
+//! args = ["--bin-width", "64ps"]   # optional further arguments
+//! ```
+//!
+//! Each job runs as `scatterscope COMMAND [INPUT] ARGS... --out
+//! OUT/NAME` (a child process of the same binary, so a crash or a bad
+//! input fails that job alone) with its output in `OUT/NAME/job.log`. A
+//! finished job leaves `OUT/NAME/batch.json` (status, seconds, its key
+//! result); a run skips the jobs whose record says they succeeded and runs
+//! the failed and missing ones again. Each job's threads are limited
+//! (`RAYON_NUM_THREADS`) so that the workers together use the cores once.
+//! On Slurm each array task runs one job by `SLURM_ARRAY_TASK_ID`; Slurm
+//! schedules, retries and accounts, and [`collect`] reads the records into
+//! the same summary.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+/// The file a finished job leaves in its folder.
+pub const RECORD: &str = "batch.json";
+/// The job's output log.
+pub const LOG: &str = "job.log";
+
+/// One job of a manifest.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobSpec {
+    /// Name, and the folder under the batch's output.
+    #[serde(default)]
+    pub name: String,
+    /// The scatterscope command.
+    pub command: String,
+    /// The first argument (a file), if any.
+    #[serde(default)]
+    pub input: Option<String>,
+    /// Further arguments.
+    #[serde(default)]
+    pub args: Vec<String>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ManifestFile {
+    job: Vec<JobSpec>,
+}
+
+/// Why a batch cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum BatchError {
+    /// The manifest cannot be read or is invalid.
+    #[error("{path}: {reason}")]
+    Manifest {
+        /// The manifest.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A file or process could not be used.
+    #[error("{0}")]
+    Io(String),
+}
+
+/// Reads a manifest; names default to `job-NNN`, relative inputs are
+/// taken from the manifest's folder, and names must be unique folder names.
+pub fn read_manifest(path: &Path) -> Result<Vec<JobSpec>, BatchError> {
+    let bad = |reason: String| BatchError::Manifest {
+        path: path.to_owned(),
+        reason,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+    let file: ManifestFile = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut jobs = file.job;
+    if jobs.is_empty() {
+        return Err(bad("no [[job]] entries".into()));
+    }
+    let mut seen = std::collections::HashSet::new();
+    for (i, job) in jobs.iter_mut().enumerate() {
+        if job.name.is_empty() {
+            job.name = format!("job-{i:03}");
+        }
+        if job.name.contains(['/', '\\']) || job.name.starts_with('.') {
+            return Err(bad(format!(
+                "job {i}: name `{}` must be a plain folder name",
+                job.name
+            )));
+        }
+        if !seen.insert(job.name.clone()) {
+            return Err(bad(format!("job {i}: name `{}` is used twice", job.name)));
+        }
+        if job.command.is_empty() || job.command.starts_with('-') || job.command == "batch" {
+            return Err(bad(format!(
+                "job `{}`: command `{}` is not a scatterscope command a batch can run",
+                job.name, job.command
+            )));
+        }
+        if job.args.iter().any(|a| a == "--out") {
+            return Err(bad(format!(
+                "job `{}`: --out is set by the batch (OUT/{})",
+                job.name, job.name
+            )));
+        }
+        if let Some(input) = &job.input {
+            // Absolute, so that the jobs read the same file wherever they
+            // run (a Slurm task starts in another folder).
+            let p = base.join(input);
+            job.input = Some(std::path::absolute(&p).unwrap_or(p).display().to_string());
+        }
+    }
+    Ok(jobs)
+}
+
+/// Writes `jobs` as a manifest [`read_manifest`] reads back.
+pub fn write_manifest(path: &Path, jobs: &[JobSpec]) -> Result<(), BatchError> {
+    #[derive(Serialize)]
+    struct File<'a> {
+        job: &'a [JobSpec],
+    }
+    let text = toml::to_string(&File { job: jobs })
+        .map_err(|e| BatchError::Io(format!("{}: {e}", path.display())))?;
+    std::fs::write(path, text).map_err(|e| BatchError::Io(format!("{}: {e}", path.display())))
+}
+
+/// How a job ended.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JobRecord {
+    /// The job's name.
+    pub name: String,
+    /// `ok` or `failed`.
+    pub status: String,
+    /// The exit status (None: killed by a signal).
+    pub exit_code: Option<i32>,
+    /// Start, seconds since the Unix epoch.
+    pub started_unix_s: f64,
+    /// Wall time, seconds.
+    pub seconds: f64,
+    /// The key result (a reconstruction's method and deviance, else the
+    /// job's last line of output), or why it failed.
+    pub result: String,
+}
+
+impl JobRecord {
+    /// Whether the job succeeded.
+    pub fn ok(&self) -> bool {
+        self.status == "ok"
+    }
+}
+
+/// How to run a batch on this machine.
+#[derive(Debug, Clone)]
+pub struct LocalRun {
+    /// The scatterscope binary the jobs run.
+    pub exe: PathBuf,
+    /// The batch's output folder.
+    pub out: PathBuf,
+    /// Jobs at once.
+    pub workers: usize,
+    /// Threads of each job.
+    pub threads_per_job: usize,
+}
+
+impl LocalRun {
+    /// Workers and threads for `cores` cores: one job per core, each with
+    /// one thread, unless `threads_per_job` asks for more.
+    pub fn for_cores(exe: PathBuf, out: PathBuf, cores: usize, threads_per_job: usize) -> Self {
+        let threads = threads_per_job.max(1);
+        Self {
+            exe,
+            out,
+            workers: (cores / threads).max(1),
+            threads_per_job: threads,
+        }
+    }
+}
+
+/// The record of `job` in `out`, if it finished.
+pub fn record_of(out: &Path, job: &JobSpec) -> Option<JobRecord> {
+    let text = std::fs::read_to_string(out.join(&job.name).join(RECORD)).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
+/// The key result of a finished job: a reconstruction's method, its last
+/// deviance (else objective) and its iterations from its trace, else the
+/// last line of its output that is not the list of files written.
+fn key_result(dir: &Path, stdout: &str) -> String {
+    if let Ok(text) = std::fs::read_to_string(dir.join("trace.json"))
+        && let Ok(trace) = serde_json::from_str::<serde_json::Value>(&text)
+    {
+        let last = |key: &str| {
+            trace["rows"]
+                .as_array()
+                .and_then(|r| r.iter().rev().find_map(|row| row[key].as_f64()))
+                .map(|v| format!(", {key} {v:.6e}"))
+        };
+        return format!(
+            "method {}{}, {} iterations",
+            trace["method"].as_str().unwrap_or("?"),
+            last("deviance")
+                .or_else(|| last("objective"))
+                .unwrap_or_default(),
+            trace["rows"].as_array().map_or(0, Vec::len)
+        );
+    }
+    stdout
+        .lines()
+        .rev()
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with("wrote "))
+        .unwrap_or("")
+        .to_string()
+}
+
+/// Runs one job now (whatever its record says) and writes its record.
+pub fn run_job(
+    exe: &Path,
+    out: &Path,
+    job: &JobSpec,
+    threads: usize,
+) -> Result<JobRecord, BatchError> {
+    let dir = out.join(&job.name);
+    std::fs::create_dir_all(&dir).map_err(|e| BatchError::Io(format!("{}: {e}", dir.display())))?;
+    let _ = std::fs::remove_file(dir.join(RECORD));
+    let started = Instant::now();
+    let started_unix_s = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64());
+    let mut cmd = std::process::Command::new(exe);
+    cmd.arg(&job.command);
+    if let Some(input) = &job.input {
+        cmd.arg(input);
+    }
+    cmd.args(&job.args)
+        .arg("--out")
+        .arg(&dir)
+        .env("RAYON_NUM_THREADS", threads.to_string());
+    let output = cmd
+        .output()
+        .map_err(|e| BatchError::Io(format!("starting {}: {e}", exe.display())))?;
+    let seconds = started.elapsed().as_secs_f64();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let log = format!("$ {cmd:?}\n{stdout}{stderr}");
+    std::fs::write(dir.join(LOG), log)
+        .map_err(|e| BatchError::Io(format!("{}: {e}", dir.display())))?;
+    let ok = output.status.success();
+    let result = if ok {
+        key_result(&dir, &stdout)
+    } else {
+        stderr
+            .lines()
+            .map(str::trim)
+            .rfind(|l| !l.is_empty())
+            .unwrap_or("no error message")
+            .to_string()
+    };
+    let record = JobRecord {
+        name: job.name.clone(),
+        status: if ok { "ok" } else { "failed" }.into(),
+        exit_code: output.status.code(),
+        started_unix_s,
+        seconds,
+        result,
+    };
+    let text = serde_json::to_string_pretty(&record).expect("records serialise");
+    std::fs::write(dir.join(RECORD), text)
+        .map_err(|e| BatchError::Io(format!("{}: {e}", dir.display())))?;
+    Ok(record)
+}
+
+/// One line of the summary.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// Ran in this run.
+    Ran(JobRecord),
+    /// Skipped: its record from an earlier run says it succeeded.
+    Done(JobRecord),
+    /// Not run (a Slurm task that has not finished, or never ran).
+    Missing(String),
+}
+
+/// Runs the jobs not already done with `run.workers` at once; `on_done`
+/// sees each job as it ends. A failing job never stops the others.
+pub fn run_local(
+    jobs: &[JobSpec],
+    run: &LocalRun,
+    on_done: impl Fn(&Outcome) + Sync,
+) -> Result<Vec<Outcome>, BatchError> {
+    std::fs::create_dir_all(&run.out)
+        .map_err(|e| BatchError::Io(format!("{}: {e}", run.out.display())))?;
+    let outcomes: Vec<Mutex<Option<Outcome>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
+    let todo: Vec<usize> = jobs
+        .iter()
+        .enumerate()
+        .filter_map(|(i, job)| match record_of(&run.out, job) {
+            Some(r) if r.ok() => {
+                let o = Outcome::Done(r);
+                on_done(&o);
+                *outcomes[i].lock().expect("not poisoned") = Some(o);
+                None
+            }
+            _ => Some(i),
+        })
+        .collect();
+    let next = AtomicUsize::new(0);
+    let failure: Mutex<Option<BatchError>> = Mutex::new(None);
+    std::thread::scope(|scope| {
+        for _ in 0..run.workers.min(todo.len()).max(1) {
+            scope.spawn(|| {
+                loop {
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&i) = todo.get(k) else { break };
+                    match run_job(&run.exe, &run.out, &jobs[i], run.threads_per_job) {
+                        Ok(r) => {
+                            let o = Outcome::Ran(r);
+                            on_done(&o);
+                            *outcomes[i].lock().expect("not poisoned") = Some(o);
+                        }
+                        Err(e) => {
+                            failure.lock().expect("not poisoned").get_or_insert(e);
+                        }
+                    }
+                }
+            });
+        }
+    });
+    if let Some(e) = failure.into_inner().expect("not poisoned") {
+        return Err(e);
+    }
+    Ok(outcomes
+        .into_iter()
+        .zip(jobs)
+        .map(|(o, job)| {
+            o.into_inner()
+                .expect("not poisoned")
+                .unwrap_or_else(|| Outcome::Missing(job.name.clone()))
+        })
+        .collect())
+}
+
+/// The records of every job in `out` (after a Slurm array, or any run).
+pub fn collect(jobs: &[JobSpec], out: &Path) -> Vec<Outcome> {
+    jobs.iter()
+        .map(|job| match record_of(out, job) {
+            Some(r) => Outcome::Ran(r),
+            None => Outcome::Missing(job.name.clone()),
+        })
+        .collect()
+}
+
+/// The summary table (Markdown) and whether every job succeeded.
+pub fn summary(outcomes: &[Outcome]) -> (String, bool) {
+    let mut s = String::from("| job | status | time (s) | result |\n| --- | --- | --- | --- |\n");
+    let mut all_ok = true;
+    for o in outcomes {
+        let (name, status, secs, result) = match o {
+            Outcome::Ran(r) => (
+                r.name.as_str(),
+                r.status.clone(),
+                r.seconds,
+                r.result.as_str(),
+            ),
+            Outcome::Done(r) => (
+                r.name.as_str(),
+                format!("{} (earlier run)", r.status),
+                r.seconds,
+                r.result.as_str(),
+            ),
+            Outcome::Missing(n) => (
+                n.as_str(),
+                "missing".into(),
+                f64::NAN,
+                "not run or not finished",
+            ),
+        };
+        all_ok &= status.starts_with("ok");
+        let secs = if secs.is_nan() {
+            "-".to_string()
+        } else {
+            format!("{secs:.2}")
+        };
+        s.push_str(&format!(
+            "| {name} | {status} | {secs} | {} |\n",
+            result.replace('|', "/")
+        ));
+    }
+    (s, all_ok)
+}
+
+/// Slurm resources of an array.
+#[derive(Debug, Clone, Default)]
+pub struct SlurmOptions {
+    /// Partition (`None`: the cluster's default).
+    pub partition: Option<String>,
+    /// Time limit per task (Slurm's format, e.g. `00:30:00`).
+    pub time: Option<String>,
+    /// CPUs per task (and the job's threads).
+    pub cpus_per_task: usize,
+    /// Memory per task (Slurm's format, e.g. `4G`).
+    pub mem: Option<String>,
+    /// Wait for the array to end (`sbatch --wait`).
+    pub wait: bool,
+}
+
+/// The sbatch script of a batch: one array task per job, each running
+/// `scatterscope batch MANIFEST --task $SLURM_ARRAY_TASK_ID`.
+pub fn slurm_script(
+    exe: &Path,
+    manifest: &Path,
+    out: &Path,
+    jobs: usize,
+    opts: &SlurmOptions,
+) -> String {
+    let mut s = String::from("#!/bin/bash\n#SBATCH --job-name=scatterscope-batch\n");
+    s.push_str(&format!("#SBATCH --array=0-{}\n", jobs.saturating_sub(1)));
+    s.push_str(&format!(
+        "#SBATCH --output={}/slurm-%A_%a.log\n",
+        out.display()
+    ));
+    s.push_str(&format!(
+        "#SBATCH --cpus-per-task={}\n",
+        opts.cpus_per_task.max(1)
+    ));
+    if let Some(p) = &opts.partition {
+        s.push_str(&format!("#SBATCH --partition={p}\n"));
+    }
+    if let Some(t) = &opts.time {
+        s.push_str(&format!("#SBATCH --time={t}\n"));
+    }
+    if let Some(m) = &opts.mem {
+        s.push_str(&format!("#SBATCH --mem={m}\n"));
+    }
+    s.push_str(&format!(
+        "exec '{}' batch '{}' --out '{}' --threads-per-job {} --task \"$SLURM_ARRAY_TASK_ID\"\n",
+        exe.display(),
+        manifest.display(),
+        out.display(),
+        opts.cpus_per_task.max(1)
+    ));
+    s
+}
+
+/// Writes the script into `out` and submits it with `sbatch` (found on
+/// PATH); returns the script's path and sbatch's answer (the job id).
+pub fn submit_slurm(
+    exe: &Path,
+    manifest: &Path,
+    out: &Path,
+    jobs: usize,
+    opts: &SlurmOptions,
+) -> Result<(PathBuf, String), BatchError> {
+    std::fs::create_dir_all(out).map_err(|e| BatchError::Io(format!("{}: {e}", out.display())))?;
+    let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let script_path = out.join("batch.sbatch");
+    let script = slurm_script(&abs(exe), &abs(manifest), &abs(out), jobs, opts);
+    std::fs::write(&script_path, script)
+        .map_err(|e| BatchError::Io(format!("{}: {e}", script_path.display())))?;
+    let mut cmd = std::process::Command::new("sbatch");
+    cmd.arg("--parsable");
+    if opts.wait {
+        cmd.arg("--wait");
+    }
+    let output = cmd.arg(&script_path).output().map_err(|e| {
+        BatchError::Io(format!(
+            "running sbatch (is Slurm installed and on PATH?): {e}"
+        ))
+    })?;
+    let id = String::from_utf8_lossy(&output.stdout).trim().to_string();
+    // With --wait, sbatch fails when a task failed; the array still ran
+    // and its records say which.
+    let array_ran = opts.wait && !id.is_empty();
+    if !output.status.success() && !array_ran {
+        return Err(BatchError::Io(format!(
+            "sbatch {} failed: {}",
+            script_path.display(),
+            String::from_utf8_lossy(&output.stderr).trim()
+        )));
+    }
+    Ok((script_path, id))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_sbatch_script_runs_one_job_per_array_task_with_its_resources() {
+        let s = slurm_script(
+            Path::new("/opt/scatterscope"),
+            Path::new("/data/jobs.toml"),
+            Path::new("/data/out"),
+            20,
+            &SlurmOptions {
+                partition: Some("gpu".into()),
+                time: Some("00:30:00".into()),
+                cpus_per_task: 4,
+                mem: Some("4G".into()),
+                wait: false,
+            },
+        );
+        for line in [
+            "#SBATCH --array=0-19",
+            "#SBATCH --cpus-per-task=4",
+            "#SBATCH --partition=gpu",
+            "#SBATCH --time=00:30:00",
+            "#SBATCH --mem=4G",
+            "#SBATCH --output=/data/out/slurm-%A_%a.log",
+            "--threads-per-job 4 --task \"$SLURM_ARRAY_TASK_ID\"",
+        ] {
+            assert!(s.contains(line), "{line}: {s}");
+        }
+        assert!(s.starts_with("#!/bin/bash\n"));
+    }
+
+    #[test]
+    fn manifests_round_trip_and_inputs_become_absolute() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
+        let jobs = vec![JobSpec {
+            name: "a".into(),
+            command: "bin".into(),
+            input: Some("x.ptu".into()),
+            args: vec!["--bins".into(), "10".into()],
+        }];
+        let path = dir.join("m.toml");
+        write_manifest(&path, &jobs).unwrap();
+        let back = read_manifest(&path).unwrap();
+        assert_eq!(back[0].args, jobs[0].args);
+        let input = PathBuf::from(back[0].input.as_ref().unwrap());
+        assert!(input.is_absolute() && input.ends_with("x.ptu"), "{input:?}");
+    }
+}
