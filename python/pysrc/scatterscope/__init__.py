@@ -108,8 +108,8 @@ def bin_file(
     )
     return {
         "stacks": list(stacks),
-        "meta": [json.loads(m) for m in metas],
-        "ledger": json.loads(ledger),
+        "meta": list(metas),
+        "ledger": ledger,
         "summary": list(summary),
     }
 
