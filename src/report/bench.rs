@@ -822,12 +822,7 @@ pub fn run_benchmark(
         .iter()
         .map(|&level| Ok((level, level_setup(&cfg.setup, level)?)))
         .collect::<Result<Vec<_>, ReportError>>()?;
-    let priors: Vec<(String, Box<dyn Denoiser>)> = cfg
-        .priors
-        .iter()
-        .map(|p| Ok((p.kind.name().to_string(), p.build()?)))
-        .collect::<Result<_, PriorError>>()
-        .map_err(|e| ReportError::Input(e.to_string()))?;
+    let priors = build_priors(cfg)?;
     let entries = pnp_entries(&cfg.solvers, &priors, cfg.time_summed);
     let Some(headline) = entries.first().map(|e| e.label.clone()) else {
         return Err(ReportError::Input("no solver or prior given".into()));
@@ -882,6 +877,18 @@ pub fn run_benchmark(
     }
     let md = write_summary(&rows, &headline, cfg)?;
     Ok((rows, md))
+}
+
+/// A prior built, with its name.
+type NamedPrior = (String, Box<dyn Denoiser>);
+
+/// The configured priors built, each with its name.
+fn build_priors(cfg: &BenchConfig) -> Result<Vec<NamedPrior>, ReportError> {
+    cfg.priors
+        .iter()
+        .map(|p| Ok((p.kind.name().to_string(), p.build()?)))
+        .collect::<Result<_, PriorError>>()
+        .map_err(|e| ReportError::Input(e.to_string()))
 }
 
 /// The summary of `rows` (table, verdict, figure) written into `cfg.out`.
@@ -942,12 +949,7 @@ pub fn merge_benchmark(cfg: &BenchConfig) -> Result<(Vec<BenchRow>, String), Rep
         })?;
         rows.extend(rows_from_csv(&text)?);
     }
-    let priors: Vec<(String, Box<dyn Denoiser>)> = cfg
-        .priors
-        .iter()
-        .map(|p| Ok((p.kind.name().to_string(), p.build()?)))
-        .collect::<Result<_, PriorError>>()
-        .map_err(|e| ReportError::Input(e.to_string()))?;
+    let priors = build_priors(cfg)?;
     let entries = pnp_entries(&cfg.solvers, &priors, cfg.time_summed);
     let headline = entries
         .first()
