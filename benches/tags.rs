@@ -37,7 +37,8 @@ fn write_raw(path: &std::path::Path) {
     let header = TagFileHeader::new("bench", &identity, &config, "bench");
     let mut out = TagFileWriter::create(path, &header).unwrap();
     photons::batches(RECORDS, |payload| out.write_batch(payload));
-    out.finish(None).unwrap();
+    out.finish(None, scatterscope::files::Completion::Complete)
+        .unwrap();
 }
 
 fn benches(c: &mut Criterion) {

@@ -17,14 +17,20 @@
 //! result); a run skips the jobs whose record says they succeeded and runs
 //! the failed and missing ones again. Each job's threads are limited
 //! (`RAYON_NUM_THREADS`) so that the workers together use the cores once.
+//! A job may have a time limit (`timeout = "30m"` in its table, or one for
+//! every job from the command line); each runs in its own process group,
+//! so that a timeout, or Ctrl-C / SIGTERM to the batch, reaches the job and
+//! everything it started: SIGTERM first (an acquisition then saves what it
+//! received), SIGKILL after a grace period, and the record says which.
 //! On Slurm each array task runs one job by `SLURM_ARRAY_TASK_ID`; Slurm
 //! schedules, retries and accounts, and [`collect`] reads the records into
 //! the same summary.
 
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Instant;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
@@ -48,7 +54,16 @@ pub struct JobSpec {
     /// Further arguments.
     #[serde(default)]
     pub args: Vec<String>,
+    /// Time limit (`90s`, `30m`, `2h`); none when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timeout: Option<String>,
 }
+
+/// Largest manifest read (a manifest of ten thousand jobs is far smaller).
+pub const MAX_MANIFEST: u64 = 16 << 20;
+
+/// How long a job has to end after SIGTERM before it is killed.
+pub const GRACE: Duration = Duration::from_secs(10);
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -79,8 +94,25 @@ pub fn read_manifest(path: &Path) -> Result<Vec<JobSpec>, BatchError> {
         path: path.to_owned(),
         reason,
     };
-    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-    let file: ManifestFile = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let bytes = crate::memory::read_bounded(path, MAX_MANIFEST, "batch manifest")
+        .map_err(|e| BatchError::Io(e.to_string()))?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        bad(format!(
+            "not UTF-8 text (byte {}): a manifest is TOML",
+            e.utf8_error().valid_up_to()
+        ))
+    })?;
+    parse_manifest(path, &text)
+}
+
+/// [`read_manifest`] on the manifest's text (`path` names it and is the
+/// base of relative inputs).
+pub fn parse_manifest(path: &Path, text: &str) -> Result<Vec<JobSpec>, BatchError> {
+    let bad = |reason: String| BatchError::Manifest {
+        path: path.to_owned(),
+        reason,
+    };
+    let file: ManifestFile = toml::from_str(text).map_err(|e| bad(e.to_string()))?;
     let base = path.parent().unwrap_or(Path::new("."));
     let mut jobs = file.job;
     if jobs.is_empty() {
@@ -112,6 +144,10 @@ pub fn read_manifest(path: &Path) -> Result<Vec<JobSpec>, BatchError> {
                 job.name, job.name
             )));
         }
+        if let Some(t) = &job.timeout {
+            crate::config::parse_duration(t)
+                .map_err(|e| bad(format!("job `{}`: timeout {e}", job.name)))?;
+        }
         if let Some(input) = &job.input {
             // Absolute, so that the jobs read the same file wherever they
             // run (a Slurm task starts in another folder).
@@ -130,7 +166,8 @@ pub fn write_manifest(path: &Path, jobs: &[JobSpec]) -> Result<(), BatchError> {
     }
     let text = toml::to_string(&File { job: jobs })
         .map_err(|e| BatchError::Io(format!("{}: {e}", path.display())))?;
-    std::fs::write(path, text).map_err(|e| BatchError::Io(format!("{}: {e}", path.display())))
+    crate::files::write_atomic(path, text)
+        .map_err(|e| BatchError::Io(format!("{}: {e}", path.display())))
 }
 
 /// How a job ended.
@@ -138,7 +175,8 @@ pub fn write_manifest(path: &Path, jobs: &[JobSpec]) -> Result<(), BatchError> {
 pub struct JobRecord {
     /// The job's name.
     pub name: String,
-    /// `ok` or `failed`.
+    /// `ok`, `failed`, `timeout` (ended at its time limit) or
+    /// `interrupted` (ended by Ctrl-C or SIGTERM to the batch).
     pub status: String,
     /// The exit status (None: killed by a signal).
     pub exit_code: Option<i32>,
@@ -169,6 +207,8 @@ pub struct LocalRun {
     pub workers: usize,
     /// Threads of each job.
     pub threads_per_job: usize,
+    /// Time limit of the jobs whose table sets none.
+    pub job_timeout: Option<Duration>,
 }
 
 impl LocalRun {
@@ -181,22 +221,24 @@ impl LocalRun {
             out,
             workers: (cores / threads).max(1),
             threads_per_job: threads,
+            job_timeout: None,
         }
     }
 }
 
 /// The record of `job` in `out`, if it finished.
 pub fn record_of(out: &Path, job: &JobSpec) -> Option<JobRecord> {
-    let text = std::fs::read_to_string(out.join(&job.name).join(RECORD)).ok()?;
-    serde_json::from_str(&text).ok()
+    let bytes =
+        crate::memory::read_bounded(&out.join(&job.name).join(RECORD), 1 << 20, "job record");
+    serde_json::from_slice(&bytes.ok()?).ok()
 }
 
 /// The key result of a finished job: a reconstruction's method, its last
 /// deviance (else objective) and its iterations from its trace, else the
 /// last line of its output that is not the list of files written.
 fn key_result(dir: &Path, stdout: &str) -> String {
-    if let Ok(text) = std::fs::read_to_string(dir.join("trace.json"))
-        && let Ok(trace) = serde_json::from_str::<serde_json::Value>(&text)
+    if let Ok(bytes) = crate::memory::read_bounded(&dir.join("trace.json"), 64 << 20, "trace")
+        && let Ok(trace) = serde_json::from_slice::<serde_json::Value>(&bytes)
     {
         let last = |key: &str| {
             trace["rows"]
@@ -222,16 +264,86 @@ fn key_result(dir: &Path, stdout: &str) -> String {
         .to_string()
 }
 
-/// Runs one job now (whatever its record says) and writes its record.
+/// How a job's process ended.
+enum Ending {
+    /// It exited, or was killed by a signal not of ours.
+    Exited(std::process::ExitStatus),
+    /// Its time limit passed.
+    Timeout(std::process::ExitStatus),
+    /// The batch was stopped.
+    Interrupted(std::process::ExitStatus),
+}
+
+/// Sends `signal` to the process group `pgid` (the job and its children).
+#[cfg(unix)]
+fn signal_group(pgid: u32, signal: i32) {
+    // SAFETY: kill(2) with a negative pid signals a process group; it has
+    // no memory effects.
+    unsafe {
+        libc::kill(-(pgid as i32), signal);
+    }
+}
+
+/// Waits for `child`, ending its process group at `deadline` or when
+/// `stop` is set: SIGTERM, then SIGKILL after [`GRACE`].
+fn supervise(
+    child: &mut std::process::Child,
+    deadline: Option<Instant>,
+    stop: &AtomicBool,
+) -> std::io::Result<Ending> {
+    let mut asked: Option<(Instant, bool)> = None; // (when, was it the timeout)
+    loop {
+        if let Some(status) = child.try_wait()? {
+            return Ok(match asked {
+                None => Ending::Exited(status),
+                Some((_, true)) => Ending::Timeout(status),
+                Some((_, false)) => Ending::Interrupted(status),
+            });
+        }
+        let now = Instant::now();
+        match asked {
+            None => {
+                let timed_out = deadline.is_some_and(|d| now >= d);
+                if timed_out || stop.load(Ordering::Relaxed) {
+                    #[cfg(unix)]
+                    signal_group(child.id(), libc::SIGTERM);
+                    #[cfg(not(unix))]
+                    let _ = child.kill();
+                    asked = Some((now, timed_out));
+                }
+            }
+            Some((when, _)) if now.duration_since(when) > GRACE => {
+                #[cfg(unix)]
+                signal_group(child.id(), libc::SIGKILL);
+                let _ = child.kill();
+            }
+            Some(_) => {}
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Runs one job now (whatever its record says) and writes its record;
+/// `timeout` applies when the job's table sets none, and `stop` (the
+/// batch's Ctrl-C) ends it early.
 pub fn run_job(
     exe: &Path,
     out: &Path,
     job: &JobSpec,
     threads: usize,
+    timeout: Option<Duration>,
+    stop: &AtomicBool,
 ) -> Result<JobRecord, BatchError> {
     let dir = out.join(&job.name);
     std::fs::create_dir_all(&dir).map_err(|e| BatchError::Io(format!("{}: {e}", dir.display())))?;
     let _ = std::fs::remove_file(dir.join(RECORD));
+    let timeout = match &job.timeout {
+        Some(t) => Some(
+            crate::config::parse_duration(t)
+                .map_err(|e| BatchError::Io(format!("job `{}`: timeout {e}", job.name)))?,
+        ),
+        None => timeout,
+    };
     let started = Instant::now();
     let started_unix_s = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -244,20 +356,61 @@ pub fn run_job(
     cmd.args(&job.args)
         .arg("--out")
         .arg(&dir)
-        .env("RAYON_NUM_THREADS", threads.to_string());
-    let output = cmd
-        .output()
-        .map_err(|e| BatchError::Io(format!("starting {}: {e}", exe.display())))?;
+        .env("RAYON_NUM_THREADS", threads.to_string())
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::CommandExt;
+        // Its own process group: a terminal's Ctrl-C reaches the batch
+        // alone, which then ends each job in order.
+        cmd.process_group(0);
+        #[cfg(target_os = "linux")]
+        // SAFETY: prctl is async-signal-safe; between fork and exec it
+        // only asks the kernel to send SIGTERM when the parent dies, so
+        // that a batch killed outright leaves no job running.
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                Ok(())
+            });
+        }
+    }
+    let start_err = |e: std::io::Error| BatchError::Io(format!("starting {}: {e}", exe.display()));
+    let mut child = cmd.spawn().map_err(start_err)?;
+    let drain = |pipe: Option<Box<dyn Read + Send>>| {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            if let Some(mut p) = pipe {
+                let _ = p.read_to_end(&mut bytes);
+            }
+            bytes
+        })
+    };
+    let out_reader = drain(
+        child
+            .stdout
+            .take()
+            .map(|p| Box::new(p) as Box<dyn Read + Send>),
+    );
+    let err_reader = drain(
+        child
+            .stderr
+            .take()
+            .map(|p| Box::new(p) as Box<dyn Read + Send>),
+    );
+    let ending = supervise(&mut child, timeout.map(|t| started + t), stop)
+        .map_err(|e| BatchError::Io(format!("waiting for job `{}`: {e}", job.name)))?;
+    let stdout = out_reader.join().unwrap_or_default();
+    let stderr = err_reader.join().unwrap_or_default();
     let seconds = started.elapsed().as_secs_f64();
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stdout = String::from_utf8_lossy(&stdout);
+    let stderr = String::from_utf8_lossy(&stderr);
     let log = format!("$ {cmd:?}\n{stdout}{stderr}");
-    std::fs::write(dir.join(LOG), log)
+    crate::files::write_atomic(dir.join(LOG), log)
         .map_err(|e| BatchError::Io(format!("{}: {e}", dir.display())))?;
-    let ok = output.status.success();
-    let result = if ok {
-        key_result(&dir, &stdout)
-    } else {
+    let last_error = || {
         stderr
             .lines()
             .map(str::trim)
@@ -265,16 +418,33 @@ pub fn run_job(
             .unwrap_or("no error message")
             .to_string()
     };
+    let (status, exit, result) = match ending {
+        Ending::Exited(s) if s.success() => ("ok", s, key_result(&dir, &stdout)),
+        Ending::Exited(s) => ("failed", s, last_error()),
+        Ending::Timeout(s) => (
+            "timeout",
+            s,
+            format!(
+                "ended at its time limit of {:.1} s",
+                timeout.map_or(0.0, |t| t.as_secs_f64())
+            ),
+        ),
+        Ending::Interrupted(s) => (
+            "interrupted",
+            s,
+            "ended by Ctrl-C or SIGTERM to the batch".to_string(),
+        ),
+    };
     let record = JobRecord {
         name: job.name.clone(),
-        status: if ok { "ok" } else { "failed" }.into(),
-        exit_code: output.status.code(),
+        status: status.into(),
+        exit_code: exit.code(),
         started_unix_s,
         seconds,
         result,
     };
     let text = serde_json::to_string_pretty(&record).expect("records serialise");
-    std::fs::write(dir.join(RECORD), text)
+    crate::files::write_atomic(dir.join(RECORD), text)
         .map_err(|e| BatchError::Io(format!("{}: {e}", dir.display())))?;
     Ok(record)
 }
@@ -292,9 +462,12 @@ pub enum Outcome {
 
 /// Runs the jobs not already done with `run.workers` at once; `on_done`
 /// sees each job as it ends. A failing job never stops the others.
+/// Once `stop` is set, no further job starts and the running ones are
+/// ended ([`run_job`]); the jobs not started are missing from the summary.
 pub fn run_local(
     jobs: &[JobSpec],
     run: &LocalRun,
+    stop: &AtomicBool,
     on_done: impl Fn(&Outcome) + Sync,
 ) -> Result<Vec<Outcome>, BatchError> {
     std::fs::create_dir_all(&run.out)
@@ -321,7 +494,18 @@ pub fn run_local(
                 loop {
                     let k = next.fetch_add(1, Ordering::Relaxed);
                     let Some(&i) = todo.get(k) else { break };
-                    match run_job(&run.exe, &run.out, &jobs[i], run.threads_per_job) {
+                    if stop.load(Ordering::Relaxed) {
+                        break;
+                    }
+                    let job = &jobs[i];
+                    match run_job(
+                        &run.exe,
+                        &run.out,
+                        job,
+                        run.threads_per_job,
+                        run.job_timeout,
+                        stop,
+                    ) {
                         Ok(r) => {
                             let o = Outcome::Ran(r);
                             on_done(&o);
@@ -464,7 +648,7 @@ pub fn submit_slurm(
     let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
     let script_path = out.join("batch.sbatch");
     let script = slurm_script(&abs(exe), &abs(manifest), &abs(out), jobs, opts);
-    std::fs::write(&script_path, script)
+    crate::files::write_atomic(&script_path, script)
         .map_err(|e| BatchError::Io(format!("{}: {e}", script_path.display())))?;
     let mut cmd = std::process::Command::new("sbatch");
     cmd.arg("--parsable");
@@ -532,6 +716,7 @@ mod tests {
             command: "bin".into(),
             input: Some("x.ptu".into()),
             args: vec!["--bins".into(), "10".into()],
+            timeout: Some("90s".into()),
         }];
         let path = dir.join("m.toml");
         write_manifest(&path, &jobs).unwrap();
@@ -539,5 +724,32 @@ mod tests {
         assert_eq!(back[0].args, jobs[0].args);
         let input = PathBuf::from(back[0].input.as_ref().unwrap());
         assert!(input.is_absolute() && input.ends_with("x.ptu"), "{input:?}");
+        assert_eq!(back[0].timeout.as_deref(), Some("90s"));
+    }
+
+    #[test]
+    fn a_manifest_that_is_not_a_small_text_file_is_refused_at_once() {
+        let t = Instant::now();
+        let err = read_manifest(Path::new("/dev/zero"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("not a regular file") && err.contains("/dev/zero"),
+            "{err}"
+        );
+        let tmp = tempfile::tempdir().unwrap();
+        let big = tmp.path().join("big.toml");
+        let f = std::fs::File::create(&big).unwrap();
+        f.set_len(10 << 30).unwrap(); // sparse: 10 GiB that take no disk
+        let err = read_manifest(&big).unwrap_err().to_string();
+        assert!(
+            err.contains("batch manifest") && err.contains("big.toml"),
+            "{err}"
+        );
+        let bad = tmp.path().join("bad.toml");
+        std::fs::write(&bad, b"[[job]]\ncommand = \"bin\"\ntimeout = \"soon\"\n").unwrap();
+        let err = read_manifest(&bad).unwrap_err().to_string();
+        assert!(err.contains("timeout") && err.contains("soon"), "{err}");
+        assert!(t.elapsed() < Duration::from_secs(1));
     }
 }

@@ -37,10 +37,10 @@
 //! let model = ForwardModel::new(&kernels, Boundary::Sensor);
 //! let truth = Scene::parse("disks").render(32, 32)?;
 //! let counts = poisson_counts(&model.expected_scene(truth.view()).counts, 7);
-//! let stack = Stack {
-//!     data: counts.mapv(|c| c as f32),
-//!     meta: StackMeta::simulated(&kernels, ValueKind::Counts, "example".into()),
-//! };
+//! let stack = Stack::new(
+//!     counts.mapv(|c| c as f32),
+//!     StackMeta::simulated(&kernels, ValueKind::Counts, "example".into()),
+//! );
 //! let problem = Problem::new(&stack, &setup, Sampling::Integrated, Boundary::Sensor)?;
 //! let mut opts = MethodOptions::default();
 //! opts.split.max_iters = 10;
@@ -75,6 +75,7 @@ pub mod config;
 pub mod confocal;
 pub mod denoise;
 pub mod fft2;
+pub mod files;
 pub mod font;
 pub mod formats;
 pub mod forward;

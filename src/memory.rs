@@ -313,8 +313,7 @@ pub fn read_bounded(path: &Path, max: u64, what: &'static str) -> Result<Vec<u8>
         path: path.to_path_buf(),
         source,
     };
-    let meta = std::fs::metadata(path).map_err(io)?;
-    require_regular_file(path, &meta, what)?;
+    let (file, meta) = crate::files::open_input(path, what)?;
     let too_large = |len| ReadError::TooLarge {
         path: path.to_path_buf(),
         len,
@@ -326,11 +325,7 @@ pub fn read_bounded(path: &Path, max: u64, what: &'static str) -> Result<Vec<u8>
     }
     check(meta.len(), || format!("reading {}", path.display()))?;
     let mut bytes = Vec::with_capacity(meta.len() as usize);
-    std::fs::File::open(path)
-        .map_err(io)?
-        .take(max + 1)
-        .read_to_end(&mut bytes)
-        .map_err(io)?;
+    file.take(max + 1).read_to_end(&mut bytes).map_err(io)?;
     if bytes.len() as u64 > max {
         return Err(too_large(bytes.len() as u64));
     }

@@ -181,11 +181,12 @@ impl PsfReport {
         }
         std::fs::create_dir_all(dir).map_err(|e| StackError::io(dir, e))?;
         let csv_path = dir.join("psf_bins.csv");
-        std::fs::write(&csv_path, self.table().1).map_err(|e| StackError::io(&csv_path, e))?;
-        let stack = Stack {
-            data: chosen.kernels.mapv(|v| v as f32),
-            meta: StackMeta::simulated(chosen, ValueKind::Kernel, "ST-PSF kernels".into()),
-        };
+        crate::files::write_atomic(&csv_path, self.table().1)
+            .map_err(|e| StackError::io(&csv_path, e))?;
+        let stack = Stack::new(
+            chosen.kernels.mapv(|v| v as f32),
+            StackMeta::simulated(chosen, ValueKind::Kernel, "ST-PSF kernels".into()),
+        );
         let exr = dir.join("psf.exr");
         stack.save(&exr)?;
         let sheet = dir.join("psf_sheet.png");

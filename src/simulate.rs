@@ -150,10 +150,7 @@ fn through_kernels(
     let mut meta = StackMeta::simulated(&kernels, ValueKind::ExpectedCounts, source);
     meta.clamped_negative = expected.clamped as u64;
     meta.boundary = Some(boundary);
-    let expected_stack = Stack {
-        data: expected.counts.mapv(|v| v as f32),
-        meta: meta.clone(),
-    };
+    let expected_stack = Stack::new(expected.counts.mapv(|v| v as f32), meta.clone());
     meta.kind = ValueKind::Counts;
     meta.seed = Some(seed);
     Ok(Simulation {
@@ -161,10 +158,7 @@ fn through_kernels(
         kernels,
         model,
         expected: expected_stack,
-        counts: Stack {
-            data: counts.mapv(|v| v as f32),
-            meta,
-        },
+        counts: Stack::new(counts.mapv(|v| v as f32), meta),
         clamped: expected.clamped,
         most_negative: expected.most_negative,
         timings: SimulationTimings {

@@ -564,7 +564,8 @@ fn t0_from_a_reference_recording_is_its_peak() {
     let mut payload = Vec::new();
     enc.finish_batch(&mut payload);
     w.write_batch(&payload);
-    w.finish(None).unwrap();
+    w.finish(None, scatterscope::files::Completion::Complete)
+        .unwrap();
     let t0 = scatterscope::acquire::calibration::t0_from_reference(&path).unwrap();
     assert!((t0 - 617.5 * 2.0).abs() < 1e-9, "{t0}");
     // A reference with no photons gives no t0, and says so by file.
@@ -574,7 +575,7 @@ fn t0_from_a_reference_recording_is_its_peak() {
         &TagFileHeader::new("test", &identity, &config, "test"),
     )
     .unwrap()
-    .finish(None)
+    .finish(None, scatterscope::files::Completion::Complete)
     .unwrap();
     let err = scatterscope::acquire::calibration::t0_from_reference(&empty)
         .unwrap_err()

@@ -221,6 +221,18 @@ fn check(kind: &Kind, defect: &str, file: &Path, out: &Path, o: &Output, expect:
                 assert!(out.join(f).exists(), "{what}: accepted without {f}");
             }
         }
+        Some(4) => {
+            // Outputs written, with the warning that they come from an
+            // incomplete input or are empty.
+            assert_eq!(expect, Expect::Either, "{what}: accepted\n{stdout}{stderr}");
+            assert!(
+                stdout.lines().any(|l| l.starts_with("warning: ")),
+                "{what}: exit status 4 without a warning line\n{stdout}{stderr}"
+            );
+            for f in kind.complete {
+                assert!(out.join(f).exists(), "{what}: accepted without {f}");
+            }
+        }
         Some(1) => {
             let name = file.file_name().unwrap().to_str().unwrap();
             assert!(

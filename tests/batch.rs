@@ -281,6 +281,12 @@ fn slurm_ready() -> Result<(), String> {
 #[test]
 fn the_same_manifest_as_a_slurm_array_gives_the_local_runs_outputs() {
     if let Err(why) = slurm_ready() {
+        // CI starts a cluster before the tests: there a missing one is a
+        // failure, not a skip; on a user's machine it is a skip.
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "CI=true but no Slurm cluster answers: {why}"
+        );
         eprintln!("skipped: {why} (start one with `bash scripts/slurm_local.sh`)");
         return;
     }
@@ -409,4 +415,77 @@ fn bench_recon_as_a_batch_gives_the_single_runs_rows() {
     assert!(a.len() > 10, "{a:?}");
     assert_eq!(a, b);
     assert!(batched.join("summary.md").exists());
+}
+
+/// Processes whose command line mentions `needle` (Linux's /proc).
+fn processes_mentioning(needle: &str) -> Vec<String> {
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        if let Ok(cmd) = std::fs::read(entry.path().join("cmdline")) {
+            let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
+            if cmd.contains(needle) && cmd.contains("acquire") {
+                found.push(cmd);
+            }
+        }
+    }
+    found
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn a_job_past_its_time_limit_and_a_stopped_batch_end_their_jobs_and_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let acquire = "command = \"acquire\"\nargs = [\"--device\", \"mock\", \"--duration\", \"60s\", \"--size\", \"16\"]\n";
+    let m = dir.path().join("slow.toml");
+    std::fs::write(
+        &m,
+        format!("[[job]]\nname = \"slow\"\ntimeout = \"1s\"\n{acquire}"),
+    )
+    .unwrap();
+    let out = dir.path().join("timed");
+    let t = Instant::now();
+    let o = scatterscope(&["batch", m.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(t.elapsed() < Duration::from_secs(30), "{:?}", t.elapsed());
+    assert!(!o.status.success(), "{}", text(&o));
+    let r = record(&out, "slow");
+    assert_eq!(r["status"], "timeout", "{r}");
+    // The job was asked to stop (SIGTERM): an acquisition saves what it
+    // received and exits 3.
+    assert_eq!(r["exit_code"], 3, "{r}");
+    assert!(out.join("slow").join("stack.exr").exists());
+    assert!(text(&o).contains("| slow | timeout |"), "{}", text(&o));
+
+    // SIGTERM to the batch reaches the running job; nothing is left running.
+    let m = dir.path().join("long.toml");
+    std::fs::write(&m, format!("[[job]]\nname = \"long\"\n{acquire}")).unwrap();
+    let out = dir.path().join("stopped");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args(["batch", m.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let needle = out.to_str().unwrap().to_string();
+    let t = Instant::now();
+    while processes_mentioning(&needle).is_empty() && t.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    // SAFETY: kill(2) on our own child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let status = child.wait().unwrap();
+    assert_eq!(
+        status.code(),
+        Some(3),
+        "the batch itself ends as interrupted"
+    );
+    assert!(t.elapsed() < Duration::from_secs(30));
+    let r = record(&out, "long");
+    assert_eq!(r["status"], "interrupted", "{r}");
+    assert_eq!(r["exit_code"], 3, "{r}");
+    assert!(
+        processes_mentioning(&needle).is_empty(),
+        "orphans: {:?}",
+        processes_mentioning(&needle)
+    );
 }

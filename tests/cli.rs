@@ -704,14 +704,23 @@ fn acquire_stops_cleanly_on(signal: nix::sys::signal::Signal) {
         stack.total() as u64,
         json["accounting"]["binned"].as_u64().unwrap()
     );
-    // The tag file is complete: it ends with the device's totals.
+    // The tag file is whole (it ends with the device's totals) and says
+    // that the run was interrupted; `info` warns (exit status 4).
     let o = scatterscope(&["info", raw.to_str().unwrap()]);
     let (stdout, _) = text(&o);
     assert!(
         stdout.contains(&format!("{received} photons sent")),
         "{stdout}"
     );
-    assert!(!stdout.contains("warning"), "{stdout}");
+    let warnings: Vec<&str> = stdout.lines().filter(|l| l.contains("warning")).collect();
+    assert_eq!(
+        warnings,
+        [
+            "warning: the run that wrote it was interrupted before its planned end (its end frame says so)"
+        ],
+        "{stdout}"
+    );
+    assert_eq!(o.status.code(), Some(4));
 }
 
 #[test]
@@ -1481,7 +1490,7 @@ fn simulate_takes_its_irf_from_a_reference_recording_and_records_it() {
         (1e6 * truth.bin_weight(a, a + 4.0, 400.0) + 5.0).round() as f32
     });
     let reference = dir.path().join("reference.exr");
-    Stack { data, meta }.save(&reference).unwrap();
+    Stack::new(data, meta).save(&reference).unwrap();
     let simulate = |out: &str, extra: &[&str]| {
         let sim = dir.path().join(out);
         let mut args = vec![
@@ -1568,12 +1577,9 @@ fn simulate_takes_its_irf_from_a_reference_recording_and_records_it() {
     );
     let flat = dir.path().join("flat.exr");
     let meta = StackMeta::consecutive(&s, 200, ValueKind::Counts, "flat".into()).unwrap();
-    Stack {
-        data: ndarray::Array3::from_elem((200, 1, 1), 7.0),
-        meta,
-    }
-    .save(&flat)
-    .unwrap();
+    Stack::new(ndarray::Array3::from_elem((200, 1, 1), 7.0), meta)
+        .save(&flat)
+        .unwrap();
     fails_with(
         &["simulate", "--irf-from", flat.to_str().unwrap()],
         &["flat.exr", "no instrument response"],

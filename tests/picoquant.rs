@@ -293,7 +293,7 @@ fn malformed_files_give_errors_with_offsets_not_panics() {
 }
 
 #[test]
-fn zero_record_count_falls_back_to_the_file_size() {
+fn a_recording_whose_writer_never_finished_is_flagged_and_binned_only_when_allowed() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("zero.ptu");
     let tags: Vec<Tag> = (0..10)
@@ -303,15 +303,71 @@ fn zero_record_count_falls_back_to_the_file_size() {
             micro_time: 1,
         })
         .collect();
-    let mut w = PtuWriter::create(&p, RecordType::PicoHarpT3, &header()).unwrap();
+    let mut w = PtuWriter::create_recording(&p, RecordType::PicoHarpT3, &header()).unwrap();
     for t in &tags {
         w.write_tag(*t).unwrap();
     }
-    drop(w); // never finished: the count stays 0
-    let (info, decoded, end) = decode_all(&p);
+    drop(w); // never finished: the count stays 0, under the temporary name
+    assert!(
+        !p.exists(),
+        "an unfinished recording never takes the final name"
+    );
+    let partial: Vec<PathBuf> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(partial.len(), 1);
+    assert!(scatterscope::files::output::is_partial_name(&partial[0]));
+    let (info, decoded, end) = decode_all(&partial[0]);
     end.unwrap();
+    assert!(info.count_missing && info.marked_incomplete());
     assert_eq!(info.records_announced, 10);
     assert_eq!(decoded, tags);
+    let note = info.completeness_note().unwrap();
+    assert!(
+        note.contains("never finished") && note.contains("10 records"),
+        "{note}"
+    );
+    let err = bin_file(&partial[0], &BinSpec::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("no record count") && err.contains(".zero.ptu.partial-"),
+        "{err}"
+    );
+    let allowed = BinSpec {
+        allow_truncated: true,
+        ..BinSpec::default()
+    };
+    let binned = bin_file(&partial[0], &allowed).unwrap();
+    assert_eq!(binned.accounting.received, 10);
+    assert!(
+        binned
+            .warnings()
+            .iter()
+            .any(|w| w.contains("never finished"))
+    );
+}
+
+#[test]
+fn an_interrupted_recording_is_whole_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("cut.ptu");
+    let mut w = PtuWriter::create_recording(&p, RecordType::GenericT3, &header()).unwrap();
+    w.write_records(&[5, 6, 7]).unwrap();
+    w.finish_as(scatterscope::files::Completion::Interrupted)
+        .unwrap();
+    let (info, _, end) = decode_all(&p);
+    end.unwrap();
+    assert!(!info.count_missing && info.marked_incomplete());
+    assert_eq!(info.records_announced, 3);
+    assert!(info.completeness_note().unwrap().contains("interrupted"));
+    let p2 = dir.path().join("whole.ptu");
+    let mut w = PtuWriter::create_recording(&p2, RecordType::GenericT3, &header()).unwrap();
+    w.write_records(&[5, 6, 7]).unwrap();
+    w.finish().unwrap();
+    let (info, _, _) = decode_all(&p2);
+    assert!(!info.marked_incomplete() && info.completeness_note().is_none());
 }
 
 #[test]

@@ -34,6 +34,7 @@ fn sample_stack(kind: ValueKind) -> Stack {
             boundary: None,
             acquisition: Some(serde_json::json!({"device": "mock", "photons": 12})),
         },
+        exact_counts: None,
     }
 }
 
@@ -322,4 +323,74 @@ fn a_measured_irf_of_the_largest_size_round_trips_through_exr_and_npy() {
         s.save(&path).unwrap();
         assert_eq!(Stack::load(&path).unwrap(), s, "{name}");
     }
+}
+
+/// Counts at and just above 2^24, where float32 stops holding every whole
+/// number, in a stack that round-trips through both formats bit for bit.
+#[test]
+fn counts_above_2_to_the_24_round_trip_exactly_through_exr_and_npy() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut counts = ndarray::Array3::<u32>::zeros((3, 2, 2));
+    counts[[0, 0, 0]] = 1 << 24;
+    counts[[0, 0, 1]] = (1 << 24) + 1; // float32 rounds this to 2^24
+    counts[[1, 1, 0]] = u32::MAX;
+    counts[[2, 1, 1]] = 7;
+    let meta = sample_stack(ValueKind::Counts).meta;
+    let stack = Stack::from_counts(counts.clone(), meta.clone());
+    assert_eq!(stack.exact_counts.as_ref(), Some(&counts));
+    for ext in ["exr", "npy"] {
+        let path = dir.path().join(format!("big.{ext}"));
+        stack.save(&path).unwrap();
+        let back = Stack::load(&path).unwrap();
+        assert_eq!(back.exact_counts.as_ref(), Some(&counts), "{ext}");
+        assert_eq!(back.data, stack.data, "{ext}");
+    }
+    // Up to 2^24 float32 is exact and nothing more is kept.
+    counts[[0, 0, 1]] = 1 << 24;
+    counts[[1, 1, 0]] = 0;
+    assert!(Stack::from_counts(counts, meta).exact_counts.is_none());
+}
+
+/// 2^24 + 3 photons in one bin: `bin`'s stack and its file sum to the ledger.
+#[test]
+fn a_bin_of_more_than_2_to_the_24_photons_sums_to_the_ledger() {
+    use scatterscope::formats::picoquant::records::RecordType;
+    use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
+    use scatterscope::tags::bin_file::{BinSpec, bin_file};
+    let dir = tempfile::tempdir().unwrap();
+    let ptu = dir.path().join("one-bin.ptu");
+    let h = WriterHeader {
+        resolution_s: 10e-12,
+        sync_rate_hz: 40e6,
+        device: "test".into(),
+        imaging: None,
+        extra: Vec::new(),
+    };
+    let n = (1u32 << 24) + 3;
+    // Generic T3 photons on channel 0, micro time 100, each at sync 5.
+    let record = (100u32 << 10) | 5;
+    let mut w = PtuWriter::create(&ptu, RecordType::GenericT3, &h).unwrap();
+    w.write_records(&vec![record; n as usize]).unwrap();
+    w.finish().unwrap();
+    let binned = bin_file(&ptu, &BinSpec::default()).unwrap();
+    assert_eq!(binned.accounting.binned, u64::from(n));
+    let stack = &binned.stacks[0];
+    let exact = stack
+        .exact_counts
+        .as_ref()
+        .expect("counts above 2^24 are kept");
+    assert_eq!(
+        exact.iter().map(|&c| u64::from(c)).sum::<u64>(),
+        u64::from(n)
+    );
+    let out = dir.path().join("out");
+    let files = binned.write(&out).unwrap();
+    let back = Stack::load(&files[0]).unwrap();
+    let sum: u64 = back
+        .exact_counts
+        .unwrap()
+        .iter()
+        .map(|&c| u64::from(c))
+        .sum();
+    assert_eq!(sum, binned.accounting.binned);
 }

@@ -35,8 +35,11 @@ use scatterscope::tags::binning::FrameSelect;
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
+// Declared under the package's own name (the package re-exports it), so
+// that pickle finds it as `scatterscope.ScatterscopeError` and the error
+// crosses a process boundary (multiprocessing, concurrent.futures).
 pyo3::create_exception!(
-    _native,
+    scatterscope,
     ScatterscopeError,
     PyException,
     "An error of the scatterscope library; its message names the file, field and value."
@@ -253,7 +256,7 @@ fn bin_file<'py>(
     frames: &str,
     allow_truncated: bool,
 ) -> PyResult<(
-    Vec<Bound<'py, PyArray3<f32>>>,
+    Vec<Bound<'py, PyAny>>,
     Vec<Bound<'py, PyAny>>,
     Bound<'py, PyAny>,
     Vec<String>,
@@ -274,9 +277,22 @@ fn bin_file<'py>(
     let mut metas = Vec::new();
     for stack in binned.stacks {
         metas.push(to_py(py, &stack.meta)?);
-        arrays.push(stack.data.into_pyarray(py));
+        arrays.push(counts_array(py, stack.data, stack.exact_counts));
     }
     Ok((arrays, metas, ledger, summary))
+}
+
+/// A stack's values as numpy: float32, or uint32 when the counts do not
+/// all fit float32 exactly (above 2^24).
+fn counts_array<'py>(
+    py: Python<'py>,
+    data: ndarray::Array3<f32>,
+    exact: Option<ndarray::Array3<u32>>,
+) -> Bound<'py, PyAny> {
+    match exact {
+        Some(counts) => counts.into_pyarray(py).into_any(),
+        None => data.into_pyarray(py).into_any(),
+    }
 }
 
 /// A stack file's counts and metadata JSON (None for a plain array).
@@ -284,13 +300,16 @@ fn bin_file<'py>(
 fn load_stack<'py>(
     py: Python<'py>,
     path: PathBuf,
-) -> PyResult<(Bound<'py, PyArray3<f32>>, Option<String>)> {
-    let (data, meta) = py.detach(|| Stack::read(&path)).map_err(err)?;
-    if let Some(m) = &meta {
+) -> PyResult<(Bound<'py, PyAny>, Option<String>)> {
+    let file = py.detach(|| Stack::read_file(&path)).map_err(err)?;
+    if let Some(m) = &file.meta {
         // The same checks as every reader of the library.
-        Stack::from_parts(data.clone(), m.clone(), &path).map_err(err)?;
+        Stack::from_parts(file.data.clone(), m.clone(), &path).map_err(err)?;
     }
-    Ok((data.into_pyarray(py), meta.map(|m| to_json(&m))))
+    Ok((
+        counts_array(py, file.data, file.exact_counts),
+        file.meta.map(|m| to_json(&m)),
+    ))
 }
 
 /// A 2-D image (EXR, PNG, npy, ...), e.g. a reconstruction.
@@ -304,15 +323,22 @@ fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArra
 
 /// Writes counts with their metadata (JSON) as EXR or npy + JSON.
 #[pyfunction]
+#[pyo3(signature = (path, data, meta_json, counts=None))]
 fn save_stack(
     py: Python<'_>,
     path: PathBuf,
     data: PyReadonlyArray3<'_, f32>,
     meta_json: &str,
+    counts: Option<PyReadonlyArray3<'_, u32>>,
 ) -> PyResult<()> {
     let meta: StackMeta = serde_json::from_str(meta_json)
         .map_err(|e| msg(format!("{}: the metadata: {e}", path.display())))?;
-    let stack = Stack::from_parts(data.as_array().to_owned(), meta, &path).map_err(err)?;
+    let mut stack = Stack::from_parts(data.as_array().to_owned(), meta, &path).map_err(err)?;
+    if let Some(c) = counts {
+        // Whole counts given exactly: kept exactly when float32 cannot.
+        stack.exact_counts =
+            Stack::from_counts(c.as_array().to_owned(), stack.meta.clone()).exact_counts;
+    }
     py.detach(|| stack.save(&path)).map_err(err)
 }
 

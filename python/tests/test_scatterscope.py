@@ -255,3 +255,35 @@ def test_help_reads_well():
         obj = getattr(scatterscope, name)
         if callable(obj):
             assert obj.__doc__ and len(obj.__doc__) > 40, name
+
+
+def _load_missing(path):
+    return scatterscope.load_stack(path)
+
+
+def test_errors_cross_a_process_boundary_with_their_message(tmp_path):
+    import concurrent.futures
+    import pickle
+
+    missing = str(tmp_path / "missing.exr")
+    with pytest.raises(ScatterscopeError) as local:
+        scatterscope.load_stack(missing)
+    assert type(local.value).__module__ == "scatterscope"
+    back = pickle.loads(pickle.dumps(local.value))
+    assert type(back) is ScatterscopeError and str(back) == str(local.value)
+    with concurrent.futures.ProcessPoolExecutor(max_workers=1) as pool:
+        with pytest.raises(ScatterscopeError) as remote:
+            pool.submit(_load_missing, missing).result()
+    assert "missing.exr" in str(remote.value)
+
+
+@pytest.mark.parametrize("ext", ["exr", "npy"])
+def test_counts_above_2_to_the_24_round_trip_exactly(tmp_path, ext):
+    meta = json.loads(scatterscope._native.measured_meta(0.0, 10.0, 2, "exact"))
+    counts = np.array([[[2**24 + 1, 3]], [[2**31 + 7, 0]]], dtype=np.uint32)
+    path = tmp_path / f"big.{ext}"
+    scatterscope.save_stack(path, counts, meta)
+    back, _ = scatterscope.load_stack(path)
+    assert back.dtype == np.uint32
+    np.testing.assert_array_equal(back, counts)
+    assert int(back.astype(np.uint64).sum()) == int(counts.astype(np.uint64).sum())

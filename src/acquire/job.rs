@@ -243,7 +243,7 @@ impl Job {
         files.push(sheet);
         let json_path = self.out.join("acquisition.json");
         let json = serde_json::to_string_pretty(&outcome.record(&plan)).expect("record serialises");
-        std::fs::write(&json_path, json + "\n").map_err(io(&json_path))?;
+        crate::files::write_atomic(&json_path, json + "\n").map_err(io(&json_path))?;
         files.push(json_path);
         files.extend(outcome.tag_file.clone());
         Ok(Acquisition {

@@ -17,7 +17,7 @@ use scatterscope_drivers::picoquant::{
 use serde::Serialize;
 
 use crate::formats::picoquant::records::{Decoder, RecordType};
-use crate::formats::picoquant::writer::{HeaderEntry, PtuWriter, WriterHeader};
+use crate::formats::picoquant::writer::{Completion, HeaderEntry, PtuWriter, WriterHeader};
 use crate::formats::png::{SheetScale, write_contact_sheet};
 use crate::stack::{Stack, StackMeta};
 use crate::tags::Imaging;
@@ -635,7 +635,7 @@ impl PicoQuantJob {
         let mut writer = match &self.ptu {
             Some(path) => {
                 let h = header(&info, &settings, resolution_ps, sync_hz, self);
-                match PtuWriter::create(path, record_type, &h) {
+                match PtuWriter::create_recording(path, record_type, &h) {
                     Ok(w) => Some(w),
                     Err(e) => {
                         ptu_error = Some(format!("creating {}: {e}", path.display()));
@@ -753,7 +753,12 @@ impl PicoQuantJob {
         if let Some(path) = &self.ptu {
             if let Some(w) = writer {
                 records_in_ptu = w.records();
-                if let Err(e) = w.finish() {
+                let completion = if end.stop == PicoQuantStop::Duration {
+                    Completion::Complete
+                } else {
+                    Completion::Interrupted
+                };
+                if let Err(e) = w.finish_as(completion) {
                     ptu_error = Some(format!("closing {}: {e}", path.display()));
                 }
             }
@@ -776,16 +781,16 @@ impl PicoQuantJob {
             info.serial,
             record_type.name()
         );
-        let stack = Stack {
-            data: stacks.swap_remove(0).mapv(|c| c as f32),
-            meta: StackMeta::measured(
+        let stack = Stack::from_counts(
+            stacks.swap_remove(0),
+            StackMeta::measured(
                 window.start_ps(resolution_ps),
                 window.width_ps(resolution_ps),
                 window.bins,
                 source,
                 None,
             ),
-        };
+        );
         let mut done = PicoQuantAcquisition {
             device: info,
             resolution_ps,
@@ -818,7 +823,8 @@ impl PicoQuantJob {
         write_contact_sheet(stack, SheetScale::Shared, &png).map_err(|e| out_err(e.to_string()))?;
         let json = self.out.join("acquisition.json");
         let text = serde_json::to_string_pretty(done).expect("the record serialises");
-        std::fs::write(&json, text).map_err(|e| out_err(format!("{}: {e}", json.display())))?;
+        crate::files::write_atomic(&json, text)
+            .map_err(|e| out_err(format!("{}: {e}", json.display())))?;
         let mut files = vec![exr, png, json];
         if let Some(p) = &done.ptu {
             files.push(p.path.clone());

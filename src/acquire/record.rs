@@ -78,10 +78,7 @@ impl Outcome {
         meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
         meta.setup = Some(setup);
         meta.sampling = Some(Sampling::Integrated);
-        Stack {
-            data: self.counts.mapv(|c| c as f32),
-            meta,
-        }
+        Stack::from_counts(self.counts.clone(), meta)
     }
 }
 

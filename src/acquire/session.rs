@@ -241,7 +241,16 @@ pub fn acquire(
                 .expect("the closed pipeline let go of the writer")
                 .into_inner()
                 .expect("writer lock");
-            Some(writer.finish(totals).map_err(AcquireError::TagFile)?)
+            let completion = if matches!(reason, StopReason::Duration | StopReason::DeviceStopped) {
+                crate::files::Completion::Complete
+            } else {
+                crate::files::Completion::Interrupted
+            };
+            Some(
+                writer
+                    .finish(totals, completion)
+                    .map_err(AcquireError::TagFile)?,
+            )
         }
         None => None,
     };

@@ -115,6 +115,25 @@ impl TimeHistogram {
                 format!("bin {i} holds {c} counts: counts must be finite and non-negative"),
             ));
         }
+        // Above 2^53 a float no longer holds whole counts, and no
+        // measurement comes near it: a file of such values is not counts.
+        if let Some((i, c)) = counts.iter().enumerate().find(|(_, c)| **c > 2f64.powi(53)) {
+            return Err(file_error(
+                source,
+                format!(
+                    "bin {i} holds {c:e} counts, more than any measurement counts (2^53): not a histogram of photon counts"
+                ),
+            ));
+        }
+        if counts.iter().all(|&c| c == 0.0) {
+            return Err(file_error(
+                source,
+                format!(
+                    "all {} bins hold 0 counts: no photon was recorded, so it gives no time profile",
+                    counts.len()
+                ),
+            ));
+        }
         Ok(Self {
             counts,
             bin_width_ps,

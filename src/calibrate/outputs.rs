@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use super::histogram::TimeHistogram;
 use super::measured_irf::MeasuredIrf;
 use super::transmittance::{
-    Capture, SlabFit, SlabFitOptions, fit_slab, predict_captures, read_captures,
+    Capture, MediumEstimate, SlabFit, SlabFitOptions, fit_slab, predict_captures, read_captures,
 };
 use super::{CalibrateError, Calibration, Free, calibrate, time_profile};
 use crate::config::PhysicsOverrides;
@@ -23,7 +23,7 @@ fn io_error(path: &Path, e: impl std::fmt::Display) -> CalibrateError {
 }
 
 fn write(path: &Path, text: &str) -> Result<(), CalibrateError> {
-    std::fs::write(path, text).map_err(|e| io_error(path, e))
+    crate::files::write_atomic(path, text).map_err(|e| io_error(path, e))
 }
 
 /// A stack file's calibration: the stack (with metadata), the physics it
@@ -288,6 +288,17 @@ pub struct SlabJob {
     pub options: SlabFitOptions,
 }
 
+/// Largest chi-square per degree of freedom of a fit taken as describing
+/// the captures (a Poisson fit that describes them gives about 1; the
+/// shared foam captures fit at 1-3).
+pub const MAX_PLAUSIBLE_CHI2_PER_DOF: f64 = 20.0;
+/// Absorption coefficients of scattering materials (1/cm): water and
+/// tissue in the near infrared lie near 0.01-1.
+pub const PLAUSIBLE_MU_A_PER_CM: (f64, f64) = (0.0, 10.0);
+/// Reduced scattering coefficients of scattering materials (1/cm): tissue
+/// and foam lie near 1-100.
+pub const PLAUSIBLE_MU_S_REDUCED_PER_CM: (f64, f64) = (0.1, 1000.0);
+
 /// A finished slab calibration.
 #[derive(Debug, Clone)]
 pub struct SlabCalibration {
@@ -384,16 +395,49 @@ impl SlabCalibration {
         lines
     }
 
-    /// Writes `fit.csv` and the plots ([`write_slab_fits`]) into `dir`.
+    /// What makes the fit doubtful, naming the value: a chi-square per
+    /// degree of freedom far from 1 (the model does not describe the
+    /// captures: thicknesses swapped, the reference and a capture swapped,
+    /// the wrong bin width), or a fitted coefficient outside what any
+    /// scattering material has ([`PLAUSIBLE_MU_A_PER_CM`],
+    /// [`PLAUSIBLE_MU_S_REDUCED_PER_CM`]).
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        let fit = &self.fit;
+        if fit.chi2_per_dof.is_nan() || fit.chi2_per_dof > MAX_PLAUSIBLE_CHI2_PER_DOF {
+            w.push(format!(
+                "chi2/dof = {:.1} over {} degrees of freedom (a fit that describes Poisson counts gives about 1, at most {MAX_PLAUSIBLE_CHI2_PER_DOF} here): the model does not describe the captures; check their thicknesses, that the reference is the reference, and the bin width",
+                fit.chi2_per_dof, fit.dof
+            ));
+        }
+        let outside = |name: &str, e: &MediumEstimate, (lo, hi): (f64, f64)| {
+            (e.fitted && !(e.value >= lo && e.value <= hi)).then(|| {
+                format!("fitted {name} = {:.4} 1/cm lies outside {lo} to {hi} 1/cm, where scattering materials lie", e.value)
+            })
+        };
+        w.extend(outside("mu_a", &fit.mu_a, PLAUSIBLE_MU_A_PER_CM));
+        w.extend(outside(
+            "reduced scattering mu_s'",
+            &fit.mu_s_reduced,
+            PLAUSIBLE_MU_S_REDUCED_PER_CM,
+        ));
+        w
+    }
+
+    /// Writes `fit.csv` and the plots ([`write_slab_fits`]) into `dir`,
+    /// and `medium.toml` unless the fit is doubtful ([`Self::warnings`]):
+    /// a material file is used without a second look.
     pub fn write(&self, dir: &Path) -> Result<Vec<PathBuf>, CalibrateError> {
         let mut groups = vec![(&self.captures[..], &self.fit, "fitted")];
         if let Some((held, pred)) = &self.prediction {
             groups.push((&held[..], pred, "predicted"));
         }
         let mut written = write_slab_fits(dir, &groups)?;
-        let path = dir.join("medium.toml");
-        write(&path, &self.medium_toml())?;
-        written.push(path);
+        if self.warnings().is_empty() {
+            let path = dir.join("medium.toml");
+            write(&path, &self.medium_toml())?;
+            written.push(path);
+        }
         Ok(written)
     }
 

@@ -33,7 +33,7 @@ pub mod stolt;
 pub mod volume;
 
 pub use poisson::{PoissonOptions, reconstruct_poisson};
-pub use published::{PublishedOptions, reconstruct_published};
+pub use published::{LIGHT_SPEED, PublishedOptions, reconstruct_published};
 pub use scan::ConfocalScan;
 pub use slab_kernel::SlabOptics;
 pub use volume::HiddenVolume;
@@ -68,6 +68,36 @@ pub fn reconstruct_hidden(
             (volume, Some(trace))
         }
     })
+}
+
+/// What makes a reconstruction of `scan` to `depth_m` (m behind the slab)
+/// doubtful, in words naming the file, the setting and the value: a scan
+/// shorter than the depth asked (the rest is zeros, and depth reads
+/// shallower), or a volume with nothing in it (a slab or medium that lets
+/// no light through).
+pub fn hidden_warnings(scan: &ConfocalScan, volume: &HiddenVolume, depth_m: f64) -> Vec<String> {
+    let mut w = Vec::new();
+    let wanted = published::crop_bins(depth_m, scan.bin_width_ps);
+    let held = (0..wanted)
+        .take_while(|&k| scan.bin_after_zero(k).is_some())
+        .count();
+    if held < wanted {
+        let reach_m = held as f64 * scan.bin_width_ps * 1e-12 * LIGHT_SPEED / 2.0;
+        w.push(format!(
+            "{}: the scan holds {held} bins after time zero, {reach_m:.3} m of depth, but the depth asked is {depth_m} m ({wanted} bins): the missing {} bins are taken as zero counts, which pulls depths shallower",
+            scan.source,
+            wanted - held
+        ));
+    }
+    let peak = volume.data.iter().fold(0.0f64, |m, &v| m.max(v));
+    if peak <= 0.0 || peak.is_nan() || volume.data.iter().any(|v| !v.is_finite()) {
+        w.push(format!(
+            "{}: the reconstructed volume is {}: the slab's model lets no light through at these settings, or the scan holds none",
+            scan.source,
+            if peak > 0.0 { "not finite everywhere" } else { "all zero" }
+        ));
+    }
+    w
 }
 
 /// Why a confocal scan cannot be read or reconstructed.

@@ -18,7 +18,7 @@ use exr::prelude::{
 use ndarray::{Array3, Axis};
 
 use crate::memory::{ReadError, bytes_of};
-use crate::stack::{Stack, StackError, StackMeta};
+use crate::stack::{F32_EXACT_COUNT, Stack, StackError, StackFile, StackMeta};
 
 /// Name of the attribute holding the JSON metadata.
 pub const META_ATTRIBUTE: &str = "scatterscope";
@@ -60,13 +60,40 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
         }
         Ok(attrs)
     };
-    write_slices(
-        stack.data.view(),
-        "stack",
-        STACK_CHANNEL_PREFIX,
-        attributes,
-        path,
-    )
+    match &stack.exact_counts {
+        // Counts above 2^24 go in 32-bit unsigned channels, exactly.
+        Some(counts) => write_channels(
+            u32_slices(counts.view(), STACK_CHANNEL_PREFIX),
+            counts.dim(),
+            "stack",
+            attributes,
+            path,
+        ),
+        None => write_slices(
+            stack.data.view(),
+            "stack",
+            STACK_CHANNEL_PREFIX,
+            attributes,
+            path,
+        ),
+    }
+}
+
+/// One `U32` channel per slice of `counts` along its first axis.
+fn u32_slices(
+    counts: ndarray::ArrayView3<u32>,
+    prefix: &str,
+) -> SmallVec<[AnyChannel<FlatSamples>; 4]> {
+    counts
+        .axis_iter(Axis(0))
+        .enumerate()
+        .map(|(i, img)| {
+            AnyChannel::new(
+                format!("{prefix}{i:03}").as_str(),
+                FlatSamples::U32(img.iter().copied().collect()),
+            )
+        })
+        .collect()
 }
 
 /// Writes a volume as one layer named `layer` with one `f32` channel per
@@ -110,13 +137,6 @@ fn write_slices(
     attributes: impl FnOnce() -> Result<LayerAttributes, StackError>,
     path: &Path,
 ) -> Result<(), StackError> {
-    let (k, h, w) = volume.dim();
-    if k == 0 || h == 0 || w == 0 {
-        return Err(StackError::format(
-            path,
-            format!("cannot write an empty {k} x {h} x {w} {what}"),
-        ));
-    }
     let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = volume
         .axis_iter(Axis(0))
         .enumerate()
@@ -127,6 +147,24 @@ fn write_slices(
             )
         })
         .collect();
+    write_channels(channels, volume.dim(), what, attributes, path)
+}
+
+/// One layer of `channels` (the slices of a `dim` volume) with the
+/// attributes `attributes` makes once the volume is known not to be empty.
+fn write_channels(
+    channels: SmallVec<[AnyChannel<FlatSamples>; 4]>,
+    (k, h, w): (usize, usize, usize),
+    what: &str,
+    attributes: impl FnOnce() -> Result<LayerAttributes, StackError>,
+    path: &Path,
+) -> Result<(), StackError> {
+    if k == 0 || h == 0 || w == 0 {
+        return Err(StackError::format(
+            path,
+            format!("cannot write an empty {k} x {h} x {w} {what}"),
+        ));
+    }
     let layer = Layer::new(
         (w, h),
         attributes()?,
@@ -145,7 +183,7 @@ fn write_layer(layer: Layer<AnyChannels<FlatSamples>>, path: &Path) -> Result<()
         .to_buffered(std::io::Cursor::new(&mut bytes))
         .map_err(|e| exr_error(path, e))?;
     sort_header_attributes(&mut bytes);
-    std::fs::write(path, bytes).map_err(|e| StackError::io(path, e))
+    crate::files::write_atomic(path, bytes).map_err(|e| StackError::io(path, e))
 }
 
 /// Puts the header attributes of a single-part EXR file in name order, in
@@ -219,9 +257,7 @@ const MIN_BUDGET: u64 = 64 << 20;
 /// declares more pixels than the file could hold, or more than the memory
 /// budget (the samples, a float32 copy of each channel and the stack).
 pub(crate) fn read_first_layer(path: &Path) -> Result<Layer<AnyChannels<FlatSamples>>, StackError> {
-    let io = |e| StackError::io(path, e);
-    let file = std::fs::metadata(path).map_err(io)?;
-    crate::memory::require_regular_file(path, &file, "OpenEXR file")?;
+    let (_, file) = crate::files::open_input(path, "OpenEXR file")?;
     let size = file.len();
     let budget = size.saturating_mul(MAX_EXPANSION).max(MIN_BUDGET);
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_error(path, e))?;
@@ -260,7 +296,7 @@ pub(crate) fn read_first_layer(path: &Path) -> Result<Layer<AnyChannels<FlatSamp
 /// Reads the first layer's time-bin channels (`t000`, `t001`, ...), as
 /// [`write()`] or any other OpenEXR writer lays them out, and the metadata
 /// attribute when there is one.
-pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
+pub fn read(path: &Path) -> Result<StackFile, StackError> {
     let layer = read_first_layer(path)?;
     let meta = match layer.attributes.other.get(&Text::from(META_ATTRIBUTE)) {
         Some(AttributeValue::Text(t)) => Some(
@@ -276,7 +312,7 @@ pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError>
         }
         None => None,
     };
-    let mut bins: Vec<(usize, Vec<f32>)> = Vec::new();
+    let mut bins: Vec<(usize, &FlatSamples)> = Vec::new();
     for ch in &layer.channel_data.list {
         let name = ch.name.to_string();
         let index = name
@@ -285,11 +321,7 @@ pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError>
             .ok_or_else(|| {
                 StackError::format(path, format!("channel `{name}` is not a time bin (tNNN)"))
             })?;
-        let values: Vec<f32> = match &ch.sample_data {
-            FlatSamples::F32(v) => v.clone(),
-            other => other.values_as_f32().collect(),
-        };
-        bins.push((index, values));
+        bins.push((index, &ch.sample_data));
     }
     bins.sort_by_key(|(i, _)| *i);
     for (expect, (got, _)) in bins.iter().enumerate() {
@@ -305,10 +337,49 @@ pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError>
     }
     let (w, h) = (layer.size.0, layer.size.1);
     let mut data = Array3::<f32>::zeros((bins.len(), h, w));
-    for (mut dst, (_, values)) in data.axis_iter_mut(Axis(0)).zip(bins) {
-        dst.iter_mut().zip(values).for_each(|(d, v)| *d = v);
+    for (mut dst, (_, samples)) in data.axis_iter_mut(Axis(0)).zip(&bins) {
+        match samples {
+            FlatSamples::F32(v) => dst.iter_mut().zip(v).for_each(|(d, &v)| *d = v),
+            other => dst
+                .iter_mut()
+                .zip(other.values_as_f32())
+                .for_each(|(d, v)| *d = v),
+        }
     }
-    Ok((data, meta))
+    // 32-bit unsigned channels hold counts exactly; kept when f32 cannot.
+    let big = |s: &FlatSamples| match s {
+        FlatSamples::U32(v) => v.iter().any(|&c| c > F32_EXACT_COUNT),
+        _ => false,
+    };
+    let exact_counts = if bins.iter().any(|(_, s)| big(s)) {
+        let mut counts = Array3::<u32>::zeros((bins.len(), h, w));
+        for (mut dst, (_, samples)) in counts.axis_iter_mut(Axis(0)).zip(&bins) {
+            match samples {
+                FlatSamples::U32(v) => dst.iter_mut().zip(v).for_each(|(d, &v)| *d = v),
+                other => {
+                    for (d, v) in dst.iter_mut().zip(other.values_as_f32()) {
+                        if !(v >= 0.0 && v.fract() == 0.0 && v <= u32::MAX as f32) {
+                            return Err(StackError::format(
+                                path,
+                                format!(
+                                    "a bin of counts holds {v}, not a whole count, beside 32-bit count channels"
+                                ),
+                            ));
+                        }
+                        *d = v as u32;
+                    }
+                }
+            }
+        }
+        Some(counts)
+    } else {
+        None
+    };
+    Ok(StackFile {
+        data,
+        meta,
+        exact_counts,
+    })
 }
 
 fn exr_error(path: &Path, e: exr::error::Error) -> StackError {

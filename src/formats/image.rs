@@ -67,10 +67,11 @@ pub fn write_image(img: ArrayView2<f64>, path: &Path) -> Result<(), ImageError> 
         "exr" => super::exr::write_image(img.mapv(|v| v as f32).view(), path)
             .map_err(|e| fail(e.to_string())),
         "npy" => {
-            let file = std::fs::File::create(path).map_err(|e| fail(e.to_string()))?;
+            let mut bytes = Vec::new();
             img.mapv(|v| v as f32)
-                .write_npy(std::io::BufWriter::new(file))
-                .map_err(|e| fail(e.to_string()))
+                .write_npy(&mut bytes)
+                .map_err(|e| fail(e.to_string()))?;
+            crate::files::write_atomic(path, bytes).map_err(|e| fail(e.to_string()))
         }
         other => Err(fail(format!(
             "unknown extension `{other}` (use .png, .exr or .npy)"

@@ -9,13 +9,7 @@ use hdf5_reader::{Dataset, Hdf5File};
 /// Opens a MATLAB v7.3 file after checking it is a regular file that fits
 /// the memory budget and is not cut short.
 pub fn open(path: &Path) -> Result<Hdf5File, String> {
-    let meta = std::fs::metadata(path).map_err(|e| e.to_string())?;
-    if !meta.is_file() {
-        return Err(format!(
-            "not a regular file ({}); a MATLAB file must be one",
-            crate::memory::file_kind(&meta)
-        ));
-    }
+    let (_, meta) = crate::files::open_regular(path, "MATLAB file").map_err(|e| e.to_string())?;
     crate::memory::check(meta.len(), || format!("reading {}", path.display()))
         .map_err(|e| e.to_string())?;
     if let Some(declared) = hdf5_declared_size(path)
@@ -33,15 +27,22 @@ pub fn open(path: &Path) -> Result<Hdf5File, String> {
     })
 }
 
-/// Dataset `name` of `file`; the error lists the datasets there are.
+/// Dataset `name` of `file`; the error lists the datasets there are, or
+/// says the file's structure cannot be read when it lists none.
 pub fn dataset(file: &Hdf5File, name: &str) -> Result<Dataset, String> {
-    file.dataset(&format!("/{name}")).map_err(|_| {
+    file.dataset(&format!("/{name}")).map_err(|e| {
         let names = file
             .root_group()
             .and_then(|g| g.member_names())
             .map(|(_, d)| d.join(", "))
             .unwrap_or_default();
-        format!("no dataset `{name}` (datasets in the file: {names})")
+        if names.is_empty() {
+            format!(
+                "no dataset `{name}`, and no dataset can be listed ({e}): the file is damaged or not a MATLAB v7.3 file"
+            )
+        } else {
+            format!("no dataset `{name}` (datasets in the file: {names})")
+        }
     })
 }
 

@@ -13,13 +13,10 @@ use ndarray::Array3;
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
 use crate::memory::{ReadError, bytes_of, read_bounded};
-use crate::stack::{Stack, StackError, StackMeta, ValueKind};
+use crate::stack::{F32_EXACT_COUNT, Stack, StackError, StackFile, StackMeta, ValueKind};
 
 /// Largest sidecar read (the metadata of any stack is far smaller).
 const MAX_SIDECAR: u64 = 64 << 20;
-
-/// Largest integer every `f32` represents exactly (2^24).
-const F32_EXACT_INT: u64 = 1 << 24;
 
 /// Path of the JSON sidecar that belongs to `npy`.
 pub fn sidecar_path(npy: &Path) -> PathBuf {
@@ -28,27 +25,33 @@ pub fn sidecar_path(npy: &Path) -> PathBuf {
 
 /// Writes `stack` as `.npy` plus the JSON sidecar.
 pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
-    let file = File::create(path).map_err(|e| StackError::io(path, e))?;
-    let out = BufWriter::new(file);
+    let file = crate::files::AtomicFile::create(path).map_err(|e| StackError::io(path, e))?;
+    let mut out = BufWriter::new(file);
     let whole_counts = stack.meta.kind == ValueKind::Counts
         && stack
             .data
             .iter()
             .all(|&v| v >= 0.0 && v.fract() == 0.0 && v <= u32::MAX as f32);
-    let written = if whole_counts {
-        stack.data.mapv(|v| v as u32).write_npy(out)
+    let written = if let Some(counts) = &stack.exact_counts {
+        counts.write_npy(&mut out)
+    } else if whole_counts {
+        stack.data.mapv(|v| v as u32).write_npy(&mut out)
     } else {
-        stack.data.write_npy(out)
+        stack.data.write_npy(&mut out)
     };
     written.map_err(|e| StackError::format(path, format!("writing .npy: {e}")))?;
+    let file = out
+        .into_inner()
+        .map_err(|e| StackError::io(path, e.into_error()))?;
+    file.commit().map_err(|e| StackError::io(path, e))?;
     let side = sidecar_path(path);
     let json = serde_json::to_string_pretty(&stack.meta).expect("metadata serialises");
-    std::fs::write(&side, json).map_err(|e| StackError::io(&side, e))
+    crate::files::write_atomic(&side, json).map_err(|e| StackError::io(&side, e))
 }
 
 /// Reads a `.npy` array of shape (K, H, W) and its JSON sidecar when there
 /// is one (a plain `np.save` array has none).
-pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
+pub fn read(path: &Path) -> Result<StackFile, StackError> {
     let side = sidecar_path(path);
     let meta = match read_bounded(&side, MAX_SIDECAR, "stack's JSON sidecar") {
         Ok(json) => Some(
@@ -65,6 +68,7 @@ pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError>
             .map_err(|e| StackError::io(path, e))
     };
     let npy_err = |e: ndarray_npy::ReadNpyError| StackError::format(path, format!(".npy: {e}"));
+    let mut exact = None;
     let data: Array3<f32> = match descr.as_str() {
         "<f4" => Array3::<f32>::read_npy(open()?).map_err(npy_err)?,
         "<f8" => Array3::<f64>::read_npy(open()?)
@@ -76,13 +80,24 @@ pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError>
         "<u2" => Array3::<u16>::read_npy(open()?)
             .map_err(npy_err)?
             .mapv(f32::from),
-        "<u4" => exact_counts(
-            path,
-            Array3::<u32>::read_npy(open()?)
-                .map_err(npy_err)?
-                .mapv(u64::from),
-        )?,
-        "<u8" => exact_counts(path, Array3::<u64>::read_npy(open()?).map_err(npy_err)?)?,
+        "<u4" => {
+            let counts = Array3::<u32>::read_npy(open()?).map_err(npy_err)?;
+            let data = counts.mapv(|c| c as f32);
+            exact = counts
+                .iter()
+                .any(|&c| c > F32_EXACT_COUNT)
+                .then_some(counts);
+            data
+        }
+        "<u8" => {
+            let counts = exact_counts(path, Array3::<u64>::read_npy(open()?).map_err(npy_err)?)?;
+            let data = counts.mapv(|c| c as f32);
+            exact = counts
+                .iter()
+                .any(|&c| c > F32_EXACT_COUNT)
+                .then_some(counts);
+            data
+        }
         other => {
             return Err(StackError::format(
                 path,
@@ -92,19 +107,25 @@ pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError>
             ));
         }
     };
-    Ok((data, meta))
+    Ok(StackFile {
+        data,
+        meta,
+        exact_counts: exact,
+    })
 }
 
-fn exact_counts(path: &Path, counts: Array3<u64>) -> Result<Array3<f32>, StackError> {
-    if let Some(big) = counts.iter().find(|&&c| c > F32_EXACT_INT) {
+/// 64-bit counts as 32-bit ones, refusing any above 2^32 - 1.
+fn exact_counts(path: &Path, counts: Array3<u64>) -> Result<Array3<u32>, StackError> {
+    if let Some(big) = counts.iter().find(|&&c| c > u64::from(u32::MAX)) {
         return Err(StackError::format(
             path,
             format!(
-                "count {big} exceeds {F32_EXACT_INT}, the largest count a float32 stack holds exactly"
+                "count {big} exceeds {}, the largest count a stack holds",
+                u32::MAX
             ),
         ));
     }
-    Ok(counts.mapv(|c| c as f32))
+    Ok(counts.mapv(|c| c as u32))
 }
 
 /// The `descr` and `shape` of a `.npy` file of `ndim` dimensions, after
@@ -162,9 +183,7 @@ fn check_size(
 /// The `descr` and `shape` entries of a `.npy` header (e.g. `<f4`,
 /// `[20, 256, 256]`) and where the data start.
 fn read_header(path: &Path) -> Result<(String, Vec<usize>, u64), StackError> {
-    let mut f = File::open(path).map_err(|e| StackError::io(path, e))?;
-    let meta = f.metadata().map_err(|e| StackError::io(path, e))?;
-    crate::memory::require_regular_file(path, &meta, "stack")?;
+    let (mut f, _) = crate::files::open_input(path, "stack")?;
     let mut head = [0u8; 12];
     f.read_exact(&mut head)
         .map_err(|_| StackError::format(path, "too short for a .npy header"))?;

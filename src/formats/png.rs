@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use image::{GrayImage, Luma};
+use image::{GrayImage, ImageEncoder, Luma};
 use ndarray::{ArrayView2, Axis};
 
 use crate::font;
@@ -35,8 +35,33 @@ pub fn write_png(img: ArrayView2<f64>, max: Option<f64>, path: &Path) -> Result<
     for ((r, c), &v) in img.indexed_iter() {
         out.put_pixel(c as u32, r as u32, Luma([to_u8(v, top)]));
     }
-    out.save(path)
-        .map_err(|e| StackError::format(path, format!("writing PNG: {e}")))
+    save(&out, path)
+}
+
+/// Encodes an 8-bit image (`L8` gray or `Rgb8`, rows of `width` pixels)
+/// as PNG and writes it whole ([`crate::files::write_atomic`]).
+pub fn write_png_bytes(
+    pixels: &[u8],
+    width: u32,
+    height: u32,
+    color: image::ExtendedColorType,
+    path: &Path,
+) -> Result<(), StackError> {
+    let mut bytes = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut bytes)
+        .write_image(pixels, width, height, color)
+        .map_err(|e| StackError::format(path, format!("writing PNG: {e}")))?;
+    crate::files::write_atomic(path, bytes).map_err(|e| StackError::io(path, e))
+}
+
+fn save(img: &GrayImage, path: &Path) -> Result<(), StackError> {
+    write_png_bytes(
+        img.as_raw(),
+        img.width(),
+        img.height(),
+        image::ExtendedColorType::L8,
+        path,
+    )
 }
 
 /// Writes all bins of `stack` as a grid of labelled tiles (label: bin start in ps).
@@ -68,9 +93,7 @@ pub fn write_contact_sheet(
             sheet.put_pixel(x0 + c as u32, y0 + LABEL_H + r as u32, Luma([px]));
         }
     }
-    sheet
-        .save(path)
-        .map_err(|e| StackError::format(path, format!("writing PNG: {e}")))
+    save(&sheet, path)
 }
 
 fn to_u8(v: f64, top: f64) -> u8 {

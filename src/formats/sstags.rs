@@ -7,7 +7,9 @@
 //! header                          L bytes of JSON (TagFileHeader)
 //! frames                          event batches exactly as on the wire
 //!                                 (firmware-protocol frames of kind 03)
-//! end frame                       a response frame Stopped(Totals), id 0xFFFF
+//! end frame                       a response frame Stopped(Totals), id
+//!                                 0xFFFF (the run reached its planned
+//!                                 end) or 0xFFFE (interrupted early)
 //! ```
 //!
 //! Every batch is written and flushed as it arrives, so a crash loses at
@@ -24,6 +26,11 @@ use firmware_protocol::{
     Totals, encode_frame, to_payload,
 };
 use serde::{Deserialize, Serialize};
+
+/// Id of the end frame of a run that reached its planned end.
+pub const END_COMPLETE: u16 = 0xFFFF;
+/// Id of the end frame of a run that was interrupted (Ctrl-C, SIGTERM).
+pub const END_INTERRUPTED: u16 = 0xFFFE;
 
 /// First bytes of every tag file.
 pub const MAGIC: &[u8; 8] = b"SSTAGS01";
@@ -100,10 +107,13 @@ pub enum TagFileError {
     },
 }
 
-/// Appends batches to a tag file, flushing after each.
+/// Appends batches to a tag file, flushing after each. The file is
+/// written under a temporary name and renamed into place by
+/// [`TagFileWriter::finish`]; a writer that never finished (killed)
+/// leaves it under that name, cut before its end frame, which readers flag.
 pub struct TagFileWriter {
     path: PathBuf,
-    out: BufWriter<File>,
+    out: BufWriter<crate::files::AtomicFile>,
     frame: Vec<u8>,
     /// First write error; later writes are skipped and the error reported
     /// at [`TagFileWriter::finish`].
@@ -118,7 +128,7 @@ impl TagFileWriter {
             path: path.to_path_buf(),
             source,
         };
-        let file = File::create(path).map_err(io)?;
+        let file = crate::files::AtomicFile::create_recording(path).map_err(io)?;
         let mut out = BufWriter::with_capacity(1 << 17, file);
         let json = serde_json::to_vec(header).expect("header serialises");
         out.write_all(MAGIC).map_err(io)?;
@@ -158,8 +168,13 @@ impl TagFileWriter {
         self.batches
     }
 
-    /// Writes the end frame (the device's totals when known) and closes.
-    pub fn finish(mut self, totals: Option<Totals>) -> Result<PathBuf, TagFileError> {
+    /// Writes the end frame (the device's totals when known, and whether
+    /// the run reached its planned end) and renames the file into place.
+    pub fn finish(
+        mut self,
+        totals: Option<Totals>,
+        completion: crate::files::Completion,
+    ) -> Result<PathBuf, TagFileError> {
         if let Some(e) = self.error.take() {
             return Err(TagFileError::Io {
                 path: self.path,
@@ -172,7 +187,10 @@ impl TagFileWriter {
         };
         if let Some(t) = totals {
             let payload = to_payload(&ResponseFrame {
-                id: 0xFFFF,
+                id: match completion {
+                    crate::files::Completion::Complete => END_COMPLETE,
+                    crate::files::Completion::Interrupted => END_INTERRUPTED,
+                },
                 response: Response::Stopped(t),
             })
             .expect("totals encode");
@@ -182,12 +200,11 @@ impl TagFileWriter {
                 .write_all(&self.frame)
                 .map_err(|e| io(&self.path, e))?;
         }
-        self.out.flush().map_err(|e| io(&self.path, e))?;
-        self.out
-            .get_ref()
-            .sync_all()
-            .map_err(|e| io(&self.path, e))?;
-        Ok(self.path)
+        let file = self
+            .out
+            .into_inner()
+            .map_err(|e| io(&self.path, e.into_error()))?;
+        file.commit().map_err(|e| io(&self.path, e))
     }
 }
 
@@ -249,6 +266,8 @@ pub struct TagFileSummary {
     /// The device's totals from the end frame; `None` if the recording was
     /// cut (crash, disconnect) before it.
     pub totals: Option<Totals>,
+    /// The end frame says the run was interrupted before its planned end.
+    pub interrupted: bool,
     /// Bytes that did not form valid frames (damage, or a last batch cut
     /// mid-write).
     pub bytes_skipped: u64,
@@ -267,10 +286,11 @@ pub struct TagFile {
 impl TagFile {
     /// Opens `path` and reads its magic and header.
     pub fn open(path: &Path) -> Result<Self, TagFileError> {
-        let mut file = File::open(path).map_err(|source| TagFileError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let (mut file, _) =
+            crate::files::open_regular(path, "tag file").map_err(|source| TagFileError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
         let (header, _) = read_header(path, &mut file)?;
         Ok(Self {
             path: path.to_path_buf(),
@@ -303,6 +323,7 @@ impl TagFile {
             header,
             batches: 0,
             totals: None,
+            interrupted: false,
             bytes_skipped: 0,
             malformed_batches: 0,
         };
@@ -317,9 +338,12 @@ impl TagFile {
                     on_batch(&b);
                 }
                 FromDevice::Response(ResponseFrame {
+                    id,
                     response: Response::Stopped(t),
-                    ..
-                }) => summary.totals = Some(t),
+                }) => {
+                    summary.totals = Some(t);
+                    summary.interrupted = id == END_INTERRUPTED;
+                }
                 FromDevice::MalformedBatch(_) => summary.malformed_batches += 1,
                 FromDevice::Response(_) | FromDevice::Stray => {}
             });
@@ -344,8 +368,8 @@ pub fn read_tag_file(
 /// Whether `path` starts with the tag file magic.
 pub fn is_tag_file(path: &Path) -> bool {
     let mut magic = [0u8; 8];
-    File::open(path)
-        .and_then(|mut f| f.read_exact(&mut magic))
+    crate::files::open_regular(path, "tag file")
+        .and_then(|(mut f, _)| f.read_exact(&mut magic))
         .is_ok()
         && &magic == MAGIC
 }

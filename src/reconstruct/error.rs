@@ -17,6 +17,21 @@ pub enum ReconstructError {
         /// The offending value.
         value: f64,
     },
+    /// A whole count larger than any measurement gives (2^53 and more,
+    /// where counts are no longer exact even in 64-bit floats).
+    #[error(
+        "row {row}, column {col} of {what} is {value} photons, more than any measurement counts (whole counts stop being exact at 2^53): check the stack's values"
+    )]
+    ImplausibleCount {
+        /// The image (e.g. "the time-summed counts").
+        what: String,
+        /// Row.
+        row: usize,
+        /// Column.
+        col: usize,
+        /// The offending value.
+        value: f64,
+    },
     /// Cross-validation by thinning met a count that is not a whole number
     /// of photons.
     #[error(

@@ -28,12 +28,24 @@ pub fn thin_halves(
         .indexed_iter()
         .find(|(_, v)| !(v.is_finite() && **v >= 0.0 && v.fract() == 0.0 && **v < 2f64.powi(53)))
     {
-        return Err(ReconstructError::NotWholeCounts {
-            what: what.into(),
-            row,
-            col,
-            value,
-        });
+        let (what, row, col) = (what.into(), row, col);
+        return Err(
+            if value.is_finite() && value.fract() == 0.0 && value > 0.0 {
+                ReconstructError::ImplausibleCount {
+                    what,
+                    row,
+                    col,
+                    value,
+                }
+            } else {
+                ReconstructError::NotWholeCounts {
+                    what,
+                    row,
+                    col,
+                    value,
+                }
+            },
+        );
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let first = counts.mapv(|m| {

@@ -93,9 +93,9 @@ impl Trace {
 
     /// Writes `STEM.csv` and `STEM.json` into `dir`.
     pub fn write(&self, dir: &Path, stem: &str) -> std::io::Result<()> {
-        std::fs::write(dir.join(format!("{stem}.csv")), self.to_csv())?;
+        crate::files::write_atomic(dir.join(format!("{stem}.csv")), self.to_csv())?;
         let json = serde_json::to_string_pretty(self).expect("trace serialises");
-        std::fs::write(dir.join(format!("{stem}.json")), json)
+        crate::files::write_atomic(dir.join(format!("{stem}.json")), json)
     }
 
     /// The row with the highest PSNR, when the truth was known.

@@ -861,7 +861,7 @@ pub fn run_benchmark(
                         image.name,
                         label.replace(' ', "_")
                     ));
-                    if let Err(e) = std::fs::write(&file, trace.to_csv()) {
+                    if let Err(e) = crate::files::write_atomic(&file, trace.to_csv()) {
                         trace_error.get_or_insert(ReportError::Io(file.display().to_string(), e));
                     }
                 },
@@ -871,7 +871,7 @@ pub fn run_benchmark(
             }
             new.iter().for_each(&mut on_row);
             rows.extend(new);
-            std::fs::write(&rows_path, rows_csv(&rows))
+            crate::files::write_atomic(&rows_path, rows_csv(&rows))
                 .map_err(|e| ReportError::Io(rows_path.display().to_string(), e))?;
         }
     }
@@ -902,7 +902,8 @@ fn write_summary(
     md.push_str(&verdict_markdown(rows));
     write_time_figure(rows, &cfg.out.join("psnr_vs_time.png"))?;
     let md_path = cfg.out.join("summary.md");
-    std::fs::write(&md_path, &md).map_err(|e| ReportError::Io(md_path.display().to_string(), e))?;
+    crate::files::write_atomic(&md_path, &md)
+        .map_err(|e| ReportError::Io(md_path.display().to_string(), e))?;
     Ok(md)
 }
 
@@ -925,6 +926,7 @@ pub fn batch_jobs(
                 .into_iter()
                 .chain(args.iter().cloned())
                 .collect(),
+            timeout: None,
         })
         .collect())
 }
@@ -955,7 +957,7 @@ pub fn merge_benchmark(cfg: &BenchConfig) -> Result<(Vec<BenchRow>, String), Rep
         .first()
         .map(|e| e.label.clone())
         .ok_or_else(|| ReportError::Input("no solver or prior given".into()))?;
-    std::fs::write(cfg.out.join("rows.csv"), rows_csv(&rows))
+    crate::files::write_atomic(cfg.out.join("rows.csv"), rows_csv(&rows))
         .map_err(|e| ReportError::Io(cfg.out.join("rows.csv").display().to_string(), e))?;
     let md = write_summary(&rows, &headline, cfg)?;
     Ok((rows, md))

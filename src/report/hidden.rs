@@ -52,7 +52,7 @@ pub fn write_hidden(
     let npy = dir.join("volume.npy");
     write_npy(&npy, |f| data32.write_npy(f))?;
     let sidecar = dir.join("volume.json");
-    std::fs::write(&sidecar, &json)
+    crate::files::write_atomic(&sidecar, &json)
         .map_err(|e| ReportError::Io(sidecar.display().to_string(), e))?;
     let exr = dir.join("volume.exr");
     crate::formats::exr::write_volume(
@@ -142,7 +142,8 @@ pub fn write_hidden(
                 r.iteration, r.wall_s, r.held_out_deviance
             ));
         }
-        std::fs::write(&path, csv).map_err(|e| ReportError::Io(path.display().to_string(), e))?;
+        crate::files::write_atomic(&path, csv)
+            .map_err(|e| ReportError::Io(path.display().to_string(), e))?;
         written.push(path);
     }
     Ok(written)
@@ -150,14 +151,11 @@ pub fn write_hidden(
 
 fn write_npy<E: std::fmt::Display>(
     path: &Path,
-    write: impl FnOnce(std::io::BufWriter<std::fs::File>) -> Result<(), E>,
+    write: impl FnOnce(&mut std::io::BufWriter<crate::files::AtomicFile>) -> Result<(), E>,
 ) -> Result<(), ReportError> {
-    let file =
-        std::fs::File::create(path).map_err(|e| ReportError::Io(path.display().to_string(), e))?;
-    write(std::io::BufWriter::new(file)).map_err(|e| {
-        ReportError::Io(
-            path.display().to_string(),
-            std::io::Error::other(e.to_string()),
-        )
-    })
+    let io = |e| ReportError::Io(path.display().to_string(), e);
+    let mut out = std::io::BufWriter::new(crate::files::AtomicFile::create(path).map_err(io)?);
+    write(&mut out).map_err(|e| io(std::io::Error::other(e.to_string())))?;
+    let file = out.into_inner().map_err(|e| io(e.into_error()))?;
+    file.commit().map(|_| ()).map_err(io)
 }

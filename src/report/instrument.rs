@@ -68,10 +68,7 @@ pub fn instrument_costs(
     let background = background_share * expected.mean().unwrap_or(0.0);
     let counts =
         poisson_counts(&expected.mapv(|v| v + background), seed ^ 0x5eed).mapv(|v| v as f32);
-    let stack = Stack {
-        data: counts,
-        meta: sim.counts.meta.clone(),
-    };
+    let stack = Stack::new(counts, sim.counts.meta.clone());
     let mut ideal = setup.clone();
     ideal.irf = None;
     let run =

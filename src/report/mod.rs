@@ -272,7 +272,8 @@ fn write_scene_files(
         .expect("String");
     }
     let path = dir.join("per_bin.csv");
-    std::fs::write(&path, csv).map_err(|e| ReportError::Io(path.display().to_string(), e))?;
+    crate::files::write_atomic(&path, csv)
+        .map_err(|e| ReportError::Io(path.display().to_string(), e))?;
     let per_bin = |f: fn(&BinScore) -> f64, label: &str| Series {
         label: label.into(),
         points: bins.iter().map(|b| (b.start_ps, f(b))).collect(),
@@ -549,8 +550,8 @@ pub fn run_report(
         ));
     }
     let md_path = cfg.out.join("summary.md");
-    std::fs::write(&md_path, &md).map_err(io(&md_path))?;
+    crate::files::write_atomic(&md_path, &md).map_err(io(&md_path))?;
     let csv_path = cfg.out.join("summary.csv");
-    std::fs::write(&csv_path, summary_csv(&reports)).map_err(io(&csv_path))?;
+    crate::files::write_atomic(&csv_path, summary_csv(&reports)).map_err(io(&csv_path))?;
     Ok(md)
 }

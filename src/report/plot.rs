@@ -18,6 +18,18 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
 }
 
+/// Writes a rendered RGB chart whole.
+fn save_rgb(pixels: &[u8], width: u32, height: u32, path: &Path) -> Result<(), String> {
+    crate::formats::png::write_png_bytes(
+        pixels,
+        width,
+        height,
+        image::ExtendedColorType::Rgb8,
+        path,
+    )
+    .map_err(|e| e.to_string())
+}
+
 fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
@@ -68,7 +80,9 @@ pub fn chart(
         .chain(lines)
         .flat_map(|s| s.points.iter().copied());
     let ((x0, x1), (y0, y1)) = bounds(all);
-    let root = BitMapBackend::new(path, (960, 600)).into_drawing_area();
+    let (width, height) = (960u32, 600u32);
+    let mut pixels = vec![0u8; (width * height * 3) as usize];
+    let root = BitMapBackend::with_buffer(&mut pixels, (width, height)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let mut builder = ChartBuilder::on(&root);
     builder
@@ -139,7 +153,10 @@ pub fn chart(
                 .map_err(|e| e.to_string())?
         );
     }
-    root.present().map_err(|e| e.to_string())
+    root.present().map_err(|e| e.to_string())?;
+    drop(builder);
+    drop(root);
+    save_rgb(&pixels, width, height, path)
 }
 
 /// One image drawn as gray cells on metric axes.
@@ -171,7 +188,8 @@ pub fn heatmap(path: &Path, map: &Heatmap) -> Result<(), String> {
     let aspect = ((y1 - y0) / (x1 - x0)).abs().clamp(0.25, 4.0);
     let width = 640u32;
     let height = ((width - 80) as f64 * aspect) as u32 + 90;
-    let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
+    let mut pixels = vec![0u8; (width * height * 3) as usize];
+    let root = BitMapBackend::with_buffer(&mut pixels, (width, height)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     // The vertical axis runs downwards, as images are read.
     let mut chart = ChartBuilder::on(&root)
@@ -202,5 +220,8 @@ pub fn heatmap(path: &Path, map: &Heatmap) -> Result<(), String> {
             )
         }))
         .map_err(|e| e.to_string())?;
-    root.present().map_err(|e| e.to_string())
+    root.present().map_err(|e| e.to_string())?;
+    drop(chart);
+    drop(root);
+    save_rgb(&pixels, width, height, path)
 }

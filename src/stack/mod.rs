@@ -91,6 +91,25 @@ pub struct Stack {
     pub data: Array3<f32>,
     /// Metadata travelling with the values.
     pub meta: StackMeta,
+    /// The photon counts exactly, kept only when some exceed 2^24, above
+    /// which `f32` (`data`) holds whole numbers rounded; the writers store
+    /// these instead (32-bit unsigned channels), so no count is lost.
+    pub exact_counts: Option<Array3<u32>>,
+}
+
+/// Largest count every `f32` holds exactly (2^24).
+pub const F32_EXACT_COUNT: u32 = 1 << 24;
+
+/// What a stack file holds, before validation.
+#[derive(Debug, Clone)]
+pub struct StackFile {
+    /// The values.
+    pub data: Array3<f32>,
+    /// The metadata, when the file has it.
+    pub meta: Option<StackMeta>,
+    /// The counts exactly, when the file stores whole numbers some of
+    /// which `data` cannot hold (above 2^24).
+    pub exact_counts: Option<Array3<u32>>,
 }
 
 /// Errors reading or writing stack files.
@@ -154,6 +173,33 @@ impl Stack {
     /// finite non-negative number; the error names the bin and pixel.
     pub fn validate(&self, path: &Path) -> Result<(), StackError> {
         let k = self.bins();
+        if self.meta.version != META_VERSION {
+            return Err(StackError::format(
+                path,
+                format!(
+                    "metadata version {} is not the version {META_VERSION} this program reads",
+                    self.meta.version
+                ),
+            ));
+        }
+        let starts = &self.meta.bin_starts_ps;
+        if let Some(i) = starts.iter().position(|t| !t.is_finite()) {
+            return Err(StackError::format(
+                path,
+                format!("bin_starts_ps[{i}] = {} is not a finite time", starts[i]),
+            ));
+        }
+        if let Some(i) = starts.windows(2).position(|w| w[1] <= w[0]) {
+            return Err(StackError::format(
+                path,
+                format!(
+                    "bin_starts_ps[{}] = {} ps does not come after bin_starts_ps[{i}] = {} ps: bins must start in increasing time",
+                    i + 1,
+                    starts[i + 1],
+                    starts[i]
+                ),
+            ));
+        }
         if self.meta.bin_starts_ps.len() != k {
             return Err(StackError::format(
                 path,
@@ -193,6 +239,30 @@ impl Stack {
         Ok(())
     }
 
+    /// A stack of `values` (no exact counts kept).
+    pub fn new(data: Array3<f32>, meta: StackMeta) -> Self {
+        Self {
+            data,
+            meta,
+            exact_counts: None,
+        }
+    }
+
+    /// A stack of photon counts: their `f32` values, and the counts
+    /// themselves when some exceed 2^24.
+    pub fn from_counts(counts: Array3<u32>, meta: StackMeta) -> Self {
+        let data = counts.mapv(|c| c as f32);
+        let exact_counts = counts
+            .iter()
+            .any(|&c| c > F32_EXACT_COUNT)
+            .then_some(counts);
+        Self {
+            data,
+            meta,
+            exact_counts,
+        }
+    }
+
     /// Writes the stack; the format follows the extension (`.exr` or `.npy`).
     pub fn save(&self, path: &Path) -> Result<(), StackError> {
         match extension(path).as_deref() {
@@ -210,9 +280,14 @@ impl Stack {
     /// another tool) is refused: read it with [`Stack::read`] and give the
     /// metadata ([`StackMeta::consecutive`]).
     pub fn load(path: &Path) -> Result<Self, StackError> {
-        match Self::read(path)? {
-            (data, Some(meta)) => Self::from_parts(data, meta, path),
-            (_, None) => Err(StackError::format(
+        let file = Self::read_file(path)?;
+        match file.meta {
+            Some(meta) => {
+                let mut stack = Self::from_parts(file.data, meta, path)?;
+                stack.exact_counts = file.exact_counts;
+                Ok(stack)
+            }
+            None => Err(StackError::format(
                 path,
                 format!("has no metadata ({})", missing_meta(path)),
             )),
@@ -223,6 +298,12 @@ impl Stack {
     /// metadata (the `.npy` sidecar, the EXR attribute); nothing is
     /// validated yet.
     pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
+        Self::read_file(path).map(|f| (f.data, f.meta))
+    }
+
+    /// [`Stack::read`] with the exact counts when the file stores counts
+    /// above 2^24.
+    pub fn read_file(path: &Path) -> Result<StackFile, StackError> {
         match extension(path).as_deref() {
             Some("exr") => crate::formats::exr::read(path),
             Some("npy") => crate::formats::npy::read(path),
@@ -236,7 +317,7 @@ impl Stack {
     /// A stack from values and metadata, validated ([`Stack::validate`]);
     /// `path` names the source in errors.
     pub fn from_parts(data: Array3<f32>, meta: StackMeta, path: &Path) -> Result<Self, StackError> {
-        let stack = Stack { data, meta };
+        let stack = Stack::new(data, meta);
         stack.validate(path)?;
         Ok(stack)
     }

@@ -140,6 +140,37 @@ impl BinnedFile {
         Ok(files)
     }
 
+    /// What makes the stacks less than a whole recording's, or empty, in
+    /// words: the input cut, never finished or interrupted, or no photon
+    /// binned. A command ends with a warning status when there are any.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        match &self.recording {
+            Recording::PicoQuant(info) => w.extend(info.completeness_note()),
+            Recording::TagFile { summary, .. } if summary.interrupted => w.push(
+                "the run that wrote it was interrupted before its planned end (its end frame says so)"
+                    .into(),
+            ),
+            Recording::TagFile { .. } => {}
+        }
+        w.extend(self.truncated.iter().cloned());
+        let acc = self.accounting;
+        if acc.binned == 0 {
+            let end = self.window.start_ps(self.resolution_ps)
+                + self.window.width_ps(self.resolution_ps) * self.window.bins as f64;
+            w.push(format!(
+                "the stack is empty: none of the {} photons was binned ({} outside the time window {} to {end} ps, {} on other channels, {} outside the image or its kept frames, {} of frames past the memory budget)",
+                acc.received,
+                acc.outside_window,
+                self.window.start_ps(self.resolution_ps),
+                acc.other_channel,
+                acc.outside_region,
+                acc.over_budget,
+            ));
+        }
+        w
+    }
+
     /// Where every record went, the notes and the window, one line each.
     pub fn summary(&self) -> Vec<String> {
         let acc = self.accounting;
@@ -168,7 +199,7 @@ impl BinnedFile {
             ),
         }];
         lines.extend(self.notes.iter().map(|n| format!("note: {n}")));
-        lines.extend(self.truncated.iter().map(|t| format!("warning: {t}")));
+        lines.extend(self.warnings().iter().map(|w| format!("warning: {w}")));
         let (k, h, w) = self.stacks[0].data.dim();
         lines.push(format!(
             "{} stack(s) of {k} x {h} x {w} ({} ps bins from {} ps)",
@@ -264,6 +295,7 @@ pub fn window_and_map(
 fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
     let spec_err = |reason| spec_error(path, reason);
     let (info, reader) = open(path)?;
+    info.check_finished(spec.allow_truncated)?;
     if !info.record_type.is_t3() {
         return Err(spec_err(format!(
             "{} records carry no micro time; binning needs a T3 file",
@@ -391,15 +423,17 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
     );
     let stacks = stacks
         .into_iter()
-        .map(|counts| Stack {
-            data: counts.mapv(|c| c as f32),
-            meta: StackMeta::measured(
-                window.start_ps(res_ps),
-                window.width_ps(res_ps),
-                window.bins,
-                source.clone(),
-                None,
-            ),
+        .map(|counts| {
+            Stack::from_counts(
+                counts,
+                StackMeta::measured(
+                    window.start_ps(res_ps),
+                    window.width_ps(res_ps),
+                    window.bins,
+                    source.clone(),
+                    None,
+                ),
+            )
         })
         .collect();
     Ok(BinnedFile {
@@ -545,16 +579,16 @@ fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError>
         tag_file_header: header,
         totals_in_file: summary.totals.is_some(),
     };
-    let stack = Stack {
-        data: stacks.swap_remove(0).mapv(|c| c as f32),
-        meta: StackMeta::measured(
+    let stack = Stack::from_counts(
+        stacks.swap_remove(0),
+        StackMeta::measured(
             window.start_ps(res_ps),
             window.width_ps(res_ps),
             window.bins,
             source,
             Some(serde_json::to_value(&record).expect("the record serialises")),
         ),
-    };
+    );
     let truncated = summary
         .totals
         .is_none()

@@ -7,9 +7,11 @@
 //! records are re-made by the writer.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use firmware_protocol::Event;
 
+use crate::files::Completion;
 use crate::formats::picoquant::records::{Decoder, RecordType};
 use crate::formats::picoquant::writer::{HeaderEntry, PtuWriter, WriterHeader};
 use crate::formats::picoquant::{FileError, TtrError, open};
@@ -40,6 +42,11 @@ pub struct Conversion {
     /// Why the input ended early, when a cut file's complete records were
     /// converted.
     pub truncated: Option<String>,
+    /// What makes the input, and so the output, less than a whole
+    /// recording (records past the announced count left out, a recording
+    /// that was interrupted or never finished), in words. The output's
+    /// header carries the incomplete mark when any applies.
+    pub warnings: Vec<String>,
 }
 
 /// Why a conversion failed.
@@ -59,6 +66,12 @@ pub enum ConvertError {
         /// Why.
         reason: String,
     },
+    /// Ctrl-C or SIGTERM: the partial output was removed.
+    #[error("{path}: the conversion was interrupted; nothing was written")]
+    Interrupted {
+        /// The output that was not written.
+        path: PathBuf,
+    },
     /// The output cannot be written.
     #[error("{path}: {source}")]
     Output {
@@ -77,23 +90,43 @@ fn out_err(path: &Path) -> impl Fn(std::io::Error) -> ConvertError + '_ {
 }
 
 /// Converts `input` (a PicoQuant file or a tag file) into the PTU file
-/// `output`; with `allow_truncated`, a cut PicoQuant file's complete
-/// records are converted (and the conversion says so) instead of failing.
+/// `output`, written whole or not at all; with `allow_truncated`, a cut
+/// PicoQuant file's complete records (or those of a file whose writer
+/// never finished) are converted, and the conversion says so, instead of
+/// failing. `stop` (Ctrl-C) ends it with nothing written. The output is
+/// never the input, however it is spelled ([`crate::files`]).
 pub fn convert_to_ptu(
     input: &Path,
     output: &Path,
     allow_truncated: bool,
+    stop: &AtomicBool,
 ) -> Result<Conversion, ConvertError> {
-    if input == output {
+    if crate::files::input::same_file(input, output) {
         return Err(ConvertError::Unsupported {
             path: input.to_owned(),
-            reason: "the output would overwrite the input".into(),
+            reason: format!(
+                "the output {} is this same file (another spelling or a link): converting would destroy the recording",
+                output.display()
+            ),
         });
     }
     if is_tag_file(input) {
-        from_tag_file(input, output)
+        from_tag_file(input, output, stop)
     } else {
-        from_picoquant(input, output, allow_truncated)
+        from_picoquant(input, output, allow_truncated, stop)
+    }
+}
+
+/// A writer's error on a tag from the input: the input's fault when the
+/// tag cannot be written (`InvalidInput`: out of order, out of range),
+/// else the output's.
+fn write_error(input: &Path, output: &Path, at: String, e: std::io::Error) -> ConvertError {
+    match e.kind() {
+        std::io::ErrorKind::InvalidInput => ConvertError::Unsupported {
+            path: input.to_owned(),
+            reason: format!("{at}: {e}"),
+        },
+        _ => out_err(output)(e),
     }
 }
 
@@ -109,8 +142,10 @@ fn from_picoquant(
     input: &Path,
     output: &Path,
     allow_truncated: bool,
+    stop: &AtomicBool,
 ) -> Result<Conversion, ConvertError> {
     let (info, mut reader) = open(input)?;
+    info.check_finished(allow_truncated)?;
     let header = WriterHeader {
         resolution_s: info.resolution_s,
         sync_rate_hz: if info.record_type.is_t3() {
@@ -129,10 +164,20 @@ fn from_picoquant(
     let mut decoder = Decoder::new(info.record_type);
     let mut c = Conversion {
         record_type: info.record_type.name().into(),
+        warnings: info
+            .unread_note()
+            .into_iter()
+            .chain(info.completeness_note())
+            .collect(),
         ..Conversion::default()
     };
     let mut chunk = Vec::new();
     loop {
+        if stop.load(Ordering::Relaxed) {
+            return Err(ConvertError::Interrupted {
+                path: output.to_owned(),
+            });
+        }
         match reader.next_chunk(&mut chunk) {
             Ok(true) => {}
             Ok(false) => break,
@@ -152,15 +197,34 @@ fn from_picoquant(
             c.records_in += 1;
             if let Some(tag) = decoder.decode(rec) {
                 count(&mut c, &tag);
-                w.write_tag(tag).map_err(out_err(output))?;
+                w.write_tag(tag).map_err(|e| {
+                    write_error(
+                        input,
+                        output,
+                        format!("record {} (0x{rec:08X})", c.records_in - 1),
+                        e,
+                    )
+                })?;
             }
         }
     }
-    c.records_out = w.finish().map_err(out_err(output))?;
+    if let Some(t) = &c.truncated {
+        c.warnings.push(format!("the input is cut: {t}"));
+    }
+    let completion = if c.warnings.is_empty() {
+        Completion::Complete
+    } else {
+        Completion::Interrupted
+    };
+    c.records_out = w.finish_as(completion).map_err(out_err(output))?;
     Ok(c)
 }
 
-fn from_tag_file(input: &Path, output: &Path) -> Result<Conversion, ConvertError> {
+fn from_tag_file(
+    input: &Path,
+    output: &Path,
+    stop: &AtomicBool,
+) -> Result<Conversion, ConvertError> {
     let file = TagFile::open(input)?;
     let h = file.header.clone();
     let pixels = usize::from(h.pixels_x) * usize::from(h.pixels_y);
@@ -202,8 +266,14 @@ fn from_tag_file(input: &Path, output: &Path) -> Result<Conversion, ConvertError
         ..Conversion::default()
     };
     let mut failure: Option<ConvertError> = None;
-    file.read(|batch| {
+    let summary = file.read(|batch| {
         if failure.is_some() {
+            return;
+        }
+        if stop.load(Ordering::Relaxed) {
+            failure = Some(ConvertError::Interrupted {
+                path: output.to_owned(),
+            });
             return;
         }
         for event in batch.events() {
@@ -241,13 +311,11 @@ fn from_tag_file(input: &Path, output: &Path) -> Result<Conversion, ConvertError
             };
             count(&mut c, &tag);
             if let Err(e) = w.write_tag(tag) {
-                failure = Some(match e.kind() {
-                    std::io::ErrorKind::InvalidInput => unsupported(format!(
-                        "batch {}: {e} (batches out of order in the recording)",
-                        batch.header.seq
-                    )),
-                    _ => out_err(output)(e),
-                });
+                let at = format!(
+                    "batch {} (out of order in the recording?)",
+                    batch.header.seq
+                );
+                failure = Some(write_error(input, output, at, e));
                 return;
             }
         }
@@ -255,7 +323,22 @@ fn from_tag_file(input: &Path, output: &Path) -> Result<Conversion, ConvertError
     if let Some(f) = failure {
         return Err(f);
     }
-    c.records_out = w.finish().map_err(out_err(output))?;
+    if summary.totals.is_none() {
+        c.warnings.push(
+            "the recording has no end frame: it was cut (a crash or a disconnect) and may not hold the whole run".into(),
+        );
+    } else if summary.interrupted {
+        c.warnings.push(
+            "the run that wrote it was interrupted before its planned end (its end frame says so)"
+                .into(),
+        );
+    }
+    let completion = if c.warnings.is_empty() {
+        Completion::Complete
+    } else {
+        Completion::Interrupted
+    };
+    c.records_out = w.finish_as(completion).map_err(out_err(output))?;
     Ok(c)
 }
 
@@ -282,6 +365,9 @@ impl Conversion {
                 "; {} photons the device reported lost are not in the source either",
                 self.lost_in_device
             ));
+        }
+        for w in &self.warnings {
+            s.push_str(&format!("\nwarning: {w}"));
         }
         s
     }

@@ -151,6 +151,7 @@ impl Survey {
             Survey::PicoQuant(info, s) => {
                 let mut lines = info.describe();
                 lines.extend(info.unread_note().map(|n| format!("warning: {n}")));
+                lines.extend(info.completeness_note().map(|n| format!("warning: {n}")));
                 lines.push(format!("photons per channel: {:?}", s.photons_per_channel));
                 lines.push(format!(
                     "markers: {}, syncs: {}, overflow records: {}",
@@ -200,6 +201,11 @@ impl Survey {
                         "warning: no end frame: the recording was cut (crash or disconnect)".into()
                     }
                 });
+                if summary.interrupted {
+                    lines.push(
+                        "warning: the run that wrote it was interrupted before its planned end (its end frame says so)".into(),
+                    );
+                }
                 if summary.bytes_skipped > 0 {
                     lines.push(format!(
                         "warning: {} bytes did not form valid frames (damage or a cut last batch)",

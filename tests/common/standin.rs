@@ -28,6 +28,7 @@ pub fn standin_library() -> PathBuf {
 
 /// Runs the CLI with the stand-in configured by `mock` (its
 /// `SCATTERSCOPE_PQ_MOCK`).
+#[allow(dead_code)]
 pub fn scatterscope_pq(args: &[&str], mock: &str) -> Output {
     Command::new(env!("CARGO_BIN_EXE_scatterscope"))
         .args(args)

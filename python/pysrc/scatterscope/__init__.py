@@ -91,7 +91,7 @@ def bin_file(
     number.
 
     Returns a dict: ``stacks`` (list of float32 arrays ``(bins, rows,
-    cols)``, one per kept frame), ``meta`` (their metadata dicts),
+    cols)``, one per kept frame; uint32 where some count exceeds 2**24), ``meta`` (their metadata dicts),
     ``ledger`` (where every photon went: ``received = binned +
     outside_window + other_channel + outside_region``) and ``summary`` (the
     lines the command prints).
@@ -117,8 +117,10 @@ def bin_file(
 def load_stack(path: "os.PathLike[str] | str") -> Tuple[np.ndarray, Optional[Dict[str, Any]]]:
     """Read a stack file (EXR, or npy with its JSON sidecar).
 
-    Returns ``(data, meta)``: float32 counts ``(bins, rows, cols)`` and the
-    metadata dict (``None`` for a plain array without one).
+    Returns ``(data, meta)``: counts ``(bins, rows, cols)`` and the
+    metadata dict (``None`` for a plain array without one). The counts are
+    float32, or uint32 when some exceed 2**24 (float32 holds whole numbers
+    exactly only up to there), so a stack round-trips bit for bit.
     """
     data, meta = _native.load_stack(_path(path))
     return data, (json.loads(meta) if meta is not None else None)
@@ -134,7 +136,14 @@ def save_stack(path: "os.PathLike[str] | str", data: np.ndarray, meta: Dict[str,
     array = np.ascontiguousarray(data, dtype=np.float32)
     if array.ndim != 3:
         raise ScatterscopeError(f"a stack is (bins, rows, cols); this array has shape {array.shape}")
-    _native.save_stack(_path(path), array, json.dumps(meta))
+    counts = None
+    if np.issubdtype(np.asarray(data).dtype, np.integer):
+        # Whole counts: passed exactly, stored exactly where float32 rounds.
+        raw = np.asarray(data)
+        if raw.size and (raw.min() < 0 or raw.max() > np.iinfo(np.uint32).max):
+            raise ScatterscopeError("counts must lie in 0 .. 2**32 - 1")
+        counts = np.ascontiguousarray(raw, dtype=np.uint32)
+    _native.save_stack(_path(path), array, json.dumps(meta), counts)
 
 
 def load_image(path: "os.PathLike[str] | str") -> np.ndarray:

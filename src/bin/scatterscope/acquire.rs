@@ -1,12 +1,11 @@
 //! `scatterscope acquire` and `scatterscope devices`.
 
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use crate::shared_args::{PhysicsArgs, choice, progress};
-use anyhow::Context;
+use crate::signals::Interrupted;
 use scatterscope::acquire::picoquant::{PicoQuantJob, PicoQuantStop, SettingsRequest};
 use scatterscope::acquire::session::StopReason;
 use scatterscope::acquire::{DeviceSpec, Job, MockJob, TimeZero, device};
@@ -260,21 +259,15 @@ fn run_picoquant(job: &PicoQuantJob, stop: &AtomicBool) -> anyhow::Result<()> {
     println!("wrote {}", names.join(", "));
     done.verdict().map_err(anyhow::Error::msg)?;
     match done.stop {
-        PicoQuantStop::Interrupted => Err(Interrupted.into()),
+        PicoQuantStop::Interrupted => Err(Interrupted(INTERRUPTED).into()),
         _ => Ok(()),
     }
 }
 
 pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // A second Ctrl-C while stopping is ignored: the files must close.
-        ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
-            .context("installing the Ctrl-C handler")?;
-    }
+    let stop = crate::signals::stop_flag();
     if let DeviceSpec::PicoQuant(spec) = &args.device {
-        return run_picoquant(&picoquant_job(args, spec.clone())?, &stop);
+        return run_picoquant(&picoquant_job(args, spec.clone())?, stop);
     }
     let job = Job {
         device: args.device.clone(),
@@ -309,7 +302,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
         out: args.out.clone(),
     };
     let bar = progress(job.duration.map(|d| d.as_millis()));
-    let done = job.run(&stop, |p| {
+    let done = job.run(stop, |p| {
         bar.set_position(p.elapsed.as_millis() as u64);
         bar.set_message(p.describe());
     })?;
@@ -324,26 +317,14 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     println!("wrote {}", names.join(", "));
     done.verdict().map_err(anyhow::Error::msg)?;
     match done.outcome.stop {
-        StopReason::Interrupted => Err(Interrupted.into()),
+        StopReason::Interrupted => Err(Interrupted(INTERRUPTED).into()),
         _ => Ok(()),
     }
 }
 
-/// An acquisition ended by a signal: its outputs are complete (exit
-/// status 3, so that a script can tell it from the planned end).
-#[derive(Debug)]
-pub struct Interrupted;
-
-impl std::fmt::Display for Interrupted {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "interrupted (Ctrl-C or SIGTERM): every output is complete and holds what was received"
-        )
-    }
-}
-
-impl std::error::Error for Interrupted {}
+/// What an acquisition ended by a signal says.
+const INTERRUPTED: &str =
+    "interrupted (Ctrl-C or SIGTERM): every output is complete and holds what was received";
 
 /// List the devices `acquire --device` can open.
 ///

@@ -28,6 +28,10 @@ pub struct BatchArgs {
     /// Threads of each job.
     #[arg(long, default_value_t = 1)]
     threads_per_job: usize,
+    /// Time limit of every job whose table sets no `timeout` (e.g. 30m);
+    /// a job past it is ended (SIGTERM, then SIGKILL) and recorded as such.
+    #[arg(long, value_parser = scatterscope::config::parse_duration)]
+    job_timeout: Option<std::time::Duration>,
     /// Submit as a Slurm job array with sbatch (one task per job).
     #[arg(long, conflicts_with = "collect")]
     slurm: bool,
@@ -59,7 +63,7 @@ fn print_summary(outcomes: &[Outcome], out: &std::path::Path) -> anyhow::Result<
     print!("{table}");
     let path = out.join("summary.md");
     std::fs::create_dir_all(out)?;
-    std::fs::write(&path, &table)?;
+    scatterscope::files::write_atomic(&path, &table)?;
     println!("wrote {}", path.display());
     anyhow::ensure!(
         all_ok,
@@ -75,7 +79,14 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
         let job = jobs.get(k).ok_or_else(|| {
             anyhow::anyhow!("task {k}: the manifest has jobs 0 to {}", jobs.len() - 1)
         })?;
-        let r = run_job(&exe, &args.out, job, args.threads_per_job)?;
+        let r = run_job(
+            &exe,
+            &args.out,
+            job,
+            args.threads_per_job,
+            args.job_timeout,
+            crate::signals::stop_flag(),
+        )?;
         println!(
             "{}: {} in {:.2} s: {}",
             r.name, r.status, r.seconds, r.result
@@ -115,6 +126,8 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
     if let Some(w) = args.workers {
         local.workers = w.max(1);
     }
+    local.job_timeout = args.job_timeout;
+    let stop = crate::signals::stop_flag();
     println!(
         "{} jobs, {} at once with {} thread(s) each",
         jobs.len(),
@@ -123,12 +136,19 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
     );
     let bar = progress(None);
     bar.set_length(jobs.len() as u64);
-    let outcomes = run_local(&jobs, &local, |o| {
+    let outcomes = run_local(&jobs, &local, stop, |o| {
         bar.inc(1);
         if let Outcome::Ran(r) = o {
             bar.set_message(format!("{} {}", r.name, r.status));
         }
     })?;
     bar.finish_and_clear();
-    print_summary(&outcomes, &args.out)
+    let printed = print_summary(&outcomes, &args.out);
+    if stop.load(std::sync::atomic::Ordering::Relaxed) {
+        return Err(crate::signals::Interrupted(
+            "interrupted (Ctrl-C or SIGTERM): running jobs were ended and recorded as interrupted; a re-run does the rest",
+        )
+        .into());
+    }
+    printed
 }

@@ -57,8 +57,8 @@ pub fn run(args: &BenchHiddenArgs) -> anyhow::Result<()> {
         )
     })?;
     std::fs::create_dir_all(&args.out)?;
-    std::fs::write(args.out.join("rows.csv"), rows_csv(&rows))?;
-    std::fs::write(args.out.join("summary.md"), &md)?;
+    scatterscope::files::write_atomic(args.out.join("rows.csv"), rows_csv(&rows))?;
+    scatterscope::files::write_atomic(args.out.join("summary.md"), &md)?;
     println!("{md}");
     println!("wrote {}/{{rows.csv, summary.md}}", args.out.display());
     Ok(())

@@ -91,11 +91,18 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     for line in done.lines() {
         println!("{line}");
     }
+    let warnings = done.warnings();
+    for w in &warnings {
+        println!("warning: {w}");
+    }
     let files = done.write(&args.out)?;
     let names: Vec<String> = files
         .iter()
         .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
         .collect();
     println!("wrote {}/{{{}}}", args.out.display(), names.join(", "));
-    Ok(())
+    if !warnings.is_empty() {
+        println!("medium.toml not written: the fit is doubtful (see the warnings)");
+    }
+    crate::signals::warned(warnings.len())
 }

@@ -64,12 +64,12 @@ pub fn run(args: &DenoiseBenchArgs) -> anyhow::Result<()> {
             r.seconds * 1e3
         );
     });
-    std::fs::write(
+    scatterscope::files::write_atomic(
         args.out.join("results.csv"),
         benchmark::results_csv(&results),
     )?;
     let md = benchmark::summary_markdown(&images, &results);
-    std::fs::write(args.out.join("summary.md"), &md)?;
+    scatterscope::files::write_atomic(args.out.join("summary.md"), &md)?;
     println!("\n{md}");
     println!("wrote {}", args.out.display());
     Ok(())

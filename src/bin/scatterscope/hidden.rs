@@ -8,7 +8,8 @@ use anyhow::Context;
 use scatterscope::calibrate::transmittance::parse_length_cm;
 use scatterscope::confocal::scan::DEFAULT_MAT_DATASET;
 use scatterscope::confocal::{
-    ConfocalScan, HiddenMethod, PoissonOptions, PublishedOptions, SlabOptics, reconstruct_hidden,
+    ConfocalScan, HiddenMethod, PoissonOptions, PublishedOptions, SlabOptics, hidden_warnings,
+    reconstruct_hidden,
 };
 use scatterscope::report::hidden::write_hidden;
 
@@ -106,6 +107,10 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
         );
     }
     println!("reconstructed in {wall_s:.3} s");
+    let warnings = hidden_warnings(&scan, &volume, depth_m);
+    for w in &warnings {
+        println!("warning: {w}");
+    }
     let written = write_hidden(&volume, trace.as_deref(), &args.out)?;
     println!(
         "wrote {}",
@@ -115,5 +120,5 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     );
-    Ok(())
+    crate::signals::warned(warnings.len())
 }

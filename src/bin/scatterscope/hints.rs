@@ -84,7 +84,7 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
     {
         "give the bin width: --bin-ps (calibrate-slab), --irf-bin-ps (with --irf-from)"
     } else if let Some(FileError {
-        error: TtrError::Truncated { .. },
+        error: TtrError::Truncated { .. } | TtrError::Unfinished { .. },
         ..
     }) = cause.downcast_ref::<FileError>()
     {

@@ -15,6 +15,7 @@ mod recon_args;
 mod reconstruct;
 mod report;
 mod shared_args;
+mod signals;
 mod simulate;
 mod tags_cmd;
 mod weights_cmd;
@@ -103,16 +104,26 @@ fn s(p: &std::path::Path) -> anyhow::Result<&str> {
 /// error), with one `error:` line naming the file, field and value and the
 /// causes after it, then a `hint:` line per flag that changes it; 2 the
 /// command line itself is wrong (clap's usage errors); 3 an acquisition
-/// ended by Ctrl-C or SIGTERM, its outputs complete with what was received.
-/// A panic (101) is a bug.
+/// ended by Ctrl-C or SIGTERM, its outputs complete with what was received
+/// (a conversion or a batch ended so writes nothing partial); 4 the command
+/// finished and wrote its outputs, but printed `warning:` lines (an empty or
+/// implausible result, an incomplete input); 130 any other command ended by
+/// a signal, the outputs it was writing removed. A panic (101) is a bug.
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     scatterscope::memory::set_limit(cli.memory_limit);
-    match dispatch(cli.command) {
+    // One command per process: no output may replace a file it read.
+    scatterscope::files::input::remember_inputs();
+    let run = signals::install().and_then(|()| dispatch(cli.command));
+    match run {
         Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) if e.is::<acquire::Interrupted>() => {
+        Err(e) if e.is::<signals::Interrupted>() => {
             eprintln!("{e}");
             std::process::ExitCode::from(3)
+        }
+        Err(e) if e.is::<signals::Warned>() => {
+            eprintln!("{e}");
+            std::process::ExitCode::from(4)
         }
         Err(e) => {
             eprintln!("error: {e:#}");

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file};
 use scatterscope::tags::binning::FrameSelect;
-use scatterscope::tags::convert::convert_to_ptu;
+use scatterscope::tags::convert::{ConvertError, convert_to_ptu};
 use scatterscope::tags::survey::survey;
 
 use crate::shared_args::choice;
@@ -53,10 +53,11 @@ pub struct BinArgs {
 }
 
 pub fn info(args: &InfoArgs) -> anyhow::Result<()> {
-    for line in survey(&args.file)?.lines() {
+    let lines = survey(&args.file)?.lines();
+    for line in &lines {
         println!("{line}");
     }
-    Ok(())
+    crate::signals::warned(lines.iter().filter(|l| l.starts_with("warning:")).count())
 }
 
 pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
@@ -77,7 +78,7 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
         println!("{line}");
     }
     println!("wrote {last} to {}", args.out.display());
-    Ok(())
+    crate::signals::warned(binned.warnings().len())
 }
 
 /// Convert a recorded file (PTU, HT3, PT3, .sstags) to PTU, photon for photon.
@@ -98,7 +99,16 @@ pub struct ConvertArgs {
 }
 
 pub fn convert(args: &ConvertArgs) -> anyhow::Result<()> {
-    let done = convert_to_ptu(&args.input, &args.out, args.allow_truncated)?;
+    let stop = crate::signals::stop_flag();
+    let done = match convert_to_ptu(&args.input, &args.out, args.allow_truncated, stop) {
+        Err(ConvertError::Interrupted { .. }) => {
+            return Err(crate::signals::Interrupted(
+                "interrupted (Ctrl-C or SIGTERM): the conversion stopped and nothing was written",
+            )
+            .into());
+        }
+        other => other?,
+    };
     println!("{}", done.summary(&args.out));
-    Ok(())
+    crate::signals::warned(done.warnings.len())
 }

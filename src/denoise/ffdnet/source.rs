@@ -115,7 +115,7 @@ pub fn import(pth: &Path, out: Option<&Path>) -> Result<(PathBuf, FfdnetWeights)
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(write(dir))?;
     }
-    std::fs::write(&out, &converted).map_err(write(&out))?;
+    crate::files::write_atomic(&out, &converted).map_err(write(&out))?;
     let weights = FfdnetWeights::from_file(&out)?;
     Ok((out, weights))
 }

@@ -37,6 +37,15 @@ pub enum TtrError {
     /// A valid file of a kind this reader does not handle.
     #[error("{0}")]
     Unsupported(String),
+    /// The header holds no record count: its writer never finished
+    /// (killed, crashed, out of disk), so the file may end anywhere.
+    #[error(
+        "its header holds no record count (TTResult_NumberOfRecords 0): the writer never finished (killed, crashed or out of disk), so the {present} records present may not be the whole recording; refused unless a truncated file is allowed"
+    )]
+    Unfinished {
+        /// Complete records present.
+        present: u64,
+    },
     /// The file ends before the records the header announces.
     #[error(
         "file is cut: read {read} of {expected} records ({trailing} trailing bytes of a partial record)"
@@ -100,6 +109,9 @@ pub struct FileInfo {
     pub sync_rate_hz: Option<f64>,
     /// Records the header announces (0 in the header: taken from the size).
     pub records_announced: u64,
+    /// The header held no record count (0) though records follow it: the
+    /// writer never finished.
+    pub count_missing: bool,
     /// Complete records present in the file.
     pub records_present: u64,
     /// Bytes after the last complete record.
@@ -182,6 +194,42 @@ impl FileInfo {
         })
     }
 
+    /// Whether the writer marked the file incomplete ([`writer::INCOMPLETE_TAG`]).
+    pub fn marked_incomplete(&self) -> bool {
+        self.tags
+            .int(writer::INCOMPLETE_TAG)
+            .is_some_and(|v| v != 0)
+    }
+
+    /// What the header says of the file's completeness, in words: `None`
+    /// for a finished file of a complete run.
+    pub fn completeness_note(&self) -> Option<String> {
+        if self.count_missing {
+            return Some(
+                TtrError::Unfinished {
+                    present: self.records_present,
+                }
+                .to_string(),
+            );
+        }
+        self.marked_incomplete().then(|| {
+            "the run that wrote it was interrupted before its planned end (its header says so); it holds every record that was read".to_string()
+        })
+    }
+
+    /// Refuses a file whose writer never finished unless `allow_unfinished`.
+    pub fn check_finished(&self, allow_unfinished: bool) -> Result<(), FileError> {
+        if self.count_missing && !allow_unfinished {
+            return Err(FileError {
+                path: self.path.clone(),
+                error: TtrError::Unfinished {
+                    present: self.records_present,
+                },
+            });
+        }
+        Ok(())
+    }
+
     /// Acquisition time set in the software (s), when recorded.
     pub fn acquisition_time_s(&self) -> Option<f64> {
         self.tags
@@ -246,14 +294,7 @@ pub fn open(path: &Path) -> Result<(FileInfo, RecordReader), FileError> {
 }
 
 fn open_inner(path: &Path) -> Result<(FileInfo, RecordReader), TtrError> {
-    let mut file = File::open(path)?;
-    let meta = file.metadata()?;
-    if !meta.is_file() {
-        return Err(TtrError::Unsupported(format!(
-            "not a regular file ({}); a recording must be one",
-            crate::memory::file_kind(&meta)
-        )));
-    }
+    let (mut file, meta) = crate::files::open_regular(path, "recording")?;
     let size = meta.len();
     let mut magic = [0u8; 16];
     let got = file.read(&mut magic)?;
@@ -289,6 +330,7 @@ fn open_inner(path: &Path) -> Result<(FileInfo, RecordReader), TtrError> {
     info.trailing_bytes = body % 4;
     if info.records_announced == 0 {
         info.records_announced = info.records_present;
+        info.count_missing = info.records_present > 0;
     }
     let records = info.records_present.min(info.records_announced);
     let rr = RecordReader {
@@ -372,11 +414,21 @@ fn from_ptu(path: &Path, r: &mut impl Read) -> Result<FileInfo, TtrError> {
                     )
                 })
         };
+        let (line_start, line_stop) = (mask("ImgHdr_LineStart")?, mask("ImgHdr_LineStop")?);
+        if line_start == line_stop {
+            return Err(TtrError::header(
+                offset,
+                format!(
+                    "ImgHdr_LineStart and ImgHdr_LineStop are both marker {}: a line's start cannot be told from its stop, so no photon has a pixel",
+                    line_start.trailing_zeros() + 1
+                ),
+            ));
+        }
         Some(Imaging {
             pixels_x: size("ImgHdr_PixX")?,
             pixels_y: size("ImgHdr_PixY")?,
-            line_start: mask("ImgHdr_LineStart")?,
-            line_stop: mask("ImgHdr_LineStop")?,
+            line_start,
+            line_stop,
             frame: if tags.value("ImgHdr_Frame").is_some() {
                 mask("ImgHdr_Frame")?
             } else {
@@ -396,6 +448,7 @@ fn from_ptu(path: &Path, r: &mut impl Read) -> Result<FileInfo, TtrError> {
         macro_unit_s,
         sync_rate_hz: sync_rate,
         records_announced: u64::try_from(announced).unwrap_or(0),
+        count_missing: false,
         records_present: 0,
         trailing_bytes: 0,
         data_offset: offset,
@@ -433,6 +486,7 @@ fn from_legacy(path: &Path, h: legacy::LegacyHeader) -> FileInfo {
         },
         sync_rate_hz: (h.sync_rate_hz > 0.0).then_some(h.sync_rate_hz),
         records_announced: h.records,
+        count_missing: false,
         records_present: 0,
         trailing_bytes: 0,
         data_offset: h.data_offset,

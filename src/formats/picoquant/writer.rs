@@ -3,12 +3,16 @@
 //! (`acquire --device picoquant`), `convert` re-encodes recorded tags, and
 //! tests build files of every record type and edge case.
 //!
-//! The header is written first with `TTResult_NumberOfRecords` 0 and
-//! patched by [`PtuWriter::finish`]; a file whose writer never finished
-//! (a crash, a full disk) still opens, its readers counting the records
-//! from the file's length.
+//! The file is written under a temporary name and renamed into place by
+//! [`PtuWriter::finish`] ([`crate::files::AtomicFile`]). Its header is
+//! written first with `TTResult_NumberOfRecords` 0 and the project's tag
+//! [`INCOMPLETE_TAG`] true; `finish` patches in the true record count and,
+//! for a run that reached its planned end, sets the tag false. So a file
+//! whose writer never finished (killed, a full disk) lies under its
+//! temporary name with no record count, which ptufile warns about and the
+//! project's readers flag, and an interrupted acquisition is a valid file
+//! whose header says it was interrupted.
 
-use std::fs::File;
 use std::io::{self, BufWriter, Seek, SeekFrom, Write};
 use std::path::Path;
 
@@ -17,6 +21,8 @@ use super::records::{
     HYDRAHARP_V1_T2_WRAP, PICOHARP_T2_WRAP, PICOHARP_T3_WRAP, RecordType, WIDE_T2_WRAP,
     WIDE_T3_WRAP,
 };
+use crate::files::AtomicFile;
+pub use crate::files::Completion;
 use crate::tags::Imaging;
 use crate::tags::Tag;
 
@@ -49,13 +55,20 @@ pub enum HeaderEntry {
     Text(String),
 }
 
+/// The project's header tag (`tyBool8`) that says a file is not the whole
+/// of what its writer meant to write: true from the start, false once the
+/// writer finished a complete run. PicoQuant's software ignores tags it
+/// does not know.
+pub const INCOMPLETE_TAG: &str = "Scatterscope_Incomplete";
+
 /// Streams tags into a PTU file, inserting overflow records as needed.
 pub struct PtuWriter {
-    out: BufWriter<File>,
+    out: BufWriter<AtomicFile>,
     record_type: RecordType,
     base: u64,
     records: u64,
     count_offset: u64,
+    incomplete_offset: u64,
 }
 
 /// `text` NUL-terminated and padded with NULs to a multiple of 8 bytes, as
@@ -73,13 +86,29 @@ fn invalid(msg: String) -> io::Error {
 }
 
 impl PtuWriter {
-    /// Creates `path` and writes the header.
+    /// Starts `path` (a derived file, such as a conversion: removed if the
+    /// writer is dropped unfinished) and writes the header.
     pub fn create(path: &Path, record_type: RecordType, h: &WriterHeader) -> io::Result<Self> {
-        let mut out = BufWriter::new(File::create(path)?);
+        Self::start(AtomicFile::create(path)?, record_type, h)
+    }
+
+    /// Starts `path` for a live recording (kept under its temporary name if
+    /// the writer is dropped unfinished: its photons were read once) and
+    /// writes the header.
+    pub fn create_recording(
+        path: &Path,
+        record_type: RecordType,
+        h: &WriterHeader,
+    ) -> io::Result<Self> {
+        Self::start(AtomicFile::create_recording(path)?, record_type, h)
+    }
+
+    fn start(file: AtomicFile, record_type: RecordType, h: &WriterHeader) -> io::Result<Self> {
+        let mut out = BufWriter::with_capacity(1 << 20, file);
         out.write_all(ptu::MAGIC)?;
         out.write_all(b"1.0.00\0\0")?;
         let mut pos = 16u64;
-        let mut tag = |out: &mut BufWriter<File>,
+        let mut tag = |out: &mut BufWriter<AtomicFile>,
                        ident: &str,
                        typ: u32,
                        value: [u8; 8],
@@ -223,6 +252,7 @@ impl PtuWriter {
                 }
             };
         }
+        let incomplete_offset = tag(&mut out, INCOMPLETE_TAG, ty::BOOL8, int(1), &[])?;
         let count_offset = tag(&mut out, "TTResult_NumberOfRecords", ty::INT8, int(0), &[])?;
         tag(&mut out, "Header_End", ty::EMPTY8, int(0), &[])?;
         Ok(Self {
@@ -231,6 +261,7 @@ impl PtuWriter {
             base: 0,
             records: 0,
             count_offset,
+            incomplete_offset,
         })
     }
 
@@ -380,15 +411,25 @@ impl PtuWriter {
         self.write_raw(rec)
     }
 
-    /// Patches the record count into the header and closes the file;
-    /// returns the number of records written.
-    pub fn finish(mut self) -> io::Result<u64> {
-        self.out.flush()?;
+    /// Patches the record count into the header and closes the file,
+    /// renaming it into place; returns the number of records written.
+    pub fn finish(self) -> io::Result<u64> {
+        self.finish_as(Completion::Complete)
+    }
+
+    /// [`Self::finish`] for a run that ended as `completion` says; an
+    /// interrupted run keeps [`INCOMPLETE_TAG`] true.
+    pub fn finish_as(self, completion: Completion) -> io::Result<u64> {
+        let records = self.records;
         let mut file = self.out.into_inner().map_err(|e| e.into_error())?;
         file.seek(SeekFrom::Start(self.count_offset))?;
-        file.write_all(&(self.records as i64).to_le_bytes())?;
-        file.sync_all()?;
-        Ok(self.records)
+        file.write_all(&(records as i64).to_le_bytes())?;
+        if completion == Completion::Complete {
+            file.seek(SeekFrom::Start(self.incomplete_offset))?;
+            file.write_all(&0i64.to_le_bytes())?;
+        }
+        file.commit()?;
+        Ok(records)
     }
 }
 

@@ -1,0 +1,11 @@
+//! How the library touches the file system: every file input passes one
+//! gate ([`input`]: regular files only, opened without blocking, their
+//! identity remembered), and every output is written whole or not at all
+//! ([`output`]: a temporary name in the destination folder, then a rename),
+//! never over a file the process has read.
+
+pub mod input;
+pub mod output;
+
+pub use input::{FileId, open_input, open_regular};
+pub use output::{AtomicFile, Completion, write_atomic};
