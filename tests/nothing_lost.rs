@@ -260,3 +260,87 @@ fn a_slab_fit_with_swapped_thicknesses_warns_and_writes_no_medium_file() {
     assert!(dir.path().join("fit.csv").exists());
     assert!(!dir.path().join("medium.toml").exists());
 }
+
+#[test]
+fn implausible_files_are_refused_naming_the_field_and_value() {
+    use scatterscope::calibrate::histogram::TimeHistogram;
+    use scatterscope::formats::picoquant::records::RecordType;
+    use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
+    use scatterscope::stack::{Stack, StackMeta, ValueKind};
+    use scatterscope::tags::Imaging;
+    let dir = tempfile::tempdir().unwrap();
+    // A scan whose line start and stop are the same marker.
+    let ptu = dir.path().join("scan.ptu");
+    let img = Imaging {
+        pixels_x: 4,
+        pixels_y: 4,
+        line_start: 1,
+        line_stop: 1,
+        frame: 0,
+        bidirectional: false,
+    };
+    let h = WriterHeader {
+        resolution_s: 4e-12,
+        sync_rate_hz: 80e6,
+        device: "test".into(),
+        imaging: Some(img),
+        extra: Vec::new(),
+    };
+    PtuWriter::create(&ptu, RecordType::GenericT3, &h)
+        .unwrap()
+        .finish()
+        .unwrap();
+    let e = scatterscope::formats::picoquant::open(&ptu)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("scan.ptu") && e.contains("both marker 1"), "{e}");
+    // Histograms with no photon, or more than any measurement counts.
+    let src = Path::new("capture.mat");
+    let e = TimeHistogram::new(vec![0.0; 50], 8.0, 0.0, src)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("capture.mat") && e.contains("all 50 bins hold 0 counts"),
+        "{e}"
+    );
+    let e = TimeHistogram::new(vec![1.0, 1e300], 8.0, 0.0, src)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("bin 1 holds 1e300 counts"), "{e}");
+    // Sidecars with bins out of order, or of a version not known.
+    let npy = dir.path().join("s.npy");
+    let meta = StackMeta::measured(0.0, 10.0, 3, "test".into(), None);
+    Stack::new(ndarray::Array3::from_elem((3, 2, 2), 1.0), meta)
+        .save(&npy)
+        .unwrap();
+    let side = dir.path().join("s.json");
+    let json = std::fs::read_to_string(&side).unwrap();
+    for (from, to, words) in [
+        ("\"version\": 1", "\"version\": 99", "metadata version 99"),
+        (
+            "20.0",
+            "10.0",
+            "bin_starts_ps[2] = 10 ps does not come after",
+        ),
+        ("20.0", "5.0", "bin_starts_ps[2] = 5 ps does not come after"),
+    ] {
+        assert!(json.contains(from), "{json}");
+        std::fs::write(&side, json.replacen(from, to, 1)).unwrap();
+        let e = Stack::load(&npy).unwrap_err().to_string();
+        assert!(e.contains(words) && e.contains("s.npy"), "{words}: {e}");
+    }
+    let _ = ValueKind::Counts;
+}
+
+#[test]
+fn a_whole_count_past_2_to_the_53_is_named_as_implausible_not_as_fractional() {
+    let counts = ndarray::Array2::from_elem((2, 2), 3e38);
+    let e = scatterscope::reconstruct::thinning::thin_halves(&counts, 1, "the counts")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("3e38 photons, more than any measurement counts"),
+        "{e}"
+    );
+}

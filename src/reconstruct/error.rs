@@ -20,7 +20,7 @@ pub enum ReconstructError {
     /// A whole count larger than any measurement gives (2^53 and more,
     /// where counts are no longer exact even in 64-bit floats).
     #[error(
-        "row {row}, column {col} of {what} is {value} photons, more than any measurement counts (whole counts stop being exact at 2^53): check the stack's values"
+        "row {row}, column {col} of {what} is {value:e} photons, more than any measurement counts (whole counts stop being exact at 2^53): check the stack's values"
     )]
     ImplausibleCount {
         /// The image (e.g. "the time-summed counts").
