@@ -13,7 +13,7 @@ use ndarray::Array3;
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
 use crate::memory::{ReadError, bytes_of, read_bounded};
-use crate::stack::{F32_EXACT_COUNT, Stack, StackError, StackFile, StackMeta, ValueKind};
+use crate::stack::{Stack, StackError, StackFile, StackMeta, ValueKind, counts_as_f32};
 
 /// Largest sidecar read (the metadata of any stack is far smaller).
 const MAX_SIDECAR: u64 = 64 << 20;
@@ -80,22 +80,14 @@ pub fn read(path: &Path) -> Result<StackFile, StackError> {
         "<u2" => Array3::<u16>::read_npy(open()?)
             .map_err(npy_err)?
             .mapv(f32::from),
-        "<u4" => {
-            let counts = Array3::<u32>::read_npy(open()?).map_err(npy_err)?;
-            let data = counts.mapv(|c| c as f32);
-            exact = counts
-                .iter()
-                .any(|&c| c > F32_EXACT_COUNT)
-                .then_some(counts);
-            data
-        }
-        "<u8" => {
-            let counts = exact_counts(path, Array3::<u64>::read_npy(open()?).map_err(npy_err)?)?;
-            let data = counts.mapv(|c| c as f32);
-            exact = counts
-                .iter()
-                .any(|&c| c > F32_EXACT_COUNT)
-                .then_some(counts);
+        "<u4" | "<u8" => {
+            let counts = if descr == "<u4" {
+                Array3::<u32>::read_npy(open()?).map_err(npy_err)?
+            } else {
+                exact_counts(path, Array3::<u64>::read_npy(open()?).map_err(npy_err)?)?
+            };
+            let data;
+            (data, exact) = counts_as_f32(counts);
             data
         }
         other => {

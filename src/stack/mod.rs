@@ -100,6 +100,17 @@ pub struct Stack {
 /// Largest count every `f32` holds exactly (2^24).
 pub const F32_EXACT_COUNT: u32 = 1 << 24;
 
+/// Counts as `f32` values, and the counts themselves when some exceed
+/// 2^24 (where `f32` rounds them).
+pub fn counts_as_f32(counts: Array3<u32>) -> (Array3<f32>, Option<Array3<u32>>) {
+    let data = counts.mapv(|c| c as f32);
+    let exact = counts
+        .iter()
+        .any(|&c| c > F32_EXACT_COUNT)
+        .then_some(counts);
+    (data, exact)
+}
+
 /// What a stack file holds, before validation.
 #[derive(Debug, Clone)]
 pub struct StackFile {
@@ -251,11 +262,7 @@ impl Stack {
     /// A stack of photon counts: their `f32` values, and the counts
     /// themselves when some exceed 2^24.
     pub fn from_counts(counts: Array3<u32>, meta: StackMeta) -> Self {
-        let data = counts.mapv(|c| c as f32);
-        let exact_counts = counts
-            .iter()
-            .any(|&c| c > F32_EXACT_COUNT)
-            .then_some(counts);
+        let (data, exact_counts) = counts_as_f32(counts);
         Self {
             data,
             meta,
