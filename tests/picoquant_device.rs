@@ -110,8 +110,8 @@ fn acquisition_ptu_bins_back_into_the_same_stack_for_both_families() {
 fn every_fault_mode_ends_the_run_with_the_ledger_balanced_and_the_stack_saved() {
     let cases = [
         ("overrun", "FIFO overrun", "fifo_overrun"),
-        ("error", "FIFO read failed", "device_error"),
-        ("vanish", "device lost", "device_error"),
+        ("error", "ERROR_USB_BULKRD_FAIL", "device_error"),
+        ("vanish", "ERROR_USB_VCMD_FAIL", "device_error"),
     ];
     for (fault, words, stop) in cases {
         let dir = tempfile::tempdir().unwrap();
@@ -213,11 +213,13 @@ fn a_scanned_acquisition_bins_into_the_scanners_image() {
 fn without_a_vendor_library_the_message_names_the_files_and_the_install() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("acq");
+    // Empty variables are unset, not paths: the installer's places are
+    // searched, as without them.
     let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
         .args(["acquire", "--device", "picoquant", "--duration", "100ms"])
         .args(["--out", out.to_str().unwrap()])
-        .env_remove("SCATTERSCOPE_MHLIB")
-        .env_remove("SCATTERSCOPE_HHLIB")
+        .env("SCATTERSCOPE_MHLIB", "")
+        .env("SCATTERSCOPE_HHLIB", "")
         .output()
         .unwrap();
     let all = text(&o);
@@ -526,4 +528,75 @@ fn ctrl_c_ends_a_picoquant_run_with_everything_read_saved() {
     assert!(t["records"].as_u64().unwrap() > 100_000, "{t}");
     let (info, _) = open(&ptu).unwrap();
     assert_eq!(info.records_announced, t["records"].as_u64().unwrap());
+}
+
+/// The T3 offset in the unit the vendor's libraries take: nanoseconds
+/// (MHLib's header, mhdefin.h: `MH_SetOffset` 0 to 100 000 000 ns). The
+/// stand-in records what it was sent; the PTU's `MeasDesc_Offset` holds
+/// the same number.
+#[test]
+fn the_t3_offset_reaches_the_library_in_nanoseconds() {
+    use scatterscope::formats::picoquant::ptu::TagLookup;
+    for family in ["multiharp", "hydraharp"] {
+        let dir = tempfile::tempdir().unwrap();
+        let truth_file = dir.path().join("truth.json");
+        let mock = format!("truth={}", truth_file.display());
+        let (out, o) = acquire(
+            dir.path(),
+            &format!("picoquant:{family}"),
+            &mock,
+            &["--offset", "10ns"],
+        );
+        assert!(o.status.success(), "{family}: {}", text(&o));
+        assert_eq!(truth(&truth_file)["offset_ns"], 10, "{family}");
+        let (info, _) = open(&out.join("acquisition.ptu")).unwrap();
+        assert_eq!(info.tags.int("MeasDesc_Offset"), Some(10), "{family}");
+        // A bare number is picoseconds, not a whole number of ns: refused.
+        let (_, o) = acquire(
+            dir.path(),
+            &format!("picoquant:{family}"),
+            &mock,
+            &["--offset", "10"],
+        );
+        assert!(!o.status.success());
+        assert!(text(&o).contains("whole nanoseconds"), "{}", text(&o));
+        // Past the library's range: its own error code and text.
+        let (_, o) = acquire(
+            dir.path(),
+            &format!("picoquant:{family}"),
+            &mock,
+            &["--offset", "200000000ns"],
+        );
+        assert!(!o.status.success());
+        assert!(
+            text(&o).contains("SetOffset returned error -17 (ERROR_INVALID_ARGUMENT)"),
+            "{}",
+            text(&o)
+        );
+    }
+}
+
+/// MultiHarp's `FLAG_CNTS_DROPPED` (mhdefin.h, 0x0040): the stand-in sets
+/// it mid-run (fault `drop`); the ledger says so, the summary does not
+/// claim the run whole, and the command fails with what was read saved.
+#[test]
+fn counts_dropped_in_the_device_reach_the_ledger_and_the_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let (out, o) = acquire(
+        dir.path(),
+        "picoquant:multiharp",
+        "rate=max,fault=drop@200000",
+        &[],
+    );
+    let all = text(&o);
+    assert!(!o.status.success(), "{all}");
+    assert!(all.contains("counts dropped in the device"), "{all}");
+    assert!(all.contains("not the whole measurement"), "{all}");
+    assert!(
+        !all.contains("balance: every record read is accounted for\n"),
+        "{all}"
+    );
+    let record = json(&out.join("acquisition.json"));
+    assert_eq!(record["ledger"]["counts_dropped"], true, "{record}");
+    assert!(out.join("stack.exr").exists() && out.join("acquisition.ptu").exists());
 }

@@ -28,6 +28,9 @@ pub const FLAG_SYNC_LOST: i32 = 0x0004;
 pub const FLAG_REF_LOST: i32 = 0x0008;
 /// `GetFlags`: a hardware error.
 pub const FLAG_SYS_ERROR: i32 = 0x0010;
+/// `GetFlags` (MultiHarp): counts were dropped in the device (MHLib's
+/// header, mhdefin.h; HHLib v3 has no such flag).
+pub const FLAG_CNTS_DROPPED: i32 = 0x0040;
 /// The libraries' "no device at this index" error.
 const ERROR_DEVICE_OPEN_FAIL: c_int = -1;
 
@@ -213,12 +216,14 @@ fn text(buf: &[u8]) -> String {
 
 impl VendorLib {
     /// Loads `family`'s library: the file `explicit` names, else the one
-    /// the family's environment variable names, else the installer's
-    /// locations ([`Family::library_candidates`]).
+    /// the family's environment variable names (when not empty), else the
+    /// installer's locations ([`Family::library_candidates`]).
     pub fn load(family: Family, explicit: Option<&Path>) -> Result<Arc<Self>, VendorError> {
         let candidates: Vec<PathBuf> = match explicit {
             Some(p) => vec![p.to_path_buf()],
-            None => match std::env::var_os(family.library_env()) {
+            // An empty variable is unset (`SCATTERSCOPE_HHLIB= cmd`), not a
+            // path to load.
+            None => match std::env::var_os(family.library_env()).filter(|p| !p.is_empty()) {
                 Some(p) => vec![PathBuf::from(p)],
                 None => family.library_candidates(),
             },
@@ -454,8 +459,11 @@ pub struct Settings {
     /// Binning code: the micro time unit is the base resolution times
     /// 2^binning.
     pub binning: i32,
-    /// T3 offset, ps.
-    pub offset_ps: i32,
+    /// T3 offset, ns: the libraries take nanoseconds (MHLib's header
+    /// gives `MH_SetOffset`'s range 0 to 100 000 000 ns; the HHLib manual
+    /// calls it the histogram time offset in ns, though HHLib's header
+    /// comments its 0 to 500 000 range as ps).
+    pub offset_ns: i32,
     /// Enable the four marker inputs (line and frame clocks of a scanner).
     pub markers: bool,
 }
@@ -470,7 +478,7 @@ impl Settings {
             input_trigger: Trigger::default_for(family),
             input_offsets_ps: Vec::new(),
             binning: 0,
-            offset_ps: 0,
+            offset_ns: 0,
             markers: false,
         }
     }
@@ -513,9 +521,18 @@ impl Flags {
         self.0 & FLAG_FIFO_FULL != 0
     }
 
+    /// The device dropped counts before they reached its FIFO.
+    pub fn counts_dropped(self) -> bool {
+        self.0 & FLAG_CNTS_DROPPED != 0
+    }
+
     /// The conditions other than an overrun, in words.
     pub fn problems(self) -> Vec<&'static str> {
         [
+            (
+                FLAG_CNTS_DROPPED,
+                "counts dropped in the device (more than it could take; how many it does not say)",
+            ),
             (FLAG_SYNC_LOST, "sync lost"),
             (FLAG_REF_LOST, "reference clock lost"),
             (
@@ -650,7 +667,7 @@ impl Device {
                 )?;
             }
             lib.check("SetBinning", (f.set_binning)(i, s.binning))?;
-            lib.check("SetOffset", (f.set_offset)(i, s.offset_ps))?;
+            lib.check("SetOffset", (f.set_offset)(i, s.offset_ns))?;
             let m = c_int::from(s.markers);
             lib.check("SetMarkerEnable", (f.set_marker_enable)(i, m, m, m, m))?;
             let mut resolution = 0.0;

@@ -101,8 +101,8 @@ pub struct SettingsRequest {
     pub input_offsets_ps: Vec<i32>,
     /// Binning code (micro-time unit = base resolution x 2^binning).
     pub binning: Option<i32>,
-    /// T3 offset, ps.
-    pub offset_ps: Option<i32>,
+    /// T3 offset, ns (the unit the vendor's libraries take).
+    pub offset_ns: Option<i32>,
 }
 
 impl SettingsRequest {
@@ -165,7 +165,7 @@ impl SettingsRequest {
         s.sync_offset_ps = self.sync_offset_ps.unwrap_or(s.sync_offset_ps);
         s.input_offsets_ps = self.input_offsets_ps.clone();
         s.binning = self.binning.unwrap_or(s.binning);
-        s.offset_ps = self.offset_ps.unwrap_or(s.offset_ps);
+        s.offset_ns = self.offset_ns.unwrap_or(s.offset_ns);
         s.markers = markers;
         Ok(s)
     }
@@ -248,10 +248,19 @@ pub struct PicoQuantLedger {
     /// Whether the device's FIFO overran (it lost records, how many it
     /// does not say).
     pub fifo_overrun: bool,
+    /// Whether the device dropped counts before its FIFO (MultiHarp's
+    /// `FLAG_CNTS_DROPPED`; how many it does not say).
+    pub counts_dropped: bool,
 }
 
 impl PicoQuantLedger {
-    fn from(read: u64, acc: &Accounting, ptu: u64, fifo_overrun: bool) -> Self {
+    fn from(
+        read: u64,
+        acc: &Accounting,
+        ptu: u64,
+        fifo_overrun: bool,
+        counts_dropped: bool,
+    ) -> Self {
         Self {
             records_read: read,
             records_decoded: acc.records,
@@ -264,7 +273,14 @@ impl PicoQuantLedger {
             frames: acc.frames,
             records_in_ptu: ptu,
             fifo_overrun,
+            counts_dropped,
         }
+    }
+
+    /// Whether the device lost photons it detected (an overrun or dropped
+    /// counts): then no ledger of what was read says what was detected.
+    pub fn lost_in_device(&self) -> bool {
+        self.fifo_overrun || self.counts_dropped
     }
 
     /// Whether every record read is decoded and every photon in one place
@@ -299,11 +315,19 @@ impl PicoQuantLedger {
                     "0".into()
                 },
             ),
+            line(
+                "dropped in the device",
+                if self.counts_dropped {
+                    "yes, count unknown".into()
+                } else {
+                    "0".into()
+                },
+            ),
         ];
-        t.push(if self.balances(ptu) {
-            "  balance: every record read is accounted for".into()
-        } else {
-            "  balance: DOES NOT BALANCE (please report)".into()
+        t.push(match (self.balances(ptu), self.lost_in_device()) {
+            (true, false) => "  balance: every record read is accounted for".into(),
+            (true, true) => "  balance: every record read is accounted for, but the device lost photons it detected (how many it does not say): this is not the whole measurement".into(),
+            (false, _) => "  balance: DOES NOT BALANCE (please report)".into(),
         });
         t
     }
@@ -409,6 +433,11 @@ impl PicoQuantAcquisition {
         if !self.ledger.balances(self.ptu_complete()) {
             return Err("the record ledger does not balance".into());
         }
+        if self.ledger.counts_dropped {
+            return Err(
+                "the device dropped counts (its flags say so; how many it does not say): the stack and PTU hold what it sent".into(),
+            );
+        }
         match &self.stop {
             PicoQuantStop::FifoOverrun => Err(self.stop.describe()),
             PicoQuantStop::DeviceError(e) => Err(format!(
@@ -501,6 +530,8 @@ pub struct PicoQuantProgress {
 struct ReaderEnd {
     stop: PicoQuantStop,
     flag_notes: Vec<String>,
+    /// The device's flags said it dropped counts.
+    counts_dropped: bool,
     /// When the measurement started (after the device's own set-up).
     started: Instant,
 }
@@ -544,7 +575,9 @@ fn header(
         ("MeasDesc_BinningFactor".into(), HeaderEntry::Int(binning)),
         (
             "MeasDesc_Offset".into(),
-            HeaderEntry::Int(i64::from(settings.offset_ps)),
+            // In the unit the device was programmed in (ns), as the
+            // library reports it.
+            HeaderEntry::Int(i64::from(settings.offset_ns)),
         ),
         (
             "CreatorSW_Name".into(),
@@ -659,11 +692,13 @@ impl PicoQuantJob {
         let end = std::thread::scope(|scope| {
             let reader = scope.spawn(move || {
                 let mut flag_notes = Vec::new();
+                let mut counts_dropped = false;
                 let fail = |e: VendorError| PicoQuantStop::DeviceError(e.to_string());
                 if let Err(e) = device.start(duration_ms) {
                     return ReaderEnd {
                         stop: fail(e),
                         flag_notes,
+                        counts_dropped,
                         started: Instant::now(),
                     };
                 }
@@ -676,6 +711,7 @@ impl PicoQuantJob {
                     match device.flags() {
                         Ok(f) if f.fifo_full() => break PicoQuantStop::FifoOverrun,
                         Ok(f) => {
+                            counts_dropped |= f.counts_dropped();
                             for p in f.problems() {
                                 if !flag_notes.iter().any(|n: &String| n == p) {
                                     flag_notes.push(p.to_string());
@@ -710,12 +746,22 @@ impl PicoQuantJob {
                         Err(e) => break fail(e),
                     }
                 };
+                // The flags once more: a drop during the last read.
+                if let Ok(f) = device.flags() {
+                    counts_dropped |= f.counts_dropped();
+                    for p in f.problems() {
+                        if !flag_notes.iter().any(|n: &String| n == p) {
+                            flag_notes.push(p.to_string());
+                        }
+                    }
+                }
                 // Stop, then close (on drop): the device's own end.
                 let _ = device.stop();
                 drop(device);
                 ReaderEnd {
                     stop: stop_reason,
                     flag_notes,
+                    counts_dropped,
                     started: measuring,
                 }
             });
@@ -774,6 +820,7 @@ impl PicoQuantJob {
             &acc,
             records_in_ptu,
             end.stop == PicoQuantStop::FifoOverrun,
+            end.counts_dropped,
         );
         let source = format!(
             "{} serial {} ({})",
@@ -911,10 +958,10 @@ mod tests {
             other_channel: 1,
             ..Accounting::default()
         };
-        let l = PicoQuantLedger::from(10, &acc, 10, false);
+        let l = PicoQuantLedger::from(10, &acc, 10, false, false);
         assert!(l.balances(true));
-        assert!(!PicoQuantLedger::from(11, &acc, 10, false).balances(false));
-        assert!(!PicoQuantLedger::from(10, &acc, 9, false).balances(true));
-        assert!(PicoQuantLedger::from(10, &acc, 9, false).balances(false));
+        assert!(!PicoQuantLedger::from(11, &acc, 10, false, false).balances(false));
+        assert!(!PicoQuantLedger::from(10, &acc, 9, false, false).balances(true));
+        assert!(PicoQuantLedger::from(10, &acc, 9, false, false).balances(false));
     }
 }

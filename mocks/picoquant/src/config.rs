@@ -9,8 +9,10 @@
 //! - `sync=HZ`: laser sync rate (default 80e6).
 //! - `scan=WxH`: a galvo scan of W x H points with line and frame markers
 //!   (default: a point detector).
-//! - `fault=overrun@N`, `fault=error@N`, `fault=vanish@N`: after N records
-//!   the FIFO overruns, a read fails, or the device disappears.
+//! - `fault=overrun@N`, `fault=error@N`, `fault=vanish@N`, `fault=drop@N`:
+//!   after N records the FIFO overruns, a read fails, the device
+//!   disappears, or (MultiHarp) the device drops counts and says so in its
+//!   flags (`FLAG_CNTS_DROPPED`) while the run goes on.
 //! - `seed=S`: photon sampling seed (default 0).
 //! - `truth=PATH`: on StopMeas, write what was delivered (records, photons,
 //!   markers, overflows, per-pixel photons of a scan) to PATH as JSON.
@@ -29,6 +31,9 @@ pub enum Fault {
     ReadError(u64),
     /// The device disappears: every later call fails.
     Vanish(u64),
+    /// The device drops counts (its `FLAG_CNTS_DROPPED` set from then on)
+    /// and goes on.
+    DropCounts(u64),
 }
 
 /// The stand-in's configuration.
@@ -112,6 +117,7 @@ impl MockConfig {
                         "overrun" => Fault::Overrun(at),
                         "error" => Fault::ReadError(at),
                         "vanish" => Fault::Vanish(at),
+                        "drop" => Fault::DropCounts(at),
                         _ => return Err(bad()),
                     });
                 }

@@ -23,21 +23,26 @@ use pool::Pool;
 const MAX_DEVICES: usize = 8;
 const FLAG_FIFO_FULL: c_int = 0x0002;
 const FLAG_ACTIVE: c_int = 0x0020;
+/// MHLib's "counts were dropped" flag (mhdefin.h).
+const FLAG_CNTS_DROPPED: c_int = 0x0040;
 const WARNING_INPUT_RATE_HIGH: c_int = 0x0040;
 
-/// Error codes (negative, as the vendor's libraries return them).
+/// Error codes: the vendor's numbers (errorcodes.h of MHLib 2.0 and HHLib
+/// 3.0 agree on these), except [`code::CONFIG`], which is the stand-in's.
 pub mod code {
-    /// No device at this index.
+    /// `ERROR_DEVICE_OPEN_FAIL`: no device at this index.
     pub const DEVICE_OPEN_FAIL: i32 = -1;
-    /// The device is not open or not initialised.
-    pub const NOT_READY: i32 = -3;
-    /// An argument is out of range.
-    pub const INVALID_ARGUMENT: i32 = -5;
-    /// A FIFO read failed (fault `error`).
-    pub const READ_FAIL: i32 = -90;
-    /// The device disappeared (fault `vanish`).
-    pub const DEVICE_LOST: i32 = -91;
-    /// `SCATTERSCOPE_PQ_MOCK` could not be read.
+    /// `ERROR_DEVICE_NOT_OPEN`.
+    pub const DEVICE_NOT_OPEN: i32 = -10;
+    /// `ERROR_INVALID_ARGUMENT`: an argument out of range.
+    pub const INVALID_ARGUMENT: i32 = -17;
+    /// `ERROR_NOT_INITIALIZED`: opened but not initialised.
+    pub const NOT_INITIALIZED: i32 = -22;
+    /// `ERROR_USB_VCMD_FAIL`: a USB command failed (fault `vanish`).
+    pub const DEVICE_LOST: i32 = -36;
+    /// `ERROR_USB_BULKRD_FAIL`: a FIFO read failed (fault `error`).
+    pub const READ_FAIL: i32 = -37;
+    /// The stand-in's own: `SCATTERSCOPE_PQ_MOCK` could not be read.
     pub const CONFIG: i32 = -99;
 }
 
@@ -77,6 +82,8 @@ struct Measurement {
     pixel_counts: Vec<u64>,
     ended: bool,
     truth_written: bool,
+    /// The T3 offset the device was set to (ns).
+    offset_ns: c_int,
 }
 
 #[derive(Default)]
@@ -87,6 +94,7 @@ struct Device {
     family: Option<Family>,
     binning: i32,
     sync_divider: i32,
+    offset_ns: c_int,
     flags: c_int,
     pool: Option<(f64, Arc<Pool>)>,
     measurement: Option<Measurement>,
@@ -138,10 +146,12 @@ fn with_device(index: c_int, f: impl FnOnce(&mut Device, &MockConfig) -> c_int) 
 /// Like [`with_device`] for a device that must be initialised.
 fn with_ready(index: c_int, f: impl FnOnce(&mut Device, &MockConfig) -> c_int) -> c_int {
     with_device(index, |d, c| {
-        if d.open && d.initialized {
-            f(d, c)
+        if !d.open {
+            code::DEVICE_NOT_OPEN
+        } else if !d.initialized {
+            code::NOT_INITIALIZED
         } else {
-            code::NOT_READY
+            f(d, c)
         }
     })
 }
@@ -170,11 +180,14 @@ unsafe fn put<T>(out: *mut T, v: T) -> c_int {
 
 fn error_text(code: c_int) -> &'static str {
     match code {
-        code::DEVICE_OPEN_FAIL => "no device at this index",
-        code::NOT_READY => "device not open or initialised",
-        code::INVALID_ARGUMENT => "argument out of range",
-        code::READ_FAIL => "FIFO read failed (stand-in)",
-        code::DEVICE_LOST => "device lost (stand-in)",
+        // The header's symbols, as the text (the vendor's own strings are
+        // not published in its headers).
+        code::DEVICE_OPEN_FAIL => "ERROR_DEVICE_OPEN_FAIL",
+        code::DEVICE_NOT_OPEN => "ERROR_DEVICE_NOT_OPEN",
+        code::INVALID_ARGUMENT => "ERROR_INVALID_ARGUMENT",
+        code::NOT_INITIALIZED => "ERROR_NOT_INITIALIZED",
+        code::READ_FAIL => "ERROR_USB_BULKRD_FAIL",
+        code::DEVICE_LOST => "ERROR_USB_VCMD_FAIL",
         code::CONFIG => "SCATTERSCOPE_PQ_MOCK invalid",
         _ => "unknown error",
     }
@@ -200,11 +213,12 @@ fn write_truth(m: &mut Measurement, config: &MockConfig) {
     m.truth_written = true;
     let pixels: Vec<String> = m.pixel_counts.iter().map(u64::to_string).collect();
     let json = format!(
-        "{{\"records\": {}, \"photons\": {}, \"markers\": {}, \"overflows\": {}, \"pixel_photons\": [{}]}}\n",
+        "{{\"records\": {}, \"photons\": {}, \"markers\": {}, \"overflows\": {}, \"offset_ns\": {}, \"pixel_photons\": [{}]}}\n",
         m.delivered,
         m.photons,
         m.markers,
         m.delivered - m.photons - m.markers,
+        m.offset_ns,
         pixels.join(", ")
     );
     if let Err(e) = std::fs::write(path, json) {
@@ -235,7 +249,8 @@ fn deliver(dev: &mut Device, config: &MockConfig, out: &mut [u32]) -> Result<usi
             dev.gone = true;
             return Err(code::DEVICE_LOST);
         }
-        Some(Fault::Overrun(n) | Fault::ReadError(n) | Fault::Vanish(n)) => {
+        Some(Fault::DropCounts(n)) if m.delivered >= n => dev.flags |= FLAG_CNTS_DROPPED,
+        Some(Fault::Overrun(n) | Fault::ReadError(n) | Fault::Vanish(n) | Fault::DropCounts(n)) => {
             limit = limit.min(n - m.delivered)
         }
         None => {}
@@ -336,7 +351,7 @@ macro_rules! library {
         pub extern "C" fn $Initialize(index: c_int, mode: c_int, _refsource: c_int) -> c_int {
             with_device(index, |d, _| {
                 if !d.open {
-                    return code::NOT_READY;
+                    return code::DEVICE_NOT_OPEN;
                 }
                 if mode != 3 {
                     return code::INVALID_ARGUMENT;
@@ -434,10 +449,17 @@ macro_rules! library {
             })
         }
 
-        /// T3 offset, ps (accepted).
+        /// T3 offset in ns (MHLib's header: 0 to 100 000 000 ns), kept for
+        /// the truth file.
         #[unsafe(no_mangle)]
-        pub extern "C" fn $SetOffset(index: c_int, ps: c_int) -> c_int {
-            with_ready(index, |_, _| in_range(ps, 0, 100_000_000))
+        pub extern "C" fn $SetOffset(index: c_int, ns: c_int) -> c_int {
+            with_ready(index, |d, _| {
+                let r = in_range(ns, 0, 100_000_000);
+                if r == 0 {
+                    d.offset_ns = ns;
+                }
+                r
+            })
         }
 
         /// Marker inputs (accepted; a scan always sends its markers).
@@ -570,6 +592,7 @@ macro_rules! library {
                     pixel_counts: vec![0; pixels],
                     ended: false,
                     truth_written: false,
+                    offset_ns: d.offset_ns,
                 });
                 0
             })

@@ -136,7 +136,8 @@ struct PicoQuantArgs {
     /// Binning code: micro-time unit = base resolution x 2^N.
     #[arg(long, value_name = "N")]
     binning: Option<i32>,
-    /// T3 offset (default unit ps).
+    /// T3 offset: a time with its unit (e.g. 10ns); the device takes whole
+    /// nanoseconds.
     #[arg(long, value_name = "TIME", value_parser = parse_ps)]
     offset: Option<f64>,
     /// A galvo scan of WxH points clocked by markers 1 (line start), 2
@@ -192,6 +193,17 @@ fn whole_ps(v: f64, flag: &str) -> anyhow::Result<i32> {
     Ok(r as i32)
 }
 
+/// `--offset` (ps, as parsed) in the whole nanoseconds the device takes.
+fn whole_ns(v_ps: f64) -> anyhow::Result<i32> {
+    let ns = v_ps / 1000.0;
+    let r = ns.round();
+    anyhow::ensure!(
+        (r - ns).abs() < 1e-9 && r.abs() <= f64::from(i32::MAX),
+        "--offset {v_ps} ps: the device takes whole nanoseconds (e.g. 10ns)"
+    );
+    Ok(r as i32)
+}
+
 fn picoquant_job(
     args: &AcquireArgs,
     spec: scatterscope::acquire::picoquant::PicoQuantSpec,
@@ -218,7 +230,7 @@ fn picoquant_job(
                 .map(|&v| whole_ps(v, "input-offsets"))
                 .collect::<anyhow::Result<_>>()?,
             binning: p.binning,
-            offset_ps: p.offset.map(|v| whole_ps(v, "offset")).transpose()?,
+            offset_ns: p.offset.map(whole_ns).transpose()?,
         },
         duration: (!args.duration.is_zero()).then_some(args.duration),
         bin: BinSpec {
