@@ -15,7 +15,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 runs="${1:-5}"
-cargo build --release --quiet -p scatterscope-mock-picoquant -p scatterscope --bin scatterscope
+# Two builds: `--bin` would also filter out the stand-in's cdylib.
+cargo build --release --quiet -p scatterscope-mock-picoquant
+cargo build --release --quiet -p scatterscope --bin scatterscope
 lib=target/release/libscatterscope_mock_picoquant.so
 work=target/bench-picoquant
 mkdir -p "$work"
