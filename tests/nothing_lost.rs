@@ -344,3 +344,29 @@ fn a_whole_count_past_2_to_the_53_is_named_as_implausible_not_as_fractional() {
         "{e}"
     );
 }
+
+#[test]
+fn picoquant_flags_given_to_another_device_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let ptu = dir.path().join("rec.ptu");
+    let r = scatterscope(&[
+        "acquire",
+        "--device",
+        "mock",
+        "--duration",
+        "100ms",
+        "--ptu",
+        s(&ptu),
+        "--offset",
+        "10ns",
+        "--out",
+        s(&dir.path().join("o")),
+    ]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(
+        text(&r).contains("--offset, --ptu set a PicoQuant device"),
+        "{}",
+        text(&r)
+    );
+    assert!(!ptu.exists() && !dir.path().join("o").exists());
+}

@@ -600,3 +600,78 @@ fn counts_dropped_in_the_device_reach_the_ledger_and_the_summary() {
     assert_eq!(record["ledger"]["counts_dropped"], true, "{record}");
     assert!(out.join("stack.exr").exists() && out.join("acquisition.ptu").exists());
 }
+
+/// What a T3 file's header and records say of its sync: the rate, the
+/// macro unit times the rate, the last sync times the macro unit against
+/// the acquisition time, and the largest micro time in sync periods.
+fn sync_facts(path: &Path) -> (f64, f64, f64, f64, f64) {
+    use scatterscope::formats::picoquant::ptu::TagLookup;
+    let (info, _) = open(path).unwrap();
+    let rate = info.sync_rate_hz.unwrap();
+    let tags = ptu_tags(path);
+    let last_sync = tags
+        .iter()
+        .filter_map(|t| match t {
+            Tag::Photon { macro_time, .. } => Some(*macro_time),
+            _ => None,
+        })
+        .max()
+        .unwrap();
+    let max_micro = tags
+        .iter()
+        .filter_map(|t| match t {
+            Tag::Photon { micro_time, .. } => Some(*micro_time),
+            _ => None,
+        })
+        .max()
+        .unwrap();
+    let acquisition_s = info.tags.float("MeasDesc_AcquisitionTime").unwrap() * 1e-3;
+    (
+        rate,
+        info.macro_unit_s * rate,
+        last_sync as f64 * info.macro_unit_s / acquisition_s,
+        f64::from(max_micro) * info.resolution_s * rate,
+        info.tags.int("HWSync_Divider").unwrap() as f64,
+    )
+}
+
+/// With a sync divider, the stand-in's PTU says of its sync what
+/// PicoQuant's own `v20_t3.ptu` (HydraHarp, divider 8) says: the rate at
+/// the input before the divider (in the sample, the laser's own rate from
+/// its driver's tags, 80 MHz / 16), the macro unit its inverse, syncs
+/// counted in undivided periods up to the acquisition time, and micro
+/// times within one undivided period.
+#[test]
+#[ignore = "needs ../shared/data/picoquant-sample-data"]
+fn with_a_sync_divider_the_ptu_says_what_picoquants_own_file_says() {
+    let sample = shared_data::shared_data("picoquant-sample-data/hydraharp/v20_t3.ptu");
+    let (rate, unit, span, micro, divider) = sync_facts(&sample);
+    assert_eq!((rate, divider), (4_999_960.0, 8.0));
+    {
+        use scatterscope::formats::picoquant::ptu::TagLookup;
+        let (info, _) = open(&sample).unwrap();
+        let laser = info.tags.float("Sep2_SOM_100_BaseOscFreq").unwrap()
+            / info.tags.float("Sep2_SOM_100_Divider").unwrap();
+        assert!(
+            (rate / laser - 1.0).abs() < 1e-4,
+            "{rate} against the laser's {laser}"
+        );
+    }
+    assert!((unit - 1.0).abs() < 1e-9, "{unit}");
+    assert!((span - 1.0).abs() < 0.01, "{span}");
+    assert!(micro <= 1.0, "{micro}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let (out, o) = acquire(
+        dir.path(),
+        "picoquant:hydraharp",
+        "sync=5e6",
+        &["--sync-divider", "8"],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let (rate, unit, span, micro, divider) = sync_facts(&out.join("acquisition.ptu"));
+    assert_eq!((rate, divider), (5e6, 8.0));
+    assert!((unit - 1.0).abs() < 1e-9, "{unit}");
+    assert!((span - 1.0).abs() < 0.01, "{span}");
+    assert!(micro <= 1.0, "{micro}");
+}

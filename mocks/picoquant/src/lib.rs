@@ -197,8 +197,14 @@ fn serial(index: c_int) -> String {
     format!("{:07}", 1_000_001 + index)
 }
 
-fn sync_period_ps(dev: &Device, config: &MockConfig) -> f64 {
-    1e12 * f64::from(dev.sync_divider.max(1)) / config.sync_hz
+/// The period the records refer to: one laser period, whatever the sync
+/// divider. PicoQuant's own `v20_t3.ptu` (HydraHarp, `HWSync_Divider` 8)
+/// holds `TTResult_SyncRate` 4 999 960 Hz with `MeasDesc_GlobalResolution`
+/// its inverse, its last nsync times 200 ns equals its 10 s acquisition
+/// time, and its largest dtime is one undivided period: the divider thins
+/// what the hardware's sync input sees, not the records' time base.
+fn sync_period_ps(config: &MockConfig) -> f64 {
+    1e12 / config.sync_hz
 }
 
 fn resolution_ps(dev: &Device) -> f64 {
@@ -228,7 +234,7 @@ fn write_truth(m: &mut Measurement, config: &MockConfig) {
 
 /// Copies the records due into `out`; returns how many.
 fn deliver(dev: &mut Device, config: &MockConfig, out: &mut [u32]) -> Result<usize, c_int> {
-    let period_ps = sync_period_ps(dev, config);
+    let period_ps = sync_period_ps(config);
     let Some(m) = dev.measurement.as_mut() else {
         return Ok(0);
     };
@@ -492,11 +498,12 @@ macro_rules! library {
             with_ready(index, |d, _| unsafe { put(res, resolution_ps(d)) })
         }
 
-        /// Sync rate after the divider, Hz.
+        /// Sync rate at the input, before the divider, Hz (as the vendor's
+        /// file at [`sync_period_ps`] records it).
         #[unsafe(no_mangle)]
         pub unsafe extern "C" fn $GetSyncRate(index: c_int, rate: *mut c_int) -> c_int {
-            with_ready(index, |d, c| unsafe {
-                put(rate, (c.sync_hz / f64::from(d.sync_divider.max(1))) as c_int)
+            with_ready(index, |_, c| unsafe {
+                put(rate, c.sync_hz as c_int)
             })
         }
 
@@ -558,7 +565,7 @@ macro_rules! library {
                     return code::INVALID_ARGUMENT;
                 }
                 let res = resolution_ps(d);
-                let period = sync_period_ps(d, c);
+                let period = sync_period_ps(c);
                 let pool = match &d.pool {
                     Some((r, p)) if *r == res => p.clone(),
                     _ => match pool::build(c, res, period) {

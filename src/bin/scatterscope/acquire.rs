@@ -193,6 +193,36 @@ fn whole_ps(v: f64, flag: &str) -> anyhow::Result<i32> {
     Ok(r as i32)
 }
 
+impl PicoQuantArgs {
+    /// The PicoQuant-only flags given, by name: refused for other devices,
+    /// which would otherwise ignore them without a word.
+    fn given(&self) -> Vec<&'static str> {
+        let set = [
+            ("--vendor-lib", self.vendor_lib.is_some()),
+            ("--sync-divider", self.sync_divider.is_some()),
+            ("--sync-level", self.sync_level.is_some()),
+            ("--sync-edge", self.sync_edge.is_some()),
+            ("--sync-zero-cross", self.sync_zero_cross.is_some()),
+            ("--sync-offset", self.sync_offset.is_some()),
+            ("--input-level", self.input_level.is_some()),
+            ("--input-edge", self.input_edge.is_some()),
+            ("--input-zero-cross", self.input_zero_cross.is_some()),
+            ("--input-offsets", !self.input_offsets.is_empty()),
+            ("--binning", self.binning.is_some()),
+            ("--offset", self.offset.is_some()),
+            ("--scan", self.scan.is_some()),
+            ("--channel", self.channel.is_some()),
+            ("--pixels", self.pixels != Pixels::Auto),
+            ("--ptu", self.ptu.is_some()),
+            ("--no-ptu", self.no_ptu),
+        ];
+        set.into_iter()
+            .filter(|(_, on)| *on)
+            .map(|(f, _)| f)
+            .collect()
+    }
+}
+
 /// `--offset` (ps, as parsed) in the whole nanoseconds the device takes.
 fn whole_ns(v_ps: f64) -> anyhow::Result<i32> {
     let ns = v_ps / 1000.0;
@@ -281,6 +311,12 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     if let DeviceSpec::PicoQuant(spec) = &args.device {
         return run_picoquant(&picoquant_job(args, spec.clone())?, stop);
     }
+    let given = args.picoquant.given();
+    anyhow::ensure!(
+        given.is_empty(),
+        "{} set a PicoQuant device (--device picoquant); this device would ignore them. To record its photons losslessly give --tags FILE (a tag file, which `convert` turns into a PTU)",
+        given.join(", ")
+    );
     let job = Job {
         device: args.device.clone(),
         setup: args.physics.resolve()?,
