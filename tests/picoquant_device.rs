@@ -434,6 +434,30 @@ fn the_shared_picoquant_samples_convert_to_ptu_photon_for_photon() {
         let (ib, _) = open(&out).unwrap();
         assert_eq!(ia.record_type, ib.record_type, "{rel}");
         assert_eq!(ia.resolution_s, ib.resolution_s, "{rel}");
+        // Every header tag of a PTU input is kept, name, index, type and
+        // value byte for byte, but the ones the conversion must change.
+        if rel.ends_with(".ptu") {
+            let changed = |i: &str| {
+                ["TTResult_NumberOfRecords", "Header_End"].contains(&i)
+                    || i == scatterscope::tags::convert::PROVENANCE_TAG
+                    || i == scatterscope::formats::picoquant::writer::INCOMPLETE_TAG
+            };
+            let kept = |tags: &[scatterscope::formats::picoquant::ptu::HeaderTag]| {
+                tags.iter()
+                    .filter(|t| !changed(&t.ident))
+                    .map(|t| t.raw.clone())
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(kept(&ia.tags), kept(&ib.tags), "{rel}: header tags");
+            assert!(ia.tags.len() > 20, "{rel}");
+            use scatterscope::formats::picoquant::ptu::TagLookup;
+            assert!(
+                ib.tags
+                    .text(scatterscope::tags::convert::PROVENANCE_TAG)
+                    .is_some_and(|p| p.contains(rel.rsplit('/').next().unwrap())),
+                "{rel}"
+            );
+        }
     }
 }
 

@@ -18,6 +18,9 @@ use crate::formats::picoquant::{FileError, TtrError, open};
 use crate::formats::sstags::{TagFile, TagFileError, is_tag_file};
 use crate::tags::Tag;
 
+/// The header tag that says where a converted file came from.
+pub const PROVENANCE_TAG: &str = "Scatterscope_ConvertedFrom";
+
 /// Channels a Generic T3 record can name (63 marks an overflow).
 pub const MAX_T3_CHANNELS: usize = 63;
 
@@ -156,11 +159,20 @@ fn from_picoquant(
         device: info.device.clone(),
         imaging: info.imaging,
         extra: vec![(
-            "File_Comment".into(),
+            PROVENANCE_TAG.into(),
             HeaderEntry::Text(format!("converted from {}", input.display())),
         )],
     };
-    let mut w = PtuWriter::create(output, info.record_type, &header).map_err(out_err(output))?;
+    // A PTU input's header is kept tag for tag, at full precision (an
+    // earlier conversion's provenance gives way to this one's).
+    let copied: Vec<_> = info
+        .tags
+        .iter()
+        .filter(|t| t.ident != PROVENANCE_TAG)
+        .cloned()
+        .collect();
+    let mut w = PtuWriter::create_copying(output, info.record_type, &header, &copied)
+        .map_err(out_err(output))?;
     let mut decoder = Decoder::new(info.record_type);
     let mut c = Conversion {
         record_type: info.record_type.name().into(),
@@ -245,7 +257,7 @@ fn from_tag_file(
         imaging: None,
         extra: vec![
             (
-                "File_Comment".into(),
+                PROVENANCE_TAG.into(),
                 HeaderEntry::Text(format!(
                     "converted from {}: input channel = sensor pixel (row-major, {} x {})",
                     input.display(),

@@ -37,6 +37,9 @@ pub struct HeaderTag {
     pub index: i32,
     /// Value.
     pub value: TagValue,
+    /// The tag exactly as the file holds it (its 48 bytes and payload),
+    /// so that a writer can copy it at full precision.
+    pub raw: Vec<u8>,
 }
 
 /// Tag type codes.
@@ -104,6 +107,7 @@ pub fn parse(r: &mut impl Read) -> Result<(String, Vec<HeaderTag>, u64), TtrErro
         let tag_offset = offset;
         offset += 48;
         let int = i64::from_le_bytes(bits);
+        let mut payload = Vec::new();
         let value = match typ {
             ty::EMPTY8 => TagValue::Empty,
             ty::BOOL8 => TagValue::Bool(int != 0),
@@ -120,7 +124,7 @@ pub fn parse(r: &mut impl Read) -> Result<(String, Vec<HeaderTag>, u64), TtrErro
                             format!("tag {ident}: payload length {int} is not plausible"),
                         )
                     })?;
-                let mut payload = vec![0u8; len as usize];
+                payload = vec![0u8; len as usize];
                 read_exact(r, &mut payload, offset, &format!("payload of tag {ident}"))?;
                 offset += len;
                 match typ {
@@ -150,10 +154,13 @@ pub fn parse(r: &mut impl Read) -> Result<(String, Vec<HeaderTag>, u64), TtrErro
             }
         };
         let end = ident == "Header_End";
+        let mut bytes = raw.to_vec();
+        bytes.extend_from_slice(&payload);
         tags.push(HeaderTag {
             ident,
             index,
             value,
+            raw: bytes,
         });
         if end {
             return Ok((version, tags, offset));

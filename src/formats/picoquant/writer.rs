@@ -61,6 +61,10 @@ pub enum HeaderEntry {
 /// does not know.
 pub const INCOMPLETE_TAG: &str = "Scatterscope_Incomplete";
 
+/// Tags the writer always writes itself, never copied from another file:
+/// the record count and the incomplete mark it patches, and the end.
+pub const OWN_TAGS: [&str; 3] = ["TTResult_NumberOfRecords", INCOMPLETE_TAG, "Header_End"];
+
 /// Streams tags into a PTU file, inserting overflow records as needed.
 pub struct PtuWriter {
     out: BufWriter<AtomicFile>,
@@ -89,7 +93,20 @@ impl PtuWriter {
     /// Starts `path` (a derived file, such as a conversion: removed if the
     /// writer is dropped unfinished) and writes the header.
     pub fn create(path: &Path, record_type: RecordType, h: &WriterHeader) -> io::Result<Self> {
-        Self::start(AtomicFile::create(path)?, record_type, h)
+        Self::start(AtomicFile::create(path)?, record_type, h, &[])
+    }
+
+    /// [`Self::create`] whose header starts with `copied`, tags of another
+    /// file copied byte for byte (a conversion keeps its input's header at
+    /// full precision); the writer's own tags of the same name are left
+    /// out, except those it must own ([`OWN_TAGS`]).
+    pub fn create_copying(
+        path: &Path,
+        record_type: RecordType,
+        h: &WriterHeader,
+        copied: &[ptu::HeaderTag],
+    ) -> io::Result<Self> {
+        Self::start(AtomicFile::create(path)?, record_type, h, copied)
     }
 
     /// Starts `path` for a live recording (kept under its temporary name if
@@ -100,20 +117,36 @@ impl PtuWriter {
         record_type: RecordType,
         h: &WriterHeader,
     ) -> io::Result<Self> {
-        Self::start(AtomicFile::create_recording(path)?, record_type, h)
+        Self::start(AtomicFile::create_recording(path)?, record_type, h, &[])
     }
 
-    fn start(file: AtomicFile, record_type: RecordType, h: &WriterHeader) -> io::Result<Self> {
+    fn start(
+        file: AtomicFile,
+        record_type: RecordType,
+        h: &WriterHeader,
+        copied: &[ptu::HeaderTag],
+    ) -> io::Result<Self> {
         let mut out = BufWriter::with_capacity(1 << 20, file);
         out.write_all(ptu::MAGIC)?;
         out.write_all(b"1.0.00\0\0")?;
         let mut pos = 16u64;
+        let copied: Vec<&ptu::HeaderTag> = copied
+            .iter()
+            .filter(|t| !OWN_TAGS.contains(&t.ident.as_str()))
+            .collect();
+        for t in &copied {
+            out.write_all(&t.raw)?;
+            pos += t.raw.len() as u64;
+        }
         let mut tag = |out: &mut BufWriter<AtomicFile>,
                        ident: &str,
                        typ: u32,
                        value: [u8; 8],
                        payload: &[u8]|
          -> io::Result<u64> {
+            if copied.iter().any(|t| t.ident == ident) {
+                return Ok(0);
+            }
             let mut name = [0u8; 32];
             name[..ident.len()].copy_from_slice(ident.as_bytes());
             out.write_all(&name)?;
