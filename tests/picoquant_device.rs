@@ -178,6 +178,14 @@ fn a_scanned_acquisition_bins_into_the_scanners_image() {
     );
     assert!(o.status.success(), "{}", text(&o));
     let t = truth(&truth_file);
+    // Set, not left to the library's defaults: the markers' edges (rising
+    // unless --marker-edge says) and every input enabled.
+    assert_eq!(t["marker_edges"], serde_json::json!([1, 1, 1, 1]), "{t}");
+    assert_eq!(
+        t["inputs_enabled"],
+        serde_json::json!([true, true, true, true]),
+        "{t}"
+    );
     let expected: Vec<u64> = t["pixel_photons"]
         .as_array()
         .unwrap()

@@ -168,6 +168,8 @@ struct Functions {
     set_binning: DevIntFn,
     set_offset: DevIntFn,
     set_marker_enable: unsafe extern "C" fn(c_int, c_int, c_int, c_int, c_int) -> c_int,
+    set_marker_edges: unsafe extern "C" fn(c_int, c_int, c_int, c_int, c_int) -> c_int,
+    set_input_channel_enable: DevIntIntFn,
     get_resolution: DevDoubleFn,
     get_sync_rate: DevOutFn,
     get_count_rate: unsafe extern "C" fn(c_int, c_int, *mut c_int) -> c_int,
@@ -296,6 +298,8 @@ impl VendorLib {
             set_binning: sym!("SetBinning"),
             set_offset: sym!("SetOffset"),
             set_marker_enable: sym!("SetMarkerEnable"),
+            set_marker_edges: sym!("SetMarkerEdges"),
+            set_input_channel_enable: sym!("SetInputChannelEnable"),
             get_resolution: sym!("GetResolution"),
             get_sync_rate: sym!("GetSyncRate"),
             get_count_rate: sym!("GetCountRate"),
@@ -466,6 +470,8 @@ pub struct Settings {
     pub offset_ns: i32,
     /// Enable the four marker inputs (line and frame clocks of a scanner).
     pub markers: bool,
+    /// The markers' active edge: rising (else falling); set with them.
+    pub markers_rising: bool,
 }
 
 impl Settings {
@@ -480,6 +486,7 @@ impl Settings {
             binning: 0,
             offset_ns: 0,
             markers: false,
+            markers_rising: true,
         }
     }
 }
@@ -659,6 +666,11 @@ impl Device {
                 Family::HydraHarp => "SetInputCFD",
             };
             for ch in 0..self.info.inputs {
+                // Every input on, not left to the library's default.
+                lib.check(
+                    "SetInputChannelEnable",
+                    (f.set_input_channel_enable)(i, ch, 1),
+                )?;
                 lib.check(input_call, (f.set_input_trigger)(i, ch, in_a, in_b))?;
                 let offset = s.input_offsets_ps.get(ch as usize).copied().unwrap_or(0);
                 lib.check(
@@ -669,6 +681,10 @@ impl Device {
             lib.check("SetBinning", (f.set_binning)(i, s.binning))?;
             lib.check("SetOffset", (f.set_offset)(i, s.offset_ns))?;
             let m = c_int::from(s.markers);
+            if s.markers {
+                let e = c_int::from(s.markers_rising);
+                lib.check("SetMarkerEdges", (f.set_marker_edges)(i, e, e, e, e))?;
+            }
             lib.check("SetMarkerEnable", (f.set_marker_enable)(i, m, m, m, m))?;
             let mut resolution = 0.0;
             lib.check("GetResolution", (f.get_resolution)(i, &mut resolution))?;

@@ -97,6 +97,8 @@ pub struct SettingsRequest {
     pub input_rising: Option<bool>,
     /// Input CFD zero cross, mV (HydraHarp).
     pub input_zero_cross_mv: Option<i32>,
+    /// The scan markers' active edge: rising if true (default rising).
+    pub markers_rising: Option<bool>,
     /// Per-input offsets, ps.
     pub input_offsets_ps: Vec<i32>,
     /// Binning code (micro-time unit = base resolution x 2^binning).
@@ -167,6 +169,7 @@ impl SettingsRequest {
         s.binning = self.binning.unwrap_or(s.binning);
         s.offset_ns = self.offset_ns.unwrap_or(s.offset_ns);
         s.markers = markers;
+        s.markers_rising = self.markers_rising.unwrap_or(s.markers_rising);
         Ok(s)
     }
 }

@@ -84,6 +84,9 @@ struct Measurement {
     truth_written: bool,
     /// The T3 offset the device was set to (ns).
     offset_ns: c_int,
+    /// The marker edges set, and the inputs enabled, at the start.
+    marker_edges: Option<[c_int; 4]>,
+    inputs_enabled: [Option<bool>; 4],
 }
 
 #[derive(Default)]
@@ -95,6 +98,10 @@ struct Device {
     binning: i32,
     sync_divider: i32,
     offset_ns: c_int,
+    /// Marker edges as set (`None`: never set).
+    marker_edges: Option<[c_int; 4]>,
+    /// Each input's enable as set (`None`: never set).
+    inputs_enabled: [Option<bool>; 4],
     flags: c_int,
     pool: Option<(f64, Arc<Pool>)>,
     measurement: Option<Measurement>,
@@ -219,12 +226,19 @@ fn write_truth(m: &mut Measurement, config: &MockConfig) {
     m.truth_written = true;
     let pixels: Vec<String> = m.pixel_counts.iter().map(u64::to_string).collect();
     let json = format!(
-        "{{\"records\": {}, \"photons\": {}, \"markers\": {}, \"overflows\": {}, \"offset_ns\": {}, \"pixel_photons\": [{}]}}\n",
+        "{{\"records\": {}, \"photons\": {}, \"markers\": {}, \"overflows\": {}, \"offset_ns\": {}, \"marker_edges\": {}, \"inputs_enabled\": [{}], \"pixel_photons\": [{}]}}\n",
         m.delivered,
         m.photons,
         m.markers,
         m.delivered - m.photons - m.markers,
         m.offset_ns,
+        m.marker_edges
+            .map_or("null".to_string(), |e| format!("{e:?}")),
+        m.inputs_enabled
+            .iter()
+            .map(|e| e.map_or("null".to_string(), |b| b.to_string()))
+            .collect::<Vec<_>>()
+            .join(", "),
         pixels.join(", ")
     );
     if let Err(e) = std::fs::write(path, json) {
@@ -311,7 +325,8 @@ macro_rules! library {
      $Initialize:ident, $GetHardwareInfo:ident, $GetSerialNumber:ident,
      $GetNumOfInputChannels:ident, $GetBaseResolution:ident, $SetSyncDiv:ident,
      $SetSyncChannelOffset:ident, $SetInputChannelOffset:ident, $SetBinning:ident,
-     $SetOffset:ident, $SetMarkerEnable:ident, $SetMarkerEdges:ident, $GetResolution:ident,
+     $SetOffset:ident, $SetMarkerEnable:ident, $SetMarkerEdges:ident,
+     $SetInputChannelEnable:ident, $GetResolution:ident,
      $GetSyncRate:ident, $GetCountRate:ident, $GetFlags:ident, $GetWarnings:ident,
      $GetWarningsText:ident, $StartMeas:ident, $StopMeas:ident, $CTCStatus:ident) => {
         /// The library's version string.
@@ -480,16 +495,36 @@ macro_rules! library {
             with_ready(index, |_, _| 0)
         }
 
-        /// Marker edges (accepted).
+        /// Marker edges, each 1 (rising) or 0 (falling), kept for the
+        /// truth file.
         #[unsafe(no_mangle)]
         pub extern "C" fn $SetMarkerEdges(
             index: c_int,
-            _e1: c_int,
-            _e2: c_int,
-            _e3: c_int,
-            _e4: c_int,
+            e1: c_int,
+            e2: c_int,
+            e3: c_int,
+            e4: c_int,
         ) -> c_int {
-            with_ready(index, |_, _| 0)
+            with_ready(index, |d, _| {
+                let edges = [e1, e2, e3, e4];
+                if edges.iter().any(|e| !(0..=1).contains(e)) {
+                    return code::INVALID_ARGUMENT;
+                }
+                d.marker_edges = Some(edges);
+                0
+            })
+        }
+
+        /// Enables (1) or disables (0) input `ch`, kept for the truth file.
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetInputChannelEnable(index: c_int, ch: c_int, enable: c_int) -> c_int {
+            with_ready(index, |d, _| {
+                if !(0..4).contains(&ch) || !(0..=1).contains(&enable) {
+                    return code::INVALID_ARGUMENT;
+                }
+                d.inputs_enabled[ch as usize] = Some(enable == 1);
+                0
+            })
         }
 
         /// Micro-time unit, ps.
@@ -600,6 +635,8 @@ macro_rules! library {
                     ended: false,
                     truth_written: false,
                     offset_ns: d.offset_ns,
+                    marker_edges: d.marker_edges,
+                    inputs_enabled: d.inputs_enabled,
                 });
                 0
             })
@@ -657,6 +694,7 @@ library!(
     MH_SetOffset,
     MH_SetMarkerEnable,
     MH_SetMarkerEdges,
+    MH_SetInputChannelEnable,
     MH_GetResolution,
     MH_GetSyncRate,
     MH_GetCountRate,
@@ -688,6 +726,7 @@ library!(
     HH_SetOffset,
     HH_SetMarkerEnable,
     HH_SetMarkerEdges,
+    HH_SetInputChannelEnable,
     HH_GetResolution,
     HH_GetSyncRate,
     HH_GetCountRate,

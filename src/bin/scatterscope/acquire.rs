@@ -115,6 +115,9 @@ struct PicoQuantArgs {
     /// Sync trigger edge (MultiHarp): rising or falling.
     #[arg(long, value_name = "EDGE", value_parser = parse_edge)]
     sync_edge: Option<bool>,
+    /// The scan markers' active edge, rising or falling [default: rising].
+    #[arg(long, value_name = "EDGE", value_parser = parse_edge, requires = "scan")]
+    marker_edge: Option<bool>,
     /// Sync CFD zero cross (HydraHarp), mV.
     #[arg(long, value_name = "MV")]
     sync_zero_cross: Option<i32>,
@@ -202,6 +205,7 @@ impl PicoQuantArgs {
             ("--sync-divider", self.sync_divider.is_some()),
             ("--sync-level", self.sync_level.is_some()),
             ("--sync-edge", self.sync_edge.is_some()),
+            ("--marker-edge", self.marker_edge.is_some()),
             ("--sync-zero-cross", self.sync_zero_cross.is_some()),
             ("--sync-offset", self.sync_offset.is_some()),
             ("--input-level", self.input_level.is_some()),
@@ -253,6 +257,7 @@ fn picoquant_job(
                 .transpose()?,
             input_level_mv: p.input_level,
             input_rising: p.input_edge,
+            markers_rising: p.marker_edge,
             input_zero_cross_mv: p.input_zero_cross,
             input_offsets_ps: p
                 .input_offsets
