@@ -640,23 +640,18 @@ fn sync_facts(path: &Path) -> (f64, f64, f64, f64, f64) {
     use scatterscope::formats::picoquant::ptu::TagLookup;
     let (info, _) = open(path).unwrap();
     let rate = info.sync_rate_hz.unwrap();
-    let tags = ptu_tags(path);
-    let last_sync = tags
-        .iter()
-        .filter_map(|t| match t {
-            Tag::Photon { macro_time, .. } => Some(*macro_time),
-            _ => None,
-        })
-        .max()
-        .unwrap();
-    let max_micro = tags
-        .iter()
-        .filter_map(|t| match t {
-            Tag::Photon { micro_time, .. } => Some(*micro_time),
-            _ => None,
-        })
-        .max()
-        .unwrap();
+    let (mut last_sync, mut max_micro) = (0u64, 0u32);
+    for t in ptu_tags(path) {
+        if let Tag::Photon {
+            macro_time,
+            micro_time,
+            ..
+        } = t
+        {
+            last_sync = last_sync.max(macro_time);
+            max_micro = max_micro.max(micro_time);
+        }
+    }
     let acquisition_s = info.tags.float("MeasDesc_AcquisitionTime").unwrap() * 1e-3;
     (
         rate,
