@@ -702,3 +702,40 @@ fn with_a_sync_divider_the_ptu_says_what_picoquants_own_file_says() {
     assert!((span - 1.0).abs() < 0.01, "{span}");
     assert!(micro <= 1.0, "{micro}");
 }
+
+/// The count rates are read from the library during the run (about every
+/// 100 ms) and kept in the acquisition's record.
+#[test]
+fn count_rates_are_read_during_the_run_at_5_hz_or_more() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("acq");
+    let lib = standin_library();
+    let o = scatterscope_pq(
+        &[
+            "acquire",
+            "--device",
+            "picoquant:multiharp",
+            "--vendor-lib",
+            lib.to_str().unwrap(),
+            "--duration",
+            "1s",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let record = json(&out.join("acquisition.json"));
+    let samples = record["rates_during_run"].as_array().unwrap();
+    assert!(samples.len() >= 5, "{} samples in 1 s", samples.len());
+    let times: Vec<f64> = samples.iter().map(|s| s["t_s"].as_f64().unwrap()).collect();
+    assert!(times.windows(2).all(|w| w[1] > w[0]), "{times:?}");
+    for s in samples {
+        assert_eq!(
+            s["sync_hz"],
+            record["sync_rate_hz"].as_f64().unwrap() as i64,
+            "{s}"
+        );
+        assert_eq!(s["inputs"].as_array().unwrap().len(), 4, "{s}");
+    }
+}

@@ -358,6 +358,8 @@ pub struct PicoQuantAcquisition {
     pub sync_rate_hz: f64,
     /// Count rates per input at the start, counts/s.
     pub count_rates: Vec<i32>,
+    /// The rates read during the run, every [`RATE_EVERY`].
+    pub rates_during_run: Vec<RateSample>,
     /// The library's warnings at the start and any flags seen during the run.
     pub warnings: Vec<String>,
     /// Why it ended.
@@ -521,12 +523,29 @@ pub fn list_picoquant(library: Option<&Path>) -> (Vec<(String, String)>, Vec<Str
 }
 
 /// Progress of a running acquisition.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct PicoQuantProgress {
     /// Since the start.
     pub elapsed: Duration,
     /// Records read so far.
     pub records: u64,
+    /// The latest rates read from the device: sync (Hz) and each input
+    /// (counts/s).
+    pub rates: Option<(i32, Vec<i32>)>,
+}
+
+/// How often the rates are read from the library during a run.
+pub const RATE_EVERY: Duration = Duration::from_millis(100);
+
+/// The device's rates at one moment of a run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RateSample {
+    /// Seconds since the measurement started.
+    pub t_s: f64,
+    /// Sync rate, Hz.
+    pub sync_hz: i32,
+    /// Count rate of each input, counts/s.
+    pub inputs: Vec<i32>,
 }
 
 /// The reader thread's end.
@@ -535,6 +554,8 @@ struct ReaderEnd {
     flag_notes: Vec<String>,
     /// The device's flags said it dropped counts.
     counts_dropped: bool,
+    /// The rates read during the run, every [`RATE_EVERY`].
+    rates: Vec<RateSample>,
     /// When the measurement started (after the device's own set-up).
     started: Instant,
 }
@@ -692,24 +713,41 @@ impl PicoQuantJob {
         let mut decoder = Decoder::new(record_type);
         let mut records_read = 0u64;
         let mut records_before_error = 0u64;
+        let latest_rates: std::sync::Mutex<Option<(i32, Vec<i32>)>> = std::sync::Mutex::new(None);
+        let latest_rates = &latest_rates;
         let end = std::thread::scope(|scope| {
             let reader = scope.spawn(move || {
                 let mut flag_notes = Vec::new();
                 let mut counts_dropped = false;
+                let mut rates = Vec::new();
                 let fail = |e: VendorError| PicoQuantStop::DeviceError(e.to_string());
                 if let Err(e) = device.start(duration_ms) {
                     return ReaderEnd {
                         stop: fail(e),
                         flag_notes,
                         counts_dropped,
+                        rates,
                         started: Instant::now(),
                     };
                 }
                 let measuring = Instant::now();
+                let mut rates_read: Option<Instant> = None;
                 let mut spare: Option<Vec<u32>> = None;
                 let stop_reason = loop {
                     if stop.load(Ordering::Relaxed) {
                         break PicoQuantStop::Interrupted;
+                    }
+                    if rates_read.is_none_or(|t| t.elapsed() >= RATE_EVERY) {
+                        rates_read = Some(Instant::now());
+                        if let Ok((sync_hz, inputs)) = device.rates() {
+                            *latest_rates.lock().unwrap_or_else(|e| e.into_inner()) =
+                                Some((sync_hz, inputs.clone()));
+                            rates.push(RateSample {
+                                t_s: measuring.elapsed().as_secs_f64(),
+                                sync_hz,
+                                inputs,
+                            });
+                        }
                     }
                     match device.flags() {
                         Ok(f) if f.fifo_full() => break PicoQuantStop::FifoOverrun,
@@ -765,6 +803,7 @@ impl PicoQuantJob {
                     stop: stop_reason,
                     flag_notes,
                     counts_dropped,
+                    rates,
                     started: measuring,
                 }
             });
@@ -790,6 +829,10 @@ impl PicoQuantJob {
                     on_progress(PicoQuantProgress {
                         elapsed: started.elapsed(),
                         records: records_read,
+                        rates: latest_rates
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .clone(),
                     });
                 }
             }
@@ -846,6 +889,7 @@ impl PicoQuantJob {
             resolution_ps,
             sync_rate_hz: sync_hz,
             count_rates,
+            rates_during_run: end.rates,
             warnings,
             stop: end.stop,
             ledger,

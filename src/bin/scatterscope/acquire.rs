@@ -292,8 +292,12 @@ fn run_picoquant(job: &PicoQuantJob, stop: &AtomicBool) -> anyhow::Result<()> {
     let done = job.run(stop, |p| {
         bar.set_position(p.elapsed.as_millis() as u64);
         let secs = p.elapsed.as_secs_f64().max(1e-3);
+        let rates = p.rates.as_ref().map_or(String::new(), |(sync, inputs)| {
+            let inputs: Vec<String> = inputs.iter().map(|r| format!("{r}/s")).collect();
+            format!("; sync {sync}/s, inputs {}", inputs.join(" "))
+        });
         bar.set_message(format!(
-            "{} records ({:.1} M records/s)",
+            "{} records ({:.1} M records/s){rates}",
             p.records,
             p.records as f64 / secs / 1e6
         ));
