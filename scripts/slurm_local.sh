@@ -44,10 +44,13 @@ if [ ! -s /etc/munge/munge.key ]; then
 fi
 chown -R munge:munge /etc/munge /run/munge /var/lib/munge /var/log/munge 2>/dev/null || true
 chmod 400 /etc/munge/munge.key
-pgrep -x munged >/dev/null || runuser -u munge -- munged
-pgrep -x slurmctld >/dev/null || slurmctld
-pgrep -x slurmd >/dev/null || slurmd
-for _ in $(seq 30); do
+# A daemon counts as running when it is alive, not a zombie left by a
+# killed one (a test under CI=true fails when the cluster is not up).
+alive() { pgrep -x "$1" -r R,S,D >/dev/null; }
+alive munged || runuser -u munge -- munged
+alive slurmctld || slurmctld
+alive slurmd || slurmd
+for _ in $(seq 60); do
     if sinfo -h -o '%T' 2>/dev/null | grep -qE 'idle|mixed|alloc'; then
         sinfo
         exit 0
