@@ -49,11 +49,13 @@ fn acquire(
         device,
         "--vendor-lib",
         lib.to_str().unwrap(),
-        "--duration",
-        "300ms",
         "--out",
         out.to_str().unwrap(),
     ];
+    // 300 ms unless the caller gives its own duration.
+    if !extra.contains(&"--duration") {
+        args.extend(["--duration", "300ms"]);
+    }
     args.extend_from_slice(extra);
     let o = scatterscope_pq(&args, mock);
     (out, o)
@@ -708,22 +710,7 @@ fn with_a_sync_divider_the_ptu_says_what_picoquants_own_file_says() {
 #[test]
 fn count_rates_are_read_during_the_run_at_5_hz_or_more() {
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("acq");
-    let lib = standin_library();
-    let o = scatterscope_pq(
-        &[
-            "acquire",
-            "--device",
-            "picoquant:multiharp",
-            "--vendor-lib",
-            lib.to_str().unwrap(),
-            "--duration",
-            "1s",
-            "--out",
-            out.to_str().unwrap(),
-        ],
-        "",
-    );
+    let (out, o) = acquire(dir.path(), "picoquant:multiharp", "", &["--duration", "1s"]);
     assert!(o.status.success(), "{}", text(&o));
     let record = json(&out.join("acquisition.json"));
     let samples = record["rates_during_run"].as_array().unwrap();

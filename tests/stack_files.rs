@@ -336,7 +336,7 @@ fn counts_above_2_to_the_24_round_trip_exactly_through_exr_and_npy() {
     counts[[1, 1, 0]] = u32::MAX;
     counts[[2, 1, 1]] = 7;
     let meta = sample_stack(ValueKind::Counts).meta;
-    let stack = Stack::from_counts(counts.clone(), meta.clone());
+    let stack = Stack::from_counts(counts.view(), meta.clone());
     assert_eq!(stack.exact_counts.as_ref(), Some(&counts));
     for ext in ["exr", "npy"] {
         let path = dir.path().join(format!("big.{ext}"));
@@ -348,7 +348,11 @@ fn counts_above_2_to_the_24_round_trip_exactly_through_exr_and_npy() {
     // Up to 2^24 float32 is exact and nothing more is kept.
     counts[[0, 0, 1]] = 1 << 24;
     counts[[1, 1, 0]] = 0;
-    assert!(Stack::from_counts(counts, meta).exact_counts.is_none());
+    assert!(
+        Stack::from_counts(counts.view(), meta)
+            .exact_counts
+            .is_none()
+    );
 }
 
 /// 2^24 + 3 photons in one bin: `bin`'s stack and its file sum to the ledger.

@@ -666,7 +666,9 @@ impl Device {
                 Family::HydraHarp => "SetInputCFD",
             };
             for ch in 0..self.info.inputs {
-                // Every input on, not left to the library's default.
+                // Every input on, not left to the library's default
+                // (`SetInputChannelEnable(devidx, channel, enable)` in the
+                // vendor's hhlib.h and mhlib.h).
                 lib.check(
                     "SetInputChannelEnable",
                     (f.set_input_channel_enable)(i, ch, 1),
@@ -682,6 +684,8 @@ impl Device {
             lib.check("SetOffset", (f.set_offset)(i, s.offset_ns))?;
             let m = c_int::from(s.markers);
             if s.markers {
+                // `SetMarkerEdges(devidx, me1, me2, me3, me4)`, each
+                // EDGE_RISING 1 or EDGE_FALLING 0 (mhdefin.h, hhdefin.h).
                 let e = c_int::from(s.markers_rising);
                 lib.check("SetMarkerEdges", (f.set_marker_edges)(i, e, e, e, e))?;
             }

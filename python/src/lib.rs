@@ -336,8 +336,7 @@ fn save_stack(
     let mut stack = Stack::from_parts(data.as_array().to_owned(), meta, &path).map_err(err)?;
     if let Some(c) = counts {
         // Whole counts given exactly: kept exactly when float32 cannot.
-        stack.exact_counts =
-            Stack::from_counts(c.as_array().to_owned(), stack.meta.clone()).exact_counts;
+        stack.exact_counts = scatterscope::stack::exact_copy(c.as_array());
     }
     py.detach(|| stack.save(&path)).map_err(err)
 }

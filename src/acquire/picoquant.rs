@@ -12,7 +12,7 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use scatterscope_drivers::picoquant::{
-    Device, DeviceInfo, Family, Settings, Trigger, VendorError, VendorLib,
+    Device, DeviceInfo, Family, Flags, Settings, Trigger, VendorError, VendorLib,
 };
 use serde::Serialize;
 
@@ -717,8 +717,17 @@ impl PicoQuantJob {
         let latest_rates = &latest_rates;
         let end = std::thread::scope(|scope| {
             let reader = scope.spawn(move || {
-                let mut flag_notes = Vec::new();
+                let mut flag_notes: Vec<String> = Vec::new();
                 let mut counts_dropped = false;
+                // What the flags say besides an overrun, each said once.
+                let mut note_flags = |f: Flags, notes: &mut Vec<String>| {
+                    counts_dropped |= f.counts_dropped();
+                    for p in f.problems() {
+                        if !notes.iter().any(|n| n == p) {
+                            notes.push(p.to_string());
+                        }
+                    }
+                };
                 let mut rates = Vec::new();
                 let fail = |e: VendorError| PicoQuantStop::DeviceError(e.to_string());
                 if let Err(e) = device.start(duration_ms) {
@@ -751,14 +760,7 @@ impl PicoQuantJob {
                     }
                     match device.flags() {
                         Ok(f) if f.fifo_full() => break PicoQuantStop::FifoOverrun,
-                        Ok(f) => {
-                            counts_dropped |= f.counts_dropped();
-                            for p in f.problems() {
-                                if !flag_notes.iter().any(|n: &String| n == p) {
-                                    flag_notes.push(p.to_string());
-                                }
-                            }
-                        }
+                        Ok(f) => note_flags(f, &mut flag_notes),
                         Err(e) => break fail(e),
                     }
                     let mut buf = spare
@@ -789,12 +791,7 @@ impl PicoQuantJob {
                 };
                 // The flags once more: a drop during the last read.
                 if let Ok(f) = device.flags() {
-                    counts_dropped |= f.counts_dropped();
-                    for p in f.problems() {
-                        if !flag_notes.iter().any(|n: &String| n == p) {
-                            flag_notes.push(p.to_string());
-                        }
-                    }
+                    note_flags(f, &mut flag_notes);
                 }
                 // Stop, then close (on drop): the device's own end.
                 let _ = device.stop();
@@ -860,7 +857,7 @@ impl PicoQuantJob {
                 error: ptu_error,
             });
         }
-        let (mut stacks, acc) = binner.finish();
+        let (stacks, acc) = binner.finish();
         let ledger = PicoQuantLedger::from(
             records_read,
             &acc,
@@ -875,7 +872,7 @@ impl PicoQuantJob {
             record_type.name()
         );
         let stack = Stack::from_counts(
-            stacks.swap_remove(0),
+            stacks[0].view(),
             StackMeta::measured(
                 window.start_ps(resolution_ps),
                 window.width_ps(resolution_ps),

@@ -78,7 +78,7 @@ impl Outcome {
         meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
         meta.setup = Some(setup);
         meta.sampling = Some(Sampling::Integrated);
-        Stack::from_counts(self.counts.clone(), meta)
+        Stack::from_counts(self.counts.view(), meta)
     }
 }
 

@@ -90,7 +90,8 @@ pub fn hidden_warnings(scan: &ConfocalScan, volume: &HiddenVolume, depth_m: f64)
         ));
     }
     let peak = volume.data.iter().fold(0.0f64, |m, &v| m.max(v));
-    if peak <= 0.0 || peak.is_nan() || volume.data.iter().any(|v| !v.is_finite()) {
+    // `max` passes over NaN, so `peak` is finite or zero.
+    if peak <= 0.0 || volume.data.iter().any(|v| !v.is_finite()) {
         w.push(format!(
             "{}: the reconstructed volume is {}: the slab's model lets no light through at these settings, or the scan holds none",
             scan.source,

@@ -126,10 +126,7 @@ impl AtomicFile {
                 format!("{}: not a file name", dest.display()),
             )
         })?;
-        let dir = match dest.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
+        let dir = folder(dest);
         let n = NEXT.fetch_add(1, Ordering::Relaxed);
         let tmp = dir.join(format!(
             ".{}{PARTIAL_MARKER}{}-{n}",
@@ -190,11 +187,7 @@ impl AtomicFile {
         std::fs::rename(&self.tmp, &self.dest)?;
         self.forget();
         if self.keep_on_drop {
-            let dir = match self.dest.parent() {
-                Some(p) if !p.as_os_str().is_empty() => p,
-                _ => Path::new("."),
-            };
-            File::open(dir)?.sync_all()?;
+            File::open(folder(&self.dest))?.sync_all()?;
         }
         self.renamed = true;
         Ok(self.dest.clone())
@@ -204,6 +197,19 @@ impl AtomicFile {
 impl AtomicFile {
     fn forget(&self) {
         live().retain(|p| p != &self.tmp);
+    }
+
+    /// Flushes `out`'s buffer and commits the file under it ([`Self::commit`]).
+    pub fn commit_buffered(out: io::BufWriter<Self>) -> io::Result<PathBuf> {
+        out.into_inner().map_err(|e| e.into_error())?.commit()
+    }
+}
+
+/// The folder `dest` goes in (`.` for a bare file name).
+fn folder(dest: &Path) -> &Path {
+    match dest.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
     }
 }
 

@@ -63,7 +63,7 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
     match &stack.exact_counts {
         // Counts above 2^24 go in 32-bit unsigned channels, exactly.
         Some(counts) => write_channels(
-            u32_slices(counts.view(), STACK_CHANNEL_PREFIX),
+            slice_channels(counts.view(), STACK_CHANNEL_PREFIX, FlatSamples::U32),
             counts.dim(),
             "stack",
             attributes,
@@ -79,18 +79,20 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
     }
 }
 
-/// One `U32` channel per slice of `counts` along its first axis.
-fn u32_slices(
-    counts: ndarray::ArrayView3<u32>,
+/// One channel per slice of `volume` along its first axis, named `prefix`
+/// and the slice index, its samples of the type `samples` makes.
+fn slice_channels<T: Copy>(
+    volume: ndarray::ArrayView3<T>,
     prefix: &str,
+    samples: fn(Vec<T>) -> FlatSamples,
 ) -> SmallVec<[AnyChannel<FlatSamples>; 4]> {
-    counts
+    volume
         .axis_iter(Axis(0))
         .enumerate()
         .map(|(i, img)| {
             AnyChannel::new(
                 format!("{prefix}{i:03}").as_str(),
-                FlatSamples::U32(img.iter().copied().collect()),
+                samples(img.iter().copied().collect()),
             )
         })
         .collect()
@@ -137,16 +139,7 @@ fn write_slices(
     attributes: impl FnOnce() -> Result<LayerAttributes, StackError>,
     path: &Path,
 ) -> Result<(), StackError> {
-    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = volume
-        .axis_iter(Axis(0))
-        .enumerate()
-        .map(|(i, img)| {
-            AnyChannel::new(
-                format!("{prefix}{i:03}").as_str(),
-                FlatSamples::F32(img.iter().copied().collect()),
-            )
-        })
-        .collect();
+    let channels = slice_channels(volume, prefix, FlatSamples::F32);
     write_channels(channels, volume.dim(), what, attributes, path)
 }
 

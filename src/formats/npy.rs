@@ -40,10 +40,7 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
         stack.data.write_npy(&mut out)
     };
     written.map_err(|e| StackError::format(path, format!("writing .npy: {e}")))?;
-    let file = out
-        .into_inner()
-        .map_err(|e| StackError::io(path, e.into_error()))?;
-    file.commit().map_err(|e| StackError::io(path, e))?;
+    crate::files::AtomicFile::commit_buffered(out).map_err(|e| StackError::io(path, e))?;
     let side = sidecar_path(path);
     let json = serde_json::to_string_pretty(&stack.meta).expect("metadata serialises");
     crate::files::write_atomic(&side, json).map_err(|e| StackError::io(&side, e))
@@ -87,7 +84,7 @@ pub fn read(path: &Path) -> Result<StackFile, StackError> {
                 exact_counts(path, Array3::<u64>::read_npy(open()?).map_err(npy_err)?)?
             };
             let data;
-            (data, exact) = counts_as_f32(counts);
+            (data, exact) = counts_as_f32(counts.view());
             data
         }
         other => {

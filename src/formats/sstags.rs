@@ -200,11 +200,7 @@ impl TagFileWriter {
                 .write_all(&self.frame)
                 .map_err(|e| io(&self.path, e))?;
         }
-        let file = self
-            .out
-            .into_inner()
-            .map_err(|e| io(&self.path, e.into_error()))?;
-        file.commit().map_err(|e| io(&self.path, e))
+        crate::files::AtomicFile::commit_buffered(self.out).map_err(|e| io(&self.path, e))
     }
 }
 

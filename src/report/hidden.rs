@@ -156,6 +156,7 @@ fn write_npy<E: std::fmt::Display>(
     let io = |e| ReportError::Io(path.display().to_string(), e);
     let mut out = std::io::BufWriter::new(crate::files::AtomicFile::create(path).map_err(io)?);
     write(&mut out).map_err(|e| io(std::io::Error::other(e.to_string())))?;
-    let file = out.into_inner().map_err(|e| io(e.into_error()))?;
-    file.commit().map(|_| ()).map_err(io)
+    crate::files::AtomicFile::commit_buffered(out)
+        .map(|_| ())
+        .map_err(io)
 }

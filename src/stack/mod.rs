@@ -8,7 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-use ndarray::{Array3, ArrayView2, Axis, s};
+use ndarray::{Array3, ArrayView2, ArrayView3, Axis, s};
 use scatterscope_physics::{Sampling, Setup};
 use serde::{Deserialize, Serialize};
 
@@ -100,15 +100,18 @@ pub struct Stack {
 /// Largest count every `f32` holds exactly (2^24).
 pub const F32_EXACT_COUNT: u32 = 1 << 24;
 
-/// Counts as `f32` values, and the counts themselves when some exceed
-/// 2^24 (where `f32` rounds them).
-pub fn counts_as_f32(counts: Array3<u32>) -> (Array3<f32>, Option<Array3<u32>>) {
-    let data = counts.mapv(|c| c as f32);
-    let exact = counts
+/// A copy of `counts` when some exceed 2^24, where `f32` rounds them;
+/// `None` when `f32` holds them all.
+pub fn exact_copy(counts: ArrayView3<u32>) -> Option<Array3<u32>> {
+    counts
         .iter()
         .any(|&c| c > F32_EXACT_COUNT)
-        .then_some(counts);
-    (data, exact)
+        .then(|| counts.to_owned())
+}
+
+/// Counts as `f32` values, with their [`exact_copy`].
+pub fn counts_as_f32(counts: ArrayView3<u32>) -> (Array3<f32>, Option<Array3<u32>>) {
+    (counts.mapv(|c| c as f32), exact_copy(counts))
 }
 
 /// What a stack file holds, before validation.
@@ -261,7 +264,7 @@ impl Stack {
 
     /// A stack of photon counts: their `f32` values, and the counts
     /// themselves when some exceed 2^24.
-    pub fn from_counts(counts: Array3<u32>, meta: StackMeta) -> Self {
+    pub fn from_counts(counts: ArrayView3<u32>, meta: StackMeta) -> Self {
         let (data, exact_counts) = counts_as_f32(counts);
         Self {
             data,

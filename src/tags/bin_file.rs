@@ -425,7 +425,7 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
         .into_iter()
         .map(|counts| {
             Stack::from_counts(
-                counts,
+                counts.view(),
                 StackMeta::measured(
                     window.start_ps(res_ps),
                     window.width_ps(res_ps),
@@ -573,14 +573,14 @@ fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError>
     let mut counts = BatchCounts::default();
     let summary = raw.read(|batch| counts += bin_batch(batch, &mut binner))?;
     let seconds = start.elapsed().as_secs_f64();
-    let (mut stacks, accounting) = binner.finish();
+    let (stacks, accounting) = binner.finish();
     let source = format!("{} ({} {})", path.display(), header.model, header.serial);
     let record = TagFileRecord {
         tag_file_header: header,
         totals_in_file: summary.totals.is_some(),
     };
     let stack = Stack::from_counts(
-        stacks.swap_remove(0),
+        stacks[0].view(),
         StackMeta::measured(
             window.start_ps(res_ps),
             window.width_ps(res_ps),

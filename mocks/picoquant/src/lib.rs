@@ -495,8 +495,10 @@ macro_rules! library {
             with_ready(index, |_, _| 0)
         }
 
-        /// Marker edges, each 1 (rising) or 0 (falling), kept for the
-        /// truth file.
+        /// Marker edges, each 1 (rising) or 0 (falling): the vendor's
+        /// `SetMarkerEdges(devidx, me1, me2, me3, me4)` (hhlib.h) with
+        /// EDGE_RISING 1 and EDGE_FALLING 0 (hhdefin.h, mhdefin.h); kept
+        /// for the truth file.
         #[unsafe(no_mangle)]
         pub extern "C" fn $SetMarkerEdges(
             index: c_int,
@@ -515,7 +517,9 @@ macro_rules! library {
             })
         }
 
-        /// Enables (1) or disables (0) input `ch`, kept for the truth file.
+        /// Enables (1) or disables (0) input `ch`: the vendor's
+        /// `SetInputChannelEnable(devidx, channel, enable)` (hhlib.h); kept
+        /// for the truth file.
         #[unsafe(no_mangle)]
         pub extern "C" fn $SetInputChannelEnable(index: c_int, ch: c_int, enable: c_int) -> c_int {
             with_ready(index, |d, _| {
