@@ -357,6 +357,39 @@ fn kill_at_random(inputs: &Inputs, work: &Path, kills: usize, only: &[&str], see
     out
 }
 
+/// Runs `convert` on the input PTU and kills it once its temporary output
+/// holds records past the header; returns that temporary.
+fn convert_killed_mid_write(inputs: &Inputs, out: &Path) -> PathBuf {
+    std::fs::create_dir_all(out).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args(["convert", inputs.ptu.to_str().unwrap(), "--out"])
+        .arg(out.join("c.ptu"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    let caught = loop {
+        let mut found = Vec::new();
+        walk(out, &mut found);
+        let temp = found.into_iter().find(|p| {
+            is_partial_name(p) && std::fs::metadata(p).is_ok_and(|m| m.len() > 64 * 1024)
+        });
+        if let Some(temp) = temp {
+            break temp;
+        }
+        assert!(
+            child.try_wait().unwrap().is_none() && start.elapsed() < Duration::from_secs(60),
+            "convert ended before its temporary held records"
+        );
+        std::thread::sleep(Duration::from_micros(200));
+    };
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(defect(&caught).is_none(), "{:?}", defect(&caught));
+    caught
+}
+
 #[test]
 fn killed_commands_leave_only_whole_files_or_flagged_temporaries_and_their_inputs_intact() {
     let inputs = Inputs::make();
@@ -381,8 +414,20 @@ fn ptufile_reads_every_whole_ptu_and_flags_every_unfinished_one() {
     let inputs = Inputs::make();
     let work = inputs.dir.path().join("work");
     let only = ["convert ptu", "convert tags", "acquire picoquant"];
-    let out = kill_at_random(&inputs, &work, 40, &only, 0xF00D);
-    assert!(!out.final_ptus.is_empty() && !out.partial_ptus.is_empty());
+    let mut out = kill_at_random(&inputs, &work, 40, &only, 0xF00D);
+    // Random moments may miss either kind on a slow or fast machine: the
+    // uninterrupted runs give the whole PTUs, and one conversion killed as
+    // soon as its temporary holds records gives an unfinished one.
+    let mut whole_runs = Vec::new();
+    walk(&work.join("whole"), &mut whole_runs);
+    out.final_ptus.extend(
+        whole_runs
+            .into_iter()
+            .filter(|p| p.extension().is_some_and(|e| e == "ptu")),
+    );
+    out.partial_ptus
+        .push(convert_killed_mid_write(&inputs, &work.join("caught")));
+    assert!(out.final_ptus.len() >= 3, "{:?}", out.final_ptus);
     let list = |v: &[PathBuf]| {
         v.iter()
             .map(|p| p.to_str().unwrap().to_string())
