@@ -11,7 +11,8 @@ mod photons;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use firmware_protocol::{EventBatch, FrameDecoder, FrameKind, encode_frame};
-use scatterscope::acquire::{DeviceSpec, MockSetup, Plan, acquire, open_device};
+use scatterscope::acquire::Plan;
+use scatterscope::acquire::mock::{MockSetup, MockSource};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::scene::Scene;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, Region, TimeWindow};
@@ -78,23 +79,26 @@ fn replayed(photons: u64) -> MockOptions {
     }
 }
 
-fn run_mock(spec: &DeviceSpec, device: MockOptions) -> u64 {
+/// The mock on the in-process USB transport.
+const USB: bool = false;
+/// The mock behind a pseudo-terminal.
+const SERIAL: bool = true;
+
+/// One acquisition through the pipeline `acquire` runs; the photons binned.
+fn run_mock(serial: bool, device: MockOptions) -> u64 {
     let setup = Preset::Paper.setup();
-    let plan = Plan {
-        t_start_ps: 0.0,
-        bin_width_ps: setup.bins.width_ps,
-        bins: setup.bins.count,
-        t0_ps: 0.0,
-        region: None,
-        duration: None,
-        resolution_fs: None,
-        tag_file: None,
+    let mut plan = Plan {
         software: "bench".into(),
+        ..Plan::default()
     };
-    let opened = open_device(spec, Some(mock_setup(device))).unwrap();
-    let out = acquire(opened.link, &plan, &AtomicBool::new(false), |_| {}).unwrap();
-    assert!(out.accounting.balances() && out.accounting.lost_in_device == 0);
-    out.accounting.binned
+    plan.set_window(&setup.bins);
+    plan.t_start_ps = 0.0;
+    let mut source = MockSource::open(mock_setup(device), serial, setup.total_photons).unwrap();
+    let out =
+        scatterscope::acquire::run(&mut source, &plan, &AtomicBool::new(false), |_| {}).unwrap();
+    source.join();
+    assert!(out.ledger.balances() && out.ledger.lost_in_device == 0);
+    out.ledger.binned
 }
 
 fn benches(c: &mut Criterion) {
@@ -169,16 +173,16 @@ fn benches(c: &mut Criterion) {
         })
     });
     g.bench_function("mock_usb_end_to_end", |b| {
-        b.iter(|| run_mock(&DeviceSpec::Mock, drawn(4_000_000)))
+        b.iter(|| run_mock(USB, drawn(4_000_000)))
     });
     g.bench_function("mock_serial_end_to_end", |b| {
-        b.iter(|| run_mock(&DeviceSpec::MockSerial, drawn(4_000_000)))
+        b.iter(|| run_mock(SERIAL, drawn(4_000_000)))
     });
     // The whole host path at hardware rates: replayed batches through the
     // in-process USB transport, reader, frame decoder and binner.
     g.throughput(Throughput::Elements(REPLAYED));
     g.bench_function("mock_usb_replay_end_to_end", |b| {
-        b.iter(|| run_mock(&DeviceSpec::Mock, replayed(REPLAYED)))
+        b.iter(|| run_mock(USB, replayed(REPLAYED)))
     });
     g.finish();
 }

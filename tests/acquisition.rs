@@ -12,9 +12,8 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use ndarray::{Array3, Axis};
-use scatterscope::acquire::{
-    DeviceSpec, MockSetup, Outcome, Plan, StopReason, acquire, open_device,
-};
+use scatterscope::acquire::mock::{MockSetup, MockSource};
+use scatterscope::acquire::{AcquireError, Outcome, Plan, StopReason};
 use scatterscope::formats::sstags::read_tag_file;
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup};
 use scatterscope::scene::Scene;
@@ -52,25 +51,29 @@ fn mock(seed: u64, max_photons: u64, faults: Faults, delay_ps: f64) -> MockSetup
 }
 
 fn plan(t0_ps: f64) -> Plan {
-    let s = setup();
-    Plan {
-        t_start_ps: s.bins.start_ps,
-        bin_width_ps: s.bins.width_ps,
-        bins: s.bins.count,
+    let mut p = Plan {
         t0_ps,
-        region: None,
-        duration: None,
-        resolution_fs: None,
-        tag_file: None,
         software: "test".into(),
-    }
+        ..Plan::default()
+    };
+    p.set_window(&setup().bins);
+    p
 }
 
-fn run(spec: DeviceSpec, m: MockSetup, plan: &Plan) -> (Outcome, Truth) {
-    let opened = open_device(&spec, Some(m)).unwrap();
-    let outcome = acquire(opened.link, plan, &AtomicBool::new(false), |_| {}).unwrap();
-    let truth = opened.mock.unwrap().join();
-    (outcome, truth)
+/// The mock on the in-process USB transport.
+const USB: bool = false;
+/// The mock behind a pseudo-terminal, opened as a serial port.
+const SERIAL: bool = true;
+
+fn try_run(serial: bool, m: MockSetup, plan: &Plan) -> (Result<Outcome, AcquireError>, Truth) {
+    let mut source = MockSource::open(m, serial, 1.0).unwrap();
+    let outcome = scatterscope::acquire::run(&mut source, plan, &AtomicBool::new(false), |_| {});
+    (outcome, source.join())
+}
+
+fn run(serial: bool, m: MockSetup, plan: &Plan) -> (Outcome, Truth) {
+    let (outcome, truth) = try_run(serial, m, plan);
+    (outcome.unwrap(), truth)
 }
 
 /// Photons in bin `k` of `counts`, over the sensor.
@@ -113,18 +116,14 @@ fn linear_convolution(kernels: &KernelStack, scene: &ndarray::Array2<f64>) -> Ar
 #[test]
 fn usb_mock_stack_balances_and_agrees_with_the_forward_model() {
     let n = 300_000;
-    let (out, truth) = run(
-        DeviceSpec::Mock,
-        mock(1, n, Faults::default(), 0.0),
-        &plan(0.0),
-    );
-    let acc = out.accounting;
-    assert_eq!(out.stop, StopReason::DeviceStopped);
-    assert!(acc.balances(), "{}", acc.table());
+    let (out, truth) = run(USB, mock(1, n, Faults::default(), 0.0), &plan(0.0));
+    let acc = out.ledger.clone();
+    assert_eq!(out.end.stop, StopReason::DeviceStopped);
+    assert!(acc.balances(), "{}", acc.table().join("\n"));
     assert_eq!(acc.detected, Some(n));
     assert_eq!(truth.photons_detected, n);
     assert_eq!(
-        (acc.received, acc.lost_in_device, acc.lost_in_transit),
+        (acc.photons, acc.lost_in_device, acc.lost_in_transit()),
         (n, 0, 0)
     );
     assert_eq!(
@@ -194,15 +193,15 @@ fn a_mock_with_an_irf_and_background_matches_the_irf_kernels_plus_background() {
     m.kernels = kernels.clone();
     m.emitter.dark_rate_hz =
         0.004 * m.emitter.rate_hz * 12_500.0 / (s.bins.count as f64 * s.bins.width_ps);
-    let (out, truth) = run(DeviceSpec::Mock, m, &plan(500.0));
-    assert!(out.accounting.balances(), "{}", out.accounting.table());
+    let (out, truth) = run(USB, m, &plan(500.0));
+    assert!(out.ledger.balances(), "{}", out.ledger.table().join("\n"));
     let (bins, h, w) = out.counts.dim();
     // Dark counts per pixel and bin: their total, spread uniformly over
     // the sync period and the sensor.
     let background = truth.dark_counts as f64 * s.bins.width_ps / 12_500.0 / (h * w) as f64;
     let dark_in_window = background * (bins * h * w) as f64;
     let expected = linear_convolution(&kernels, &scene);
-    let binned = out.accounting.binned as f64;
+    let binned = out.ledger.binned as f64;
     let scale = (binned - dark_in_window) / expected.sum();
     let share = dark_in_window / (binned - dark_in_window);
     assert!(
@@ -270,53 +269,33 @@ fn a_mock_with_an_irf_and_background_matches_the_irf_kernels_plus_background() {
 #[test]
 fn usb_and_serial_transports_deliver_the_same_photons() {
     let p = plan(0.0);
-    let (usb, _) = run(
-        DeviceSpec::Mock,
-        mock(7, 40_000, Faults::default(), 0.0),
-        &p,
+    let (usb, _) = run(USB, mock(7, 40_000, Faults::default(), 0.0), &p);
+    let (pty, truth) = run(SERIAL, mock(7, 40_000, Faults::default(), 0.0), &p);
+    assert!(
+        pty.facts.device.link.starts_with("mock-serial (/dev/"),
+        "{}",
+        pty.facts.device.link
     );
-    let (pty, truth) = run(
-        DeviceSpec::MockSerial,
-        mock(7, 40_000, Faults::default(), 0.0),
-        &p,
-    );
-    assert!(pty.link.starts_with("mock-serial (/dev/"), "{}", pty.link);
-    assert!(pty.accounting.balances() && pty.accounting.detected == Some(40_000));
+    assert!(pty.ledger.balances() && pty.ledger.detected == Some(40_000));
     assert_eq!(truth.photons_sent, 40_000);
     assert_eq!(
         usb.counts, pty.counts,
         "same seed, same photons, whatever the transport"
     );
-    let (other, _) = run(
-        DeviceSpec::Mock,
-        mock(8, 40_000, Faults::default(), 0.0),
-        &p,
-    );
+    let (other, _) = run(USB, mock(8, 40_000, Faults::default(), 0.0), &p);
     assert_ne!(usb.counts, other.counts, "another seed gives other photons");
 }
 
 #[test]
 fn t0_calibration_undoes_the_instrument_delay() {
-    let (plain, _) = run(
-        DeviceSpec::Mock,
-        mock(3, 30_000, Faults::default(), 0.0),
-        &plan(0.0),
-    );
-    let (delayed, _) = run(
-        DeviceSpec::Mock,
-        mock(3, 30_000, Faults::default(), 300.0),
-        &plan(300.0),
-    );
+    let (plain, _) = run(USB, mock(3, 30_000, Faults::default(), 0.0), &plan(0.0));
+    let (delayed, _) = run(USB, mock(3, 30_000, Faults::default(), 300.0), &plan(300.0));
     assert_eq!(plain.counts, delayed.counts);
-    let (uncalibrated, _) = run(
-        DeviceSpec::Mock,
-        mock(3, 30_000, Faults::default(), 300.0),
-        &plan(0.0),
-    );
+    let (uncalibrated, _) = run(USB, mock(3, 30_000, Faults::default(), 300.0), &plan(0.0));
     assert!(
-        uncalibrated.accounting.outside_window > 25_000,
+        uncalibrated.ledger.outside_window > 25_000,
         "{}",
-        uncalibrated.accounting.table()
+        uncalibrated.ledger.table().join("\n")
     );
 }
 
@@ -325,18 +304,22 @@ fn check_fault(faults: Faults) -> (Outcome, Truth) {
     // A FIFO smaller than the run, so batches go out while photons come in.
     let mut m = mock(5, 120_000, faults.clone(), 0.0);
     m.device.fifo_capacity = 10_000;
-    let (out, truth) = run(DeviceSpec::Mock, m, &plan(0.0));
-    let acc = out.accounting;
-    let ctx = format!("{faults:?}\n{}\n{truth:?}", acc.table());
+    let (out, truth) = run(USB, m, &plan(0.0));
+    let acc = out.ledger.clone();
+    let ctx = format!("{faults:?}\n{}\n{truth:?}", acc.table().join("\n"));
     ledger::assert_exact(&out, &truth, &ctx);
-    assert_eq!(acc.batches_lost, u64::from(truth.batches_damaged), "{ctx}");
     assert_eq!(
-        acc.batches_duplicate,
+        acc.transit.unwrap().batches_lost,
+        u64::from(truth.batches_damaged),
+        "{ctx}"
+    );
+    assert_eq!(
+        acc.transit.unwrap().batches_duplicate,
         u64::from(truth.batches_duplicated),
         "{ctx}"
     );
     assert_eq!(
-        acc.batches_out_of_order,
+        acc.transit.unwrap().batches_out_of_order,
         u64::from(truth.batches_reordered),
         "{ctx}"
     );
@@ -349,7 +332,7 @@ fn corrupted_frames_are_rejected_and_their_photons_counted() {
         corrupt_every: 3,
         ..Faults::default()
     });
-    assert!(truth.batches_damaged >= 4 && out.accounting.crc_errors > 0);
+    assert!(truth.batches_damaged >= 4 && out.ledger.transit.unwrap().crc_errors > 0);
 }
 
 #[test]
@@ -358,16 +341,12 @@ fn dropped_bytes_are_resynchronised_and_counted() {
         drop_bytes_every: 4,
         ..Faults::default()
     });
-    assert!(truth.batches_damaged >= 3 && out.accounting.bytes_skipped > 0);
+    assert!(truth.batches_damaged >= 3 && out.ledger.transit.unwrap().bytes_skipped > 0);
 }
 
 #[test]
 fn duplicated_batches_are_binned_once() {
-    let (clean, _) = run(
-        DeviceSpec::Mock,
-        mock(5, 120_000, Faults::default(), 0.0),
-        &plan(0.0),
-    );
+    let (clean, _) = run(USB, mock(5, 120_000, Faults::default(), 0.0), &plan(0.0));
     let (out, truth) = check_fault(Faults {
         duplicate_every: 3,
         ..Faults::default()
@@ -378,11 +357,7 @@ fn duplicated_batches_are_binned_once() {
 
 #[test]
 fn reordered_batches_are_all_kept() {
-    let (clean, _) = run(
-        DeviceSpec::Mock,
-        mock(5, 120_000, Faults::default(), 0.0),
-        &plan(0.0),
-    );
+    let (clean, _) = run(USB, mock(5, 120_000, Faults::default(), 0.0), &plan(0.0));
     let (out, truth) = check_fault(Faults {
         reorder_every: 3,
         ..Faults::default()
@@ -400,10 +375,7 @@ fn device_fifo_overflow_is_reported_exactly() {
     });
     assert!(truth.photons_lost_fifo >= 3 * 777, "{truth:?}");
     assert_eq!(truth.photons_lost_fifo % 777, 0);
-    assert_eq!(
-        out.accounting.received + out.accounting.lost_in_device,
-        120_000
-    );
+    assert_eq!(out.ledger.photons + out.ledger.lost_in_device, 120_000);
 }
 
 #[test]
@@ -412,19 +384,19 @@ fn a_disconnect_mid_stream_ends_cleanly_with_a_lower_bound() {
         disconnect_after: 5,
         ..Faults::default()
     };
-    let (out, truth) = run(DeviceSpec::Mock, mock(5, 500_000, faults, 0.0), &plan(0.0));
+    let (out, truth) = run(USB, mock(5, 500_000, faults, 0.0), &plan(0.0));
     assert!(
-        matches!(out.stop, StopReason::Disconnected(_)),
+        matches!(out.end.stop, StopReason::Disconnected(_)),
         "{:?}",
-        out.stop
+        out.end.stop
     );
-    let acc = out.accounting;
+    let acc = out.ledger.clone();
     assert!(truth.disconnected && truth.batches_sent == 5);
     assert_eq!(acc.detected, None);
-    assert!(!acc.transit_exact);
-    assert_eq!(acc.batches_received, 5);
-    assert_eq!(acc.received, truth.photons_sent);
-    assert!(acc.balances(), "{}", acc.table());
+    assert!(!acc.transit.unwrap().exact);
+    assert_eq!(acc.transit.unwrap().batches_received, 5);
+    assert_eq!(acc.photons, truth.photons_sent);
+    assert!(acc.balances(), "{}", acc.table().join("\n"));
 }
 
 #[test]
@@ -439,22 +411,22 @@ fn a_slow_host_makes_the_device_fifo_overflow_and_says_so() {
     m.emitter.rate_hz = 1e6;
     let mut p = plan(0.0);
     p.duration = Some(Duration::from_millis(2500));
-    let opened = open_device(&DeviceSpec::Mock, Some(m)).unwrap();
+    let mut source = MockSource::open(m, USB, 1.0).unwrap();
     let mut stalled = false;
-    let out = acquire(opened.link, &p, &AtomicBool::new(false), |_| {
+    let out = scatterscope::acquire::run(&mut source, &p, &AtomicBool::new(false), |_| {
         if !stalled {
             stalled = true;
             std::thread::sleep(Duration::from_millis(1500));
         }
     })
     .unwrap();
-    let truth = opened.mock.unwrap().join();
-    let acc = out.accounting;
-    assert!(acc.balances(), "{}", acc.table());
-    assert!(acc.lost_in_device > 0, "{}", acc.table());
+    let truth = source.join();
+    let acc = out.ledger.clone();
+    assert!(acc.balances(), "{}", acc.table().join("\n"));
+    assert!(acc.lost_in_device > 0, "{}", acc.table().join("\n"));
     assert_eq!(acc.lost_in_device, truth.photons_lost_fifo);
     assert_eq!(acc.detected, Some(truth.photons_detected));
-    assert_eq!(acc.lost_in_transit, 0);
+    assert_eq!(acc.lost_in_transit(), 0);
 }
 
 /// Bins a raw tag file with the library's `bin_file` (what `scatterscope
@@ -486,23 +458,25 @@ fn raw_recordings_round_trip_and_survive_a_cut() {
     let path = dir.path().join("tags.sstags");
     let mut p = plan(0.0);
     p.tag_file = Some(path.clone());
-    let (out, _) = run(
-        DeviceSpec::Mock,
-        mock(11, 100_000, Faults::default(), 0.0),
-        &p,
+    let (out, _) = run(USB, mock(11, 100_000, Faults::default(), 0.0), &p);
+    assert_eq!(
+        out.ledger.recordings.first().map(|r| r.path.as_path()),
+        Some(path.as_path())
     );
-    assert_eq!(out.tag_file.as_deref(), Some(path.as_path()));
     let (counts, summary) = bin_raw_file(&path);
     assert_eq!(counts, out.counts);
-    assert_eq!(summary.totals, out.totals);
-    assert_eq!(summary.batches, out.accounting.batches_received);
+    assert_eq!(summary.totals, out.end.totals);
+    assert_eq!(
+        summary.batches,
+        out.ledger.transit.unwrap().batches_received
+    );
     assert_eq!(summary.bytes_skipped, 0);
     assert_eq!(summary.header.pixels_x, 64);
     // What `info` shows: the file's events counted by kind agree with the
     // acquisition's ledger.
     let (_, survey) = scatterscope::tags::survey::survey_tag_file(&path).unwrap();
-    assert_eq!(survey.photons, out.accounting.received);
-    assert_eq!(survey.lost_in_device, out.accounting.lost_in_device);
+    assert_eq!(survey.photons, out.ledger.photons);
+    assert_eq!(survey.lost_in_device, out.ledger.lost_in_device);
     assert_eq!(survey.invalid_records, 0);
     assert!(survey.last_event_s > 0.0);
 
@@ -589,10 +563,10 @@ fn t0_from_a_reference_recording_is_its_peak() {
 #[test]
 fn plans_that_do_not_fit_the_device_are_refused_by_name() {
     let mut p = plan(0.0);
-    p.bin_width_ps = 4.5;
+    p.bin_width_ps = Some(4.5);
     p.resolution_fs = Some(1000);
-    let opened = open_device(&DeviceSpec::Mock, Some(mock(1, 10, Faults::default(), 0.0))).unwrap();
-    let err = acquire(opened.link, &p, &AtomicBool::new(false), |_| {})
+    let err = try_run(USB, mock(1, 10, Faults::default(), 0.0), &p)
+        .0
         .unwrap_err()
         .to_string();
     assert!(
@@ -607,8 +581,8 @@ fn plans_that_do_not_fit_the_device_are_refused_by_name() {
         width: 10,
         height: 10,
     });
-    let opened = open_device(&DeviceSpec::Mock, Some(mock(1, 10, Faults::default(), 0.0))).unwrap();
-    let err = acquire(opened.link, &p, &AtomicBool::new(false), |_| {})
+    let err = try_run(USB, mock(1, 10, Faults::default(), 0.0), &p)
+        .0
         .unwrap_err()
         .to_string();
     assert!(
@@ -619,8 +593,8 @@ fn plans_that_do_not_fit_the_device_are_refused_by_name() {
     // The device refuses a resolution that is not a multiple of its TDC.
     let mut p = plan(0.0);
     p.resolution_fs = Some(1500);
-    let opened = open_device(&DeviceSpec::Mock, Some(mock(1, 10, Faults::default(), 0.0))).unwrap();
-    let err = acquire(opened.link, &p, &AtomicBool::new(false), |_| {})
+    let err = try_run(USB, mock(1, 10, Faults::default(), 0.0), &p)
+        .0
         .unwrap_err()
         .to_string();
     assert!(
@@ -638,25 +612,17 @@ fn a_region_of_interest_bins_its_pixels_and_counts_the_rest() {
         width: 32,
         height: 24,
     });
-    let (region, _) = run(
-        DeviceSpec::Mock,
-        mock(2, 50_000, Faults::default(), 0.0),
-        &p,
-    );
-    let (full, _) = run(
-        DeviceSpec::Mock,
-        mock(2, 50_000, Faults::default(), 0.0),
-        &plan(0.0),
-    );
+    let (region, _) = run(USB, mock(2, 50_000, Faults::default(), 0.0), &p);
+    let (full, _) = run(USB, mock(2, 50_000, Faults::default(), 0.0), &plan(0.0));
     assert_eq!(region.counts.dim(), (30, 24, 32));
     assert_eq!(
         region.counts,
         full.counts.slice(ndarray::s![.., 8..32, 16..48]).to_owned()
     );
-    assert!(region.accounting.balances());
+    assert!(region.ledger.balances());
     assert_eq!(
-        region.accounting.outside_region,
-        50_000 - region.accounting.binned - region.accounting.outside_window
+        region.ledger.outside_region,
+        50_000 - region.ledger.binned - region.ledger.outside_window
     );
 }
 
@@ -666,8 +632,8 @@ fn afterpulses_and_dark_counts_arrive_at_their_rates() {
     let mut m = mock(4, n, Faults::default(), 0.0);
     m.emitter.afterpulse_probability = 0.05;
     m.emitter.dark_rate_hz = 0.1 * m.emitter.rate_hz;
-    let (out, truth) = run(DeviceSpec::Mock, m, &plan(0.0));
-    assert!(out.accounting.balances() && out.accounting.detected == Some(n));
+    let (out, truth) = run(USB, m, &plan(0.0));
+    assert!(out.ledger.balances() && out.ledger.detected == Some(n));
     // Every detection (signal, dark count or afterpulse) is followed by an
     // afterpulse with probability p: afterpulses / detections = p (5 sigma).
     let primaries = (n - truth.afterpulses) as f64;
@@ -685,11 +651,11 @@ fn afterpulses_and_dark_counts_arrive_at_their_rates() {
     );
     // Dark counts and afterpulses spread over the whole sync period: most
     // land outside the 120 ps window.
-    let outside = out.accounting.outside_window as f64;
+    let outside = out.ledger.outside_window as f64;
     assert!(
         outside > 0.9 * (truth.dark_counts + truth.afterpulses) as f64 * 0.98,
         "{}",
-        out.accounting.table()
+        out.ledger.table().join("\n")
     );
 }
 
@@ -709,9 +675,9 @@ fn replay_mode_keeps_the_ledger_exact_under_every_fault() {
     };
     let mut m = mock(21, 3_000_000, faults.clone(), 0.0);
     m.device.replay_batches = 8;
-    let (out, truth) = run(DeviceSpec::Mock, m, &plan(0.0));
-    let acc = out.accounting;
-    let ctx = format!("{faults:?}\n{}\n{truth:?}", acc.table());
+    let (out, truth) = run(USB, m, &plan(0.0));
+    let acc = out.ledger.clone();
+    let ctx = format!("{faults:?}\n{}\n{truth:?}", acc.table().join("\n"));
     ledger::assert_exact(&out, &truth, &ctx);
     assert!(truth.photons_detected >= 3_000_000, "{ctx}");
     assert!(
@@ -720,13 +686,13 @@ fn replay_mode_keeps_the_ledger_exact_under_every_fault() {
     );
     // A duplicated or held-back batch that is also damaged never reaches
     // the host as such, so these are bounds; the photons are exact.
-    assert!(acc.batches_duplicate > 0, "{ctx}");
+    assert!(acc.transit.unwrap().batches_duplicate > 0, "{ctx}");
     assert!(
-        acc.batches_duplicate <= u64::from(truth.batches_duplicated),
+        acc.transit.unwrap().batches_duplicate <= u64::from(truth.batches_duplicated),
         "{ctx}"
     );
     assert!(
-        acc.batches_out_of_order <= u64::from(truth.batches_reordered),
+        acc.transit.unwrap().batches_out_of_order <= u64::from(truth.batches_reordered),
         "{ctx}"
     );
 }
@@ -740,9 +706,9 @@ fn replay_beyond_the_host_rate_overflows_and_counts_every_photon() {
     m.emitter.rate_hz = 1e10;
     m.device.real_time = true;
     m.device.replay_batches = 8;
-    let (out, truth) = run(DeviceSpec::Mock, m, &plan(0.0));
-    let acc = out.accounting;
-    let ctx = format!("{}\n{truth:?}", acc.table());
+    let (out, truth) = run(USB, m, &plan(0.0));
+    let acc = out.ledger.clone();
+    let ctx = format!("{}\n{truth:?}", acc.table().join("\n"));
     assert!(acc.balances(), "{ctx}");
     assert_eq!(acc.detected, Some(truth.photons_detected), "{ctx}");
     assert!(
@@ -751,7 +717,7 @@ fn replay_beyond_the_host_rate_overflows_and_counts_every_photon() {
     );
     assert_eq!(acc.lost_in_device, truth.photons_lost_fifo, "{ctx}");
     assert_eq!(
-        acc.received + acc.lost_in_device,
+        acc.photons + acc.lost_in_device,
         truth.photons_detected,
         "{ctx}"
     );

@@ -124,7 +124,8 @@ fn empty_or_bad_profiles_are_refused() {
 /// middle of a sensor wide enough to hold its light, `photons` detections,
 /// with `irf` and `dark_rate_hz`; the time profile and the setup used.
 fn mock_profile(photons: u64, irf: Option<Irf>, dark_rate_hz: f64) -> (Vec<f64>, Setup) {
-    use scatterscope::acquire::{DeviceSpec, MockSetup, Plan, acquire, open_device};
+    use scatterscope::acquire::Plan;
+    use scatterscope::acquire::mock::{MockSetup, MockSource};
     use scatterscope::physics::{KernelStack, Sampling};
     use scatterscope_mocks::{EmitterOptions, MockOptions};
     let mut s = truth();
@@ -150,21 +151,16 @@ fn mock_profile(photons: u64, irf: Option<Irf>, dark_rate_hz: f64) -> (Vec<f64>,
             ..MockOptions::default()
         },
     };
-    let plan = Plan {
-        t_start_ps: s.bins.start_ps,
-        bin_width_ps: s.bins.width_ps,
-        bins: s.bins.count,
+    let mut plan = Plan {
         t0_ps: 1000.0,
-        region: None,
-        duration: None,
-        resolution_fs: None,
-        tag_file: None,
         software: "test".into(),
+        ..Plan::default()
     };
-    let opened = open_device(&DeviceSpec::Mock, Some(mock)).unwrap();
+    plan.set_window(&s.bins);
+    let mut source = MockSource::open(mock, false, s.total_photons).unwrap();
     let stop = std::sync::atomic::AtomicBool::new(false);
-    let out = acquire(opened.link, &plan, &stop, |_| {}).unwrap();
-    opened.mock.unwrap().join();
+    let out = scatterscope::acquire::run(&mut source, &plan, &stop, |_| {}).unwrap();
+    source.join();
     let profile = out
         .counts
         .outer_iter()

@@ -546,14 +546,14 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap())
             .unwrap();
-    assert_eq!(json["accounting"]["received"], 200_000);
-    assert_eq!(json["accounting"]["binned"], 200_000);
+    assert_eq!(json["ledger"]["photons"], 200_000);
+    assert_eq!(json["ledger"]["binned"], 200_000);
     assert_eq!(json["stop"], "device_stopped");
     let stack = Stack::load(&out.join("stack.exr")).unwrap();
     assert_eq!(stack.data.dim(), (30, 64, 64));
     assert_eq!(stack.total(), 200_000.0);
     assert_eq!(
-        stack.meta.acquisition.as_ref().unwrap()["accounting"]["received"],
+        stack.meta.acquisition.as_ref().unwrap()["ledger"]["photons"],
         200_000
     );
 
@@ -693,7 +693,7 @@ fn acquire_stops_cleanly_on(signal: nix::sys::signal::Signal) {
         stdout.contains("ended: interrupted (Ctrl-C or SIGTERM)"),
         "{stdout}"
     );
-    let received = json["accounting"]["received"].as_u64().unwrap();
+    let received = json["ledger"]["photons"].as_u64().unwrap();
     assert!(received > 100_000, "{json}");
     assert_eq!(
         json["device_totals"]["photons_sent"].as_u64(),
@@ -702,7 +702,7 @@ fn acquire_stops_cleanly_on(signal: nix::sys::signal::Signal) {
     let stack = Stack::load(&out.join("stack.exr")).unwrap();
     assert_eq!(
         stack.total() as u64,
-        json["accounting"]["binned"].as_u64().unwrap()
+        json["ledger"]["binned"].as_u64().unwrap()
     );
     // The tag file is whole (it ends with the device's totals) and says
     // that the run was interrupted; `info` warns (exit status 4).
@@ -750,7 +750,7 @@ fn acquire_says_when_its_duration_ends_it_before_the_mocks_photon_quota() {
     );
     assert!(
         stdout.contains(
-            "note: the duration (300ms) ended the acquisition before the mock's photon quota (1000000000) was reached"
+            "note: the duration ended the acquisition before the mock's photon quota (1000000000) was reached"
         ),
         "{stdout}"
     );
@@ -792,11 +792,14 @@ fn acquire_reports_injected_faults_and_a_disconnect() {
         serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap())
             .unwrap();
     assert!(
-        json["accounting"]["lost_in_transit"].as_u64().unwrap() > 0,
+        json["ledger"]["transit"]["lost_photons"].as_u64().unwrap() > 0,
         "{json}"
     );
     assert!(
-        json["accounting"]["batches_duplicate"].as_u64().unwrap() > 0,
+        json["ledger"]["transit"]["batches_duplicate"]
+            .as_u64()
+            .unwrap()
+            > 0,
         "{json}"
     );
 

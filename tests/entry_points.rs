@@ -8,7 +8,7 @@ use std::sync::atomic::AtomicBool;
 
 use ndarray::{Array2, Array3};
 use ndarray_npy::WriteNpyExt;
-use scatterscope::acquire::{DeviceSpec, Job, MockJob, TimeZero};
+use scatterscope::acquire::{DeviceSpec, Job, MockSpec, Plan, TimeZero};
 use scatterscope::config::PhysicsOverrides;
 use scatterscope::formats::image::{read_image, write_image};
 use scatterscope::formats::picoquant::writer::write_synthetic_t3;
@@ -69,29 +69,31 @@ fn a_plain_array_takes_its_physics_from_the_overrides_and_says_so() {
 #[test]
 fn a_mock_acquisition_writes_its_stack_and_record_and_balances() {
     let dir = tempfile::tempdir().unwrap();
-    let mut mock = MockJob {
+    let mut mock = MockSpec {
         scene: Scene::parse("disks"),
         emitter: Default::default(),
         device: Default::default(),
     };
     mock.device.real_time = false;
     mock.device.max_photons = 200_000;
-    let job = Job {
-        device: DeviceSpec::Mock,
-        setup: small(32),
-        t0: TimeZero::At(0.0),
-        region: None,
-        duration: None,
-        resolution_ps: None,
+    let setup = small(32);
+    let mut plan = Plan {
         tag_file: Some(dir.path().join("tags.sstags")),
         software: "entry-point test".into(),
-        mock,
+        ..Plan::default()
+    };
+    plan.set_window(&setup.bins);
+    let job = Job {
+        device: DeviceSpec::Mock(mock),
+        setup: Some(setup),
+        t0: TimeZero::At(0.0),
+        plan,
         out: dir.path().join("acq"),
     };
     let done = job.run(&AtomicBool::new(false), |_| {}).unwrap();
     done.verdict().unwrap();
-    let acc = &done.outcome.accounting;
-    assert_eq!(acc.received, 200_000);
+    let acc = &done.outcome.ledger;
+    assert_eq!(acc.photons, 200_000);
     // Every file it lists exists, and the stack holds what was binned.
     for f in &done.files {
         assert!(f.is_file(), "{}", f.display());
@@ -113,7 +115,7 @@ fn a_mock_acquisition_writes_its_stack_and_record_and_balances() {
     assert_eq!(binned.stacks[0].data, stack.data);
     // A sensor the protocol cannot address is refused before anything runs.
     let mut big = job.clone();
-    big.setup = small(300);
+    big.setup = Some(small(300));
     let err = big.run(&AtomicBool::new(false), |_| {}).unwrap_err();
     assert!(err.to_string().contains("300 x 300 pixels"), "{err}");
 }

@@ -364,7 +364,7 @@ fn picoquant_flags_given_to_another_device_are_refused_by_name() {
     ]);
     assert_eq!(r.status.code(), Some(1), "{}", text(&r));
     assert!(
-        text(&r).contains("--offset, --ptu set a PicoQuant device"),
+        text(&r).contains("--offset set a PicoQuant device"),
         "{}",
         text(&r)
     );

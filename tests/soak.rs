@@ -13,7 +13,8 @@ mod ledger;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use scatterscope::acquire::{DeviceSpec, MockSetup, Plan, acquire, open_device};
+use scatterscope::acquire::Plan;
+use scatterscope::acquire::mock::{MockSetup, MockSource};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::scene::Scene;
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
@@ -71,24 +72,19 @@ fn soak_with_every_fault_at_random_times_balances_and_stays_flat() {
             ..MockOptions::default()
         },
     };
-    let plan = Plan {
-        t_start_ps: setup.bins.start_ps,
-        bin_width_ps: setup.bins.width_ps,
-        bins: setup.bins.count,
-        t0_ps: 0.0,
-        region: None,
+    let mut plan = Plan {
         duration: Some(Duration::from_secs(seconds)),
-        resolution_fs: None,
-        tag_file: None,
         software: "soak".into(),
+        ..Plan::default()
     };
-    let opened = open_device(&DeviceSpec::Mock, Some(mock)).unwrap();
+    plan.set_window(&setup.bins);
+    let mut source = MockSource::open(mock, false, setup.total_photons).unwrap();
     let started = Instant::now();
     let mut rss = Vec::new();
     let mut last_sample = Instant::now();
     let mut stalls = (0u32, Duration::ZERO);
     let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let outcome = acquire(opened.link, &plan, &AtomicBool::new(false), |_| {
+    let outcome = scatterscope::acquire::run(&mut source, &plan, &AtomicBool::new(false), |_| {
         if last_sample.elapsed() >= Duration::from_secs(1) {
             last_sample = Instant::now();
             if let Some(r) = rss_mib() {
@@ -106,9 +102,9 @@ fn soak_with_every_fault_at_random_times_balances_and_stays_flat() {
         }
     })
     .unwrap();
-    let truth = opened.mock.unwrap().join();
-    let acc = outcome.accounting;
-    let ctx = format!("{faults:?}\n{}\n{truth:?}", acc.table());
+    let truth = source.join();
+    let acc = outcome.ledger.clone();
+    let ctx = format!("{faults:?}\n{}\n{truth:?}", acc.table().join("\n"));
     println!(
         "soak: {:.0} s, {} photons detected ({:.2} M/s), {} batches, {} damaged, {} duplicated, {} reordered, {} photons lost in the FIFO; {} consumer stalls ({:.1} s)",
         started.elapsed().as_secs_f64(),

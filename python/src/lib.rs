@@ -559,23 +559,21 @@ fn acquire_mock<'py>(
     seed: u64,
     physics: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<(Bound<'py, PyArray3<f32>>, String, String, Vec<String>)> {
-    use scatterscope::acquire::{DeviceSpec, Job, MockJob, TimeZero};
+    use scatterscope::acquire::{DeviceSpec, Job, MockSpec, Plan, TimeZero};
     if !(duration_s.is_finite() && duration_s > 0.0) {
         return Err(msg(format!(
             "duration_s = {duration_s}: give a positive number of seconds"
         )));
     }
     let setup = overrides(physics)?.resolve().map_err(err)?;
-    let job = Job {
-        device: DeviceSpec::Mock,
-        setup,
-        t0: TimeZero::At(0.0),
-        region: None,
+    let mut plan = Plan {
         duration: Some(Duration::from_secs_f64(duration_s)),
-        resolution_ps: None,
-        tag_file: None,
         software: format!("scatterscope python {}", env!("CARGO_PKG_VERSION")),
-        mock: MockJob {
+        ..Plan::default()
+    };
+    plan.set_window(&setup.bins);
+    let job = Job {
+        device: DeviceSpec::Mock(MockSpec {
             scene: scatterscope::scene::Scene::parse(scene),
             emitter: scatterscope_mocks::EmitterOptions {
                 rate_hz,
@@ -584,7 +582,10 @@ fn acquire_mock<'py>(
                 ..scatterscope_mocks::EmitterOptions::default()
             },
             device: scatterscope_mocks::MockOptions::default(),
-        },
+        }),
+        plan,
+        setup: Some(setup),
+        t0: TimeZero::At(0.0),
         out,
     };
     let stop = Arc::new(AtomicBool::new(false));

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use firmware_protocol::record::Record;
 
-use super::session::AcquireError;
+use super::pipeline::AcquireError;
 use crate::formats::sstags::read_tag_file;
 
 /// t0 in picoseconds from a raw tag file of a reference measurement.

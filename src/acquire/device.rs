@@ -1,29 +1,37 @@
 //! Devices by name: `mock` (in-process USB), `mock-serial` (a real
-//! pseudo-terminal), `serial:PATH`, `usb:VID:PID[:SERIAL]`: parsing an
-//! address, listing what is attached, and opening it (mocks included).
+//! pseudo-terminal), `serial:PATH`, `usb:VID:PID[:SERIAL]`,
+//! `picoquant[:FAMILY][:SERIAL]`: parsing an address, listing what is
+//! attached, and opening any of them as an acquisition [`Source`].
 
 use std::str::FromStr;
 
+use scatterscope_drivers::LinkError;
 pub use scatterscope_drivers::discovery::DeviceEntry;
 use scatterscope_drivers::discovery::{serial_ports, usb_devices};
 use scatterscope_drivers::usb::UsbSelector;
-use scatterscope_drivers::{Link, LinkError};
 
-pub use super::mock::{MockHandle, MockSetup};
+use ndarray::Array2;
 
-/// A device address as given to `--device`.
-#[derive(Debug, Clone, PartialEq, Eq)]
+use super::mock::MockSpec;
+use super::picoquant::{PicoQuantDevice, PicoQuantSource};
+use super::source::Source;
+use crate::physics::Setup;
+
+/// A device address as given to `--device`, with what the device needs
+/// beyond its address (a mock's scene and behaviour, a PicoQuant device's
+/// settings).
+#[derive(Debug, Clone)]
 pub enum DeviceSpec {
     /// The mock time tagger on an in-process USB transport.
-    Mock,
+    Mock(MockSpec),
     /// The mock time tagger behind a pseudo-terminal, opened as a serial port.
-    MockSerial,
+    MockSerial(MockSpec),
     /// A serial port (USB-CDC time tagger).
     Serial(String),
     /// A USB time tagger.
     Usb(UsbSelector),
     /// A PicoQuant time tagger through the vendor's library.
-    PicoQuant(super::picoquant::PicoQuantSpec),
+    PicoQuant(PicoQuantDevice),
 }
 
 impl FromStr for DeviceSpec {
@@ -31,8 +39,8 @@ impl FromStr for DeviceSpec {
 
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
-            "mock" => Ok(Self::Mock),
-            "mock-serial" => Ok(Self::MockSerial),
+            "mock" => Ok(Self::Mock(MockSpec::default())),
+            "mock-serial" => Ok(Self::MockSerial(MockSpec::default())),
             _ => {
                 if let Some(path) = s.strip_prefix("serial:") {
                     if path.is_empty() {
@@ -43,9 +51,12 @@ impl FromStr for DeviceSpec {
                     match rest {
                         "" => Ok(Self::PicoQuant(Default::default())),
                         _ => match rest.strip_prefix(':') {
-                            Some(r) => {
-                                super::picoquant::PicoQuantSpec::parse(r).map(Self::PicoQuant)
-                            }
+                            Some(r) => super::picoquant::PicoQuantSpec::parse(r).map(|spec| {
+                                Self::PicoQuant(PicoQuantDevice {
+                                    spec,
+                                    ..Default::default()
+                                })
+                            }),
                             None => Err(format!(
                                 "unknown device `{s}`: did you mean picoquant:{rest}?"
                             )),
@@ -67,8 +78,8 @@ impl std::fmt::Display for DeviceSpec {
     /// The address as `--device` takes it.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Self::Mock => write!(f, "mock"),
-            Self::MockSerial => write!(f, "mock-serial"),
+            Self::Mock(_) => write!(f, "mock"),
+            Self::MockSerial(_) => write!(f, "mock-serial"),
             Self::Serial(p) => write!(f, "serial:{p}"),
             Self::Usb(sel) => write!(f, "{sel}"),
             Self::PicoQuant(spec) => write!(f, "{spec}"),
@@ -79,7 +90,7 @@ impl std::fmt::Display for DeviceSpec {
 impl DeviceSpec {
     /// Whether this names a mock device.
     pub fn is_mock(&self) -> bool {
-        matches!(self, Self::Mock | Self::MockSerial)
+        matches!(self, Self::Mock(_) | Self::MockSerial(_))
     }
 }
 
@@ -111,11 +122,11 @@ pub fn list_devices(picoquant_library: Option<&std::path::Path>) -> DeviceList {
     );
     let hardware = all.len();
     all.push(DeviceEntry {
-        address: DeviceSpec::Mock.to_string(),
+        address: "mock".into(),
         description: "emulated time tagger on an in-process USB transport".into(),
     });
     all.push(DeviceEntry {
-        address: DeviceSpec::MockSerial.to_string(),
+        address: "mock-serial".into(),
         description: "emulated time tagger behind a pseudo-terminal".into(),
     });
     DeviceList {
@@ -140,12 +151,12 @@ impl DeviceList {
     }
 }
 
-/// An opened link, and the mock behind it if any.
+/// An opened device.
 pub struct OpenedDevice {
-    /// The transport.
-    pub link: Link,
-    /// The emulated device (its true counts), for mocks.
-    pub mock: Option<MockHandle>,
+    /// The device as an acquisition source.
+    pub source: Box<dyn Source>,
+    /// For a mock, its scene as the sensor sees it (the truth).
+    pub truth: Option<Array2<f64>>,
 }
 
 /// Why a device cannot be opened.
@@ -154,52 +165,65 @@ pub enum OpenError {
     /// Transport failure.
     #[error(transparent)]
     Link(#[from] LinkError),
+    /// The vendor's library or its device.
+    #[error(transparent)]
+    Vendor(#[from] scatterscope_drivers::picoquant::VendorError),
     /// The mock's scene or physics is unusable.
     #[error("the mock's scene or physics: {0}")]
     Mock(String),
-    /// A mock was asked for without its set-up, or in a build without mocks.
+    /// A device that cannot be opened as asked.
     #[error("{0}")]
     Usage(String),
+    /// The sensor exceeds what the wire protocol addresses.
+    #[error(
+        "the sensor is {width} x {height} pixels; the protocol addresses at most {max} pixels (256 x 256)"
+    )]
+    SensorTooLarge {
+        /// Columns.
+        width: usize,
+        /// Rows.
+        height: usize,
+        /// The protocol's limit.
+        max: usize,
+    },
     /// The pseudo-terminal could not be created.
     #[error("creating the mock's pseudo-terminal: {0}")]
     Pty(std::io::Error),
 }
 
-/// Opens `spec`; mocks are started from `mock` (required for them).
-pub fn open_device(spec: &DeviceSpec, mock: Option<MockSetup>) -> Result<OpenedDevice, OpenError> {
+/// Opens `spec` as an acquisition source; a mock is built from `setup`
+/// (its sensor, medium and window), which hardware does not need.
+pub fn open_device(spec: &DeviceSpec, setup: Option<&Setup>) -> Result<OpenedDevice, OpenError> {
+    let link = |link: scatterscope_drivers::Link| OpenedDevice {
+        source: Box::new(super::link::LinkSource::new(link)),
+        truth: None,
+    };
     match spec {
-        DeviceSpec::Mock | DeviceSpec::MockSerial => {
-            let setup = mock.ok_or_else(|| {
-                OpenError::Usage("a mock device needs a scene and physics".into())
+        DeviceSpec::Mock(mock) | DeviceSpec::MockSerial(mock) => {
+            let setup = setup.ok_or_else(|| {
+                OpenError::Usage("a mock device needs the sample's physics (a set-up)".into())
             })?;
-            let (link, handle) = super::mock::open(spec, setup)?;
+            let serial = matches!(spec, DeviceSpec::MockSerial(_));
+            let (source, truth) = super::mock::open_spec(mock, serial, setup)?;
             Ok(OpenedDevice {
-                link,
-                mock: Some(handle),
+                source,
+                truth: Some(truth),
             })
         }
-        DeviceSpec::Serial(path) => Ok(OpenedDevice {
-            link: scatterscope_drivers::serial::open(
-                path,
-                scatterscope_drivers::serial::DEFAULT_BAUD,
-            )?,
-            mock: None,
+        DeviceSpec::Serial(path) => Ok(link(scatterscope_drivers::serial::open(
+            path,
+            scatterscope_drivers::serial::DEFAULT_BAUD,
+        )?)),
+        DeviceSpec::PicoQuant(device) => Ok(OpenedDevice {
+            source: Box::new(PicoQuantSource::open(device)?),
+            truth: None,
         }),
-        DeviceSpec::PicoQuant(_) => Err(OpenError::Usage(
-            "a PicoQuant device is not opened as a protocol link: run it as an acquire::picoquant::PicoQuantJob".into(),
-        )),
         DeviceSpec::Usb(sel) => {
             #[cfg(feature = "rusb")]
             if std::env::var_os("SCATTERSCOPE_USB_BACKEND").is_some_and(|v| v == "rusb") {
-                return Ok(OpenedDevice {
-                    link: scatterscope_drivers::usb::open_rusb(sel)?,
-                    mock: None,
-                });
+                return Ok(link(scatterscope_drivers::usb::open_rusb(sel)?));
             }
-            Ok(OpenedDevice {
-                link: scatterscope_drivers::usb::open_nusb(sel)?,
-                mock: None,
-            })
+            Ok(link(scatterscope_drivers::usb::open_nusb(sel)?))
         }
     }
 }

@@ -1,35 +1,37 @@
-//! Live acquisition: open a device (hardware or a mock), configure it,
-//! stream event batches through the drivers' pipeline, bin them into a
-//! K x H x W stack, and account for every photon.
+//! Live acquisition: one pipeline for every device. A device is opened as
+//! a [`Source`] (our own time taggers on the wire protocol, the mocks
+//! behind the same transports, PicoQuant devices through the vendor's
+//! library); the pipeline streams what it sends through the recordings
+//! and the binner into a K x H x W stack, and accounts for every photon.
 //!
-//! - [`device`]: what `--device` names, and opening it (mocks included).
+//! - [`device`]: what `--device` names, and opening it as a source.
+//! - [`source`]: the source interface, and what a source says about itself.
+//! - [`link`]: our own devices on the wire protocol.
+//! - [`picoquant`]: PicoQuant devices through the vendor's library.
 //! - [`mock`]: the emulated time tagger (the `mock` feature).
-//! - [`job`]: one acquisition as the `acquire` command runs it, outputs
-//!   included.
-//! - [`picoquant`]: a PicoQuant device through the vendor's library, its
-//!   records streamed to a PTU file and binned.
-//! - [`session`]: one acquisition from Start to the device's totals.
-//! - [`accounting`]: where every photon went; the totals balance exactly.
+//! - [`pipeline`]: the stages every source's stream runs through.
+//! - [`ledger`]: where every photon and record went; the totals balance.
 //! - [`record`]: the outcome as a stack, with the typed record of the
 //!   acquisition.
+//! - [`job`]: one acquisition as the `acquire` command runs it, outputs
+//!   included.
 //! - [`calibration`]: time zero from a reference measurement.
 
-pub mod accounting;
 pub mod calibration;
 pub mod device;
 pub mod job;
+pub mod ledger;
+pub mod link;
 pub mod mock;
 pub mod picoquant;
+pub mod pipeline;
 pub mod record;
-pub mod session;
+pub mod source;
 
-pub use accounting::AcquisitionAccounting;
 pub use device::{DeviceSpec, OpenedDevice, open_device};
-#[cfg(feature = "mock")]
-pub use job::MockJob;
 pub use job::{Acquisition, Job, JobError, TimeZero};
-pub use mock::MockSetup;
-#[cfg(feature = "mock")]
-pub use mock::{MockReference, Truth};
+pub use ledger::{Ledger, Recording};
+pub use mock::MockSpec;
+pub use pipeline::{AcquireError, Outcome, Plan, Progress, run};
 pub use record::AcquisitionRecord;
-pub use session::{AcquireError, Outcome, Plan, Progress, StopReason, acquire};
+pub use source::{Source, SourceFacts, StopReason};

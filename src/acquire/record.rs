@@ -1,14 +1,14 @@
 //! An acquisition outcome -> a stack with its metadata, and the typed
 //! record of the acquisition that goes with it (the stack's `acquisition`
-//! metadata and `acquisition.json`).
+//! metadata and `acquisition.json`). One record for every device kind;
+//! what does not apply to a device is left out.
 
-use std::path::PathBuf;
-
-use firmware_protocol::{Config, Identity, Totals};
+use firmware_protocol::{Config, Totals};
 use serde::{Deserialize, Serialize};
 
-use super::accounting::AcquisitionAccounting;
-use super::session::{Outcome, Plan, StopReason};
+use super::ledger::Ledger;
+use super::pipeline::{Outcome, Plan};
+use super::source::{DeviceInfo, RateSample, RecordFormat, StopReason};
 use crate::physics::{Sampling, Setup};
 use crate::stack::{Stack, StackMeta};
 use crate::tags::binning::Region;
@@ -17,67 +17,112 @@ use crate::tags::binning::Region;
 /// why it ended and where every photon went.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AcquisitionRecord {
-    /// The link the device was on.
-    pub link: String,
-    /// The device's identity.
-    pub identity: Identity,
-    /// The configuration the device applied.
-    pub config: Config,
+    /// The device.
+    pub device: DeviceInfo,
+    /// The configuration our own device applied.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub config: Option<Config>,
+    /// Micro-time unit, ps.
+    pub resolution_ps: f64,
+    /// Sync rate the records' macro time counts, Hz.
+    pub sync_rate_hz: f64,
     /// Time zero: device micro time of the instrument's zero, ps.
     pub t0_ps: f64,
     /// Start of the first bin in device micro time (t0 + the plan's start), ps.
     pub window_start_device_ps: f64,
-    /// The pixels binned.
-    pub region: Region,
+    /// Bin width, ps.
+    pub bin_width_ps: f64,
+    /// Bins.
+    pub bins: usize,
+    /// The pixels of a sensor binned.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub region: Option<Region>,
     /// Why the acquisition ended.
     pub stop: StopReason,
-    /// From Start to the last batch, seconds.
+    /// From the start to the last record, seconds.
     pub elapsed_s: f64,
-    /// Where every photon went.
-    pub accounting: AcquisitionAccounting,
+    /// Records read per second.
+    pub records_per_s: f64,
+    /// Where every photon and record went.
+    pub ledger: Ledger,
     /// The device's totals, when it sent them.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
     pub device_totals: Option<Totals>,
-    /// The tag file written, if any (`raw` in records written before it
-    /// was renamed).
-    #[serde(alias = "raw")]
-    pub tag_file: Option<PathBuf>,
+    /// The rates read before the start, when the device reports them.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub rates_at_start: Option<RateSample>,
+    /// The rates read during the run.
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
+    pub rates_during_run: Vec<RateSample>,
+    /// What the device, its library or its flags warned about.
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
+    pub warnings: Vec<String>,
 }
 
 impl Outcome {
     /// The record of this acquisition of `plan`.
     pub fn record(&self, plan: &Plan) -> AcquisitionRecord {
+        let f = &self.facts;
         AcquisitionRecord {
-            link: self.link.clone(),
-            identity: self.identity.clone(),
-            config: self.config.clone(),
+            device: f.device.clone(),
+            config: match &f.format {
+                RecordFormat::Wire { config, .. } => Some(config.clone()),
+                RecordFormat::T3(_) => None,
+            },
+            resolution_ps: f.resolution_ps,
+            sync_rate_hz: 1e12 / f.sync_period_ps,
             t0_ps: plan.t0_ps,
             window_start_device_ps: self.window_ps.0,
+            bin_width_ps: self.window_ps.1,
+            bins: self.counts.shape()[0],
             region: self.region,
-            stop: self.stop.clone(),
-            elapsed_s: self.elapsed.as_secs_f64(),
-            accounting: self.accounting,
-            device_totals: self.totals,
-            tag_file: self.tag_file.clone(),
+            stop: self.end.stop.clone(),
+            elapsed_s: self.end.elapsed.as_secs_f64(),
+            records_per_s: self.records_per_s(),
+            ledger: self.ledger.clone(),
+            device_totals: self.end.totals,
+            rates_at_start: f.rates_at_start.clone(),
+            rates_during_run: self.rates_during_run.clone(),
+            warnings: self.warnings(),
         }
     }
 
-    /// The counts as a stack: bins from the plan (relative to t0), the
-    /// acquisition's record in the metadata, and `setup` (the sample's
-    /// physics on the whole sensor) cut to the binned region, so the stack
+    /// Every warning of the run: the device's at the start, then its
+    /// flags' during it.
+    pub fn warnings(&self) -> Vec<String> {
+        self.facts
+            .warnings
+            .iter()
+            .chain(&self.end.warnings)
+            .cloned()
+            .collect()
+    }
+
+    /// The counts as a stack: bins relative to t0, the acquisition's record
+    /// in the metadata, and `setup` (the sample's physics on the whole
+    /// sensor, when known) cut to the binned region, so the stack
     /// reconstructs as it is. `source` says how it was made.
-    pub fn stack(&self, plan: &Plan, setup: &Setup, source: String) -> Stack {
+    pub fn stack(&self, plan: &Plan, setup: Option<&Setup>, source: String) -> Stack {
         let record = serde_json::to_value(self.record(plan)).expect("the record serialises");
         let mut meta = StackMeta::measured(
-            plan.t_start_ps,
-            plan.bin_width_ps,
-            plan.bins,
+            self.window_ps.0 - plan.t0_ps,
+            self.window_ps.1,
+            self.counts.shape()[0],
             source,
             Some(record),
         );
-        let setup = cropped(setup, self.region);
-        meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
-        meta.setup = Some(setup);
-        meta.sampling = Some(Sampling::Integrated);
+        if let Some(setup) = setup {
+            let mut setup = match self.region {
+                Some(region) => cropped(setup, region),
+                None => setup.clone(),
+            };
+            setup.bins.start_ps = self.window_ps.0 - plan.t0_ps;
+            setup.bins.width_ps = self.window_ps.1;
+            setup.bins.count = self.counts.shape()[0];
+            meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
+            meta.setup = Some(setup);
+            meta.sampling = Some(Sampling::Integrated);
+        }
         Stack::from_counts(self.counts.view(), meta)
     }
 }

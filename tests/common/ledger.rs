@@ -8,14 +8,14 @@ use scatterscope_mocks::Truth;
 /// detected, lost in the device, lost in transit, received, and the stack's
 /// sum equal to the binned photons. `ctx` is printed on failure.
 pub fn assert_exact(out: &Outcome, truth: &Truth, ctx: &str) {
-    let acc = &out.accounting;
+    let acc = &out.ledger;
     assert!(acc.balances(), "{ctx}");
     assert_eq!(acc.detected, Some(truth.photons_detected), "{ctx}");
-    assert!(acc.transit_exact, "{ctx}");
+    assert!(acc.transit.unwrap().exact, "{ctx}");
     assert_eq!(acc.lost_in_device, truth.photons_lost_fifo, "{ctx}");
-    assert_eq!(acc.lost_in_transit, truth.photons_damaged, "{ctx}");
+    assert_eq!(acc.lost_in_transit(), truth.photons_damaged, "{ctx}");
     assert_eq!(
-        acc.received,
+        acc.photons,
         truth.photons_sent - truth.photons_damaged,
         "{ctx}"
     );

@@ -8,7 +8,9 @@
 //! - `dark=HZ`: dark counts per second (default 0).
 //! - `sync=HZ`: laser sync rate (default 80e6).
 //! - `scan=WxH`: a galvo scan of W x H points with line and frame markers
-//!   (default: a point detector).
+//!   (default: a point detector); each frame is drawn anew (Poisson).
+//! - `drift=N`: a scan's scene moves N points to the right each frame
+//!   (default 0).
 //! - `fault=overrun@N`, `fault=error@N`, `fault=vanish@N`, `fault=drop@N`:
 //!   after N records the FIFO overruns, a read fails, the device
 //!   disappears, or (MultiHarp) the device drops counts and says so in its
@@ -51,6 +53,8 @@ pub struct MockConfig {
     pub sync_hz: f64,
     /// Scan points (width, height).
     pub scan: Option<(usize, usize)>,
+    /// Points a scan's scene moves to the right each frame.
+    pub drift: usize,
     /// The fault, if any.
     pub fault: Option<Fault>,
     /// Sampling seed.
@@ -68,6 +72,7 @@ impl Default for MockConfig {
             dark_hz: 0.0,
             sync_hz: 80e6,
             scan: None,
+            drift: 0,
             fault: None,
             seed: 0,
             truth: None,
@@ -100,6 +105,7 @@ impl MockConfig {
                 "dark" => c.dark_hz = number(value).ok_or_else(bad)?,
                 "sync" => c.sync_hz = number(value).filter(|r| *r >= 1e3).ok_or_else(bad)?,
                 "seed" => c.seed = value.parse().map_err(|_| bad())?,
+                "drift" => c.drift = value.parse().map_err(|_| bad())?,
                 "truth" => c.truth = Some(PathBuf::from(value)),
                 "scan" => {
                     let (w, h) = value.split_once('x').ok_or_else(bad)?;

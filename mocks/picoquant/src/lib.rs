@@ -623,7 +623,7 @@ macro_rules! library {
                 let mut end_syncs = (f64::from(tacq) * 1e9 / period) as u64;
                 if c.scan.is_some() {
                     // A scanner finishes the frame it is in.
-                    end_syncs = end_syncs.div_ceil(pool.span) * pool.span;
+                    end_syncs = end_syncs.div_ceil(pool.frame_span) * pool.frame_span;
                 }
                 d.flags = FLAG_ACTIVE;
                 d.measurement = Some(Measurement {

@@ -26,6 +26,10 @@ const RETRACE_SYNCS: u64 = 1600;
 pub const PULSE_DELAY_PS: f64 = 1000.0;
 /// Photons in the point detector's pool.
 const POINT_POOL_PHOTONS: usize = 1 << 21;
+/// Frames in a scan's pool, each drawn on its own (Poisson), so that
+/// frames differ as a real scanner's do; a run longer than these frames
+/// replays them.
+pub const SCAN_FRAMES: u64 = 8;
 
 /// One replay unit.
 pub struct Pool {
@@ -35,6 +39,9 @@ pub struct Pool {
     pub sync_at: Vec<u64>,
     /// Syncs the pool spans (a multiple of [`WRAP`]).
     pub span: u64,
+    /// Syncs of one frame of a scan (a multiple of [`WRAP`]; frame `f`
+    /// starts at `f * frame_span`); the whole span for a point detector.
+    pub frame_span: u64,
     /// Scan pixel of each photon record (`u32::MAX` for other records);
     /// empty for a point detector.
     pub pixel_of: Vec<u32>,
@@ -119,51 +126,69 @@ pub fn build(cfg: &MockConfig, resolution_ps: f64, period_ps: f64) -> Result<Poo
             let mut e = emitter(cfg, w, h, period_ps)?;
             let line = w as u64 * DWELL_SYNCS + RETRACE_SYNCS;
             let frame_syncs = h as u64 * line;
-            // Photons drawn over one frame's time, each placed in its
-            // pixel's dwell (a point is seen only while the scan is on it).
-            let mut drawn = Vec::new();
+            let frame_span = frame_syncs.div_ceil(WRAP) * WRAP;
+            // The clocks first: a photon at the same sync as a line's start
+            // follows it (the sort below is stable).
+            for frame in 0..SCAN_FRAMES {
+                let base = frame * frame_span;
+                events.push(Event::Marker {
+                    sync: base,
+                    bits: FRAME,
+                });
+                for y in 0..h as u64 {
+                    let start = base + y * line + 1;
+                    events.push(Event::Marker {
+                        sync: start,
+                        bits: LINE_START,
+                    });
+                    events.push(Event::Marker {
+                        sync: start + w as u64 * DWELL_SYNCS,
+                        bits: LINE_STOP,
+                    });
+                }
+            }
+            // Photons drawn over each frame's time in turn, each placed in
+            // its pixel's dwell (a point is seen only while the scan is on
+            // it); with a drift the scene moves `drift` points to the right
+            // a frame (wrapping around).
             loop {
                 let d = e.next_detection();
-                if d.sync >= frame_syncs {
+                let frame = d.sync / frame_syncs;
+                if frame >= SCAN_FRAMES {
                     break;
                 }
-                drawn.push(d);
-            }
-            events.push(Event::Marker {
-                sync: 0,
-                bits: FRAME,
-            });
-            for y in 0..h as u64 {
-                let start = y * line + 1;
-                events.push(Event::Marker {
-                    sync: start,
-                    bits: LINE_START,
-                });
-                events.push(Event::Marker {
-                    sync: start + w as u64 * DWELL_SYNCS,
-                    bits: LINE_STOP,
-                });
-            }
-            for d in drawn {
-                let (x, y) = (d.pixel as u64 % w as u64, d.pixel as u64 / w as u64);
-                let within = d.sync % DWELL_SYNCS;
+                let shift = (frame * cfg.drift as u64) % w as u64;
+                let (x, y) = (
+                    (u64::from(d.pixel) % w as u64 + shift) % w as u64,
+                    u64::from(d.pixel) / w as u64,
+                );
                 events.push(Event::Photon {
-                    sync: y * line + 1 + x * DWELL_SYNCS + within,
+                    sync: frame * frame_span
+                        + y * line
+                        + 1
+                        + x * DWELL_SYNCS
+                        + d.sync % DWELL_SYNCS,
                     micro: micro(d.delay_ps),
-                    pixel: d.pixel,
+                    pixel: (y * w as u64 + x) as u32,
                 });
             }
             events.sort_by_key(Event::sync);
+            return Ok(encode(&events, Some(SCAN_FRAMES * frame_span), frame_span));
         }
     }
-    Ok(encode(&events, cfg.scan.is_some()))
+    Ok(encode(&events, None, 0))
 }
 
-fn encode(events: &[Event], scanned: bool) -> Pool {
+/// Encodes `events`; a scan's pool (`span` given) ends at that span, its
+/// frames `frame_span` apart; a point detector's on the wrap after its last
+/// event.
+fn encode(events: &[Event], span: Option<u64>, frame_span: u64) -> Pool {
+    let scanned = span.is_some();
     let mut pool = Pool {
         records: Vec::with_capacity(events.len() * 21 / 20),
         sync_at: Vec::with_capacity(events.len() * 21 / 20),
         span: 0,
+        frame_span,
         pixel_of: Vec::new(),
     };
     let mut base = 0u64;
@@ -192,9 +217,22 @@ fn encode(events: &[Event], scanned: bool) -> Pool {
             }
         }
     }
-    // Close the pool on an overflow boundary past its last event.
-    base += WRAP;
-    push(&mut pool, overflow(1), base, u32::MAX);
+    match span {
+        // Close the pool on its span, so that frames replay in step.
+        Some(span) => {
+            while base < span {
+                let n = ((span - base) / WRAP).min(1023);
+                base += n * WRAP;
+                push(&mut pool, overflow(n), base, u32::MAX);
+            }
+        }
+        // Close the pool on an overflow boundary past its last event.
+        None => {
+            base += WRAP;
+            push(&mut pool, overflow(1), base, u32::MAX);
+            pool.frame_span = base;
+        }
+    }
     pool.span = base;
     pool
 }
@@ -251,18 +289,77 @@ mod tests {
         assert!(times.windows(2).all(|w| w[0] <= w[1]));
         assert!(*times.last().unwrap() < pool.span);
         let markers = pool.records.iter().filter(|&&r| is_marker(r)).count();
-        assert_eq!(markers, 1 + 2 * 3, "a frame marker and two per line");
+        assert_eq!(
+            markers as u64,
+            SCAN_FRAMES * (1 + 2 * 3),
+            "a frame marker and two per line"
+        );
+        assert_eq!(pool.span, SCAN_FRAMES * pool.frame_span);
         // Every photon lies in its pixel's dwell.
         let line = 4 * DWELL_SYNCS + RETRACE_SYNCS;
         for ((&r, &s), &p) in pool.records.iter().zip(&pool.sync_at).zip(&pool.pixel_of) {
             if is_photon(r) {
                 let (x, y) = (u64::from(p) % 4, u64::from(p) / 4);
-                let start = y * line + 1 + x * DWELL_SYNCS;
+                let start = s / pool.frame_span * pool.frame_span + y * line + 1 + x * DWELL_SYNCS;
                 assert!(
                     (start..start + DWELL_SYNCS).contains(&s),
                     "pixel {p} at {s}"
                 );
             }
         }
+    }
+
+    /// Per-pixel photons of each frame of a scan's pool.
+    fn frame_images(pool: &Pool, pixels: usize) -> Vec<Vec<u64>> {
+        let frames = (pool.span / pool.frame_span) as usize;
+        let mut images = vec![vec![0u64; pixels]; frames];
+        for ((&r, &s), &p) in pool.records.iter().zip(&pool.sync_at).zip(&pool.pixel_of) {
+            if is_photon(r) {
+                images[(s / pool.frame_span) as usize][p as usize] += 1;
+            }
+        }
+        images
+    }
+
+    #[test]
+    fn frames_vary_as_poisson_draws_and_drift_moves_the_scene() {
+        let still = MockConfig {
+            scan: Some((16, 8)),
+            rate_hz: 2e7,
+            ..MockConfig::default()
+        };
+        let images = frame_images(&build(&still, 5.0, 12_500.0).unwrap(), 128);
+        assert_eq!(images.len() as u64, SCAN_FRAMES);
+        for pair in images.windows(2) {
+            assert_ne!(pair[0], pair[1], "two frames identical count for count");
+        }
+        // Frame totals scatter about their mean as Poisson counts do.
+        let totals: Vec<f64> = images
+            .iter()
+            .map(|i| i.iter().sum::<u64>() as f64)
+            .collect();
+        let mean = totals.iter().sum::<f64>() / totals.len() as f64;
+        let var =
+            totals.iter().map(|t| (t - mean).powi(2)).sum::<f64>() / (totals.len() - 1) as f64;
+        assert!(mean > 1000.0, "{mean}");
+        assert!(var / mean < 4.0, "variance {var} for a mean {mean}");
+        // A drift of 2 points a frame moves the image's centroid right
+        // (the bright bar sits at a fifth of the width).
+        let drifting = MockConfig { drift: 2, ..still };
+        let images = frame_images(&build(&drifting, 5.0, 12_500.0).unwrap(), 128);
+        let centroid = |img: &Vec<u64>| {
+            let (mut sx, mut n) = (0.0, 0.0);
+            for (p, &c) in img.iter().enumerate() {
+                sx += (p % 16) as f64 * c as f64;
+                n += c as f64;
+            }
+            sx / n
+        };
+        assert!(
+            centroid(&images[2]) > centroid(&images[0]) + 1.5,
+            "{} then {}",
+            centroid(&images[0]),
+            centroid(&images[2])
+        );
     }
 }

@@ -1,18 +1,16 @@
 //! `scatterscope acquire` and `scatterscope devices`.
 
 use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use crate::shared_args::{PhysicsArgs, choice, progress};
 use crate::signals::Interrupted;
-use scatterscope::acquire::picoquant::{PicoQuantJob, PicoQuantStop, SettingsRequest};
-use scatterscope::acquire::session::StopReason;
-use scatterscope::acquire::{DeviceSpec, Job, MockJob, TimeZero, device};
+use scatterscope::acquire::picoquant::{PicoQuantDevice, SettingsRequest};
+use scatterscope::acquire::{DeviceSpec, Job, MockSpec, Plan, StopReason, TimeZero, device};
 use scatterscope::config::{parse_duration, parse_ps};
 use scatterscope::scene::Scene;
 use scatterscope::tags::Imaging;
-use scatterscope::tags::bin_file::{BinSpec, Pixels};
+use scatterscope::tags::bin_file::Pixels;
 use scatterscope::tags::binning::Region;
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
 
@@ -153,10 +151,13 @@ struct PicoQuantArgs {
     /// Pixel mapping: auto (the scan's image, else single), single, channel.
     #[arg(long, value_parser = choice::<Pixels>(), default_value = "auto")]
     pixels: Pixels,
-    /// Write every record to this PTU file (default OUT/acquisition.ptu).
+    /// Write every record to this PTU file (a PicoQuant device: default
+    /// OUT/acquisition.ptu; our own devices and the mocks: Generic T3 with
+    /// the sensor pixel as the input channel, sensors of at most 63
+    /// pixels).
     #[arg(long, value_name = "FILE")]
     ptu: Option<PathBuf>,
-    /// Do not write a PTU file.
+    /// Do not write a PTU file (PicoQuant devices).
     #[arg(long, conflicts_with = "ptu")]
     no_ptu: bool,
 }
@@ -199,7 +200,7 @@ fn whole_ps(v: f64, flag: &str) -> anyhow::Result<i32> {
 impl PicoQuantArgs {
     /// The PicoQuant-only flags given, by name: refused for other devices,
     /// which would otherwise ignore them without a word.
-    fn given(&self) -> Vec<&'static str> {
+    fn vendor_only(&self) -> Vec<&'static str> {
         let set = [
             ("--vendor-lib", self.vendor_lib.is_some()),
             ("--sync-divider", self.sync_divider.is_some()),
@@ -217,7 +218,6 @@ impl PicoQuantArgs {
             ("--scan", self.scan.is_some()),
             ("--channel", self.channel.is_some()),
             ("--pixels", self.pixels != Pixels::Auto),
-            ("--ptu", self.ptu.is_some()),
             ("--no-ptu", self.no_ptu),
         ];
         set.into_iter()
@@ -238,127 +238,125 @@ fn whole_ns(v_ps: f64) -> anyhow::Result<i32> {
     Ok(r as i32)
 }
 
-fn picoquant_job(
-    args: &AcquireArgs,
-    spec: scatterscope::acquire::picoquant::PicoQuantSpec,
-) -> anyhow::Result<PicoQuantJob> {
-    let p = &args.picoquant;
-    Ok(PicoQuantJob {
-        spec,
-        library: p.vendor_lib.clone(),
-        settings: SettingsRequest {
-            sync_divider: p.sync_divider,
-            sync_level_mv: p.sync_level,
-            sync_rising: p.sync_edge,
-            sync_zero_cross_mv: p.sync_zero_cross,
-            sync_offset_ps: p
+impl PicoQuantArgs {
+    /// The device's settings as given.
+    fn settings(&self) -> anyhow::Result<SettingsRequest> {
+        Ok(SettingsRequest {
+            sync_divider: self.sync_divider,
+            sync_level_mv: self.sync_level,
+            sync_rising: self.sync_edge,
+            sync_zero_cross_mv: self.sync_zero_cross,
+            sync_offset_ps: self
                 .sync_offset
                 .map(|v| whole_ps(v, "sync-offset"))
                 .transpose()?,
-            input_level_mv: p.input_level,
-            input_rising: p.input_edge,
-            markers_rising: p.marker_edge,
-            input_zero_cross_mv: p.input_zero_cross,
-            input_offsets_ps: p
+            input_level_mv: self.input_level,
+            input_rising: self.input_edge,
+            markers_rising: self.marker_edge,
+            input_zero_cross_mv: self.input_zero_cross,
+            input_offsets_ps: self
                 .input_offsets
                 .iter()
                 .map(|&v| whole_ps(v, "input-offsets"))
                 .collect::<anyhow::Result<_>>()?,
-            binning: p.binning,
-            offset_ns: p.offset.map(whole_ns).transpose()?,
+            binning: self.binning,
+            offset_ns: self.offset.map(whole_ns).transpose()?,
+        })
+    }
+}
+
+/// The mock's scene and behaviour from the mock flags.
+fn mock_spec(args: &AcquireArgs) -> MockSpec {
+    MockSpec {
+        scene: Scene::parse(&args.scene),
+        emitter: EmitterOptions {
+            rate_hz: args.rate,
+            dark_rate_hz: args.dark_rate,
+            afterpulse_probability: args.afterpulse,
+            t0_delay_ps: args.mock_delay,
+            seed: args.seed,
+            ..EmitterOptions::default()
         },
+        device: MockOptions {
+            real_time: !args.unpaced,
+            max_photons: args.max_photons,
+            faults: args.faults.clone(),
+            replay_batches: args.replay,
+            ..MockOptions::default()
+        },
+    }
+}
+
+/// The job the flags describe, for any device.
+fn job(args: &AcquireArgs) -> anyhow::Result<Job> {
+    let p = &args.picoquant;
+    let mut plan = Plan {
+        region: args.roi,
+        channel: p.channel,
+        pixels: p.pixels,
         duration: (!args.duration.is_zero()).then_some(args.duration),
-        bin: BinSpec {
-            bin_width_ps: args.physics.bin_width,
-            t_start_ps: args.physics.t_start.unwrap_or(0.0),
-            bins: args.physics.bins,
-            channel: p.channel,
-            pixels: p.pixels,
-            ..BinSpec::default()
-        },
-        scan: p.scan,
-        ptu: match (&p.ptu, p.no_ptu) {
-            (_, true) => None,
-            (Some(f), false) => Some(f.clone()),
-            (None, false) => Some(args.out.join("acquisition.ptu")),
-        },
+        resolution_fs: args.resolution.map(|ps| (ps * 1000.0).round() as u32),
+        tag_file: args.tags.clone(),
+        ptu: p.ptu.clone(),
         software: format!("scatterscope {}", env!("CARGO_PKG_VERSION")),
-        out: args.out.clone(),
-    })
-}
-
-fn run_picoquant(job: &PicoQuantJob, stop: &AtomicBool) -> anyhow::Result<()> {
-    let bar = progress(job.duration.map(|d| d.as_millis()));
-    let done = job.run(stop, |p| {
-        bar.set_position(p.elapsed.as_millis() as u64);
-        let secs = p.elapsed.as_secs_f64().max(1e-3);
-        let rates = p.rates.as_ref().map_or(String::new(), |(sync, inputs)| {
-            let inputs: Vec<String> = inputs.iter().map(|r| format!("{r}/s")).collect();
-            format!("; sync {sync}/s, inputs {}", inputs.join(" "))
-        });
-        bar.set_message(format!(
-            "{} records ({:.1} M records/s){rates}",
-            p.records,
-            p.records as f64 / secs / 1e6
-        ));
-    })?;
-    bar.finish_and_clear();
-    for line in done.summary() {
-        println!("{line}");
-    }
-    let names: Vec<String> = done.files.iter().map(|f| f.display().to_string()).collect();
-    println!("wrote {}", names.join(", "));
-    done.verdict().map_err(anyhow::Error::msg)?;
-    match done.stop {
-        PicoQuantStop::Interrupted => Err(Interrupted(INTERRUPTED).into()),
-        _ => Ok(()),
-    }
-}
-
-pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
-    let stop = crate::signals::stop_flag();
-    if let DeviceSpec::PicoQuant(spec) = &args.device {
-        return run_picoquant(&picoquant_job(args, spec.clone())?, stop);
-    }
-    let given = args.picoquant.given();
-    anyhow::ensure!(
-        given.is_empty(),
-        "{} set a PicoQuant device (--device picoquant); this device would ignore them. To record its photons losslessly give --tags FILE (a tag file, which `convert` turns into a PTU)",
-        given.join(", ")
-    );
-    let job = Job {
-        device: args.device.clone(),
-        setup: args.physics.resolve()?,
+        ..Plan::default()
+    };
+    let device = match &args.device {
+        DeviceSpec::PicoQuant(d) => {
+            // The vendor's device: its settings, a PTU by default, and the
+            // window the flags give (default: one sync period); its
+            // physics are not assumed.
+            plan.bin_width_ps = args.physics.bin_width;
+            plan.t_start_ps = args.physics.t_start.unwrap_or(0.0);
+            plan.bins = args.physics.bins;
+            if !p.no_ptu && plan.ptu.is_none() {
+                plan.ptu = Some(args.out.join("acquisition.ptu"));
+            }
+            DeviceSpec::PicoQuant(PicoQuantDevice {
+                spec: d.spec.clone(),
+                library: p.vendor_lib.clone(),
+                settings: p.settings()?,
+                scan: p.scan,
+            })
+        }
+        other => {
+            let given = p.vendor_only();
+            anyhow::ensure!(
+                given.is_empty(),
+                "{} set a PicoQuant device (--device picoquant); {other} would ignore them",
+                given.join(", ")
+            );
+            match other {
+                DeviceSpec::Mock(_) => DeviceSpec::Mock(mock_spec(args)),
+                DeviceSpec::MockSerial(_) => DeviceSpec::MockSerial(mock_spec(args)),
+                hardware => hardware.clone(),
+            }
+        }
+    };
+    let setup = match device {
+        DeviceSpec::PicoQuant(_) => None,
+        _ => {
+            let setup = args.physics.resolve()?;
+            plan.set_window(&setup.bins);
+            Some(setup)
+        }
+    };
+    Ok(Job {
+        device,
+        setup,
         t0: match &args.t0_from {
             Some(reference) => TimeZero::FromReference(reference.clone()),
             None => TimeZero::At(args.t0),
         },
-        region: args.roi,
-        duration: (!args.duration.is_zero()).then_some(args.duration),
-        resolution_ps: args.resolution,
-        tag_file: args.tags.clone(),
-        software: format!("scatterscope {}", env!("CARGO_PKG_VERSION")),
-        mock: MockJob {
-            scene: Scene::parse(&args.scene),
-            emitter: EmitterOptions {
-                rate_hz: args.rate,
-                dark_rate_hz: args.dark_rate,
-                afterpulse_probability: args.afterpulse,
-                t0_delay_ps: args.mock_delay,
-                seed: args.seed,
-                ..EmitterOptions::default()
-            },
-            device: MockOptions {
-                real_time: !args.unpaced,
-                max_photons: args.max_photons,
-                faults: args.faults.clone(),
-                replay_batches: args.replay,
-                ..MockOptions::default()
-            },
-        },
+        plan,
         out: args.out.clone(),
-    };
-    let bar = progress(job.duration.map(|d| d.as_millis()));
+    })
+}
+
+pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
+    let stop = crate::signals::stop_flag();
+    let job = job(args)?;
+    let bar = progress(job.plan.duration.map(|d| d.as_millis()));
     let done = job.run(stop, |p| {
         bar.set_position(p.elapsed.as_millis() as u64);
         bar.set_message(p.describe());
@@ -373,7 +371,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     let names: Vec<String> = done.files.iter().map(|f| f.display().to_string()).collect();
     println!("wrote {}", names.join(", "));
     done.verdict().map_err(anyhow::Error::msg)?;
-    match done.outcome.stop {
+    match done.outcome.end.stop {
         StopReason::Interrupted => Err(Interrupted(INTERRUPTED).into()),
         _ => Ok(()),
     }

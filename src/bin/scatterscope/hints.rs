@@ -5,6 +5,7 @@
 use std::error::Error;
 
 use scatterscope::acquire::JobError;
+use scatterscope::acquire::device::OpenError;
 use scatterscope::calibrate::CalibrateError;
 use scatterscope::calibrate::histogram::HistogramError;
 use scatterscope::config::ConfigError;
@@ -95,7 +96,11 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
         "lower --min-bin-photons"
     } else if let Some(ImportError::NoDataDir) = cause.downcast_ref::<ImportError>() {
         "pass --out"
-    } else if let Some(JobError::SensorTooLarge { .. }) = cause.downcast_ref::<JobError>() {
+    } else if let Some(JobError::Open {
+        source: OpenError::SensorTooLarge { .. },
+        ..
+    }) = cause.downcast_ref::<JobError>()
+    {
         "a smaller --size"
     } else {
         return None;

@@ -53,7 +53,7 @@ enum Command {
     Info(tags_cmd::InfoArgs),
     Bin(tags_cmd::BinArgs),
     Convert(tags_cmd::ConvertArgs),
-    Acquire(acquire::AcquireArgs),
+    Acquire(Box<acquire::AcquireArgs>),
     Devices(acquire::DevicesArgs),
     Batch(batch::BatchArgs),
     Denoise(denoise::DenoiseArgs),

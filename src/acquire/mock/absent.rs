@@ -1,0 +1,22 @@
+//! A build without the `mock` feature: the spec exists, no mock opens.
+
+use ndarray::Array2;
+
+use super::super::device::OpenError;
+use super::super::source::Source;
+use crate::physics::Setup;
+
+/// What a mock images: nothing in a build without the `mock` feature.
+#[derive(Debug, Clone, Default)]
+pub struct MockSpec {}
+
+/// There is no mock to open in this build.
+pub(crate) fn open_spec(
+    _: &MockSpec,
+    _: bool,
+    _: &Setup,
+) -> Result<(Box<dyn Source>, Array2<f64>), OpenError> {
+    Err(OpenError::Usage(
+        "this build has no mock device (it was built without the `mock` feature)".into(),
+    ))
+}
