@@ -1,16 +1,18 @@
 #!/usr/bin/env bash
 # Installs numpy and h5py under target/pydeps for scripts/cdt_reference.py,
 # the independent numpy implementation the confocal test compares against,
-# and ptufile, the independent PTU reader the PicoQuant acquisition test
-# decodes our PTU files with.
+# ptufile, the independent PTU reader the PicoQuant acquisition test
+# decodes our PTU files with, and playwright, which drives the system's
+# Chromium (Debian's package; its own browser download is never used) in
+# the live view's browser test.
 # Nothing is installed system-wide; the test sets PYTHONPATH to that folder.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dest=target/pydeps
-if PYTHONPATH="$dest" python3 -c "import numpy, h5py, ptufile" 2>/dev/null; then
-    echo "already present: numpy, h5py and ptufile under $dest"
+if PYTHONPATH="$dest" python3 -c "import numpy, h5py, ptufile, playwright" 2>/dev/null; then
+    echo "already present: numpy, h5py, ptufile and playwright under $dest"
     exit 0
 fi
 mkdir -p "$dest"
-python3 -m pip install --quiet --disable-pip-version-check --target "$dest" numpy h5py ptufile
-echo "installed numpy, h5py and ptufile under $dest"
+python3 -m pip install --quiet --disable-pip-version-check --target "$dest" numpy h5py ptufile playwright
+echo "installed numpy, h5py, ptufile and playwright under $dest"

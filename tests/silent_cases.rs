@@ -61,7 +61,7 @@ fn an_acquisition_that_receives_nothing_fails() {
     let (stdout, stderr) = text(&o);
     assert_eq!(o.status.code(), Some(1), "{stdout}\n{stderr}");
     assert!(
-        stderr.contains("nothing was received from the device"),
+        stderr.contains("no photon was received from the device"),
         "{stderr}"
     );
     // What was (not) received is still written and said.

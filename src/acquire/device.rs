@@ -88,6 +88,15 @@ impl std::fmt::Display for DeviceSpec {
 }
 
 impl DeviceSpec {
+    /// The scene a mock images, as its sensor sees it under `setup` (the
+    /// truth a reconstruction is judged against); `None` for hardware.
+    pub fn known_scene(&self, setup: &Setup) -> Option<Array2<f64>> {
+        match self {
+            Self::Mock(mock) | Self::MockSerial(mock) => super::mock::scene_truth(mock, setup),
+            _ => None,
+        }
+    }
+
     /// Whether this names a mock device.
     pub fn is_mock(&self) -> bool {
         matches!(self, Self::Mock(_) | Self::MockSerial(_))

@@ -10,7 +10,7 @@ use std::sync::atomic::AtomicBool;
 
 use super::calibration::t0_from_reference;
 use super::device::{DeviceSpec, OpenError, open_device};
-use super::pipeline::{AcquireError, Outcome, Plan, Progress, run};
+use super::pipeline::{AcquireError, Outcome, Plan, Progress, Snapshot, run_watched};
 use super::source::{SourceReport, StopReason};
 use crate::formats::png::{SheetScale, write_contact_sheet};
 use crate::physics::Setup;
@@ -104,6 +104,17 @@ impl Job {
         stop: &AtomicBool,
         progress: impl FnMut(&Progress),
     ) -> Result<Acquisition, JobError> {
+        self.run_watched(stop, progress, &mut |_| {})
+    }
+
+    /// [`Self::run`] with a watching stage (a live view): see
+    /// [`super::pipeline::run_watched`].
+    pub fn run_watched(
+        &self,
+        stop: &AtomicBool,
+        progress: impl FnMut(&Progress),
+        watch: &mut dyn FnMut(&Snapshot<'_>),
+    ) -> Result<Acquisition, JobError> {
         let io = |path: &Path| {
             let path = path.to_path_buf();
             move |source| JobError::Io { path, source }
@@ -141,9 +152,11 @@ impl Job {
         }
         let mut source = opened.source;
         let outcome =
-            run(source.as_mut(), &plan, stop, progress).map_err(|source| JobError::Acquire {
-                device: device.clone(),
-                source,
+            run_watched(source.as_mut(), &plan, stop, progress, watch).map_err(|source| {
+                JobError::Acquire {
+                    device: device.clone(),
+                    source,
+                }
             })?;
         let report = source.report(&outcome.ledger, outcome.region, &outcome.end.stop);
         drop(source);

@@ -32,6 +32,6 @@ pub use device::{DeviceSpec, OpenedDevice, open_device};
 pub use job::{Acquisition, Job, JobError, TimeZero};
 pub use ledger::{Ledger, Recording};
 pub use mock::MockSpec;
-pub use pipeline::{AcquireError, Outcome, Plan, Progress, run};
+pub use pipeline::{AcquireError, Outcome, Plan, Progress, Snapshot, run, run_watched};
 pub use record::AcquisitionRecord;
 pub use source::{Source, SourceFacts, StopReason};

@@ -33,6 +33,8 @@ use crate::tags::wire::bin_batch;
 
 /// How often the progress callback runs.
 const PROGRESS_EVERY: Duration = Duration::from_millis(100);
+/// How often a watching stage sees the counts.
+const WATCH_EVERY: Duration = Duration::from_millis(250);
 
 /// What to acquire and how to bin and record it.
 #[derive(Debug, Clone, PartialEq)]
@@ -106,6 +108,8 @@ pub struct Progress {
     pub binned: u64,
     /// Photons the device reported lost so far.
     pub lost_in_device: u64,
+    /// Marker records so far.
+    pub markers: u64,
     /// Frames rejected by their checks so far (a link of our own).
     pub damaged_frames: u64,
     /// The latest rates the device reported.
@@ -132,14 +136,29 @@ impl Progress {
                 inputs.join(" ")
             ));
         }
-        if self.lost_in_device > 0 {
-            s.push_str(&format!(", lost in device {}", self.lost_in_device));
-        }
+        s.push_str(&format!(", lost in device {}", self.lost_in_device));
         if self.damaged_frames > 0 {
             s.push_str(&format!(", damaged frames {}", self.damaged_frames));
         }
         s
     }
+}
+
+/// What a watching stage (a live view) sees every 250 ms: the progress and
+/// the counts so far, read in place (the stage copies what it keeps).
+pub struct Snapshot<'a> {
+    /// The counters.
+    pub progress: &'a Progress,
+    /// Counts so far, K x H x W.
+    pub counts: ndarray::ArrayView3<'a, u32>,
+    /// The binned window in device micro time: (first bin start, width), ps.
+    pub window_ps: (f64, f64),
+    /// The pixels of a sensor binned.
+    pub region: Option<Region>,
+    /// Time zero, ps (device micro time).
+    pub t0_ps: f64,
+    /// What the source said it is.
+    pub facts: &'a SourceFacts,
 }
 
 /// What the pipeline made of one acquisition.
@@ -413,7 +432,20 @@ pub fn run(
     source: &mut dyn Source,
     plan: &Plan,
     stop: &AtomicBool,
+    progress: impl FnMut(&Progress),
+) -> Result<Outcome, AcquireError> {
+    run_watched(source, plan, stop, progress, &mut |_| {})
+}
+
+/// [`run`] with one more stage, `watch`, that sees the counts so far every
+/// 250 ms on the pipeline's thread: it must return at once (a live view
+/// copies what it shows and hands slow work to a thread of its own).
+pub fn run_watched(
+    source: &mut dyn Source,
+    plan: &Plan,
+    stop: &AtomicBool,
     mut progress: impl FnMut(&Progress),
+    watch: &mut dyn FnMut(&Snapshot<'_>),
 ) -> Result<Outcome, AcquireError> {
     let facts = source.start(&StartRequest {
         resolution_fs: plan.resolution_fs,
@@ -449,6 +481,7 @@ pub fn run(
     let mut damaged_frames = 0u64;
     let started = Instant::now();
     let (mut last_progress, mut last_photons) = (started, 0u64);
+    let mut last_watch = started;
     let end = source.stream(plan.duration, stop, &mut |delivery| {
         match delivery {
             Delivery::Batch { payload, batch } => {
@@ -481,18 +514,33 @@ pub fn run(
         if last_progress.elapsed() >= PROGRESS_EVERY {
             let acc = binner.accounting();
             let dt = last_progress.elapsed().as_secs_f64();
-            progress(&Progress {
+            let p = Progress {
                 elapsed: started.elapsed(),
                 records: records_read,
                 photons: acc.received,
                 rate_hz: acc.received.saturating_sub(last_photons) as f64 / dt,
                 binned: acc.binned,
                 lost_in_device: counted_lost,
+                markers: acc.markers,
                 damaged_frames,
                 rates: latest_rates.clone(),
-            });
+            };
+            progress(&p);
             last_progress = Instant::now();
             last_photons = acc.received;
+            if last_watch.elapsed() >= WATCH_EVERY
+                && let Some(counts) = binner.counts_so_far()
+            {
+                last_watch = Instant::now();
+                watch(&Snapshot {
+                    progress: &p,
+                    counts,
+                    window_ps,
+                    region,
+                    t0_ps: plan.t0_ps,
+                    facts: &facts,
+                });
+            }
         }
     });
     let completion = if end.stop.is_planned_end() {

@@ -104,27 +104,46 @@ impl Outcome {
     /// reconstructs as it is. `source` says how it was made.
     pub fn stack(&self, plan: &Plan, setup: Option<&Setup>, source: String) -> Stack {
         let record = serde_json::to_value(self.record(plan)).expect("the record serialises");
-        let mut meta = StackMeta::measured(
-            self.window_ps.0 - plan.t0_ps,
-            self.window_ps.1,
-            self.counts.shape()[0],
+        stack_of(
+            self.counts.view(),
+            self.window_ps,
+            self.region,
+            plan.t0_ps,
+            setup,
             source,
             Some(record),
-        );
-        if let Some(setup) = setup {
-            let mut setup = match self.region {
-                Some(region) => cropped(setup, region),
-                None => setup.clone(),
-            };
-            setup.bins.start_ps = self.window_ps.0 - plan.t0_ps;
-            setup.bins.width_ps = self.window_ps.1;
-            setup.bins.count = self.counts.shape()[0];
-            meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
-            meta.setup = Some(setup);
-            meta.sampling = Some(Sampling::Integrated);
-        }
-        Stack::from_counts(self.counts.view(), meta)
+        )
     }
+}
+
+/// `counts` binned in the window `window_ps` (device micro time) as a stack
+/// with bins relative to `t0_ps`, `setup` cut to `region` when known, and
+/// `record` in the metadata: a finished acquisition's stack, or a live
+/// view's snapshot.
+pub fn stack_of(
+    counts: ndarray::ArrayView3<'_, u32>,
+    window_ps: (f64, f64),
+    region: Option<Region>,
+    t0_ps: f64,
+    setup: Option<&Setup>,
+    source: String,
+    record: Option<serde_json::Value>,
+) -> Stack {
+    let bins = counts.shape()[0];
+    let mut meta = StackMeta::measured(window_ps.0 - t0_ps, window_ps.1, bins, source, record);
+    if let Some(setup) = setup {
+        let mut setup = match region {
+            Some(region) => cropped(setup, region),
+            None => setup.clone(),
+        };
+        setup.bins.start_ps = window_ps.0 - t0_ps;
+        setup.bins.width_ps = window_ps.1;
+        setup.bins.count = bins;
+        meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
+        meta.setup = Some(setup);
+        meta.sampling = Some(Sampling::Integrated);
+    }
+    Stack::from_counts(counts, meta)
 }
 
 /// The same physics on `region` of `setup`'s sensor: the region's pixels at

@@ -706,6 +706,14 @@ impl Binner {
         }
     }
 
+    /// The counts binned so far into the latest stack (`None` before the
+    /// first photon), for a live view.
+    pub fn counts_so_far(&self) -> Option<ndarray::ArrayView3<'_, u32>> {
+        self.stacks.last().map(|s| {
+            ndarray::ArrayView3::from_shape(self.shape, s).expect("stack length matches its shape")
+        })
+    }
+
     /// Counts so far.
     pub fn accounting(&self) -> Accounting {
         self.accounting

@@ -20,3 +20,8 @@ pub(crate) fn open_spec(
         "this build has no mock device (it was built without the `mock` feature)".into(),
     ))
 }
+
+/// No mock, no scene.
+pub(crate) fn scene_truth(_: &MockSpec, _: &Setup) -> Option<Array2<f64>> {
+    None
+}

@@ -200,6 +200,14 @@ pub(crate) fn open_spec(
     Ok((Box::new(source), truth))
 }
 
+/// The scene of `spec` on the sensor of `setup` (`None` when it does not
+/// render there).
+pub(crate) fn scene_truth(spec: &MockSpec, setup: &Setup) -> Option<Array2<f64>> {
+    spec.scene
+        .render(setup.sensor.height_px, setup.sensor.width_px)
+        .ok()
+}
+
 /// A mock's known scene as the sensor sees it: the expected stack at the
 /// set-up's light budget, to put a mock acquisition's reconstruction in
 /// the scene's units.

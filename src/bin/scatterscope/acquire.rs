@@ -8,6 +8,7 @@ use crate::signals::Interrupted;
 use scatterscope::acquire::picoquant::{PicoQuantDevice, SettingsRequest};
 use scatterscope::acquire::{DeviceSpec, Job, MockSpec, Plan, StopReason, TimeZero, device};
 use scatterscope::config::{parse_duration, parse_ps};
+use scatterscope::live::LiveView;
 use scatterscope::scene::Scene;
 use scatterscope::tags::Imaging;
 use scatterscope::tags::bin_file::Pixels;
@@ -87,6 +88,16 @@ pub struct AcquireArgs {
     faults: Faults,
     #[command(flatten)]
     picoquant: PicoQuantArgs,
+    /// Serve a live view of the run (rates, decay, image, ledger, the
+    /// reconstruction as it forms) on 127.0.0.1 at a free port, or on
+    /// ADDRESS:PORT (any other address than loopback gets an access token,
+    /// printed with the address).
+    #[arg(long, value_name = "ADDRESS:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:0")]
+    live: Option<String>,
+    /// With --live: keep serving the final page this long after the run
+    /// (Ctrl-C ends it sooner).
+    #[arg(long, value_name = "TIME", value_parser = parse_duration, default_value = "0s", requires = "live")]
+    linger: Duration,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/acquire")]
     out: PathBuf,
@@ -356,11 +367,29 @@ fn job(args: &AcquireArgs) -> anyhow::Result<Job> {
 pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     let stop = crate::signals::stop_flag();
     let job = job(args)?;
+    let live = args
+        .live
+        .as_deref()
+        .map(|addr| LiveView::start(Some(addr)))
+        .transpose()?;
+    let mut stage = live.as_ref().map(|view| {
+        println!("live view: {}", view.url());
+        let truth = job.setup.as_ref().and_then(|s| job.device.known_scene(s));
+        view.stage(job.setup.clone(), truth)
+    });
     let bar = progress(job.plan.duration.map(|d| d.as_millis()));
-    let done = job.run(stop, |p| {
-        bar.set_position(p.elapsed.as_millis() as u64);
-        bar.set_message(p.describe());
-    })?;
+    let done = job.run_watched(
+        stop,
+        |p| {
+            bar.set_position(p.elapsed.as_millis() as u64);
+            bar.set_message(p.describe());
+        },
+        &mut |s| {
+            if let Some(stage) = stage.as_mut() {
+                stage.watch(s);
+            }
+        },
+    )?;
     bar.finish_and_clear();
     for note in &done.notes {
         println!("{note}");
@@ -370,6 +399,22 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     }
     let names: Vec<String> = done.files.iter().map(|f| f.display().to_string()).collect();
     println!("wrote {}", names.join(", "));
+    if let (Some(view), Some(stage)) = (&live, stage) {
+        view.finish(&done);
+        if !args.linger.is_zero() {
+            stage.finish(&done);
+            println!(
+                "live view: the final page stays up for {:?} (Ctrl-C ends it)",
+                args.linger
+            );
+            let until = std::time::Instant::now() + args.linger;
+            while std::time::Instant::now() < until
+                && !stop.load(std::sync::atomic::Ordering::Relaxed)
+            {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
+    }
     done.verdict().map_err(anyhow::Error::msg)?;
     match done.outcome.end.stop {
         StopReason::Interrupted => Err(Interrupted(INTERRUPTED).into()),

@@ -1,0 +1,201 @@
+//! The reconstruction of snapshots of a running acquisition, on a thread
+//! of its own: the default method (`auto`) with the default prior, on the
+//! stack accumulated so far; a snapshot offered while one runs is dropped
+//! (the next one is newer), so the acquisition never waits for it. Its
+//! threads run at the lowest scheduling priority, on all cores but one:
+//! the acquisition comes first.
+
+use std::path::Path;
+use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+use ndarray::{Array2, ArrayView2};
+
+use super::state::{Image, LiveReconstruction, LiveState, TracePoint};
+use crate::denoise::prior::PriorSpec;
+use crate::reconstruct::input::{InputSpec, prepare};
+use crate::reconstruct::method::{Method, MethodOptions, run_method};
+use crate::stack::Stack;
+
+/// A snapshot to reconstruct.
+struct Snapshot {
+    stack: Stack,
+    acquired_s: f64,
+    photons: u64,
+}
+
+/// The reconstruction thread.
+pub struct Reconstructor {
+    tx: Option<SyncSender<Snapshot>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+/// PSNR of `image` against `truth` after the gain that best fits the truth
+/// (least squares); `None` when the shapes differ or the image is dark.
+pub fn psnr_fitted(image: ArrayView2<f64>, truth: ArrayView2<f64>) -> Option<f64> {
+    if image.dim() != truth.dim() {
+        return None;
+    }
+    let (xy, xx) = image
+        .iter()
+        .zip(truth.iter())
+        .fold((0.0, 0.0), |(xy, xx), (&x, &y)| (xy + x * y, xx + x * x));
+    if xx <= 0.0 {
+        return None;
+    }
+    let scaled = image.mapv(|v| v * xy / xx);
+    Some(crate::metrics::psnr(scaled.view(), truth))
+}
+
+/// The calling thread at the lowest scheduling priority (Linux schedules
+/// threads one by one; elsewhere nothing changes).
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: setpriority on the calling thread (who = 0) with a valid
+    // priority; it only fails for lack of permission to raise it.
+    unsafe {
+        libc::setpriority(libc::PRIO_PROCESS, 0, 19);
+    }
+}
+
+impl Reconstructor {
+    /// Starts the thread; results go into `state`, scored against `truth`
+    /// when it is known.
+    pub fn start(state: Arc<Mutex<LiveState>>, truth: Option<Array2<f64>>) -> Self {
+        let (tx, rx) = sync_channel::<Snapshot>(1);
+        let thread = std::thread::spawn(move || {
+            lower_priority();
+            let threads = std::thread::available_parallelism()
+                .map_or(1, |n| n.get().saturating_sub(1).max(1));
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .start_handler(|_| lower_priority())
+                .build();
+            let denoiser = PriorSpec::default().build();
+            for snap in rx {
+                let started = Instant::now();
+                let result = denoiser
+                    .as_ref()
+                    .map_err(|e| e.to_string())
+                    .and_then(|denoiser| {
+                        let input = prepare(
+                            snap.stack.data.clone(),
+                            Some(snap.stack.meta.clone()),
+                            Path::new("the live snapshot"),
+                            &InputSpec::default(),
+                        )
+                        .map_err(|e| e.to_string())?;
+                        let kept: Vec<usize> = input
+                            .problem
+                            .bin_starts_ps
+                            .iter()
+                            .filter_map(|&t| {
+                                let m = &snap.stack.meta;
+                                m.bin_starts_ps.iter().position(|&s| (s - t).abs() < 1e-6)
+                            })
+                            .collect();
+                        let run = || {
+                            run_method(
+                                &input.problem,
+                                Method::Auto,
+                                None,
+                                denoiser.as_ref(),
+                                &MethodOptions::default(),
+                                None,
+                                |_| {},
+                            )
+                        };
+                        let rec = match &pool {
+                            Ok(pool) => pool.install(run),
+                            Err(_) => run(),
+                        }
+                        .map_err(|e| e.to_string())?;
+                        Ok((rec, kept, input.assumed))
+                    });
+                let run_s = started.elapsed().as_secs_f64();
+                let mut s = state.lock().unwrap_or_else(|e| e.into_inner());
+                match result {
+                    Ok((rec, kept, assumed)) => {
+                        let psnr_db = truth
+                            .as_ref()
+                            .and_then(|t| psnr_fitted(rec.image.view(), t.view()));
+                        let (h, w) = rec.image.dim();
+                        let mut notes = assumed;
+                        notes.extend(rec.trace.notes.iter().cloned());
+                        s.decay.kept = kept;
+                        s.trace.push(TracePoint {
+                            acquired_s: snap.acquired_s,
+                            photons: snap.photons,
+                            psnr_db,
+                            run_s,
+                        });
+                        s.reconstruction = Some(LiveReconstruction {
+                            acquired_s: snap.acquired_s,
+                            photons: snap.photons,
+                            method: rec.trace.method.clone(),
+                            run_s,
+                            image: Image {
+                                width: w,
+                                height: h,
+                                values: rec.image.iter().map(|&v| v as f32).collect(),
+                            },
+                            notes,
+                            psnr_db,
+                        });
+                        s.reconstruction_error = None;
+                    }
+                    Err(e) => s.reconstruction_error = Some(e),
+                }
+                s.version += 1;
+            }
+        });
+        Self {
+            tx: Some(tx),
+            thread: Some(thread),
+        }
+    }
+
+    /// Offers a snapshot; `false` when one is still being reconstructed
+    /// (the snapshot is dropped: the next is newer).
+    pub fn offer(&self, stack: Stack, acquired_s: f64, photons: u64) -> bool {
+        let Some(tx) = &self.tx else {
+            return false;
+        };
+        match tx.try_send(Snapshot {
+            stack,
+            acquired_s,
+            photons,
+        }) {
+            Ok(()) => true,
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => false,
+        }
+    }
+
+    /// Lets the last snapshot finish and ends the thread.
+    pub fn finish(mut self) {
+        drop(self.tx.take());
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_fitted_psnr_ignores_the_gain_and_sees_the_error() {
+        let truth = Array2::from_shape_fn((8, 8), |(y, x)| ((x + y) % 3) as f64);
+        let scaled = truth.mapv(|v| 7.0 * v);
+        assert!(psnr_fitted(scaled.view(), truth.view()).unwrap() > 100.0);
+        let mut off = scaled.clone();
+        off[(2, 2)] += 5.0;
+        let p = psnr_fitted(off.view(), truth.view()).unwrap();
+        assert!(p.is_finite() && p < 60.0, "{p}");
+        assert!(psnr_fitted(Array2::zeros((8, 8)).view(), truth.view()).is_none());
+        assert!(psnr_fitted(Array2::ones((4, 8)).view(), truth.view()).is_none());
+    }
+}

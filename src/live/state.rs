@@ -1,0 +1,174 @@
+//! What the live page shows, updated by the acquisition's watching stage
+//! and by the reconstruction thread, read by the server.
+
+use serde::Serialize;
+
+use crate::acquire::{Ledger, Snapshot};
+
+/// Rates kept for the page: the last minute.
+pub const RATE_HISTORY_S: f64 = 60.0;
+
+/// One point of the rate plot.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct RatePoint {
+    /// Seconds since the start.
+    pub t_s: f64,
+    /// Photons received per second.
+    pub photons_per_s: f64,
+    /// Count rate of each input the device reports (counts/s); empty when
+    /// it reports none.
+    pub inputs: Vec<f64>,
+}
+
+/// The decay histogram: photons per bin over every pixel.
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct Decay {
+    /// Start of the first bin after time zero, ps.
+    pub start_ps: f64,
+    /// Bin width, ps.
+    pub width_ps: f64,
+    /// Photons per bin.
+    pub counts: Vec<u64>,
+    /// The bins the last reconstruction kept (enough light to use).
+    pub kept: Vec<usize>,
+}
+
+/// An image: row-major values.
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct Image {
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Values, row-major.
+    pub values: Vec<f32>,
+}
+
+/// The counters so far.
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct Counters {
+    /// Records read.
+    pub records: u64,
+    /// Photons received.
+    pub photons: u64,
+    /// Photons binned.
+    pub binned: u64,
+    /// Photons the device reported lost.
+    pub lost_in_device: u64,
+    /// Marker records.
+    pub markers: u64,
+    /// Frames that failed their checks.
+    pub damaged_frames: u64,
+}
+
+/// One reconstruction of a snapshot.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct LiveReconstruction {
+    /// Seconds of acquisition the snapshot holds.
+    pub acquired_s: f64,
+    /// Photons in it.
+    pub photons: u64,
+    /// The method that ran (the default, `auto`, says which it chose).
+    pub method: String,
+    /// Seconds the reconstruction took.
+    pub run_s: f64,
+    /// The image, on the sensor's grid.
+    pub image: Image,
+    /// Its notes (what it assumed, chose and left out).
+    pub notes: Vec<String>,
+    /// PSNR against the known truth (mock scenes), dB, after the gain that
+    /// best fits the truth (a snapshot's light budget is not yet known).
+    pub psnr_db: Option<f64>,
+}
+
+/// One point of the error-against-run-time trace.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct TracePoint {
+    /// Seconds of acquisition.
+    pub acquired_s: f64,
+    /// Photons.
+    pub photons: u64,
+    /// PSNR against the truth, dB.
+    pub psnr_db: Option<f64>,
+    /// Seconds the reconstruction took.
+    pub run_s: f64,
+}
+
+/// Everything the page shows.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct LiveState {
+    /// The device, in words.
+    pub device: String,
+    /// Seconds since the start.
+    pub elapsed_s: f64,
+    /// Whether the acquisition has ended (then `ledger` is final).
+    pub done: bool,
+    /// Why it ended, once it has.
+    pub ended: Option<String>,
+    /// Rates over the last minute.
+    pub rates: Vec<RatePoint>,
+    /// The decay histogram.
+    pub decay: Decay,
+    /// The accumulated intensity image (photons per pixel).
+    pub image: Image,
+    /// The counters so far.
+    pub counters: Counters,
+    /// The final ledger, once the acquisition ended.
+    pub ledger: Option<Ledger>,
+    /// The final ledger as the summary prints it.
+    pub ledger_table: Vec<String>,
+    /// The latest reconstruction.
+    pub reconstruction: Option<LiveReconstruction>,
+    /// Error against run time: one point per reconstruction.
+    pub trace: Vec<TracePoint>,
+    /// What the reconstruction of a snapshot could not do, if it failed.
+    pub reconstruction_error: Option<String>,
+    /// Increments on every change.
+    pub version: u64,
+}
+
+impl LiveState {
+    /// Takes in a snapshot of the running acquisition: counters, rates,
+    /// decay histogram and image (summed over bins), copied.
+    pub fn update(&mut self, s: &Snapshot<'_>) {
+        let p = s.progress;
+        self.device = format!(
+            "{} ({} {})",
+            s.facts.device.link, s.facts.device.model, s.facts.device.serial
+        );
+        self.elapsed_s = p.elapsed.as_secs_f64();
+        self.counters = Counters {
+            records: p.records,
+            photons: p.photons,
+            binned: p.binned,
+            lost_in_device: p.lost_in_device,
+            markers: p.markers,
+            damaged_frames: p.damaged_frames,
+        };
+        self.rates.push(RatePoint {
+            t_s: self.elapsed_s,
+            photons_per_s: p.rate_hz,
+            inputs: p.rates.as_ref().map_or(Vec::new(), |r| r.inputs.clone()),
+        });
+        let keep_from = self.elapsed_s - RATE_HISTORY_S;
+        self.rates.retain(|r| r.t_s >= keep_from);
+        let (k, h, w) = s.counts.dim();
+        let mut decay = vec![0u64; k];
+        let mut image = vec![0f32; h * w];
+        for (b, plane) in s.counts.outer_iter().enumerate() {
+            for (i, &c) in plane.iter().enumerate() {
+                decay[b] += u64::from(c);
+                image[i] += c as f32;
+            }
+        }
+        self.decay.start_ps = s.window_ps.0 - s.t0_ps;
+        self.decay.width_ps = s.window_ps.1;
+        self.decay.counts = decay;
+        self.image = Image {
+            width: w,
+            height: h,
+            values: image,
+        };
+        self.version += 1;
+    }
+}

@@ -1,0 +1,309 @@
+//! The live view of a running acquisition: opened in a real headless
+//! browser (Debian's Chromium, driven by playwright), it shows rates,
+//! decay, image and the reconstruction as they update, and once the run
+//! ends the ledger the acquisition wrote; a stuck browser does not stall
+//! the acquisition; a view shared on the network needs its token.
+
+#[path = "common/standin.rs"]
+mod standin;
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Starts `acquire` with `args`; returns the child and the live view's
+/// address from its first line.
+fn start(args: &[&str], env: &[(&str, &str)]) -> (Child, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .arg("acquire")
+        .args(args)
+        .envs(env.iter().copied())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.as_mut().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let url = line
+        .trim()
+        .strip_prefix("live view: ")
+        .unwrap_or_else(|| panic!("first line: {line}"))
+        .to_string();
+    (child, url)
+}
+
+/// Ends a lingering run (Ctrl-C) and waits for it; its exit status.
+fn stop(mut child: Child) -> std::process::ExitStatus {
+    unsafe {
+        libc::kill(child.id() as i32, libc::SIGINT);
+    }
+    let mut rest = String::new();
+    child
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut rest)
+        .unwrap();
+    child.wait().unwrap()
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// Runs the browser check on `url`; the page's report.
+fn browse(url: &str, reconstruction: bool) -> serde_json::Value {
+    let pydeps = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/pydeps");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/live/browser_check.py");
+    let o = Command::new("python3")
+        .arg(&script)
+        .arg(url)
+        .arg(if reconstruction { "1" } else { "0" })
+        .env("PYTHONPATH", &pydeps)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+/// The page's ledger equals the one the acquisition wrote.
+fn assert_same_ledger(page: &serde_json::Value, record: &serde_json::Value) {
+    let on_page = &page["ledger_on_page"];
+    let ledger = &record["ledger"];
+    for field in [
+        "records_read",
+        "photons",
+        "binned",
+        "outside_window",
+        "lost_in_device",
+        "markers",
+    ] {
+        assert_eq!(
+            on_page[field].as_str().unwrap(),
+            ledger[field].to_string(),
+            "{field}: page {on_page}, record {ledger}"
+        );
+    }
+}
+
+fn assert_shown_and_updating(page: &serde_json::Value) {
+    assert!(page["errors"].as_array().unwrap().is_empty(), "{page}");
+    assert!(page["updates"].as_u64().unwrap() >= 3, "{page}");
+    for grew in [
+        "photons_grew",
+        "decay_grew",
+        "image_grew",
+        "rate_points_grew",
+    ] {
+        assert_eq!(page[grew], true, "{grew}: {page}");
+    }
+    for plot in ["rates", "decay", "image"] {
+        assert!(
+            page["inked"][plot].as_u64().unwrap() > 1000,
+            "{plot}: {page}"
+        );
+    }
+    assert!(
+        page["status"]
+            .as_str()
+            .unwrap()
+            .contains("ended: the planned duration elapsed")
+    );
+}
+
+#[test]
+#[ignore = "needs Chromium (/usr/bin/chromium) and playwright under target/pydeps (scripts/fetch_python_deps.sh)"]
+fn a_browser_sees_a_mock_run_form_and_ends_on_its_ledger() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("acq");
+    let (child, url) = start(
+        &[
+            "--device",
+            "mock",
+            "--size",
+            "32",
+            "--fov",
+            "6cm",
+            "--duration",
+            "8s",
+            "--live",
+            "--linger",
+            "120s",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[],
+    );
+    assert!(
+        url.starts_with("http://127.0.0.1:") && !url.contains("token"),
+        "{url}"
+    );
+    let page = browse(&url, true);
+    let status = stop(child);
+    assert!(status.success(), "{status:?}");
+    assert_shown_and_updating(&page);
+    let recon = &page["reconstruction"];
+    assert!(recon["notes"].as_u64().unwrap() > 0, "{page}");
+    assert!(page["inked"]["recon"].as_u64().unwrap() > 1000, "{page}");
+    // The error against run time: the mock's scene is known.
+    let trace = page["trace"].as_array().unwrap();
+    assert!(
+        trace
+            .iter()
+            .all(|p| p["psnr_db"].as_f64().is_some_and(f64::is_finite)),
+        "{page}"
+    );
+    assert_same_ledger(&page, &json(&out.join("acquisition.json")));
+}
+
+#[test]
+#[ignore = "needs Chromium (/usr/bin/chromium) and playwright under target/pydeps (scripts/fetch_python_deps.sh)"]
+fn a_browser_sees_a_picoquant_run_with_its_rates_and_ledger() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("acq");
+    let lib = standin::standin_library();
+    let (child, url) = start(
+        &[
+            "--device",
+            "picoquant:multiharp",
+            "--vendor-lib",
+            lib.to_str().unwrap(),
+            "--duration",
+            "5s",
+            "--live",
+            "--linger",
+            "120s",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[("SCATTERSCOPE_PQ_MOCK", "rate=2e6")],
+    );
+    let page = browse(&url, false);
+    let status = stop(child);
+    assert!(status.success(), "{status:?}");
+    assert_shown_and_updating(&page);
+    assert_same_ledger(&page, &json(&out.join("acquisition.json")));
+}
+
+/// A browser that connects and never reads: the acquisition runs to its
+/// end all the same, with every photon accounted for.
+#[test]
+fn a_stuck_browser_does_not_stall_the_acquisition() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("acq");
+    let (mut child, url) = start(
+        &[
+            "--size",
+            "16",
+            "--fov",
+            "3cm",
+            "--unpaced",
+            "--max-photons",
+            "3000000",
+            "--duration",
+            "0",
+            "--live",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[],
+    );
+    let addr = url.trim_start_matches("http://").trim_end_matches('/');
+    let mut stuck = Vec::new();
+    for _ in 0..3 {
+        let mut s = std::net::TcpStream::connect(addr).unwrap();
+        s.write_all(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+            .unwrap();
+        stuck.push(s);
+    }
+    let started = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(120),
+            "the run stalled"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(status.success(), "{status:?}");
+    let record = json(&out.join("acquisition.json"));
+    assert_eq!(record["ledger"]["photons"], 3_000_000, "{record}");
+    assert_eq!(record["stop"], "device_stopped");
+}
+
+/// Shared on the network, the view answers only with its token.
+#[test]
+fn a_shared_view_needs_its_token() {
+    let dir = tempfile::tempdir().unwrap();
+    let (child, url) = start(
+        &[
+            "--size",
+            "16",
+            "--fov",
+            "3cm",
+            "--duration",
+            "1s",
+            "--live",
+            "0.0.0.0:0",
+            "--linger",
+            "60s",
+            "--out",
+            dir.path().join("acq").to_str().unwrap(),
+        ],
+        &[],
+    );
+    let (base, token) = url
+        .split_once("/?token=")
+        .unwrap_or_else(|| panic!("{url}"));
+    assert_eq!(token.len(), 32, "{url}");
+    let port = base.rsplit(':').next().unwrap();
+    let get = |path: &str| {
+        let mut s = std::net::TcpStream::connect(format!("127.0.0.1:{port}")).unwrap();
+        write!(
+            s,
+            "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        let mut r = String::new();
+        s.read_to_string(&mut r).unwrap();
+        r.lines().next().unwrap_or_default().to_string()
+    };
+    assert!(get("/state").contains("403"), "without the token");
+    assert!(
+        get("/state?token=0123").contains("403"),
+        "with a wrong token"
+    );
+    assert!(get(&format!("/state?token={token}")).contains("200"));
+    assert!(get(&format!("/?token={token}")).contains("200"));
+    // The run ends on its duration; then Ctrl-C ends the lingering page.
+    let state = |path: &str| {
+        let mut s = std::net::TcpStream::connect(format!("127.0.0.1:{port}")).unwrap();
+        write!(
+            s,
+            "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        let mut r = String::new();
+        s.read_to_string(&mut r).unwrap();
+        r
+    };
+    let started = Instant::now();
+    while !state(&format!("/state?token={token}")).contains("\"done\":true") {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the run did not end"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(stop(child).success());
+}
