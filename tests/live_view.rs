@@ -307,3 +307,80 @@ fn a_shared_view_needs_its_token() {
     }
     assert!(stop(child).success());
 }
+
+/// A recording played back shows in the same view: the page's state ends
+/// on the replay's ledger, which is the recording's.
+#[test]
+fn a_replay_shows_in_the_live_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let tags = dir.path().join("run.sstags");
+    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args([
+            "acquire",
+            "--size",
+            "8",
+            "--fov",
+            "2cm",
+            "--duration",
+            "1s",
+            "--tags",
+        ])
+        .arg(&tags)
+        .arg("--out")
+        .arg(dir.path().join("original"))
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let out = dir.path().join("replayed");
+    let device = format!("replay:{}", tags.display());
+    let (child, url) = start(
+        &[
+            "--device",
+            &device,
+            "--size",
+            "8",
+            "--fov",
+            "2cm",
+            "--live",
+            "--linger",
+            "60s",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[],
+    );
+    let addr = url.trim_start_matches("http://").trim_end_matches('/');
+    let state = || {
+        let mut s = std::net::TcpStream::connect(addr).unwrap();
+        write!(
+            s,
+            "GET /state HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        let mut r = String::new();
+        s.read_to_string(&mut r).unwrap();
+        let body = r.split_once("\r\n\r\n").map_or("", |(_, b)| b).to_string();
+        serde_json::from_str::<serde_json::Value>(&body).unwrap()
+    };
+    let started = Instant::now();
+    let last = loop {
+        let s = state();
+        if s["done"] == true {
+            break s;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the replay did not end"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert!(stop(child).success());
+    let original = json(&dir.path().join("original/acquisition.json"));
+    assert_eq!(last["ledger"]["photons"], original["ledger"]["photons"]);
+    assert!(
+        last["device"].as_str().unwrap().contains("replay of"),
+        "{}",
+        last["device"]
+    );
+    assert_eq!(last["ended"], "the recording reached its end");
+}

@@ -231,3 +231,94 @@ print(photons)
     let photons: u64 = String::from_utf8_lossy(&p.stdout).trim().parse().unwrap();
     assert_eq!(photons, record["ledger"]["photons"].as_u64().unwrap());
 }
+
+/// A recording played back (`--device replay:FILE`) runs the same pipeline
+/// at its recorded pace: the same photons into the same stack, and at
+/// least the recorded time over the speed.
+#[test]
+fn a_replay_of_a_recording_gives_its_stack_at_its_pace() {
+    let dir = tempfile::tempdir().unwrap();
+    let tags = dir.path().join("run.sstags");
+    let run = |args: &[&str]| {
+        let o = scatterscope(args);
+        assert!(o.status.success(), "{}", text(&o));
+        o
+    };
+    let original = dir.path().join("original");
+    let replayed = dir.path().join("replayed");
+    let common = ["--size", "8", "--fov", "2cm"];
+    let mut a = vec![
+        "acquire",
+        "--duration",
+        "1s",
+        "--tags",
+        tags.to_str().unwrap(),
+    ];
+    a.extend(common);
+    a.extend(["--out", original.to_str().unwrap()]);
+    run(&a);
+    let device = format!("replay:{}", tags.display());
+    let mut r = vec!["acquire", "--device", &device, "--speed", "4"];
+    r.extend(common);
+    r.extend(["--out", replayed.to_str().unwrap()]);
+    let o = run(&r);
+    assert!(
+        text(&o).contains("the recording reached its end"),
+        "{}",
+        text(&o)
+    );
+    let (first, again) = (
+        json(&original.join("acquisition.json")),
+        json(&replayed.join("acquisition.json")),
+    );
+    assert_eq!(first["ledger"]["photons"], again["ledger"]["photons"]);
+    assert_eq!(again["stop"], "end_of_recording");
+    let load = |d: &Path| scatterscope::stack::Stack::load(&d.join("stack.exr")).unwrap();
+    assert_eq!(load(&original).data, load(&replayed).data);
+    let recorded_s = first["elapsed_s"].as_f64().unwrap();
+    assert!(
+        again["elapsed_s"].as_f64().unwrap() >= 0.8 * recorded_s / 4.0,
+        "{} s for {recorded_s} s at 4x",
+        again["elapsed_s"]
+    );
+
+    // A PicoQuant recording the same way.
+    let lib = standin::standin_library();
+    let pq = dir.path().join("pq");
+    let o = standin::scatterscope_pq(
+        &[
+            "acquire",
+            "--device",
+            "picoquant:hydraharp",
+            "--vendor-lib",
+            lib.to_str().unwrap(),
+            "--duration",
+            "500ms",
+            "--out",
+            pq.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let device = format!("replay:{}", pq.join("acquisition.ptu").display());
+    let pq_again = dir.path().join("pq-again");
+    run(&[
+        "acquire",
+        "--device",
+        &device,
+        "--speed",
+        "2",
+        "--out",
+        pq_again.to_str().unwrap(),
+    ]);
+    let (first, again) = (
+        json(&pq.join("acquisition.json")),
+        json(&pq_again.join("acquisition.json")),
+    );
+    assert_eq!(first["ledger"]["photons"], again["ledger"]["photons"]);
+    assert_eq!(
+        first["ledger"]["records_read"],
+        again["ledger"]["records_read"]
+    );
+    assert_eq!(load(&pq).data, load(&pq_again).data);
+}

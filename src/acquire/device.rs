@@ -32,6 +32,8 @@ pub enum DeviceSpec {
     Usb(UsbSelector),
     /// A PicoQuant time tagger through the vendor's library.
     PicoQuant(PicoQuantDevice),
+    /// A recording played back at its recorded pace.
+    Replay(super::replay::ReplaySpec),
 }
 
 impl FromStr for DeviceSpec {
@@ -62,11 +64,19 @@ impl FromStr for DeviceSpec {
                             )),
                         },
                     }
+                } else if let Some(path) = s.strip_prefix("replay:") {
+                    if path.is_empty() {
+                        return Err("`replay:` needs a recording, e.g. replay:run.ptu".into());
+                    }
+                    Ok(Self::Replay(super::replay::ReplaySpec {
+                        path: path.into(),
+                        speed: 1.0,
+                    }))
                 } else if let Some(rest) = s.strip_prefix("usb:") {
                     rest.parse().map(Self::Usb)
                 } else {
                     Err(format!(
-                        "unknown device `{s}`: use mock, mock-serial, serial:PATH, usb:VID:PID[:SERIAL] or picoquant[:FAMILY][:SERIAL] (see `scatterscope devices`)"
+                        "unknown device `{s}`: use mock, mock-serial, serial:PATH, usb:VID:PID[:SERIAL], picoquant[:FAMILY][:SERIAL] or replay:FILE (see `scatterscope devices`)"
                     ))
                 }
             }
@@ -83,6 +93,7 @@ impl std::fmt::Display for DeviceSpec {
             Self::Serial(p) => write!(f, "serial:{p}"),
             Self::Usb(sel) => write!(f, "{sel}"),
             Self::PicoQuant(spec) => write!(f, "{spec}"),
+            Self::Replay(r) => write!(f, "replay:{}", r.path.display()),
         }
     }
 }
@@ -94,6 +105,19 @@ impl DeviceSpec {
         match self {
             Self::Mock(mock) | Self::MockSerial(mock) => super::mock::scene_truth(mock, setup),
             _ => None,
+        }
+    }
+
+    /// Whether the device is a sensor array of the wire protocol (our own
+    /// devices, the mocks, a tag file played back), whose stack takes the
+    /// sample's physics and window; else a vendor's point detector or
+    /// scanner (a PicoQuant device, a PTU played back), binned over its
+    /// sync period unless a window is given.
+    pub fn is_sensor(&self) -> bool {
+        match self {
+            Self::PicoQuant(_) => false,
+            Self::Replay(r) => crate::formats::sstags::is_tag_file(&r.path),
+            _ => true,
         }
     }
 
@@ -225,6 +249,13 @@ pub fn open_device(spec: &DeviceSpec, setup: Option<&Setup>) -> Result<OpenedDev
         )?)),
         DeviceSpec::PicoQuant(device) => Ok(OpenedDevice {
             source: Box::new(PicoQuantSource::open(device)?),
+            truth: None,
+        }),
+        DeviceSpec::Replay(r) => Ok(OpenedDevice {
+            source: Box::new(
+                super::replay::FileSource::open(&r.path, r.speed)
+                    .map_err(|e| OpenError::Usage(e.to_string()))?,
+            ),
             truth: None,
         }),
         DeviceSpec::Usb(sel) => {

@@ -9,6 +9,7 @@
 //! - [`link`]: our own devices on the wire protocol.
 //! - [`picoquant`]: PicoQuant devices through the vendor's library.
 //! - [`mock`]: the emulated time tagger (the `mock` feature).
+//! - [`replay`]: a recorded file played back at its recorded pace.
 //! - [`pipeline`]: the stages every source's stream runs through.
 //! - [`ledger`]: where every photon and record went; the totals balance.
 //! - [`record`]: the outcome as a stack, with the typed record of the
@@ -26,6 +27,7 @@ pub mod mock;
 pub mod picoquant;
 pub mod pipeline;
 pub mod record;
+pub mod replay;
 pub mod source;
 
 pub use device::{DeviceSpec, OpenedDevice, open_device};

@@ -140,8 +140,11 @@ pub enum StopReason {
     NoStopAnswer,
     /// The device's FIFO overran: records after it were lost in the device.
     FifoOverrun,
-    /// A library call failed mid-run (the vendor's text).
+    /// A library call failed mid-run (the vendor's text), or a recording
+    /// played back could not be read on.
     DeviceError(String),
+    /// A recording played back reached its end.
+    EndOfRecording,
 }
 
 impl StopReason {
@@ -157,13 +160,17 @@ impl StopReason {
             Self::NoStopAnswer => "the device did not confirm Stop in time".into(),
             Self::FifoOverrun => "FIFO overrun: the device lost records and stopped (lower the count rate, or read faster)".into(),
             Self::DeviceError(e) => format!("device error: {e}"),
+            Self::EndOfRecording => "the recording reached its end".into(),
         }
     }
 
     /// Whether the run reached its planned end (the recordings say
     /// complete) rather than being cut short.
     pub fn is_planned_end(&self) -> bool {
-        matches!(self, Self::Duration | Self::DeviceStopped)
+        matches!(
+            self,
+            Self::Duration | Self::DeviceStopped | Self::EndOfRecording
+        )
     }
 }
 

@@ -301,6 +301,14 @@ impl TagFile {
         self,
         mut on_batch: impl FnMut(&EventBatch<'_>),
     ) -> Result<TagFileSummary, TagFileError> {
+        self.read_payloads(|_, batch| on_batch(batch))
+    }
+
+    /// [`Self::read`] with each batch's payload as recorded, byte for byte.
+    pub fn read_payloads(
+        self,
+        mut on_batch: impl FnMut(&[u8], &EventBatch<'_>),
+    ) -> Result<TagFileSummary, TagFileError> {
         let Self {
             path,
             mut file,
@@ -331,7 +339,7 @@ impl TagFile {
             decoder.push_with(&buf[..n], |frame| match FromDevice::parse(frame) {
                 FromDevice::Events(b) => {
                     summary.batches += 1;
-                    on_batch(&b);
+                    on_batch(frame.payload, &b);
                 }
                 FromDevice::Response(ResponseFrame {
                     id,

@@ -6,6 +6,7 @@ use std::time::Duration;
 use crate::shared_args::{PhysicsArgs, choice, progress};
 use crate::signals::Interrupted;
 use scatterscope::acquire::picoquant::{PicoQuantDevice, SettingsRequest};
+use scatterscope::acquire::replay::ReplaySpec;
 use scatterscope::acquire::{DeviceSpec, Job, MockSpec, Plan, StopReason, TimeZero, device};
 use scatterscope::config::{parse_duration, parse_ps};
 use scatterscope::live::LiveView;
@@ -25,15 +26,17 @@ use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
 #[derive(Debug, clap::Args)]
 pub struct AcquireArgs {
     /// mock (in-process USB), mock-serial (pseudo-terminal),
-    /// serial:PATH, usb:VID:PID[:SERIAL], or picoquant[:FAMILY][:SERIAL]
-    /// (FAMILY multiharp or hydraharp, through the vendor's library); see
-    /// `scatterscope devices`.
+    /// serial:PATH, usb:VID:PID[:SERIAL], picoquant[:FAMILY][:SERIAL]
+    /// (FAMILY multiharp or hydraharp, through the vendor's library), or
+    /// replay:FILE (a PTU or tag file played back at its recorded pace,
+    /// e.g. with --live to review a run); see `scatterscope devices`.
     #[arg(long, default_value = "mock")]
     device: DeviceSpec,
     /// How long to acquire (e.g. 10s, 500ms, 2m); 0 runs until the device
     /// stops or Ctrl-C.
-    #[arg(long, default_value = "2s", value_parser = parse_duration)]
-    duration: Duration,
+    /// [default: 2s; a replay: the whole recording]
+    #[arg(long, value_parser = parse_duration)]
+    duration: Option<Duration>,
     #[command(flatten)]
     physics: PhysicsArgs,
     /// Time zero of the instrument: micro time at which the pulse reaches
@@ -94,6 +97,10 @@ pub struct AcquireArgs {
     /// printed with the address).
     #[arg(long, value_name = "ADDRESS:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:0")]
     live: Option<String>,
+    /// With --device replay:FILE: play the recording this many times faster
+    /// than it was recorded.
+    #[arg(long, value_name = "FACTOR", default_value_t = 1.0)]
+    speed: f64,
     /// With --live: keep serving the final page this long after the run
     /// (Ctrl-C ends it sooner).
     #[arg(long, value_name = "TIME", value_parser = parse_duration, default_value = "0s", requires = "live")]
@@ -305,7 +312,11 @@ fn job(args: &AcquireArgs) -> anyhow::Result<Job> {
         region: args.roi,
         channel: p.channel,
         pixels: p.pixels,
-        duration: (!args.duration.is_zero()).then_some(args.duration),
+        duration: match (args.duration, &args.device) {
+            (Some(d), _) => (!d.is_zero()).then_some(d),
+            (None, DeviceSpec::Replay(_)) => None,
+            (None, _) => Some(Duration::from_secs(2)),
+        },
         resolution_fs: args.resolution.map(|ps| (ps * 1000.0).round() as u32),
         tag_file: args.tags.clone(),
         ptu: p.ptu.clone(),
@@ -314,12 +325,7 @@ fn job(args: &AcquireArgs) -> anyhow::Result<Job> {
     };
     let device = match &args.device {
         DeviceSpec::PicoQuant(d) => {
-            // The vendor's device: its settings, a PTU by default, and the
-            // window the flags give (default: one sync period); its
-            // physics are not assumed.
-            plan.bin_width_ps = args.physics.bin_width;
-            plan.t_start_ps = args.physics.t_start.unwrap_or(0.0);
-            plan.bins = args.physics.bins;
+            // The vendor's device: its settings and a PTU by default.
             if !p.no_ptu && plan.ptu.is_none() {
                 plan.ptu = Some(args.out.join("acquisition.ptu"));
             }
@@ -340,17 +346,29 @@ fn job(args: &AcquireArgs) -> anyhow::Result<Job> {
             match other {
                 DeviceSpec::Mock(_) => DeviceSpec::Mock(mock_spec(args)),
                 DeviceSpec::MockSerial(_) => DeviceSpec::MockSerial(mock_spec(args)),
+                DeviceSpec::Replay(r) => DeviceSpec::Replay(ReplaySpec {
+                    path: r.path.clone(),
+                    speed: args.speed,
+                }),
                 hardware => hardware.clone(),
             }
         }
     };
-    let setup = match device {
-        DeviceSpec::PicoQuant(_) => None,
-        _ => {
-            let setup = args.physics.resolve()?;
-            plan.set_window(&setup.bins);
-            Some(setup)
-        }
+    anyhow::ensure!(
+        args.speed == 1.0 || matches!(device, DeviceSpec::Replay(_)),
+        "--speed plays a recording back faster (--device replay:FILE); {device} runs at its own pace"
+    );
+    let setup = if device.is_sensor() {
+        let setup = args.physics.resolve()?;
+        plan.set_window(&setup.bins);
+        Some(setup)
+    } else {
+        // A vendor's device or its recording: the window the flags give
+        // (default: one sync period); its physics are not assumed.
+        plan.bin_width_ps = args.physics.bin_width;
+        plan.t_start_ps = args.physics.t_start.unwrap_or(0.0);
+        plan.bins = args.physics.bins;
+        None
     };
     Ok(Job {
         device,
