@@ -49,14 +49,19 @@ pub fn psnr_fitted(image: ArrayView2<f64>, truth: ArrayView2<f64>) -> Option<f64
     Some(crate::metrics::psnr(scaled.view(), truth))
 }
 
-/// The calling thread at the lowest scheduling priority (Linux schedules
-/// threads one by one; elsewhere nothing changes).
+/// The calling thread at the lowest scheduling priority: Linux's idle
+/// class (it runs only on a core nothing else wants, and yields at once),
+/// and nice 19 where that class is refused (Linux schedules threads one by
+/// one; elsewhere nothing changes).
 fn lower_priority() {
     #[cfg(target_os = "linux")]
-    // SAFETY: setpriority on the calling thread (who = 0) with a valid
-    // priority; it only fails for lack of permission to raise it.
+    // SAFETY: both calls act on the calling thread (0) with valid
+    // arguments; they only fail for lack of permission.
     unsafe {
-        libc::setpriority(libc::PRIO_PROCESS, 0, 19);
+        let param = libc::sched_param { sched_priority: 0 };
+        if libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) != 0 {
+            libc::setpriority(libc::PRIO_PROCESS, 0, 19);
+        }
     }
 }
 
