@@ -54,14 +54,22 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
-/// Runs the browser check on `url`; the page's report.
-fn browse(url: &str, reconstruction: bool) -> serde_json::Value {
+/// Runs the browser check on `url` (`mode`: watch to the end, or close
+/// mid-run); the page's report.
+fn browse(
+    url: &str,
+    reconstruction: bool,
+    mode: &str,
+    screenshot: Option<&Path>,
+) -> serde_json::Value {
     let pydeps = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/pydeps");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/live/browser_check.py");
     let o = Command::new("python3")
         .arg(&script)
         .arg(url)
         .arg(if reconstruction { "1" } else { "0" })
+        .arg(mode)
+        .args(screenshot)
         .env("PYTHONPATH", &pydeps)
         .output()
         .unwrap();
@@ -146,7 +154,16 @@ fn a_browser_sees_a_mock_run_form_and_ends_on_its_ledger() {
         url.starts_with("http://127.0.0.1:") && !url.contains("token"),
         "{url}"
     );
-    let page = browse(&url, true);
+    // The page as it ended (README's screenshot is one of these), where
+    // SCATTERSCOPE_LIVE_SCREENSHOT says, else beside the run.
+    let shot = std::env::var_os("SCATTERSCOPE_LIVE_SCREENSHOT")
+        .map_or_else(|| dir.path().join("live-view.png"), Into::into);
+    let page = browse(&url, true, "watch", Some(&shot));
+    assert!(
+        image::open(&shot).is_ok_and(|i| i.width() > 800),
+        "{}",
+        shot.display()
+    );
     let status = stop(child);
     assert!(status.success(), "{status:?}");
     assert_shown_and_updating(&page);
@@ -177,7 +194,7 @@ fn a_browser_sees_a_picoquant_run_with_its_rates_and_ledger() {
             "--vendor-lib",
             lib.to_str().unwrap(),
             "--duration",
-            "5s",
+            "10s",
             "--live",
             "--linger",
             "120s",
@@ -186,11 +203,181 @@ fn a_browser_sees_a_picoquant_run_with_its_rates_and_ledger() {
         ],
         &[("SCATTERSCOPE_PQ_MOCK", "rate=2e6")],
     );
-    let page = browse(&url, false);
+    let page = browse(&url, false, "watch", None);
     let status = stop(child);
     assert!(status.success(), "{status:?}");
     assert_shown_and_updating(&page);
     assert_same_ledger(&page, &json(&out.join("acquisition.json")));
+}
+
+/// A browser closed mid-run changes nothing the run saves: the same seeded
+/// photons give the same stack and ledger as a run nobody watched.
+#[test]
+#[ignore = "needs Chromium (/usr/bin/chromium) and playwright under target/pydeps (scripts/fetch_python_deps.sh)"]
+fn closing_the_browser_mid_run_changes_no_saved_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, live: bool| {
+        let out = dir.path().join(name);
+        let mut args = vec![
+            "--size",
+            "16",
+            "--fov",
+            "3cm",
+            "--seed",
+            "7",
+            "--max-photons",
+            "6000000",
+            "--duration",
+            "0",
+            "--out",
+        ];
+        let out_s = out.to_str().unwrap().to_string();
+        args.push(&out_s);
+        if !live {
+            let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+                .arg("acquire")
+                .args(&args)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            return out;
+        }
+        args.push("--live");
+        let (mut child, url) = start(&args, &[]);
+        let page = browse(&url, false, "close", None);
+        assert_eq!(
+            page["done_when_closed"], false,
+            "closed after the run: {page}"
+        );
+        assert!(child.wait().unwrap().success());
+        out
+    };
+    let (quiet, watched) = (run("quiet", false), run("watched", true));
+    let load = |d: &Path| scatterscope::stack::Stack::load(&d.join("stack.exr")).unwrap();
+    assert_eq!(load(&quiet).data, load(&watched).data);
+    let (a, b) = (
+        json(&quiet.join("acquisition.json")),
+        json(&watched.join("acquisition.json")),
+    );
+    // Where every photon went; how the device cut its stream into batches
+    // depends on timing and is not a result.
+    for field in [
+        "detected",
+        "photons",
+        "binned",
+        "outside_window",
+        "outside_region",
+        "lost_in_device",
+    ] {
+        assert_eq!(a["ledger"][field], b["ledger"][field], "{field}");
+    }
+    assert_eq!(
+        a["ledger"]["lost_in_device"], 0,
+        "a loss would make the runs differ"
+    );
+}
+
+/// The port in use, 50 clients at once, loopback only: clear errors or
+/// graceful refusals, and the acquisition unaffected.
+#[test]
+fn bad_cases_are_refused_clearly_and_the_run_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args(["acquire", "--duration", "200ms", "--live"])
+        .arg(format!("127.0.0.1:{port}"))
+        .arg("--out")
+        .arg(dir.path().join("taken"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains(&format!("--live 127.0.0.1:{port}")), "{err}");
+    assert!(!dir.path().join("taken").exists(), "nothing written");
+    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        .args(["acquire", "--live", "nowhere", "--out"])
+        .arg(dir.path().join("bad"))
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&o.stderr).contains("give ADDRESS:PORT"));
+
+    let out = dir.path().join("acq");
+    let (child, url) = start(
+        &[
+            "--size",
+            "16",
+            "--fov",
+            "3cm",
+            "--duration",
+            "3s",
+            "--live",
+            "--linger",
+            "60s",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[],
+    );
+    // Bound to loopback: nothing listens on the machine's other addresses.
+    let port: u16 = url
+        .trim_end_matches('/')
+        .rsplit(':')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let other = std::net::UdpSocket::bind("0.0.0.0:0")
+        .and_then(|s| s.connect("192.0.2.1:9").map(|()| s))
+        .and_then(|s| s.local_addr())
+        .map(|a| a.ip());
+    if let Some(ip) = other.ok().filter(|ip| !ip.is_loopback()) {
+        let refused = std::net::TcpStream::connect_timeout(
+            &std::net::SocketAddr::new(ip, port),
+            Duration::from_secs(2),
+        );
+        assert!(refused.is_err(), "reached on {ip}");
+    }
+    // 50 browsers at once: 16 are served events, the rest told so.
+    let addr = url
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
+        .to_string();
+    let clients: Vec<_> = (0..50)
+        .map(|_| {
+            let mut s = std::net::TcpStream::connect(&addr).unwrap();
+            s.write_all(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+                .unwrap();
+            s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+            s
+        })
+        .collect();
+    let mut served = 0;
+    let mut refused = 0;
+    for mut c in clients {
+        let mut head = [0u8; 32];
+        let n = c.read(&mut head).unwrap_or(0);
+        let head = String::from_utf8_lossy(&head[..n]).to_string();
+        if head.contains("200") {
+            served += 1;
+        } else if head.contains("503") {
+            refused += 1;
+        }
+    }
+    assert_eq!((served, refused), (16, 34));
+    let started = Instant::now();
+    while !std::fs::read_to_string(out.join("acquisition.json"))
+        .is_ok_and(|j| j.contains("\"stop\": \"duration\""))
+    {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the run did not end"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(stop(child).success());
+    let record = json(&out.join("acquisition.json"));
+    assert!(record["ledger"]["photons"].as_u64().unwrap() > 0);
 }
 
 /// A browser that connects and never reads: the acquisition runs to its

@@ -1,9 +1,11 @@
 """Opens a live view in headless Chromium (Debian's package, driven by
 playwright with the system browser) and reports what the page showed, as
 JSON on stdout: whether rates, decay, image and reconstruction appeared and
-updated, and the ledger as the page printed it once the run ended.
+updated, and the ledger as the page printed it once the run ended; with a
+SCREENSHOT path, the page as it ended. With MODE `close`, it only opens the
+page, sees it update and closes the browser mid-run.
 
-    python3 browser_check.py URL EXPECT_RECONSTRUCTION(0|1)
+    python3 browser_check.py URL EXPECT_RECONSTRUCTION(0|1) [MODE] [SCREENSHOT]
 """
 import json
 import sys
@@ -12,6 +14,8 @@ import time
 from playwright.sync_api import sync_playwright
 
 url, expect_recon = sys.argv[1], sys.argv[2] == "1"
+mode = sys.argv[3] if len(sys.argv) > 3 else "watch"
+screenshot = sys.argv[4] if len(sys.argv) > 4 else None
 CHROMIUM = "/usr/bin/chromium"
 ARGS = [
     "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -35,9 +39,19 @@ with sync_playwright() as p:
     page.on("pageerror", lambda e: errors.append(str(e)))
     page.goto(url)
     page.wait_for_function("window.liveUpdates >= 3 && window.liveState.counters.photons > 0", timeout=60000)
+    if mode == "close":
+        report["closed_at_s"] = page.evaluate("window.liveState.elapsed_s")
+        report["done_when_closed"] = page.evaluate("window.liveState.done")
+        browser.close()
+        print(json.dumps(report))
+        sys.exit(0)
     first = page.evaluate("window.liveState")
     first_updates = page.evaluate("window.liveUpdates")
-    time.sleep(1.5)
+    # Three more states, however loaded the machine (a 2-core CI runs other
+    # tests beside this one).
+    page.wait_for_function(
+        f"window.liveUpdates >= {first_updates + 3} && window.liveState.elapsed_s > {first['elapsed_s'] + 0.5}",
+        timeout=60000)
     second = page.evaluate("window.liveState")
     report["updates"] = page.evaluate("window.liveUpdates") - first_updates
     report["photons_grew"] = second["counters"]["photons"] > first["counters"]["photons"]
@@ -66,6 +80,8 @@ with sync_playwright() as p:
         "#ledger td[data-field]", "tds => tds.map(t => [t.dataset.field, t.textContent])")
     report["ledger_on_page"] = {k: v for k, v in cells}
     report["status"] = page.inner_text("#status")
+    if screenshot:
+        page.screenshot(path=screenshot, full_page=True)
     report["errors"] = errors
     browser.close()
 print(json.dumps(report))
