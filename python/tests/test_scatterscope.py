@@ -208,8 +208,8 @@ def test_acquire_mock_accounts_for_every_photon(tmp_path):
     done = scatterscope.acquire_mock(0.3, tmp_path / "acq", scene="star", size=32, seed=3)
     stack = done["stack"]
     assert stack.shape[1:] == (32, 32)
-    acc = done["record"]["accounting"]
-    assert acc["received"] == acc["binned"] + acc["outside_window"] + acc["outside_region"]
+    acc = done["record"]["ledger"]
+    assert acc["photons"] == acc["binned"] + acc["outside_window"] + acc["outside_region"] + acc["other_channel"]
     assert stack.sum() == acc["binned"] > 10_000
     assert (tmp_path / "acq" / "stack.exr").exists()
     assert any("photons" in line for line in done["summary"])

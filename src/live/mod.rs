@@ -8,7 +8,9 @@
 //! It is one more stage of the acquisition pipeline
 //! ([`crate::acquire::run_watched`]): every 250 ms it copies what it shows
 //! under a short lock and returns, so a slow, stuck or closed browser
-//! never stalls or changes an acquisition. The page is pushed to the
+//! never stalls or changes an acquisition. Every thread of the view (the
+//! server, each browser's events, the reconstruction) runs in Linux's idle
+//! scheduling class: it gets a core only when the acquisition leaves one. The page is pushed to the
 //! browser as server-sent events (`/events`), each event the whole state,
 //! so a browser that falls behind skips states instead of queueing them.
 //!
@@ -21,4 +23,21 @@ pub mod server;
 pub mod state;
 
 pub use server::{LiveError, LiveView};
+
+/// The calling thread at the lowest scheduling priority: Linux's idle
+/// class (it runs only on a core nothing else wants, and yields at once),
+/// and nice 19 where that class is refused (Linux schedules threads one by
+/// one; elsewhere nothing changes).
+pub(crate) fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: both calls act on the calling thread (0) with valid
+    // arguments; they only fail for lack of permission.
+    unsafe {
+        let param = libc::sched_param { sched_priority: 0 };
+        if libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) != 0 {
+            libc::setpriority(libc::PRIO_PROCESS, 0, 19);
+        }
+    }
+}
+
 pub use state::LiveState;

@@ -13,6 +13,7 @@ use std::time::Instant;
 
 use ndarray::{Array2, ArrayView2};
 
+use super::lower_priority;
 use super::state::{Image, LiveReconstruction, LiveState, TracePoint};
 use crate::denoise::prior::PriorSpec;
 use crate::reconstruct::input::{InputSpec, prepare};
@@ -47,22 +48,6 @@ pub fn psnr_fitted(image: ArrayView2<f64>, truth: ArrayView2<f64>) -> Option<f64
     }
     let scaled = image.mapv(|v| v * xy / xx);
     Some(crate::metrics::psnr(scaled.view(), truth))
-}
-
-/// The calling thread at the lowest scheduling priority: Linux's idle
-/// class (it runs only on a core nothing else wants, and yields at once),
-/// and nice 19 where that class is refused (Linux schedules threads one by
-/// one; elsewhere nothing changes).
-fn lower_priority() {
-    #[cfg(target_os = "linux")]
-    // SAFETY: both calls act on the calling thread (0) with valid
-    // arguments; they only fail for lack of permission.
-    unsafe {
-        let param = libc::sched_param { sched_priority: 0 };
-        if libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) != 0 {
-            libc::setpriority(libc::PRIO_PROCESS, 0, 19);
-        }
-    }
 }
 
 impl Reconstructor {

@@ -111,7 +111,10 @@ impl LiveView {
         let server = Arc::new(server);
         let thread = {
             let (server, shared) = (server.clone(), shared.clone());
-            std::thread::spawn(move || serve(&server, &shared))
+            std::thread::spawn(move || {
+                super::lower_priority();
+                serve(&server, &shared)
+            })
         };
         Ok(Self {
             shared,
@@ -291,6 +294,7 @@ fn serve(server: &tiny_http::Server, shared: &Arc<Shared>) {
                 // Each browser on its own thread: a stuck one blocks only
                 // itself.
                 std::thread::spawn(move || {
+                    super::lower_priority();
                     let _ = stream_events(request.into_writer(), &shared);
                     shared.clients.fetch_sub(1, Ordering::Relaxed);
                 });

@@ -271,7 +271,7 @@ def acquire_mock(
     ``star``, ``text``, ``disks`` or an image file) through the physics;
     ``out`` receives the command's files (stack, record, contact sheet).
     Returns ``stack`` (float32 ``(bins, rows, cols)``), ``meta``, ``record``
-    (the acquisition's record: device, photon accounting, why it ended) and
+    (the acquisition's record: device, the ledger of every photon, why it ended) and
     ``summary`` (the lines ``scatterscope acquire`` prints). Ctrl-C ends it
     cleanly, then raises KeyboardInterrupt.
     """
