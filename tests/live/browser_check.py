@@ -60,7 +60,7 @@ with sync_playwright() as p:
     report["rate_points_grew"] = len(second["rates"]) > len(first["rates"])
     report["inked"] = {c: page.evaluate(INKED, c) for c in ["rates", "decay", "image"]}
     if expect_recon:
-        page.wait_for_function("window.liveState.reconstruction !== null", timeout=90000)
+        page.wait_for_function("window.liveState.reconstruction !== null", timeout=240000)
         r = page.evaluate("window.liveState.reconstruction")
         report["reconstruction"] = {
             "method": r["method"], "psnr_db": r["psnr_db"], "notes": len(r["notes"]),
@@ -68,12 +68,12 @@ with sync_playwright() as p:
         }
         report["inked"]["recon"] = page.evaluate(INKED, "recon")
         report["recon_info"] = page.inner_text("#recon-info")
-    page.wait_for_function("window.liveState.done", timeout=90000)
+    page.wait_for_function("window.liveState.done", timeout=240000)
     if expect_recon:
         # The whole run's reconstruction follows the end.
         page.wait_for_function(
             "window.liveState.trace.length >= 2 && window.liveState.reconstruction.photons === window.liveState.ledger.photons",
-            timeout=90000)
+            timeout=240000)
         report["trace"] = page.evaluate("window.liveState.trace")
     time.sleep(0.6)
     cells = page.eval_on_selector_all(
