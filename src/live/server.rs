@@ -284,10 +284,18 @@ fn serve(server: &tiny_http::Server, shared: &Arc<Shared>) {
             "/events" => {
                 if shared.clients.fetch_add(1, Ordering::Relaxed) >= MAX_CLIENTS {
                     shared.clients.fetch_sub(1, Ordering::Relaxed);
-                    let _ = request.respond(
-                        tiny_http::Response::from_string("too many browsers on this live view")
-                            .with_status_code(503),
-                    );
+                    // Answered and closed on a thread of its own: the loop
+                    // goes on at once.
+                    std::thread::spawn(move || {
+                        let mut out = request.into_writer();
+                        let body = "too many browsers on this live view\n";
+                        let _ = write!(
+                            out,
+                            "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+                            body.len()
+                        );
+                        let _ = out.flush();
+                    });
                     continue;
                 }
                 let shared = shared.clone();
