@@ -50,6 +50,20 @@ fn stop(mut child: Child) -> std::process::ExitStatus {
     child.wait().unwrap()
 }
 
+/// One GET of `path` from the view at `addr` (`HOST:PORT`), the
+/// connection closed after it: the whole response, status line first.
+fn http_get(addr: &str, path: &str) -> String {
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut r = String::new();
+    s.read_to_string(&mut r).unwrap();
+    r
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -465,16 +479,13 @@ fn a_shared_view_needs_its_token() {
         .unwrap_or_else(|| panic!("{url}"));
     assert_eq!(token.len(), 32, "{url}");
     let port = base.rsplit(':').next().unwrap();
+    let addr = format!("127.0.0.1:{port}");
     let get = |path: &str| {
-        let mut s = std::net::TcpStream::connect(format!("127.0.0.1:{port}")).unwrap();
-        write!(
-            s,
-            "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
-        )
-        .unwrap();
-        let mut r = String::new();
-        s.read_to_string(&mut r).unwrap();
-        r.lines().next().unwrap_or_default().to_string()
+        http_get(&addr, path)
+            .lines()
+            .next()
+            .unwrap_or_default()
+            .to_string()
     };
     assert!(get("/state").contains("403"), "without the token");
     assert!(
@@ -484,19 +495,8 @@ fn a_shared_view_needs_its_token() {
     assert!(get(&format!("/state?token={token}")).contains("200"));
     assert!(get(&format!("/?token={token}")).contains("200"));
     // The run ends on its duration; then Ctrl-C ends the lingering page.
-    let state = |path: &str| {
-        let mut s = std::net::TcpStream::connect(format!("127.0.0.1:{port}")).unwrap();
-        write!(
-            s,
-            "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
-        )
-        .unwrap();
-        let mut r = String::new();
-        s.read_to_string(&mut r).unwrap();
-        r
-    };
     let started = Instant::now();
-    while !state(&format!("/state?token={token}")).contains("\"done\":true") {
+    while !http_get(&addr, &format!("/state?token={token}")).contains("\"done\":true") {
         assert!(
             started.elapsed() < Duration::from_secs(60),
             "the run did not end"
@@ -549,14 +549,7 @@ fn a_replay_shows_in_the_live_view() {
     );
     let addr = url.trim_start_matches("http://").trim_end_matches('/');
     let state = || {
-        let mut s = std::net::TcpStream::connect(addr).unwrap();
-        write!(
-            s,
-            "GET /state HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
-        )
-        .unwrap();
-        let mut r = String::new();
-        s.read_to_string(&mut r).unwrap();
+        let r = http_get(addr, "/state");
         let body = r.split_once("\r\n\r\n").map_or("", |(_, b)| b).to_string();
         serde_json::from_str::<serde_json::Value>(&body).unwrap()
     };

@@ -104,19 +104,8 @@ impl Source for LinkSource {
         sink: &mut dyn FnMut(Delivery<'_>),
     ) -> SourceEnd {
         let mut device = self.device.take().expect("streamed once");
-        let failed = |reason: StopReason| SourceEnd {
-            stop: reason,
-            elapsed: Duration::ZERO,
-            totals: None,
-            detected: None,
-            lost_in_device: None,
-            fifo_overrun: false,
-            counts_dropped: false,
-            transit: None,
-            warnings: Vec::new(),
-        };
         if let Err(e) = device.start() {
-            return failed(StopReason::Disconnected(e.to_string()));
+            return SourceEnd::ended(StopReason::Disconnected(e.to_string()));
         }
         let started = Instant::now();
         let mut stop_sent: Option<Instant> = None;

@@ -537,14 +537,10 @@ impl Source for PicoQuantSource {
         });
         SourceEnd {
             fifo_overrun: end.stop == StopReason::FifoOverrun,
-            stop: end.stop,
             elapsed: end.started.elapsed(),
-            totals: None,
-            detected: None,
-            lost_in_device: None,
             counts_dropped: end.counts_dropped,
-            transit: None,
             warnings: end.flag_notes,
+            ..SourceEnd::ended(end.stop)
         }
     }
 }

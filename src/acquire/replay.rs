@@ -183,17 +183,7 @@ impl Source for FileSource {
             started: Instant::now(),
             speed: self.speed,
         };
-        let mut end = SourceEnd {
-            stop: StopReason::EndOfRecording,
-            elapsed: Duration::ZERO,
-            totals: None,
-            detected: None,
-            lost_in_device: None,
-            fifo_overrun: false,
-            counts_dropped: false,
-            transit: None,
-            warnings: Vec::new(),
-        };
+        let mut end = SourceEnd::ended(StopReason::EndOfRecording);
         let cut = |stop: &AtomicBool| {
             if stop.load(Ordering::Relaxed) {
                 StopReason::Interrupted

@@ -221,6 +221,24 @@ pub struct SourceEnd {
     pub warnings: Vec<String>,
 }
 
+impl SourceEnd {
+    /// An end for `stop` with nothing else known yet: no time, no totals,
+    /// no loss, no transport; a source fills in what it learns.
+    pub fn ended(stop: StopReason) -> Self {
+        Self {
+            stop,
+            elapsed: Duration::ZERO,
+            totals: None,
+            detected: None,
+            lost_in_device: None,
+            fifo_overrun: false,
+            counts_dropped: false,
+            transit: None,
+            warnings: Vec::new(),
+        }
+    }
+}
+
 /// What a mock (or any source that knows its truth) adds after the run.
 #[derive(Debug, Clone, Default)]
 pub struct SourceReport {

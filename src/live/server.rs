@@ -171,6 +171,14 @@ impl LiveView {
         s.version += 1;
     }
 
+    /// Keeps serving the final page for `time`, or until `stop` (Ctrl-C).
+    pub fn linger(&self, time: Duration, stop: &AtomicBool) {
+        let until = Instant::now() + time;
+        while Instant::now() < until && !stop.load(Ordering::Relaxed) {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
     /// Stops serving.
     pub fn close(mut self) {
         self.stop();

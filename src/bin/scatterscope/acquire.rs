@@ -425,12 +425,7 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
                 "live view: the final page stays up for {:?} (Ctrl-C ends it)",
                 args.linger
             );
-            let until = std::time::Instant::now() + args.linger;
-            while std::time::Instant::now() < until
-                && !stop.load(std::sync::atomic::Ordering::Relaxed)
-            {
-                std::thread::sleep(Duration::from_millis(50));
-            }
+            view.linger(args.linger, stop);
         }
     }
     done.verdict().map_err(anyhow::Error::msg)?;
