@@ -15,7 +15,7 @@
 //! so a browser that falls behind skips states instead of queueing them.
 //!
 //! - [`state`]: what the page shows, as JSON.
-//! - [`server`]: the HTTP server (tiny_http), the page and its access token.
+//! - [`server`]: the HTTP server (axum on one tokio thread), the page and its access token.
 //! - [`recon`]: the reconstruction of snapshots, off the acquisition's path.
 
 pub mod recon;

@@ -5,16 +5,22 @@
 //! address every request needs the random access token printed with the
 //! address, so no one else on the network reads the run.
 //!
-//! tiny_http: a small, well-kept, synchronous server; the view has a handful
-//! of clients and needs no async runtime.
+//! axum on a tokio runtime of one thread (in the idle class, as every
+//! thread of the view): an idle keep-alive connection or a browser that
+//! stops reading is a parked task, not a blocked thread, so many open pages
+//! never stall a new one.
 
-use std::io::Write;
+use std::convert::Infallible;
 use std::net::{IpAddr, SocketAddr, ToSocketAddrs};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use axum::extract::State;
+use axum::http::{StatusCode, Uri, header};
+use axum::response::sse::{Event, Sse};
+use axum::response::{IntoResponse, Response};
 use ndarray::Array2;
 
 use super::recon::Reconstructor;
@@ -58,7 +64,7 @@ struct Shared {
 /// A running live view.
 pub struct LiveView {
     shared: Arc<Shared>,
-    server: Arc<tiny_http::Server>,
+    shutdown: Option<tokio::sync::oneshot::Sender<()>>,
     thread: Option<JoinHandle<()>>,
     url: String,
 }
@@ -82,14 +88,18 @@ impl LiveView {
             .ok()
             .and_then(|mut a| a.next())
             .ok_or_else(|| LiveError::Address(text.to_string()))?;
-        let server = tiny_http::Server::http(socket).map_err(|e| LiveError::Bind {
+        let bind_error = |e: std::io::Error| LiveError::Bind {
             addr: text.to_string(),
             reason: e.to_string(),
-        })?;
-        let bound = server
-            .server_addr()
-            .to_ip()
-            .ok_or_else(|| LiveError::Address(text.to_string()))?;
+        };
+        let listener = std::net::TcpListener::bind(socket).map_err(bind_error)?;
+        listener.set_nonblocking(true).map_err(bind_error)?;
+        let bound = listener.local_addr().map_err(bind_error)?;
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_io()
+            .enable_time()
+            .build()
+            .map_err(bind_error)?;
         let token = (!bound.ip().is_loopback()).then(random_token);
         let host = match bound.ip() {
             IpAddr::V4(ip) if ip.is_unspecified() => "0.0.0.0".to_string(),
@@ -108,17 +118,29 @@ impl LiveView {
             closed: AtomicBool::new(false),
             clients: AtomicUsize::new(0),
         });
-        let server = Arc::new(server);
+        let (shutdown, closing) = tokio::sync::oneshot::channel::<()>();
         let thread = {
-            let (server, shared) = (server.clone(), shared.clone());
+            let app = axum::Router::new()
+                .fallback(answer)
+                .with_state(shared.clone());
             std::thread::spawn(move || {
                 super::lower_priority();
-                serve(&server, &shared)
+                runtime.block_on(async move {
+                    let Ok(listener) = tokio::net::TcpListener::from_std(listener) else {
+                        return;
+                    };
+                    // Ends at `close`; the runtime's drop then ends every
+                    // connection still open.
+                    tokio::select! {
+                        _ = axum::serve(listener, app) => {}
+                        _ = closing => {}
+                    }
+                });
             })
         };
         Ok(Self {
             shared,
-            server,
+            shutdown: Some(shutdown),
             thread: Some(thread),
             url,
         })
@@ -186,7 +208,9 @@ impl LiveView {
 
     fn stop(&mut self) {
         self.shared.closed.store(true, Ordering::Relaxed);
-        self.server.unblock();
+        if let Some(s) = self.shutdown.take() {
+            let _ = s.send(());
+        }
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
@@ -253,74 +277,87 @@ impl LiveStage {
     }
 }
 
-fn serve(server: &tiny_http::Server, shared: &Arc<Shared>) {
-    for request in server.incoming_requests() {
-        if shared.closed.load(Ordering::Relaxed) {
-            break;
-        }
-        let url = request.url().to_string();
-        let (path, query) = url.split_once('?').unwrap_or((&url, ""));
-        let token_ok = shared.token.as_ref().is_none_or(|t| {
-            query
-                .split('&')
-                .any(|kv| kv.strip_prefix("token=") == Some(t.as_str()))
-        });
-        let header = |k: &str, v: &str| {
-            tiny_http::Header::from_bytes(k.as_bytes(), v.as_bytes()).expect("a valid header")
-        };
-        if !token_ok {
-            let _ = request.respond(
-                tiny_http::Response::from_string("this live view needs its access token")
-                    .with_status_code(403),
-            );
-            continue;
-        }
-        match path {
-            "/" => {
-                let _ = request.respond(
-                    tiny_http::Response::from_string(PAGE)
-                        .with_header(header("Content-Type", "text/html; charset=utf-8")),
-                );
-            }
-            "/state" => {
-                let json = state_json(shared);
-                let _ = request.respond(
-                    tiny_http::Response::from_string(json)
-                        .with_header(header("Content-Type", "application/json")),
-                );
-            }
-            "/events" => {
-                if shared.clients.fetch_add(1, Ordering::Relaxed) >= MAX_CLIENTS {
-                    shared.clients.fetch_sub(1, Ordering::Relaxed);
-                    // Answered and closed on a thread of its own: the loop
-                    // goes on at once.
-                    std::thread::spawn(move || {
-                        let mut out = request.into_writer();
-                        let body = "too many browsers on this live view\n";
-                        let _ = write!(
-                            out,
-                            "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
-                            body.len()
-                        );
-                        let _ = out.flush();
-                    });
-                    continue;
-                }
-                let shared = shared.clone();
-                // Each browser on its own thread: a stuck one blocks only
-                // itself.
-                std::thread::spawn(move || {
-                    super::lower_priority();
-                    let _ = stream_events(request.into_writer(), &shared);
-                    shared.clients.fetch_sub(1, Ordering::Relaxed);
-                });
-            }
-            _ => {
-                let _ = request
-                    .respond(tiny_http::Response::from_string("not found").with_status_code(404));
-            }
-        }
+/// Every request: the token first (off loopback), then the path.
+async fn answer(State(shared): State<Arc<Shared>>, uri: Uri) -> Response {
+    let token_ok = shared.token.as_ref().is_none_or(|t| {
+        uri.query()
+            .unwrap_or("")
+            .split('&')
+            .any(|kv| kv.strip_prefix("token=") == Some(t.as_str()))
+    });
+    if !token_ok {
+        return (
+            StatusCode::FORBIDDEN,
+            "this live view needs its access token",
+        )
+            .into_response();
     }
+    match uri.path() {
+        "/" => ([(header::CONTENT_TYPE, "text/html; charset=utf-8")], PAGE).into_response(),
+        "/state" => (
+            [(header::CONTENT_TYPE, "application/json")],
+            state_json(&shared),
+        )
+            .into_response(),
+        "/events" => match Slot::take(&shared) {
+            Some(slot) => Sse::new(events(slot)).into_response(),
+            None => (
+                StatusCode::SERVICE_UNAVAILABLE,
+                [(header::CONNECTION, "close")],
+                "too many browsers on this live view\n",
+            )
+                .into_response(),
+        },
+        _ => (StatusCode::NOT_FOUND, "not found").into_response(),
+    }
+}
+
+/// One browser's place among the [`MAX_CLIENTS`] served events; given
+/// back when its stream ends (the view closes or the browser goes).
+struct Slot(Arc<Shared>);
+
+impl Slot {
+    fn take(shared: &Arc<Shared>) -> Option<Self> {
+        if shared.clients.fetch_add(1, Ordering::Relaxed) >= MAX_CLIENTS {
+            shared.clients.fetch_sub(1, Ordering::Relaxed);
+            return None;
+        }
+        Some(Self(shared.clone()))
+    }
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        self.0.clients.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+/// The event stream of one browser: the latest state when it changed, at
+/// most every [`EVENT_EVERY`]; ends when the view closes. A browser that
+/// stops reading holds back only its own stream (the next state is made
+/// when it reads again), never another browser or the acquisition.
+fn events(slot: Slot) -> impl futures_util::Stream<Item = Result<Event, Infallible>> {
+    futures_util::stream::unfold((slot, None), |(slot, mut sent)| async move {
+        loop {
+            if sent.is_some() {
+                tokio::time::sleep(EVENT_EVERY).await;
+            }
+            if slot.0.closed.load(Ordering::Relaxed) {
+                return None;
+            }
+            let version = slot
+                .0
+                .state
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .version;
+            if sent != Some(version) {
+                let event = Event::default().data(state_json(&slot.0));
+                return Some((Ok(event), (slot, Some(version))));
+            }
+            sent = Some(version);
+        }
+    })
 }
 
 fn state_json(shared: &Shared) -> String {
@@ -330,29 +367,4 @@ fn state_json(shared: &Shared) -> String {
         .unwrap_or_else(|e| e.into_inner())
         .clone();
     serde_json::to_string(&state).expect("the state serialises")
-}
-
-/// The event stream of one browser: the latest state when it changed, at
-/// most every [`EVENT_EVERY`], each event flushed; ends when the view
-/// closes or the browser goes.
-fn stream_events(mut out: Box<dyn Write + Send>, shared: &Shared) -> std::io::Result<()> {
-    out.write_all(
-        b"HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\nConnection: close\r\n\r\n",
-    )?;
-    out.flush()?;
-    let mut sent = None;
-    while !shared.closed.load(Ordering::Relaxed) {
-        let version = shared
-            .state
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .version;
-        if sent != Some(version) {
-            sent = Some(version);
-            out.write_all(format!("data: {}\n\n", state_json(shared)).as_bytes())?;
-            out.flush()?;
-        }
-        std::thread::sleep(EVENT_EVERY);
-    }
-    Ok(())
 }
