@@ -2,14 +2,18 @@
 //! of its own: the default method (`auto`) with the default prior, on the
 //! stack accumulated so far; a snapshot offered while one runs is dropped
 //! (the next one is newer), so the acquisition never waits for it. Its
-//! threads run at the lowest scheduling priority, on all cores but one:
-//! the acquisition comes first.
+//! threads run at the lowest scheduling priority, on all cores but one,
+//! and rest three times as long as each reconstruction took before the
+//! next: the acquisition comes first. (Always at work, even in the idle
+//! class, it cost an unpaced 2-core acquisition about 9 % of its rate, by
+//! the caches and memory it shares; see BENCHMARKS.md.)
 
 use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use ndarray::{Array2, ArrayView2};
 
@@ -31,7 +35,15 @@ struct Snapshot {
 pub struct Reconstructor {
     tx: Option<SyncSender<Snapshot>>,
     thread: Option<JoinHandle<()>>,
+    /// When the thread started.
+    born: Instant,
+    /// Milliseconds after `born` before which it rests.
+    rests_until_ms: Arc<AtomicU64>,
 }
+
+/// Rest after a reconstruction, as a multiple of the time it took: the
+/// reconstruction works at most a quarter of the run's time.
+const REST_PER_WORK: u32 = 3;
 
 /// PSNR of `image` against `truth` after the gain that best fits the truth
 /// (least squares); `None` when the shapes differ or the image is dark.
@@ -55,6 +67,9 @@ impl Reconstructor {
     /// when it is known.
     pub fn start(state: Arc<Mutex<LiveState>>, truth: Option<Array2<f64>>) -> Self {
         let (tx, rx) = sync_channel::<Snapshot>(1);
+        let born = Instant::now();
+        let rests_until_ms = Arc::new(AtomicU64::new(0));
+        let rests = rests_until_ms.clone();
         let thread = std::thread::spawn(move || {
             lower_priority();
             let threads = std::thread::available_parallelism()
@@ -105,6 +120,8 @@ impl Reconstructor {
                         Ok((rec, kept, input.assumed))
                     });
                 let run_s = started.elapsed().as_secs_f64();
+                let rest_until = born.elapsed() + started.elapsed() * REST_PER_WORK;
+                rests.store(rest_until.as_millis() as u64, Ordering::Relaxed);
                 let mut s = state.lock().unwrap_or_else(|e| e.into_inner());
                 match result {
                     Ok((rec, kept, assumed)) => {
@@ -144,15 +161,25 @@ impl Reconstructor {
         Self {
             tx: Some(tx),
             thread: Some(thread),
+            born,
+            rests_until_ms,
         }
     }
 
-    /// Offers a snapshot; `false` when one is still being reconstructed
-    /// (the snapshot is dropped: the next is newer).
+    /// Whether the thread rests after its last reconstruction.
+    pub fn resting(&self) -> bool {
+        self.born.elapsed() < Duration::from_millis(self.rests_until_ms.load(Ordering::Relaxed))
+    }
+
+    /// Offers a snapshot; `false` when one is still being reconstructed or
+    /// the thread rests (the snapshot is dropped: the next is newer).
     pub fn offer(&self, stack: Stack, acquired_s: f64, photons: u64) -> bool {
         let Some(tx) = &self.tx else {
             return false;
         };
+        if self.resting() {
+            return false;
+        }
         match tx.try_send(Snapshot {
             stack,
             acquired_s,
@@ -163,9 +190,16 @@ impl Reconstructor {
         }
     }
 
-    /// Lets the last snapshot finish and ends the thread.
-    pub fn finish(mut self) {
-        drop(self.tx.take());
+    /// Reconstructs the whole run's `stack` after any snapshot still at
+    /// work (no rest: the acquisition has ended), then ends the thread.
+    pub fn finish_with(mut self, stack: Stack, acquired_s: f64, photons: u64) {
+        if let Some(tx) = self.tx.take() {
+            let _ = tx.send(Snapshot {
+                stack,
+                acquired_s,
+                photons,
+            });
+        }
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }

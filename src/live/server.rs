@@ -170,6 +170,7 @@ impl LiveView {
         }
         LiveStage {
             state: self.shared.state.clone(),
+            acquired: LiveState::default(),
             reconstructor: setup
                 .is_some()
                 .then(|| Reconstructor::start(self.shared.state.clone(), truth)),
@@ -226,6 +227,8 @@ impl Drop for LiveView {
 /// The live view's stage of the pipeline.
 pub struct LiveStage {
     state: Arc<Mutex<LiveState>>,
+    /// What the acquisition has shown so far, the stage's own copy.
+    acquired: LiveState,
     reconstructor: Option<Reconstructor>,
     setup: Option<Setup>,
     last_offer: Option<Instant>,
@@ -234,15 +237,23 @@ pub struct LiveStage {
 impl LiveStage {
     /// Takes in one snapshot (see [`crate::acquire::run_watched`]).
     pub fn watch(&mut self, s: &Snapshot<'_>) {
-        self.state
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .update(s);
+        // Never waits on the lock: its other users run in the idle class
+        // and may be preempted holding it; when it is held, this snapshot
+        // is shown with the next one.
+        self.acquired.update(s);
+        match self.state.try_lock() {
+            Ok(mut shown) => shown.show_acquisition(&self.acquired),
+            Err(std::sync::TryLockError::Poisoned(e)) => {
+                e.into_inner().show_acquisition(&self.acquired)
+            }
+            Err(std::sync::TryLockError::WouldBlock) => {}
+        }
         if let Some(r) = &self.reconstructor
             && self
                 .last_offer
                 .is_none_or(|t| t.elapsed() >= RECONSTRUCT_EVERY)
             && s.progress.binned > 0
+            && !r.resting()
         {
             let stack = crate::acquire::record::stack_of(
                 s.counts,
@@ -263,16 +274,11 @@ impl LiveStage {
     /// so that a lingering page shows it.
     pub fn finish(self, done: &Acquisition) {
         if let Some(r) = self.reconstructor {
-            let acquired_s = done.outcome.end.elapsed.as_secs_f64();
-            // A snapshot may still run: the final one waits its turn.
-            let mut stack = Some(done.stack.clone());
-            while let Some(s) = stack.take() {
-                if !r.offer(s.clone(), acquired_s, done.outcome.ledger.photons) {
-                    std::thread::sleep(Duration::from_millis(50));
-                    stack = Some(s);
-                }
-            }
-            r.finish();
+            r.finish_with(
+                done.stack.clone(),
+                done.outcome.end.elapsed.as_secs_f64(),
+                done.outcome.ledger.photons,
+            );
         }
     }
 }

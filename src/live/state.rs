@@ -1,5 +1,8 @@
 //! What the live page shows, updated by the acquisition's watching stage
-//! and by the reconstruction thread, read by the server.
+//! and by the reconstruction thread, read by the server. The watching
+//! stage keeps its own copy and only tries the shared one's lock: the
+//! server and the reconstruction run in the idle class, and one preempted
+//! while holding the lock would otherwise stall the acquisition.
 
 use serde::Serialize;
 
@@ -169,6 +172,20 @@ impl LiveState {
             height: h,
             values: image,
         };
+        self.version += 1;
+    }
+
+    /// Shows what `acquired` holds of the acquisition (device, counters,
+    /// rates, decay, image), leaving the reconstruction's part as it is.
+    pub fn show_acquisition(&mut self, acquired: &LiveState) {
+        self.device.clone_from(&acquired.device);
+        self.elapsed_s = acquired.elapsed_s;
+        self.counters = acquired.counters.clone();
+        self.rates.clone_from(&acquired.rates);
+        self.decay.start_ps = acquired.decay.start_ps;
+        self.decay.width_ps = acquired.decay.width_ps;
+        self.decay.counts.clone_from(&acquired.decay.counts);
+        self.image.clone_from(&acquired.image);
         self.version += 1;
     }
 }
