@@ -3,17 +3,18 @@
 //! stack accumulated so far; a snapshot offered while one runs is dropped
 //! (the next one is newer), so the acquisition never waits for it. Its
 //! threads run at the lowest scheduling priority, on all cores but one,
-//! and rest three times as long as each reconstruction took before the
-//! next: the acquisition comes first. (Always at work, even in the idle
-//! class, it cost an unpaced 2-core acquisition about 9 % of its rate, by
-//! the caches and memory it shares; see BENCHMARKS.md.)
+//! and the acquisition comes first: a snapshot is skipped while the
+//! acquisition's own threads keep every core but half of one busy (even
+//! in the idle class, a reconstruction at work beside an unpaced 2-core
+//! acquisition cost it about 10 % of its rate, by the caches and the
+//! wake-ups it shares; see BENCHMARKS.md), and the page says so. The whole
+//! run's stack is reconstructed once it ends, whatever the load.
 
 use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use ndarray::{Array2, ArrayView2};
 
@@ -29,21 +30,48 @@ struct Snapshot {
     stack: Stack,
     acquired_s: f64,
     photons: u64,
+    /// The whole run's stack, reconstructed whatever the load.
+    last: bool,
 }
 
 /// The reconstruction thread.
 pub struct Reconstructor {
     tx: Option<SyncSender<Snapshot>>,
     thread: Option<JoinHandle<()>>,
-    /// When the thread started.
-    born: Instant,
-    /// Milliseconds after `born` before which it rests.
-    rests_until_ms: Arc<AtomicU64>,
 }
 
-/// Rest after a reconstruction, as a multiple of the time it took: the
-/// reconstruction works at most a quarter of the run's time.
-const REST_PER_WORK: u32 = 3;
+/// Cores the acquisition leaves idle, at least, for a snapshot to be
+/// reconstructed during the run.
+const SPARE_CORES: f64 = 0.5;
+
+/// Whether the acquisition's threads keep the machine's cores busy: the
+/// CPU they used since the last look, against the cores there are.
+struct Load {
+    cores: f64,
+    last: Option<(Instant, f64)>,
+}
+
+impl Load {
+    fn new() -> Self {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
+        let mut load = Self { cores, last: None };
+        load.busy_cores();
+        load
+    }
+
+    /// Cores the acquisition kept busy since the last call (`None` the
+    /// first time, or where it cannot be read).
+    fn busy_cores(&mut self) -> Option<f64> {
+        let now = (Instant::now(), super::acquisition_cpu_s()?);
+        let busy = self.last.and_then(|(t, cpu)| {
+            let wall = now.0.duration_since(t).as_secs_f64();
+            // A thread that ended takes its CPU with it: never below 0.
+            (wall > 0.05).then(|| (now.1 - cpu).max(0.0) / wall)
+        });
+        self.last = Some(now);
+        busy
+    }
+}
 
 /// PSNR of `image` against `truth` after the gain that best fits the truth
 /// (least squares); `None` when the shapes differ or the image is dark.
@@ -67,9 +95,6 @@ impl Reconstructor {
     /// when it is known.
     pub fn start(state: Arc<Mutex<LiveState>>, truth: Option<Array2<f64>>) -> Self {
         let (tx, rx) = sync_channel::<Snapshot>(1);
-        let born = Instant::now();
-        let rests_until_ms = Arc::new(AtomicU64::new(0));
-        let rests = rests_until_ms.clone();
         let thread = std::thread::spawn(move || {
             lower_priority();
             let threads = std::thread::available_parallelism()
@@ -79,7 +104,20 @@ impl Reconstructor {
                 .start_handler(|_| lower_priority())
                 .build();
             let denoiser = PriorSpec::default().build();
+            let mut load = Load::new();
             for snap in rx {
+                let busy = load.busy_cores();
+                if !snap.last
+                    && let Some(busy) = busy.filter(|b| *b > load.cores - SPARE_CORES)
+                {
+                    let mut s = state.lock().unwrap_or_else(|e| e.into_inner());
+                    s.reconstruction_paused = Some(format!(
+                        "snapshots skipped while the acquisition keeps {busy:.1} of {} cores busy; the whole run is reconstructed when it ends",
+                        load.cores
+                    ));
+                    s.version += 1;
+                    continue;
+                }
                 let started = Instant::now();
                 let result = denoiser
                     .as_ref()
@@ -120,8 +158,6 @@ impl Reconstructor {
                         Ok((rec, kept, input.assumed))
                     });
                 let run_s = started.elapsed().as_secs_f64();
-                let rest_until = born.elapsed() + started.elapsed() * REST_PER_WORK;
-                rests.store(rest_until.as_millis() as u64, Ordering::Relaxed);
                 let mut s = state.lock().unwrap_or_else(|e| e.into_inner());
                 match result {
                     Ok((rec, kept, assumed)) => {
@@ -152,6 +188,7 @@ impl Reconstructor {
                             psnr_db,
                         });
                         s.reconstruction_error = None;
+                        s.reconstruction_paused = None;
                     }
                     Err(e) => s.reconstruction_error = Some(e),
                 }
@@ -161,29 +198,20 @@ impl Reconstructor {
         Self {
             tx: Some(tx),
             thread: Some(thread),
-            born,
-            rests_until_ms,
         }
     }
 
-    /// Whether the thread rests after its last reconstruction.
-    pub fn resting(&self) -> bool {
-        self.born.elapsed() < Duration::from_millis(self.rests_until_ms.load(Ordering::Relaxed))
-    }
-
-    /// Offers a snapshot; `false` when one is still being reconstructed or
-    /// the thread rests (the snapshot is dropped: the next is newer).
+    /// Offers a snapshot; `false` when one is still being reconstructed
+    /// (the snapshot is dropped: the next is newer).
     pub fn offer(&self, stack: Stack, acquired_s: f64, photons: u64) -> bool {
         let Some(tx) = &self.tx else {
             return false;
         };
-        if self.resting() {
-            return false;
-        }
         match tx.try_send(Snapshot {
             stack,
             acquired_s,
             photons,
+            last: false,
         }) {
             Ok(()) => true,
             Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => false,
@@ -198,6 +226,7 @@ impl Reconstructor {
                 stack,
                 acquired_s,
                 photons,
+                last: true,
             });
         }
         if let Some(t) = self.thread.take() {

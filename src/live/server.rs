@@ -253,7 +253,6 @@ impl LiveStage {
                 .last_offer
                 .is_none_or(|t| t.elapsed() >= RECONSTRUCT_EVERY)
             && s.progress.binned > 0
-            && !r.resting()
         {
             let stack = crate::acquire::record::stack_of(
                 s.counts,

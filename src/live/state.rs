@@ -126,6 +126,9 @@ pub struct LiveState {
     pub trace: Vec<TracePoint>,
     /// What the reconstruction of a snapshot could not do, if it failed.
     pub reconstruction_error: Option<String>,
+    /// Why snapshots are being skipped (the acquisition keeps every core
+    /// busy), while they are.
+    pub reconstruction_paused: Option<String>,
     /// Increments on every change.
     pub version: u64,
 }
