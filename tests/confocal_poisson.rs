@@ -46,6 +46,35 @@ fn confocal_model_adjoint_identity() {
     assert!((lhs - rhs).abs() <= 1e-9 * lhs.abs(), "{lhs} vs {rhs}");
 }
 
+/// The paired blur (two transients packed as one complex volume) equals
+/// the blur of each alone, forward and adjoint, and the adjoint is the
+/// forward's transpose.
+#[test]
+fn the_paired_slab_blur_is_two_blurs() {
+    use scatterscope::confocal::forward::SlabBlur;
+    let blur = SlabBlur::new(&SlabOptics::PUBLISHED_FOAM, 24, 30, 96.0, 6, 7, 0.5 / 6.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let uniform = rand_distr::Uniform::new(0.0, 1.0).unwrap();
+    let (a, b) = (
+        Array3::from_shape_fn(blur.transient_dim(), |_| uniform.sample(&mut rng)),
+        Array3::from_shape_fn(blur.transient_dim(), |_| uniform.sample(&mut rng)),
+    );
+    let close = |x: &Array3<f64>, y: &Array3<f64>| {
+        let top = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        x.dim() == y.dim() && x.iter().zip(y).all(|(p, q)| (p - q).abs() <= 1e-12 * top)
+    };
+    let (fa, fb) = blur.forward_pair(&a, &b);
+    assert!(close(&fa, &blur.forward(&a)) && close(&fb, &blur.forward(&b)));
+    let (ya, yb) = (
+        Array3::from_shape_fn(fa.dim(), |_| uniform.sample(&mut rng)),
+        Array3::from_shape_fn(fa.dim(), |_| uniform.sample(&mut rng)),
+    );
+    let (aa, ab) = blur.adjoint_pair(&ya, &yb);
+    assert!(close(&aa, &blur.adjoint(&ya)) && close(&ab, &blur.adjoint(&yb)));
+    let (lhs, rhs) = ((&fa * &ya).sum(), (&a * &aa).sum());
+    assert!((lhs - rhs).abs() <= 1e-9 * lhs.abs(), "{lhs} vs {rhs}");
+}
+
 /// A square plate 36 cm behind the slab, simulated through the full model
 /// (light cone, slab kernel, background, Poisson counts), is found at its
 /// depth and in its place by the Poisson method.

@@ -21,8 +21,11 @@
 //! and, after every iteration, scored by the Poisson deviance of the other
 //! half's counts; the transient is the sum of the two halves' at the
 //! iteration that scored best, as the Richardson-Lucy stop of
-//! `reconstruct` does. Nothing is chosen per scan. The transient's square
-//! root is then migrated ([`super::stolt`]) to the volume.
+//! `reconstruct` does. The two halves share every transform, packed as
+//! the real and imaginary parts of one volume
+//! ([`SlabBlur::forward_pair`]). Nothing is chosen per scan. The
+//! transient's square root is then migrated ([`super::stolt`]) to the
+//! volume.
 
 use std::time::Instant;
 
@@ -50,8 +53,9 @@ pub struct PoissonOptions {
     /// Depth per bin the scan's bins are summed to, about (m).
     pub step_m: f64,
     /// Most iterations the stop searches (150 keeps a 32 x 32 scan near
-    /// 10 s on two cores; at full counts the held-out deviance is still
-    /// falling there, and the notes say so).
+    /// 8 s on two cores; at full counts the held-out deviance is still
+    /// falling there, past 1000 iterations on letter_s, and the notes say
+    /// so).
     pub max_iters: usize,
 }
 
@@ -91,15 +95,6 @@ struct Estimate {
     background: Array1<f64>,
 }
 
-/// Expected counts of `e` (background added in every bin).
-fn expected(blur: &SlabBlur, e: &Estimate) -> Array3<f64> {
-    let mut mu = blur.forward(&e.tau);
-    for (mut plane, &b) in mu.axis_iter_mut(Axis(0)).zip(e.background.iter()) {
-        plane += b;
-    }
-    mu
-}
-
 /// Poisson deviance of `counts` under `mu` over the bins from `onset`.
 fn deviance(counts: &Array3<f64>, mu: &Array3<f64>, onset: usize) -> f64 {
     let mut total = 0.0;
@@ -112,29 +107,36 @@ fn deviance(counts: &Array3<f64>, mu: &Array3<f64>, onset: usize) -> f64 {
     total
 }
 
-/// One EM step of `e` on `counts` given its expectation `mu`.
-fn em_step(
-    blur: &SlabBlur,
-    e: &mut Estimate,
-    counts: &Array3<f64>,
-    mu: &Array3<f64>,
-    sensitivity: &Array3<f64>,
-    onset: usize,
-) {
-    let points = (counts.dim().1 * counts.dim().2) as f64;
+/// `counts / mu` over the bins from `onset` (0 before it and where `mu`
+/// is 0): what the EM step projects back.
+fn ratio(counts: &Array3<f64>, mu: &Array3<f64>, onset: usize) -> Array3<f64> {
     let mut ratio = Array3::<f64>::zeros(counts.dim());
     Zip::from(ratio.slice_mut(s![onset.., .., ..]))
         .and(counts.slice(s![onset.., .., ..]))
         .and(mu.slice(s![onset.., .., ..]))
         .for_each(|r, &y, &m| *r = if m > 0.0 { y / m } else { 0.0 });
-    let back = blur.adjoint(&ratio);
-    Zip::from(&mut e.tau)
-        .and(&back)
+    ratio
+}
+
+/// The EM step of `e` given its `ratio` and that ratio projected back.
+fn em_step(
+    e: &Estimate,
+    ratio: &Array3<f64>,
+    back: &Array3<f64>,
+    sensitivity: &Array3<f64>,
+    onset: usize,
+) -> Estimate {
+    let points = (ratio.dim().1 * ratio.dim().2) as f64;
+    let mut tau = e.tau.clone();
+    Zip::from(&mut tau)
+        .and(back)
         .and(sensitivity)
         .par_for_each(|v, &b, &s| *v = if s > 0.0 { *v * b / s } else { 0.0 });
-    for (i, b) in e.background.iter_mut().enumerate().skip(onset) {
+    let mut background = e.background.clone();
+    for (i, b) in background.iter_mut().enumerate().skip(onset) {
         *b *= ratio.index_axis(Axis(0), i).sum() / points;
     }
+    Estimate { tau, background }
 }
 
 /// The scan's counts from time zero, bins summed `group` at a time, for
@@ -237,8 +239,16 @@ pub fn reconstruct_poisson(
     let mut b = start(&second);
     let mut best = (f64::INFINITY, 0usize, a.clone(), b.clone());
     let mut trace = Vec::new();
+    let with_background = |mut mu: Array3<f64>, e: &Estimate| {
+        for (mut plane, &b) in mu.axis_iter_mut(Axis(0)).zip(e.background.iter()) {
+            plane += b;
+        }
+        mu
+    };
     for iteration in 0..=opts.max_iters {
-        let (mu_a, mu_b) = rayon::join(|| expected(&blur, &a), || expected(&blur, &b));
+        // Both halves through one transform each way (forward_pair).
+        let (blur_a, blur_b) = blur.forward_pair(&a.tau, &b.tau);
+        let (mu_a, mu_b) = (with_background(blur_a, &a), with_background(blur_b, &b));
         let score = deviance(&second, &mu_a, onset) + deviance(&first, &mu_b, onset);
         trace.push(PoissonTraceRow {
             iteration,
@@ -252,10 +262,10 @@ pub fn reconstruct_poisson(
         if iteration >= best.1 + patience || iteration == opts.max_iters {
             break;
         }
-        rayon::join(
-            || em_step(&blur, &mut a, &first, &mu_a, &sensitivity, onset),
-            || em_step(&blur, &mut b, &second, &mu_b, &sensitivity, onset),
-        );
+        let (ratio_a, ratio_b) = (ratio(&first, &mu_a, onset), ratio(&second, &mu_b, onset));
+        let (back_a, back_b) = blur.adjoint_pair(&ratio_a, &ratio_b);
+        a = em_step(&a, &ratio_a, &back_a, &sensitivity, onset);
+        b = em_step(&b, &ratio_b, &back_b, &sensitivity, onset);
     }
     let (_, chosen, a, b) = best;
     let reach = blur.reach;

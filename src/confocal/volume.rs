@@ -236,8 +236,7 @@ mod tests {
     fn the_blur_has_the_asked_widths_and_keeps_mass() {
         let mut data = Array3::zeros((41, 31, 31));
         data[[20, 15, 15]] = 1.0;
-        data[[0, 0, 0]] = 1.0;
-        let vol = HiddenVolume {
+        let mut vol = HiddenVolume {
             data,
             depth_step_m: 0.01,
             first_depth_m: 0.0,
@@ -256,12 +255,36 @@ mod tests {
                 })
                 .sum()
         };
-        assert!((moment(0, 20.0) - 9.0).abs() < 0.05, "{}", moment(0, 20.0));
-        assert!((moment(1, 15.0) - 2.25).abs() < 0.05, "{}", moment(1, 15.0));
-        assert!((moment(2, 15.0) - 2.25).abs() < 0.05, "{}", moment(2, 15.0));
+        // The variance of the Gaussian sampled at whole offsets and cut at
+        // 3 sigma (a little under sigma squared).
+        let variance = |sigma: f64| {
+            let r = (3.0 * sigma).ceil() as i32;
+            let w = |d: i32| (-0.5 * (d as f64 / sigma).powi(2)).exp();
+            let total: f64 = (-r..=r).map(w).sum();
+            (-r..=r).map(|d| w(d) * (d * d) as f64).sum::<f64>() / total
+        };
+        assert!((variance(3.0) - 9.0).abs() < 0.3);
+        assert!(
+            (moment(0, 20.0) - variance(3.0)).abs() < 1e-9,
+            "{}",
+            moment(0, 20.0)
+        );
+        assert!(
+            (moment(1, 15.0) - variance(1.5)).abs() < 1e-9,
+            "{}",
+            moment(1, 15.0)
+        );
+        assert!(
+            (moment(2, 15.0) - variance(1.5)).abs() < 1e-9,
+            "{}",
+            moment(2, 15.0)
+        );
+        assert_eq!(vol.blurred(0.0, 0.0).data, vol.data);
+        vol.data.fill(0.0);
+        vol.data[[0, 0, 0]] = 1.0;
+        let b = vol.blurred(1.5, 3.0).data;
         assert!(b[[0, 0, 0]] > b[[1, 0, 0]] && b[[0, 0, 0]] > b[[0, 1, 1]]);
         assert!(b.iter().all(|v| v.is_finite() && *v >= 0.0));
-        assert_eq!(vol.blurred(0.0, 0.0).data, vol.data);
     }
 
     #[test]

@@ -35,8 +35,23 @@ pub struct HiddenBenchConfig {
     pub seed: u64,
     /// Runs per row whose median is the time.
     pub repeats: usize,
-    /// Also run the Poisson method (once per row).
-    pub poisson: bool,
+    /// Also run the Poisson method with these settings (once per row;
+    /// its depth is the benchmark's).
+    pub poisson: Option<PoissonOptions>,
+    /// Blur baselines: the published volume blurred by a 3-D Gaussian of
+    /// these (across, depth) standard deviations in voxels, a row each.
+    pub blurs: Vec<(f64, f64)>,
+}
+
+/// The blur baseline chosen on the 12 shared scans (σ in voxels across,
+/// in depth): the pair of a fixed grid with the best mean front-projection
+/// correlation at 10 % and 1 % of the counts (thinning seed 1); see
+/// docs/journal/2026-11-26-twenty-third-session.md.
+pub const BLUR_BASELINE: (f64, f64) = (1.5, 3.0);
+
+/// Label of the published method followed by a blur.
+pub fn blur_label((across, depth): (f64, f64)) -> String {
+    format!("published + blur {across}x{depth}")
 }
 
 /// One scan at one count fraction through one method.
@@ -59,6 +74,9 @@ pub struct HiddenBenchRow {
     pub brightest_cm: f64,
     /// Median wall time of the reconstruction (s).
     pub wall_s: f64,
+    /// For an iterative method: the iteration its stop chose, and the
+    /// iterations it searched.
+    pub stop: Option<(usize, usize)>,
 }
 
 /// Runs `f` `repeats` times; its last result and the median time (s).
@@ -132,19 +150,36 @@ pub fn run_hidden_bench(
             );
             on_row(&row);
             rows.push(row);
-            if cfg.poisson {
-                let (volume, wall_s) = timed(1, || {
-                    reconstruct_poisson(
-                        &thinned,
-                        &SlabOptics::PUBLISHED_FOAM,
-                        &PoissonOptions::default(),
-                    )
-                    .map(|(v, _)| v)
-                    .map_err(|e| ReportError::Input(e.to_string()))
-                })?;
+            for &blur in &cfg.blurs {
+                let started = Instant::now();
+                let blurred = volume.blurred(blur.0, blur.1);
+                let label = blur_label(blur);
+                let blur_s = started.elapsed().as_secs_f64();
                 let row = row_of(
+                    &name,
+                    fraction,
+                    &thinned,
+                    &label,
+                    &blurred,
+                    &reference,
+                    wall_s + blur_s,
+                );
+                on_row(&row);
+                rows.push(row);
+            }
+            if let Some(poisson) = &cfg.poisson {
+                let ((volume, trace), wall_s) = timed(1, || {
+                    reconstruct_poisson(&thinned, &SlabOptics::PUBLISHED_FOAM, poisson)
+                        .map_err(|e| ReportError::Input(e.to_string()))
+                })?;
+                let mut row = row_of(
                     &name, fraction, &thinned, POISSON, &volume, &reference, wall_s,
                 );
+                let chosen = trace
+                    .iter()
+                    .min_by(|a, b| a.held_out_deviance.total_cmp(&b.held_out_deviance))
+                    .map_or(0, |t| t.iteration);
+                row.stop = Some((chosen, trace.len().saturating_sub(1)));
                 on_row(&row);
                 rows.push(row);
             }
@@ -172,6 +207,7 @@ fn row_of(
         depth_cm: volume.object_depth().map(|d| d * 100.0),
         brightest_cm: volume.brightest_depth() * 100.0,
         wall_s,
+        stop: None,
     }
 }
 
@@ -206,12 +242,13 @@ pub fn rms_after_offset(pairs: &[(f64, f64)]) -> Option<(f64, f64)> {
 
 /// The rows as CSV.
 pub fn rows_csv(rows: &[HiddenBenchRow]) -> String {
-    let mut csv =
-        String::from("scan,fraction,counts,method,correlation,depth_cm,brightest_cm,wall_s\n");
+    let mut csv = String::from(
+        "scan,fraction,counts,method,correlation,depth_cm,brightest_cm,wall_s,stop,searched\n",
+    );
     for r in rows {
         writeln!(
             csv,
-            "{},{},{:.0},\"{}\",{:.4},{},{:.2},{:.4}",
+            "{},{},{:.0},\"{}\",{:.4},{},{:.2},{:.4},{},{}",
             r.scan,
             r.fraction,
             r.counts,
@@ -219,7 +256,9 @@ pub fn rows_csv(rows: &[HiddenBenchRow]) -> String {
             r.correlation,
             r.depth_cm.map_or(String::new(), |d| format!("{d:.2}")),
             r.brightest_cm,
-            r.wall_s
+            r.wall_s,
+            r.stop.map_or(String::new(), |s| s.0.to_string()),
+            r.stop.map_or(String::new(), |s| s.1.to_string())
         )
         .expect("String");
     }
@@ -248,7 +287,10 @@ fn summary_markdown(rows: &[HiddenBenchRow], cfg: &HiddenBenchConfig) -> String 
     }
     if rows.iter().any(|r| r.scan.starts_with("letter_u_")) {
         md.push_str("\n### Letter U depth (full counts, one fitted offset)\n\n| method | depth rule | scans | offset (cm) | RMS error (cm) |\n|---|---|---|---|---|\n");
-        for method in [PUBLISHED, POISSON] {
+        let mut methods = vec![PUBLISHED.to_string()];
+        methods.extend(cfg.blurs.iter().map(|&b| blur_label(b)));
+        methods.push(POISSON.to_string());
+        for method in &methods {
             depth_rows(&mut md, rows, method);
         }
     }

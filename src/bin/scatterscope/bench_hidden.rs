@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use scatterscope::confocal::PoissonOptions;
 use scatterscope::report::hidden_bench::{HiddenBenchConfig, rows_csv, run_hidden_bench};
 
 /// Benchmark the hidden-object reconstructions on the confocal scans of a
@@ -31,6 +32,15 @@ pub struct BenchHiddenArgs {
     /// Also run the Poisson method (once per row, about 10 s each).
     #[arg(long)]
     poisson: bool,
+    /// With --poisson: most iterations its stop searches.
+    #[arg(long, requires = "poisson", default_value_t = PoissonOptions::default().max_iters)]
+    poisson_cap: usize,
+
+    /// Blur baselines, ACROSSxDEPTH (Gaussian sigma in voxels), comma
+    /// separated: a row of the published method followed by each blur, so
+    /// no method is credited for what a blur does ("none": no baseline).
+    #[arg(long, value_delimiter = ',', value_parser = parse_blur, default_value = "1.5x3")]
+    blur: Vec<Option<(f64, f64)>>,
     /// Output directory.
     #[arg(long, default_value = "out/bench-hidden")]
     out: PathBuf,
@@ -43,7 +53,11 @@ pub fn run(args: &BenchHiddenArgs) -> anyhow::Result<()> {
         fractions: args.fractions.clone(),
         seed: args.seed,
         repeats: args.repeats,
-        poisson: args.poisson,
+        poisson: args.poisson.then_some(PoissonOptions {
+            max_iters: args.poisson_cap,
+            ..PoissonOptions::default()
+        }),
+        blurs: args.blur.iter().flatten().copied().collect(),
     };
     let (rows, md) = run_hidden_bench(&cfg, |r| {
         println!(
@@ -62,4 +76,20 @@ pub fn run(args: &BenchHiddenArgs) -> anyhow::Result<()> {
     println!("{md}");
     println!("wrote {}/{{rows.csv, summary.md}}", args.out.display());
     Ok(())
+}
+
+/// `ACROSSxDEPTH` in voxels, or `none`.
+fn parse_blur(text: &str) -> Result<Option<(f64, f64)>, String> {
+    if text == "none" {
+        return Ok(None);
+    }
+    let bad = || {
+        format!("blur {text:?}: give ACROSSxDEPTH, Gaussian sigma in voxels (e.g. 1.5x3), or none")
+    };
+    let (a, d) = text.split_once('x').ok_or_else(bad)?;
+    let (a, d): (f64, f64) = (a.parse().map_err(|_| bad())?, d.parse().map_err(|_| bad())?);
+    if !(a.is_finite() && d.is_finite() && a >= 0.0 && d >= 0.0) {
+        return Err(bad());
+    }
+    Ok(Some((a, d)))
 }
