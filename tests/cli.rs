@@ -430,6 +430,26 @@ fn info_and_bin_on_recorded_files() {
         }
     }
     assert_eq!(stack.meta.bin_starts_ps, vec![0.0, 8.0, 16.0, 24.0]);
+    assert!(out.join("stack.png").exists());
+    // Without previews: the same stack, no contact sheet.
+    let bare = dir.path().join("bare");
+    let o = scatterscope(&[
+        "bin",
+        file.to_str().unwrap(),
+        "--bin-width",
+        "8ps",
+        "--bins",
+        "4",
+        "--no-preview",
+        "--out",
+        bare.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    assert_eq!(
+        Stack::load(&bare.join("stack.exr")).unwrap().data,
+        stack.data
+    );
+    assert!(!bare.join("stack.png").exists());
     // T2 files cannot be binned by micro time.
     let t2 = dir.path().join("t2.ptu");
     let mut w = PtuWriter::create(&t2, RecordType::GenericT2, &h).unwrap();

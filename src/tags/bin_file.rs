@@ -119,10 +119,11 @@ pub enum Recording {
 }
 
 impl BinnedFile {
-    /// Writes every stack as EXR with a PNG contact sheet into `dir`
-    /// (created if missing): `stack.exr`, or `stack_f000.exr`, ... when
-    /// frames are kept apart. Returns the EXR files.
-    pub fn write(&self, dir: &Path) -> Result<Vec<PathBuf>, StackError> {
+    /// Writes every stack as EXR into `dir` (created if missing), each
+    /// with a PNG contact sheet when `previews`: `stack.exr`, or
+    /// `stack_f000.exr`, ... when frames are kept apart. Returns the EXR
+    /// files.
+    pub fn write(&self, dir: &Path, previews: bool) -> Result<Vec<PathBuf>, StackError> {
         std::fs::create_dir_all(dir).map_err(|e| StackError::io(dir, e))?;
         let many = self.stacks.len() > 1;
         let mut files = Vec::new();
@@ -134,7 +135,9 @@ impl BinnedFile {
             };
             let exr = dir.join(format!("{stem}.exr"));
             stack.save(&exr)?;
-            write_contact_sheet(stack, SheetScale::Shared, &dir.join(format!("{stem}.png")))?;
+            if previews {
+                write_contact_sheet(stack, SheetScale::Shared, &dir.join(format!("{stem}.png")))?;
+            }
             files.push(exr);
         }
         Ok(files)
