@@ -133,7 +133,7 @@ fn a_recorded_file_is_surveyed_binned_and_written() {
     assert_eq!(info.records_present, info.records_announced);
     let binned = bin_file(&ptu, &BinSpec::default()).unwrap();
     assert_eq!(binned.accounting.received, photons);
-    let files = binned.write(&dir.path().join("bin")).unwrap();
+    let files = binned.write(&dir.path().join("bin"), true).unwrap();
     let back = Stack::load(&files[0]).unwrap();
     assert_eq!(back.total() as u64, binned.accounting.binned);
     assert!(dir.path().join("bin/stack.png").is_file());
