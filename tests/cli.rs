@@ -407,17 +407,24 @@ fn info_and_bin_on_recorded_files() {
         stdout.contains("Generic T3") && stdout.contains("image: 2 x 2 pixels"),
         "{stdout}"
     );
+    // `bin` of the file into `out`, with `extra` flags.
+    let bin = |out: &Path, extra: &[&str]| {
+        let (file, out) = (file.to_str().unwrap(), out.to_str().unwrap());
+        let mut args = vec![
+            "bin",
+            file,
+            "--bin-width",
+            "8ps",
+            "--bins",
+            "4",
+            "--out",
+            out,
+        ];
+        args.extend_from_slice(extra);
+        scatterscope(&args)
+    };
     let out = dir.path().join("bin");
-    let o = scatterscope(&[
-        "bin",
-        file.to_str().unwrap(),
-        "--bin-width",
-        "8ps",
-        "--bins",
-        "4",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = bin(&out, &[]);
     let (stdout, stderr) = text(&o);
     assert!(o.status.success(), "{stderr}");
     assert!(stdout.contains("12 photons, 12 binned"), "{stdout}");
@@ -433,17 +440,7 @@ fn info_and_bin_on_recorded_files() {
     assert!(out.join("stack.png").exists());
     // Without previews: the same stack, no contact sheet.
     let bare = dir.path().join("bare");
-    let o = scatterscope(&[
-        "bin",
-        file.to_str().unwrap(),
-        "--bin-width",
-        "8ps",
-        "--bins",
-        "4",
-        "--no-preview",
-        "--out",
-        bare.to_str().unwrap(),
-    ]);
+    let o = bin(&bare, &["--no-preview"]);
     assert!(o.status.success(), "{}", text(&o).1);
     assert_eq!(
         Stack::load(&bare.join("stack.exr")).unwrap().data,

@@ -18,7 +18,7 @@
 //! self-convolution `(T * T)(t)` times that Gaussian, integrated over each
 //! time bin and each scan cell.
 
-use ndarray::{Array1, Array3, Zip, s};
+use ndarray::{Array1, Array3, ArrayView3, Zip, s};
 use ndrustfft::Complex;
 use scatterscope_physics::diffusion::gaussian_interval_fraction;
 use scatterscope_physics::slab::SlabTransmittance;
@@ -223,20 +223,7 @@ impl SlabBlur {
     /// Expected counts (scan grid) of `tau` (widened grid), background
     /// left out.
     pub fn forward(&self, tau: &Array3<f64>) -> Array3<f64> {
-        let (m, wr, wc) = self.transient_dim();
-        let mut padded = Array3::<Complex<f64>>::zeros(self.spectrum.dim());
-        Zip::from(padded.slice_mut(s![..m, ..wr, ..wc]))
-            .and(tau)
-            .for_each(|d, &v| d.re = v);
-        self.fft.forward(&mut padded);
-        Zip::from(&mut padded)
-            .and(&self.spectrum)
-            .par_for_each(|p, &h| *p *= h);
-        self.fft.inverse(&mut padded);
-        let r = self.reach;
-        padded
-            .slice(s![..self.count_bins, r..r + self.rows, r..r + self.cols])
-            .mapv(|z| z.re.max(0.0))
+        self.convolve(tau, None, false, |out| out.mapv(|z| z.re.max(0.0)))
     }
 
     /// [`Self::forward`] of two transients at the cost of one: the kernel
@@ -244,56 +231,60 @@ impl SlabBlur {
     /// the blur of `b` (the two halves of the Poisson stop share every
     /// transform).
     pub fn forward_pair(&self, a: &Array3<f64>, b: &Array3<f64>) -> (Array3<f64>, Array3<f64>) {
-        let (m, wr, wc) = self.transient_dim();
-        let mut padded = Array3::<Complex<f64>>::zeros(self.spectrum.dim());
-        Zip::from(padded.slice_mut(s![..m, ..wr, ..wc]))
-            .and(a)
-            .and(b)
-            .for_each(|d, &x, &y| *d = Complex::new(x, y));
-        self.fft.forward(&mut padded);
-        Zip::from(&mut padded)
-            .and(&self.spectrum)
-            .par_for_each(|p, &h| *p *= h);
-        self.fft.inverse(&mut padded);
-        let r = self.reach;
-        let view = padded.slice(s![..self.count_bins, r..r + self.rows, r..r + self.cols]);
-        (view.mapv(|z| z.re.max(0.0)), view.mapv(|z| z.im.max(0.0)))
+        self.convolve(a, Some(b), false, split)
+    }
+
+    /// The transpose of [`Self::forward`].
+    pub fn adjoint(&self, counts: &Array3<f64>) -> Array3<f64> {
+        self.convolve(counts, None, true, |out| out.mapv(|z| z.re.max(0.0)))
     }
 
     /// [`Self::adjoint`] of two count volumes at the cost of one (see
     /// [`Self::forward_pair`]).
     pub fn adjoint_pair(&self, a: &Array3<f64>, b: &Array3<f64>) -> (Array3<f64>, Array3<f64>) {
-        let (m, wr, wc) = self.transient_dim();
-        let r = self.reach;
-        let mut padded = Array3::<Complex<f64>>::zeros(self.spectrum.dim());
-        Zip::from(padded.slice_mut(s![..self.count_bins, r..r + self.rows, r..r + self.cols]))
-            .and(a)
-            .and(b)
-            .for_each(|d, &x, &y| *d = Complex::new(x, y));
-        self.fft.forward(&mut padded);
-        Zip::from(&mut padded)
-            .and(&self.spectrum)
-            .par_for_each(|p, &h| *p *= h.conj());
-        self.fft.inverse(&mut padded);
-        let view = padded.slice(s![..m, ..wr, ..wc]);
-        (view.mapv(|z| z.re.max(0.0)), view.mapv(|z| z.im.max(0.0)))
+        self.convolve(a, Some(b), true, split)
     }
 
-    /// The transpose of [`Self::forward`].
-    pub fn adjoint(&self, counts: &Array3<f64>) -> Array3<f64> {
+    /// `re + i im` (`im` 0 when absent) through the blur, or with
+    /// `adjoint` its transpose (transient grid to counts, or back), by FFT
+    /// on the padded grid; `read` takes the output's region.
+    fn convolve<T>(
+        &self,
+        re: &Array3<f64>,
+        im: Option<&Array3<f64>>,
+        adjoint: bool,
+        read: impl FnOnce(ArrayView3<Complex<f64>>) -> T,
+    ) -> T {
         let (m, wr, wc) = self.transient_dim();
         let r = self.reach;
+        let transient = s![..m, ..wr, ..wc];
+        let counts = s![..self.count_bins, r..r + self.rows, r..r + self.cols];
+        let (input, output) = if adjoint {
+            (counts, transient)
+        } else {
+            (transient, counts)
+        };
         let mut padded = Array3::<Complex<f64>>::zeros(self.spectrum.dim());
-        Zip::from(padded.slice_mut(s![..self.count_bins, r..r + self.rows, r..r + self.cols]))
-            .and(counts)
-            .for_each(|d, &v| d.re = v);
+        let mut region = padded.slice_mut(input);
+        match im {
+            Some(im) => Zip::from(&mut region)
+                .and(re)
+                .and(im)
+                .for_each(|d, &x, &y| *d = Complex::new(x, y)),
+            None => Zip::from(&mut region).and(re).for_each(|d, &x| d.re = x),
+        }
         self.fft.forward(&mut padded);
         Zip::from(&mut padded)
             .and(&self.spectrum)
-            .par_for_each(|p, &h| *p *= h.conj());
+            .par_for_each(|p, &h| *p *= if adjoint { h.conj() } else { h });
         self.fft.inverse(&mut padded);
-        padded.slice(s![..m, ..wr, ..wc]).mapv(|z| z.re.max(0.0))
+        read(padded.slice(output))
     }
+}
+
+/// The real and imaginary parts of a paired result, each non-negative.
+fn split(out: ArrayView3<Complex<f64>>) -> (Array3<f64>, Array3<f64>) {
+    (out.mapv(|z| z.re.max(0.0)), out.mapv(|z| z.im.max(0.0)))
 }
 
 /// The whole model on one scan grid: the light cone, then the slab's blur

@@ -219,7 +219,8 @@ impl Reconstructor {
     }
 
     /// Reconstructs the whole run's `stack` after any snapshot still at
-    /// work (no rest: the acquisition has ended), then ends the thread.
+    /// work (whatever the load: the acquisition has ended), then ends the
+    /// thread.
     pub fn finish_with(mut self, stack: Stack, acquired_s: f64, photons: u64) {
         if let Some(tx) = self.tx.take() {
             let _ = tx.send(Snapshot {

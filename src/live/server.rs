@@ -299,11 +299,19 @@ async fn answer(State(shared): State<Arc<Shared>>, uri: Uri) -> Response {
     }
     match uri.path() {
         "/" => ([(header::CONTENT_TYPE, "text/html; charset=utf-8")], PAGE).into_response(),
-        "/state" => (
-            [(header::CONTENT_TYPE, "application/json")],
-            state_json(&shared),
-        )
-            .into_response(),
+        "/state" => {
+            // Copied under the lock, written out after it.
+            let state = shared
+                .state
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .clone();
+            (
+                [(header::CONTENT_TYPE, "application/json")],
+                to_json(&state),
+            )
+                .into_response()
+        }
         "/events" => match Slot::take(&shared) {
             Some(slot) => Sse::new(events(slot)).into_response(),
             None => (
@@ -342,7 +350,7 @@ impl Drop for Slot {
 /// stops reading holds back only its own stream (the next state is made
 /// when it reads again), never another browser or the acquisition.
 fn events(slot: Slot) -> impl futures_util::Stream<Item = Result<Event, Infallible>> {
-    futures_util::stream::unfold((slot, None), |(slot, mut sent)| async move {
+    futures_util::stream::unfold((slot, None), |(slot, sent)| async move {
         loop {
             if sent.is_some() {
                 tokio::time::sleep(EVENT_EVERY).await;
@@ -350,26 +358,20 @@ fn events(slot: Slot) -> impl futures_util::Stream<Item = Result<Event, Infallib
             if slot.0.closed.load(Ordering::Relaxed) {
                 return None;
             }
-            let version = slot
-                .0
-                .state
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .version;
-            if sent != Some(version) {
-                let event = Event::default().data(state_json(&slot.0));
-                return Some((Ok(event), (slot, Some(version))));
+            // The version and the state sent under one lock.
+            let newer = {
+                let state = slot.0.state.lock().unwrap_or_else(|e| e.into_inner());
+                (sent != Some(state.version)).then(|| state.clone())
+            };
+            if let Some(state) = newer {
+                let event = Event::default().data(to_json(&state));
+                return Some((Ok(event), (slot, Some(state.version))));
             }
-            sent = Some(version);
         }
     })
 }
 
-fn state_json(shared: &Shared) -> String {
-    let state = shared
-        .state
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .clone();
-    serde_json::to_string(&state).expect("the state serialises")
+/// The state as the page reads it.
+fn to_json(state: &LiveState) -> String {
+    serde_json::to_string(state).expect("the state serialises")
 }

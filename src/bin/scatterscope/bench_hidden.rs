@@ -4,7 +4,9 @@
 use std::path::PathBuf;
 
 use scatterscope::confocal::PoissonOptions;
-use scatterscope::report::hidden_bench::{HiddenBenchConfig, rows_csv, run_hidden_bench};
+use scatterscope::report::hidden_bench::{
+    BLUR_BASELINE, HiddenBenchConfig, rows_csv, run_hidden_bench,
+};
 
 /// Benchmark the hidden-object reconstructions on the confocal scans of a
 /// folder (named as the published ones: letter_s.mat, letter_u_50.mat, ...).
@@ -35,12 +37,12 @@ pub struct BenchHiddenArgs {
     /// With --poisson: most iterations its stop searches.
     #[arg(long, requires = "poisson", default_value_t = PoissonOptions::default().max_iters)]
     poisson_cap: usize,
-
     /// Blur baselines, ACROSSxDEPTH (Gaussian sigma in voxels), comma
     /// separated: a row of the published method followed by each blur, so
-    /// no method is credited for what a blur does ("none": no baseline).
-    #[arg(long, value_delimiter = ',', value_parser = parse_blur, default_value = "1.5x3")]
-    blur: Vec<Option<(f64, f64)>>,
+    /// no method is credited for what a blur does ("none": no baseline;
+    /// default: the one chosen on the shared scans, 1.5x3).
+    #[arg(long, value_delimiter = ',', value_parser = parse_blur)]
+    blur: Option<Vec<Option<(f64, f64)>>>,
     /// Output directory.
     #[arg(long, default_value = "out/bench-hidden")]
     out: PathBuf,
@@ -57,7 +59,9 @@ pub fn run(args: &BenchHiddenArgs) -> anyhow::Result<()> {
             max_iters: args.poisson_cap,
             ..PoissonOptions::default()
         }),
-        blurs: args.blur.iter().flatten().copied().collect(),
+        blurs: args.blur.as_ref().map_or(vec![BLUR_BASELINE], |b| {
+            b.iter().flatten().copied().collect()
+        }),
     };
     let (rows, md) = run_hidden_bench(&cfg, |r| {
         println!(
