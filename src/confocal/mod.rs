@@ -20,8 +20,11 @@
 //! - [`published`]: the published reconstruction (Lindell and Wetzstein,
 //!   Nature Communications 11, 4517 (2020)): Wiener deconvolution of the
 //!   slab kernel, then f-k migration.
+//! - [`auto`]: the default: the published method smoothed by a width its
+//!   own thinned halves choose.
 //! - [`volume`]: the reconstructed volume, its projections and depth map.
 
+pub mod auto;
 pub mod fft3;
 pub mod forward;
 pub mod light_cone;
@@ -32,6 +35,7 @@ pub mod slab_kernel;
 pub mod stolt;
 pub mod volume;
 
+pub use auto::{AutoChoice, reconstruct_auto};
 pub use poisson::{PoissonOptions, reconstruct_poisson};
 pub use published::{LIGHT_SPEED, PublishedOptions, reconstruct_published};
 pub use scan::ConfocalScan;
@@ -41,6 +45,8 @@ pub use volume::HiddenVolume;
 /// How a hidden volume is reconstructed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum HiddenMethod {
+    /// [`auto::reconstruct_auto`].
+    Auto,
     /// [`published::reconstruct_published`].
     Published,
     /// [`poisson::reconstruct_poisson`].
@@ -48,6 +54,7 @@ pub enum HiddenMethod {
 }
 
 crate::named::named!(HiddenMethod {
+    Auto => "auto",
     Published => "published",
     Poisson => "poisson",
 });
@@ -62,6 +69,7 @@ pub fn reconstruct_hidden(
     poisson: &PoissonOptions,
 ) -> Result<(HiddenVolume, Option<Vec<poisson::PoissonTraceRow>>), ConfocalError> {
     Ok(match method {
+        HiddenMethod::Auto => (reconstruct_auto(scan, optics, published)?.0, None),
         HiddenMethod::Published => (reconstruct_published(scan, optics, published)?, None),
         HiddenMethod::Poisson => {
             let (volume, trace) = reconstruct_poisson(scan, optics, poisson)?;

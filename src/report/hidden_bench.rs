@@ -12,12 +12,15 @@ use super::ReportError;
 use crate::confocal::published::authors_settings;
 use crate::confocal::volume::{HiddenVolume, Projection, correlation};
 use crate::confocal::{
-    ConfocalScan, PoissonOptions, PublishedOptions, SlabOptics, reconstruct_poisson,
-    reconstruct_published,
+    ConfocalScan, PoissonOptions, PublishedOptions, SlabOptics, reconstruct_auto,
+    reconstruct_poisson, reconstruct_published,
 };
 
 /// Label of the published method.
 pub const PUBLISHED: &str = "published (Wiener + f-k)";
+
+/// Label of the default method.
+pub const AUTO: &str = "auto (published + blur chosen on halves)";
 
 /// Label of the Poisson method.
 pub const POISSON: &str = "poisson (EM + f-k)";
@@ -77,6 +80,8 @@ pub struct HiddenBenchRow {
     /// For an iterative method: the iteration its stop chose, and the
     /// iterations it searched.
     pub stop: Option<(usize, usize)>,
+    /// For the default method: the blur it chose (across, depth voxels).
+    pub blur: Option<(f64, f64)>,
 }
 
 /// Runs `f` `repeats` times; its last result and the median time (s).
@@ -167,6 +172,14 @@ pub fn run_hidden_bench(
                 on_row(&row);
                 rows.push(row);
             }
+            let ((volume, choice), wall_s) = timed(cfg.repeats, || {
+                reconstruct_auto(&thinned, &SlabOptics::PUBLISHED_FOAM, &opts)
+                    .map_err(|e| ReportError::Input(e.to_string()))
+            })?;
+            let mut row = row_of(&name, fraction, &thinned, AUTO, &volume, &reference, wall_s);
+            row.blur = choice.map(|c| c.blur);
+            on_row(&row);
+            rows.push(row);
             if let Some(poisson) = &cfg.poisson {
                 let ((volume, trace), wall_s) = timed(1, || {
                     reconstruct_poisson(&thinned, &SlabOptics::PUBLISHED_FOAM, poisson)
@@ -208,6 +221,7 @@ fn row_of(
         brightest_cm: volume.brightest_depth() * 100.0,
         wall_s,
         stop: None,
+        blur: None,
     }
 }
 
@@ -243,12 +257,12 @@ pub fn rms_after_offset(pairs: &[(f64, f64)]) -> Option<(f64, f64)> {
 /// The rows as CSV.
 pub fn rows_csv(rows: &[HiddenBenchRow]) -> String {
     let mut csv = String::from(
-        "scan,fraction,counts,method,correlation,depth_cm,brightest_cm,wall_s,stop,searched\n",
+        "scan,fraction,counts,method,correlation,depth_cm,brightest_cm,wall_s,stop,searched,blur_across,blur_depth\n",
     );
     for r in rows {
         writeln!(
             csv,
-            "{},{},{:.0},\"{}\",{:.4},{},{:.2},{:.4},{},{}",
+            "{},{},{:.0},\"{}\",{:.4},{},{:.2},{:.4},{},{},{},{}",
             r.scan,
             r.fraction,
             r.counts,
@@ -258,7 +272,9 @@ pub fn rows_csv(rows: &[HiddenBenchRow]) -> String {
             r.brightest_cm,
             r.wall_s,
             r.stop.map_or(String::new(), |s| s.0.to_string()),
-            r.stop.map_or(String::new(), |s| s.1.to_string())
+            r.stop.map_or(String::new(), |s| s.1.to_string()),
+            r.blur.map_or(String::new(), |b| format!("{:.3}", b.0)),
+            r.blur.map_or(String::new(), |b| format!("{:.3}", b.1))
         )
         .expect("String");
     }
@@ -289,6 +305,7 @@ fn summary_markdown(rows: &[HiddenBenchRow], cfg: &HiddenBenchConfig) -> String 
         md.push_str("\n### Letter U depth (full counts, one fitted offset)\n\n| method | depth rule | scans | offset (cm) | RMS error (cm) |\n|---|---|---|---|---|\n");
         let mut methods = vec![PUBLISHED.to_string()];
         methods.extend(cfg.blurs.iter().map(|&b| blur_label(b)));
+        methods.push(AUTO.to_string());
         methods.push(POISSON.to_string());
         for method in &methods {
             depth_rows(&mut md, rows, method);

@@ -12,7 +12,8 @@ use scatterscope::report::hidden_bench::{
 /// folder (named as the published ones: letter_s.mat, letter_u_50.mat, ...).
 ///
 /// Each scan at each count fraction (binomially thinned, seeded) through
-/// each method: the front projection's correlation with the published
+/// each method (the published one, its blur baselines, the default `auto`
+/// and optionally `poisson`): the front projection's correlation with the published
 /// method's at full counts, the object's depth, the median wall time.
 /// Writes OUT/rows.csv and OUT/summary.md (with the letter-U depth series).
 #[derive(Debug, clap::Args)]
@@ -65,13 +66,15 @@ pub fn run(args: &BenchHiddenArgs) -> anyhow::Result<()> {
     };
     let (rows, md) = run_hidden_bench(&cfg, |r| {
         println!(
-            "{:<14} {:>5}% {:<26} corr {:.3}  depth {:>6}  {:.3} s",
+            "{:<14} {:>5}% {:<26} corr {:.3}  depth {:>6}  {:.3} s{}",
             r.scan,
             r.fraction * 100.0,
             r.method,
             r.correlation,
             r.depth_cm.map_or("-".into(), |d| format!("{d:.1}")),
-            r.wall_s
+            r.wall_s,
+            r.blur
+                .map_or(String::new(), |b| format!("  blur {:.2}x{:.2}", b.0, b.1))
         )
     })?;
     std::fs::create_dir_all(&args.out)?;

@@ -20,8 +20,11 @@ use crate::shared_args::choice;
 /// The scan: a MATLAB v7.3 file of counts (column, row, time; the
 /// confocal diffuse tomography scans) or a project stack whose pixels are
 /// scan points (e.g. a galvo-scanned PTU binned with `bin`). The methods:
-/// `published`, Wiener deconvolution of the slab's in-and-out diffusion
-/// kernel then f-k migration (Lindell and Wetzstein 2020); `poisson`, the
+/// `auto` (the default), the published method followed by a 3-D Gaussian
+/// blur whose width two thinned halves of the scan choose without the
+/// truth; `published`, Wiener deconvolution of the slab's in-and-out
+/// diffusion kernel then f-k migration (Lindell and Wetzstein 2020),
+/// sharpest at full counts and noisy at low light; `poisson`, the
 /// slab's blur undone by maximum likelihood of the counts (with a
 /// background per bin, stopped by cross-validation on thinned halves),
 /// then f-k migration. Writes OUT/volume.{npy,json,exr}, OUT/depth.{npy,png},
@@ -48,9 +51,10 @@ pub struct HiddenArgs {
     /// Dataset holding the counts in MATLAB files.
     #[arg(long, default_value = DEFAULT_MAT_DATASET)]
     dataset: String,
-    /// Reconstruction method: published, or poisson (in progress: slower
-    /// and not yet better; see the guide).
-    #[arg(long, value_parser = choice::<HiddenMethod>(), default_value = "published")]
+    /// Reconstruction method: auto (published, smoothed as the scan's own
+    /// noise asks), published, or poisson (slower, and on the shared scans
+    /// below auto at every light level; see the guide).
+    #[arg(long, value_parser = choice::<HiddenMethod>(), default_value = "auto")]
     method: HiddenMethod,
     /// Wiener constant of the published method (the authors used 2.5e3
     /// to 2e4 per scene).
