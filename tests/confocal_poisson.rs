@@ -1,5 +1,5 @@
-//! The confocal forward model in counts and the Poisson reconstruction on
-//! scans simulated with it.
+//! The confocal forward model in counts, and the Poisson reconstruction
+//! and the default (`auto`) on scans simulated with it.
 
 use ndarray::{Array3, s};
 use rand::SeedableRng;
@@ -8,7 +8,10 @@ use rand_distr::{Distribution, Poisson};
 use scatterscope::confocal::forward::ConfocalModel;
 use scatterscope::confocal::light_cone::ConeGrid;
 use scatterscope::confocal::volume::{Projection, correlation};
-use scatterscope::confocal::{ConfocalScan, PoissonOptions, SlabOptics, reconstruct_poisson};
+use scatterscope::confocal::{
+    ConfocalScan, PoissonOptions, PublishedOptions, SlabOptics, reconstruct_auto,
+    reconstruct_poisson, reconstruct_published,
+};
 
 const BIN_PS: f64 = 48.0;
 
@@ -75,20 +78,23 @@ fn the_paired_slab_blur_is_two_blurs() {
     assert!((lhs - rhs).abs() <= 1e-9 * lhs.abs(), "{lhs} vs {rhs}");
 }
 
-/// A square plate 36 cm behind the slab, simulated through the full model
-/// (light cone, slab kernel, background, Poisson counts), is found at its
-/// depth and in its place by the Poisson method.
-#[test]
-fn poisson_method_finds_a_plate_at_its_depth() {
+/// Sample of the plate's depth in [`plate_scan`].
+const PLATE_DEPTH: usize = 50;
+
+/// A square plate behind the slab at sample [`PLATE_DEPTH`] (about 36 cm),
+/// simulated through the full model (light cone, slab kernel, background
+/// 0.5 per point and bin in all, Poisson counts) with about `photons`
+/// signal photons; the scan and the plate's front view.
+fn plate_scan(photons: f64, seed: u64) -> (ConfocalScan, ndarray::Array2<f64>) {
     let g = grid();
     let m = model(g);
-    let depth_sample = 50;
     let mut volume = Array3::<f64>::zeros((g.depths, g.rows, g.cols));
-    volume.slice_mut(s![depth_sample, 5..11, 4..9]).fill(1.0);
+    volume.slice_mut(s![PLATE_DEPTH, 5..11, 4..9]).fill(1.0);
     let clean = m.forward(&volume);
-    let scale = 2e6 / clean.sum();
-    let mu = m.expected_counts(&(volume.clone() * scale), &vec![0.5; g.depths]);
-    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let scale = photons / clean.sum();
+    let background = 0.5 * photons / 2e6;
+    let mu = m.expected_counts(&(volume.clone() * scale), &vec![background; g.depths]);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let counts = mu.mapv(|l| {
         if l > 0.0 {
             Poisson::new(l).unwrap().sample(&mut rng)
@@ -96,7 +102,18 @@ fn poisson_method_finds_a_plate_at_its_depth() {
             0.0
         }
     });
-    let scan = ConfocalScan::new(counts, BIN_PS, 0.0, 0.5, "plate").unwrap();
+    let plate = volume.index_axis(ndarray::Axis(0), PLATE_DEPTH).to_owned();
+    (
+        ConfocalScan::new(counts, BIN_PS, 0.0, 0.5, "plate").unwrap(),
+        plate,
+    )
+}
+
+/// The plate is found at its depth and in its place by the Poisson method.
+#[test]
+fn poisson_method_finds_a_plate_at_its_depth() {
+    let g = grid();
+    let (scan, plate) = plate_scan(2e6, 9);
     let opts = PoissonOptions {
         depth_m: g.depths as f64 * g.step_m,
         step_m: g.step_m,
@@ -104,15 +121,48 @@ fn poisson_method_finds_a_plate_at_its_depth() {
     };
     let (vol, trace) = reconstruct_poisson(&scan, &SlabOptics::PUBLISHED_FOAM, &opts).unwrap();
     assert!(!trace.is_empty());
-    let truth_m = (depth_sample as f64 + 0.5) * g.step_m;
+    let truth_m = (PLATE_DEPTH as f64 + 0.5) * g.step_m;
     let found = vol.object_depth().unwrap();
     assert!(
         (found - truth_m).abs() < 2.0 * g.step_m,
         "depth {found} m vs {truth_m} m"
     );
-    let plate = volume.index_axis(ndarray::Axis(0), depth_sample).to_owned();
     let r = correlation(&vol.projection(Projection::Front), &plate);
     assert!(r > 0.7, "front projection against the plate: {r}");
+}
+
+/// The default's halves choose more blur at low light than at high light,
+/// and at low light its front view is closer to the plate than the
+/// published method's it starts from.
+#[test]
+fn auto_blurs_more_as_the_light_falls() {
+    let opts = PublishedOptions {
+        depth_m: 0.7,
+        ..PublishedOptions::default()
+    };
+    let foam = SlabOptics::PUBLISHED_FOAM;
+    let mut chosen = Vec::new();
+    for photons in [2e7, 2e4] {
+        let (scan, plate) = plate_scan(photons, 3);
+        let (auto, choice) = reconstruct_auto(&scan, &foam, &opts).unwrap();
+        let choice = choice.expect("whole counts are split");
+        let published = reconstruct_published(&scan, &foam, &opts).unwrap();
+        let front = |v: &scatterscope::confocal::HiddenVolume| {
+            correlation(&v.projection(Projection::Front), &plate)
+        };
+        println!(
+            "{photons:e} photons: blur {:?}, plate correlation auto {:.3}, published {:.3}",
+            choice.blur,
+            front(&auto),
+            front(&published)
+        );
+        assert!(auto.notes.iter().any(|n| n.starts_with("auto: blur chosen")));
+        if photons < 1e5 {
+            assert!(front(&auto) > front(&published));
+        }
+        chosen.push(choice.blur.0);
+    }
+    assert!(chosen[1] > chosen[0], "blur at high, low light: {chosen:?}");
 }
 
 #[test]

@@ -228,6 +228,11 @@ fn bench_hidden_reports_the_blur_baseline() {
         correlation("published + blur 1.5x3"),
     );
     assert!(blurred > published + 0.05, "{blurred} vs {published}");
+    let auto = correlation("auto (published + blur chosen on halves)");
+    assert!(auto > published + 0.05, "{auto} vs {published}");
+    let auto_row = csv.lines().find(|l| l.contains("\"auto (")).unwrap();
+    let blur_across: f64 = auto_row.split(',').nth(10).unwrap().parse().unwrap();
+    assert!(blur_across > 0.0, "{auto_row}");
     let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
         .arg("bench-hidden")
         .arg(&scans)

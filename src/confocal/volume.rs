@@ -108,7 +108,7 @@ impl HiddenVolume {
         }
         let mut notes = self.notes.clone();
         notes.push(format!(
-            "then a 3-D Gaussian blur: sigma {sigma_across} voxels across, {sigma_depth} in depth"
+            "then a 3-D Gaussian blur: sigma {sigma_across:.2} voxels across, {sigma_depth:.2} in depth"
         ));
         HiddenVolume {
             data,

@@ -60,6 +60,13 @@ pub struct HiddenArgs {
     /// to 2e4 per scene).
     #[arg(long, default_value_t = PublishedOptions::default().snr)]
     snr: f64,
+    /// Keep only this fraction of the photons (binomial thinning, seeded
+    /// by --thin-seed): what a shorter exposure of the same scene gives.
+    #[arg(long, value_name = "FRACTION")]
+    thin: Option<f64>,
+    /// Seed of --thin.
+    #[arg(long, default_value_t = 1, requires = "thin")]
+    thin_seed: u64,
     /// Depth behind the slab to reconstruct, with its unit.
     #[arg(long, value_name = "LENGTH", default_value = "1m")]
     depth: String,
@@ -72,7 +79,10 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
     let side_m = parse_length_cm(&args.scan_side).context("--scan-side")? / 100.0;
     let thickness_m = parse_length_cm(&args.slab_thickness).context("--slab-thickness")? / 100.0;
     let depth_m = parse_length_cm(&args.depth).context("--depth")? / 100.0;
-    let scan = ConfocalScan::open(&args.scan, &args.dataset, args.bin_ps, side_m)?;
+    let mut scan = ConfocalScan::open(&args.scan, &args.dataset, args.bin_ps, side_m)?;
+    if let Some(fraction) = args.thin.filter(|&f| f != 1.0) {
+        scan = scan.thinned(fraction, args.thin_seed).context("--thin")?;
+    }
     let optics = SlabOptics::for_slab(args.medium.as_deref(), thickness_m)?;
     let published = PublishedOptions {
         snr: args.snr,
