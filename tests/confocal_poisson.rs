@@ -156,7 +156,11 @@ fn auto_blurs_more_as_the_light_falls() {
             front(&auto),
             front(&published)
         );
-        assert!(auto.notes.iter().any(|n| n.starts_with("auto: blur chosen")));
+        assert!(
+            auto.notes
+                .iter()
+                .any(|n| n.starts_with("auto: blur chosen"))
+        );
         if photons < 1e5 {
             assert!(front(&auto) > front(&published));
         }

@@ -120,12 +120,29 @@ pub enum ConfocalError {
         /// What is wrong, with the value.
         message: String,
     },
+    /// A setting's value is not usable; `name` is the library's name for it
+    /// (the command line's hints name its flag).
+    #[error("{message}")]
+    Setting {
+        /// The setting (a field name, e.g. `snr`, `side_m`).
+        name: &'static str,
+        /// What is wrong, with the value.
+        message: String,
+    },
     /// The work does not fit the memory budget.
     #[error(transparent)]
     Memory(#[from] crate::memory::MemoryError),
 }
 
 impl ConfocalError {
+    /// An error about the setting `name`.
+    pub fn setting(name: &'static str, message: impl Into<String>) -> Self {
+        Self::Setting {
+            name,
+            message: message.into(),
+        }
+    }
+
     /// An input error about `source_name`.
     pub fn input(source_name: impl Into<String>, message: impl Into<String>) -> Self {
         Self::Input {

@@ -163,15 +163,18 @@ pub fn reconstruct_poisson(
 ) -> Result<(HiddenVolume, Vec<PoissonTraceRow>), ConfocalError> {
     let started = Instant::now();
     if !(opts.step_m.is_finite() && opts.step_m > 0.0) {
-        return Err(ConfocalError::input(
-            "--step",
+        return Err(ConfocalError::setting(
+            "step_m",
             format!("depth step {} m must be positive and finite", opts.step_m),
         ));
     }
     if !(opts.depth_m.is_finite() && opts.depth_m > opts.step_m) {
-        return Err(ConfocalError::input(
-            "--depth",
-            format!("depth {} m must exceed the depth step", opts.depth_m),
+        return Err(ConfocalError::setting(
+            "depth_m",
+            format!(
+                "depth {} m must exceed the depth step {} m",
+                opts.depth_m, opts.step_m
+            ),
         ));
     }
     if let Some(v) = scan.counts.iter().find(|v| v.fract() != 0.0) {

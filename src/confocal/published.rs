@@ -62,23 +62,26 @@ impl Default for PublishedOptions {
 }
 
 impl PublishedOptions {
-    /// Checks the settings; errors name the flag.
+    /// Checks the settings; errors name the setting and its value.
     pub fn validate(&self) -> Result<(), ConfocalError> {
         if !(self.snr.is_finite() && self.snr > 0.0) {
-            return Err(ConfocalError::input(
-                "--snr",
-                format!("Wiener constant {} must be positive and finite", self.snr),
+            return Err(ConfocalError::setting(
+                "snr",
+                format!(
+                    "Wiener constant (snr) {} must be positive and finite",
+                    self.snr
+                ),
             ));
         }
         if !(self.depth_m.is_finite() && self.depth_m > 0.0) {
-            return Err(ConfocalError::input(
-                "--depth",
+            return Err(ConfocalError::setting(
+                "depth_m",
                 format!("depth {} m must be positive and finite", self.depth_m),
             ));
         }
         if self.depth_samples < 4 {
-            return Err(ConfocalError::input(
-                "--depth-samples",
+            return Err(ConfocalError::setting(
+                "depth_samples",
                 format!(
                     "{} depth samples: at least 4 are needed",
                     self.depth_samples
@@ -86,8 +89,8 @@ impl PublishedOptions {
             ));
         }
         if self.trimmed_tail >= self.depth_samples {
-            return Err(ConfocalError::input(
-                "--trimmed-tail",
+            return Err(ConfocalError::setting(
+                "trimmed_tail",
                 format!(
                     "{} trimmed samples leave nothing of {} depth samples",
                     self.trimmed_tail, self.depth_samples

@@ -64,9 +64,10 @@ impl ConfocalScan {
             return Err(fail(format!("time zero {start_ps} ps must be finite")));
         }
         if !(side_m.is_finite() && side_m > 0.0) {
-            return Err(fail(format!(
-                "scanned side {side_m} m must be positive and finite (--scan-side)"
-            )));
+            return Err(ConfocalError::setting(
+                "side_m",
+                format!("{source}: scanned side {side_m} m must be positive and finite"),
+            ));
         }
         if let Some(((k, r, c), v)) = counts
             .indexed_iter()
@@ -103,9 +104,9 @@ impl ConfocalScan {
         match path.extension().and_then(|e| e.to_str()) {
             Some("mat") => {
                 let width = bin_width_ps.ok_or_else(|| {
-                    ConfocalError::input(
-                        &name,
-                        "a MATLAB file does not record its bin width: give it (--bin-ps)",
+                    ConfocalError::setting(
+                        "bin_width_ps",
+                        format!("{name}: a MATLAB file does not record its bin width: give it"),
                     )
                 })?;
                 Self::read_mat(path, dataset, width, side_m)

@@ -83,10 +83,10 @@ impl SlabOptics {
         if let Some(cm) = file.thickness_cm
             && (cm / 100.0 - thickness_m).abs() > 1e-6 * thickness_m.max(1e-9)
         {
-            return Err(ConfocalError::input(
-                &name,
+            return Err(ConfocalError::setting(
+                "thickness_m",
                 format!(
-                    "the medium file is for a slab {cm} cm thick, the scan's slab is {} cm (--slab-thickness): remove its `thickness` key to use the material at another thickness",
+                    "{name}: the medium file is for a slab {cm} cm thick, the scan's slab is {} cm: remove its `thickness` key to use the material at another thickness",
                     thickness_m * 100.0
                 ),
             ));
@@ -265,7 +265,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("3 cm thick") && e.contains("2.54 cm") && e.contains("--slab-thickness"),
+            e.contains("3 cm thick") && e.contains("2.54 cm") && e.contains("medium.toml"),
             "{e}"
         );
         let missing = medium_file("mu_a = 0.0048\nmu_s = 2.72\n");

@@ -9,6 +9,7 @@ use scatterscope::acquire::device::OpenError;
 use scatterscope::calibrate::CalibrateError;
 use scatterscope::calibrate::histogram::HistogramError;
 use scatterscope::config::ConfigError;
+use scatterscope::confocal::ConfocalError;
 use scatterscope::denoise::ffdnet::source::ImportError;
 use scatterscope::denoise::prior::PriorError;
 use scatterscope::formats::picoquant::{FileError, TtrError};
@@ -67,6 +68,18 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
     }
     if let Some(ReconstructError::Setting { name, .. }) = cause.downcast_ref::<ReconstructError>() {
         return Some(format!("set it with --{}", name.replace('_', "-")));
+    }
+    if let Some(ConfocalError::Setting { name, .. }) = cause.downcast_ref::<ConfocalError>() {
+        let flag = match *name {
+            "snr" => "--snr",
+            "depth_m" => "--depth",
+            "side_m" => "--scan-side",
+            "bin_width_ps" => "--bin-ps",
+            "thickness_m" => "--slab-thickness",
+            // Settings of the library the command line does not expose.
+            _ => return None,
+        };
+        return Some(format!("set it with {flag}"));
     }
     if let Some(PriorError::Setting(_)) = cause.downcast_ref::<PriorError>() {
         return Some("--tv-gain is TV's gain; --weights applies to --denoiser ffdnet".into());
