@@ -136,6 +136,12 @@ def test_simulate_equals_the_command(tmp_path):
     np.testing.assert_array_equal(sim["expected"], expected)
 
 
+def test_an_unknown_scene_name_lists_the_built_in_ones():
+    with pytest.raises(Exception) as e:
+        scatterscope.simulate("usa", size=32)
+    assert "usa: no such file, and not a built-in scene (usaf, star, text, disks)" in str(e.value)
+
+
 def test_simulate_an_array_matches_the_same_scene_rendered():
     scene = scatterscope.simulate("disks", seed=2, size=32)
     again = scatterscope.simulate(scene["truth"], seed=2)

@@ -59,6 +59,15 @@ impl Scene {
             Scene::Star => patterns::siemens_star(height, width, 36),
             Scene::Text => patterns::text(height, width, &["SCATTER", "SCOPE", "2026"]),
             Scene::Disks => patterns::disks(height, width),
+            Scene::File(path) if !path.exists() => {
+                return Err(ImageError::Content {
+                    path: path.clone(),
+                    reason: format!(
+                        "no such file, and not a built-in scene ({})",
+                        Self::BUILT_IN.join(", ")
+                    ),
+                });
+            }
             Scene::File(path) => {
                 crate::formats::image::read_grayscale(Path::new(path), height, width)?
             }
