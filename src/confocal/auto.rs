@@ -91,14 +91,12 @@ pub fn reconstruct_auto(
             (across, score)
         })
         .collect();
-    // A NaN score (an empty half) loses to every number.
+    // A NaN score (a half with nothing in it) is left out; with none left
+    // the volume is not blurred.
     let half_across = scores
         .iter()
-        .copied()
-        .max_by(|x, y| {
-            let key = |s: f64| if s.is_nan() { f64::NEG_INFINITY } else { s };
-            key(x.1).total_cmp(&key(y.1))
-        })
+        .filter(|s| !s.1.is_nan())
+        .max_by(|x, y| x.1.total_cmp(&y.1))
         .map_or(0.0, |s| s.0);
     let across = half_across * half_to_whole();
     let blur = (across, DEPTH_PER_ACROSS * across);
@@ -152,6 +150,20 @@ mod tests {
         let a = Array3::from_shape_fn((4, 5, 6), |(k, r, c)| (k * 31 + r * 7 + c) as f64);
         assert!((correlation3(&a, &(a.clone() * 3.0 + 1.0)) - 1.0).abs() < 1e-12);
         assert!(correlation3(&a, &Array3::from_elem((4, 5, 6), 2.0)).is_nan());
+    }
+
+    /// A scan whose halves reconstruct to nothing (a slab that lets no
+    /// light through) is not blurred, and nothing in it turns NaN.
+    #[test]
+    fn an_empty_volume_is_left_unblurred() {
+        let mut counts = Array3::<f64>::zeros((600, 4, 4));
+        counts.slice_mut(ndarray::s![100..400, .., ..]).fill(1.0);
+        let scan = ConfocalScan::new(counts, 16.0, 0.0, 0.5, "dark").unwrap();
+        let optics = SlabOptics::for_slab(None, 1000.0).unwrap();
+        let (volume, choice) =
+            reconstruct_auto(&scan, &optics, &PublishedOptions::default()).unwrap();
+        assert!(volume.data.iter().all(|v| v.is_finite()));
+        assert_eq!(choice.unwrap().blur, (0.0, 0.0));
     }
 
     #[test]

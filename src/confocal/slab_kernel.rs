@@ -265,7 +265,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("3 cm thick") && e.contains("2.54 cm") && e.contains("medium.toml"),
+            e.contains("3 cm thick") && e.contains("2.54 cm") && e.contains(".toml:"),
             "{e}"
         );
         let missing = medium_file("mu_a = 0.0048\nmu_s = 2.72\n");
