@@ -18,9 +18,9 @@
 use ndarray::Array3;
 
 use super::published::{PublishedOptions, reconstruct_published};
-use super::scan::keep_photons;
+use super::scan::halves;
 use super::slab_kernel::SlabOptics;
-use super::volume::HiddenVolume;
+use super::volume::{HiddenVolume, pearson};
 use super::{ConfocalError, ConfocalScan};
 
 /// Seed of the halves' thinning.
@@ -69,8 +69,7 @@ pub fn reconstruct_auto(
         );
         return Ok((whole, None));
     }
-    let first = keep_photons(&scan.counts, 0.5, AUTO_SEED);
-    let second = &scan.counts - &first;
+    let (first, second) = halves(&scan.counts, AUTO_SEED);
     let half = |counts: Array3<f64>, name: &str| {
         let s = ConfocalScan::new(
             counts,
@@ -86,8 +85,13 @@ pub fn reconstruct_auto(
         .iter()
         .map(|&across| {
             let depth = DEPTH_PER_ACROSS * across;
-            let score = correlation3(&a.blurred(across, depth).data, &b.data)
-                + correlation3(&b.blurred(across, depth).data, &a.data);
+            let score = match (
+                pearson(&a.blurred(across, depth).data, &b.data),
+                pearson(&b.blurred(across, depth).data, &a.data),
+            ) {
+                (Some(ab), Some(ba)) => ab + ba,
+                _ => f64::NAN,
+            };
             (across, score)
         })
         .collect();
@@ -125,32 +129,10 @@ pub fn reconstruct_auto(
     ))
 }
 
-/// Pearson correlation of two equally shaped volumes; NaN when either is
-/// constant.
-fn correlation3(a: &Array3<f64>, b: &Array3<f64>) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.sum() / n, b.sum() / n);
-    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b.iter()) {
-        let (dx, dy) = (x - ma, y - mb);
-        ab += dx * dy;
-        aa += dx * dx;
-        bb += dy * dy;
-    }
-    ab / (aa * bb).sqrt()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use ndarray::Array3;
-
-    #[test]
-    fn correlation3_is_one_for_scaled_copies_and_nan_for_constants() {
-        let a = Array3::from_shape_fn((4, 5, 6), |(k, r, c)| (k * 31 + r * 7 + c) as f64);
-        assert!((correlation3(&a, &(a.clone() * 3.0 + 1.0)) - 1.0).abs() < 1e-12);
-        assert!(correlation3(&a, &Array3::from_elem((4, 5, 6), 2.0)).is_nan());
-    }
 
     /// A scan whose halves reconstruct to nothing (a slab that lets no
     /// light through) is not blurred, and nothing in it turns NaN.

@@ -33,7 +33,7 @@ use ndarray::{Array1, Array3, Axis, Zip, s};
 
 use super::forward::SlabBlur;
 use super::published::{LIGHT_SPEED, crop_bins};
-use super::scan::keep_photons;
+use super::scan::halves;
 use super::slab_kernel::SlabOptics;
 use super::volume::HiddenVolume;
 use super::{ConfocalError, ConfocalScan, stolt};
@@ -78,14 +78,6 @@ pub struct PoissonTraceRow {
     pub wall_s: f64,
     /// Each half's deviance on the other half's counts, summed.
     pub held_out_deviance: f64,
-}
-
-/// Splits whole counts into two halves, each photon to the first with
-/// probability 1/2.
-fn halves(counts: &Array3<f64>, seed: u64) -> (Array3<f64>, Array3<f64>) {
-    let first = keep_photons(counts, 0.5, seed);
-    let second = counts - &first;
-    (first, second)
 }
 
 /// One half's estimate: transient and background per bin.

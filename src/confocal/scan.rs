@@ -255,3 +255,12 @@ pub fn keep_photons(counts: &Array3<f64>, fraction: f64, seed: u64) -> Array3<f6
         }
     })
 }
+
+/// Splits whole counts into two halves, each photon to the first with
+/// probability 1/2, seeded (the thinned halves the Poisson method's stop
+/// and the default's blur are chosen on).
+pub fn halves(counts: &Array3<f64>, seed: u64) -> (Array3<f64>, Array3<f64>) {
+    let first = keep_photons(counts, 0.5, seed);
+    let second = counts - &first;
+    (first, second)
+}

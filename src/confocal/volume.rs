@@ -1,7 +1,7 @@
 //! A reconstructed hidden volume and what a person reads from it:
 //! maximum-intensity projections, a depth map and the depth of the object.
 
-use ndarray::{Array2, Array3, Axis};
+use ndarray::{Array, Array2, Array3, Axis, Dimension};
 
 /// Values over (depth behind the slab, row, column).
 #[derive(Debug, Clone)]
@@ -172,9 +172,9 @@ fn parabola_offset(lane: &[f64], k: usize, n: usize) -> f64 {
     (0.5 * (a - c) / curvature).clamp(-0.5, 0.5)
 }
 
-/// Pearson correlation of two equally sized arrays; 0 when either is
-/// constant.
-pub fn correlation(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
+/// Pearson correlation of two equally shaped arrays of any dimension;
+/// `None` when either is constant or not finite.
+pub fn pearson<D: Dimension>(a: &Array<f64, D>, b: &Array<f64, D>) -> Option<f64> {
     let n = a.len() as f64;
     let (ma, mb) = (a.sum() / n, b.sum() / n);
     let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
@@ -184,16 +184,25 @@ pub fn correlation(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
         aa += dx * dx;
         bb += dy * dy;
     }
-    if aa > 0.0 && bb > 0.0 {
-        ab / (aa * bb).sqrt()
-    } else {
-        0.0
-    }
+    (aa > 0.0 && bb > 0.0).then(|| ab / (aa * bb).sqrt())
+}
+
+/// Pearson correlation of two equally sized images; 0 when either is
+/// constant.
+pub fn correlation(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
+    pearson(a, b).unwrap_or(0.0)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pearson_is_one_for_scaled_copies_and_none_for_constants() {
+        let a = Array3::from_shape_fn((4, 5, 6), |(k, r, c)| (k * 31 + r * 7 + c) as f64);
+        assert!((pearson(&a, &(a.clone() * 3.0 + 1.0)).unwrap() - 1.0).abs() < 1e-12);
+        assert_eq!(pearson(&a, &Array3::from_elem((4, 5, 6), 2.0)), None);
+    }
 
     /// The parabola's vertex is exact for samples of a parabola.
     #[test]
