@@ -4,6 +4,10 @@
 //! transport and over a pseudo-terminal (unpaced: as fast as the host takes
 //! photons).
 
+/// The command's allocator, so that the bench times what `scatterscope` runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use std::sync::atomic::AtomicBool;
 
 #[path = "common/photons.rs"]

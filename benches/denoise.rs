@@ -4,6 +4,10 @@
 //! network, one 64->64 layer alone (im2col + GEMM and Winograd), and TV for
 //! comparison.
 
+/// The command's allocator, so that the bench times what `scatterscope` runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use std::collections::BTreeMap;
 use std::hint::black_box;
 

@@ -1,5 +1,9 @@
 //! PSF generation and the forward model on the paper preset (256 x 256, 20 kept bins).
 
+/// The command's allocator, so that the bench times what `scatterscope` runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use criterion::{Criterion, criterion_group, criterion_main};
 use scatterscope::fft2::Fft2;
 use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};

@@ -5,6 +5,10 @@
 //! embedded FFDNet prior, its own stopping rule), and Richardson-Lucy's
 //! cross-validated stop on the time-summed and on the whole stack.
 
+/// The command's allocator, so that the bench times what `scatterscope` runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use criterion::{Criterion, criterion_group, criterion_main};
 use ndarray::parallel::prelude::*;
 use rustfft::num_complex::Complex64;

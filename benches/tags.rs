@@ -2,6 +2,10 @@
 //! through [`bin_file`], the function `scatterscope bin` calls: a PicoQuant
 //! T3 file and one of the project's raw tag files.
 
+/// The command's allocator, so that the bench times what `scatterscope` runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 #[path = "common/photons.rs"]
 mod photons;
 

@@ -2,9 +2,9 @@
 //! cross-validated stop) and PnP (the split solver with the learned
 //! prior), made without the truth.
 //!
-//! Both run; PnP's output is returned when its output deviance, in noise
+//! PnP runs first; its output is returned when its output deviance, in noise
 //! standard deviations above the Poisson expectation, is at least
-//! [`PNP_MISFIT_Z`], else `rl-stack`'s. The rule and its threshold were
+//! [`PNP_MISFIT_Z`], else `rl-stack` runs and its output is returned. The rule and its threshold were
 //! chosen on the benchmark's tuning images only (the eighteenth session's
 //! journal, BENCHMARKS.md): among the truth-free scores tried (statistics
 //! of the `rl-stack` estimate, each candidate's held-out deviance on
@@ -83,22 +83,23 @@ impl Reconstructor for Auto<'_> {
             let seconds = sub.elapsed_s() - from;
             Ok((out, sub.into_trace(), seconds))
         };
-        let (rl_out, rl_trace, rl_s) = candidate(&rl, rl_name)?;
+        // PnP first: when its output is chosen, `rl-stack` (the slower of
+        // the two on most stacks) is not run at all.
         let (pnp_out, pnp_trace, pnp_s) = candidate(&pnp, pnp_name)?;
         let z = deviance_z(&pnp_trace);
         let z_text = z.map_or("none (never at its noise floor)".into(), |z| {
             format!("{z:.1}")
         });
-        let mut notes = vec![
-            format!("auto: {rl_name} took {rl_s:.2} s"),
-            format!(
-                "auto: {pnp_name} took {pnp_s:.2} s; its output deviance z = {z_text} (chosen at {PNP_MISFIT_Z} or more)"
-            ),
-        ];
+        let mut notes = vec![format!(
+            "auto: {pnp_name} took {pnp_s:.2} s; its output deviance z = {z_text} (chosen at {PNP_MISFIT_Z} or more)"
+        )];
         let (out, trace) = if chooses_pnp(z) {
+            notes.push(format!("auto: {rl_name} not run: {pnp_name} is chosen"));
             notes.push(format!("{CHOSE}{pnp_name}"));
             (pnp_out, pnp_trace)
         } else {
+            let (rl_out, rl_trace, rl_s) = candidate(&rl, rl_name)?;
+            notes.push(format!("auto: {rl_name} took {rl_s:.2} s"));
             notes.push(format!("{CHOSE}{rl_name}"));
             (rl_out, rl_trace)
         };
