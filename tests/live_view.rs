@@ -309,7 +309,11 @@ fn bad_cases_are_refused_clearly_and_the_run_goes_on() {
         .unwrap();
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains(&format!("--live 127.0.0.1:{port}")), "{err}");
+    assert!(
+        err.contains(&format!("live view address 127.0.0.1:{port}"))
+            && err.contains("hint: the address is --live's"),
+        "{err}"
+    );
     assert!(!dir.path().join("taken").exists(), "nothing written");
     let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
         .args(["acquire", "--live", "nowhere", "--out"])

@@ -155,10 +155,16 @@ fn a_sensor_too_large_for_a_t3_record_is_refused_before_anything_is_written() {
     ]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     let t = text(&o);
+    // The library names the setting, the command's hint its flag.
     assert!(
-        t.contains("--ptu") && t.contains("16 x 16 = 256 pixels") && t.contains("--tags"),
+        t.contains("PTU recording")
+            && t.contains("16 x 16 = 256 pixels")
+            && t.contains("to a tag file")
+            && t.contains("hint: set it with --ptu"),
         "{t}"
     );
+    // The job's error shows its cause once, not once more from the chain.
+    assert_eq!(t.matches("16 x 16 = 256 pixels").count(), 1, "{t}");
     assert!(!ptu.exists() && !out.join("stack.exr").exists());
 }
 
@@ -168,7 +174,7 @@ fn a_picoquant_device_refuses_a_tag_file_and_our_resolution_flag_by_name() {
     let lib = standin::standin_library();
     let tags = dir.path().join("pq.sstags");
     for (flag, value, says) in [
-        ("--tags", tags.to_str().unwrap(), "a PTU file (--ptu)"),
+        ("--tags", tags.to_str().unwrap(), "go to a PTU file"),
         ("--resolution", "4ps", "--binning"),
     ] {
         let o = standin::scatterscope_pq(
@@ -193,6 +199,14 @@ fn a_picoquant_device_refuses_a_tag_file_and_our_resolution_flag_by_name() {
             "{}",
             text(&o)
         );
+        // The flag comes from the command's hint; the library's error
+        // line names no flag.
+        let error_line = text(&o)
+            .lines()
+            .find(|l| l.starts_with("error:"))
+            .unwrap_or_default()
+            .to_string();
+        assert!(!error_line.contains(" --"), "{error_line}");
         assert!(!tags.exists());
     }
 }

@@ -105,7 +105,7 @@ impl Family {
 pub enum VendorError {
     /// No library file could be loaded.
     #[error(
-        "no {family} library found: tried {tried}. Install PicoQuant's programming library for Linux (its `install` script puts it in /usr/local/lib64 and links {linker_name}), or name the file with --vendor-lib or {env}"
+        "no {family} library found: tried {tried}. Install PicoQuant's programming library for Linux (its `install` script puts it in /usr/local/lib64 and links {linker_name}), or name the library file in the settings or in {env}"
     )]
     NotInstalled {
         /// The family searched.

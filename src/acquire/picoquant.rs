@@ -106,22 +106,29 @@ pub struct SettingsRequest {
 
 impl SettingsRequest {
     /// The settings for `family`; an edge given for a HydraHarp or a zero
-    /// cross for a MultiHarp is an error naming the flag.
-    pub fn resolve(&self, family: Family, markers: bool) -> Result<Settings, VendorError> {
+    /// cross for a MultiHarp is an error naming the setting (a field of
+    /// this request).
+    pub fn resolve(&self, family: Family, markers: bool) -> Result<Settings, SourceError> {
         let mut s = Settings::default_for(family);
         let trigger = |base: Trigger,
                        level: Option<i32>,
                        rising: Option<bool>,
                        zc: Option<i32>,
-                       what: &str|
-         -> Result<Trigger, VendorError> {
+                       [edge, zero_cross]: [&'static str; 2]|
+         -> Result<Trigger, SourceError> {
             match (base, rising, zc) {
-                (Trigger::Edge { .. }, _, Some(_)) => Err(VendorError::Setting(format!(
-                    "--{what}-zero-cross: a MultiHarp input has an edge trigger (use --{what}-edge)"
-                ))),
-                (Trigger::Cfd { .. }, Some(_), _) => Err(VendorError::Setting(format!(
-                    "--{what}-edge: a HydraHarp input has a CFD (use --{what}-zero-cross)"
-                ))),
+                (Trigger::Edge { .. }, _, Some(_)) => Err(SourceError::setting(
+                    zero_cross,
+                    format!(
+                        "{zero_cross}: a MultiHarp input has an edge trigger, not a CFD (set {edge})"
+                    ),
+                )),
+                (Trigger::Cfd { .. }, Some(_), _) => Err(SourceError::setting(
+                    edge,
+                    format!(
+                        "{edge}: a HydraHarp input has a CFD, not an edge trigger (set {zero_cross})"
+                    ),
+                )),
                 (
                     Trigger::Edge {
                         level_mv,
@@ -151,14 +158,14 @@ impl SettingsRequest {
             self.sync_level_mv,
             self.sync_rising,
             self.sync_zero_cross_mv,
-            "sync",
+            ["sync_rising", "sync_zero_cross_mv"],
         )?;
         s.input_trigger = trigger(
             s.input_trigger,
             self.input_level_mv,
             self.input_rising,
             self.input_zero_cross_mv,
-            "input",
+            ["input_rising", "input_zero_cross_mv"],
         )?;
         s.sync_divider = self.sync_divider.unwrap_or(s.sync_divider);
         s.sync_offset_ps = self.sync_offset_ps.unwrap_or(s.sync_offset_ps);
@@ -369,8 +376,9 @@ fn vendor(e: VendorError) -> SourceError {
 impl Source for PicoQuantSource {
     fn start(&mut self, request: &StartRequest) -> Result<SourceFacts, SourceError> {
         if request.resolution_fs.is_some() {
-            return Err(SourceError::Plan(
-                "--resolution sets our own devices' micro-time unit; a PicoQuant device takes --binning (unit = base resolution x 2^N)".into(),
+            return Err(SourceError::setting(
+                "resolution_fs",
+                "a micro-time unit in femtoseconds configures our own devices; a PicoQuant device takes a binning code N instead (unit = base resolution x 2^N)",
             ));
         }
         let device = self.device.as_mut().expect("started once");
@@ -378,8 +386,7 @@ impl Source for PicoQuantSource {
         let settings = self
             .request
             .settings
-            .resolve(family, self.request.scan.is_some())
-            .map_err(vendor)?;
+            .resolve(family, self.request.scan.is_some())?;
         let resolution_ps = device.configure(&settings).map_err(vendor)?;
         // The libraries report valid rates 100-150 ms after a set-up.
         std::thread::sleep(Duration::from_millis(150));
@@ -393,9 +400,12 @@ impl Source for PicoQuantSource {
             .map(String::from)
             .collect();
         if sync_rate <= 0 {
-            return Err(SourceError::Plan(format!(
-                "the sync rate is {sync_rate}/s: no laser sync reaches the device (check the cable and --sync-level)"
-            )));
+            return Err(SourceError::setting(
+                "sync_level_mv",
+                format!(
+                    "the sync rate is {sync_rate}/s: no laser sync reaches the device (check the cable and the sync level)"
+                ),
+            ));
         }
         let record_type = RecordType::from_code(family.t3_record_type())
             .expect("the family's record type is known");
@@ -600,7 +610,7 @@ mod tests {
             .resolve(Family::HydraHarp, false)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("--sync-edge") && e.contains("CFD"), "{e}");
+        assert!(e.contains("sync_rising") && e.contains("CFD"), "{e}");
         let zc = SettingsRequest {
             input_zero_cross_mv: Some(10),
             ..SettingsRequest::default()
@@ -609,7 +619,7 @@ mod tests {
             .resolve(Family::MultiHarp, false)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("--input-zero-cross"), "{e}");
+        assert!(e.contains("input_zero_cross_mv"), "{e}");
         assert!(zc.resolve(Family::HydraHarp, false).is_ok());
     }
 }

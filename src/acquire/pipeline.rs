@@ -199,6 +199,26 @@ pub enum AcquireError {
     /// The plan does not fit the device.
     #[error("{0}")]
     Plan(String),
+    /// A setting of the plan does not fit the device; `name` is the
+    /// plan's field (the command line's hints name its flag).
+    #[error("{message}")]
+    Setting {
+        /// The setting: a field of [`Plan`] (`channel`, `pixels`,
+        /// `region`, `tag_file`, `ptu`).
+        name: &'static str,
+        /// What is wrong, with the value.
+        message: String,
+    },
+}
+
+impl AcquireError {
+    /// An error about the plan's setting `name`.
+    pub fn setting(name: &'static str, message: impl Into<String>) -> Self {
+        Self::Setting {
+            name,
+            message: message.into(),
+        }
+    }
 }
 
 /// A binner with the window it bins, in device micro time: (first bin
@@ -215,14 +235,17 @@ fn make_binner(plan: &Plan, facts: &SourceFacts) -> Result<Binning, AcquireError
     };
     match facts.layout {
         Layout::Sensor { width, height } => {
-            for (flag, given) in [
-                ("--channel", plan.channel.is_some()),
-                ("--pixels", plan.pixels != Pixels::Auto),
+            for (name, given) in [
+                ("channel", plan.channel.is_some()),
+                ("pixels", plan.pixels != Pixels::Auto),
             ] {
                 if given {
-                    return Err(AcquireError::Plan(format!(
-                        "{flag} selects a point detector's inputs; this device is a {width} x {height} sensor (use --roi)"
-                    )));
+                    return Err(AcquireError::setting(
+                        name,
+                        format!(
+                            "the {name} setting selects a point detector's inputs; this device is a {width} x {height} sensor (select its pixels with a region)"
+                        ),
+                    ));
                 }
             }
             let width_ps = plan.bin_width_ps.unwrap_or(res_ps);
@@ -274,8 +297,9 @@ fn make_binner(plan: &Plan, facts: &SourceFacts) -> Result<Binning, AcquireError
         }
         Layout::Inputs { scan, .. } => {
             if plan.region.is_some() {
-                return Err(AcquireError::Plan(
-                    "--roi selects pixels of a sensor array; this device has inputs (use --channel, or --scan for an image)".into(),
+                return Err(AcquireError::setting(
+                    "region",
+                    "a region selects pixels of a sensor array; this device has inputs (select one with a channel, or an image with a scan)",
                 ));
             }
             let spec = BinSpec {
@@ -327,12 +351,15 @@ impl PtuRecording {
             (RecordFormat::Wire { identity, .. }, _) => {
                 let pixels = usize::from(identity.pixels_x) * usize::from(identity.pixels_y);
                 if pixels > MAX_T3_CHANNELS {
-                    return Err(AcquireError::Plan(format!(
-                        "--ptu {}: the sensor has {} x {} = {pixels} pixels; a PTU T3 record names at most {MAX_T3_CHANNELS} input channels, so the pixel of each photon cannot be kept. Record losslessly with --tags FILE (every pixel), or use a sensor of at most {MAX_T3_CHANNELS} pixels",
-                        path.display(),
-                        identity.pixels_x,
-                        identity.pixels_y
-                    )));
+                    return Err(AcquireError::setting(
+                        "ptu",
+                        format!(
+                            "PTU recording {}: the sensor has {} x {} = {pixels} pixels; a PTU T3 record names at most {MAX_T3_CHANNELS} input channels, so the pixel of each photon cannot be kept. Record losslessly to a tag file (every pixel), or use a sensor of at most {MAX_T3_CHANNELS} pixels",
+                            path.display(),
+                            identity.pixels_x,
+                            identity.pixels_y
+                        ),
+                    ));
                 }
                 extra.push((
                     "Scatterscope_Channels".into(),
@@ -458,11 +485,14 @@ pub fn run_watched(
             Some(TagFileWriter::create(path, &header).map_err(AcquireError::TagFile)?)
         }
         (Some(path), RecordFormat::T3(_)) => {
-            return Err(AcquireError::Plan(format!(
-                "--tags {}: a tag file holds the event batches of our own devices; {} sends T3 records, which go to a PTU file (--ptu)",
-                path.display(),
-                facts.device.model
-            )));
+            return Err(AcquireError::setting(
+                "tag_file",
+                format!(
+                    "tag file {}: a tag file holds the event batches of our own devices; {} sends T3 records, which go to a PTU file",
+                    path.display(),
+                    facts.device.model
+                ),
+            ));
         }
     };
     let mut ptu = match &plan.ptu {

@@ -74,9 +74,10 @@ impl FileSource {
     /// refused if it is not a whole recording of a kind that replays.
     pub fn open(path: &Path, speed: f64) -> Result<Self, SourceError> {
         if !(speed.is_finite() && speed > 0.0) {
-            return Err(SourceError::Plan(format!(
-                "--speed {speed}: give a positive factor (1 plays the recorded pace)"
-            )));
+            return Err(SourceError::setting(
+                "speed",
+                format!("replay speed {speed}: give a positive factor (1 plays the recorded pace)"),
+            ));
         }
         let err = |e: String| SourceError::Device(e);
         let opened = if is_tag_file(path) {
@@ -104,9 +105,9 @@ impl FileSource {
 impl Source for FileSource {
     fn start(&mut self, request: &StartRequest) -> Result<SourceFacts, SourceError> {
         if request.resolution_fs.is_some() {
-            return Err(SourceError::Plan(
-                "--resolution configures a device; a recording keeps its own micro-time unit"
-                    .into(),
+            return Err(SourceError::setting(
+                "resolution_fs",
+                "a micro-time unit configures a device; a recording keeps its own",
             ));
         }
         let link = format!("replay of {}", self.path.display());

@@ -259,6 +259,25 @@ pub enum SourceError {
     /// The request does not fit the device.
     #[error("{0}")]
     Plan(String),
+    /// A setting of the request or the source does not fit; `name` is the
+    /// library's name for it (the command line's hints name its flag).
+    #[error("{message}")]
+    Setting {
+        /// The setting (`resolution_fs`, `speed`, `sync_level_mv`, ...).
+        name: &'static str,
+        /// What is wrong, with the value.
+        message: String,
+    },
+}
+
+impl SourceError {
+    /// An error about the setting `name`.
+    pub fn setting(name: &'static str, message: impl Into<String>) -> Self {
+        Self::Setting {
+            name,
+            message: message.into(),
+        }
+    }
 }
 
 /// Everything the pipeline asks of a source at the start.

@@ -41,10 +41,10 @@ const MAX_CLIENTS: usize = 16;
 #[derive(Debug, thiserror::Error)]
 pub enum LiveError {
     /// The address does not parse or resolve.
-    #[error("--live {0}: give ADDRESS:PORT, e.g. 127.0.0.1:8080 or 0.0.0.0:8080")]
+    #[error("live view address {0}: give ADDRESS:PORT, e.g. 127.0.0.1:8080 or 0.0.0.0:8080")]
     Address(String),
     /// The port cannot be bound.
-    #[error("--live {addr}: {reason}")]
+    #[error("live view address {addr}: {reason}")]
     Bind {
         /// The address.
         addr: String,

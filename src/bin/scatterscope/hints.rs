@@ -6,6 +6,8 @@ use std::error::Error;
 
 use scatterscope::acquire::JobError;
 use scatterscope::acquire::device::OpenError;
+use scatterscope::acquire::pipeline::AcquireError;
+use scatterscope::acquire::source::SourceError;
 use scatterscope::calibrate::CalibrateError;
 use scatterscope::calibrate::histogram::HistogramError;
 use scatterscope::config::ConfigError;
@@ -13,6 +15,7 @@ use scatterscope::confocal::ConfocalError;
 use scatterscope::denoise::ffdnet::source::ImportError;
 use scatterscope::denoise::prior::PriorError;
 use scatterscope::formats::picoquant::{FileError, TtrError};
+use scatterscope::live::server::LiveError;
 use scatterscope::memory::LIMIT_ENV;
 use scatterscope::psf::PsfError;
 use scatterscope::reconstruct::ReconstructError;
@@ -20,6 +23,7 @@ use scatterscope::reconstruct::input::InputError;
 use scatterscope::reconstruct::problem::ProblemError;
 use scatterscope::simulate::SimulateError;
 use scatterscope::tags::bin_file::BinFileError;
+use scatterscope_drivers::picoquant::VendorError;
 
 /// The hints for the errors in `err`'s chain, one line each.
 pub fn flag_hints(err: &anyhow::Error) -> Vec<String> {
@@ -80,6 +84,52 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
             _ => return None,
         };
         return Some(format!("set it with {flag}"));
+    }
+    if let Some(e) = cause.downcast_ref::<AcquireError>() {
+        return match e {
+            AcquireError::Source(e) => hint(e),
+            AcquireError::Setting { name, .. } => {
+                let flag = match *name {
+                    "channel" => "--channel",
+                    "pixels" => "--pixels",
+                    "region" => "--roi",
+                    "tag_file" => "--tags",
+                    "ptu" => "--ptu",
+                    _ => return None,
+                };
+                Some(format!("set it with {flag}"))
+            }
+            _ => None,
+        };
+    }
+    if let Some(SourceError::Setting { name, .. }) = cause.downcast_ref::<SourceError>() {
+        let flag = match *name {
+            "speed" => "--speed",
+            "resolution_fs" => {
+                return Some(
+                    "--resolution sets our own devices' micro-time unit; --binning a PicoQuant device's"
+                        .into(),
+                );
+            }
+            "sync_level_mv" => "--sync-level",
+            "sync_rising" => "--sync-edge",
+            "sync_zero_cross_mv" => "--sync-zero-cross",
+            "input_rising" => "--input-edge",
+            "input_zero_cross_mv" => "--input-zero-cross",
+            _ => return None,
+        };
+        return Some(format!("set it with {flag}"));
+    }
+    // No library of a family, or of any family when none was named (the
+    // families' messages joined).
+    if let Some(OpenError::Vendor(e)) = cause.downcast_ref::<OpenError>()
+        && (matches!(e, VendorError::NotInstalled { .. })
+            || e.to_string().contains("library found"))
+    {
+        return Some("--vendor-lib names the library file".into());
+    }
+    if cause.downcast_ref::<LiveError>().is_some() {
+        return Some("the address is --live's".into());
     }
     if let Some(PriorError::Setting(_)) = cause.downcast_ref::<PriorError>() {
         return Some("--tv-gain is TV's gain; --weights applies to --denoiser ffdnet".into());

@@ -134,13 +134,28 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::from(4)
         }
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", error_text(&e));
             for hint in hints::flag_hints(&e) {
                 eprintln!("hint: {hint}");
             }
             std::process::ExitCode::from(1)
         }
     }
+}
+
+/// The error and its causes, joined by ": ", each cause left out where the
+/// text so far already holds it (library errors that show their cause in
+/// their own message would otherwise print it twice).
+fn error_text(e: &anyhow::Error) -> String {
+    let mut text = e.to_string();
+    for cause in e.chain().skip(1) {
+        let cause = cause.to_string();
+        if !text.contains(&cause) {
+            text.push_str(": ");
+            text.push_str(&cause);
+        }
+    }
+    text
 }
 
 fn dispatch(command: Command) -> anyhow::Result<()> {
