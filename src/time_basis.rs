@@ -212,7 +212,7 @@ impl<'a> TimeBasis<'a> {
 
 /// Pixels per block of [`mix`]: a block of every input fits the second-
 /// level cache, so each input and output streams through memory once.
-const MIX_BLOCK: usize = 128;
+const MIX_BLOCK: usize = 1024;
 
 /// Pixels [`mix`] sums in registers at once.
 const LANES: usize = 8;
@@ -234,58 +234,28 @@ fn mix(inputs: &[&[f64]], weights: &[Vec<f64>]) -> Vec<Vec<f64>> {
     blocks
         .into_par_iter()
         .enumerate()
-        .for_each(|(b, mut outs)| mix_block(inputs, weights, b * MIX_BLOCK, &mut outs));
-    outputs
-}
-
-/// One block of [`mix`]: `outs[i]` (from pixel `base` on) gets the weighted
-/// sum `weights[i]` of the inputs. With AVX (checked at run time) the same
-/// additions in the same order run four to a register: the results are
-/// identical bit for bit (no fused multiply-add), at about half the time
-/// of the two-wide baseline build (measured on `rl-stack`).
-fn mix_block(inputs: &[&[f64]], weights: &[Vec<f64>], base: usize, outs: &mut [&mut [f64]]) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx") {
-        // SAFETY: the CPU has AVX (checked just above).
-        unsafe { mix_block_avx(inputs, weights, base, outs) };
-        return;
-    }
-    mix_block_portable(inputs, weights, base, outs);
-}
-
-/// [`mix_block_portable`] compiled for AVX.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-fn mix_block_avx(inputs: &[&[f64]], weights: &[Vec<f64>], base: usize, outs: &mut [&mut [f64]]) {
-    mix_block_portable(inputs, weights, base, outs);
-}
-
-/// The block kernel itself (see [`mix_block`]).
-#[inline(always)]
-fn mix_block_portable(
-    inputs: &[&[f64]],
-    weights: &[Vec<f64>],
-    base: usize,
-    outs: &mut [&mut [f64]],
-) {
-    for (out, w) in outs.iter_mut().zip(weights) {
-        // Eight pixels at a time, summed over the inputs in registers
-        // (one store per pixel instead of one per pixel and input).
-        let n = out.len();
-        let mut lanes = out.chunks_exact_mut(LANES);
-        for (g, group) in lanes.by_ref().enumerate() {
-            let at = base + g * LANES;
-            let mut acc = [0.0; LANES];
-            for (x, &c) in inputs.iter().zip(w) {
-                let x: &[f64; LANES] = x[at..at + LANES].try_into().expect("LANES values");
-                acc.iter_mut().zip(x).for_each(|(a, v)| *a += c * v);
+        .for_each(|(b, mut outs)| {
+            let base = b * MIX_BLOCK;
+            for (out, w) in outs.iter_mut().zip(weights) {
+                // Eight pixels at a time, summed over the inputs in registers
+                // (one store per pixel instead of one per pixel and input).
+                let n = out.len();
+                let mut lanes = out.chunks_exact_mut(LANES);
+                for (g, group) in lanes.by_ref().enumerate() {
+                    let at = base + g * LANES;
+                    let mut acc = [0.0; LANES];
+                    for (x, &c) in inputs.iter().zip(w) {
+                        let x: &[f64; LANES] = x[at..at + LANES].try_into().expect("LANES values");
+                        acc.iter_mut().zip(x).for_each(|(a, v)| *a += c * v);
+                    }
+                    group.copy_from_slice(&acc);
+                }
+                let rest = lanes.into_remainder();
+                let at = base + n - rest.len();
+                for (i, o) in rest.iter_mut().enumerate() {
+                    *o = inputs.iter().zip(w).map(|(x, &c)| c * x[at + i]).sum();
+                }
             }
-            group.copy_from_slice(&acc);
-        }
-        let rest = lanes.into_remainder();
-        let at = base + n - rest.len();
-        for (i, o) in rest.iter_mut().enumerate() {
-            *o = inputs.iter().zip(w).map(|(x, &c)| c * x[at + i]).sum();
-        }
-    }
+        });
+    outputs
 }

@@ -107,7 +107,10 @@ pub struct SettingsRequest {
 impl SettingsRequest {
     /// The settings for `family`; an edge given for a HydraHarp or a zero
     /// cross for a MultiHarp is an error naming the setting (a field of
-    /// this request).
+    /// this request). The families differ as the vendors' headers do:
+    /// mhlib.h sets inputs with `MH_SetSyncEdgeTrg` / `MH_SetInputEdgeTrg`
+    /// (level and edge), hhlib.h with `HH_SetSyncCFD` / `HH_SetInputCFD`
+    /// (level and zero cross).
     pub fn resolve(&self, family: Family, markers: bool) -> Result<Settings, SourceError> {
         let mut s = Settings::default_for(family);
         let trigger = |base: Trigger,

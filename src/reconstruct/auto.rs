@@ -2,11 +2,11 @@
 //! cross-validated stop) and PnP (the split solver with the learned
 //! prior), made without the truth.
 //!
-//! PnP runs first; its output is returned when its output deviance, in noise
-//! standard deviations above the Poisson expectation, is at least
-//! [`PNP_MISFIT_Z`], else `rl-stack` runs and its output is returned. The rule and its threshold were
-//! chosen on the benchmark's tuning images only (the eighteenth session's
-//! journal, BENCHMARKS.md): among the truth-free scores tried (statistics
+//! PnP runs first; its output is returned when its output deviance, in
+//! noise standard deviations above the Poisson expectation, is at least
+//! [`PNP_MISFIT_Z`], else `rl-stack` runs and its output is returned. The
+//! rule and its threshold were chosen on the benchmark's tuning images
+//! only (the eighteenth session's journal, BENCHMARKS.md): among the truth-free scores tried (statistics
 //! of the `rl-stack` estimate, each candidate's held-out deviance on
 //! thinned halves, PnP's training deviance) it was the only one that
 //! gained on the tuning images, and it rests on three of them.

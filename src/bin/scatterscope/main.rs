@@ -21,6 +21,7 @@ mod tags_cmd;
 mod weights_cmd;
 
 use clap::{Parser, Subcommand};
+use scatterscope::memory::parse_size;
 
 /// The allocator: the reconstructions free and allocate images of 0.5-1 MB
 /// per bin and iteration on several threads, and the system allocator
@@ -29,7 +30,6 @@ use clap::{Parser, Subcommand};
 /// them for reuse.
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-use scatterscope::memory::parse_size;
 
 /// Time-resolved imaging through scattering media.
 ///
