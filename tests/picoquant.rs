@@ -16,10 +16,10 @@ use scatterscope::formats::picoquant::writer::write_synthetic_t3;
 use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
 use scatterscope::formats::picoquant::{self, TtrError};
 use scatterscope::tags::Imaging;
-use scatterscope::tags::Tag;
-use scatterscope::tags::bin_file::{BinSpec, bin_file};
+use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file};
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
 use scatterscope::tags::survey::{Survey, survey};
+use scatterscope::tags::{ChunkDecoder, Tag, TagSink};
 
 /// A PicoQuant sample file (`../shared/data/picoquant-sample-data/REL`).
 fn sample(rel: &str) -> PathBuf {
@@ -574,37 +574,73 @@ fn bulk_binning_matches_record_by_record_binning() {
             }),
         });
     }
-    let window = TimeWindow {
-        start: 100.0,
-        width: 7.0,
-        bins: 300,
-    };
-    for (map, channel) in [
-        (PixelMap::Single, None),
-        (PixelMap::Single, Some(2)),
-        (PixelMap::Channel { width: 4 }, None),
-        (PixelMap::Channel { width: 4 }, Some(4)),
-    ] {
-        let mut one = Binner::new(window, map, channel, FrameSelect::Sum);
-        let mut bulk = Binner::new(window, map, channel, FrameSelect::Sum);
-        for &t in &tags {
-            one.push(t);
+    // A window of 7-unit bins (the lookup table) and one of unit bins
+    // from a whole unit (the subtraction).
+    let windows = [
+        TimeWindow {
+            start: 100.0,
+            width: 7.0,
+            bins: 300,
+        },
+        TimeWindow {
+            start: 100.0,
+            width: 1.0,
+            bins: 3000,
+        },
+    ];
+    for window in windows {
+        for (map, channel) in [
+            (PixelMap::Single, None),
+            (PixelMap::Single, Some(2)),
+            (PixelMap::Channel { width: 4 }, None),
+            (PixelMap::Channel { width: 4 }, Some(4)),
+        ] {
+            let mut one = Binner::new(window, map, channel, FrameSelect::Sum);
+            for &t in &tags {
+                one.push(t);
+            }
+            // Chunk by chunk, and in three parts binned apart and absorbed.
+            let fresh = Binner::new(window, map, channel, FrameSelect::Sum);
+            let mut bulk = fresh.clone();
+            for chunk in tags.chunks(977) {
+                bulk.bin_chunk(&mut Replay, chunk);
+            }
+            assert!(fresh.order_free());
+            let mut parts = fresh.clone();
+            for part in tags.chunks(tags.len() / 3 + 1) {
+                let mut b = fresh.clone();
+                b.bin_chunk(&mut Replay, part);
+                parts.absorb(b);
+            }
+            for other in [bulk, parts] {
+                let label = format!("{window:?} {map:?} {channel:?}");
+                assert_eq!(one.past_window(), other.past_window(), "{label}");
+                let (a, acc_a) = one.clone().finish();
+                let (b, acc_b) = other.finish();
+                assert_eq!(acc_a, acc_b, "{label}");
+                assert!(
+                    acc_a.balances()
+                        && acc_a.outside_window > 0
+                        && acc_a.binned + acc_a.outside_region > 0,
+                    "{label}"
+                );
+                assert_eq!(a, b, "{label}");
+            }
         }
-        for chunk in tags.chunks(977) {
-            bulk.bulk(|sink| {
-                for &t in chunk {
-                    sink.push(t);
-                }
-            });
+    }
+}
+
+/// Tags already decoded, handed on as they are.
+struct Replay;
+
+impl ChunkDecoder for Replay {
+    type Record = Option<Tag>;
+
+    fn decode_chunk<S: TagSink>(&mut self, records: &[Option<Tag>], mut sink: S) -> S {
+        for &t in records {
+            sink.push(t);
         }
-        assert_eq!(one.past_window(), bulk.past_window(), "{map:?} {channel:?}");
-        let (a, acc_a) = one.finish();
-        let (b, acc_b) = bulk.finish();
-        assert_eq!(acc_a, acc_b, "{map:?} {channel:?}");
-        assert!(
-            acc_a.balances() && acc_a.outside_window > 0 && acc_a.binned + acc_a.outside_region > 0
-        );
-        assert_eq!(a, b, "{map:?} {channel:?}");
+        sink
     }
 }
 
@@ -817,5 +853,94 @@ fn records_past_the_announced_count_are_said_not_ignored() {
             .lines()
             .iter()
             .any(|l| l.starts_with("warning: the header announces")),
+    );
+}
+
+#[test]
+fn binning_a_file_in_parts_equals_one_pass() {
+    // Long enough for three parts of the parallel path, on channels 0-3
+    // with micro times over one sync period.
+    let dir = tempfile::tempdir().unwrap();
+    let whole = dir.path().join("whole.ptu");
+    write_synthetic_t3(&whole, 13_000_000).unwrap();
+    // The same file cut 1000 and a half records short of its count.
+    let bytes = std::fs::read(&whole).unwrap();
+    let cut = dir.path().join("cut.ptu");
+    std::fs::write(&cut, &bytes[..bytes.len() - 4002]).unwrap();
+
+    // The part readers cover the records once, in order.
+    let (info, mut reader) = picoquant::open(&whole).unwrap();
+    let read = |r: &mut picoquant::RecordReader| {
+        let (mut all, mut chunk) = (Vec::new(), Vec::new());
+        while r.next_chunk(&mut chunk).unwrap() {
+            all.extend_from_slice(&chunk);
+        }
+        all
+    };
+    let expected = read(&mut reader);
+    let parts: Vec<u32> = info
+        .split_records(3)
+        .unwrap()
+        .iter_mut()
+        .flat_map(read)
+        .collect();
+    assert_eq!(parts, expected);
+
+    let on = |threads: usize, path: &Path, spec: &BinSpec| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| bin_file(path, spec).unwrap())
+    };
+    let specs = [
+        (&whole, BinSpec::default()),
+        (
+            &whole,
+            BinSpec {
+                channel: Some(2),
+                pixels: Pixels::Channel,
+                bin_width_ps: Some(12.0),
+                ..BinSpec::default()
+            },
+        ),
+        (
+            &cut,
+            BinSpec {
+                allow_truncated: true,
+                ..BinSpec::default()
+            },
+        ),
+    ];
+    for (path, spec) in &specs {
+        let one = on(1, path, spec);
+        let three = on(3, path, spec);
+        let label = format!("{} {spec:?}", path.display());
+        assert_eq!(one.accounting, three.accounting, "{label}");
+        assert!(
+            one.accounting.balances() && one.accounting.binned > 0,
+            "{label}"
+        );
+        assert_eq!(one.window, three.window, "{label}");
+        assert_eq!(one.notes, three.notes, "{label}");
+        assert_eq!(one.truncated, three.truncated, "{label}");
+        assert_eq!(one.stacks.len(), three.stacks.len(), "{label}");
+        for (a, b) in one.stacks.iter().zip(&three.stacks) {
+            assert_eq!(a.data, b.data, "{label}");
+        }
+    }
+    // The cut file says so, in parts as in one pass.
+    let cut_binned = on(3, &cut, &specs[2].1);
+    assert!(
+        cut_binned
+            .truncated
+            .as_deref()
+            .is_some_and(|t| t.contains(&format!(
+                "read {} of {} records",
+                expected.len() - 1001,
+                expected.len()
+            ))),
+        "{:?}",
+        cut_binned.truncated
     );
 }

@@ -532,7 +532,7 @@ pub fn run_watched(
                     p.records(records);
                 }
                 if let Some(d) = decoder.as_mut() {
-                    binner.bulk(|sink| d.decode_all(records, sink));
+                    binner.bin_chunk(d, records);
                 }
             }
             Delivery::Rates(r) => {

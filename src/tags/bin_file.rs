@@ -16,6 +16,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use crate::formats::sstags::{TagFile, TagFileError, TagFileSummary, is_tag_file};
 use ndarray::{Array3, s};
 
@@ -478,6 +480,9 @@ fn trim(pass: &mut Pass, bins: usize) {
     pass.window.bins = bins;
 }
 
+/// Records of the smallest part of a file binned on a core of its own.
+const PART_RECORDS: u64 = 1 << 22;
+
 /// One read -> decode -> bin pass over the records.
 struct Pass {
     stacks: Vec<Array3<u32>>,
@@ -491,33 +496,44 @@ struct Pass {
 fn run_pass(
     path: &Path,
     info: &FileInfo,
-    mut reader: RecordReader,
+    reader: RecordReader,
     window: TimeWindow,
     map: PixelMap,
     spec: &BinSpec,
 ) -> Result<Pass, BinFileError> {
-    let mut binner = Binner::new(window, map, spec.channel, spec.frames);
-    let mut decoder = Decoder::new(info.record_type);
     let start = Instant::now();
-    let mut chunk = Vec::new();
-    let mut truncated = None;
-    loop {
-        match reader.next_chunk(&mut chunk) {
-            Ok(true) => binner.bulk(|sink| decoder.decode_all(&chunk, sink)),
-            Ok(false) => break,
-            Err(e @ TtrError::Truncated { .. }) if spec.allow_truncated => {
-                truncated = Some(e.to_string());
-                break;
-            }
-            Err(error) => {
-                return Err(FileError {
-                    path: path.to_owned(),
-                    error,
-                }
-                .into());
-            }
+    let binner = Binner::new(window, map, spec.channel, spec.frames);
+    let records = info.records_present.min(info.records_announced);
+    // Parts of the file binned on the cores at once, where no photon's
+    // pixel depends on an earlier record (every map but a scanned image's),
+    // each part at least `PART_RECORDS` long and its stack within the
+    // memory budget; the counts are sums, equal to one pass's.
+    let parts = if binner.order_free() {
+        rayon::current_num_threads()
+            .min(usize::try_from(records / PART_RECORDS).unwrap_or(usize::MAX))
+            .min(binner.max_stacks())
+            .max(1)
+    } else {
+        1
+    };
+    let (binner, truncated) = if parts > 1 {
+        drop(reader);
+        let readers = info.split_records(parts)?;
+        let done: Vec<_> = readers
+            .into_par_iter()
+            .map(|r| bin_records(path, info, r, binner.clone(), spec.allow_truncated))
+            .collect();
+        let mut merged = binner;
+        let mut truncated = None;
+        for part in done {
+            let (b, t) = part?;
+            merged.absorb(b);
+            truncated = truncated.or(t);
         }
-    }
+        (merged, truncated)
+    } else {
+        bin_records(path, info, reader, binner, spec.allow_truncated)?
+    };
     let seconds = start.elapsed().as_secs_f64();
     let past = binner.past_window();
     let (stacks, accounting) = binner.finish();
@@ -529,6 +545,35 @@ fn run_pass(
         window,
         truncated,
     })
+}
+
+/// Reads, decodes and bins `reader`'s records with `binner`; the text of
+/// a truncation when `allow_truncated` lets the records end early.
+fn bin_records(
+    path: &Path,
+    info: &FileInfo,
+    mut reader: RecordReader,
+    mut binner: Binner,
+    allow_truncated: bool,
+) -> Result<(Binner, Option<String>), BinFileError> {
+    let mut decoder = Decoder::new(info.record_type);
+    let mut chunk = Vec::new();
+    loop {
+        match reader.next_chunk(&mut chunk) {
+            Ok(true) => binner.bin_chunk(&mut decoder, &chunk),
+            Ok(false) => return Ok((binner, None)),
+            Err(e @ TtrError::Truncated { .. }) if allow_truncated => {
+                return Ok((binner, Some(e.to_string())));
+            }
+            Err(error) => {
+                return Err(FileError {
+                    path: path.to_owned(),
+                    error,
+                }
+                .into());
+            }
+        }
+    }
 }
 
 /// A tag file: the device's whole sensor, micro time from the sync.

@@ -8,7 +8,7 @@
 
 use ndarray::Array3;
 
-use super::{Imaging, Tag, TagSink};
+use super::{ChunkDecoder, Imaging, Tag, TagSink};
 
 /// How photons map to pixels.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -151,6 +151,21 @@ pub struct Accounting {
     /// Photons of frames kept apart (`FrameSelect::All`) past the most
     /// stacks the memory budget holds.
     pub over_budget: u64,
+}
+
+impl std::ops::AddAssign for Accounting {
+    /// Counts of two parts of one stream, added.
+    fn add_assign(&mut self, other: Accounting) {
+        self.records += other.records;
+        self.received += other.received;
+        self.binned += other.binned;
+        self.outside_window += other.outside_window;
+        self.other_channel += other.other_channel;
+        self.outside_region += other.outside_region;
+        self.markers += other.markers;
+        self.frames += other.frames;
+        self.over_budget += other.over_budget;
+    }
 }
 
 impl Accounting {
@@ -333,7 +348,7 @@ pub struct Binner {
     /// Scratch space of [`Binner::push_sensor_photons`].
     offsets: Vec<u32>,
     /// Photons past the window's end, from [`Binner::push`] and
-    /// [`Binner::bulk`].
+    /// [`Binner::bin_chunk`].
     past: PastWindow,
     /// The most stacks kept at once: frames kept apart past it are counted,
     /// not binned (the memory budget; at least one).
@@ -437,7 +452,7 @@ impl Binner {
     }
 
     /// Photons so far whose micro time fell at or past the window's end
-    /// (tags from [`Binner::push`] and [`Binner::bulk`]).
+    /// (tags from [`Binner::push`] and [`Binner::bin_chunk`]).
     pub fn past_window(&self) -> PastWindow {
         self.past
     }
@@ -465,66 +480,154 @@ impl Binner {
         lookup_bin(&self.micro_lut, &self.window, micro)
     }
 
-    /// Runs `feed` with a sink that bins tags like [`Binner::push`], but
-    /// with the counters in local variables and the stack borrowed once, so
-    /// the per-record loop keeps them in registers (the decode + bin hot
-    /// path of recorded files, see BENCHMARKS.md). Scanned images, and
-    /// frame selections that exclude frame 0, go through `push` unchanged.
-    pub fn bulk<R>(&mut self, feed: impl FnOnce(&mut BulkSink<'_>) -> R) -> R {
-        let fast = !matches!(self.map, PixelMap::Scan(_)) && self.stack_for_frame(0).is_some();
-        if !fast {
-            let mut sink = BulkSink {
-                fast: None,
-                slow: Some(self),
-            };
-            return feed(&mut sink);
+    /// Decodes `records` with `decoder` and bins their tags like
+    /// [`Binner::push`]. Single-pixel, channel and sensor maps summed into
+    /// frame 0 take a sink specialised to the map, passed by value so that
+    /// the decoder's loop keeps its counters in registers (the decode + bin
+    /// hot path of recorded files, see BENCHMARKS.md); scanned images and
+    /// frame selections that exclude frame 0 go through `push`.
+    pub fn bin_chunk<D: ChunkDecoder>(&mut self, decoder: &mut D, records: &[D::Record]) {
+        if matches!(self.map, PixelMap::Scan(_)) || self.stack_for_frame(0).is_none() {
+            let _ = decoder.decode_chunk(records, |tag| self.push(tag));
+            return;
         }
-        let (_, h, w) = self.shape;
-        let Self {
-            window,
-            micro_lut,
-            map,
-            channel,
-            stacks,
-            accounting,
-            pixel_lut,
-            past,
-            ..
-        } = self;
-        let mut sink = BulkSink {
-            fast: Some(FastSink {
-                window: *window,
-                micro_lut,
-                pixel_lut,
-                map: *map,
-                channel: *channel,
-                plane: h * w,
-                width: w,
-                stack: &mut stacks[0],
-                acc: *accounting,
-                other_records: 0,
-                past: *past,
-            }),
-            slow: None,
+        match self.channel {
+            None => self.bin_map::<false, D>(decoder, records),
+            Some(_) => self.bin_map::<true, D>(decoder, records),
+        }
+    }
+
+    /// The window's first micro time when its bins are single micro-time
+    /// units from a whole unit (the default window of `bin`): then a bin is
+    /// a subtraction, not a table lookup (a quarter of the loop's time).
+    fn unit_start(&self) -> Option<u32> {
+        let w = &self.window;
+        (w.width == 1.0
+            && w.start.fract() == 0.0
+            && w.start >= 0.0
+            && w.start <= f64::from(u32::MAX))
+        .then_some(w.start as u32)
+    }
+
+    /// [`Binner::bin_chunk`]'s fast path for this map, with or without a
+    /// channel filter (`FILTER`): each a loop of its own, the fewer
+    /// instructions per record the faster (measured, BENCHMARKS.md).
+    #[inline(always)]
+    fn bin_map<const FILTER: bool, D: ChunkDecoder>(
+        &mut self,
+        decoder: &mut D,
+        records: &[D::Record],
+    ) {
+        match self.map {
+            PixelMap::Single => self.bin_fast::<FILTER, D>(decoder, records, |_, bin| Some(bin)),
+            PixelMap::Channel { width } => {
+                self.bin_fast::<FILTER, D>(decoder, records, move |c: u16, bin| {
+                    let c = usize::from(c);
+                    (c < width).then_some(bin * width + c)
+                })
+            }
+            PixelMap::Sensor { region, .. } => {
+                let plane = region.width * region.height;
+                let lut = std::mem::take(&mut self.pixel_lut);
+                self.bin_fast::<FILTER, D>(decoder, records, |c: u16, bin| {
+                    match lut.get(usize::from(c)) {
+                        Some(&p) if p != OUTSIDE_REGION => Some(bin * plane + p as usize),
+                        _ => None,
+                    }
+                });
+                self.pixel_lut = lut;
+            }
+            PixelMap::Scan(_) => unreachable!("scanned images take the path of `push`"),
+        }
+    }
+
+    /// [`Binner::bin_chunk`] through a [`FastSink`] whose stack offset of
+    /// a photon of a channel in a bin is `place` (`None`: outside the
+    /// image), with the micro time's bin by subtraction or table.
+    #[inline(always)]
+    fn bin_fast<const FILTER: bool, D: ChunkDecoder>(
+        &mut self,
+        decoder: &mut D,
+        records: &[D::Record],
+        place: impl Fn(u16, usize) -> Option<usize>,
+    ) {
+        match self.unit_start() {
+            Some(start) => {
+                let bins = self.window.bins;
+                self.bin_with::<FILTER, D>(decoder, records, place, move |micro: u32| {
+                    let bin = micro.wrapping_sub(start) as usize;
+                    (bin < bins).then_some(bin)
+                })
+            }
+            None => {
+                let (lut, window) = (std::mem::take(&mut self.micro_lut), self.window);
+                self.bin_with::<FILTER, D>(decoder, records, place, |micro| {
+                    lookup_bin(&lut, &window, micro)
+                });
+                self.micro_lut = lut;
+            }
+        }
+    }
+
+    /// [`Binner::bin_fast`] with the micro time's bin from `bin_of`.
+    #[inline(always)]
+    fn bin_with<const FILTER: bool, D: ChunkDecoder>(
+        &mut self,
+        decoder: &mut D,
+        records: &[D::Record],
+        place: impl Fn(u16, usize) -> Option<usize>,
+        bin_of: impl Fn(u32) -> Option<usize>,
+    ) {
+        let sink = FastSink::<_, _, FILTER> {
+            window: self.window,
+            bin_of,
+            place,
+            channel: self.channel.unwrap_or(0),
+            stack: &mut self.stacks[0],
+            markers: 0,
+            other_records: 0,
+            other_channel: 0,
+            outside_window: 0,
+            outside_region: 0,
+            past: self.past,
         };
-        let received_before = accounting.received;
-        let r = feed(&mut sink);
-        if let Some(f) = sink.fast {
-            // The hot loop counts photons and the exceptions only; records
-            // and binned photons follow from them.
-            let mut acc = f.acc;
-            let photons = acc.received - received_before;
-            let binned_before = accounting.binned;
-            let excluded = (acc.other_channel - accounting.other_channel)
-                + (acc.outside_window - accounting.outside_window)
-                + (acc.outside_region - accounting.outside_region);
-            acc.binned = binned_before + photons - excluded;
-            acc.records =
-                accounting.records + photons + (acc.markers - accounting.markers) + f.other_records;
-            *accounting = acc;
-            *past = f.past;
+        let f = decoder.decode_chunk(records, sink);
+        // The loop counts the exceptions only; photons and binned photons
+        // follow from them.
+        let photons = records.len() as u64 - f.markers - f.other_records;
+        let acc = &mut self.accounting;
+        acc.records += records.len() as u64;
+        acc.received += photons;
+        acc.markers += f.markers;
+        acc.other_channel += f.other_channel;
+        acc.outside_window += f.outside_window;
+        acc.outside_region += f.outside_region;
+        acc.binned += photons - f.other_channel - f.outside_window - f.outside_region;
+        self.past = f.past;
+    }
+
+    /// Whether no photon's place depends on the records before it: true
+    /// for every map but a scanned image's, whose pixel follows the line
+    /// markers. Parts of such a stream can be binned apart and
+    /// [`Binner::absorb`]ed.
+    pub fn order_free(&self) -> bool {
+        !matches!(self.map, PixelMap::Scan(_))
+    }
+
+    /// Adds the counts of `other`, a clone of this binner's fresh state
+    /// that binned another part of the same stream (see
+    /// [`Binner::order_free`]).
+    pub fn absorb(&mut self, other: Binner) {
+        debug_assert!(self.order_free() && self.shape == other.shape);
+        for (i, stack) in other.stacks.into_iter().enumerate() {
+            match self.stacks.get_mut(i) {
+                Some(mine) => mine.iter_mut().zip(stack).for_each(|(a, b)| *a += b),
+                None => self.stacks.push(stack),
+            }
         }
-        r
+        self.accounting += other.accounting;
+        self.past.photons += other.past.photons;
+        self.past.max_micro = self.past.max_micro.max(other.past.max_micro);
     }
 
     /// Feeds one decoded record's tag (`None` for overflow records).
@@ -745,93 +848,66 @@ fn lookup_bin(micro_lut: &[u16], window: &TimeWindow, micro: u32) -> Option<usiz
     match micro_lut.get(micro as usize) {
         Some(&OUTSIDE) => None,
         Some(&b) => Some(usize::from(b)),
-        None => {
-            let x = (f64::from(micro) - window.start) / window.width;
-            (x >= 0.0 && x < window.bins as f64).then_some(x as usize)
-        }
+        None => bin_past_lut(window, micro),
     }
 }
 
-/// The sink of [`Binner::bulk`].
-pub struct BulkSink<'a> {
-    fast: Option<FastSink<'a>>,
-    slow: Option<&'a mut Binner>,
+/// The bin of a micro time past the lookup table. Kept out of line: its
+/// floating-point registers, inlined, pushed the hot loop's pointers onto
+/// the stack (perf, BENCHMARKS.md).
+#[cold]
+#[inline(never)]
+fn bin_past_lut(window: &TimeWindow, micro: u32) -> Option<usize> {
+    let x = (f64::from(micro) - window.start) / window.width;
+    (x >= 0.0 && x < window.bins as f64).then_some(x as usize)
 }
 
-struct FastSink<'a> {
+/// The sink of [`Binner::bin_chunk`]'s fast path: a photon goes to the
+/// stack offset `place` gives its channel and its micro time's bin
+/// (`bin_of`); with `FILTER`, only photons of `channel` are binned.
+struct FastSink<'a, P, B, const FILTER: bool> {
     window: TimeWindow,
-    micro_lut: &'a [u16],
-    pixel_lut: &'a [u32],
-    map: PixelMap,
-    channel: Option<u16>,
-    plane: usize,
-    width: usize,
+    bin_of: B,
+    place: P,
+    channel: u16,
     stack: &'a mut [u32],
-    acc: Accounting,
+    markers: u64,
     /// Records that are neither photons nor markers (overflows, syncs).
     other_records: u64,
+    other_channel: u64,
+    outside_window: u64,
+    outside_region: u64,
     past: PastWindow,
 }
 
-impl TagSink for &mut BulkSink<'_> {
-    #[inline(always)]
-    fn push(&mut self, tag: Option<Tag>) {
-        BulkSink::push(self, tag)
-    }
-}
-
-impl BulkSink<'_> {
-    /// Bins one decoded record's tag (`None` for overflow records).
-    #[inline(always)]
-    pub fn push(&mut self, tag: Option<Tag>) {
-        match (&mut self.fast, &mut self.slow) {
-            (Some(f), _) => f.push(tag),
-            (None, Some(b)) => b.push(tag),
-            (None, None) => unreachable!("a sink is fast or slow"),
-        }
-    }
-}
-
-impl FastSink<'_> {
+impl<P, B, const FILTER: bool> TagSink for FastSink<'_, P, B, FILTER>
+where
+    P: Fn(u16, usize) -> Option<usize>,
+    B: Fn(u32) -> Option<usize>,
+{
     #[inline(always)]
     fn push(&mut self, tag: Option<Tag>) {
         match tag {
             None | Some(Tag::Sync { .. }) => self.other_records += 1,
-            Some(Tag::Marker { .. }) => self.acc.markers += 1,
+            Some(Tag::Marker { .. }) => self.markers += 1,
             Some(Tag::Photon {
                 channel,
                 micro_time,
                 ..
             }) => {
-                self.acc.received += 1;
-                if self.channel.is_some_and(|c| c != channel) {
-                    self.acc.other_channel += 1;
+                if FILTER && channel != self.channel {
+                    self.other_channel += 1;
                     return;
                 }
-                let Some(bin) = lookup_bin(self.micro_lut, &self.window, micro_time) else {
-                    self.acc.outside_window += 1;
+                let Some(bin) = (self.bin_of)(micro_time) else {
+                    self.outside_window += 1;
                     self.past.note(&self.window, micro_time);
                     return;
                 };
-                let pixel = match self.map {
-                    PixelMap::Single => 0,
-                    PixelMap::Channel { width } if usize::from(channel) < width => {
-                        usize::from(channel)
-                    }
-                    PixelMap::Sensor { .. } => match self.pixel_lut.get(usize::from(channel)) {
-                        Some(&p) if p != OUTSIDE_REGION => p as usize,
-                        _ => {
-                            self.acc.outside_region += 1;
-                            return;
-                        }
-                    },
-                    _ => {
-                        self.acc.outside_region += 1;
-                        return;
-                    }
-                };
-                debug_assert!(pixel < self.plane && self.width > 0);
-                self.stack[bin * self.plane + pixel] += 1;
+                match (self.place)(channel, bin).and_then(|o| self.stack.get_mut(o)) {
+                    Some(count) => *count += 1,
+                    None => self.outside_region += 1,
+                }
             }
         }
     }

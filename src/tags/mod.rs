@@ -70,12 +70,24 @@ pub struct Imaging {
 }
 
 /// Where a decoder puts each record's tag: any `FnMut(Option<Tag>)`, or
-/// a [`binning::BulkSink`], whose `push` is then inlined into the
+/// the binner's specialised sink, whose `push` is then inlined into the
 /// decoder's per-layout loop.
 pub trait TagSink {
     /// Takes one record's tag (`None` for records that carry no event,
     /// such as overflows).
     fn push(&mut self, tag: Option<Tag>);
+}
+
+/// A decoder of a record stream, chunk by chunk, carrying its state (the
+/// overflow-corrected time base) from one chunk to the next.
+pub trait ChunkDecoder {
+    /// One record as stored.
+    type Record;
+
+    /// Decodes `records` in order, handing each record's tag to `sink`,
+    /// and returns the sink: taken by value, so that its counters live in
+    /// registers of the decoder's loop.
+    fn decode_chunk<S: TagSink>(&mut self, records: &[Self::Record], sink: S) -> S;
 }
 
 impl<F: FnMut(Option<Tag>)> TagSink for F {

@@ -243,6 +243,44 @@ impl FileInfo {
     }
 }
 
+impl FileInfo {
+    /// Readers of `parts` consecutive ranges of the records [`open`] reads,
+    /// each on the file opened anew, for decoding parts at once where no
+    /// record depends on the state an earlier one left. The last range
+    /// ends as [`open`]'s reader does ([`TtrError::Truncated`] when records
+    /// are missing).
+    pub fn split_records(&self, parts: usize) -> Result<Vec<RecordReader>, FileError> {
+        let records = self.records_present.min(self.records_announced);
+        let parts = parts.max(1) as u64;
+        (0..parts)
+            .map(|i| {
+                let (first, end) = (records * i / parts, records * (i + 1) / parts);
+                let opened = crate::files::open_regular(&self.path, "recording").and_then(
+                    |(mut file, _)| {
+                        file.seek(SeekFrom::Start(self.data_offset + 4 * first))?;
+                        Ok(file)
+                    },
+                );
+                let file = opened.map_err(|error| FileError {
+                    path: self.path.clone(),
+                    error: error.into(),
+                })?;
+                Ok(RecordReader {
+                    reader: BufReader::with_capacity(1 << 20, file),
+                    remaining: end - first,
+                    read: first,
+                    info_announced: if i + 1 == parts {
+                        self.records_announced
+                    } else {
+                        end
+                    },
+                    trailing: self.trailing_bytes,
+                })
+            })
+            .collect()
+    }
+}
+
 /// Streams records in chunks.
 pub struct RecordReader {
     reader: BufReader<File>,
@@ -256,12 +294,12 @@ pub struct RecordReader {
 pub const CHUNK_RECORDS: usize = 1 << 20;
 
 impl RecordReader {
-    /// Reads the next chunk of records into `out` (cleared first); returns
+    /// Reads the next chunk of records into `out` (replacing its contents); returns
     /// false at the end. A file cut before the announced count ends with
     /// [`TtrError::Truncated`] after its last complete record was returned.
     pub fn next_chunk(&mut self, out: &mut Vec<u32>) -> Result<bool, TtrError> {
-        out.clear();
         if self.remaining == 0 {
+            out.clear();
             if self.read < self.info_announced {
                 return Err(TtrError::Truncated {
                     read: self.read,
@@ -272,7 +310,8 @@ impl RecordReader {
             return Ok(false);
         }
         let n = (self.remaining as usize).min(CHUNK_RECORDS);
-        // Read straight into the u32 buffer: one copy from the page cache.
+        // Read straight into the u32 buffer: one copy from the page cache
+        // (zeroed only when it grows).
         out.resize(n, 0);
         self.reader
             .read_exact(bytemuck::cast_slice_mut(out.as_mut_slice()))?;

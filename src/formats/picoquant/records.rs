@@ -14,7 +14,7 @@
 //!   63 overflows by 33,552,000 (HydraHarp v1, always one) or by 2^25 times
 //!   the count (0 meaning 1); special channel 0 is a sync; 1-15 markers.
 
-use crate::tags::{Tag, TagSink};
+use crate::tags::{ChunkDecoder, Tag, TagSink};
 
 /// A TTTR record type, as `TTResultFormat_TTTRRecType` codes it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -174,34 +174,10 @@ impl Decoder {
         self.decode_as(self.layout, rec)
     }
 
-    /// Decodes `records` in order, handing each result to `f`. The layout
-    /// is matched once per chunk, not per record: each arm is a loop the
-    /// compiler specialises (the decode + bin hot path, see BENCHMARKS.md).
+    /// Decodes `records` in order, handing each result to `sink`.
     #[inline]
-    pub fn decode_all(&mut self, records: &[u32], mut sink: impl TagSink) {
-        macro_rules! run {
-            ($layout:expr) => {
-                for &r in records {
-                    sink.push(self.decode_as($layout, r));
-                }
-            };
-        }
-        match self.layout {
-            Layout::PicoHarpT3 => run!(Layout::PicoHarpT3),
-            Layout::PicoHarpT2 => run!(Layout::PicoHarpT2),
-            Layout::WideT3 {
-                single_overflow: true,
-            } => run!(Layout::WideT3 {
-                single_overflow: true
-            }),
-            Layout::WideT3 {
-                single_overflow: false,
-            } => run!(Layout::WideT3 {
-                single_overflow: false
-            }),
-            Layout::WideT2 { v1: true } => run!(Layout::WideT2 { v1: true }),
-            Layout::WideT2 { v1: false } => run!(Layout::WideT2 { v1: false }),
-        }
+    pub fn decode_all(&mut self, records: &[u32], sink: impl TagSink) {
+        self.decode_chunk(records, sink);
     }
 
     #[inline(always)]
@@ -300,6 +276,43 @@ impl Decoder {
                 })
             }
         }
+    }
+}
+
+impl ChunkDecoder for Decoder {
+    type Record = u32;
+
+    /// The layout is matched once per chunk, not per record: each arm is a
+    /// loop the compiler specialises, on a copy of the decoder in a local
+    /// (the decode + bin hot path, see BENCHMARKS.md).
+    #[inline]
+    fn decode_chunk<S: TagSink>(&mut self, records: &[u32], mut sink: S) -> S {
+        let mut local = self.clone();
+        macro_rules! run {
+            ($layout:expr) => {
+                for &r in records {
+                    sink.push(local.decode_as($layout, r));
+                }
+            };
+        }
+        match self.layout {
+            Layout::PicoHarpT3 => run!(Layout::PicoHarpT3),
+            Layout::PicoHarpT2 => run!(Layout::PicoHarpT2),
+            Layout::WideT3 {
+                single_overflow: true,
+            } => run!(Layout::WideT3 {
+                single_overflow: true
+            }),
+            Layout::WideT3 {
+                single_overflow: false,
+            } => run!(Layout::WideT3 {
+                single_overflow: false
+            }),
+            Layout::WideT2 { v1: true } => run!(Layout::WideT2 { v1: true }),
+            Layout::WideT2 { v1: false } => run!(Layout::WideT2 { v1: false }),
+        }
+        *self = local;
+        sink
     }
 }
 
