@@ -79,6 +79,7 @@ pub mod files;
 pub mod font;
 pub mod formats;
 pub mod forward;
+pub mod length;
 pub mod live;
 pub mod memory;
 pub mod metrics;

@@ -14,7 +14,7 @@ use scatterscope::calibrate::histogram::TimeHistogram;
 use scatterscope::calibrate::measured_irf::{MeasuredIrf, recorded_range};
 use scatterscope::calibrate::transmittance::{
     Capture, MediumEstimate, RISING_EDGE_CONVENTION, SlabFitOptions, expected_capture, fit_slab,
-    parse_length_cm, predict_captures, read_captures,
+    predict_captures, read_captures,
 };
 
 const BIN_PS: f64 = 8.0;
@@ -413,12 +413,16 @@ fn references_and_captures_without_light_are_refused_by_name() {
 }
 
 #[test]
-fn lengths_need_a_known_unit() {
-    assert!((parse_length_cm("1in").unwrap() - 2.54).abs() < 1e-12);
-    assert!((parse_length_cm("25.4mm").unwrap() - 2.54).abs() < 1e-12);
-    assert!((parse_length_cm("0.5 m").unwrap() - 50.0).abs() < 1e-12);
+fn capture_thicknesses_need_a_known_unit() {
+    // The capture label's thickness goes through the one length parser,
+    // which refuses bare numbers, unknown units and sizes of zero or less.
+    let dir = tempfile::tempdir().unwrap();
     for bad in ["3", "3ft", "-1cm", "xcm", "0in"] {
-        assert!(parse_length_cm(bad).is_err(), "{bad} accepted");
+        let spec = format!("{}={bad}", dir.path().join("c.csv").display());
+        let err = read_captures(&[spec.as_str()], "out", None, None)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(&format!("length `{bad}`")), "{bad}: {err}");
     }
 }
 

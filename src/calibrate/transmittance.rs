@@ -126,7 +126,7 @@ pub struct Capture {
 
 impl Capture {
     /// The capture `FILE=THICKNESS` (THICKNESS with its unit, see
-    /// [`parse_length_cm`]), read by [`TimeHistogram::read`] with
+    /// [`crate::length::parse_positive_cm`]), read by [`TimeHistogram::read`] with
     /// `dataset` and `bin_width_ps`, labelled by the file's stem.
     pub fn from_spec(
         spec: &str,
@@ -159,7 +159,7 @@ fn parse_spec(spec: &str) -> Result<(PathBuf, f64, String), CalibrateError> {
     let (file, thickness) = spec
         .rsplit_once('=')
         .ok_or_else(|| fail("expected FILE=THICKNESS".into()))?;
-    let thickness_cm = parse_length_cm(thickness).map_err(|e| fail(e.to_string()))?;
+    let thickness_cm = crate::length::parse_positive_cm(thickness).map_err(fail)?;
     let path = PathBuf::from(file);
     let label = path
         .file_stem()
@@ -1013,36 +1013,6 @@ fn finish(
         evaluations,
         undetermined,
     })
-}
-
-/// A length with its unit (`2.54cm`, `25.4mm`, `1in`, `0.0254m`) in cm.
-pub fn parse_length_cm(text: &str) -> Result<f64, CalibrateError> {
-    let t = text.trim();
-    let split = t.find(|c: char| c.is_ascii_alphabetic()).ok_or_else(|| {
-        CalibrateError::Invalid(format!("length `{text}` needs a unit: cm, mm, m or in"))
-    })?;
-    let (number, unit) = t.split_at(split);
-    let value: f64 = number.trim().parse().map_err(|_| {
-        CalibrateError::Invalid(format!("length `{text}`: `{number}` is not a number"))
-    })?;
-    let scale = match unit {
-        "cm" => 1.0,
-        "mm" => 0.1,
-        "m" => 100.0,
-        "in" => 2.54,
-        other => {
-            return Err(CalibrateError::Invalid(format!(
-                "length `{text}`: unknown unit `{other}` (cm, mm, m or in)"
-            )));
-        }
-    };
-    let cm = value * scale;
-    if !(cm.is_finite() && cm > 0.0) {
-        return Err(CalibrateError::Invalid(format!(
-            "length `{text}` must be positive"
-        )));
-    }
-    Ok(cm)
 }
 
 /// Expected counts in bins `0..bins` (of the response's width, from time

@@ -5,12 +5,12 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
-use scatterscope::calibrate::transmittance::parse_length_cm;
 use scatterscope::confocal::scan::DEFAULT_MAT_DATASET;
 use scatterscope::confocal::{
     ConfocalScan, HiddenMethod, PoissonOptions, PublishedOptions, SlabOptics, hidden_warnings,
     reconstruct_hidden,
 };
+use scatterscope::length::parse_positive_cm;
 use scatterscope::report::hidden::write_hidden;
 
 use crate::shared_args::choice;
@@ -76,9 +76,18 @@ pub struct HiddenArgs {
 }
 
 pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
-    let side_m = parse_length_cm(&args.scan_side).context("--scan-side")? / 100.0;
-    let thickness_m = parse_length_cm(&args.slab_thickness).context("--slab-thickness")? / 100.0;
-    let depth_m = parse_length_cm(&args.depth).context("--depth")? / 100.0;
+    let side_m = parse_positive_cm(&args.scan_side)
+        .map_err(anyhow::Error::msg)
+        .context("--scan-side")?
+        / 100.0;
+    let thickness_m = parse_positive_cm(&args.slab_thickness)
+        .map_err(anyhow::Error::msg)
+        .context("--slab-thickness")?
+        / 100.0;
+    let depth_m = parse_positive_cm(&args.depth)
+        .map_err(anyhow::Error::msg)
+        .context("--depth")?
+        / 100.0;
     let mut scan = ConfocalScan::open(&args.scan, &args.dataset, args.bin_ps, side_m)?;
     if let Some(fraction) = args.thin.filter(|&f| f != 1.0) {
         scan = scan.thinned(fraction, args.thin_seed).context("--thin")?;

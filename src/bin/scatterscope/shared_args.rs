@@ -4,7 +4,8 @@
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::Named;
-use scatterscope::config::{PhysicsOverrides, parse_cm, parse_ps};
+use scatterscope::config::{PhysicsOverrides, parse_ps};
+use scatterscope::length::parse_cm_or_bare;
 use scatterscope::physics::{MediumModel, Preset, Setup};
 use std::path::PathBuf;
 
@@ -46,14 +47,14 @@ pub struct PhysicsArgs {
     #[arg(long, value_name = "N", allow_negative_numbers = true)]
     pub n: Option<f64>,
     /// Slab thickness z0 between object and sensor (default unit cm; e.g. 30mm).
-    #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
+    #[arg(long, value_name = "LENGTH", value_parser = parse_cm_or_bare, allow_negative_numbers = true)]
     pub thickness: Option<f64>,
     /// The medium: infinite (the paper's Eq. 6) or slab (extrapolated
     /// boundaries, image sources; transmitted flux).
     #[arg(long, value_name = "MODEL", value_parser = scatterscope::config::parse_medium)]
     pub medium: Option<MediumModel>,
     /// Horizontal field of view (default unit cm).
-    #[arg(long, value_name = "LENGTH", value_parser = parse_cm, allow_negative_numbers = true)]
+    #[arg(long, value_name = "LENGTH", value_parser = parse_cm_or_bare, allow_negative_numbers = true)]
     pub fov: Option<f64>,
     /// Image side in pixels (square images).
     #[arg(long, value_name = "PIXELS")]
