@@ -503,7 +503,7 @@ fn run_pass(
 ) -> Result<Pass, BinFileError> {
     let start = Instant::now();
     let binner = Binner::new(window, map, spec.channel, spec.frames);
-    let records = info.records_present.min(info.records_announced);
+    let records = info.records_to_read();
     // Parts of the file binned on the cores at once, where no photon's
     // pixel depends on an earlier record (every map but a scanned image's),
     // each part at least `PART_RECORDS` long and its stack within the

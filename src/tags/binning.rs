@@ -487,7 +487,7 @@ impl Binner {
     /// hot path of recorded files, see BENCHMARKS.md); scanned images and
     /// frame selections that exclude frame 0 go through `push`.
     pub fn bin_chunk<D: ChunkDecoder>(&mut self, decoder: &mut D, records: &[D::Record]) {
-        if matches!(self.map, PixelMap::Scan(_)) || self.stack_for_frame(0).is_none() {
+        if !self.order_free() || self.stack_for_frame(0).is_none() {
             let _ = decoder.decode_chunk(records, |tag| self.push(tag));
             return;
         }

@@ -244,13 +244,18 @@ impl FileInfo {
 }
 
 impl FileInfo {
+    /// Records a reader returns: those present, up to the announced count.
+    pub fn records_to_read(&self) -> u64 {
+        self.records_present.min(self.records_announced)
+    }
+
     /// Readers of `parts` consecutive ranges of the records [`open`] reads,
     /// each on the file opened anew, for decoding parts at once where no
     /// record depends on the state an earlier one left. The last range
     /// ends as [`open`]'s reader does ([`TtrError::Truncated`] when records
     /// are missing).
     pub fn split_records(&self, parts: usize) -> Result<Vec<RecordReader>, FileError> {
-        let records = self.records_present.min(self.records_announced);
+        let records = self.records_to_read();
         let parts = parts.max(1) as u64;
         (0..parts)
             .map(|i| {
@@ -371,7 +376,7 @@ fn open_inner(path: &Path) -> Result<(FileInfo, RecordReader), TtrError> {
         info.records_announced = info.records_present;
         info.count_missing = info.records_present > 0;
     }
-    let records = info.records_present.min(info.records_announced);
+    let records = info.records_to_read();
     let rr = RecordReader {
         reader,
         remaining: records,

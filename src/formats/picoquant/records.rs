@@ -174,12 +174,6 @@ impl Decoder {
         self.decode_as(self.layout, rec)
     }
 
-    /// Decodes `records` in order, handing each result to `sink`.
-    #[inline]
-    pub fn decode_all(&mut self, records: &[u32], sink: impl TagSink) {
-        self.decode_chunk(records, sink);
-    }
-
     #[inline(always)]
     fn decode_as(&mut self, layout: Layout, rec: u32) -> Option<Tag> {
         match layout {
