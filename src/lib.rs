@@ -102,5 +102,5 @@ pub use reconstruct::problem::Problem;
 pub use scatterscope_physics::{KernelStack, Preset, Sampling, Setup};
 pub use scene::Scene;
 pub use stack::{Stack, StackMeta, ValueKind};
-pub use tags::bin_file::{BinSpec, BinnedFile, bin_file};
+pub use tags::bin_file::{BinSpec, BinnedFile, bin_file, bin_file_counts};
 pub use tags::binning::{Accounting, Binner, TimeWindow};

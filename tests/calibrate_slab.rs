@@ -784,7 +784,8 @@ fn broken_matlab_files_give_errors_naming_the_file() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("capture.txt") && err.contains("unknown histogram format"),
+        err.contains("capture.txt")
+            && err.contains("not a histogram: neither its first bytes nor its extension"),
         "{err}"
     );
 }

@@ -177,7 +177,10 @@ fn wrong_files_are_refused() {
     let e = ConfocalScan::open(&txt, "meas", Some(16.0), 0.5)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("\"txt\" is not a scan"), "{e}");
+    assert!(
+        e.contains("scan.txt: not a scan: neither its first bytes nor its extension"),
+        "{e}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -4,6 +4,8 @@
 //! one ledger, and what a device cannot record is refused by name before
 //! anything is written.
 
+#[path = "common/pydeps.rs"]
+mod pydeps;
 #[path = "common/standin.rs"]
 mod standin;
 
@@ -233,16 +235,7 @@ if warned:
     sys.exit(f"warned: {warned}")
 print(photons)
 "#;
-    let pydeps = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/pydeps");
-    let p = Command::new("python3")
-        .arg("-c")
-        .arg(script)
-        .arg(&ptu)
-        .env("PYTHONPATH", &pydeps)
-        .output()
-        .unwrap();
-    assert!(p.status.success(), "{}", text(&p));
-    let photons: u64 = String::from_utf8_lossy(&p.stdout).trim().parse().unwrap();
+    let photons: u64 = pydeps::python(script, &[&ptu]).trim().parse().unwrap();
     assert_eq!(photons, record["ledger"]["photons"].as_u64().unwrap());
 }
 

@@ -4,6 +4,8 @@
 
 #[path = "common/pt3.rs"]
 mod pt3;
+#[path = "common/pydeps.rs"]
+mod pydeps;
 #[path = "common/shared_data.rs"]
 mod shared_data;
 
@@ -943,4 +945,54 @@ fn binning_a_file_in_parts_equals_one_pass() {
         "{:?}",
         cut_binned.truncated
     );
+}
+
+/// A synthetic FLIM image file bins, frame by frame and summed, into the
+/// image histograms ptufile (an independent reader) decodes from it: the
+/// same photons in the same pixel and bin.
+#[test]
+#[ignore = "needs ptufile under target/pydeps (scripts/fetch_python_deps.sh)"]
+fn a_flim_image_bins_as_ptufile_decodes_it() {
+    use ndarray::{Array3, Array5, Axis};
+    use ndarray_npy::ReadNpyExt;
+    let dir = tempfile::tempdir().unwrap();
+    let ptu = dir.path().join("flim.ptu");
+    scatterscope::formats::picoquant::writer::write_synthetic_flim(&ptu, 48, 60_000).unwrap();
+    let script = r#"
+import sys, numpy, ptufile
+with ptufile.PtuFile(sys.argv[1]) as f:
+    assert f.is_image, "ptufile does not read the file as an image"
+    numpy.save(sys.argv[2], f.decode_image(dtype="uint32"))
+"#;
+    let npy = dir.path().join("ptufile.npy");
+    pydeps::python(script, &[&ptu, &npy]);
+    // T (frames), Y, X, C (channels), H (bins).
+    let theirs = Array5::<u32>::read_npy(std::fs::File::open(&npy).unwrap()).unwrap();
+    let (frames, h, w, channels, bins) = theirs.dim();
+    assert_eq!((frames, h, w, channels), (2, 48, 48, 1));
+    let frame = |t: usize| -> Array3<u32> {
+        theirs
+            .index_axis(Axis(0), t)
+            .index_axis(Axis(2), 0)
+            .permuted_axes([2, 0, 1])
+            .to_owned()
+    };
+    let bin = |frames: FrameSelect| {
+        let spec = BinSpec {
+            frames,
+            bins: Some(bins),
+            ..BinSpec::default()
+        };
+        bin_file(&ptu, &spec).unwrap()
+    };
+    let summed = bin(FrameSelect::Sum);
+    assert_eq!(summed.stacks.len(), 1);
+    let ours = summed.stacks[0].data.mapv(|v| v as u32);
+    assert_eq!(ours, frame(0) + frame(1));
+    assert!(ours.sum() > 50_000, "{} photons", ours.sum());
+    let each = bin(FrameSelect::All);
+    assert_eq!(each.stacks.len(), 2);
+    for (t, stack) in each.stacks.iter().enumerate() {
+        assert_eq!(stack.data.mapv(|v| v as u32), frame(t), "frame {t}");
+    }
 }

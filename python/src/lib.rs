@@ -27,7 +27,7 @@ use scatterscope::reconstruct::input::{InputSpec, prepare};
 use scatterscope::reconstruct::method::{Method, MethodOptions, Solver, run_method};
 use scatterscope::reconstruct::problem::BackgroundChoice;
 use scatterscope::stack::{Stack, StackMeta};
-use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file as lib_bin_file};
+use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file_counts as lib_bin_file_counts};
 use scatterscope::tags::binning::FrameSelect;
 
 /// The extension's allocator (see the dependency's comment in Cargo.toml:
@@ -243,7 +243,7 @@ fn read_tags<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>
 /// Bins a recorded file: (stacks, metadata per stack, ledger, summary
 /// lines).
 #[pyfunction]
-#[pyo3(signature = (path, bin_width_ps=None, t_start_ps=0.0, bins=None, channel=None, pixels="auto", frames="sum", allow_truncated=false))]
+#[pyo3(signature = (path, bin_width_ps=None, t_start_ps=0.0, bins=None, channel=None, pixels="auto", frames="sum", allow_truncated=false, dtype=None))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn bin_file<'py>(
     py: Python<'py>,
@@ -255,6 +255,7 @@ fn bin_file<'py>(
     pixels: &str,
     frames: &str,
     allow_truncated: bool,
+    dtype: Option<&str>,
 ) -> PyResult<(
     Vec<Bound<'py, PyAny>>,
     Vec<Bound<'py, PyAny>>,
@@ -270,14 +271,44 @@ fn bin_file<'py>(
         frames: frames.parse::<FrameSelect>().map_err(msg)?,
         allow_truncated,
     };
-    let binned = py.detach(|| lib_bin_file(&path, &spec)).map_err(err)?;
+    if !matches!(dtype, None | Some("float32" | "uint16" | "uint32")) {
+        return Err(ScatterscopeError::new_err(format!(
+            "bin_file: dtype {:?} is not one of float32, uint16, uint32",
+            dtype.unwrap_or_default()
+        )));
+    }
+    let binned = py
+        .detach(|| lib_bin_file_counts(&path, &spec))
+        .map_err(err)?;
     let summary = binned.summary();
     let ledger = to_py(py, &binned.accounting)?;
     let mut arrays = Vec::new();
     let mut metas = Vec::new();
-    for stack in binned.stacks {
+    for (frame, stack) in binned.stacks.into_iter().enumerate() {
         metas.push(to_py(py, &stack.meta)?);
-        arrays.push(counts_array(py, stack.data, stack.exact_counts));
+        let too_large = |largest: u32, dtype: &str| {
+            ScatterscopeError::new_err(format!(
+                "bin_file: {}: stack {frame} holds {largest} photons in one bin, more than {dtype} holds exactly: ask for dtype=\"uint32\"",
+                path.display()
+            ))
+        };
+        arrays.push(match dtype {
+            // The counts as binned: moved into numpy, not copied.
+            Some("uint32") => stack.counts.into_pyarray(py).into_any(),
+            Some("uint16") => stack
+                .narrowed::<u16>()
+                .map_err(|largest| too_large(largest, "uint16"))?
+                .into_pyarray(py)
+                .into_any(),
+            _ => {
+                let values = Stack::from_counts(stack.counts.view(), stack.meta);
+                if dtype.is_some() && values.exact_counts.is_some() {
+                    let largest = stack.counts.iter().copied().max().unwrap_or(0);
+                    return Err(too_large(largest, "float32"));
+                }
+                counts_array(py, values.data, values.exact_counts)
+            }
+        });
     }
     Ok((arrays, metas, ledger, summary))
 }

@@ -77,6 +77,23 @@ def test_bin_file_equals_the_command_bin_for_bin(tmp_path):
     assert ours["stacks"][0].sum() == ledger["binned"] > 10_000
 
 
+def test_bin_file_gives_the_counts_in_the_dtype_asked_for(tmp_path):
+    ptu = mock_ptu(tmp_path)
+    floats = scatterscope.bin_file(ptu, pixels="channel")["stacks"][0]
+    assert floats.dtype == np.float32
+    for dtype in ["uint32", "uint16", "float32"]:
+        counts = scatterscope.bin_file(ptu, pixels="channel", dtype=dtype)["stacks"][0]
+        assert counts.dtype == np.dtype(dtype)
+        np.testing.assert_array_equal(counts, floats)
+    # Every photon in one bin of one pixel: more than uint16 holds.
+    one = scatterscope.bin_file(ptu, pixels="single", bins=1, bin_width_ps=1e5, dtype="uint32")["stacks"][0]
+    assert one.shape == (1, 1, 1) and one[0, 0, 0] > 65_535
+    with pytest.raises(ScatterscopeError, match=f"holds {one[0, 0, 0]} photons in one bin, more than uint16"):
+        scatterscope.bin_file(ptu, pixels="single", bins=1, bin_width_ps=1e5, dtype="uint16")
+    with pytest.raises(ScatterscopeError, match='dtype "int8" is not one of float32, uint16, uint32'):
+        scatterscope.bin_file(ptu, dtype="int8")
+
+
 def test_read_tags_agrees_with_bin_file(tmp_path):
     ptu = mock_ptu(tmp_path)
     tags = scatterscope.read_tags(ptu)

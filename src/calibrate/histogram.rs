@@ -8,6 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::formats::detect::Format;
 use crate::stack::Stack;
 
 /// Most bins before the light whose median is the background.
@@ -223,7 +224,7 @@ impl TimeHistogram {
         Self::new(counts, first.meta.bin_width_ps, start, path)
     }
 
-    /// Reads a histogram file by its extension: `.mat` (dataset `dataset`,
+    /// Reads a histogram file by its format ([`Format::of_file`]): `.mat` (dataset `dataset`,
     /// bins of `bin_width_ps`), a stack (`.exr`, `.npy`: summed over the
     /// sensor, bins from its metadata), or a tag file (`.ptu`, `.pt3`,
     /// `.ht3`, `.sstags`: every photon, the file's resolution).
@@ -232,25 +233,21 @@ impl TimeHistogram {
         dataset: &str,
         bin_width_ps: Option<f64>,
     ) -> Result<Self, HistogramError> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        match ext.as_deref() {
-            Some("mat") => {
+        match Format::of_file(path) {
+            Format::Mat => {
                 let width = bin_width_ps.ok_or_else(|| HistogramError::BinWidthUnknown {
                     path: path.to_path_buf(),
                 })?;
                 Self::read_mat(path, dataset, width)
             }
-            Some("exr") | Some("npy") => {
+            Format::Exr | Format::Npy => {
                 let stack = Stack::load(path).map_err(|e| file_error(path, e.to_string()))?;
                 Self::from_stack(&stack, path)
             }
-            Some("ptu") | Some("pt3") | Some("ht3") | Some("sstags") => Self::from_tags(path),
+            Format::Ptu | Format::PicoQuantLegacy | Format::TagFile => Self::from_tags(path),
             _ => Err(file_error(
                 path,
-                "unknown histogram format (read: .mat MATLAB v7.3, .exr and .npy stacks, .ptu, .pt3, .ht3 and .sstags tag files)",
+                "not a histogram: neither its first bytes nor its extension say MATLAB v7.3 (.mat), a stack (.exr, .npy) or a tag file (.ptu, .pt3, .ht3, .sstags)",
             )),
         }
     }

@@ -50,6 +50,7 @@ use super::measured_irf::MeasuredIrf;
 use super::parts::{check_parts, kept_sum};
 use super::response_convolution::ResponseConvolution;
 use super::search::{nelder_mead, pearson_chi2};
+use crate::formats::detect::Format;
 
 /// Nodes of the Gauss-Legendre rule integrating `T` over one bin. The
 /// transmittance changes by well under a factor e per 8 ps bin wherever
@@ -197,9 +198,7 @@ pub fn read_captures(
     // (capture index, its parts) for the captures that have parts.
     let mut parted: Vec<(usize, Vec<Vec<f64>>)> = Vec::new();
     for (i, (path, _, _)) in parsed.iter().enumerate() {
-        let is_mat = path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("mat"));
+        let is_mat = Format::of_file(path) == Format::Mat;
         let width = captures[i].histogram.bin_width_ps;
         let found = if is_mat {
             TimeHistogram::read_mat_parts(path, parts_name, width).map_err(invalid)?

@@ -9,6 +9,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Binomial, Distribution};
 
 use super::ConfocalError;
+use crate::formats::detect::Format;
 use crate::stack::Stack;
 
 /// The MATLAB dataset read unless another is named (the confocal diffuse
@@ -91,7 +92,7 @@ impl ConfocalScan {
         })
     }
 
-    /// Opens a scan by its extension: a MATLAB v7.3 file (`.mat`, dataset
+    /// Opens a scan by its format ([`Format::of_file`]): a MATLAB v7.3 file (`.mat`, dataset
     /// `dataset`, bin width `bin_width_ps` required) or a project stack
     /// (`.exr`, `.npy`, whose metadata carries its bin width).
     pub fn open(
@@ -101,8 +102,8 @@ impl ConfocalScan {
         side_m: f64,
     ) -> Result<Self, ConfocalError> {
         let name = path.display().to_string();
-        match path.extension().and_then(|e| e.to_str()) {
-            Some("mat") => {
+        match Format::of_file(path) {
+            Format::Mat => {
                 let width = bin_width_ps.ok_or_else(|| {
                     ConfocalError::setting(
                         "bin_width_ps",
@@ -111,17 +112,14 @@ impl ConfocalScan {
                 })?;
                 Self::read_mat(path, dataset, width, side_m)
             }
-            Some("exr") | Some("npy") => {
+            Format::Exr | Format::Npy => {
                 let stack =
                     Stack::load(path).map_err(|e| ConfocalError::input(&name, e.to_string()))?;
                 Self::from_stack(&stack, side_m, &name)
             }
-            other => Err(ConfocalError::input(
+            _ => Err(ConfocalError::input(
                 &name,
-                format!(
-                    "extension {:?} is not a scan: give a MATLAB .mat or a stack (.exr, .npy)",
-                    other.unwrap_or("")
-                ),
+                "not a scan: neither its first bytes nor its extension say MATLAB .mat or a stack (.exr, .npy)",
             )),
         }
     }

@@ -14,6 +14,7 @@ use super::Denoiser;
 use super::ffdnet::weights::WeightsError;
 use super::ffdnet::{Ffdnet, source};
 use super::tv::TotalVariation;
+use crate::formats::detect::Format;
 use crate::formats::image::{ImageError, read_image, write_image};
 use crate::metrics::{psnr, ssim};
 
@@ -156,12 +157,7 @@ pub fn collect_images(paths: &[PathBuf]) -> Result<Vec<BenchImage>, ImageError> 
         })?;
         let mut inner: Vec<PathBuf> = listing
             .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|f| {
-                let ext = f
-                    .extension()
-                    .map(|e| e.to_string_lossy().to_ascii_lowercase());
-                matches!(ext.as_deref(), Some("png" | "jpg" | "jpeg"))
-            })
+            .filter(|f| matches!(Format::of_file(f), Format::Png | Format::Jpeg))
             .collect();
         if inner.is_empty() {
             return Err(ImageError::Content {

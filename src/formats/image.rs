@@ -1,6 +1,7 @@
 //! Single images in and out: PNG and JPEG (gray levels on a [0, 1]
 //! scale), EXR (luminance, values as stored) and 2-D `.npy` (float32 or
-//! float64), chosen by the file's extension; scenes, truths, denoiser
+//! float64), read as the file's first bytes say (else its extension) and
+//! written as the extension says; scenes, truths, denoiser
 //! inputs and outputs all go through here.
 
 use std::path::{Path, PathBuf};
@@ -10,6 +11,8 @@ use image::imageops::{FilterType, resize};
 use image::{ImageBuffer, Luma};
 use ndarray::{Array2, ArrayView2};
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
+
+use super::detect::Format;
 
 /// Why an image file cannot be read or written.
 #[derive(Debug, thiserror::Error)]
@@ -46,13 +49,6 @@ fn strip_path(path: &Path, text: String) -> String {
         .map_or(text.clone(), str::to_string)
 }
 
-/// The lower-case extension of `path` ("" without one).
-fn extension(path: &Path) -> String {
-    path.extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default()
-}
-
 /// Writes `img` as the extension of `path` says: `.png` (8 bits, [0, 1]
 /// to black and white, values outside clamped), `.exr` or `.npy` (float32,
 /// values as they are).
@@ -61,20 +57,23 @@ pub fn write_image(img: ArrayView2<f64>, path: &Path) -> Result<(), ImageError> 
         path: path.to_owned(),
         reason,
     };
-    match extension(path).as_str() {
-        "png" => super::png::write_png(img.mapv(|v| v.clamp(0.0, 1.0)).view(), Some(1.0), path)
+    match Format::of_extension(path) {
+        Format::Png => {
+            super::png::write_png(img.mapv(|v| v.clamp(0.0, 1.0)).view(), Some(1.0), path)
+                .map_err(|e| fail(e.to_string()))
+        }
+        Format::Exr => super::exr::write_image(img.mapv(|v| v as f32).view(), path)
             .map_err(|e| fail(e.to_string())),
-        "exr" => super::exr::write_image(img.mapv(|v| v as f32).view(), path)
-            .map_err(|e| fail(e.to_string())),
-        "npy" => {
+        Format::Npy => {
             let mut bytes = Vec::new();
             img.mapv(|v| v as f32)
                 .write_npy(&mut bytes)
                 .map_err(|e| fail(e.to_string()))?;
             crate::files::write_atomic(path, bytes).map_err(|e| fail(e.to_string()))
         }
-        other => Err(fail(format!(
-            "unknown extension `{other}` (use .png, .exr or .npy)"
+        _ => Err(fail(format!(
+            "unknown extension `{}` (use .png, .exr or .npy)",
+            path.extension().unwrap_or_default().to_string_lossy()
         ))),
     }
 }
@@ -105,7 +104,7 @@ fn read_npy_image(path: &Path) -> Result<Array2<f64>, ImageError> {
 /// Reads a PNG or JPEG file as grayscale in [0, 1], an EXR file's
 /// luminance or a 2-D `.npy` array with its own values, at the file's size.
 pub fn read_image(path: &Path) -> Result<Array2<f64>, ImageError> {
-    let img = if extension(path) == "npy" {
+    let img = if Format::of_file(path) == Format::Npy {
         read_npy_image(path)?
     } else {
         read_decoded(path)?
@@ -134,9 +133,7 @@ fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, Ima
         path: path.to_owned(),
         reason,
     };
-    let is_exr = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    let is_exr = Format::of_file(path) == Format::Exr;
     let gray: ImageBuffer<Luma<f32>, Vec<f32>> = if is_exr {
         read_exr_luminance(path).map_err(decode)?
     } else {

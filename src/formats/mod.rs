@@ -14,10 +14,13 @@
 //! - [`mat`]: MATLAB v7.3 (HDF5) datasets, e.g. the confocal diffuse
 //!   tomography captures and scans.
 //!
+//! Which is which: [`detect`], by a file's first bytes, then its extension.
+//!
 //! Images (scenes, truths, reconstructions, previews):
 //! - [`image`]: single images in and out (PNG, JPEG, EXR, `.npy`).
 //! - [`png`]: 8-bit PNG previews and labelled contact sheets of a stack.
 
+pub mod detect;
 pub mod exr;
 pub mod image;
 pub mod mat;

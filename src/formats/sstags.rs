@@ -369,11 +369,8 @@ pub fn read_tag_file(
     TagFile::open(path)?.read(on_batch)
 }
 
-/// Whether `path` starts with the tag file magic.
+/// Whether `path` is a tag file ([`crate::formats::detect`]: its magic,
+/// else its `.sstags` extension).
 pub fn is_tag_file(path: &Path) -> bool {
-    let mut magic = [0u8; 8];
-    crate::files::open_regular(path, "tag file")
-        .and_then(|(mut f, _)| f.read_exact(&mut magic))
-        .is_ok()
-        && &magic == MAGIC
+    crate::formats::detect::Format::of_file(path) == crate::formats::detect::Format::TagFile
 }

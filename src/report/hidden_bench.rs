@@ -15,6 +15,7 @@ use crate::confocal::{
     ConfocalScan, PoissonOptions, PublishedOptions, SlabOptics, reconstruct_auto,
     reconstruct_poisson, reconstruct_published,
 };
+use crate::formats::detect::Format;
 
 /// Label of the published method.
 pub const PUBLISHED: &str = "published (Wiener + f-k)";
@@ -106,7 +107,7 @@ pub fn scans_in(dir: &Path) -> Result<Vec<(String, PathBuf)>, ReportError> {
         std::fs::read_dir(dir).map_err(|e| ReportError::Io(dir.display().to_string(), e))?;
     let mut scans: Vec<(String, PathBuf)> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "mat"))
+        .filter(|p| Format::of_file(p) == Format::Mat)
         .filter_map(|p| {
             let stem = p.file_stem()?.to_str()?.to_string();
             authors_settings(&stem).map(|_| (stem, p))

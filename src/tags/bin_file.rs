@@ -83,14 +83,18 @@ impl Default for BinSpec {
     }
 }
 
-/// The stacks of one file, with everything a user needs to trust them.
+/// The stacks of one file, with everything a user needs to trust them:
+/// float32 [`Stack`]s ([`bin_file`]) or the counts as binned
+/// ([`bin_file_counts`]).
 #[derive(Debug)]
-pub struct BinnedFile {
+pub struct BinnedFile<S = Stack> {
     /// The file and what its header says.
     pub recording: Recording,
     /// One stack per kept frame (one when frames are summed), counts with
     /// their metadata.
-    pub stacks: Vec<Stack>,
+    pub stacks: Vec<S>,
+    /// Each stack's bins, rows and columns.
+    pub shape: (usize, usize, usize),
     /// Photon accounting of the (last) pass: it balances.
     pub accounting: Accounting,
     /// The window binned.
@@ -103,6 +107,31 @@ pub struct BinnedFile {
     pub notes: Vec<String>,
     /// Why the file ended early, when a cut file was binned.
     pub truncated: Option<String>,
+}
+
+/// One kept frame's photon counts as binned, with their metadata: a
+/// [`Stack`] before its values become float32.
+#[derive(Debug)]
+pub struct CountStack {
+    /// Photons per bin, row and column.
+    pub counts: Array3<u32>,
+    /// What the counts are.
+    pub meta: StackMeta,
+}
+
+impl CountStack {
+    /// The counts as `T` (such as `u16`); `Err` holds the largest count
+    /// when it does not fit.
+    pub fn narrowed<T: TryFrom<u32> + Copy>(&self) -> Result<Array3<T>, u32> {
+        let largest = self.counts.iter().copied().max().unwrap_or(0);
+        let fits = |c: u32| T::try_from(c).map_err(|_| largest);
+        fits(largest)?;
+        self.counts
+            .iter()
+            .map(|&c| fits(c))
+            .collect::<Result<Vec<T>, u32>>()
+            .map(|v| Array3::from_shape_vec(self.counts.dim(), v).expect("one value per count"))
+    }
 }
 
 /// The file a [`BinnedFile`] came from.
@@ -120,7 +149,29 @@ pub enum Recording {
     },
 }
 
-impl BinnedFile {
+impl BinnedFile<CountStack> {
+    /// The stacks as float32 [`Stack`]s, each frame's counts dropped once
+    /// converted.
+    pub fn into_stacks(self) -> BinnedFile<Stack> {
+        BinnedFile {
+            stacks: self
+                .stacks
+                .into_iter()
+                .map(|s| Stack::from_owned_counts(s.counts, s.meta))
+                .collect(),
+            recording: self.recording,
+            shape: self.shape,
+            accounting: self.accounting,
+            window: self.window,
+            resolution_ps: self.resolution_ps,
+            records_per_s: self.records_per_s,
+            notes: self.notes,
+            truncated: self.truncated,
+        }
+    }
+}
+
+impl BinnedFile<Stack> {
     /// Writes every stack as EXR into `dir` (created if missing), each
     /// with a PNG contact sheet when `previews`: `stack.exr`, or
     /// `stack_f000.exr`, ... when frames are kept apart. Returns the EXR
@@ -136,15 +187,27 @@ impl BinnedFile {
                 "stack".into()
             };
             let exr = dir.join(format!("{stem}.exr"));
-            stack.save(&exr)?;
-            if previews {
-                write_contact_sheet(stack, SheetScale::Shared, &dir.join(format!("{stem}.png")))?;
-            }
+            // The stack and its sheet at once, on two threads.
+            let (saved, sheet) = rayon::join(
+                || stack.save(&exr),
+                || {
+                    previews
+                        .then(|| {
+                            let png = dir.join(format!("{stem}.png"));
+                            write_contact_sheet(stack, SheetScale::Shared, &png)
+                        })
+                        .transpose()
+                },
+            );
+            saved?;
+            sheet?;
             files.push(exr);
         }
         Ok(files)
     }
+}
 
+impl<S> BinnedFile<S> {
     /// What makes the stacks less than a whole recording's, or empty, in
     /// words: the input cut, never finished or interrupted, or no photon
     /// binned. A command ends with a warning status when there are any.
@@ -205,7 +268,7 @@ impl BinnedFile {
         }];
         lines.extend(self.notes.iter().map(|n| format!("note: {n}")));
         lines.extend(self.warnings().iter().map(|w| format!("warning: {w}")));
-        let (k, h, w) = self.stacks[0].data.dim();
+        let (k, h, w) = self.shape;
         lines.push(format!(
             "{} stack(s) of {k} x {h} x {w} ({} ps bins from {} ps)",
             self.stacks.len(),
@@ -241,6 +304,15 @@ pub enum BinFileError {
 /// Bins a recorded tag file into transient stacks: a project tag file
 /// (recognised by its magic) or a PicoQuant T3 file (PTU, PT3, HT3).
 pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
+    bin_file_counts(path, spec).map(BinnedFile::into_stacks)
+}
+
+/// [`bin_file`] with the counts as binned (`u32`), for a caller that
+/// wants them in another type or as they are.
+pub fn bin_file_counts(
+    path: &Path,
+    spec: &BinSpec,
+) -> Result<BinnedFile<CountStack>, BinFileError> {
     if is_tag_file(path) {
         bin_tag_file(path, spec)
     } else {
@@ -297,7 +369,7 @@ pub fn window_and_map(
 }
 
 /// A PicoQuant T3 file.
-fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
+fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFileError> {
     let spec_err = |reason| spec_error(path, reason);
     let (info, reader) = open(path)?;
     info.check_finished(spec.allow_truncated)?;
@@ -426,24 +498,24 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError
         info.device,
         info.record_type.name()
     );
+    let shape = stacks[0].dim();
     let stacks = stacks
         .into_iter()
-        .map(|counts| {
-            Stack::from_counts(
-                counts.view(),
-                StackMeta::measured(
-                    window.start_ps(res_ps),
-                    window.width_ps(res_ps),
-                    window.bins,
-                    source.clone(),
-                    None,
-                ),
-            )
+        .map(|counts| CountStack {
+            counts,
+            meta: StackMeta::measured(
+                window.start_ps(res_ps),
+                window.width_ps(res_ps),
+                window.bins,
+                source.clone(),
+                None,
+            ),
         })
         .collect();
     Ok(BinnedFile {
         recording: Recording::PicoQuant(info),
         stacks,
+        shape,
         accounting,
         window,
         resolution_ps: res_ps,
@@ -577,7 +649,7 @@ fn bin_records(
 }
 
 /// A tag file: the device's whole sensor, micro time from the sync.
-fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
+fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFileError> {
     let spec_err = |reason| spec_error(path, reason);
     if !matches!(spec.pixels, Pixels::Auto) || spec.frames != FrameSelect::Sum {
         return Err(spec_err(
@@ -621,22 +693,24 @@ fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError>
     let mut counts = BatchCounts::default();
     let summary = raw.read(|batch| counts += bin_batch(batch, &mut binner))?;
     let seconds = start.elapsed().as_secs_f64();
-    let (stacks, accounting) = binner.finish();
+    let (mut stacks, accounting) = binner.finish();
+    let counts_binned = stacks.swap_remove(0);
     let source = format!("{} ({} {})", path.display(), header.model, header.serial);
     let record = TagFileRecord {
         tag_file_header: header,
         totals_in_file: summary.totals.is_some(),
     };
-    let stack = Stack::from_counts(
-        stacks[0].view(),
-        StackMeta::measured(
+    let shape = counts_binned.dim();
+    let stack = CountStack {
+        counts: counts_binned,
+        meta: StackMeta::measured(
             window.start_ps(res_ps),
             window.width_ps(res_ps),
             window.bins,
             source,
             Some(serde_json::to_value(&record).expect("the record serialises")),
         ),
-    );
+    };
     let truncated = summary
         .totals
         .is_none()
@@ -644,6 +718,7 @@ fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError>
     Ok(BinnedFile {
         recording: Recording::TagFile { summary, counts },
         stacks: vec![stack],
+        shape,
         accounting,
         window,
         resolution_ps: res_ps,

@@ -81,6 +81,7 @@ def bin_file(
     pixels: str = "auto",
     frames: "str | int" = "sum",
     allow_truncated: bool = False,
+    dtype: Optional[str] = None,
 ) -> Dict[str, Any]:
     """Bin a recorded file into transient stacks, as ``scatterscope bin``.
 
@@ -88,10 +89,13 @@ def bin_file(
     one sync period (widened to every micro time present); ``pixels`` is
     ``auto`` (the scanned image of imaging files, else one pixel),
     ``single`` or ``channel``; ``frames`` is ``sum``, ``all`` or a frame
-    number.
+    number. ``dtype`` is the arrays' type: ``"uint32"`` (the counts as
+    binned, handed over without a copy), ``"uint16"`` or ``"float32"``
+    (an error when a count does not fit exactly); by default float32,
+    or uint32 for a stack with a count above 2**24.
 
-    Returns a dict: ``stacks`` (list of float32 arrays ``(bins, rows,
-    cols)``, one per kept frame; uint32 where some count exceeds 2**24), ``meta`` (their metadata dicts),
+    Returns a dict: ``stacks`` (list of arrays ``(bins, rows, cols)``, one
+    per kept frame, of the type ``dtype`` says), ``meta`` (their metadata dicts),
     ``ledger`` (where every photon went: ``received = binned +
     outside_window + other_channel + outside_region``) and ``summary`` (the
     lines the command prints).
@@ -105,6 +109,7 @@ def bin_file(
         pixels,
         str(frames),
         allow_truncated,
+        dtype,
     )
     return {
         "stacks": list(stacks),

@@ -23,6 +23,7 @@ def bin_file(
     pixels: str = "auto",
     frames: Union[str, int] = "sum",
     allow_truncated: bool = False,
+    dtype: Optional[str] = None,
 ) -> Dict[str, Any]:
     """Bin a recorded file into transient stacks, as ``scatterscope bin``."""
 
