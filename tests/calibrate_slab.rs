@@ -685,7 +685,8 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     )
     .unwrap();
     assert!((optics.mu_s_reduced_per_m - 100.0 * medium.mu_s_per_cm).abs() < 1e-9);
-    // A bad thickness is refused by name.
+    // A bad thickness is refused by name; the old names of mu_s' (the
+    // flag and the fit name) are read and say their new ones.
     let output = std::process::Command::new(env!("CARGO_BIN_EXE_scatterscope"))
         .args([
             "calibrate-slab",
@@ -693,6 +694,10 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
             "8",
             "--refractive-index",
             "1.12",
+            "--mu-s",
+            "3",
+            "--fit",
+            "mu_a,mu_s",
             "--irf-from",
         ])
         .arg(dir.join("capture_direct.mat"))
@@ -703,6 +708,11 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     assert_eq!(output.status.code(), Some(1), "{stderr}");
     assert!(
         stderr.contains("3ft") && stderr.contains("unit"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("note: --mu-s is now --mu-s-reduced")
+            && stderr.contains("note: --fit `mu_s` is now `mu_s_reduced`"),
         "{stderr}"
     );
 }

@@ -1351,6 +1351,11 @@ fn calibrate_fits_a_simulated_stack_and_names_bad_parameters() {
     ]);
     let (stdout, stderr) = text(&o);
     assert!(o.status.success(), "{stderr}");
+    // `mu_s`, the old name of `mu_s_reduced`, still works and says so.
+    assert!(
+        stderr.contains("note: --fit `mu_s` is now `mu_s_reduced`"),
+        "{stderr}"
+    );
     assert!(
         stdout.contains("mu_s'") && stdout.contains("chi-square per degree of freedom"),
         "{stdout}"
@@ -1393,7 +1398,7 @@ fn calibrate_fits_a_simulated_stack_and_names_bad_parameters() {
     );
     fails_with(
         &["calibrate", stack.to_str().unwrap(), "--fit", "mu_z"],
-        &["unknown parameter `mu_z`", "mu_a, mu_s, t0, irf"],
+        &["unknown parameter `mu_z`", "mu_a, mu_s_reduced, t0, irf"],
     );
 }
 
@@ -1444,7 +1449,7 @@ fn reconstruct_fits_the_physics_first_when_asked_and_records_it() {
         "--mu-s",
         "600",
         "--fit-physics",
-        "mu_a,mu_s",
+        "mu_a,mu_s_reduced",
         "--out",
         rec.to_str().unwrap(),
     ]);
@@ -1463,7 +1468,7 @@ fn reconstruct_fits_the_physics_first_when_asked_and_records_it() {
     assert!((fitted("mu_a") / 0.2 - 1.0).abs() < 0.15, "{stdout}");
     let trace = std::fs::read_to_string(rec.join("trace.json")).unwrap();
     assert!(
-        trace.contains("physics fitted to the stack's time profile (mu_a, mu_s)"),
+        trace.contains("physics fitted to the stack's time profile (mu_a, mu_s_reduced)"),
         "{trace}"
     );
     assert!(

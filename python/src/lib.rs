@@ -663,7 +663,7 @@ fn histogram(
 /// Fits a slab's mu_a and mu_s' to transmittance captures: (result JSON
 /// with the estimates, lines, medium.toml text).
 #[pyfunction]
-#[pyo3(signature = (reference, captures, refractive_index, predict=Vec::new(), bin_ps=None, dataset="out", irf_extent="period", mu_a=0.01, mu_s=5.0, fit=vec!["mu_a".to_string(), "mu_s".to_string()], offset_cm=0.0, rising_edge_share=RISING_EDGE_CONVENTION))]
+#[pyo3(signature = (reference, captures, refractive_index, predict=Vec::new(), bin_ps=None, dataset="out", irf_extent="period", mu_a=0.01, mu_s_reduced=5.0, fit=vec!["mu_a".to_string(), "mu_s_reduced".to_string()], offset_cm=0.0, rising_edge_share=RISING_EDGE_CONVENTION))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_slab<'py>(
     py: Python<'py>,
@@ -675,7 +675,7 @@ fn calibrate_slab<'py>(
     dataset: &str,
     irf_extent: &str,
     mu_a: f64,
-    mu_s: f64,
+    mu_s_reduced: f64,
     fit: Vec<String>,
     offset_cm: f64,
     rising_edge_share: f64,
@@ -704,7 +704,7 @@ fn calibrate_slab<'py>(
     let mut options = SlabFitOptions {
         refractive_index,
         mu_a_per_cm: mu_a,
-        mu_s_reduced_per_cm: mu_s,
+        mu_s_reduced_per_cm: mu_s_reduced,
         fit_mu_a: false,
         fit_mu_s_reduced: false,
         offset_cm,

@@ -219,10 +219,12 @@ def test_calibrate_slab_equals_the_command_from_files_and_from_arrays(tmp_path):
         with h5py.File(cal / name, "r") as f:
             return np.asarray(f["out"][()], dtype=np.float64).ravel()
 
-    arrays = scatterscope.calibrate_slab(
-        counts("capture_direct.mat"), [(counts("capture_3_0_inch.mat"), 7.62)], 1.12,
-        predict=[(counts("capture_3_5_inch.mat"), 8.89)], bin_ps=8.0,
-    )
+    # The old names of mu_s' (the argument and the fit name) still work, and warn.
+    with pytest.warns(FutureWarning, match="mu_s is now mu_s_reduced"):
+        arrays = scatterscope.calibrate_slab(
+            counts("capture_direct.mat"), [(counts("capture_3_0_inch.mat"), 7.62)], 1.12,
+            predict=[(counts("capture_3_5_inch.mat"), 8.89)], bin_ps=8.0, mu_s=5.0, fit=("mu_a", "mu_s"),
+        )
     for key in ("mu_a_per_cm", "mu_s_reduced_per_cm", "chi2_per_dof"):
         assert arrays[key] == files[key], key
 

@@ -43,8 +43,23 @@ pub struct Free {
     pub irf_fwhm: bool,
 }
 
+/// Parameter names that changed, old and new: `mu_s` named the reduced
+/// scattering coefficient mu_s', which the physics settings call `mu_s`
+/// only for the scattering coefficient itself (mu_s' = (1 - g) mu_s).
+pub const RENAMED_PARAMETERS: [(&str, &str); 1] = [("mu_s", "mu_s_reduced")];
+
+/// `name` as the fits read it: an old name ([`RENAMED_PARAMETERS`]) as its
+/// new one, any other as it is.
+pub fn current_parameter_name(name: &str) -> &str {
+    RENAMED_PARAMETERS
+        .iter()
+        .find(|(old, _)| *old == name)
+        .map_or(name, |(_, new)| new)
+}
+
 impl Free {
-    /// The parameters named in `names` (`mu_a`, `mu_s`, `t0`, `irf`).
+    /// The parameters named in `names` (`mu_a`, `mu_s_reduced`, `t0`,
+    /// `irf`; the old `mu_s` for `mu_s_reduced`).
     pub fn from_names<S: AsRef<str>>(names: &[S]) -> Result<Self, CalibrateError> {
         let mut free = Free {
             mu_a: false,
@@ -53,14 +68,14 @@ impl Free {
             irf_fwhm: false,
         };
         for name in names {
-            match name.as_ref() {
+            match current_parameter_name(name.as_ref()) {
                 "mu_a" => free.mu_a = true,
-                "mu_s" => free.mu_s_reduced = true,
+                "mu_s_reduced" => free.mu_s_reduced = true,
                 "t0" => free.t0 = true,
                 "irf" => free.irf_fwhm = true,
                 other => {
                     return Err(CalibrateError::Invalid(format!(
-                        "unknown parameter `{other}` (use mu_a, mu_s, t0, irf)"
+                        "unknown parameter `{other}` (use mu_a, mu_s_reduced, t0, irf)"
                     )));
                 }
             }
@@ -73,7 +88,7 @@ impl Free {
     pub fn names(&self) -> Vec<&'static str> {
         [
             (self.mu_a, "mu_a"),
-            (self.mu_s_reduced, "mu_s"),
+            (self.mu_s_reduced, "mu_s_reduced"),
             (self.t0, "t0"),
             (self.irf_fwhm, "irf"),
         ]

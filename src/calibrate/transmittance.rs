@@ -275,17 +275,18 @@ pub struct SlabFitOptions {
 }
 
 impl SlabFitOptions {
-    /// Frees the parameters named in `names` (`mu_a`, `mu_s`, `offset`);
+    /// Frees the parameters named in `names` (`mu_a`, `mu_s_reduced` or
+    /// its old name `mu_s`, `offset`);
     /// the others stay fixed at their starting values.
     pub fn free_named<S: AsRef<str>>(&mut self, names: &[S]) -> Result<(), CalibrateError> {
         for name in names {
-            match name.as_ref() {
+            match super::current_parameter_name(name.as_ref()) {
                 "mu_a" => self.fit_mu_a = true,
-                "mu_s" => self.fit_mu_s_reduced = true,
+                "mu_s_reduced" => self.fit_mu_s_reduced = true,
                 "offset" => self.fit_offset = true,
                 other => {
                     return Err(CalibrateError::Invalid(format!(
-                        "unknown parameter `{other}` (use mu_a, mu_s, offset)"
+                        "unknown parameter `{other}` (use mu_a, mu_s_reduced, offset)"
                     )));
                 }
             }

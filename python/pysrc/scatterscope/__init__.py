@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
@@ -295,10 +296,11 @@ def calibrate_slab(
     dataset: str = "out",
     irf_extent: str = "period",
     mu_a: float = 0.01,
-    mu_s: float = 5.0,
-    fit: Tuple[str, ...] = ("mu_a", "mu_s"),
+    mu_s_reduced: float = 5.0,
+    fit: Tuple[str, ...] = ("mu_a", "mu_s_reduced"),
     offset_cm: float = 0.0,
     rising_edge_share: Optional[float] = None,
+    mu_s: Optional[float] = None,
 ) -> Dict[str, Any]:
     """Fit a slab's absorption and reduced scattering to transmittance
     captures, as ``scatterscope calibrate-slab``.
@@ -308,8 +310,10 @@ def calibrate_slab(
     (MATLAB dataset ``dataset``, a stack, a tag file) or a 1-D array of
     counts (then ``bin_ps`` is needed). ``predict`` captures are left out of
     the fit and predicted with the fitted medium. ``fit`` names the free
-    parameters (``mu_a``, ``mu_s``, ``offset``); ``mu_a`` and ``mu_s`` (1/cm)
-    are their starts or fixed values.
+    parameters (``mu_a``, ``mu_s_reduced``, ``offset``); ``mu_a`` and
+    ``mu_s_reduced`` (mu_s', 1/cm) are their starts or fixed values.
+    ``mu_s``, the old name of ``mu_s_reduced`` (as an argument and in
+    ``fit``), still works with a ``FutureWarning``.
 
     Returns ``mu_a_per_cm``, ``mu_s_reduced_per_cm`` and ``offset_cm`` (each
     ``value``, ``standard_error``, ``fitted``), ``chi2_per_dof``,
@@ -322,6 +326,20 @@ def calibrate_slab(
             return _path(h)
         return np.ascontiguousarray(h, dtype=np.float64)
 
+    if mu_s is not None:
+        warnings.warn(
+            "calibrate_slab: mu_s is now mu_s_reduced (the reduced scattering coefficient mu_s'); "
+            "the old name still works",
+            FutureWarning,
+            stacklevel=2,
+        )
+        mu_s_reduced = mu_s
+    if "mu_s" in fit:
+        warnings.warn(
+            "calibrate_slab: fit name mu_s is now mu_s_reduced; the old name still works",
+            FutureWarning,
+            stacklevel=2,
+        )
     kwargs: Dict[str, Any] = {}
     if rising_edge_share is not None:
         kwargs["rising_edge_share"] = float(rising_edge_share)
@@ -334,7 +352,7 @@ def calibrate_slab(
         dataset,
         irf_extent,
         float(mu_a),
-        float(mu_s),
+        float(mu_s_reduced),
         list(fit),
         float(offset_cm),
         **kwargs,

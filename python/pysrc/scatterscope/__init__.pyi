@@ -81,9 +81,10 @@ def calibrate_slab(
     dataset: str = "out",
     irf_extent: str = "period",
     mu_a: float = 0.01,
-    mu_s: float = 5.0,
-    fit: Tuple[str, ...] = ("mu_a", "mu_s"),
+    mu_s_reduced: float = 5.0,
+    fit: Tuple[str, ...] = ("mu_a", "mu_s_reduced"),
     offset_cm: float = 0.0,
     rising_edge_share: Optional[float] = None,
+    mu_s: Optional[float] = None,
 ) -> Dict[str, Any]:
     """Fit a slab's mu_a and mu_s' to transmittance captures, as ``scatterscope calibrate-slab``."""

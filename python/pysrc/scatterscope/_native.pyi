@@ -59,7 +59,7 @@ def calibrate_slab(
     dataset: str = ...,
     irf_extent: str = ...,
     mu_a: float = ...,
-    mu_s: float = ...,
+    mu_s_reduced: float = ...,
     fit: List[str] = ...,
     offset_cm: float = ...,
     rising_edge_share: float = ...,

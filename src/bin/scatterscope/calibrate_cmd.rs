@@ -18,9 +18,10 @@ use crate::shared_args::PhysicsArgs;
 pub struct CalibrateArgs {
     /// The stack (.exr or .npy with metadata; its physics is the start).
     stack: PathBuf,
-    /// What to fit, comma-separated: mu_a, mu_s (the reduced scattering
-    /// coefficient), t0 (time zero) and irf (the IRF's FWHM).
-    #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s")]
+    /// What to fit, comma-separated: mu_a, mu_s_reduced (the reduced
+    /// scattering coefficient mu_s'; `mu_s`, its old name, still works), t0
+    /// (time zero) and irf (the IRF's FWHM).
+    #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s_reduced")]
     fit: Vec<String>,
     #[command(flatten)]
     physics: PhysicsArgs,
@@ -30,6 +31,7 @@ pub struct CalibrateArgs {
 }
 
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    crate::shared_args::note_renamed_parameters("--fit", &args.fit);
     let free = Free::from_names(&args.fit).context("--fit")?;
     let done = calibrate_file(&args.stack, &args.physics.overrides(), free)?;
     println!("model: {}", done.start.model_summary());

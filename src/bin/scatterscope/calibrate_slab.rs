@@ -47,14 +47,19 @@ pub struct CalibrateSlabArgs {
     /// Starting mu_a (1/cm).
     #[arg(long, default_value_t = 0.01)]
     mu_a: f64,
-    /// Starting mu_s' (1/cm).
+    /// Starting reduced scattering coefficient mu_s' (1/cm).
     #[arg(long, default_value_t = 5.0)]
-    mu_s: f64,
+    mu_s_reduced: f64,
+    /// The old name of --mu-s-reduced (the physics flags' --mu-s is mu_s,
+    /// not mu_s'); still read, with a note.
+    #[arg(long = "mu-s", hide = true, conflicts_with = "mu_s_reduced")]
+    mu_s_old: Option<f64>,
     /// Starting (or fixed) distance of the detector from the axis (cm).
     #[arg(long, default_value_t = 0.0)]
     offset_cm: f64,
-    /// What to fit, comma-separated: mu_a, mu_s, offset.
-    #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s")]
+    /// What to fit, comma-separated: mu_a, mu_s_reduced (`mu_s`, its old
+    /// name, still works), offset.
+    #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s_reduced")]
     fit: Vec<String>,
     /// Leave out the rising edge before the excess reaches this share of
     /// the peak's (where diffusion is least accurate; 0 fits every bin).
@@ -69,13 +74,19 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     let mut options = SlabFitOptions {
         refractive_index: args.refractive_index,
         mu_a_per_cm: args.mu_a,
-        mu_s_reduced_per_cm: args.mu_s,
+        mu_s_reduced_per_cm: args.mu_s_old.unwrap_or(args.mu_s_reduced),
         fit_mu_a: false,
         fit_mu_s_reduced: false,
         offset_cm: args.offset_cm,
         fit_offset: false,
         rising_edge_share: args.rising_edge_share,
     };
+    if args.mu_s_old.is_some() {
+        eprintln!(
+            "note: --mu-s is now --mu-s-reduced (the reduced scattering coefficient mu_s'); the old name still works"
+        );
+    }
+    crate::shared_args::note_renamed_parameters("--fit", &args.fit);
     options.free_named(&args.fit).context("--fit")?;
     let job = SlabJob {
         irf_from: args.irf_from.clone(),

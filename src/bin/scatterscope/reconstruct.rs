@@ -56,6 +56,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         "method {} needs --bin K",
         args.method.name()
     );
+    crate::shared_args::note_renamed_parameters("--fit-physics", &args.fit_physics);
     let fit_physics = (!args.fit_physics.is_empty())
         .then(|| Free::from_names(&args.fit_physics))
         .transpose()

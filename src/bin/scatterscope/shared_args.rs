@@ -129,3 +129,14 @@ pub fn progress(millis: Option<u128>) -> ProgressBar {
     };
     bar.with_style(ProgressStyle::with_template(template).expect("template"))
 }
+
+/// Says on stderr which of `names`, given to `flag`, are old spellings of
+/// a fitted parameter, and the new ones (the old still work).
+pub fn note_renamed_parameters(flag: &str, names: &[String]) {
+    for name in names {
+        let new = scatterscope::calibrate::current_parameter_name(name);
+        if new != name {
+            eprintln!("note: {flag} `{name}` is now `{new}`; the old name still works");
+        }
+    }
+}
