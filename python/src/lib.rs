@@ -301,9 +301,9 @@ fn bin_file<'py>(
                 .into_pyarray(py)
                 .into_any(),
             _ => {
-                let values = Stack::from_counts(stack.counts.view(), stack.meta);
-                if dtype.is_some() && values.exact_counts.is_some() {
-                    let largest = stack.counts.iter().copied().max().unwrap_or(0);
+                let values = Stack::from_owned_counts(stack.counts, stack.meta);
+                if let (Some(_), Some(exact)) = (dtype, &values.exact_counts) {
+                    let largest = exact.iter().copied().max().unwrap_or(0);
                     return Err(too_large(largest, "float32"));
                 }
                 counts_array(py, values.data, values.exact_counts)
@@ -660,6 +660,13 @@ fn histogram(
     TimeHistogram::new(counts, bin_ps, 0.0, Path::new(label)).map_err(err)
 }
 
+/// The old parameter names among `names`, each with its new one (the
+/// library's list, so the package warns for the names the command notes).
+#[pyfunction]
+fn renamed_parameters(names: Vec<String>) -> Vec<(&'static str, &'static str)> {
+    scatterscope::calibrate::renamed_in(&names)
+}
+
 /// Fits a slab's mu_a and mu_s' to transmittance captures: (result JSON
 /// with the estimates, lines, medium.toml text).
 #[pyfunction]
@@ -752,6 +759,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(acquire_mock, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_slab, m)?)?;
+    m.add_function(wrap_pyfunction!(renamed_parameters, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     Ok(())
 }

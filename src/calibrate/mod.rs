@@ -57,6 +57,16 @@ pub fn current_parameter_name(name: &str) -> &str {
         .map_or(name, |(_, new)| new)
 }
 
+/// The old names among `names`, each with its new one, for the caller to
+/// say so ([`RENAMED_PARAMETERS`]).
+pub fn renamed_in<S: AsRef<str>>(names: &[S]) -> Vec<(&'static str, &'static str)> {
+    RENAMED_PARAMETERS
+        .iter()
+        .filter(|(old, _)| names.iter().any(|n| n.as_ref() == *old))
+        .copied()
+        .collect()
+}
+
 impl Free {
     /// The parameters named in `names` (`mu_a`, `mu_s_reduced`, `t0`,
     /// `irf`; the old `mu_s` for `mu_s_reduced`).

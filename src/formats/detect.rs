@@ -93,11 +93,6 @@ impl Format {
             .find(|(magic, _)| head.starts_with(magic))
             .map(|&(_, format)| format)
     }
-
-    /// A PicoQuant time-tagged file, PTU or legacy.
-    pub fn is_picoquant(self) -> bool {
-        matches!(self, Self::Ptu | Self::PicoQuantLegacy)
-    }
 }
 
 #[cfg(test)]

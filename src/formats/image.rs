@@ -104,10 +104,11 @@ fn read_npy_image(path: &Path) -> Result<Array2<f64>, ImageError> {
 /// Reads a PNG or JPEG file as grayscale in [0, 1], an EXR file's
 /// luminance or a 2-D `.npy` array with its own values, at the file's size.
 pub fn read_image(path: &Path) -> Result<Array2<f64>, ImageError> {
-    let img = if Format::of_file(path) == Format::Npy {
+    let format = Format::of_file(path);
+    let img = if format == Format::Npy {
         read_npy_image(path)?
     } else {
-        read_decoded(path)?
+        read_decoded(path, format)?
     };
     if img.is_empty() {
         return Err(ImageError::Content {
@@ -118,23 +119,25 @@ pub fn read_image(path: &Path) -> Result<Array2<f64>, ImageError> {
     Ok(img)
 }
 
-/// A PNG, JPEG or EXR file's luminance at its size.
-fn read_decoded(path: &Path) -> Result<Array2<f64>, ImageError> {
-    let gray = decode_luminance(path)?;
+/// A PNG, JPEG or EXR file (`format`, as detected) at its size.
+fn read_decoded(path: &Path, format: Format) -> Result<Array2<f64>, ImageError> {
+    let gray = decode_luminance(path, format)?;
     let (w, h) = gray.dimensions();
     Ok(Array2::from_shape_fn((h as usize, w as usize), |(r, c)| {
         f64::from(gray.get_pixel(c as u32, r as u32).0[0])
     }))
 }
 
-/// The file's luminance, every value finite.
-fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, ImageError> {
+/// The luminance of the file, in `format` (as detected), every value finite.
+fn decode_luminance(
+    path: &Path,
+    format: Format,
+) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, ImageError> {
     let decode = |reason: String| ImageError::Decode {
         path: path.to_owned(),
         reason,
     };
-    let is_exr = Format::of_file(path) == Format::Exr;
-    let gray: ImageBuffer<Luma<f32>, Vec<f32>> = if is_exr {
+    let gray: ImageBuffer<Luma<f32>, Vec<f32>> = if format == Format::Exr {
         read_exr_luminance(path).map_err(decode)?
     } else {
         let budget = crate::memory::budget().map_err(|e| decode(e.to_string()))?;
@@ -196,7 +199,7 @@ fn decode_luminance(path: &Path) -> Result<ImageBuffer<Luma<f32>, Vec<f32>>, Ima
 /// `height` x `width` (Lanczos-3, clamped after resampling). EXR data is
 /// scaled by its maximum when that exceeds 1.
 pub fn read_grayscale(path: &Path, height: usize, width: usize) -> Result<Array2<f64>, ImageError> {
-    let mut gray = decode_luminance(path)?;
+    let mut gray = decode_luminance(path, Format::of_file(path))?;
     let max = gray.pixels().fold(0.0f32, |m, p| m.max(p.0[0]));
     if max > 1.0 {
         gray.pixels_mut().for_each(|p| p.0[0] /= max);

@@ -311,9 +311,9 @@ impl Stack {
     }
 
     /// Reads and validates a stack with its metadata; the format follows
-    /// the file's first bytes, else its extension. A file without metadata (a plain `.npy`, an EXR from
-    /// another tool) is refused: read it with [`Stack::read`] and give the
-    /// metadata ([`StackMeta::consecutive`]).
+    /// the file's first bytes, else its extension. A file without metadata
+    /// (a plain `.npy`, an EXR from another tool) is refused: read it with
+    /// [`Stack::read`] and give the metadata ([`StackMeta::consecutive`]).
     pub fn load(path: &Path) -> Result<Self, StackError> {
         let file = Self::read_file(path)?;
         match file.meta {

@@ -124,13 +124,11 @@ impl CountStack {
     /// when it does not fit.
     pub fn narrowed<T: TryFrom<u32> + Copy>(&self) -> Result<Array3<T>, u32> {
         let largest = self.counts.iter().copied().max().unwrap_or(0);
-        let fits = |c: u32| T::try_from(c).map_err(|_| largest);
-        fits(largest)?;
-        self.counts
-            .iter()
-            .map(|&c| fits(c))
-            .collect::<Result<Vec<T>, u32>>()
-            .map(|v| Array3::from_shape_vec(self.counts.dim(), v).expect("one value per count"))
+        T::try_from(largest).map_err(|_| largest)?;
+        // Every count is at most the largest, which fits.
+        Ok(self
+            .counts
+            .mapv(|c| T::try_from(c).unwrap_or_else(|_| unreachable!("{c} <= {largest}"))))
     }
 }
 

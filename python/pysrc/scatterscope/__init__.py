@@ -334,9 +334,9 @@ def calibrate_slab(
             stacklevel=2,
         )
         mu_s_reduced = mu_s
-    if "mu_s" in fit:
+    for old, new in _native.renamed_parameters(list(fit)):
         warnings.warn(
-            "calibrate_slab: fit name mu_s is now mu_s_reduced; the old name still works",
+            f"calibrate_slab: fit name {old} is now {new}; the old name still works",
             FutureWarning,
             stacklevel=2,
         )

@@ -133,10 +133,7 @@ pub fn progress(millis: Option<u128>) -> ProgressBar {
 /// Says on stderr which of `names`, given to `flag`, are old spellings of
 /// a fitted parameter, and the new ones (the old still work).
 pub fn note_renamed_parameters(flag: &str, names: &[String]) {
-    for name in names {
-        let new = scatterscope::calibrate::current_parameter_name(name);
-        if new != name {
-            eprintln!("note: {flag} `{name}` is now `{new}`; the old name still works");
-        }
+    for (old, new) in scatterscope::calibrate::renamed_in(names) {
+        eprintln!("note: {flag} `{old}` is now `{new}`; the old name still works");
     }
 }

@@ -224,9 +224,11 @@ impl PtuWriter {
         )?;
         if let Some(img) = &h.imaging {
             let bit = |mask: u8| i64::from(mask.trailing_zeros() + 1);
-            // Image files say they hold an image (3 dimensions, against 1
-            // for a point and 2 for a line scan); ptufile reads a file as
-            // an image only with it.
+            // Image files say they hold an image: PicoQuant's snAPI demo
+            // for image measurements tags its file `ImgHdr_Dimensions` 3
+            // (1 a point, 2 a line, 3 an image, 4 a stack), and ptufile
+            // reads a file as an image only with it. A caller's own tag of
+            // that name (the live recordings') is written instead.
             if !h
                 .extra
                 .iter()
