@@ -12,9 +12,9 @@ mod photons;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use firmware_protocol::{Config, Identity};
 use scatterscope::formats::picoquant;
-use scatterscope::formats::picoquant::writer::write_synthetic_t3;
+use scatterscope::formats::picoquant::writer::{write_synthetic_flim, write_synthetic_t3};
 use scatterscope::formats::sstags::{TagFileHeader, TagFileWriter};
-use scatterscope::tags::bin_file::{BinSpec, bin_file};
+use scatterscope::tags::bin_file::{BinSpec, bin_file, bin_file_counts};
 
 const RECORDS: u64 = 20_000_000;
 
@@ -74,6 +74,19 @@ fn benches(c: &mut Criterion) {
     g.throughput(Throughput::Elements(RECORDS));
     g.bench_function("decode_bin_raw_tag_file_from_page_cache", |b| {
         b.iter(|| bin_file(&raw, &spec).unwrap().accounting.binned)
+    });
+    // A 256 x 256 FLIM image (two frames, summed) as Python's `bin_file`
+    // bins it: the counts as binned, narrowed to u16.
+    let flim = dir.path().join("flim.ptu");
+    write_synthetic_flim(&flim, 256, 730_000).unwrap();
+    let spec = BinSpec::default();
+    let records = picoquant::open(&flim).unwrap().0.records_present;
+    g.throughput(Throughput::Elements(records));
+    g.bench_function("decode_bin_flim_image_u16_from_page_cache", |b| {
+        b.iter(|| {
+            let binned = bin_file_counts(&flim, &spec).unwrap();
+            binned.stacks[0].narrowed::<u16>().unwrap().len()
+        })
     });
     g.finish();
 }

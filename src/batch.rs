@@ -94,7 +94,7 @@ pub fn read_manifest(path: &Path) -> Result<Vec<JobSpec>, BatchError> {
         path: path.to_owned(),
         reason,
     };
-    let bytes = crate::memory::read_bounded(path, MAX_MANIFEST, "batch manifest")
+    let bytes = crate::files::read_bounded(path, MAX_MANIFEST, "batch manifest")
         .map_err(|e| BatchError::Io(e.to_string()))?;
     let text = String::from_utf8(bytes).map_err(|e| {
         bad(format!(
@@ -229,7 +229,7 @@ impl LocalRun {
 /// The record of `job` in `out`, if it finished.
 pub fn record_of(out: &Path, job: &JobSpec) -> Option<JobRecord> {
     let bytes =
-        crate::memory::read_bounded(&out.join(&job.name).join(RECORD), 1 << 20, "job record");
+        crate::files::read_bounded(&out.join(&job.name).join(RECORD), 1 << 20, "job record");
     serde_json::from_slice(&bytes.ok()?).ok()
 }
 
@@ -237,7 +237,7 @@ pub fn record_of(out: &Path, job: &JobSpec) -> Option<JobRecord> {
 /// deviance (else objective) and its iterations from its trace, else the
 /// last line of its output that is not the list of files written.
 fn key_result(dir: &Path, stdout: &str) -> String {
-    if let Ok(bytes) = crate::memory::read_bounded(&dir.join("trace.json"), 64 << 20, "trace")
+    if let Ok(bytes) = crate::files::read_bounded(&dir.join("trace.json"), 64 << 20, "trace")
         && let Ok(trace) = serde_json::from_slice::<serde_json::Value>(&bytes)
     {
         let last = |key: &str| {

@@ -230,7 +230,7 @@ pub enum ConfigError {
     },
     /// The file cannot be read whole (a special file, or too large).
     #[error(transparent)]
-    Read(#[from] crate::memory::ReadError),
+    Read(#[from] crate::files::ReadError),
     /// The reference recording of the instrument response cannot be used.
     #[error(transparent)]
     Reference(#[from] crate::calibrate::CalibrateError),
@@ -485,7 +485,7 @@ pub fn read_medium(path: &Path) -> Result<MediumFile, ConfigError> {
 const MAX_CONFIG: u64 = 1 << 20;
 
 fn read_file(path: &Path) -> Result<FileOverrides, ConfigError> {
-    let bytes = crate::memory::read_bounded(path, MAX_CONFIG, "configuration file")?;
+    let bytes = crate::files::read_bounded(path, MAX_CONFIG, "configuration file")?;
     let text =
         String::from_utf8(bytes).map_err(|e| invalid(path, format!("not UTF-8 text: {e}")))?;
     toml::from_str(&text).map_err(|e| invalid(path, e.to_string()))

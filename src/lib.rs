@@ -6,6 +6,9 @@
 //!
 //! - [`scene`]: test objects (built-in patterns or image files).
 //! - [`forward`]: ST-PSF convolution and Poisson sampling.
+//! - [`events`]: photon time tags as every source produces them;
+//!   [`formats`] reads and writes the files that hold them and stacks;
+//!   [`tags`] bins them into stacks.
 //! - [`stack`]: the K x H x W transient stack with its metadata, and its
 //!   OpenEXR / .npy files and PNG previews.
 //! - [`reconstruct`]: Poisson PnP-ADMM, Richardson-Lucy and raw baselines.
@@ -74,6 +77,7 @@ pub mod calibrate;
 pub mod config;
 pub mod confocal;
 pub mod denoise;
+pub mod events;
 pub mod fft2;
 pub mod files;
 pub mod font;
@@ -84,6 +88,7 @@ pub mod live;
 pub mod memory;
 pub mod metrics;
 pub mod named;
+pub mod plot;
 pub mod psf;
 pub mod reconstruct;
 pub mod report;

@@ -2,8 +2,8 @@
 //! file's header, a sensor size, a bin count) is estimated and checked
 //! against it first, so that input asks for at most the budget and a
 //! larger request is a clear error, not an aborted process. Whole-file
-//! reads go through [`read_bounded`], which refuses special files and
-//! caps the size.
+//! reads go through [`crate::files::read_bounded`], which refuses special
+//! files and caps the size.
 //!
 //! The budget is, first found: a limit set by the program
 //! ([`set_limit`], e.g. from a command-line flag), the environment
@@ -13,8 +13,7 @@
 //! limit, as the operating system reports them (Linux; elsewhere
 //! [`FALLBACK_BYTES`]).
 
-use std::io::Read;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Environment variable that sets the budget.
@@ -246,118 +245,6 @@ fn cgroup_limit() -> Option<u64> {
         .join(path.trim_start_matches('/'))
         .join("memory.max");
     std::fs::read_to_string(file).ok()?.trim().parse().ok()
-}
-
-/// Why a whole-file read was refused.
-#[derive(Debug, thiserror::Error)]
-pub enum ReadError {
-    /// The file cannot be opened or read.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// Why.
-        source: std::io::Error,
-    },
-    /// Not a regular file (a device, a FIFO, a directory).
-    #[error("{path}: not a regular file ({kind}); a {what} must be one")]
-    NotAFile {
-        /// The file.
-        path: PathBuf,
-        /// What it is.
-        kind: &'static str,
-        /// What was expected.
-        what: &'static str,
-    },
-    /// Larger than such a file may be.
-    #[error("{path}: {} is more than a {what} may hold ({})", size(*len), size(*max))]
-    TooLarge {
-        /// The file.
-        path: PathBuf,
-        /// Its size (at least), bytes.
-        len: u64,
-        /// The cap, bytes.
-        max: u64,
-        /// What it was read as.
-        what: &'static str,
-    },
-    /// The cap exceeds the memory budget.
-    #[error(transparent)]
-    Memory(#[from] MemoryError),
-}
-
-/// Refuses what `meta` describes unless it is a regular file: a device,
-/// FIFO or folder at `path` would hang or fail a reader that expects a
-/// `what`.
-pub fn require_regular_file(
-    path: &Path,
-    meta: &std::fs::Metadata,
-    what: &'static str,
-) -> Result<(), ReadError> {
-    if meta.is_file() {
-        return Ok(());
-    }
-    Err(ReadError::NotAFile {
-        path: path.to_path_buf(),
-        kind: file_kind(meta),
-        what,
-    })
-}
-
-/// Reads the regular file at `path` whole, refusing special files and
-/// files over `max` bytes (or over the budget); a file that grows past
-/// the cap while it is read is refused too. `what` names the file's role
-/// in errors ("configuration file").
-pub fn read_bounded(path: &Path, max: u64, what: &'static str) -> Result<Vec<u8>, ReadError> {
-    let io = |source| ReadError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let (file, meta) = crate::files::open_input(path, what)?;
-    let too_large = |len| ReadError::TooLarge {
-        path: path.to_path_buf(),
-        len,
-        max,
-        what,
-    };
-    if meta.len() > max {
-        return Err(too_large(meta.len()));
-    }
-    check(meta.len(), || format!("reading {}", path.display()))?;
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
-    file.take(max + 1).read_to_end(&mut bytes).map_err(io)?;
-    if bytes.len() as u64 > max {
-        return Err(too_large(bytes.len() as u64));
-    }
-    Ok(bytes)
-}
-
-/// What kind of file `meta` describes, in words.
-pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
-    let t = meta.file_type();
-    if t.is_file() {
-        return "regular file";
-    }
-    if t.is_dir() {
-        return "a directory";
-    }
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if t.is_char_device() {
-            return "a character device";
-        }
-        if t.is_block_device() {
-            return "a block device";
-        }
-        if t.is_fifo() {
-            return "a FIFO";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-    }
-    "a special file"
 }
 
 #[cfg(test)]

@@ -77,3 +77,60 @@ fn auto_picks_whole_stack_richardson_lucy_on_a_textured_scene() {
     assert!(first_row >= pnp_s - 0.01, "{first_row} < {pnp_s}");
     assert!(out.trace.wall_s >= first_row);
 }
+
+/// The z of PnP's output that an `auto` run's first note states.
+fn stated_z(trace: &scatterscope::reconstruct::trace::Trace) -> String {
+    let notes = trace.notes.join("\n");
+    notes
+        .split("its output deviance z = ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .unwrap_or_else(|| panic!("no z in {notes}"))
+        .to_string()
+}
+
+#[test]
+fn auto_runs_pnp_with_the_solver_the_options_choose() {
+    use scatterscope::denoise::tv::TotalVariation;
+    use scatterscope::forward::poisson_counts;
+    use scatterscope::reconstruct::method::Solver;
+    use scatterscope::{
+        Boundary, ForwardModel, KernelStack, Problem, Sampling, Scene, Stack, StackMeta, ValueKind,
+    };
+    // A small stack of the paper's slab: 32 x 32 pixels.
+    let mut setup = Preset::Paper.setup();
+    (setup.sensor.width_px, setup.sensor.height_px) = (32, 32);
+    setup.sensor.fov_cm = 50.0 / 8.0;
+    let kernels = KernelStack::build(&setup, Sampling::Integrated).unwrap();
+    let model = ForwardModel::new(&kernels, Boundary::Sensor);
+    let truth = Scene::parse("disks").render(32, 32).unwrap();
+    let counts = poisson_counts(&model.expected_scene(truth.view()).counts, 7);
+    let stack = Stack::new(
+        counts.mapv(|c| c as f32),
+        StackMeta::simulated(&kernels, ValueKind::Counts, "test".into()),
+    );
+    let problem = Problem::new(&stack, &setup, Sampling::Integrated, Boundary::Sensor).unwrap();
+    let prior = TotalVariation::default();
+    let run = |method, solver| {
+        let mut opts = MethodOptions {
+            solver,
+            ..MethodOptions::default()
+        };
+        opts.split.max_iters = 8;
+        opts.admm_lbfgs.max_iters = 8;
+        opts.rl_max_iters = 20;
+        run_method(&problem, method, None, &prior, &opts, None, |_| {}).unwrap()
+    };
+    let z_of =
+        |r: &Reconstruction| deviance_z(&r.trace).map_or("none".into(), |z| format!("{z:.1}"));
+    for solver in [Solver::Split, Solver::AdmmLbfgs] {
+        let pnp = run(Method::Pnp, solver);
+        let auto = run(Method::Auto, solver);
+        assert_eq!(stated_z(&auto.trace), z_of(&pnp), "{solver:?}");
+    }
+    // The two solvers' outputs differ, so the check above tells them apart.
+    assert_ne!(
+        z_of(&run(Method::Pnp, Solver::Split)),
+        z_of(&run(Method::Pnp, Solver::AdmmLbfgs))
+    );
+}

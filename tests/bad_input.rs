@@ -18,9 +18,9 @@ use std::process::{Command, Output};
 
 use npy::npy_bytes as npy;
 use pt3::write_pt3;
+use scatterscope::events::Tag;
 use scatterscope::formats::picoquant::records::RecordType;
 use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
-use scatterscope::tags::Tag;
 
 /// What a defect must lead to.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -10,9 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
+use scatterscope::events::Tag;
 use scatterscope::formats::picoquant::records::RecordType;
 use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
-use scatterscope::tags::Tag;
 
 fn scatterscope(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_scatterscope"))

@@ -352,10 +352,10 @@ fn report_writes_tables_and_plots() {
 
 #[test]
 fn info_and_bin_on_recorded_files() {
+    use scatterscope::events::Imaging;
+    use scatterscope::events::Tag;
     use scatterscope::formats::picoquant::records::RecordType;
     use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
-    use scatterscope::tags::Imaging;
-    use scatterscope::tags::Tag;
     let dir = tempfile::tempdir().unwrap();
     // A 2 x 2 image, 3 photons per pixel at micro time 5 (bin 1 of 4 ps bins at 4 ps resolution... 20 ps).
     let img = Imaging {

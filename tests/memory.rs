@@ -179,8 +179,9 @@ fn whole_file_reads_refuse_special_files_and_cap_sizes() {
         ("/dev/zero", "a character device"),
         (dir.path().to_str().unwrap(), "a directory"),
     ] {
-        let (r, peak) =
-            peak_of(|| memory::read_bounded(Path::new(path), 1 << 20, "configuration file"));
+        let (r, peak) = peak_of(|| {
+            scatterscope::files::read_bounded(Path::new(path), 1 << 20, "configuration file")
+        });
         let e = r.unwrap_err().to_string();
         assert!(e.contains(what) && e.contains(path), "{e}");
         assert!(peak < 1 << 20, "peak {peak}");
@@ -190,7 +191,7 @@ fn whole_file_reads_refuse_special_files_and_cap_sizes() {
         .unwrap()
         .set_len(2 << 20)
         .unwrap();
-    let e = memory::read_bounded(&big, 1 << 20, "configuration file")
+    let e = scatterscope::files::read_bounded(&big, 1 << 20, "configuration file")
         .unwrap_err()
         .to_string();
     assert!(e.contains("big.toml") && e.contains("2.0 MiB"), "{e}");

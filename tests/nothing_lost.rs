@@ -264,10 +264,10 @@ fn a_slab_fit_with_swapped_thicknesses_warns_and_writes_no_medium_file() {
 #[test]
 fn implausible_files_are_refused_naming_the_field_and_value() {
     use scatterscope::calibrate::histogram::TimeHistogram;
+    use scatterscope::events::Imaging;
     use scatterscope::formats::picoquant::records::RecordType;
     use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
     use scatterscope::stack::{Stack, StackMeta, ValueKind};
-    use scatterscope::tags::Imaging;
     let dir = tempfile::tempdir().unwrap();
     // A scan whose line start and stop are the same marker.
     let ptu = dir.path().join("scan.ptu");

@@ -12,9 +12,9 @@ mod standin;
 use std::path::Path;
 use std::process::{Command, Output};
 
+use scatterscope::events::Tag;
 use scatterscope::formats::picoquant;
 use scatterscope::formats::picoquant::records::Decoder;
-use scatterscope::tags::Tag;
 
 fn scatterscope(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_scatterscope"))

@@ -13,15 +13,15 @@ use std::path::{Path, PathBuf};
 
 use pt3::write_pt3;
 
+use scatterscope::events::Imaging;
+use scatterscope::events::{ChunkDecoder, Tag, TagSink};
 use scatterscope::formats::picoquant::records::{Decoder, RecordType};
 use scatterscope::formats::picoquant::writer::write_synthetic_t3;
 use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
 use scatterscope::formats::picoquant::{self, TtrError};
-use scatterscope::tags::Imaging;
 use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file};
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
 use scatterscope::tags::survey::{Survey, survey};
-use scatterscope::tags::{ChunkDecoder, Tag, TagSink};
 
 /// A PicoQuant sample file (`../shared/data/picoquant-sample-data/REL`).
 fn sample(rel: &str) -> PathBuf {

@@ -14,11 +14,11 @@ mod standin;
 use std::path::Path;
 use std::process::Command;
 
+use scatterscope::events::Tag;
 use scatterscope::formats::picoquant::open;
 use scatterscope::formats::picoquant::records::Decoder;
 use scatterscope::formats::sstags::TagFile;
 use scatterscope::stack::Stack;
-use scatterscope::tags::Tag;
 use standin::{scatterscope_pq, standin_library, truth};
 
 fn text(o: &std::process::Output) -> String {

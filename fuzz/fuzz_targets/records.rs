@@ -9,7 +9,7 @@ use std::sync::LazyLock;
 
 use libfuzzer_sys::fuzz_target;
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
-use scatterscope::tags::Imaging;
+use scatterscope::events::Imaging;
 use scatterscope::formats::picoquant::records::{Decoder, RecordType};
 
 static BINNERS: LazyLock<Vec<(RecordType, Binner)>> = LazyLock::new(|| {

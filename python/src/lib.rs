@@ -17,7 +17,6 @@ use pyo3::types::PyDict;
 
 use scatterscope::Named;
 use scatterscope::calibrate::histogram::TimeHistogram;
-use scatterscope::calibrate::outputs::{IrfExtent, calibrate_slab as lib_calibrate_slab};
 use scatterscope::calibrate::transmittance::{Capture, RISING_EDGE_CONVENTION, SlabFitOptions};
 use scatterscope::config::PhysicsOverrides;
 use scatterscope::denoise::prior::{PriorKind, PriorSpec};
@@ -26,6 +25,7 @@ use scatterscope::physics::{KernelStack, MediumModel, Preset, Sampling};
 use scatterscope::reconstruct::input::{InputSpec, prepare};
 use scatterscope::reconstruct::method::{Method, MethodOptions, Solver, run_method};
 use scatterscope::reconstruct::problem::BackgroundChoice;
+use scatterscope::report::calibration::{IrfExtent, calibrate_slab as lib_calibrate_slab};
 use scatterscope::stack::{Stack, StackMeta};
 use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file_counts as lib_bin_file_counts};
 use scatterscope::tags::binning::FrameSelect;

@@ -116,7 +116,7 @@ impl DeviceSpec {
     pub fn is_sensor(&self) -> bool {
         match self {
             Self::PicoQuant(_) => false,
-            Self::Replay(r) => crate::formats::sstags::is_tag_file(&r.path),
+            Self::Replay(r) => crate::formats::detect::is_tag_file(&r.path),
             _ => true,
         }
     }

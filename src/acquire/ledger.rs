@@ -17,7 +17,28 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-use super::source::Transit;
+/// What the transport between the device and the host lost or repaired
+/// (our own devices' links; a vendor library keeps its own).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Transit {
+    /// Photons in batches that never arrived or arrived damaged.
+    pub lost_photons: u64,
+    /// Whether `lost_photons` is exact (else a lower bound: the device's
+    /// totals are missing).
+    pub exact: bool,
+    /// Valid batches received.
+    pub batches_received: u64,
+    /// Batches lost or damaged.
+    pub batches_lost: u64,
+    /// Repeated batches discarded.
+    pub batches_duplicate: u64,
+    /// Batches that arrived late (kept).
+    pub batches_out_of_order: u64,
+    /// Bytes discarded while resynchronising.
+    pub bytes_skipped: u64,
+    /// Frames rejected by their checks.
+    pub crc_errors: u64,
+}
 
 /// A file that recorded what the device sent, as it came.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

@@ -12,9 +12,10 @@ use scatterscope_drivers::Link;
 use scatterscope_drivers::client::Device;
 use scatterscope_drivers::pipeline::Delivery as LinkDelivery;
 
+use super::ledger::Transit;
 use super::source::{
     Delivery, DeviceInfo, Layout, RecordFormat, Source, SourceEnd, SourceError, SourceFacts,
-    StartRequest, StopReason, Transit,
+    StartRequest, StopReason,
 };
 use crate::formats::picoquant::writer::HeaderEntry;
 

@@ -19,9 +19,9 @@ use super::source::{
     Delivery, DeviceInfo, Layout, RateSample, RecordFormat, Source, SourceEnd, SourceError,
     SourceFacts, StartRequest, StopReason,
 };
+use crate::events::Imaging;
 use crate::formats::picoquant::records::RecordType;
 use crate::formats::picoquant::writer::HeaderEntry;
-use crate::tags::Imaging;
 
 /// FIFO reads that may wait for the writer and binner before the reader
 /// stops reading (the device's own FIFO then buffers).

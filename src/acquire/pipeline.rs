@@ -21,11 +21,11 @@ use super::source::{
     Delivery, Layout, RateSample, RecordFormat, Source, SourceEnd, SourceError, SourceFacts,
     StartRequest,
 };
+use crate::events::Tag;
 use crate::files::Completion;
 use crate::formats::picoquant::records::{Decoder, RecordType};
 use crate::formats::picoquant::writer::{HeaderEntry, PtuWriter, WriterHeader};
 use crate::formats::sstags::{TagFileError, TagFileHeader, TagFileWriter};
-use crate::tags::Tag;
 use crate::tags::bin_file::{BinSpec, Pixels, window_and_map};
 use crate::tags::binning::{Binner, FrameSelect, PixelMap, Region, TimeWindow};
 use crate::tags::convert::MAX_T3_CHANNELS;

@@ -14,10 +14,11 @@ use super::source::{
     Delivery, DeviceInfo, Layout, RecordFormat, Source, SourceEnd, SourceError, SourceFacts,
     StartRequest, StopReason,
 };
+use crate::events::Tag;
+use crate::formats::detect::is_tag_file;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{self, FileInfo, RecordReader};
-use crate::formats::sstags::{TagFile, is_tag_file};
-use crate::tags::Tag;
+use crate::formats::sstags::TagFile;
 
 /// Records handed on at once: pacing is this fine.
 const PIECE: usize = 1 << 15;

@@ -12,9 +12,10 @@ use std::time::Duration;
 use firmware_protocol::{Config, EventBatch, Identity, Totals};
 use serde::{Deserialize, Serialize};
 
+use super::ledger::{Ledger, Transit};
+use crate::events::Imaging;
 use crate::formats::picoquant::records::RecordType;
 use crate::formats::picoquant::writer::HeaderEntry;
-use crate::tags::Imaging;
 
 /// What the device is, as the summary and the record name it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -174,29 +175,6 @@ impl StopReason {
     }
 }
 
-/// What the transport between the device and the host lost or repaired
-/// (our own devices' links; a vendor library keeps its own).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Transit {
-    /// Photons in batches that never arrived or arrived damaged.
-    pub lost_photons: u64,
-    /// Whether `lost_photons` is exact (else a lower bound: the device's
-    /// totals are missing).
-    pub exact: bool,
-    /// Valid batches received.
-    pub batches_received: u64,
-    /// Batches lost or damaged.
-    pub batches_lost: u64,
-    /// Repeated batches discarded.
-    pub batches_duplicate: u64,
-    /// Batches that arrived late (kept).
-    pub batches_out_of_order: u64,
-    /// Bytes discarded while resynchronising.
-    pub bytes_skipped: u64,
-    /// Frames rejected by their checks.
-    pub crc_errors: u64,
-}
-
 /// How a source's stream ended, and what only the source knows.
 #[derive(Debug, Clone)]
 pub struct SourceEnd {
@@ -306,7 +284,7 @@ pub trait Source {
     /// mock compares them with its truth.
     fn report(
         &self,
-        _ledger: &super::ledger::Ledger,
+        _ledger: &Ledger,
         _region: Option<crate::tags::binning::Region>,
         _stop: &StopReason,
     ) -> SourceReport {

@@ -21,7 +21,6 @@ pub mod hessian;
 pub mod histogram;
 pub mod irf_fit;
 pub mod measured_irf;
-pub mod outputs;
 pub mod parts;
 pub mod response_convolution;
 pub mod search;
@@ -186,9 +185,6 @@ pub enum CalibrateError {
     /// A stack file cannot be read.
     #[error(transparent)]
     Stack(#[from] crate::stack::StackError),
-    /// The starting physics is invalid.
-    #[error(transparent)]
-    Config(Box<crate::config::ConfigError>),
 }
 
 /// Natural parameters in the order of [`Calibration::parameters`].

@@ -7,14 +7,14 @@
 //! however its path is spelled (relative, absolute, through a symbolic or a
 //! hard link). A library user (a notebook that loads a stack, changes it
 //! and saves it back) is not held to that; [`same_file`] serves the
-//! functions that read and write at once.
+//! functions that read and write at once. [`read_bounded`] reads such a
+//! file whole, with a cap on its size.
 
 use std::collections::HashMap;
 use std::fs::{File, Metadata};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-
-use crate::memory::{ReadError, require_regular_file};
 
 /// A file's identity: the device and inode it lives at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -124,12 +124,124 @@ pub fn open_regular(path: &Path, what: &'static str) -> std::io::Result<(File, M
             std::io::ErrorKind::InvalidInput,
             format!(
                 "not a regular file ({}); a {what} must be one",
-                crate::memory::file_kind(&meta)
+                file_kind(&meta)
             ),
         ));
     }
     register_input(path, &meta);
     Ok((file, meta))
+}
+
+/// Why a whole-file read was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    /// The file cannot be opened or read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// Not a regular file (a device, a FIFO, a directory).
+    #[error("{path}: not a regular file ({kind}); a {what} must be one")]
+    NotAFile {
+        /// The file.
+        path: PathBuf,
+        /// What it is.
+        kind: &'static str,
+        /// What was expected.
+        what: &'static str,
+    },
+    /// Larger than such a file may be.
+    #[error("{path}: {} is more than a {what} may hold ({})", crate::memory::size(*len), crate::memory::size(*max))]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// Its size (at least), bytes.
+        len: u64,
+        /// The cap, bytes.
+        max: u64,
+        /// What it was read as.
+        what: &'static str,
+    },
+    /// The cap exceeds the memory budget.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::MemoryError),
+}
+
+/// Refuses what `meta` describes unless it is a regular file: a device,
+/// FIFO or folder at `path` would hang or fail a reader that expects a
+/// `what`.
+pub fn require_regular_file(
+    path: &Path,
+    meta: &std::fs::Metadata,
+    what: &'static str,
+) -> Result<(), ReadError> {
+    if meta.is_file() {
+        return Ok(());
+    }
+    Err(ReadError::NotAFile {
+        path: path.to_path_buf(),
+        kind: file_kind(meta),
+        what,
+    })
+}
+
+/// Reads the regular file at `path` whole, refusing special files and
+/// files over `max` bytes (or over the budget); a file that grows past
+/// the cap while it is read is refused too. `what` names the file's role
+/// in errors ("configuration file").
+pub fn read_bounded(path: &Path, max: u64, what: &'static str) -> Result<Vec<u8>, ReadError> {
+    let io = |source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let (file, meta) = open_input(path, what)?;
+    let too_large = |len| ReadError::TooLarge {
+        path: path.to_path_buf(),
+        len,
+        max,
+        what,
+    };
+    if meta.len() > max {
+        return Err(too_large(meta.len()));
+    }
+    crate::memory::check(meta.len(), || format!("reading {}", path.display()))?;
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(max + 1).read_to_end(&mut bytes).map_err(io)?;
+    if bytes.len() as u64 > max {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
+}
+
+/// What kind of file `meta` describes, in words.
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    let t = meta.file_type();
+    if t.is_file() {
+        return "regular file";
+    }
+    if t.is_dir() {
+        return "a directory";
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    "a special file"
 }
 
 #[cfg(test)]

@@ -7,5 +7,5 @@
 pub mod input;
 pub mod output;
 
-pub use input::{FileId, open_input, open_regular};
+pub use input::{FileId, ReadError, open_input, open_regular, read_bounded};
 pub use output::{AtomicFile, Completion, write_atomic};

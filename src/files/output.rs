@@ -76,7 +76,7 @@ pub fn check_destination(dest: &Path) -> io::Result<()> {
             format!(
                 "{} exists and is not a regular file ({}); outputs are renamed into place, so name a regular file",
                 dest.display(),
-                crate::memory::file_kind(&meta)
+                crate::files::input::file_kind(&meta)
             ),
         ));
     }

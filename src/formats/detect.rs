@@ -95,6 +95,12 @@ impl Format {
     }
 }
 
+/// Whether `path` is one of the project's tag files (its magic, else its
+/// `.sstags` extension).
+pub fn is_tag_file(path: &Path) -> bool {
+    Format::of_file(path) == Format::TagFile
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -17,7 +17,8 @@ use exr::prelude::{
 };
 use ndarray::{Array3, Axis};
 
-use crate::memory::{ReadError, bytes_of};
+use crate::files::ReadError;
+use crate::memory::bytes_of;
 use crate::stack::{F32_EXACT_COUNT, Stack, StackError, StackFile, StackMeta};
 
 /// Name of the attribute holding the JSON metadata.

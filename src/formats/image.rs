@@ -141,7 +141,7 @@ fn decode_luminance(
         read_exr_luminance(path).map_err(decode)?
     } else {
         let budget = crate::memory::budget().map_err(|e| decode(e.to_string()))?;
-        let bytes = crate::memory::read_bounded(path, budget.bytes, "image")
+        let bytes = crate::files::read_bounded(path, budget.bytes, "image")
             .map_err(|e| strip_path(path, e.to_string()))
             .map_err(decode)?;
         // JPEG decoders fill a cut file's missing blocks with grey and say

@@ -9,6 +9,7 @@
 //! Stacks (what binning or simulation makes):
 //! - [`exr`]: OpenEXR, one `f32` channel per bin, with the metadata.
 //! - [`npy`]: NumPy `.npy` with a JSON sidecar.
+//! - [`stack_file`]: either, by the file: `Stack::load`, `Stack::save`.
 //!
 //! Measurements of other instruments:
 //! - [`mat`]: MATLAB v7.3 (HDF5) datasets, e.g. the confocal diffuse
@@ -28,3 +29,4 @@ pub mod npy;
 pub mod picoquant;
 pub mod png;
 pub mod sstags;
+pub mod stack_file;

@@ -12,7 +12,8 @@ use std::path::{Path, PathBuf};
 use ndarray::Array3;
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
-use crate::memory::{ReadError, bytes_of, read_bounded};
+use crate::files::{ReadError, read_bounded};
+use crate::memory::bytes_of;
 use crate::stack::{Stack, StackError, StackFile, StackMeta, ValueKind, counts_as_f32};
 
 /// Largest sidecar read (the metadata of any stack is far smaller).

@@ -368,9 +368,3 @@ pub fn read_tag_file(
 ) -> Result<TagFileSummary, TagFileError> {
     TagFile::open(path)?.read(on_batch)
 }
-
-/// Whether `path` is a tag file ([`crate::formats::detect`]: its magic,
-/// else its `.sstags` extension).
-pub fn is_tag_file(path: &Path) -> bool {
-    crate::formats::detect::Format::of_file(path) == crate::formats::detect::Format::TagFile
-}

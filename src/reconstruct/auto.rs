@@ -13,12 +13,9 @@
 
 use super::data::Data;
 use super::error::ReconstructError;
-use super::method::MethodOptions;
 use super::rl_stack::RlStack;
 use super::run::{Estimate, Reconstructor, Run};
-use super::split::Split;
 use super::trace::Trace;
-use crate::denoise::Denoiser;
 
 /// PnP's output deviance z at or above which its output is chosen.
 pub const PNP_MISFIT_Z: f64 = 263.7;
@@ -26,11 +23,12 @@ pub const PNP_MISFIT_Z: f64 = 263.7;
 /// Chooses between `rl-stack` and PnP per stack (see the module's
 /// documentation).
 pub struct Auto<'a> {
-    /// The prior PnP uses.
-    pub denoiser: &'a dyn Denoiser,
-    /// Both candidates' settings (Richardson-Lucy's stop, the split
-    /// solver's).
-    pub opts: MethodOptions,
+    /// PnP with the solver and prior the settings choose
+    /// ([`super::method::MethodOptions::pnp`]). The threshold was chosen
+    /// with the split solver, the default.
+    pub pnp: Box<dyn Reconstructor + 'a>,
+    /// Richardson-Lucy on the whole stack, with its stop.
+    pub rl: RlStack,
 }
 
 /// PnP's output deviance minus its Poisson expectation over its standard
@@ -68,13 +66,7 @@ impl Reconstructor for Auto<'_> {
         run: &mut Run<'_>,
     ) -> Result<Estimate, ReconstructError> {
         let bins = data.bins.len();
-        let rl = RlStack {
-            stop: self.opts.rl_stopping(),
-        };
-        let pnp = Split {
-            denoiser: self.denoiser,
-            opts: self.opts.split,
-        };
+        let (rl, pnp) = (&self.rl, self.pnp.as_ref());
         let (rl_name, pnp_name) = (rl.name(bins), pnp.name(bins));
         let mut candidate = |r: &dyn Reconstructor, name| -> Result<_, ReconstructError> {
             let from = run.elapsed_s();
@@ -85,7 +77,7 @@ impl Reconstructor for Auto<'_> {
         };
         // PnP first: when its output is chosen, `rl-stack` (the slower of
         // the two on most stacks) is not run at all.
-        let (pnp_out, pnp_trace, pnp_s) = candidate(&pnp, pnp_name)?;
+        let (pnp_out, pnp_trace, pnp_s) = candidate(pnp, pnp_name)?;
         let z = deviance_z(&pnp_trace);
         let z_text = z.map_or("none (never at its noise floor)".into(), |z| {
             format!("{z:.1}")
@@ -98,7 +90,7 @@ impl Reconstructor for Auto<'_> {
             notes.push(format!("{CHOSE}{pnp_name}"));
             (pnp_out, pnp_trace)
         } else {
-            let (rl_out, rl_trace, rl_s) = candidate(&rl, rl_name)?;
+            let (rl_out, rl_trace, rl_s) = candidate(rl, rl_name)?;
             notes.push(format!("auto: {rl_name} took {rl_s:.2} s"));
             notes.push(format!("{CHOSE}{rl_name}"));
             (rl_out, rl_trace)

@@ -13,10 +13,11 @@ use super::problem::{BackgroundChoice, Problem, ProblemError};
 use crate::calibrate::{CalibrateError, Free, fit_stack_physics};
 use crate::config::{ConfigError, PhysicsOverrides};
 use crate::formats::image::read_image;
+use crate::formats::stack_file::missing_meta;
 use crate::forward::Boundary;
 use crate::physics::{Preset, Sampling, Setup};
 use crate::scene::{ImageError, Scene};
-use crate::stack::{Stack, StackError, StackMeta, ValueKind, missing_meta};
+use crate::stack::{Stack, StackError, StackMeta, ValueKind};
 
 /// How a stack file is matched with its physics.
 #[derive(Debug, Clone, Default)]

@@ -260,8 +260,10 @@ pub fn run_method(
     };
     match method {
         Method::Auto => Auto {
-            denoiser,
-            opts: *opts,
+            pnp: opts.pnp(denoiser),
+            rl: RlStack {
+                stop: opts.rl_stopping(),
+            },
         }
         .run(&Data::new(model, &problem.counts, &all)?, truth, on_iter),
         Method::Pnp => {

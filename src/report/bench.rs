@@ -31,7 +31,7 @@ use crate::reconstruct::trace::Trace;
 use crate::scene::Scene;
 
 use super::ReportError;
-use super::plot::{Series, chart};
+use crate::plot::{Series, chart};
 
 /// Label of Richardson-Lucy's best iteration chosen with the truth.
 pub const RL_BEST: &str = "rl-sum (best iteration by truth)";
@@ -77,7 +77,7 @@ pub struct BenchImage {
 /// licence; the file empty for built-in scenes).
 pub fn read_manifest(dir: &Path) -> Result<Vec<BenchImage>, ReportError> {
     let path = dir.join("manifest.csv");
-    let bytes = crate::memory::read_bounded(&path, 16 << 20, "benchmark manifest")
+    let bytes = crate::files::read_bounded(&path, 16 << 20, "benchmark manifest")
         .map_err(|e| ReportError::Input(e.to_string()))?;
     let text = String::from_utf8_lossy(&bytes);
     let bad = |line: usize, why: String| {

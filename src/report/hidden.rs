@@ -10,9 +10,9 @@ use ndarray_npy::WriteNpyExt;
 use serde::Serialize;
 
 use super::ReportError;
-use super::plot::{Heatmap, heatmap};
 use crate::confocal::poisson::PoissonTraceRow;
 use crate::confocal::volume::{HiddenVolume, Projection};
+use crate::plot::{Heatmap, heatmap};
 
 /// The geometry travelling with a written volume (the JSON sidecar and
 /// the EXR's `scatterscope` attribute).

@@ -3,12 +3,17 @@
 //! Per scene: a table of PSNR / SSIM / wall time per method, the paper's
 //! Fig. 4 analogue (PSNR per time bin of scaled counts, RL and PnP on that bin, with
 //! the full-stack results as lines) and error-against-run-time curves.
+//!
+//! Beside it, what the other jobs write and print: the held-out benchmarks
+//! ([`bench`], [`hidden_bench`]), hidden-object volumes ([`hidden`]), the
+//! instrument's description ([`instrument`]) and the calibrations' files
+//! ([`calibration`]).
 
 pub mod bench;
+pub mod calibration;
 pub mod hidden;
 pub mod hidden_bench;
 pub mod instrument;
-pub mod plot;
 
 use crate::named::Named;
 use std::fmt::Write as _;
@@ -20,13 +25,13 @@ use crate::denoise::Denoiser;
 use crate::formats::png::write_png;
 use crate::forward::Boundary;
 use crate::physics::{Sampling, Setup};
+use crate::plot::{self, Series};
 use crate::reconstruct::method::{Method, MethodOptions, RlStop, Solver, run_method};
 use crate::reconstruct::problem::Problem;
 use crate::reconstruct::trace::Trace;
 use crate::reconstruct::{ReconstructError, Reconstruction};
 use crate::scene::Scene;
 use crate::simulate::{SimulateError, Simulation, simulate};
-use plot::Series;
 
 /// One method's result on one scene.
 #[derive(Debug, Clone, Serialize)]

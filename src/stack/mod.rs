@@ -1,10 +1,11 @@
 //! The transient stack: K time bins of H x W images plus the metadata that
 //! every later stage needs (binning, pixel pitch, physics, provenance).
 //!
-//! Its files are in [`crate::formats`]: OpenEXR ([`crate::formats::exr`],
-//! one `f32` channel per bin) and `.npy` with a JSON sidecar
-//! ([`crate::formats::npy`]); PNG contact sheets for a quick look
-//! ([`crate::formats::png`]).
+//! Its files are in [`crate::formats`], which sits above this module:
+//! [`Stack::load`] and [`Stack::save`] ([`crate::formats::stack_file`])
+//! dispatch to OpenEXR ([`crate::formats::exr`], one `f32` channel per bin)
+//! and `.npy` with a JSON sidecar ([`crate::formats::npy`]); PNG contact
+//! sheets for a quick look ([`crate::formats::png`]).
 
 use std::path::{Path, PathBuf};
 
@@ -12,7 +13,6 @@ use ndarray::{Array3, ArrayView2, ArrayView3, Axis, s};
 use scatterscope_physics::{Sampling, Setup};
 use serde::{Deserialize, Serialize};
 
-use crate::formats::detect::Format;
 use crate::forward::Boundary;
 
 /// Version of the metadata layout written to files.
@@ -141,7 +141,7 @@ pub enum StackError {
     /// The file would need more memory than the budget, or is a special
     /// file or too large to read whole.
     #[error(transparent)]
-    Memory(#[from] crate::memory::ReadError),
+    Memory(#[from] crate::files::ReadError),
     /// The file is not a valid stack; says which field and value.
     #[error("{path}: {reason}")]
     Format {
@@ -298,74 +298,12 @@ impl Stack {
         }
     }
 
-    /// Writes the stack; the format follows the extension (`.exr` or `.npy`).
-    pub fn save(&self, path: &Path) -> Result<(), StackError> {
-        match Format::of_extension(path) {
-            Format::Exr => crate::formats::exr::write(self, path),
-            Format::Npy => crate::formats::npy::write(self, path),
-            _ => Err(StackError::format(
-                path,
-                "unknown stack format: use a .exr or .npy file name",
-            )),
-        }
-    }
-
-    /// Reads and validates a stack with its metadata; the format follows
-    /// the file's first bytes, else its extension. A file without metadata
-    /// (a plain `.npy`, an EXR from another tool) is refused: read it with
-    /// [`Stack::read`] and give the metadata ([`StackMeta::consecutive`]).
-    pub fn load(path: &Path) -> Result<Self, StackError> {
-        let file = Self::read_file(path)?;
-        match file.meta {
-            Some(meta) => {
-                let mut stack = Self::from_parts(file.data, meta, path)?;
-                stack.exact_counts = file.exact_counts;
-                Ok(stack)
-            }
-            None => Err(StackError::format(
-                path,
-                format!("has no metadata ({})", missing_meta(path)),
-            )),
-        }
-    }
-
-    /// Reads a stack file's values and, when the file has them, its
-    /// metadata (the `.npy` sidecar, the EXR attribute); nothing is
-    /// validated yet.
-    pub fn read(path: &Path) -> Result<(Array3<f32>, Option<StackMeta>), StackError> {
-        Self::read_file(path).map(|f| (f.data, f.meta))
-    }
-
-    /// [`Stack::read`] with the exact counts when the file stores counts
-    /// above 2^24.
-    pub fn read_file(path: &Path) -> Result<StackFile, StackError> {
-        match Format::of_file(path) {
-            Format::Exr => crate::formats::exr::read(path),
-            Format::Npy => crate::formats::npy::read(path),
-            _ => Err(StackError::format(
-                path,
-                "not a stack: neither its first bytes nor its extension say OpenEXR or NumPy .npy",
-            )),
-        }
-    }
-
     /// A stack from values and metadata, validated ([`Stack::validate`]);
     /// `path` names the source in errors.
     pub fn from_parts(data: Array3<f32>, meta: StackMeta, path: &Path) -> Result<Self, StackError> {
         let stack = Stack::new(data, meta);
         stack.validate(path)?;
         Ok(stack)
-    }
-}
-
-/// Where a file of this kind keeps its metadata, for error messages.
-pub fn missing_meta(path: &Path) -> String {
-    match Format::of_file(path) {
-        Format::Npy => format!(
-            "no sidecar {}",
-            crate::formats::npy::sidecar_path(path).display()
-        ),
-        _ => format!("no `{}` attribute", crate::formats::exr::META_ATTRIBUTE),
     }
 }
 

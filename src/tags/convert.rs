@@ -11,12 +11,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use firmware_protocol::Event;
 
+use crate::events::Tag;
 use crate::files::Completion;
+use crate::formats::detect::is_tag_file;
 use crate::formats::picoquant::records::{Decoder, RecordType};
 use crate::formats::picoquant::writer::{HeaderEntry, PtuWriter, WriterHeader};
 use crate::formats::picoquant::{FileError, TtrError, open};
-use crate::formats::sstags::{TagFile, TagFileError, is_tag_file};
-use crate::tags::Tag;
+use crate::formats::sstags::{TagFile, TagFileError};
 
 /// The header tag that says where a converted file came from.
 pub const PROVENANCE_TAG: &str = "Scatterscope_ConvertedFrom";

@@ -5,10 +5,11 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::formats::sstags::{TagFileError, TagFileSummary, is_tag_file, read_tag_file};
+use crate::formats::detect::is_tag_file;
+use crate::formats::sstags::{TagFileError, TagFileSummary, read_tag_file};
 use firmware_protocol::Event;
 
-use super::Tag;
+use crate::events::Tag;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, TtrError, open};
 

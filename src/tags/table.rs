@@ -8,10 +8,11 @@ use std::path::Path;
 
 use firmware_protocol::Event;
 
+use crate::events::Tag;
+use crate::formats::detect::is_tag_file;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, open};
-use crate::formats::sstags::{TagFile, TagFileError, is_tag_file};
-use crate::tags::Tag;
+use crate::formats::sstags::{TagFile, TagFileError};
 
 /// The columns of a file's tags, in file order within each kind.
 #[derive(Debug, Clone, Default, PartialEq)]

@@ -6,8 +6,8 @@
 use firmware_protocol::EventBatch;
 use firmware_protocol::record::Record;
 
-use super::Tag;
 use super::binning::Binner;
+use crate::events::Tag;
 
 /// Counts of one batch beyond what the binner keeps.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]

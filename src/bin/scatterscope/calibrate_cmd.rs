@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use scatterscope::calibrate::Free;
-use scatterscope::calibrate::outputs::calibrate_file;
+use scatterscope::report::calibration::calibrate_file;
 
 use crate::shared_args::PhysicsArgs;
 

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use scatterscope::calibrate::histogram::{DEFAULT_MAT_DATASET, DEFAULT_MAT_PARTS};
-use scatterscope::calibrate::outputs::{IrfExtent, SlabJob};
 use scatterscope::calibrate::transmittance::{RISING_EDGE_CONVENTION, SlabFitOptions};
+use scatterscope::report::calibration::{IrfExtent, SlabJob};
 
 use crate::shared_args::choice;
 

@@ -8,7 +8,6 @@ use scatterscope::acquire::JobError;
 use scatterscope::acquire::device::OpenError;
 use scatterscope::acquire::pipeline::AcquireError;
 use scatterscope::acquire::source::SourceError;
-use scatterscope::calibrate::CalibrateError;
 use scatterscope::calibrate::histogram::HistogramError;
 use scatterscope::config::ConfigError;
 use scatterscope::confocal::ConfocalError;
@@ -21,6 +20,7 @@ use scatterscope::psf::PsfError;
 use scatterscope::reconstruct::ReconstructError;
 use scatterscope::reconstruct::input::InputError;
 use scatterscope::reconstruct::problem::ProblemError;
+use scatterscope::report::calibration::StackCalibrationError;
 use scatterscope::simulate::SimulateError;
 use scatterscope::tags::bin_file::BinFileError;
 use scatterscope_drivers::picoquant::VendorError;
@@ -51,8 +51,8 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
     if let Some(BinFileError::File(e)) = cause.downcast_ref::<BinFileError>() {
         return hint(e);
     }
-    if let Some(CalibrateError::Config(e)) = cause.downcast_ref::<CalibrateError>() {
-        return hint(e.as_ref());
+    if let Some(StackCalibrationError::Config(e)) = cause.downcast_ref::<StackCalibrationError>() {
+        return hint(e);
     }
     if let Some(e) = cause.downcast_ref::<ConfigError>() {
         return match e {

@@ -101,7 +101,7 @@ pub enum ImportError {
 /// are looked for ([`imported_path`]); returns the file and the weights,
 /// validated as the prior loads them.
 pub fn import(pth: &Path, out: Option<&Path>) -> Result<(PathBuf, FfdnetWeights), ImportError> {
-    let bytes = crate::memory::read_bounded(pth, super::weights::MAX_WEIGHT_FILE, "weight file")
+    let bytes = crate::files::read_bounded(pth, super::weights::MAX_WEIGHT_FILE, "weight file")
         .map_err(|e| WeightsError::Read(e.to_string()))?;
     let converted = super::pth::import_ffdnet_gray(&bytes, pth)?;
     let out = match out {

@@ -228,7 +228,7 @@ pub const MAX_WEIGHT_FILE: u64 = 256 << 20;
 impl FfdnetWeights {
     /// Reads and validates a weight file.
     pub fn from_file(path: &Path) -> Result<Self, WeightsError> {
-        let bytes = crate::memory::read_bounded(path, MAX_WEIGHT_FILE, "weight file")
+        let bytes = crate::files::read_bounded(path, MAX_WEIGHT_FILE, "weight file")
             .map_err(|e| WeightsError::Read(e.to_string()))?;
         Self::from_bytes(&bytes, &path.display().to_string())
     }

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use ptu::{HeaderTag, TagLookup};
 use records::RecordType;
 
-use crate::tags::Imaging;
+use crate::events::Imaging;
 
 /// Why a file cannot be read; the file is named by [`FileError`].
 #[derive(Debug, thiserror::Error)]

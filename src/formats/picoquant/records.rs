@@ -14,7 +14,7 @@
 //!   63 overflows by 33,552,000 (HydraHarp v1, always one) or by 2^25 times
 //!   the count (0 meaning 1); special channel 0 is a sync; 1-15 markers.
 
-use crate::tags::{ChunkDecoder, Tag, TagSink};
+use crate::events::{ChunkDecoder, Tag, TagSink};
 
 /// A TTTR record type, as `TTResultFormat_TTTRRecType` codes it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -21,10 +21,10 @@ use super::records::{
     HYDRAHARP_V1_T2_WRAP, PICOHARP_T2_WRAP, PICOHARP_T3_WRAP, RecordType, WIDE_T2_WRAP,
     WIDE_T3_WRAP,
 };
+use crate::events::Imaging;
+use crate::events::Tag;
 use crate::files::AtomicFile;
 pub use crate::files::Completion;
-use crate::tags::Imaging;
-use crate::tags::Tag;
 
 /// Header content of a written file.
 #[derive(Debug, Clone)]

@@ -1,4 +1,5 @@
-//! PNG plots of the report (plotters, bitmap backend).
+//! PNG charts and heatmaps (plotters, bitmap backend): the report's
+//! figures and the calibrations' plots.
 //!
 //! plotters draws text only with a registered font; the DejaVu Sans font
 //! ships inside the `dejavu` crate and is registered once, so no system

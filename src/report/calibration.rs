@@ -1,21 +1,22 @@
 //! What the two calibrations write and print: a stack's fitted time
 //! profile ([`Calibration`]) and the slab fit to transmittance captures
 //! ([`SlabFit`]): the measured and fitted counts as CSV, plots of both, the
-//! fitted physics as a TOML file, and the fit in words.
+//! fitted physics as a TOML file, and the fit in words. The fits
+//! themselves are [`crate::calibrate`]'s; this module reads their inputs
+//! and writes what they found.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use super::histogram::TimeHistogram;
-use super::measured_irf::MeasuredIrf;
-use super::transmittance::{
+use crate::calibrate::histogram::TimeHistogram;
+use crate::calibrate::measured_irf::MeasuredIrf;
+use crate::calibrate::transmittance::{
     Capture, MediumEstimate, SlabFit, SlabFitOptions, fit_slab, predict_captures, read_captures,
 };
-use super::{CalibrateError, Calibration, Free, calibrate, time_profile};
-use crate::config::PhysicsOverrides;
-use crate::config::medium_toml;
+use crate::calibrate::{CalibrateError, Calibration, Free, calibrate, time_profile};
+use crate::config::{ConfigError, PhysicsOverrides, medium_toml};
 use crate::physics::Setup;
-use crate::report::plot::{Series, chart};
+use crate::plot::{Series, chart};
 use crate::stack::Stack;
 
 fn io_error(path: &Path, e: impl std::fmt::Display) -> CalibrateError {
@@ -39,24 +40,34 @@ pub struct StackCalibration {
     pub fit: Calibration,
 }
 
+/// Why a stack file's calibration cannot run: its starting physics, or
+/// the calibration itself.
+#[derive(Debug, thiserror::Error)]
+pub enum StackCalibrationError {
+    /// The starting physics is invalid.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The stack cannot be read or its profile fitted.
+    #[error(transparent)]
+    Calibrate(#[from] CalibrateError),
+}
+
 /// Fits `free` to the time profile of the stack at `path`, starting from
 /// its recorded physics under `physics`.
 pub fn calibrate_file(
     path: &Path,
     physics: &PhysicsOverrides,
     free: Free,
-) -> Result<StackCalibration, CalibrateError> {
-    let (data, meta) = Stack::read(path)?;
+) -> Result<StackCalibration, StackCalibrationError> {
+    let (data, meta) = Stack::read(path).map_err(CalibrateError::from)?;
     let meta = meta.ok_or_else(|| {
         CalibrateError::Invalid(format!(
             "{} records no time bins; calibration needs a stack with metadata",
             path.display()
         ))
     })?;
-    let stack = Stack::from_parts(data, meta, path)?;
-    let start = physics
-        .resolve_over(stack.meta.setup.clone())
-        .map_err(|e| CalibrateError::Config(Box::new(e)))?;
+    let stack = Stack::from_parts(data, meta, path).map_err(CalibrateError::from)?;
+    let start = physics.resolve_over(stack.meta.setup.clone())?;
     let (start_ps, counts) = time_profile(&stack)?;
     let fit = calibrate(&counts, start_ps, &start, free)
         .map_err(|e| CalibrateError::Invalid(format!("calibrating {}: {e}", path.display())))?;
