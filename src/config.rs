@@ -443,11 +443,11 @@ fn invalid(path: &Path, reason: impl Into<String>) -> ConfigError {
     }
 }
 
-/// A medium as a configuration file states it (e.g. the `medium.toml`
-/// that `calibrate-slab` writes): `mu_a`, `mu_s` and `n` required, `g`
+/// A material file: the optics of a medium as a configuration file
+/// states them (e.g. the `medium.toml` that `calibrate-slab` writes): `mu_a`, `mu_s` and `n` required, `g`
 /// (0 when absent) and `thickness` optional.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MediumFile {
+pub struct MaterialFile {
     /// Absorption coefficient (1/cm).
     pub mu_a_per_cm: f64,
     /// Scattering coefficient (1/cm).
@@ -460,19 +460,19 @@ pub struct MediumFile {
     pub thickness_cm: Option<f64>,
 }
 
-/// Reads the medium keys of a configuration file; a missing required key
-/// is named.
-pub fn read_medium(path: &Path) -> Result<MediumFile, ConfigError> {
+/// Reads a material file (the medium keys of a configuration file); a
+/// missing required key is named.
+pub fn read_material(path: &Path) -> Result<MaterialFile, ConfigError> {
     let o = file_as_overrides(path, &read_file(path)?)?;
     let need = |key: &str, v: Option<f64>| {
         v.ok_or_else(|| {
             invalid(
                 path,
-                format!("key `{key}` is missing: a medium file states mu_a, mu_s and n"),
+                format!("key `{key}` is missing: a material file states mu_a, mu_s and n"),
             )
         })
     };
-    Ok(MediumFile {
+    Ok(MaterialFile {
         mu_a_per_cm: need("mu_a", o.mu_a)?,
         mu_s_per_cm: need("mu_s", o.mu_s)?,
         g: o.g.unwrap_or(0.0),

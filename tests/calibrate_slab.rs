@@ -672,14 +672,14 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     );
     // The fitted material as a medium file, read back as `hidden --medium`
     // reads it: no thickness, n as given, mu_s' in the foam's range.
-    let medium = scatterscope::config::read_medium(&out.path().join("medium.toml")).unwrap();
+    let medium = scatterscope::config::read_material(&out.path().join("medium.toml")).unwrap();
     assert_eq!(medium.thickness_cm, None);
     assert_eq!((medium.refractive_index, medium.g), (1.12, 0.0));
     assert!(
         (2.0..3.5).contains(&medium.mu_s_per_cm) && medium.mu_a_per_cm > 0.0,
         "{medium:?}"
     );
-    let optics = scatterscope::confocal::SlabOptics::from_medium_file(
+    let optics = scatterscope::confocal::SlabOptics::from_material_file(
         &out.path().join("medium.toml"),
         0.0254,
     )

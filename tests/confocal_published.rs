@@ -287,3 +287,64 @@ fn hidden_names_the_flag_of_a_bad_setting() {
         "{e}"
     );
 }
+
+/// `hidden --material FILE` reads the slab's material; `--medium FILE`,
+/// its old name, gives the same volume and says the new name.
+#[test]
+#[ignore = "needs ../shared/data/cdt-scenes"]
+fn hidden_reads_a_material_file_under_its_new_and_its_old_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let material = dir.path().join("foam.toml");
+    // The published foam's optics with mu_s' doubled: a material that
+    // differs from the default.
+    std::fs::write(&material, "mu_a = 0.0053\nmu_s = 5.24\ng = 0.0\nn = 1.12\n").unwrap();
+    let run = |flag: &str, out: &str| {
+        let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+            .arg("hidden")
+            .arg(shared_scenes().join("letter_s.mat"))
+            .args([
+                "--scan-side",
+                "63.6cm",
+                "--slab-thickness",
+                "1in",
+                "--bin-ps",
+                "16",
+            ])
+            .args(["--method", "published", flag])
+            .arg(&material)
+            .arg("--out")
+            .arg(dir.path().join(out))
+            .output()
+            .unwrap();
+        let (stdout, stderr) = (
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        );
+        assert!(o.status.success(), "{stderr}");
+        (stdout, stderr)
+    };
+    let (new_out, new_err) = run("--material", "new");
+    let (_, old_err) = run("--medium", "old");
+    assert!(
+        new_out.contains("material: ") && new_out.contains("foam.toml"),
+        "{new_out}"
+    );
+    assert!(!new_err.contains("note: hidden's --medium"), "{new_err}");
+    assert!(
+        old_err.contains("note: hidden's --medium is now --material"),
+        "{old_err}"
+    );
+    let files: Vec<_> = std::fs::read_dir(dir.path().join("new"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(!files.is_empty());
+    for name in files {
+        let a = std::fs::read(dir.path().join("new").join(&name)).unwrap();
+        let b = std::fs::read(dir.path().join("old").join(&name)).unwrap();
+        if name.to_string_lossy().ends_with(".json") {
+            continue; // the trace times the run
+        }
+        assert_eq!(a, b, "{name:?} differs");
+    }
+}

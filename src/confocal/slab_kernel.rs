@@ -69,16 +69,16 @@ impl SlabOptics {
         })
     }
 
-    /// The optics of the medium in a configuration file (e.g. the
+    /// The optics of the material file at `path` (e.g. the
     /// `medium.toml` that `calibrate-slab` writes) for a slab
     /// `thickness_m` thick. A file that names another thickness is refused
     /// with both.
-    pub fn from_medium_file(
+    pub fn from_material_file(
         path: &std::path::Path,
         thickness_m: f64,
     ) -> Result<Self, ConfocalError> {
         let name = path.display().to_string();
-        let file = crate::config::read_medium(path)
+        let file = crate::config::read_material(path)
             .map_err(|e| ConfocalError::input(&name, e.to_string()))?;
         if let Some(cm) = file.thickness_cm
             && (cm / 100.0 - thickness_m).abs() > 1e-6 * thickness_m.max(1e-9)
@@ -86,7 +86,7 @@ impl SlabOptics {
             return Err(ConfocalError::setting(
                 "thickness_m",
                 format!(
-                    "{name}: the medium file is for a slab {cm} cm thick, the scan's slab is {} cm: remove its `thickness` key to use the material at another thickness",
+                    "{name}: the material file is for a slab {cm} cm thick, the scan's slab is {} cm: remove its `thickness` key to use the material at another thickness",
                     thickness_m * 100.0
                 ),
             ));
@@ -106,14 +106,14 @@ impl SlabOptics {
     }
 
     /// The optics of a slab `thickness_m` thick: the material of
-    /// `medium_file` ([`Self::from_medium_file`]), or the published foam's
+    /// `material_file` ([`Self::from_material_file`]), or the published foam's
     /// when there is none.
     pub fn for_slab(
-        medium_file: Option<&std::path::Path>,
+        material_file: Option<&std::path::Path>,
         thickness_m: f64,
     ) -> Result<Self, ConfocalError> {
-        match medium_file {
-            Some(path) => Self::from_medium_file(path, thickness_m),
+        match material_file {
+            Some(path) => Self::from_material_file(path, thickness_m),
             None => Ok(Self {
                 thickness_m,
                 ..Self::PUBLISHED_FOAM
@@ -239,7 +239,7 @@ pub fn in_and_out_spectrum(optics: &SlabOptics, grid: &KernelGrid) -> Array3<Com
 mod tests {
     use super::*;
 
-    fn medium_file(text: &str) -> std::path::PathBuf {
+    fn material_file(text: &str) -> std::path::PathBuf {
         use std::sync::atomic::{AtomicUsize, Ordering};
         static N: AtomicUsize = AtomicUsize::new(0);
         let path = std::env::temp_dir().join(format!(
@@ -256,20 +256,21 @@ mod tests {
     /// `n`, is refused with the reason.
     #[test]
     fn medium_files_are_read_and_checked() {
-        let ok = medium_file("mu_a = 0.0048\nmu_s = 2.72\ng = 0.0\nn = 1.12\nmedium = \"slab\"\n");
-        let optics = SlabOptics::from_medium_file(&ok, 0.0254).unwrap();
+        let ok =
+            material_file("mu_a = 0.0048\nmu_s = 2.72\ng = 0.0\nn = 1.12\nmedium = \"slab\"\n");
+        let optics = SlabOptics::from_material_file(&ok, 0.0254).unwrap();
         assert!((optics.mu_s_reduced_per_m - 272.0).abs() < 1e-9);
         assert!((optics.thickness_m - 0.0254).abs() < 1e-12);
-        let other = medium_file("mu_a = 0.0048\nmu_s = 2.72\nn = 1.12\nthickness = 3.0\n");
-        let e = SlabOptics::from_medium_file(&other, 0.0254)
+        let other = material_file("mu_a = 0.0048\nmu_s = 2.72\nn = 1.12\nthickness = 3.0\n");
+        let e = SlabOptics::from_material_file(&other, 0.0254)
             .unwrap_err()
             .to_string();
         assert!(
             e.contains("3 cm thick") && e.contains("2.54 cm") && e.contains(".toml:"),
             "{e}"
         );
-        let missing = medium_file("mu_a = 0.0048\nmu_s = 2.72\n");
-        let e = SlabOptics::from_medium_file(&missing, 0.0254)
+        let missing = material_file("mu_a = 0.0048\nmu_s = 2.72\n");
+        let e = SlabOptics::from_material_file(&missing, 0.0254)
             .unwrap_err()
             .to_string();
         assert!(e.contains("key `n` is missing"), "{e}");

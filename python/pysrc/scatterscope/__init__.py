@@ -318,7 +318,7 @@ def calibrate_slab(
     Returns ``mu_a_per_cm``, ``mu_s_reduced_per_cm`` and ``offset_cm`` (each
     ``value``, ``standard_error``, ``fitted``), ``chi2_per_dof``,
     ``seconds``, ``lines`` (what the command prints) and ``medium_toml``
-    (the file ``scatterscope hidden --medium`` reads).
+    (the material file ``scatterscope hidden --material`` reads).
     """
 
     def arg(h: Any) -> Any:

@@ -40,11 +40,20 @@ pub struct HiddenArgs {
     /// Slab thickness with its unit (e.g. 1in, 2.54cm).
     #[arg(long, value_name = "LENGTH")]
     slab_thickness: String,
-    /// The slab's material: a medium file (e.g. calibrate-slab's
-    /// OUT/medium.toml: mu_a, mu_s, n). Without it the published foam fit
-    /// is assumed (n 1.12, mu_a 0.53 /m, mu_s' 262 /m, z_e 3.6 mm).
+    /// The slab's material: a material file (e.g. calibrate-slab's
+    /// OUT/medium.toml: mu_a, mu_s, g, n). Without it the published foam
+    /// fit is assumed (n 1.12, mu_a 0.53 /m, mu_s' 262 /m, z_e 3.6 mm).
     #[arg(long, value_name = "FILE")]
-    medium: Option<PathBuf>,
+    material: Option<PathBuf>,
+    /// The old name of --material (the physics flags' --medium is the
+    /// diffusion model, infinite or slab); still read, with a note.
+    #[arg(
+        long = "medium",
+        value_name = "FILE",
+        hide = true,
+        conflicts_with = "material"
+    )]
+    medium_old: Option<PathBuf>,
     /// Bin width (ps) of MATLAB scans, which do not record it.
     #[arg(long)]
     bin_ps: Option<f64>,
@@ -92,7 +101,13 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
     if let Some(fraction) = args.thin.filter(|&f| f != 1.0) {
         scan = scan.thinned(fraction, args.thin_seed).context("--thin")?;
     }
-    let optics = SlabOptics::for_slab(args.medium.as_deref(), thickness_m)?;
+    if args.medium_old.is_some() {
+        eprintln!(
+            "note: hidden's --medium is now --material (the material file; --medium is the physics flags' diffusion model); the old name still works"
+        );
+    }
+    let material = args.material.as_deref().or(args.medium_old.as_deref());
+    let optics = SlabOptics::for_slab(material, thickness_m)?;
     let published = PublishedOptions {
         snr: args.snr,
         depth_m,
@@ -110,10 +125,10 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
         scan.bin_width_ps,
         scan.total()
     );
-    match &args.medium {
-        Some(path) => println!("medium: {} ({})", path.display(), optics.describe()),
+    match material {
+        Some(path) => println!("material: {} ({})", path.display(), optics.describe()),
         None => println!(
-            "medium: the published foam fit ({}); assumed, not measured here (--medium)",
+            "material: the published foam fit ({}); assumed, not measured here (--material)",
             optics.describe()
         ),
     }
