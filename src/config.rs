@@ -206,7 +206,7 @@ pub struct PhysicsOverrides {
     /// Fit the parametric form to `irf_from` instead of using its table.
     pub irf_parametric: bool,
     /// Bin width of an `irf_from` file that does not record one (ps).
-    pub irf_bin_ps: Option<f64>,
+    pub irf_bin_width: Option<f64>,
 }
 
 /// A configuration problem, naming the file or key and the value.
@@ -268,7 +268,7 @@ impl PhysicsOverrides {
             return Ok((setup, notes));
         };
         if self.irf_parametric {
-            let fit = crate::calibrate::irf_fit::irf_from_reference(reference, self.irf_bin_ps)?;
+            let fit = crate::calibrate::irf_fit::irf_from_reference(reference, self.irf_bin_width)?;
             let se = |v: Option<f64>| v.map_or(String::new(), |e| format!(" +- {e:.2}"));
             notes.push(format!(
                 "instrument response fitted to {}: Gaussian FWHM {:.2}{} ps, exponential tail {:.2}{} ps, centre at {:.2} ps on its clock, background {:.3} counts per bin, chi-square per degree of freedom {:.2}",
@@ -292,7 +292,7 @@ impl PhysicsOverrides {
         } else {
             let (measured, table) = crate::calibrate::measured_irf::measured_irf_from_reference(
                 reference,
-                self.irf_bin_ps,
+                self.irf_bin_width,
             )?;
             notes.push(format!(
                 "instrument response measured in {}: {} bins of {} ps, FWHM {:.1} ps, mean delay {:.1} ps after its peak, time zero at {:.2} ps on its clock (the peak bin's centre), background {:.3} counts per bin subtracted, {:.0} counts in the response",

@@ -623,8 +623,8 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     let output = std::process::Command::new(env!("CARGO_BIN_EXE_scatterscope"))
         .args([
             "calibrate-slab",
-            "--bin-ps",
-            "8",
+            "--bin-width",
+            "8ps",
             "--refractive-index",
             "1.12",
             "--irf-from",
@@ -686,7 +686,8 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     .unwrap();
     assert!((optics.mu_s_reduced_per_m - 100.0 * medium.mu_s_per_cm).abs() < 1e-9);
     // A bad thickness is refused by name; the old names of mu_s' (the
-    // flag and the fit name) are read and say their new ones.
+    // flag and the fit name) and of the bin width are read and say their
+    // new ones.
     let output = std::process::Command::new(env!("CARGO_BIN_EXE_scatterscope"))
         .args([
             "calibrate-slab",
@@ -712,7 +713,8 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     );
     assert!(
         stderr.contains("note: --mu-s is now --mu-s-reduced")
-            && stderr.contains("note: --fit `mu_s` is now `mu_s_reduced`"),
+            && stderr.contains("note: --fit `mu_s` is now `mu_s_reduced`")
+            && stderr.contains("note: --bin-ps is now --bin-width"),
         "{stderr}"
     );
 }
@@ -850,11 +852,20 @@ fn the_real_reference_is_the_kernels_measured_table() {
     let o = simulate(&[]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        !o.status.success() && err.contains("capture_direct.mat") && err.contains("--irf-bin-ps"),
+        !o.status.success()
+            && err.contains("capture_direct.mat")
+            && err.contains("--irf-bin-width"),
         "{err}"
     );
-    let o = simulate(&["--irf-bin-ps", "8"]);
+    let o = simulate(&["--irf-bin-width", "8ps"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The old name still works and says the new one.
+    let old = simulate(&["--irf-bin-ps", "8"]);
+    let said = String::from_utf8_lossy(&old.stderr);
+    assert!(
+        old.status.success() && said.contains("note: --irf-bin-ps is now --irf-bin-width"),
+        "{said}"
+    );
     let stack = Stack::load(&out.path().join("counts.exr")).unwrap();
     let Some(InstrumentResponse::Measured(table)) = stack.meta.setup.unwrap().irf else {
         panic!("the stack records the measured table")

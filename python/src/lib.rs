@@ -160,10 +160,10 @@ fn overrides(kw: Option<&Bound<'_, PyDict>>) -> PyResult<PhysicsOverrides> {
             "irf_tail_ps" => o.irf_tail = Some(f()?),
             "irf_from" => o.irf_from = Some(PathBuf::from(value.extract::<String>()?)),
             "irf_parametric" => o.irf_parametric = value.extract()?,
-            "irf_bin_ps" => o.irf_bin_ps = Some(f()?),
+            "irf_bin_width_ps" | "irf_bin_ps" => o.irf_bin_width = Some(f()?),
             other => {
                 return Err(PyKeyError::new_err(format!(
-                    "unknown physics keyword `{other}` (known: preset, config, mu_a, mu_s, g, n, thickness_cm, medium, fov_cm, size, bin_width_ps, t_start_ps, bins, photons, min_bin_photons, irf_fwhm_ps, irf_tail_ps, irf_from, irf_parametric, irf_bin_ps)"
+                    "unknown physics keyword `{other}` (known: preset, config, mu_a, mu_s, g, n, thickness_cm, medium, fov_cm, size, bin_width_ps, t_start_ps, bins, photons, min_bin_photons, irf_fwhm_ps, irf_tail_ps, irf_from, irf_parametric, irf_bin_width_ps)"
                 )));
             }
         }
@@ -637,15 +637,15 @@ fn acquire_mock<'py>(
 }
 
 /// One histogram argument: a file (MATLAB, stack, tag file) or a 1-D
-/// array of counts with `bin_ps`.
+/// array of counts with bins of `bin_width_ps`.
 fn histogram(
     value: &Bound<'_, PyAny>,
     dataset: &str,
-    bin_ps: Option<f64>,
+    bin_width_ps: Option<f64>,
     label: &str,
 ) -> PyResult<TimeHistogram> {
     if let Ok(path) = value.extract::<PathBuf>() {
-        return TimeHistogram::read(&path, dataset, bin_ps).map_err(err);
+        return TimeHistogram::read(&path, dataset, bin_width_ps).map_err(err);
     }
     let counts: Vec<f64> = value
         .extract::<numpy::PyReadonlyArray1<'_, f64>>()
@@ -656,8 +656,9 @@ fn histogram(
                 "{label}: give a file path or a 1-D array of counts"
             ))
         })?;
-    let bin_ps = bin_ps.ok_or_else(|| msg(format!("{label}: an array of counts needs bin_ps")))?;
-    TimeHistogram::new(counts, bin_ps, 0.0, Path::new(label)).map_err(err)
+    let width = bin_width_ps
+        .ok_or_else(|| msg(format!("{label}: an array of counts needs bin_width_ps")))?;
+    TimeHistogram::new(counts, width, 0.0, Path::new(label)).map_err(err)
 }
 
 /// The old parameter names among `names`, each with its new one (the
@@ -670,7 +671,7 @@ fn renamed_parameters(names: Vec<String>) -> Vec<(&'static str, &'static str)> {
 /// Fits a slab's mu_a and mu_s' to transmittance captures: (result JSON
 /// with the estimates, lines, medium.toml text).
 #[pyfunction]
-#[pyo3(signature = (reference, captures, refractive_index, predict=Vec::new(), bin_ps=None, dataset="out", irf_extent="period", mu_a=0.01, mu_s_reduced=5.0, fit=vec!["mu_a".to_string(), "mu_s_reduced".to_string()], offset_cm=0.0, rising_edge_share=RISING_EDGE_CONVENTION))]
+#[pyo3(signature = (reference, captures, refractive_index, predict=Vec::new(), bin_width_ps=None, dataset="out", irf_extent="period", mu_a=0.01, mu_s_reduced=5.0, fit=vec!["mu_a".to_string(), "mu_s_reduced".to_string()], offset_cm=0.0, rising_edge_share=RISING_EDGE_CONVENTION))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_slab<'py>(
     py: Python<'py>,
@@ -678,7 +679,7 @@ fn calibrate_slab<'py>(
     captures: Vec<(Bound<'py, PyAny>, f64)>,
     refractive_index: f64,
     predict: Vec<(Bound<'py, PyAny>, f64)>,
-    bin_ps: Option<f64>,
+    bin_width_ps: Option<f64>,
     dataset: &str,
     irf_extent: &str,
     mu_a: f64,
@@ -687,7 +688,7 @@ fn calibrate_slab<'py>(
     offset_cm: f64,
     rising_edge_share: f64,
 ) -> PyResult<String> {
-    let reference = histogram(reference, dataset, bin_ps, "reference")?;
+    let reference = histogram(reference, dataset, bin_width_ps, "reference")?;
     let read = |list: &[(Bound<'py, PyAny>, f64)], what: &str| -> PyResult<Vec<Capture>> {
         list.iter()
             .enumerate()
@@ -699,7 +700,7 @@ fn calibrate_slab<'py>(
                     Err(_) => format!("{what} {i}"),
                 };
                 Ok(Capture {
-                    histogram: histogram(h, dataset, bin_ps, &label)?,
+                    histogram: histogram(h, dataset, bin_width_ps, &label)?,
                     thickness_cm: *thickness_cm,
                     label,
                 })

@@ -198,7 +198,7 @@ def test_calibrate_slab_equals_the_command_from_files_and_from_arrays(tmp_path):
     if not cal.exists():
         pytest.skip(f"needs {cal} (the shared transmittance captures)")
     out = cli(
-        "calibrate-slab", "--bin-ps", "8", "--refractive-index", "1.12", "--parts", "none",
+        "calibrate-slab", "--bin-width", "8ps", "--refractive-index", "1.12", "--parts", "none",
         "--irf-from", str(cal / "capture_direct.mat"),
         "--capture", f"{cal / 'capture_3_0_inch.mat'}=3in",
         "--predict", f"{cal / 'capture_3_5_inch.mat'}=3.5in",
@@ -206,7 +206,7 @@ def test_calibrate_slab_equals_the_command_from_files_and_from_arrays(tmp_path):
     )
     files = scatterscope.calibrate_slab(
         cal / "capture_direct.mat", [(cal / "capture_3_0_inch.mat", 7.62)], 1.12,
-        predict=[(cal / "capture_3_5_inch.mat", 8.89)], bin_ps=8.0,
+        predict=[(cal / "capture_3_5_inch.mat", 8.89)], bin_width_ps=8.0,
     )
     assert files["medium_toml"] == (tmp_path / "cli" / "medium.toml").read_text()
     for line in files["lines"]:
@@ -219,12 +219,15 @@ def test_calibrate_slab_equals_the_command_from_files_and_from_arrays(tmp_path):
         with h5py.File(cal / name, "r") as f:
             return np.asarray(f["out"][()], dtype=np.float64).ravel()
 
-    # The old names of mu_s' (the argument and the fit name) still work, and warn.
-    with pytest.warns(FutureWarning, match="mu_s is now mu_s_reduced"):
+    # The old names (mu_s' as an argument and a fit name, bin_ps) still work, and warn.
+    with pytest.warns(FutureWarning) as warned:
         arrays = scatterscope.calibrate_slab(
             counts("capture_direct.mat"), [(counts("capture_3_0_inch.mat"), 7.62)], 1.12,
             predict=[(counts("capture_3_5_inch.mat"), 8.89)], bin_ps=8.0, mu_s=5.0, fit=("mu_a", "mu_s"),
         )
+    said = " | ".join(str(w.message) for w in warned)
+    for note in ("mu_s is now mu_s_reduced", "bin_ps is now bin_width_ps", "fit name mu_s is now mu_s_reduced"):
+        assert note in said, said
     for key in ("mu_a_per_cm", "mu_s_reduced_per_cm", "chi2_per_dof"):
         assert arrays[key] == files[key], key
 

@@ -294,7 +294,7 @@ pub struct SlabJob {
     /// Cell array of per-part histograms in MATLAB files, if any.
     pub parts: Option<String>,
     /// Bin width (ps) of MATLAB histograms, which do not record it.
-    pub bin_ps: Option<f64>,
+    pub bin_width_ps: Option<f64>,
     /// The model's settings and starting values.
     pub options: SlabFitOptions,
 }
@@ -331,15 +331,19 @@ pub struct SlabCalibration {
 impl SlabJob {
     /// Reads the reference and the captures, fits, and predicts.
     pub fn run(&self) -> Result<SlabCalibration, CalibrateError> {
-        let reference = TimeHistogram::read(&self.irf_from, &self.dataset, self.bin_ps)?;
+        let reference = TimeHistogram::read(&self.irf_from, &self.dataset, self.bin_width_ps)?;
         let specs: Vec<&str> = self
             .captures
             .iter()
             .chain(&self.predict)
             .map(String::as_str)
             .collect();
-        let (mut captures, parts) =
-            read_captures(&specs, &self.dataset, self.parts.as_deref(), self.bin_ps)?;
+        let (mut captures, parts) = read_captures(
+            &specs,
+            &self.dataset,
+            self.parts.as_deref(),
+            self.bin_width_ps,
+        )?;
         let held = captures.split_off(self.captures.len());
         let notes = parts.iter().map(|p| format!("parts: {p}")).collect();
         calibrate_slab(

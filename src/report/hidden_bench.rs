@@ -32,7 +32,7 @@ pub struct HiddenBenchConfig {
     /// `letter_u_NN` for NN cm, ...).
     pub dir: PathBuf,
     /// Bin width of the scans (ps).
-    pub bin_ps: f64,
+    pub bin_width_ps: f64,
     /// Fractions of the counts kept (1 = the scan itself).
     pub fractions: Vec<f64>,
     /// Seed of the thinning.
@@ -132,7 +132,7 @@ pub fn run_hidden_bench(
     let mut rows = Vec::new();
     for (name, path) in scans_in(&cfg.dir)? {
         let (side, snr) = authors_settings(&name).expect("scans_in keeps known names");
-        let scan = ConfocalScan::read_mat(&path, "meas", cfg.bin_ps, side)
+        let scan = ConfocalScan::read_mat(&path, "meas", cfg.bin_width_ps, side)
             .map_err(|e| ReportError::Input(e.to_string()))?;
         let opts = PublishedOptions {
             snr,

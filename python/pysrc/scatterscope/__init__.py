@@ -292,7 +292,7 @@ def calibrate_slab(
     captures: List[Tuple[Any, float]],
     refractive_index: float,
     predict: Optional[List[Tuple[Any, float]]] = None,
-    bin_ps: Optional[float] = None,
+    bin_width_ps: Optional[float] = None,
     dataset: str = "out",
     irf_extent: str = "period",
     mu_a: float = 0.01,
@@ -301,6 +301,7 @@ def calibrate_slab(
     offset_cm: float = 0.0,
     rising_edge_share: Optional[float] = None,
     mu_s: Optional[float] = None,
+    bin_ps: Optional[float] = None,
 ) -> Dict[str, Any]:
     """Fit a slab's absorption and reduced scattering to transmittance
     captures, as ``scatterscope calibrate-slab``.
@@ -308,12 +309,13 @@ def calibrate_slab(
     ``reference`` is the instrument response measured without the slab and
     each capture a ``(histogram, thickness_cm)`` pair; a histogram is a file
     (MATLAB dataset ``dataset``, a stack, a tag file) or a 1-D array of
-    counts (then ``bin_ps`` is needed). ``predict`` captures are left out of
+    counts (then ``bin_width_ps`` is needed). ``predict`` captures are left out of
     the fit and predicted with the fitted medium. ``fit`` names the free
     parameters (``mu_a``, ``mu_s_reduced``, ``offset``); ``mu_a`` and
     ``mu_s_reduced`` (mu_s', 1/cm) are their starts or fixed values.
     ``mu_s``, the old name of ``mu_s_reduced`` (as an argument and in
-    ``fit``), still works with a ``FutureWarning``.
+    ``fit``), and ``bin_ps``, the old name of ``bin_width_ps``, still work
+    with a ``FutureWarning``.
 
     Returns ``mu_a_per_cm``, ``mu_s_reduced_per_cm`` and ``offset_cm`` (each
     ``value``, ``standard_error``, ``fitted``), ``chi2_per_dof``,
@@ -334,6 +336,13 @@ def calibrate_slab(
             stacklevel=2,
         )
         mu_s_reduced = mu_s
+    if bin_ps is not None:
+        warnings.warn(
+            "calibrate_slab: bin_ps is now bin_width_ps; the old name still works",
+            FutureWarning,
+            stacklevel=2,
+        )
+        bin_width_ps = bin_ps
     for old, new in _native.renamed_parameters(list(fit)):
         warnings.warn(
             f"calibrate_slab: fit name {old} is now {new}; the old name still works",
@@ -348,7 +357,7 @@ def calibrate_slab(
         [(arg(h), float(t)) for h, t in captures],
         float(refractive_index),
         [(arg(h), float(t)) for h, t in (predict or [])],
-        bin_ps,
+        bin_width_ps,
         dataset,
         irf_extent,
         float(mu_a),

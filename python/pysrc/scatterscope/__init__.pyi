@@ -77,7 +77,7 @@ def calibrate_slab(
     captures: List[Tuple[Any, float]],
     refractive_index: float,
     predict: Optional[List[Tuple[Any, float]]] = None,
-    bin_ps: Optional[float] = None,
+    bin_width_ps: Optional[float] = None,
     dataset: str = "out",
     irf_extent: str = "period",
     mu_a: float = 0.01,
@@ -86,5 +86,6 @@ def calibrate_slab(
     offset_cm: float = 0.0,
     rising_edge_share: Optional[float] = None,
     mu_s: Optional[float] = None,
+    bin_ps: Optional[float] = None,
 ) -> Dict[str, Any]:
     """Fit a slab's mu_a and mu_s' to transmittance captures, as ``scatterscope calibrate-slab``."""

@@ -3,10 +3,13 @@
 
 use std::path::PathBuf;
 
+use scatterscope::config::parse_ps;
 use scatterscope::confocal::PoissonOptions;
 use scatterscope::report::hidden_bench::{
     BLUR_BASELINE, HiddenBenchConfig, rows_csv, run_hidden_bench,
 };
+
+use crate::shared_args::note_renamed_flag;
 
 /// Benchmark the hidden-object reconstructions on the confocal scans of a
 /// folder (named as the published ones: letter_s.mat, letter_u_50.mat, ...).
@@ -20,9 +23,13 @@ use scatterscope::report::hidden_bench::{
 pub struct BenchHiddenArgs {
     /// Folder of scans.
     dir: PathBuf,
-    /// Bin width of the scans (ps); MATLAB files do not record it.
-    #[arg(long, default_value_t = 16.0)]
-    bin_ps: f64,
+    /// Bin width of the scans (default unit ps); MATLAB files do not
+    /// record it.
+    #[arg(long, value_name = "TIME", value_parser = parse_ps, default_value = "16")]
+    bin_width: f64,
+    /// The old name of --bin-width; still read, with a note.
+    #[arg(long = "bin-ps", value_name = "TIME", value_parser = parse_ps, hide = true)]
+    bin_ps_old: Option<f64>,
     /// Fractions of the counts kept.
     #[arg(long, value_delimiter = ',', default_value = "1,0.1,0.01")]
     fractions: Vec<f64>,
@@ -50,9 +57,10 @@ pub struct BenchHiddenArgs {
 }
 
 pub fn run(args: &BenchHiddenArgs) -> anyhow::Result<()> {
+    note_renamed_flag(args.bin_ps_old.is_some(), "--bin-ps", "--bin-width");
     let cfg = HiddenBenchConfig {
         dir: args.dir.clone(),
-        bin_ps: args.bin_ps,
+        bin_width_ps: args.bin_ps_old.unwrap_or(args.bin_width),
         fractions: args.fractions.clone(),
         seed: args.seed,
         repeats: args.repeats,

@@ -78,7 +78,7 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
             "snr" => "--snr",
             "depth_m" => "--depth",
             "side_m" => "--scan-side",
-            "bin_width_ps" => "--bin-ps",
+            "bin_width_ps" => "--bin-width",
             "thickness_m" => "--slab-thickness",
             // Settings of the library the command line does not expose.
             _ => return None,
@@ -146,7 +146,7 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
     } else if let Some(HistogramError::BinWidthUnknown { .. }) =
         cause.downcast_ref::<HistogramError>()
     {
-        "give the bin width: --bin-ps (calibrate-slab), --irf-bin-ps (with --irf-from)"
+        "give the bin width: --bin-width (calibrate-slab), --irf-bin-width (with --irf-from)"
     } else if let Some(FileError {
         error: TtrError::Truncated { .. } | TtrError::Unfinished { .. },
         ..

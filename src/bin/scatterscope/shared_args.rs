@@ -81,7 +81,7 @@ pub struct PhysicsArgs {
     #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     pub irf_tail: Option<f64>,
     /// Instrument response measured without the medium (a tag file, a
-    /// stack, or a MATLAB histogram with --irf-bin-ps), as a table.
+    /// stack, or a MATLAB histogram with --irf-bin-width), as a table.
     #[arg(long, value_name = "REF", conflicts_with_all = ["irf_fwhm", "irf_tail"])]
     pub irf_from: Option<PathBuf>,
     /// With --irf-from: fit the Gaussian-plus-exponential form instead.
@@ -89,15 +89,26 @@ pub struct PhysicsArgs {
     pub irf_parametric: bool,
     /// Bin width of an --irf-from file that records none (default unit ps).
     #[arg(long, value_name = "TIME", value_parser = parse_ps, requires = "irf_from")]
-    pub irf_bin_ps: Option<f64>,
+    pub irf_bin_width: Option<f64>,
+    /// The old name of --irf-bin-width; still read, with a note.
+    #[arg(long = "irf-bin-ps", value_name = "TIME", value_parser = parse_ps, hide = true,
+          requires = "irf_from", conflicts_with = "irf_bin_width")]
+    pub irf_bin_ps_old: Option<f64>,
 }
 
 impl PhysicsArgs {
-    /// The flags as the library's overrides.
+    /// The flags as the library's overrides (saying so on stderr when an
+    /// old flag name was given).
     pub fn overrides(&self) -> PhysicsOverrides {
+        note_renamed_flag(
+            self.irf_bin_ps_old.is_some(),
+            "--irf-bin-ps",
+            "--irf-bin-width",
+        );
         same_fields!(self => PhysicsOverrides { preset, config, mu_a, mu_s, g, n, thickness,
             medium, fov, size, bin_width, t_start, bins, photons, min_bin_photons, irf_fwhm,
-            irf_tail, irf_from, irf_parametric, irf_bin_ps })
+            irf_tail, irf_from, irf_parametric }
+            irf_bin_width: self.irf_bin_width.or(self.irf_bin_ps_old))
     }
 
     /// Resolves preset, config file and flags into a validated setup,
@@ -128,6 +139,14 @@ pub fn progress(millis: Option<u128>) -> ProgressBar {
         None => (ProgressBar::new_spinner(), "{spinner} {elapsed} {msg}"),
     };
     bar.with_style(ProgressStyle::with_template(template).expect("template"))
+}
+
+/// Says on stderr that `old`, a flag the command was given, is now `new`
+/// (the old spelling still works).
+pub fn note_renamed_flag(given: bool, old: &str, new: &str) {
+    if given {
+        eprintln!("note: {old} is now {new}; the old name still works");
+    }
 }
 
 /// Says on stderr which of `names`, given to `flag`, are old spellings of
