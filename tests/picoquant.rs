@@ -458,6 +458,58 @@ fn scanned_images_bin_photons_into_their_pixels_and_keep_every_frame() {
     assert_eq!(acc.outside_region, 6, "one photon between lines per line");
 }
 
+/// Frames kept apart: a last frame whose lines place no photon in the
+/// image (none inside a line, one past its last pixel) makes no stack, as
+/// a frame without photons never has; its photon counts outside.
+#[test]
+fn a_last_frame_without_a_placed_photon_makes_no_stack() {
+    let img = Imaging {
+        pixels_x: 2,
+        pixels_y: 1,
+        line_start: 1,
+        line_stop: 2,
+        frame: 4,
+        bidirectional: false,
+    };
+    let window = TimeWindow {
+        start: 0.0,
+        width: 16.0,
+        bins: 1,
+    };
+    let marker = |bits, macro_time| Tag::Marker { bits, macro_time };
+    let photon = |macro_time| Tag::Photon {
+        channel: 0,
+        macro_time,
+        micro_time: 3,
+    };
+    let tags = [
+        // Frame 0: one line, one photon in each pixel.
+        marker(1, 0),
+        photon(10),
+        photon(60),
+        marker(2, 100),
+        marker(4, 110),
+        // Frame 1: an empty line, then a line whose only photon is
+        // recorded with the stop marker's own time (past the last pixel).
+        marker(1, 200),
+        marker(2, 300),
+        marker(1, 400),
+        photon(500),
+        marker(2, 500),
+        marker(4, 510),
+    ];
+    let mut b = Binner::new(window, PixelMap::Scan(img), None, FrameSelect::All);
+    for t in tags {
+        b.push(Some(t));
+    }
+    let (stacks, acc) = b.finish();
+    assert_eq!(acc.frames, 2);
+    assert_eq!(stacks.len(), 1, "the photon-less frame has no stack");
+    assert_eq!(stacks[0].iter().copied().collect::<Vec<_>>(), vec![1, 1]);
+    assert_eq!((acc.binned, acc.outside_region), (2, 1), "{acc:?}");
+    assert!(acc.balances(), "{acc:?}");
+}
+
 #[test]
 fn legacy_pt3_files_decode_with_their_header_values() {
     let dir = tempfile::tempdir().unwrap();

@@ -775,7 +775,7 @@ impl Binner {
     /// the counts incremented in one tight loop after: a line's photons
     /// land on every bin plane of a stack larger than the cache, and
     /// with nothing between the increments the CPU keeps many of those
-    /// misses in flight (the per-photon loop was 60 % of binning a FLIM
+    /// misses in flight (the per-photon loop was 62 % of binning a FLIM
     /// image, perf, BENCHMARKS.md).
     fn flush_line(&mut self, img: Imaging, start: u64, stop: u64) {
         let mut pending = std::mem::take(&mut self.scan.pending);
@@ -798,7 +798,14 @@ impl Binner {
         let placed = offsets.len() as u64;
         self.accounting.outside_region += pending.len() as u64 - placed;
         let all = self.frames == FrameSelect::All;
-        match self.stack_for_frame(self.scan.frame) {
+        // A line with no photon placed makes no stack (a frame's first
+        // stack is made by its first photon, as everywhere).
+        let stack = if placed > 0 {
+            self.stack_for_frame(self.scan.frame)
+        } else {
+            None
+        };
+        match stack {
             Some(stack) => {
                 for &o in &offsets {
                     stack[o as usize] += 1;
