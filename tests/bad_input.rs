@@ -8,13 +8,15 @@
 //!   bit inside photon data, or a raw tag file cut by a crash, which is
 //!   read up to the cut and said so): exit status 0 and complete outputs.
 
+#[path = "common/command.rs"]
+mod command;
 #[path = "common/npy.rs"]
 mod npy;
 #[path = "common/pt3.rs"]
 mod pt3;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use npy::npy_bytes as npy;
 use pt3::write_pt3;
@@ -82,7 +84,7 @@ impl Kind {
 }
 
 fn scatterscope(args: &[String]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    command::scatterscope()
         .args(args)
         .env_remove("SCATTERSCOPE_FFDNET_WEIGHTS")
         .env(

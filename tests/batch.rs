@@ -6,6 +6,8 @@
 //! (`scripts/slurm_local.sh`), its outputs equal to the local run's bit for
 //! bit. Where no cluster answers, that test says why and skips.
 
+#[path = "common/command.rs"]
+mod command;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
@@ -15,7 +17,7 @@ use scatterscope::formats::picoquant::records::RecordType;
 use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
 
 fn scatterscope(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    command::scatterscope()
         .args(args)
         .output()
         .expect("binary runs")
@@ -132,7 +134,7 @@ fn a_killed_batch_resumes_with_only_the_missing_jobs_and_a_bad_job_fails_alone()
         out.to_str().unwrap(),
     ];
     // Start, and kill the batch once a few jobs have finished.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let mut child = command::scatterscope()
         .args(args)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
@@ -459,7 +461,7 @@ fn a_job_past_its_time_limit_and_a_stopped_batch_end_their_jobs_and_say_so() {
     let m = dir.path().join("long.toml");
     std::fs::write(&m, format!("[[job]]\nname = \"long\"\n{acquire}")).unwrap();
     let out = dir.path().join("stopped");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let mut child = command::scatterscope()
         .args(["batch", m.to_str().unwrap(), "--out", out.to_str().unwrap()])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())

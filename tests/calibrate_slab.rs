@@ -2,6 +2,8 @@
 //! medium from simulated captures, error messages, and the real foam
 //! captures of `../shared/data/cdt-calibration` (ignored tests that say so).
 
+#[path = "common/command.rs"]
+mod command;
 #[path = "common/shared_data.rs"]
 mod shared_data;
 
@@ -620,7 +622,7 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     let dir = cdt();
     let out = tempfile::tempdir().unwrap();
     let arg = |name: &str, t: &str| format!("{}={t}", dir.join(name).display());
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let output = command::scatterscope()
         .args([
             "calibrate-slab",
             "--bin-width",
@@ -688,7 +690,7 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     // A bad thickness is refused by name; the old names of mu_s' (the
     // flag and the fit name) and of the bin width are read and say their
     // new ones.
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let output = command::scatterscope()
         .args([
             "calibrate-slab",
             "--bin-ps",
@@ -836,7 +838,7 @@ fn the_real_reference_is_the_kernels_measured_table() {
     let out = tempfile::tempdir().unwrap();
     let reference = dir.join("capture_direct.mat");
     let simulate = |extra: &[&str]| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        command::scatterscope()
             .args([
                 "simulate", "--scene", "disks", "--size", "32", "--fov", "6.25cm",
             ])

@@ -1,11 +1,13 @@
 //! The `scatterscope` binary end to end: files written, numbers printed,
 //! errors worded for a lab user.
 
+#[path = "common/command.rs"]
+mod command;
 #[path = "common/shared_data.rs"]
 mod shared_data;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use scatterscope::stack::{Stack, ValueKind};
 
@@ -17,7 +19,7 @@ fn scatterscope(args: &[&str]) -> Output {
 }
 
 fn scatterscope_with_data_dir(args: &[&str], data_dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    command::scatterscope()
         .args(args)
         .env_remove("SCATTERSCOPE_FFDNET_WEIGHTS")
         .env("SCATTERSCOPE_DATA_DIR", data_dir)
@@ -668,7 +670,7 @@ fn acquire_stops_cleanly_on(signal: nix::sys::signal::Signal) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("acq");
     let raw = dir.path().join("tags.sstags");
-    let child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let child = command::scatterscope()
         .args([
             "acquire",
             "--device",
@@ -1078,7 +1080,7 @@ fn the_word_embedded_picks_the_built_in_weights_over_imported_ones() {
         "prior: ffdnet(embedded; ",
     );
     shows(
-        Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        command::scatterscope()
             .args(["weights", "show"])
             .env(WEIGHTS_ENV, "embedded")
             .env("SCATTERSCOPE_DATA_DIR", &data)

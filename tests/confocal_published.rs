@@ -2,6 +2,8 @@
 //! implementation (`scripts/cdt_reference.py`) on the shared scans, and
 //! its behaviour on synthetic scans and bad input.
 
+#[path = "common/command.rs"]
+mod command;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -213,7 +215,7 @@ fn bench_hidden_reports_the_blur_baseline() {
     )
     .unwrap();
     let out = dir.path().join("out");
-    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let o = command::scatterscope()
         .arg("bench-hidden")
         .arg(&scans)
         .args(["--fractions", "0.01", "--repeats", "1", "--out"])
@@ -239,7 +241,7 @@ fn bench_hidden_reports_the_blur_baseline() {
     let auto_row = csv.lines().find(|l| l.contains("\"auto (")).unwrap();
     let blur_across: f64 = auto_row.split(',').nth(10).unwrap().parse().unwrap();
     assert!(blur_across > 0.0, "{auto_row}");
-    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let o = command::scatterscope()
         .arg("bench-hidden")
         .arg(&scans)
         .args(["--blur", "2", "--out"])
@@ -262,7 +264,7 @@ fn hidden_names_the_flag_of_a_bad_setting() {
     let dir = tempfile::tempdir().unwrap();
     let scan = shared_scenes().join("letter_s.mat");
     let run = |extra: &[&str]| {
-        let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        let o = command::scatterscope()
             .arg("hidden")
             .arg(&scan)
             .args(["--scan-side", "63.6cm", "--slab-thickness", "1in"])
@@ -300,7 +302,7 @@ fn hidden_reads_its_material_and_bin_width_under_new_and_old_flags() {
     // differs from the default.
     std::fs::write(&material, "mu_a = 0.0053\nmu_s = 5.24\ng = 0.0\nn = 1.12\n").unwrap();
     let run = |flags: [&str; 3], out: &str| {
-        let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        let o = command::scatterscope()
             .arg("hidden")
             .arg(shared_scenes().join("letter_s.mat"))
             .args([

@@ -6,6 +6,8 @@
 //! the inputs are byte for byte what they were. The PTU files are checked
 //! with ptufile too (an ignored test, run in CI).
 
+#[path = "common/command.rs"]
+mod command;
 #[path = "common/standin.rs"]
 mod standin;
 
@@ -73,10 +75,7 @@ impl Inputs {
 }
 
 fn scatterscope(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_scatterscope"))
-        .args(args)
-        .output()
-        .unwrap()
+    command::scatterscope().args(args).output().unwrap()
 }
 
 fn digest(path: &Path) -> u64 {
@@ -312,7 +311,7 @@ fn kill_at_random(inputs: &Inputs, work: &Path, kills: usize, only: &[&str], see
         let (name, args) = &cmds[rng.next() as usize % cmds.len()];
         let whole = full[name];
         let delay = whole.mul_f64((rng.next() % 1000) as f64 / 1000.0);
-        let mut child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        let mut child = command::scatterscope()
             .args(args)
             .env_remove("SCATTERSCOPE_PQ_MOCK")
             .stdout(Stdio::null())
@@ -361,7 +360,7 @@ fn kill_at_random(inputs: &Inputs, work: &Path, kills: usize, only: &[&str], see
 /// holds records past the header; returns that temporary.
 fn convert_killed_mid_write(inputs: &Inputs, out: &Path) -> PathBuf {
     std::fs::create_dir_all(out).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let mut child = command::scatterscope()
         .args(["convert", inputs.ptu.to_str().unwrap(), "--out"])
         .arg(out.join("c.ptu"))
         .stdout(Stdio::null())

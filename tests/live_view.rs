@@ -4,6 +4,8 @@
 //! ends the ledger the acquisition wrote; a stuck browser does not stall
 //! the acquisition; a view shared on the network needs its token.
 
+#[path = "common/command.rs"]
+mod command;
 #[path = "common/standin.rs"]
 mod standin;
 
@@ -15,7 +17,7 @@ use std::time::{Duration, Instant};
 /// Starts `acquire` with `args`; returns the child and the live view's
 /// address from its first line.
 fn start(args: &[&str], env: &[(&str, &str)]) -> (Child, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let mut child = command::scatterscope()
         .arg("acquire")
         .args(args)
         .envs(env.iter().copied())
@@ -250,7 +252,7 @@ fn closing_the_browser_mid_run_changes_no_saved_result() {
         let out_s = out.to_str().unwrap().to_string();
         args.push(&out_s);
         if !live {
-            let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+            let o = command::scatterscope()
                 .arg("acquire")
                 .args(&args)
                 .output()
@@ -300,7 +302,7 @@ fn bad_cases_are_refused_clearly_and_the_run_goes_on() {
     let dir = tempfile::tempdir().unwrap();
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let port = taken.local_addr().unwrap().port();
-    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let o = command::scatterscope()
         .args(["acquire", "--duration", "200ms", "--live"])
         .arg(format!("127.0.0.1:{port}"))
         .arg("--out")
@@ -315,7 +317,7 @@ fn bad_cases_are_refused_clearly_and_the_run_goes_on() {
         "{err}"
     );
     assert!(!dir.path().join("taken").exists(), "nothing written");
-    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let o = command::scatterscope()
         .args(["acquire", "--live", "nowhere", "--out"])
         .arg(dir.path().join("bad"))
         .output()
@@ -533,7 +535,7 @@ fn a_shared_view_needs_its_token() {
 fn a_replay_shows_in_the_live_view() {
     let dir = tempfile::tempdir().unwrap();
     let tags = dir.path().join("run.sstags");
-    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let o = command::scatterscope()
         .args([
             "acquire",
             "--size",

@@ -3,6 +3,8 @@
 //! once), results that are empty or doubtful end with a `warning:` line and
 //! exit status 4, and a batch manifest is read bounded.
 
+#[path = "common/command.rs"]
+mod command;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
@@ -10,10 +12,7 @@ use std::time::{Duration, Instant};
 use scatterscope::formats::picoquant::writer::write_synthetic_t3;
 
 fn scatterscope(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_scatterscope"))
-        .args(args)
-        .output()
-        .unwrap()
+    command::scatterscope().args(args).output().unwrap()
 }
 
 fn text(o: &Output) -> String {

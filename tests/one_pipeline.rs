@@ -4,23 +4,22 @@
 //! one ledger, and what a device cannot record is refused by name before
 //! anything is written.
 
+#[path = "common/command.rs"]
+mod command;
 #[path = "common/pydeps.rs"]
 mod pydeps;
 #[path = "common/standin.rs"]
 mod standin;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use scatterscope::events::Tag;
 use scatterscope::formats::picoquant;
 use scatterscope::formats::picoquant::records::Decoder;
 
 fn scatterscope(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_scatterscope"))
-        .args(args)
-        .output()
-        .unwrap()
+    command::scatterscope().args(args).output().unwrap()
 }
 
 fn text(o: &Output) -> String {

@@ -6,6 +6,8 @@
 //! unwritable PTU is a clear error with the stack kept; and `convert` to
 //! PTU is lossless.
 
+#[path = "common/command.rs"]
+mod command;
 #[path = "common/shared_data.rs"]
 mod shared_data;
 #[path = "common/standin.rs"]
@@ -90,7 +92,7 @@ fn acquisition_ptu_bins_back_into_the_same_stack_for_both_families() {
         assert!(t["photons"].as_u64().unwrap() > 100_000, "{family}: {t}");
         assert_eq!(record["stop"], "duration");
         let binned = out.join("binned");
-        let b = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+        let b = command::scatterscope()
             .args(["bin", out.join("acquisition.ptu").to_str().unwrap()])
             .args(["--out", binned.to_str().unwrap()])
             .output()
@@ -270,7 +272,7 @@ fn without_a_vendor_library_the_message_names_the_files_and_the_install() {
     let out = dir.path().join("acq");
     // Empty variables are unset, not paths: the installer's places are
     // searched, as without them.
-    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let o = command::scatterscope()
         .args(["acquire", "--device", "picoquant", "--duration", "100ms"])
         .args(["--out", out.to_str().unwrap()])
         .env("SCATTERSCOPE_MHLIB", "")
@@ -283,7 +285,7 @@ fn without_a_vendor_library_the_message_names_the_files_and_the_install() {
         assert!(all.contains(words), "`{words}` missing: {all}");
     }
     assert!(!out.join("stack.exr").exists());
-    let d = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let d = command::scatterscope()
         .args(["devices", "--picoquant"])
         .env_remove("SCATTERSCOPE_MHLIB")
         .env_remove("SCATTERSCOPE_HHLIB")
@@ -295,7 +297,7 @@ fn without_a_vendor_library_the_message_names_the_files_and_the_install() {
         "{}",
         text(&d)
     );
-    let plain = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let plain = command::scatterscope()
         .arg("devices")
         .env_remove("SCATTERSCOPE_MHLIB")
         .env_remove("SCATTERSCOPE_HHLIB")
@@ -401,10 +403,7 @@ fn a_mock_tag_file_converts_to_ptu_photon_for_photon() {
     let tags = dir.path().join("m.sstags");
     let ptu = dir.path().join("m.ptu");
     let run = |args: &[&str]| {
-        let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
-            .args(args)
-            .output()
-            .unwrap();
+        let o = command::scatterscope().args(args).output().unwrap();
         assert!(o.status.success(), "{args:?}: {}", text(&o));
         o
     };
@@ -456,7 +455,7 @@ fn a_mock_tag_file_converts_to_ptu_photon_for_photon() {
         "--out",
         dir.path().join("acq2").to_str().unwrap(),
     ]);
-    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let o = command::scatterscope()
         .args(["convert", big.to_str().unwrap(), "--out"])
         .arg(dir.path().join("big.ptu"))
         .output()
@@ -573,7 +572,7 @@ fn ctrl_c_ends_a_picoquant_run_with_everything_read_saved() {
     let out = dir.path().join("acq");
     let truth_file = dir.path().join("truth.json");
     let lib = standin_library();
-    let child = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let child = command::scatterscope()
         .args(["acquire", "--device", "picoquant", "--duration", "0"])
         .args(["--vendor-lib", lib.to_str().unwrap()])
         .args(["--out", out.to_str().unwrap()])

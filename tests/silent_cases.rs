@@ -1,10 +1,12 @@
 //! The cases a bad-input campaign found where the output did not say what
 //! happened: each now says it, or refuses.
 
-use std::process::{Command, Output};
+#[path = "common/command.rs"]
+mod command;
+use std::process::Output;
 
 fn scatterscope(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    command::scatterscope()
         .args(args)
         .env_remove("SCATTERSCOPE_FFDNET_WEIGHTS")
         .env(
@@ -160,7 +162,7 @@ fn a_truth_of_another_size_is_said_to_be_resampled() {
 fn a_memory_limit_that_is_not_a_size_is_refused() {
     let o = scatterscope(&["psf", "--memory-limit", "lots", "--out", "/tmp/none"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o).1);
-    let o = Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    let o = command::scatterscope()
         .args(["psf", "--out", "/tmp/scatterscope-psf-limit"])
         .env("SCATTERSCOPE_MEMORY_LIMIT", "1MB")
         .output()

@@ -3,7 +3,7 @@
 //! dev-dependency) and the tests' way to run `acquire` against it.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 /// The stand-in's shared library file.
 pub fn standin_library() -> PathBuf {
@@ -30,7 +30,7 @@ pub fn standin_library() -> PathBuf {
 /// `SCATTERSCOPE_PQ_MOCK`).
 #[allow(dead_code)]
 pub fn scatterscope_pq(args: &[&str], mock: &str) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_scatterscope"))
+    super::command::scatterscope()
         .args(args)
         .env("SCATTERSCOPE_PQ_MOCK", mock)
         .env_remove("SCATTERSCOPE_MHLIB")
