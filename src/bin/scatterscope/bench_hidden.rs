@@ -28,7 +28,7 @@ pub struct BenchHiddenArgs {
     #[arg(long, value_name = "TIME", value_parser = parse_ps, default_value = "16")]
     bin_width: f64,
     /// The old name of --bin-width; still read, with a note.
-    #[arg(long = "bin-ps", value_name = "TIME", value_parser = parse_ps, hide = true)]
+    #[arg(long = "bin-ps", value_name = "TIME", value_parser = parse_ps, hide = true, conflicts_with = "bin_width")]
     bin_ps_old: Option<f64>,
     /// Fractions of the counts kept.
     #[arg(long, value_delimiter = ',', default_value = "1,0.1,0.01")]

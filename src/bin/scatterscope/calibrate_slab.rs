@@ -6,10 +6,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use scatterscope::calibrate::histogram::{DEFAULT_MAT_DATASET, DEFAULT_MAT_PARTS};
 use scatterscope::calibrate::transmittance::{RISING_EDGE_CONVENTION, SlabFitOptions};
-use scatterscope::config::parse_ps;
 use scatterscope::report::calibration::{IrfExtent, SlabJob};
 
-use crate::shared_args::choice;
+use crate::shared_args::{FileBinWidthArgs, choice, note_renamed_flag, note_renamed_parameters};
 
 /// Fit mu_s' and mu_a to transmittance captures through slabs.
 ///
@@ -32,13 +31,8 @@ pub struct CalibrateSlabArgs {
     /// peak, pedestal and tail) or the peak's run above the background.
     #[arg(long, value_parser = choice::<IrfExtent>(), default_value = "period")]
     irf_extent: IrfExtent,
-    /// Bin width of MATLAB histograms, which do not record it (default
-    /// unit ps; e.g. 8ps).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps)]
-    bin_width: Option<f64>,
-    /// The old name of --bin-width; still read, with a note.
-    #[arg(long = "bin-ps", value_name = "TIME", value_parser = parse_ps, hide = true, conflicts_with = "bin_width")]
-    bin_ps_old: Option<f64>,
+    #[command(flatten)]
+    bin_width: FileBinWidthArgs,
     /// Dataset holding the histogram in MATLAB files.
     #[arg(long, default_value = DEFAULT_MAT_DATASET)]
     dataset: String,
@@ -86,13 +80,13 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
         fit_offset: false,
         rising_edge_share: args.rising_edge_share,
     };
-    if args.mu_s_old.is_some() {
-        eprintln!(
-            "note: --mu-s is now --mu-s-reduced (the reduced scattering coefficient mu_s'); the old name still works"
-        );
-    }
-    crate::shared_args::note_renamed_flag(args.bin_ps_old.is_some(), "--bin-ps", "--bin-width");
-    crate::shared_args::note_renamed_parameters("--fit", &args.fit);
+    note_renamed_flag(
+        args.mu_s_old.is_some(),
+        "--mu-s",
+        "--mu-s-reduced (the reduced scattering coefficient mu_s')",
+    );
+    let bin_width_ps = args.bin_width.resolve();
+    note_renamed_parameters("--fit", &args.fit);
     options.free_named(&args.fit).context("--fit")?;
     let job = SlabJob {
         irf_from: args.irf_from.clone(),
@@ -101,7 +95,7 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
         predict: args.predict.clone(),
         dataset: args.dataset.clone(),
         parts: (args.parts != "none").then(|| args.parts.clone()),
-        bin_width_ps: args.bin_width.or(args.bin_ps_old),
+        bin_width_ps,
         options,
     };
     let done = job.run()?;

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
-use scatterscope::config::parse_ps;
 use scatterscope::confocal::scan::DEFAULT_MAT_DATASET;
 use scatterscope::confocal::{
     ConfocalScan, HiddenMethod, PoissonOptions, PublishedOptions, SlabOptics, hidden_warnings,
@@ -14,7 +13,7 @@ use scatterscope::confocal::{
 use scatterscope::length::parse_positive_cm;
 use scatterscope::report::hidden::write_hidden;
 
-use crate::shared_args::{choice, note_renamed_flag};
+use crate::shared_args::{FileBinWidthArgs, choice, note_renamed_flag};
 
 /// Reconstruct what hides behind a slab from a confocal scan of its face.
 ///
@@ -55,13 +54,8 @@ pub struct HiddenArgs {
         conflicts_with = "material"
     )]
     medium_old: Option<PathBuf>,
-    /// Bin width of MATLAB scans, which do not record it (default unit ps;
-    /// e.g. 16ps).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps)]
-    bin_width: Option<f64>,
-    /// The old name of --bin-width; still read, with a note.
-    #[arg(long = "bin-ps", value_name = "TIME", value_parser = parse_ps, hide = true, conflicts_with = "bin_width")]
-    bin_ps_old: Option<f64>,
+    #[command(flatten)]
+    bin_width: FileBinWidthArgs,
     /// Dataset holding the counts in MATLAB files.
     #[arg(long, default_value = DEFAULT_MAT_DATASET)]
     dataset: String,
@@ -102,17 +96,16 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)
         .context("--depth")?
         / 100.0;
-    note_renamed_flag(args.bin_ps_old.is_some(), "--bin-ps", "--bin-width");
-    let bin_width = args.bin_width.or(args.bin_ps_old);
+    let bin_width = args.bin_width.resolve();
     let mut scan = ConfocalScan::open(&args.scan, &args.dataset, bin_width, side_m)?;
     if let Some(fraction) = args.thin.filter(|&f| f != 1.0) {
         scan = scan.thinned(fraction, args.thin_seed).context("--thin")?;
     }
-    if args.medium_old.is_some() {
-        eprintln!(
-            "note: hidden's --medium is now --material (the material file; --medium is the physics flags' diffusion model); the old name still works"
-        );
-    }
+    note_renamed_flag(
+        args.medium_old.is_some(),
+        "hidden's --medium",
+        "--material (the material file; --medium is the physics flags' diffusion model)",
+    );
     let material = args.material.as_deref().or(args.medium_old.as_deref());
     let optics = SlabOptics::for_slab(material, thickness_m)?;
     let published = PublishedOptions {

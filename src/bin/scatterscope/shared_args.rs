@@ -141,6 +141,28 @@ pub fn progress(millis: Option<u128>) -> ProgressBar {
     bar.with_style(ProgressStyle::with_template(template).expect("template"))
 }
 
+/// The bin width of MATLAB files, which do not record theirs (`hidden`,
+/// `calibrate-slab`), with its old flag name.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct FileBinWidthArgs {
+    /// Bin width of MATLAB files, which do not record it (default unit ps;
+    /// e.g. 16ps).
+    #[arg(long, value_name = "TIME", value_parser = parse_ps)]
+    bin_width: Option<f64>,
+    /// The old name of --bin-width; still read, with a note.
+    #[arg(long = "bin-ps", value_name = "TIME", value_parser = parse_ps, hide = true, conflicts_with = "bin_width")]
+    bin_ps_old: Option<f64>,
+}
+
+impl FileBinWidthArgs {
+    /// The bin width given under either name (ps), saying so on stderr
+    /// when the old one was used.
+    pub fn resolve(&self) -> Option<f64> {
+        note_renamed_flag(self.bin_ps_old.is_some(), "--bin-ps", "--bin-width");
+        self.bin_width.or(self.bin_ps_old)
+    }
+}
+
 /// Says on stderr that `old`, a flag the command was given, is now `new`
 /// (the old spelling still works).
 pub fn note_renamed_flag(given: bool, old: &str, new: &str) {
