@@ -6,6 +6,8 @@
 //! `size`, `bin_width`, `t_start`, `bins`, `photons`, `min_bin_photons`,
 //! `irf_fwhm`, `irf_tail`, `preset`). Lengths and times take plain numbers in the
 //! documented unit (cm, ps) or strings with a unit (`"30mm"`, `"0.004ns"`).
+//! A file may state the reduced scattering coefficient mu_s' = mu_s (1 - g)
+//! as `mu_s_reduced` instead of `mu_s` (with `g`, or g = 0 when absent).
 
 use std::path::{Path, PathBuf};
 
@@ -143,6 +145,7 @@ struct FileOverrides {
     preset: Option<String>,
     mu_a: Option<f64>,
     mu_s: Option<f64>,
+    mu_s_reduced: Option<f64>,
     g: Option<f64>,
     n: Option<f64>,
     thickness: Option<Quantity>,
@@ -444,8 +447,9 @@ fn invalid(path: &Path, reason: impl Into<String>) -> ConfigError {
 }
 
 /// A material file: the optics of a medium as a configuration file
-/// states them (e.g. the `medium.toml` that `calibrate-slab` writes): `mu_a`, `mu_s` and `n` required, `g`
-/// (0 when absent) and `thickness` optional.
+/// states them (e.g. the `medium.toml` that `calibrate-slab` writes):
+/// `mu_a`, `n` and `mu_s_reduced` (or `mu_s`) required, `g` (0 when
+/// absent) and `thickness` optional.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MaterialFile {
     /// Absorption coefficient (1/cm).
@@ -468,13 +472,15 @@ pub fn read_material(path: &Path) -> Result<MaterialFile, ConfigError> {
         v.ok_or_else(|| {
             invalid(
                 path,
-                format!("key `{key}` is missing: a material file states mu_a, mu_s and n"),
+                format!(
+                    "key `{key}` is missing: a material file states mu_a, mu_s_reduced (or mu_s with g) and n"
+                ),
             )
         })
     };
     Ok(MaterialFile {
         mu_a_per_cm: need("mu_a", o.mu_a)?,
-        mu_s_per_cm: need("mu_s", o.mu_s)?,
+        mu_s_per_cm: need("mu_s_reduced", o.mu_s)?,
         g: o.g.unwrap_or(0.0),
         refractive_index: need("n", o.n)?,
         thickness_cm: o.thickness,
@@ -504,12 +510,33 @@ fn file_as_overrides(path: &Path, f: &FileOverrides) -> Result<PhysicsOverrides,
             })
             .transpose()
     };
+    let (mu_s, g) = match (f.mu_s, f.mu_s_reduced) {
+        (Some(_), Some(_)) => {
+            return Err(invalid(
+                path,
+                "keys `mu_s` and `mu_s_reduced` are both given: state one (mu_s' = mu_s (1 - g))"
+                    .to_string(),
+            ));
+        }
+        (None, Some(reduced)) => {
+            // mu_s' states the medium with g as given, isotropic without.
+            let g = f.g.unwrap_or(0.0);
+            if g.is_nan() || g >= 1.0 {
+                return Err(invalid(
+                    path,
+                    format!("key `g` = {g} with `mu_s_reduced`: g must be below 1"),
+                ));
+            }
+            (Some(reduced / (1.0 - g)), Some(g))
+        }
+        (mu_s, None) => (mu_s, f.g),
+    };
     Ok(PhysicsOverrides {
         preset: None,
         config: None,
         mu_a: f.mu_a,
-        mu_s: f.mu_s,
-        g: f.g,
+        mu_s,
+        g,
         n: f.n,
         thickness: q("thickness", &f.thickness, parse_cm_or_bare)?,
         medium: f
@@ -534,6 +561,41 @@ fn file_as_overrides(path: &Path, f: &FileOverrides) -> Result<PhysicsOverrides,
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_file_states_reduced_scattering_by_its_own_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("medium.toml");
+        std::fs::write(&path, "mu_a = 0.01\nmu_s_reduced = 5.0\nn = 1.12\n").unwrap();
+        let m = read_material(&path).unwrap();
+        assert_eq!((m.mu_s_per_cm, m.g), (5.0, 0.0));
+        // With g, mu_s = mu_s' / (1 - g).
+        std::fs::write(
+            &path,
+            "mu_a = 0.01\nmu_s_reduced = 5.0\ng = 0.9\nn = 1.12\n",
+        )
+        .unwrap();
+        let m = read_material(&path).unwrap();
+        assert!((m.mu_s_per_cm - 50.0).abs() < 1e-9 && m.g == 0.9, "{m:?}");
+        // The old spelling (mu_s with g = 0) reads the same medium.
+        std::fs::write(&path, "mu_a = 0.01\nmu_s = 5.0\ng = 0.0\nn = 1.12\n").unwrap();
+        assert_eq!(read_material(&path).unwrap().mu_s_per_cm, 5.0);
+        for (text, needle) in [
+            (
+                "mu_a = 0.01\nmu_s = 5.0\nmu_s_reduced = 5.0\nn = 1.12\n",
+                "both given",
+            ),
+            (
+                "mu_a = 0.01\nmu_s_reduced = 5.0\ng = 1.0\nn = 1.12\n",
+                "below 1",
+            ),
+            ("mu_a = 0.01\nn = 1.12\n", "`mu_s_reduced` is missing"),
+        ] {
+            std::fs::write(&path, text).unwrap();
+            let e = read_material(&path).unwrap_err().to_string();
+            assert!(e.contains("medium.toml") && e.contains(needle), "{e}");
+        }
+    }
 
     #[test]
     fn precedence_is_flags_over_file_over_preset() {

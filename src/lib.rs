@@ -12,6 +12,8 @@
 //! - [`stack`]: the K x H x W transient stack with its metadata, and its
 //!   OpenEXR / .npy files and PNG previews.
 //! - [`reconstruct`]: Poisson PnP-ADMM, Richardson-Lucy and raw baselines.
+//! - [`poisson`]: what both share: thinning into halves, the Poisson
+//!   deviance.
 //! - [`confocal`]: confocal scans of hidden objects behind a slab,
 //!   reconstructed into volumes.
 //! - [`denoise`]: Gaussian denoisers plugged in as priors.
@@ -89,6 +91,7 @@ pub mod memory;
 pub mod metrics;
 pub mod named;
 pub mod plot;
+pub mod poisson;
 pub mod psf;
 pub mod reconstruct;
 pub mod report;

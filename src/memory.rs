@@ -199,11 +199,12 @@ pub const SIMULATE_BYTES: u64 = 64;
 /// Bytes per pixel and bin of the ST-PSF report: both discretisations'
 /// kernels and the single-precision stack.
 pub const PSF_BYTES: u64 = 24;
-/// Bytes per pixel and bin a reconstruction holds at once: the counts,
-/// the kernels, their spectra and every method's per-bin state (the split
-/// solver's and whole-stack Richardson-Lucy's halves are the largest) on
-/// a grid up to twice the sensor's side.
-pub const RECONSTRUCT_BYTES: u64 = 136;
+/// Bytes per pixel and bin a reconstruction's problem holds: the counts,
+/// the kernels and their spectra on a grid up to twice the sensor's side
+/// (57 measured on a 32 x 32 sensor, whose grid is that large). Each
+/// method's own memory is its plan's
+/// ([`crate::reconstruct::method::Plan::working_bytes`]).
+pub const PROBLEM_BYTES: u64 = 80;
 
 /// Checks a job on `setup`'s sensor and bins against the budget at
 /// `per_pixel_bin` bytes per pixel and bin; `what` names the job.

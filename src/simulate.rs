@@ -79,18 +79,11 @@ pub fn simulate(
     seed: u64,
 ) -> Result<Simulation, SimulateError> {
     setup.validate()?;
+    // The budget before the scene is rendered at the sensor's size.
     crate::memory::check_setup(setup, crate::memory::SIMULATE_BYTES, "a simulation")?;
-    let t = Instant::now();
-    let kernels = KernelStack::build(setup, sampling)?;
-    let psf_s = t.elapsed().as_secs_f64();
-    if kernels.is_empty() {
-        return Err(SimulateError::NoBins {
-            min_bin_photons: setup.min_bin_photons,
-        });
-    }
     let truth = scene.render(setup.sensor.height_px, setup.sensor.width_px)?;
     let source = format!("simulated scene {}", scene.name());
-    through_kernels(kernels, truth, boundary, seed, psf_s, source)
+    simulate_image(setup, truth, sampling, boundary, seed, source)
 }
 
 /// Simulates the image `truth` (the sensor's `setup` size, values >= 0)

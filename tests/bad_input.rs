@@ -10,6 +10,7 @@
 
 #[path = "common/command.rs"]
 mod command;
+use command::run_isolated;
 #[path = "common/npy.rs"]
 mod npy;
 #[path = "common/pt3.rs"]
@@ -81,19 +82,6 @@ impl Kind {
             extra: Vec::new(),
         }
     }
-}
-
-fn scatterscope(args: &[String]) -> Output {
-    command::scatterscope()
-        .args(args)
-        .env_remove("SCATTERSCOPE_FFDNET_WEIGHTS")
-        .env(
-            "SCATTERSCOPE_DATA_DIR",
-            "/nonexistent/scatterscope-test-data",
-        )
-        .env("RUST_BACKTRACE", "0")
-        .output()
-        .expect("binary runs")
 }
 
 fn strings(args: &[&str]) -> Vec<String> {
@@ -297,7 +285,7 @@ fn run_matrix(kind: &Kind, dir: &Path) -> usize {
         }
         let out = dir.join(format!("out_{}_{i}", kind.name));
         std::fs::create_dir_all(&out).unwrap();
-        let o = scatterscope(&(kind.command)(&file, &out, dir));
+        let o = run_isolated(&(kind.command)(&file, &out, dir));
         if defect == "valid" {
             assert_eq!(
                 o.status.code(),
@@ -321,10 +309,10 @@ fn every_reader_refuses_bad_files_clearly() {
     let mut args = strings(&["simulate", "--scene", "disks", "--npy", "--seed", "1"]);
     args.extend(strings(&SMALL));
     args.extend(strings(&["--out", sim.to_str().unwrap()]));
-    assert!(scatterscope(&args).status.success());
+    assert!(run_isolated(&args).status.success());
     let acq = d.join("acq");
     let raw = d.join("tags.sstags");
-    let o = scatterscope(&strings(&[
+    let o = run_isolated(&strings(&[
         "acquire",
         "--device",
         "mock",
@@ -573,7 +561,7 @@ fn every_reader_refuses_bad_files_clearly() {
                 std::fs::write(&file, &bytes).unwrap();
                 let out = d.join(format!("out_{}_{i}", kind.name));
                 std::fs::create_dir_all(&out).unwrap();
-                let o = scatterscope(&(kind.command)(&file, &out, d));
+                let o = run_isolated(&(kind.command)(&file, &out, d));
                 check(kind, defect, &file, &out, &o, Expect::Refused);
                 runs += 1;
             }

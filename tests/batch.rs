@@ -6,30 +6,19 @@
 //! (`scripts/slurm_local.sh`), its outputs equal to the local run's bit for
 //! bit. Where no cluster answers, that test says why and skips.
 
+#[path = "common/bench_images.rs"]
+mod bench_images;
 #[path = "common/command.rs"]
 mod command;
+use bench_images::{QUICK_BENCH_FLAGS, small_image_set};
+use command::{run, text};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use scatterscope::events::Tag;
 use scatterscope::formats::picoquant::records::RecordType;
 use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
-
-fn scatterscope(args: &[&str]) -> Output {
-    command::scatterscope()
-        .args(args)
-        .output()
-        .expect("binary runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
 
 /// A small T3 file: `n` photons on two channels.
 fn write_ptu(path: &Path, n: u64, seed: u64) {
@@ -69,7 +58,7 @@ fn manifest(dir: &Path) -> PathBuf {
     }
     for i in 0..8 {
         let stack = data.join(format!("counts-{i}"));
-        let o = scatterscope(&[
+        let o = run(&[
             "simulate",
             "--scene",
             "text",
@@ -166,7 +155,7 @@ fn a_killed_batch_resumes_with_only_the_missing_jobs_and_a_bad_job_fails_alone()
         .map(|n| record(&out, n)["started_unix_s"].as_f64().unwrap())
         .collect();
     // Resume.
-    let o = scatterscope(&args);
+    let o = run(&args);
     let all = text(&o);
     assert!(!o.status.success(), "the bad job fails the batch: {all}");
     for (n, s) in before.iter().zip(&stamps) {
@@ -250,7 +239,7 @@ fn a_manifest_with_mistakes_is_refused_naming_them() {
     ] {
         let path = dir.path().join("m.toml");
         std::fs::write(&path, body).unwrap();
-        let o = scatterscope(&["batch", path.to_str().unwrap(), "--out", "/tmp/never"]);
+        let o = run(&["batch", path.to_str().unwrap(), "--out", "/tmp/never"]);
         assert!(!o.status.success());
         assert!(
             text(&o).contains(words) && text(&o).contains("m.toml"),
@@ -297,9 +286,9 @@ fn the_same_manifest_as_a_slurm_array_gives_the_local_runs_outputs() {
     let local = dir.path().join("local");
     let slurm = dir.path().join("slurm");
     let m = manifest.to_str().unwrap();
-    let o = scatterscope(&["batch", m, "--out", local.to_str().unwrap()]);
+    let o = run(&["batch", m, "--out", local.to_str().unwrap()]);
     assert!(!o.status.success(), "the bad job fails: {}", text(&o));
-    let o = scatterscope(&[
+    let o = run(&[
         "batch",
         m,
         "--slurm",
@@ -312,7 +301,7 @@ fn the_same_manifest_as_a_slurm_array_gives_the_local_runs_outputs() {
         all.contains("submitted") && all.contains("20 array tasks"),
         "{all}"
     );
-    let c = scatterscope(&["batch", m, "--collect", "--out", slurm.to_str().unwrap()]);
+    let c = run(&["batch", m, "--collect", "--out", slurm.to_str().unwrap()]);
     let collected = text(&c);
     for n in names() {
         assert!(collected.contains(&format!("| {n} | ok |")), "{collected}");
@@ -344,62 +333,28 @@ fn the_same_manifest_as_a_slurm_array_gives_the_local_runs_outputs() {
 #[test]
 fn bench_recon_as_a_batch_gives_the_single_runs_rows() {
     let dir = tempfile::tempdir().unwrap();
-    let images = dir.path().join("images");
-    std::fs::create_dir_all(&images).unwrap();
-    let wide = scatterscope::scene::Scene::parse("disks")
-        .render(160, 160)
-        .unwrap();
-    scatterscope::formats::png::write_png(wide.view(), Some(1.0), &images.join("wide.png"))
-        .unwrap();
-    std::fs::write(
-        images.join("manifest.csv"),
-        "name,file,source,category,split,licence\n\
-         disks,,scatterscope,sparse,tuning,built-in\n\
-         wide,wide.png,test,line art,held-out,test\n",
-    )
-    .unwrap();
-    let flags = [
-        "--split",
-        "all",
-        "--size",
-        "32",
-        "--fov",
-        "6.25",
-        "--object-px",
-        "160",
-        "--levels",
-        "1",
-        "--solvers",
-        "split",
-        "--priors",
-        "tv",
-        "--max-iters",
-        "10",
-        "--rl-iters",
-        "5",
-        "--rl-best-iters",
-        "20",
-    ];
-    let run = |extra: &[&str]| {
+    let images = small_image_set(dir.path());
+    let flags = QUICK_BENCH_FLAGS;
+    let bench = |extra: &[&str]| {
         let mut args = vec!["bench-recon", images.to_str().unwrap()];
         args.extend_from_slice(&flags);
         args.extend_from_slice(extra);
-        let o = scatterscope(&args);
+        let o = run(&args);
         assert!(o.status.success(), "{extra:?}: {}", text(&o));
     };
     let single = dir.path().join("single");
-    run(&["--out", single.to_str().unwrap()]);
+    bench(&["--out", single.to_str().unwrap()]);
     let manifest = dir.path().join("bench.toml");
     let batched = dir.path().join("batched");
-    run(&["--write-batch", manifest.to_str().unwrap()]);
-    let o = scatterscope(&[
+    bench(&["--write-batch", manifest.to_str().unwrap()]);
+    let o = run(&[
         "batch",
         manifest.to_str().unwrap(),
         "--out",
         batched.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", text(&o));
-    run(&["--merge", "--out", batched.to_str().unwrap()]);
+    bench(&["--merge", "--out", batched.to_str().unwrap()]);
     // Every column but the wall time (the 8th) agrees.
     let strip = |path: &Path| -> Vec<String> {
         std::fs::read_to_string(path)
@@ -446,7 +401,7 @@ fn a_job_past_its_time_limit_and_a_stopped_batch_end_their_jobs_and_say_so() {
     .unwrap();
     let out = dir.path().join("timed");
     let t = Instant::now();
-    let o = scatterscope(&["batch", m.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o = run(&["batch", m.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert!(t.elapsed() < Duration::from_secs(30), "{:?}", t.elapsed());
     assert!(!o.status.success(), "{}", text(&o));
     let r = record(&out, "slow");

@@ -838,17 +838,9 @@ fn the_real_reference_is_the_kernels_measured_table() {
     let out = tempfile::tempdir().unwrap();
     let reference = dir.join("capture_direct.mat");
     let simulate = |extra: &[&str]| {
-        command::scatterscope()
-            .args([
-                "simulate", "--scene", "disks", "--size", "32", "--fov", "6.25cm",
-            ])
-            .arg("--irf-from")
-            .arg(&reference)
-            .args(extra)
-            .arg("--out")
-            .arg(out.path())
-            .output()
-            .unwrap()
+        let mut args = vec!["--irf-from", reference.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        command::simulate_small(out.path(), &args)
     };
     // Without its bin width the reference is refused, naming the flag.
     let o = simulate(&[]);

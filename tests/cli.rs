@@ -1,8 +1,12 @@
 //! The `scatterscope` binary end to end: files written, numbers printed,
 //! errors worded for a lab user.
 
+#[path = "common/bench_images.rs"]
+mod bench_images;
 #[path = "common/command.rs"]
 mod command;
+use bench_images::{QUICK_BENCH_FLAGS, small_image_set};
+use command::{run_isolated, run_with_data_dir, simulate_small, streams};
 #[path = "common/shared_data.rs"]
 mod shared_data;
 
@@ -10,22 +14,6 @@ use std::path::Path;
 use std::process::Output;
 
 use scatterscope::stack::{Stack, ValueKind};
-
-/// Runs the binary with no weights from the user's environment: no
-/// weights variable and an empty data directory, so the prior is the
-/// embedded one unless a test says otherwise.
-fn scatterscope(args: &[&str]) -> Output {
-    scatterscope_with_data_dir(args, Path::new("/nonexistent/scatterscope-test-data"))
-}
-
-fn scatterscope_with_data_dir(args: &[&str], data_dir: &Path) -> Output {
-    command::scatterscope()
-        .args(args)
-        .env_remove("SCATTERSCOPE_FFDNET_WEIGHTS")
-        .env("SCATTERSCOPE_DATA_DIR", data_dir)
-        .output()
-        .expect("binary runs")
-}
 
 /// Writes a built-in scene rendered `size` x `size` as a PNG (gray levels
 /// in [0, 1]) and returns the rendered image.
@@ -37,19 +25,12 @@ fn write_scene_png(scene: &str, size: usize, path: &Path) -> ndarray::Array2<f64
     img
 }
 
-fn text(o: &Output) -> (String, String) {
-    (
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
-}
-
 #[test]
 fn psf_paper_preset_writes_stack_table_and_warnings() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().to_str().unwrap();
-    let o = scatterscope(&["psf", "--preset", "paper", "--out", out]);
-    let (stdout, stderr) = text(&o);
+    let o = run_isolated(&["psf", "--preset", "paper", "--out", out]);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     assert!(stderr.contains("warning [weak-scattering]"), "{stderr}");
     assert!(stderr.contains("left out: 10 bin(s)"), "{stderr}");
@@ -74,7 +55,7 @@ fn simulate_writes_reproducible_stacks_in_both_formats() {
     let dir = tempfile::tempdir().unwrap();
     let run = |sub: &str| {
         let out = dir.path().join(sub);
-        let o = scatterscope(&[
+        let o = run_isolated(&[
             "simulate",
             "--scene",
             "disks",
@@ -88,7 +69,7 @@ fn simulate_writes_reproducible_stacks_in_both_formats() {
             "--out",
             out.to_str().unwrap(),
         ]);
-        assert!(o.status.success(), "{}", text(&o).1);
+        assert!(o.status.success(), "{}", streams(&o).1);
         out
     };
     let (a, b) = (run("a"), run("b"));
@@ -121,8 +102,8 @@ fn simulate_writes_reproducible_stacks_in_both_formats() {
 }
 
 fn fails_with(args: &[&str], needles: &[&str]) {
-    let o = scatterscope(args);
-    let (_, stderr) = text(&o);
+    let o = run_isolated(args);
+    let (_, stderr) = streams(&o);
     assert!(!o.status.success(), "{args:?} should fail");
     for n in needles {
         assert!(stderr.contains(n), "{args:?}: missing `{n}` in: {stderr}");
@@ -177,8 +158,8 @@ fn bad_input_is_a_clear_error() {
 
 #[test]
 fn help_explains_units() {
-    let o = scatterscope(&["simulate", "--help"]);
-    let (stdout, _) = text(&o);
+    let o = run_isolated(&["simulate", "--help"]);
+    let (stdout, _) = streams(&o);
     for needle in [
         "--mu-a <1/CM>",
         "Time-bin width (default unit ps",
@@ -187,16 +168,16 @@ fn help_explains_units() {
     ] {
         assert!(stdout.contains(needle), "missing {needle}: {stdout}");
     }
-    assert!(Path::new(env!("CARGO_BIN_EXE_scatterscope")).exists());
+    assert!(Path::new(command::PROGRAM).exists());
 }
 
 /// Simulates the disks scene at `size` pixels with the paper's pixel pitch
 /// into `dir/sim`.
-fn simulate_small(dir: &Path, size: usize) -> std::path::PathBuf {
+fn simulate_disks(dir: &Path, size: usize) -> std::path::PathBuf {
     let sim = dir.join("sim");
     let fov = (50.0 * size as f64 / 256.0).to_string();
     let size = size.to_string();
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "simulate",
         "--scene",
         "disks",
@@ -207,14 +188,14 @@ fn simulate_small(dir: &Path, size: usize) -> std::path::PathBuf {
         "--out",
         sim.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", text(&o).1);
+    assert!(o.status.success(), "{}", streams(&o).1);
     sim
 }
 
 #[test]
 fn reconstruct_a_simulated_stack_with_every_method() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = simulate_small(dir.path(), 32);
+    let sim = simulate_disks(dir.path(), 32);
     let stack = sim.join("counts.exr");
     let truth = sim.join("truth.exr");
     for (method, bin) in [
@@ -242,8 +223,8 @@ fn reconstruct_a_simulated_stack_with_every_method() {
         if let Some(b) = bin {
             args.extend(["--bin", b]);
         }
-        let o = scatterscope(&args);
-        let (stdout, stderr) = text(&o);
+        let o = run_isolated(&args);
+        let (stdout, stderr) = streams(&o);
         assert!(o.status.success(), "{method}: {stderr}");
         assert!(stdout.contains("output PSNR"), "{method}: {stdout}");
         for f in [
@@ -258,7 +239,7 @@ fn reconstruct_a_simulated_stack_with_every_method() {
         assert!(csv.starts_with("method,iteration,wall_s,objective"));
         assert!(csv.lines().count() >= 2);
     }
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "reconstruct",
         stack.to_str().unwrap(),
         "--method",
@@ -267,9 +248,9 @@ fn reconstruct_a_simulated_stack_with_every_method() {
         dir.path().to_str().unwrap(),
     ]);
     assert!(!o.status.success());
-    assert!(text(&o).1.contains("needs --bin K"), "{}", text(&o).1);
+    assert!(streams(&o).1.contains("needs --bin K"), "{}", streams(&o).1);
     // The recorded physics can be overridden, and a mismatch is explained.
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "reconstruct",
         stack.to_str().unwrap(),
         "--bin-width",
@@ -279,16 +260,18 @@ fn reconstruct_a_simulated_stack_with_every_method() {
     ]);
     assert!(!o.status.success());
     assert!(
-        text(&o).1.contains("4 ps wide but the physics uses 8 ps"),
+        streams(&o)
+            .1
+            .contains("4 ps wide but the physics uses 8 ps"),
         "{}",
-        text(&o).1
+        streams(&o).1
     );
 }
 
 #[test]
 fn reconstruct_rejects_non_finite_stacks() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = simulate_small(dir.path(), 16);
+    let sim = simulate_disks(dir.path(), 16);
     let mut s = Stack::load(&sim.join("counts.exr")).unwrap();
     s.data[[3, 4, 5]] = f32::INFINITY;
     let bad = dir.path().join("bad.exr");
@@ -308,7 +291,7 @@ fn reconstruct_rejects_non_finite_stacks() {
 fn report_writes_tables_and_plots() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().to_str().unwrap();
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "report",
         "--scene",
         "disks",
@@ -323,7 +306,7 @@ fn report_writes_tables_and_plots() {
         "--out",
         out,
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     // The learned prior by default, with TV beside it (never a baseline).
     assert!(
@@ -402,8 +385,8 @@ fn info_and_bin_on_recorded_files() {
         t += 100;
     }
     w.finish().unwrap();
-    let o = scatterscope(&["info", file.to_str().unwrap()]);
-    let (stdout, stderr) = text(&o);
+    let o = run_isolated(&["info", file.to_str().unwrap()]);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     assert!(
         stdout.contains("Generic T3") && stdout.contains("image: 2 x 2 pixels"),
@@ -423,11 +406,11 @@ fn info_and_bin_on_recorded_files() {
             out,
         ];
         args.extend_from_slice(extra);
-        scatterscope(&args)
+        run_isolated(&args)
     };
     let out = dir.path().join("bin");
     let o = bin(&out, &[]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     assert!(stdout.contains("12 photons, 12 binned"), "{stdout}");
     let stack = Stack::load(&out.join("stack.exr")).unwrap();
@@ -443,7 +426,7 @@ fn info_and_bin_on_recorded_files() {
     // Without previews: the same stack, no contact sheet.
     let bare = dir.path().join("bare");
     let o = bin(&bare, &["--no-preview"]);
-    assert!(o.status.success(), "{}", text(&o).1);
+    assert!(o.status.success(), "{}", streams(&o).1);
     assert_eq!(
         Stack::load(&bare.join("stack.exr")).unwrap().data,
         stack.data
@@ -475,7 +458,7 @@ fn bin_reads_a_real_ptu_sample() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bin");
     let sample = shared_data::shared_data("picoquant-sample-data/hydraharp/v20_t3.ptu");
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "bin",
         sample.to_str().unwrap(),
         "--channel",
@@ -483,7 +466,7 @@ fn bin_reads_a_real_ptu_sample() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     assert!(
         stdout.contains("77883 photons") && stdout.contains("45012 on other channels"),
@@ -507,8 +490,8 @@ fn bin_reads_a_real_ptu_sample() {
 
 #[test]
 fn devices_lists_the_mocks_without_hardware() {
-    let o = scatterscope(&["devices", "--json"]);
-    let (stdout, stderr) = text(&o);
+    let o = run_isolated(&["devices", "--json"]);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     let list: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     let addresses: Vec<&str> = list
@@ -528,7 +511,7 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("acq");
     let raw = dir.path().join("tags.sstags");
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "acquire",
         "--device",
         "mock-serial",
@@ -546,7 +529,7 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stdout}\n{stderr}");
     assert!(
         stdout.contains("balance: every photon accounted for"),
@@ -577,15 +560,15 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
     );
 
     // The raw recording holds the same photons.
-    let o = scatterscope(&["info", raw.to_str().unwrap()]);
-    let (stdout, stderr) = text(&o);
+    let o = run_isolated(&["info", raw.to_str().unwrap()]);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     assert!(
         stdout.contains("photons: 200000") && stdout.contains("200000 photons sent"),
         "{stdout}"
     );
     let binned = dir.path().join("bin");
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "bin",
         raw.to_str().unwrap(),
         "--bin-width",
@@ -595,7 +578,7 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
         "--out",
         binned.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", text(&o).1);
+    assert!(o.status.success(), "{}", streams(&o).1);
     assert_eq!(
         Stack::load(&binned.join("stack.exr")).unwrap().data,
         stack.data
@@ -607,7 +590,7 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
     // recover the disks: far above the flat start and close to the best
     // iterate by truth.
     let rec = dir.path().join("rec");
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "reconstruct",
         out.join("stack.exr").to_str().unwrap(),
         "--truth",
@@ -615,7 +598,7 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
         "--out",
         rec.to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     let number_after = |key: &str| -> f64 {
         stdout
@@ -690,17 +673,13 @@ fn acquire_stops_cleanly_on(signal: nix::sys::signal::Signal) {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // The tag file is created once the device is configured, right before
-    // Start: wait for it (a loaded machine may take a while), then let the
-    // acquisition run for a moment.
-    let t0 = std::time::Instant::now();
-    while !raw.exists() && t0.elapsed() < std::time::Duration::from_secs(60) {
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
+    // The tag file is started once the device is configured, right before
+    // Start: wait for it, then let the acquisition run for a moment.
+    command::wait_for_recording(&raw);
     std::thread::sleep(std::time::Duration::from_millis(800));
     nix::sys::signal::kill(nix::unistd::Pid::from_raw(child.id() as i32), signal).unwrap();
     let o = child.wait_with_output().unwrap();
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     // Its own exit status: complete outputs, but not the planned end.
     assert_eq!(o.status.code(), Some(3), "{signal}: {stdout}\n{stderr}");
     assert!(stderr.contains("interrupted"), "{stderr}");
@@ -725,8 +704,8 @@ fn acquire_stops_cleanly_on(signal: nix::sys::signal::Signal) {
     );
     // The tag file is whole (it ends with the device's totals) and says
     // that the run was interrupted; `info` warns (exit status 4).
-    let o = scatterscope(&["info", raw.to_str().unwrap()]);
-    let (stdout, _) = text(&o);
+    let o = run_isolated(&["info", raw.to_str().unwrap()]);
+    let (stdout, _) = streams(&o);
     assert!(
         stdout.contains(&format!("{received} photons sent")),
         "{stdout}"
@@ -748,7 +727,7 @@ fn acquire_says_when_its_duration_ends_it_before_the_mocks_photon_quota() {
     let out = dir.path().join("acq");
     // Paced at the default 2 M photons per second, a billion photons take
     // minutes: the 300 ms duration ends the run first.
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "acquire",
         "--size",
         "64",
@@ -761,7 +740,7 @@ fn acquire_says_when_its_duration_ends_it_before_the_mocks_photon_quota() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stdout}\n{stderr}");
     assert!(
         stdout.contains("ended: the planned duration elapsed"),
@@ -787,7 +766,7 @@ fn acquire_says_when_its_duration_ends_it_before_the_mocks_photon_quota() {
 fn acquire_reports_injected_faults_and_a_disconnect() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("acq");
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "acquire",
         "--size",
         "64",
@@ -801,7 +780,7 @@ fn acquire_reports_injected_faults_and_a_disconnect() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stdout}\n{stderr}");
     assert!(
         stdout.contains("balance: every photon accounted for"),
@@ -822,7 +801,7 @@ fn acquire_reports_injected_faults_and_a_disconnect() {
         "{json}"
     );
 
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "acquire",
         "--size",
         "64",
@@ -834,7 +813,7 @@ fn acquire_reports_injected_faults_and_a_disconnect() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(!o.status.success());
     assert!(stderr.contains("the device disconnected"), "{stderr}");
     assert!(
@@ -880,7 +859,7 @@ fn denoise_improves_a_noisy_chart_and_names_bad_input() {
     };
     let out = dir.path().join("tv.npy");
     let run = |prior: &str| {
-        let o = scatterscope(&[
+        let o = run_isolated(&[
             "denoise",
             clean.to_str().unwrap(),
             "--sigma",
@@ -892,7 +871,7 @@ fn denoise_improves_a_noisy_chart_and_names_bad_input() {
             "--out",
             out.to_str().unwrap(),
         ]);
-        let (stdout, stderr) = text(&o);
+        let (stdout, stderr) = streams(&o);
         assert!(o.status.success(), "{stderr}");
         (psnrs(&stdout), stdout)
     };
@@ -915,7 +894,7 @@ fn denoise_improves_a_noisy_chart_and_names_bad_input() {
     );
 
     // The identity changes nothing: its output read back is the input.
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "denoise",
         clean.to_str().unwrap(),
         "--sigma",
@@ -925,8 +904,8 @@ fn denoise_improves_a_noisy_chart_and_names_bad_input() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", text(&o).1);
-    let back = scatterscope(&[
+    assert!(o.status.success(), "{}", streams(&o).1);
+    let back = run_isolated(&[
         "denoise",
         out.to_str().unwrap(),
         "--sigma",
@@ -936,7 +915,7 @@ fn denoise_improves_a_noisy_chart_and_names_bad_input() {
         "--out",
         dir.path().join("again.exr").to_str().unwrap(),
     ]);
-    assert!(back.status.success(), "{}", text(&back).1);
+    assert!(back.status.success(), "{}", streams(&back).1);
     use ndarray_npy::ReadNpyExt;
     let read: ndarray::Array2<f32> =
         ndarray::Array2::read_npy(std::fs::File::open(&out).unwrap()).unwrap();
@@ -980,8 +959,8 @@ fn weights_import_show_and_priority() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     // Nothing imported: the embedded weights.
-    let o = scatterscope_with_data_dir(&["weights", "show"], &data);
-    let (stdout, stderr) = text(&o);
+    let o = run_with_data_dir(&["weights", "show"], &data);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     assert!(stdout.contains("prior: ffdnet(embedded; "), "{stdout}");
     assert!(
@@ -992,21 +971,21 @@ fn weights_import_show_and_priority() {
     // A file that is not weights: the error names it, and nothing is written.
     let junk = dir.path().join("junk.pth");
     std::fs::write(&junk, b"not a pickle").unwrap();
-    let o = scatterscope_with_data_dir(&["weights", "import", junk.to_str().unwrap()], &data);
+    let o = run_with_data_dir(&["weights", "import", junk.to_str().unwrap()], &data);
     assert!(!o.status.success());
     assert!(
-        text(&o).1.contains("junk.pth: pickle at byte"),
+        streams(&o).1.contains("junk.pth: pickle at byte"),
         "{}",
-        text(&o).1
+        streams(&o).1
     );
     assert!(!data.exists());
     // An explicit weight file that fails validation is an error, not a fallback.
-    let o = scatterscope_with_data_dir(&["weights", "show", junk.to_str().unwrap()], &data);
+    let o = run_with_data_dir(&["weights", "show", junk.to_str().unwrap()], &data);
     assert!(!o.status.success());
     assert!(
-        text(&o).1.contains("junk.pth: not a safetensors file"),
+        streams(&o).1.contains("junk.pth: not a safetensors file"),
         "{}",
-        text(&o).1
+        streams(&o).1
     );
 }
 
@@ -1016,12 +995,12 @@ fn weights_import_of_the_original_comes_before_the_embedded() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     let pth = shared_data::original_ffdnet_pth();
-    let o = scatterscope_with_data_dir(&["weights", "import", pth.to_str().unwrap()], &data);
-    assert!(o.status.success(), "{}", text(&o).1);
+    let o = run_with_data_dir(&["weights", "import", pth.to_str().unwrap()], &data);
+    assert!(o.status.success(), "{}", streams(&o).1);
     assert!(data.join("ffdnet-gray.safetensors").is_file());
     // Imported weights now come before the embedded ones...
-    let o = scatterscope_with_data_dir(&["weights", "show"], &data);
-    let stdout = text(&o).0;
+    let o = run_with_data_dir(&["weights", "show"], &data);
+    let stdout = streams(&o).0;
     assert!(stdout.contains("prior: ffdnet(imported "), "{stdout}");
     assert!(stdout.contains("15 layers, 64 channels"), "{stdout}");
     // ...and an explicit --weights before both.
@@ -1029,7 +1008,7 @@ fn weights_import_of_the_original_comes_before_the_embedded() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/ffdnet-gray-small.safetensors");
     let img = dir.path().join("img.png");
     write_scene_png("disks", 32, &img);
-    let o = scatterscope_with_data_dir(
+    let o = run_with_data_dir(
         &[
             "denoise",
             img.to_str().unwrap(),
@@ -1042,8 +1021,8 @@ fn weights_import_of_the_original_comes_before_the_embedded() {
         ],
         &data,
     );
-    let stdout = text(&o).0;
-    assert!(o.status.success(), "{}", text(&o).1);
+    let stdout = streams(&o).0;
+    assert!(o.status.success(), "{}", streams(&o).1);
     assert!(
         stdout.contains("ffdnet-gray-small.safetensors; 12x"),
         "{stdout}"
@@ -1067,16 +1046,16 @@ fn the_word_embedded_picks_the_built_in_weights_over_imported_ones() {
     let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/ffdnet-gray-small.safetensors");
     std::fs::copy(&file, data.join(IMPORTED_FILE)).unwrap();
     let shows = |o: Output, prior: &str| {
-        let (stdout, stderr) = text(&o);
+        let (stdout, stderr) = streams(&o);
         assert!(o.status.success(), "{stderr}");
         assert!(stdout.contains(prior), "{stdout}");
     };
     shows(
-        scatterscope_with_data_dir(&["weights", "show"], &data),
+        run_with_data_dir(&["weights", "show"], &data),
         "prior: ffdnet(imported ",
     );
     shows(
-        scatterscope_with_data_dir(&["weights", "show", "embedded"], &data),
+        run_with_data_dir(&["weights", "show", "embedded"], &data),
         "prior: ffdnet(embedded; ",
     );
     shows(
@@ -1089,9 +1068,9 @@ fn the_word_embedded_picks_the_built_in_weights_over_imported_ones() {
         "prior: ffdnet(embedded; ",
     );
     // Any other missing name is still an error that names it.
-    let o = scatterscope_with_data_dir(&["weights", "show", "embeded"], &data);
+    let o = run_with_data_dir(&["weights", "show", "embeded"], &data);
     assert!(!o.status.success());
-    assert!(text(&o).1.contains("embeded"), "{}", text(&o).1);
+    assert!(streams(&o).1.contains("embeded"), "{}", streams(&o).1);
 }
 
 #[test]
@@ -1103,7 +1082,7 @@ fn denoise_bench_scores_every_prior_on_the_same_noise() {
         write_scene_png(scene, 64, &images.join(format!("{scene}.png")));
     }
     let out = dir.path().join("bench");
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "denoise-bench",
         images.to_str().unwrap(),
         "--sigmas",
@@ -1112,7 +1091,7 @@ fn denoise_bench_scores_every_prior_on_the_same_noise() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
     // 2 images x 1 sigma x 3 priors (embedded, tv, tv oracle) + header.
@@ -1154,44 +1133,13 @@ fn denoise_bench_scores_every_prior_on_the_same_noise() {
 #[test]
 fn bench_recon_scores_pnp_against_richardson_lucy_on_a_manifest() {
     let dir = tempfile::tempdir().unwrap();
-    let images = dir.path().join("images");
-    std::fs::create_dir_all(&images).unwrap();
-    write_scene_png("disks", 160, &images.join("wide.png"));
-    std::fs::write(
-        images.join("manifest.csv"),
-        "name,file,source,category,split,licence\n\
-         disks,,scatterscope,sparse,tuning,built-in\n\
-         wide,wide.png,test,line art,held-out,test\n",
-    )
-    .unwrap();
+    let images = small_image_set(dir.path());
     let out = dir.path().join("bench");
-    let o = scatterscope(&[
-        "bench-recon",
-        images.to_str().unwrap(),
-        "--split",
-        "all",
-        "--size",
-        "32",
-        "--fov",
-        "6.25",
-        "--object-px",
-        "160",
-        "--levels",
-        "1",
-        "--solvers",
-        "split",
-        "--priors",
-        "tv",
-        "--max-iters",
-        "10",
-        "--rl-iters",
-        "5",
-        "--rl-best-iters",
-        "20",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    let (stdout, stderr) = text(&o);
+    let mut args = vec!["bench-recon", images.to_str().unwrap()];
+    args.extend(QUICK_BENCH_FLAGS);
+    args.extend(["--out", out.to_str().unwrap()]);
+    let o = run_isolated(&args);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stdout}\n{stderr}");
     let rows = std::fs::read_to_string(out.join("rows.csv")).unwrap();
     for method in [
@@ -1241,7 +1189,7 @@ fn bench_recon_scores_pnp_against_richardson_lucy_on_a_manifest() {
     );
     assert!(out.join("traces/wide_1_pnp_split_tv.csv").exists());
     // An object grid too small for the kernels is refused, naming both.
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "bench-recon",
         images.to_str().unwrap(),
         "--size",
@@ -1255,9 +1203,9 @@ fn bench_recon_scores_pnp_against_richardson_lucy_on_a_manifest() {
     ]);
     assert!(!o.status.success());
     assert!(
-        text(&o).1.contains("less than the kernels' support"),
+        streams(&o).1.contains("less than the kernels' support"),
         "{}",
-        text(&o).1
+        streams(&o).1
     );
 }
 
@@ -1282,8 +1230,8 @@ fn plain_npy_without_sidecar_reconstructs_like_the_stack_with_metadata() {
     let mut args = vec!["simulate", "--scene", "disks", "--npy", "--seed", "5"];
     args.extend(flags);
     args.extend(["--out", sim.to_str().unwrap()]);
-    let o = scatterscope(&args);
-    assert!(o.status.success(), "{}", text(&o).1);
+    let o = run_isolated(&args);
+    assert!(o.status.success(), "{}", streams(&o).1);
     let with_meta = Stack::load(&sim.join("counts.npy")).unwrap();
     assert!(with_meta.meta.dropped_bins.is_empty());
     let plain = dir.path().join("plain.npy");
@@ -1293,10 +1241,10 @@ fn plain_npy_without_sidecar_reconstructs_like_the_stack_with_metadata() {
         let mut args = vec!["reconstruct", stack.to_str().unwrap(), "--max-iters", "5"];
         args.extend(extra);
         args.extend(["--out", out.to_str().unwrap()]);
-        let o = scatterscope(&args);
-        assert!(o.status.success(), "{}", text(&o).1);
+        let o = run_isolated(&args);
+        assert!(o.status.success(), "{}", streams(&o).1);
         (
-            text(&o).1,
+            streams(&o).1,
             scatterscope::scene::Scene::File(out.join("reconstruction.exr"))
                 .render(48, 48)
                 .unwrap(),
@@ -1311,14 +1259,18 @@ fn plain_npy_without_sidecar_reconstructs_like_the_stack_with_metadata() {
     );
     assert_eq!(a, b, "same counts and physics, same reconstruction");
     // Without the physics' size the plain file cannot match the sensor.
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "reconstruct",
         plain.to_str().unwrap(),
         "--out",
         dir.path().join("c").to_str().unwrap(),
     ]);
     assert!(!o.status.success());
-    assert!(text(&o).1.contains("48 x 48 pixels"), "{}", text(&o).1);
+    assert!(
+        streams(&o).1.contains("48 x 48 pixels"),
+        "{}",
+        streams(&o).1
+    );
 }
 
 #[test]
@@ -1327,23 +1279,11 @@ fn calibrate_fits_a_simulated_stack_and_names_bad_parameters() {
     // 100x the paper's light: its profile determines mu_s' (at the paper's
     // 450 photons the data do not, and calibrate refuses to guess).
     let sim = dir.path().join("sim");
-    let o = scatterscope(&[
-        "simulate",
-        "--scene",
-        "disks",
-        "--size",
-        "32",
-        "--fov",
-        "6.25cm",
-        "--photons",
-        "45000",
-        "--out",
-        sim.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o).1);
+    let o = simulate_small(&sim, &["--photons", "45000"]);
+    assert!(o.status.success(), "{}", streams(&o).1);
     let stack = sim.join("counts.exr");
     let out = dir.path().join("cal");
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "calibrate",
         stack.to_str().unwrap(),
         "--fit",
@@ -1351,7 +1291,7 @@ fn calibrate_fits_a_simulated_stack_and_names_bad_parameters() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     // `mu_s`, the old name of `mu_s_reduced`, still works and says so.
     assert!(
@@ -1437,11 +1377,11 @@ fn reconstruct_fits_the_physics_first_when_asked_and_records_it() {
         sim.to_str().unwrap(),
     ];
     args.extend(physics);
-    let o = scatterscope(&args);
-    assert!(o.status.success(), "{}", text(&o).1);
+    let o = run_isolated(&args);
+    assert!(o.status.success(), "{}", streams(&o).1);
     let stack = sim.join("counts.exr");
     let rec = dir.path().join("rec");
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "reconstruct",
         stack.to_str().unwrap(),
         "--method",
@@ -1455,7 +1395,7 @@ fn reconstruct_fits_the_physics_first_when_asked_and_records_it() {
         "--out",
         rec.to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     let fitted = |name: &str| -> f64 {
         let line = stdout
@@ -1520,22 +1460,10 @@ fn simulate_takes_its_irf_from_a_reference_recording_and_records_it() {
     Stack::new(data, meta).save(&reference).unwrap();
     let simulate = |out: &str, extra: &[&str]| {
         let sim = dir.path().join(out);
-        let mut args = vec![
-            "simulate",
-            "--scene",
-            "disks",
-            "--size",
-            "32",
-            "--fov",
-            "6.25cm",
-            "--irf-from",
-            reference.to_str().unwrap(),
-            "--out",
-            sim.to_str().unwrap(),
-        ];
+        let mut args = vec!["--irf-from", reference.to_str().unwrap()];
         args.extend_from_slice(extra);
-        let o = scatterscope(&args);
-        let (stdout, stderr) = text(&o);
+        let o = simulate_small(&sim, &args);
+        let (stdout, stderr) = streams(&o);
         assert!(o.status.success(), "{stderr}");
         let stack = Stack::load(&sim.join("counts.exr")).unwrap();
         let irf = stack.meta.setup.unwrap().irf.expect("the IRF is recorded");

@@ -8,13 +8,16 @@
 
 #[path = "common/command.rs"]
 mod command;
+use command::run;
+#[path = "common/pydeps.rs"]
+mod pydeps;
 #[path = "common/standin.rs"]
 mod standin;
 
 use std::collections::hash_map::DefaultHasher;
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use scatterscope::files::output::is_partial_name;
@@ -38,7 +41,7 @@ impl Inputs {
         let ptu = dir.path().join("in.ptu");
         write_synthetic_t3(&ptu, 4_000_000).unwrap();
         let tags = dir.path().join("in.sstags");
-        let o = scatterscope(&[
+        let o = run(&[
             "acquire",
             "--device",
             "mock",
@@ -72,10 +75,6 @@ impl Inputs {
     fn files(&self) -> [&Path; 3] {
         [&self.ptu, &self.tags, &self.manifest]
     }
-}
-
-fn scatterscope(args: &[&str]) -> std::process::Output {
-    command::scatterscope().args(args).output().unwrap()
 }
 
 fn digest(path: &Path) -> u64 {
@@ -290,7 +289,7 @@ fn kill_at_random(inputs: &Inputs, work: &Path, kills: usize, only: &[&str], see
     for (name, args) in commands(inputs, &work.join("whole")) {
         let t = Instant::now();
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let o = scatterscope(&args);
+        let o = run(&args);
         assert!(
             o.status.success(),
             "{name} whole: {}",
@@ -441,14 +440,8 @@ fn ptufile_reads_every_whole_ptu_and_flags_every_unfinished_one() {
     // about (its record count is 0 with records after it) or refused, or
     // holds nothing to misread: no record yet, or every record its patched
     // count says (killed between the patch and the rename).
-    let script = r#"
-import logging, sys, warnings
-import ptufile
-warned = []
-class Catch(logging.Handler):
-    def emit(self, record):
-        warned.append(record.getMessage())
-logging.getLogger("ptufile").addHandler(Catch())
+    let script = pydeps::PTUFILE_WARNINGS.to_string()
+        + r#"
 bad = []
 for path in open(sys.argv[1]).read().split():
     warned.clear()
@@ -481,19 +474,5 @@ print(flagged)
 if bad:
     sys.exit("\n".join(bad))
 "#;
-    let pydeps = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/pydeps");
-    let o = Command::new("python3")
-        .arg("-c")
-        .arg(script)
-        .arg(&whole)
-        .arg(&partial)
-        .env("PYTHONPATH", &pydeps)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
+    pydeps::python(&script, &[&whole, &partial]);
 }

@@ -6,12 +6,15 @@
 
 #[path = "common/command.rs"]
 mod command;
+use command::json;
+#[path = "common/pydeps.rs"]
+mod pydeps;
 #[path = "common/standin.rs"]
 mod standin;
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 /// Starts `acquire` with `args`; returns the child and the live view's
@@ -68,10 +71,6 @@ fn http_get(addr: &str, path: &str) -> String {
     r
 }
 
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
 /// Runs the browser check on `url` (`mode`: watch to the end, or close
 /// mid-run); the page's report.
 fn browse(
@@ -80,24 +79,14 @@ fn browse(
     mode: &str,
     screenshot: Option<&Path>,
 ) -> serde_json::Value {
-    let pydeps = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/pydeps");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/live/browser_check.py");
-    let o = Command::new("python3")
-        .arg(&script)
-        .arg(url)
-        .arg(if reconstruction { "1" } else { "0" })
-        .arg(mode)
-        .args(screenshot)
-        .env("PYTHONPATH", &pydeps)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    serde_json::from_slice(&o.stdout).unwrap()
+    let mut args = vec![
+        url.to_string(),
+        if reconstruction { "1" } else { "0" }.to_string(),
+        mode.to_string(),
+    ];
+    args.extend(screenshot.map(|p| p.display().to_string()));
+    let report = pydeps::python_file("tests/live/browser_check.py", &args);
+    serde_json::from_str(&report).unwrap()
 }
 
 /// The page's ledger equals the one the acquisition wrote.

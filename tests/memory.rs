@@ -4,11 +4,14 @@
 //! (64 MiB) and forged files declare arrays of gigabytes to terabytes
 //! (sparse, so they cost no disk).
 
+#[path = "common/forged.rs"]
+mod forged;
+
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::io::Write;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use forged::{forged_exr, forged_npy};
 use proptest::prelude::*;
 use scatterscope::memory::{self, MemoryError};
 use scatterscope::physics::{Preset, Sampling};
@@ -50,50 +53,6 @@ fn peak_of<T>(f: impl FnOnce() -> T) -> (T, u64) {
     let out = f();
     let peak = PEAK.load(Ordering::Relaxed).saturating_sub(before);
     (out, peak as u64)
-}
-
-/// A `.npy` file declaring `shape` of `descr`, sparse: its data "hold"
-/// every byte the header promises without taking disk.
-fn forged_npy(path: &Path, descr: &str, shape: &[usize]) {
-    let dims: Vec<String> = shape.iter().map(usize::to_string).collect();
-    let mut header = format!(
-        "{{'descr': '{descr}', 'fortran_order': False, 'shape': ({},), }}",
-        dims.join(", ")
-    );
-    while !(10 + header.len() + 1).is_multiple_of(64) {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut f = std::fs::File::create(path).unwrap();
-    f.write_all(b"\x93NUMPY\x01\x00").unwrap();
-    f.write_all(&(header.len() as u16).to_le_bytes()).unwrap();
-    f.write_all(header.as_bytes()).unwrap();
-    let item: u64 = descr[2..].parse().unwrap();
-    let data = memory::bytes_of(shape.iter().copied(), item);
-    // Files past a few TiB exceed what filesystems allow: such a header
-    // then promises more than its file holds, which is refused too.
-    f.set_len((10 + header.len()) as u64 + data.min(1 << 40))
-        .unwrap();
-}
-
-/// A 4 x 4 one-channel EXR whose data window is then declared `w` x `h`,
-/// zero-padded to `len` bytes.
-fn forged_exr(path: &Path, w: i32, h: i32, len: u64) {
-    let img = ndarray::Array2::<f32>::zeros((4, 4));
-    scatterscope::formats::exr::write_image(img.view(), path).unwrap();
-    let mut bytes = std::fs::read(path).unwrap();
-    let window = b"dataWindow\0box2i\0\x10\0\0\0";
-    let at = bytes
-        .windows(window.len())
-        .position(|win| win == window)
-        .unwrap()
-        + window.len();
-    // xMin, yMin, xMax, yMax.
-    bytes[at + 8..at + 12].copy_from_slice(&(w - 1).to_le_bytes());
-    bytes[at + 12..at + 16].copy_from_slice(&(h - 1).to_le_bytes());
-    std::fs::write(path, &bytes).unwrap();
-    let f = std::fs::OpenOptions::new().write(true).open(path).unwrap();
-    f.set_len(len.max(bytes.len() as u64)).unwrap();
 }
 
 fn assert_over_budget(e: &dyn std::error::Error, peak: u64) {
@@ -232,5 +191,74 @@ proptest! {
         forged_exr(&path, w, h, len);
         let (_, peak) = peak_of(|| Stack::read(&path));
         prop_assert!(peak <= BUDGET, "{w} x {h} in {len} bytes: peak {peak}");
+    }
+}
+
+/// Every method's plan declares its working memory: at two sensor sizes
+/// the bytes a run holds beyond its problem stay within the declaration,
+/// and the declaration within 2.5x of them (it sizes the budget check, so
+/// it must not refuse jobs that fit by a wide margin); the problem's own
+/// bytes stay within [`memory::PROBLEM_BYTES`] per pixel and bin.
+#[test]
+fn each_method_declares_the_working_memory_it_uses() {
+    use scatterscope::denoise::tv::TotalVariation;
+    use scatterscope::forward::poisson_counts;
+    use scatterscope::reconstruct::method::{Method, MethodOptions, Plan, Solver, run_method};
+    use scatterscope::{
+        Boundary, ForwardModel, KernelStack, Named, Problem, Scene, StackMeta, ValueKind,
+    };
+    for size in [32usize, 64] {
+        let mut setup = Preset::Paper.setup();
+        (setup.sensor.width_px, setup.sensor.height_px) = (size, size);
+        setup.sensor.fov_cm = 50.0 * size as f64 / 256.0;
+        let kernels = KernelStack::build(&setup, Sampling::Integrated).unwrap();
+        let model = ForwardModel::new(&kernels, Boundary::Sensor);
+        let truth = Scene::parse("disks").render(size, size).unwrap();
+        let counts = poisson_counts(&model.expected_scene(truth.view()).counts, 7);
+        let stack = Stack::new(
+            counts.mapv(|c| c as f32),
+            StackMeta::simulated(&kernels, ValueKind::Counts, "test".into()),
+        );
+        let (problem, peak) = peak_of(|| {
+            Problem::new(&stack, &setup, Sampling::Integrated, Boundary::Sensor).unwrap()
+        });
+        let k = problem.counts.shape()[0];
+        let declared = memory::bytes_of([k, size, size], memory::PROBLEM_BYTES);
+        assert!(peak <= declared, "problem at {size}: {peak} > {declared}");
+        let prior = TotalVariation::default();
+        for (method, solver, bin) in [
+            (Method::Auto, Solver::Split, None),
+            (Method::Pnp, Solver::Split, None),
+            (Method::Pnp, Solver::AdmmLbfgs, None),
+            (Method::PnpSlice, Solver::Split, Some(3)),
+            (Method::PnpSum, Solver::Split, None),
+            (Method::Rl, Solver::Split, Some(3)),
+            (Method::RlSum, Solver::Split, None),
+            (Method::RlStack, Solver::Split, None),
+            (Method::ScaledCounts, Solver::Split, None),
+        ] {
+            let mut opts = MethodOptions {
+                solver,
+                ..MethodOptions::default()
+            };
+            opts.split.max_iters = 4;
+            opts.admm_lbfgs.max_iters = 4;
+            opts.rl_max_iters = 10;
+            let declared = Plan::new(method, bin, k, &prior, &opts)
+                .unwrap()
+                .working_bytes(&problem);
+            let (r, peak) =
+                peak_of(|| run_method(&problem, method, bin, &prior, &opts, None, |_| {}));
+            r.unwrap();
+            let what = format!("{} ({solver:?}) at {size}", method.name());
+            assert!(
+                peak <= declared,
+                "{what}: used {peak} > declared {declared}"
+            );
+            assert!(
+                declared as f64 <= 2.5 * peak as f64,
+                "{what}: declared {declared} > 2.5 x used {peak}"
+            );
+        }
     }
 }

@@ -5,20 +5,28 @@
 //! without an address-space limit of 4 GB (`ulimit -v`), and no run's
 //! peak memory reaches 1 GB.
 
-use std::io::Write;
-use std::path::Path;
+#[path = "common/command.rs"]
+mod command;
+#[path = "common/forged.rs"]
+mod forged;
+
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
+use forged::{forged_exr, forged_npy};
+
 /// Runs the binary, under `ulimit -v 4 GB` when `limited`.
 fn run(args: &[&str], limited: bool) -> (Output, Duration) {
-    let bin = env!("CARGO_BIN_EXE_scatterscope");
     let mut cmd = if limited {
         let mut c = Command::new("bash");
-        c.args(["-c", "ulimit -v 4194304 && exec \"$0\" \"$@\"", bin]);
+        c.args([
+            "-c",
+            "ulimit -v 4194304 && exec \"$0\" \"$@\"",
+            command::PROGRAM,
+        ]);
         c
     } else {
-        Command::new(bin)
+        command::scatterscope()
     };
     let start = Instant::now();
     let out = cmd
@@ -29,67 +37,14 @@ fn run(args: &[&str], limited: bool) -> (Output, Duration) {
     (out, start.elapsed())
 }
 
-/// A `.npy` header declaring (20, 32768, 32768) float32, its 86 GB of
-/// data present as a hole.
-fn huge_npy(path: &Path) {
-    let mut header =
-        "{'descr': '<f4', 'fortran_order': False, 'shape': (20, 32768, 32768), }".to_string();
-    while !(10 + header.len() + 1).is_multiple_of(64) {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut f = std::fs::File::create(path).unwrap();
-    f.write_all(b"\x93NUMPY\x01\x00").unwrap();
-    f.write_all(&(header.len() as u16).to_le_bytes()).unwrap();
-    f.write_all(header.as_bytes()).unwrap();
-    f.set_len((10 + header.len()) as u64 + 20 * 32768 * 32768 * 4)
-        .unwrap();
-}
-
-/// An EXR whose header declares a 131072 x 131072 channel, padded with
-/// zeros to 17 MiB.
-fn forged_exr(path: &Path) {
-    let img = ndarray::Array2::<f32>::zeros((4, 4));
-    scatterscope::formats::exr::write_image(img.view(), path).unwrap();
-    let mut bytes = std::fs::read(path).unwrap();
-    let window = b"dataWindow\0box2i\0\x10\0\0\0";
-    let at = bytes
-        .windows(window.len())
-        .position(|w| w == window)
-        .unwrap()
-        + window.len();
-    bytes[at + 8..at + 12].copy_from_slice(&(131_071i32).to_le_bytes());
-    bytes[at + 12..at + 16].copy_from_slice(&(131_071i32).to_le_bytes());
-    std::fs::write(path, &bytes).unwrap();
-    std::fs::OpenOptions::new()
-        .write(true)
-        .open(path)
-        .unwrap()
-        .set_len(17 << 20)
-        .unwrap();
-}
-
 #[test]
 fn every_way_to_ask_for_too_much_memory_ends_quickly_with_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    huge_npy(&dir.path().join("big.npy"));
-    forged_exr(&dir.path().join("forged.exr"));
+    forged_npy(&dir.path().join("big.npy"), "<f4", &[20, 32768, 32768]);
+    forged_exr(&dir.path().join("forged.exr"), 131_072, 131_072, 17 << 20);
     // A small stack and image for the reads that need one.
-    let (o, _) = run(
-        &[
-            "simulate",
-            "--scene",
-            "disks",
-            "--size",
-            "32",
-            "--fov",
-            "6.25cm",
-            "--out",
-            &d("sim"),
-        ],
-        false,
-    );
+    let o = command::simulate_small(&dir.path().join("sim"), &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let stack = d("sim/counts.exr");
     let png = d("sim/truth.png");

@@ -5,23 +5,12 @@
 
 #[path = "common/command.rs"]
 mod command;
+use command::{run, text};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use scatterscope::formats::picoquant::writer::write_synthetic_t3;
-
-fn scatterscope(args: &[&str]) -> Output {
-    command::scatterscope().args(args).output().unwrap()
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -47,7 +36,7 @@ fn convert_onto_its_own_input_by_any_spelling_leaves_it_byte_identical() {
         ("hard link", hard, rec.clone()),
     ];
     for (how, input, output) in cases {
-        let r = scatterscope(&["convert", s(&input), "--out", s(&output)]);
+        let r = run(&["convert", s(&input), "--out", s(&output)]);
         assert_eq!(r.status.code(), Some(1), "{how}: {}", text(&r));
         assert!(text(&r).contains("same file"), "{how}: {}", text(&r));
         assert_eq!(
@@ -57,7 +46,7 @@ fn convert_onto_its_own_input_by_any_spelling_leaves_it_byte_identical() {
         );
     }
     // A command whose output is named as its input: refused by identity.
-    let r = scatterscope(&[
+    let r = run(&[
         "simulate",
         "--scene",
         "disks",
@@ -69,7 +58,7 @@ fn convert_onto_its_own_input_by_any_spelling_leaves_it_byte_identical() {
     assert!(r.status.success(), "{}", text(&r));
     std::fs::rename(o.join("counts.exr"), o.join("reconstruction.exr")).unwrap();
     let before = std::fs::read(o.join("reconstruction.exr")).unwrap();
-    let r = scatterscope(&[
+    let r = run(&[
         "reconstruct",
         s(&o.join("reconstruction.exr")),
         "--method",
@@ -122,7 +111,7 @@ fn a_fifo_as_any_input_is_refused_at_once() {
     ];
     for args in cases {
         let t = Instant::now();
-        let r = scatterscope(&args);
+        let r = run(&args);
         assert!(
             t.elapsed() < Duration::from_secs(5),
             "{args:?} took {:?}",
@@ -150,7 +139,7 @@ fn a_batch_manifest_that_is_a_device_or_huge_is_refused_in_under_a_second() {
         (s(&big), "batch manifest"),
     ] {
         let t = Instant::now();
-        let r = scatterscope(&["batch", manifest, "--out", s(&dir.path().join("o"))]);
+        let r = run(&["batch", manifest, "--out", s(&dir.path().join("o"))]);
         assert!(
             t.elapsed() < Duration::from_secs(1),
             "{manifest}: {:?}",
@@ -173,7 +162,7 @@ fn an_empty_stack_is_written_with_a_warning_and_exit_status_4() {
         let out = dir.path().join("out");
         let mut args = vec!["bin", s(&rec), "--out", s(&out)];
         args.extend(&flags);
-        let r = scatterscope(&args);
+        let r = run(&args);
         let all = text(&r);
         assert_eq!(r.status.code(), Some(4), "{flags:?}: {all}");
         let warning = all
@@ -208,7 +197,7 @@ fn hidden_warns_of_a_scan_shorter_than_the_depth_and_of_an_empty_volume() {
             s(dir.path()),
         ];
         args.extend_from_slice(extra);
-        scatterscope(&args)
+        run(&args)
     };
     let r = run(&["--slab-thickness", "1in", "--depth", "3m"]);
     assert_eq!(r.status.code(), Some(4), "{}", text(&r));
@@ -238,7 +227,7 @@ fn a_slab_fit_with_swapped_thicknesses_warns_and_writes_no_medium_file() {
     );
     let thin_as_thick = format!("{}=4in", s(&thin));
     let thick_as_thin = format!("{}=1in", s(&thick));
-    let r = scatterscope(&[
+    let r = run(&[
         "calibrate-slab",
         "--irf-from",
         s(&irf),
@@ -335,7 +324,7 @@ fn implausible_files_are_refused_naming_the_field_and_value() {
 #[test]
 fn a_whole_count_past_2_to_the_53_is_named_as_implausible_not_as_fractional() {
     let counts = ndarray::Array2::from_elem((2, 2), 3e38);
-    let e = scatterscope::reconstruct::thinning::thin_halves(&counts, 1, "the counts")
+    let e = scatterscope::poisson::thinning::thin_halves(&counts, 1, "the counts")
         .unwrap_err()
         .to_string();
     assert!(
@@ -348,7 +337,7 @@ fn a_whole_count_past_2_to_the_53_is_named_as_implausible_not_as_fractional() {
 fn picoquant_flags_given_to_another_device_are_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
     let ptu = dir.path().join("rec.ptu");
-    let r = scatterscope(&[
+    let r = run(&[
         "acquire",
         "--device",
         "mock",

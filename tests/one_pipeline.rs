@@ -6,6 +6,7 @@
 
 #[path = "common/command.rs"]
 mod command;
+use command::{json, run, text};
 #[path = "common/pydeps.rs"]
 mod pydeps;
 #[path = "common/standin.rs"]
@@ -17,22 +18,6 @@ use std::process::Output;
 use scatterscope::events::Tag;
 use scatterscope::formats::picoquant;
 use scatterscope::formats::picoquant::records::Decoder;
-
-fn scatterscope(args: &[&str]) -> Output {
-    command::scatterscope().args(args).output().unwrap()
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
 
 /// A mock acquisition of a 6 x 6 sensor (36 pixels: a T3 record names up
 /// to 63 channels) recorded to `ptu`, stopped by its photon quota.
@@ -55,7 +40,7 @@ fn mock_to_ptu(dir: &Path, ptu: &Path, extra: &[&str]) -> (Output, serde_json::V
         out.to_str().unwrap(),
     ];
     args.extend(extra);
-    let o = scatterscope(&args);
+    let o = run(&args);
     let record = if o.status.success() {
         json(&out.join("acquisition.json"))
     } else {
@@ -141,7 +126,7 @@ fn a_sensor_too_large_for_a_t3_record_is_refused_before_anything_is_written() {
     let dir = tempfile::tempdir().unwrap();
     let ptu = dir.path().join("big.ptu");
     let out = dir.path().join("acq");
-    let o = scatterscope(&[
+    let o = run(&[
         "acquire",
         "--device",
         "mock",
@@ -219,14 +204,9 @@ fn ptufile_decodes_a_mocks_ptu_to_the_photons_the_ledger_reports() {
     let ptu = dir.path().join("mock.ptu");
     let (o, record) = mock_to_ptu(dir.path(), &ptu, &[]);
     assert!(o.status.success(), "{}", text(&o));
-    let script = r#"
-import logging, sys
-import numpy, ptufile
-warned = []
-class Catch(logging.Handler):
-    def emit(self, record):
-        warned.append(record.getMessage())
-logging.getLogger("ptufile").addHandler(Catch())
+    let script = pydeps::PTUFILE_WARNINGS.to_string()
+        + r#"
+import numpy
 with ptufile.PtuFile(sys.argv[1]) as f:
     records = f.decode_records()
 photons = int(numpy.count_nonzero(records["marker"] == 0) - numpy.count_nonzero(records["channel"] < 0))
@@ -234,7 +214,7 @@ if warned:
     sys.exit(f"warned: {warned}")
 print(photons)
 "#;
-    let photons: u64 = pydeps::python(script, &[&ptu]).trim().parse().unwrap();
+    let photons: u64 = pydeps::python(&script, &[&ptu]).trim().parse().unwrap();
     assert_eq!(photons, record["ledger"]["photons"].as_u64().unwrap());
 }
 
@@ -246,7 +226,7 @@ fn a_replay_of_a_recording_gives_its_stack_at_its_pace() {
     let dir = tempfile::tempdir().unwrap();
     let tags = dir.path().join("run.sstags");
     let run = |args: &[&str]| {
-        let o = scatterscope(args);
+        let o = run(args);
         assert!(o.status.success(), "{}", text(&o));
         o
     };

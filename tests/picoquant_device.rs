@@ -8,13 +8,15 @@
 
 #[path = "common/command.rs"]
 mod command;
+use command::{json, text};
+#[path = "common/pydeps.rs"]
+mod pydeps;
 #[path = "common/shared_data.rs"]
 mod shared_data;
 #[path = "common/standin.rs"]
 mod standin;
 
 use std::path::Path;
-use std::process::Command;
 
 use scatterscope::events::Tag;
 use scatterscope::formats::picoquant::open;
@@ -22,18 +24,6 @@ use scatterscope::formats::picoquant::records::Decoder;
 use scatterscope::formats::sstags::TagFile;
 use scatterscope::stack::Stack;
 use standin::{scatterscope_pq, standin_library, truth};
-
-fn text(o: &std::process::Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
 
 /// Acquires from the stand-in; returns the output folder's path and the
 /// command's output.
@@ -518,7 +508,6 @@ fn the_shared_picoquant_samples_convert_to_ptu_photon_for_photon() {
 #[test]
 #[ignore = "needs ptufile and numpy under target/pydeps (scripts/fetch_python_deps.sh)"]
 fn ptufile_decodes_the_acquisitions_records_and_histogram() {
-    let pydeps = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/pydeps");
     for family in ["multiharp", "hydraharp"] {
         let dir = tempfile::tempdir().unwrap();
         let (out, o) = acquire(dir.path(), &format!("picoquant:{family}"), "", &[]);
@@ -537,15 +526,8 @@ with ptufile.PtuFile(sys.argv[1]) as p:
                       "resolution": float(p.tcspc_resolution),
                       "hist": hist.tolist()}))
 "#;
-        let py = Command::new("python3")
-            .arg("-c")
-            .arg(script)
-            .arg(&ptu)
-            .env("PYTHONPATH", &pydeps)
-            .output()
-            .expect("python3 runs");
-        assert!(py.status.success(), "{}", text(&py));
-        let got: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
+        let py = pydeps::python(script, &[&ptu]);
+        let got: serde_json::Value = serde_json::from_str(&py).unwrap();
         let record = json(&out.join("acquisition.json"));
         assert_eq!(got["records"], record["ledger"]["records_read"], "{family}");
         assert_eq!(got["photons"], record["ledger"]["photons"], "{family}");
@@ -584,12 +566,9 @@ fn ctrl_c_ends_a_picoquant_run_with_everything_read_saved() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // The PTU is created once the device is set up, right before Start.
+    // The PTU is started once the device is set up, right before Start.
     let ptu = out.join("acquisition.ptu");
-    let t0 = std::time::Instant::now();
-    while !ptu.exists() && t0.elapsed() < std::time::Duration::from_secs(60) {
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
+    command::wait_for_recording(&ptu);
     std::thread::sleep(std::time::Duration::from_millis(500));
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(child.id() as i32),

@@ -3,42 +3,13 @@
 
 #[path = "common/command.rs"]
 mod command;
-use std::process::Output;
-
-fn scatterscope(args: &[&str]) -> Output {
-    command::scatterscope()
-        .args(args)
-        .env_remove("SCATTERSCOPE_FFDNET_WEIGHTS")
-        .env(
-            "SCATTERSCOPE_DATA_DIR",
-            "/nonexistent/scatterscope-test-data",
-        )
-        .output()
-        .expect("binary runs")
-}
-
-fn text(o: &Output) -> (String, String) {
-    (
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
-}
+use command::{run_isolated, simulate_small, streams};
 
 /// A simulated 32 x 32 stack in `dir/sim`; returns its counts file.
 fn small_stack(dir: &std::path::Path) -> String {
     let sim = dir.join("sim");
-    let o = scatterscope(&[
-        "simulate",
-        "--scene",
-        "disks",
-        "--size",
-        "32",
-        "--fov",
-        "6.25cm",
-        "--out",
-        sim.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o).1);
+    let o = simulate_small(&sim, &[]);
+    assert!(o.status.success(), "{}", streams(&o).1);
     sim.join("counts.exr").to_str().unwrap().to_string()
 }
 
@@ -46,7 +17,7 @@ fn small_stack(dir: &std::path::Path) -> String {
 fn an_acquisition_that_receives_nothing_fails() {
     let dir = tempfile::tempdir().unwrap();
     // Every batch's frame corrupted: the host accepts none.
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "acquire",
         "--size",
         "16",
@@ -60,7 +31,7 @@ fn an_acquisition_that_receives_nothing_fails() {
         "--out",
         dir.path().join("acq").to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert_eq!(o.status.code(), Some(1), "{stdout}\n{stderr}");
     assert!(
         stderr.contains("no photon was received from the device"),
@@ -81,13 +52,13 @@ fn a_calibration_the_data_cannot_determine_writes_nothing_and_fails() {
     let one = dir.path().join("one.exr");
     s.save(&one).unwrap();
     let out = dir.path().join("cal");
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "calibrate",
         one.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert_eq!(o.status.code(), Some(1), "{stdout}\n{stderr}");
     assert!(
         stderr.contains("determine none of the fitted parameters"),
@@ -114,7 +85,7 @@ fn settings_that_are_not_numbers_or_absurd_are_refused_with_their_flag() {
         ),
         ("--rho", "inf", "rho = inf must be a positive number"),
     ] {
-        let o = scatterscope(&[
+        let o = run_isolated(&[
             "reconstruct",
             &stack,
             flag,
@@ -122,7 +93,7 @@ fn settings_that_are_not_numbers_or_absurd_are_refused_with_their_flag() {
             "--out",
             out.to_str().unwrap(),
         ]);
-        let (_, stderr) = text(&o);
+        let (_, stderr) = streams(&o);
         assert_eq!(o.status.code(), Some(1), "{flag} {value}: {stderr}");
         assert!(stderr.contains(want), "{stderr}");
         assert!(
@@ -139,7 +110,7 @@ fn a_truth_of_another_size_is_said_to_be_resampled() {
     let truth = dir.path().join("big_truth.png");
     let img = ndarray::Array2::from_shape_fn((48, 48), |(r, c)| ((r + c) % 7) as f64 / 7.0);
     scatterscope::formats::image::write_image(img.view(), &truth).unwrap();
-    let o = scatterscope(&[
+    let o = run_isolated(&[
         "reconstruct",
         &stack,
         "--method",
@@ -149,7 +120,7 @@ fn a_truth_of_another_size_is_said_to_be_resampled() {
         "--out",
         dir.path().join("rec").to_str().unwrap(),
     ]);
-    let (stdout, stderr) = text(&o);
+    let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stderr}");
     assert!(
         stderr.contains("big_truth.png is 48 x 48 pixels; resampled to the 32 x 32 sensor"),
@@ -160,14 +131,14 @@ fn a_truth_of_another_size_is_said_to_be_resampled() {
 
 #[test]
 fn a_memory_limit_that_is_not_a_size_is_refused() {
-    let o = scatterscope(&["psf", "--memory-limit", "lots", "--out", "/tmp/none"]);
-    assert_eq!(o.status.code(), Some(2), "{}", text(&o).1);
+    let o = run_isolated(&["psf", "--memory-limit", "lots", "--out", "/tmp/none"]);
+    assert_eq!(o.status.code(), Some(2), "{}", streams(&o).1);
     let o = command::scatterscope()
         .args(["psf", "--out", "/tmp/scatterscope-psf-limit"])
         .env("SCATTERSCOPE_MEMORY_LIMIT", "1MB")
         .output()
         .unwrap();
-    let (_, stderr) = text(&o);
+    let (_, stderr) = streams(&o);
     assert_eq!(o.status.code(), Some(1), "{stderr}");
     assert!(
         stderr.contains("more than the budget of 976.6 KiB (SCATTERSCOPE_MEMORY_LIMIT)")

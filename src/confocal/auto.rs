@@ -18,10 +18,10 @@
 use ndarray::Array3;
 
 use super::published::{PublishedOptions, reconstruct_published};
-use super::scan::halves;
 use super::slab_kernel::SlabOptics;
 use super::volume::{HiddenVolume, pearson};
 use super::{ConfocalError, ConfocalScan};
+use crate::poisson::thinning::halves;
 
 /// Seed of the halves' thinning.
 pub const AUTO_SEED: u64 = 0x5ca7_2049;
@@ -127,6 +127,29 @@ pub fn reconstruct_auto(
             blur,
         }),
     ))
+}
+
+/// The default: the published method blurred by a width its thinned
+/// halves choose ([`reconstruct_auto`]).
+#[derive(Debug, Clone, Copy)]
+pub struct AutoBlur(pub PublishedOptions);
+
+impl super::VolumeReconstructor for AutoBlur {
+    fn name(&self) -> &'static str {
+        "auto"
+    }
+
+    fn reconstruct(
+        &self,
+        scan: &ConfocalScan,
+        optics: &SlabOptics,
+    ) -> Result<super::HiddenResult, ConfocalError> {
+        let (volume, choice) = reconstruct_auto(scan, optics, &self.0)?;
+        Ok(super::HiddenResult {
+            choice,
+            ..super::HiddenResult::volume(volume)
+        })
+    }
 }
 
 #[cfg(test)]

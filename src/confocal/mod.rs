@@ -45,11 +45,11 @@ pub use volume::HiddenVolume;
 /// How a hidden volume is reconstructed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum HiddenMethod {
-    /// [`auto::reconstruct_auto`].
+    /// [`auto::AutoBlur`].
     Auto,
-    /// [`published::reconstruct_published`].
+    /// [`published::Published`].
     Published,
-    /// [`poisson::reconstruct_poisson`].
+    /// [`poisson::PoissonEm`].
     Poisson,
 }
 
@@ -59,23 +59,57 @@ crate::named::named!(HiddenMethod {
     Poisson => "poisson",
 });
 
-/// Reconstructs `scan` through a slab of `optics` by `method` with its
-/// settings; the Poisson method's search trace beside the volume.
-pub fn reconstruct_hidden(
-    scan: &ConfocalScan,
-    optics: &SlabOptics,
-    method: HiddenMethod,
-    published: &PublishedOptions,
-    poisson: &PoissonOptions,
-) -> Result<(HiddenVolume, Option<Vec<poisson::PoissonTraceRow>>), ConfocalError> {
-    Ok(match method {
-        HiddenMethod::Auto => (reconstruct_auto(scan, optics, published)?.0, None),
-        HiddenMethod::Published => (reconstruct_published(scan, optics, published)?, None),
-        HiddenMethod::Poisson => {
-            let (volume, trace) = reconstruct_poisson(scan, optics, poisson)?;
-            (volume, Some(trace))
+impl HiddenMethod {
+    /// The method with its settings, behind the one interface.
+    pub fn reconstructor(
+        self,
+        published: &PublishedOptions,
+        poisson: &PoissonOptions,
+    ) -> Box<dyn VolumeReconstructor> {
+        match self {
+            HiddenMethod::Auto => Box::new(auto::AutoBlur(*published)),
+            HiddenMethod::Published => Box::new(published::Published(*published)),
+            HiddenMethod::Poisson => Box::new(poisson::PoissonEm(*poisson)),
         }
-    })
+    }
+}
+
+/// A hidden-volume method: the confocal counterpart of the 2-D methods'
+/// [`crate::reconstruct::Reconstructor`], one interface for the command,
+/// the benchmark and code.
+pub trait VolumeReconstructor {
+    /// The method's name.
+    fn name(&self) -> &'static str;
+
+    /// Reconstructs the volume behind a slab of `optics` from `scan`.
+    fn reconstruct(
+        &self,
+        scan: &ConfocalScan,
+        optics: &SlabOptics,
+    ) -> Result<HiddenResult, ConfocalError>;
+}
+
+/// A reconstructed volume and what its method reports beside it.
+#[derive(Debug, Clone)]
+pub struct HiddenResult {
+    /// The volume.
+    pub volume: HiddenVolume,
+    /// The Poisson method's search, one row per iteration.
+    pub trace: Option<Vec<poisson::PoissonTraceRow>>,
+    /// The default's choice of blur (none where the counts cannot be
+    /// thinned).
+    pub choice: Option<AutoChoice>,
+}
+
+impl HiddenResult {
+    /// A volume with nothing reported beside it.
+    pub fn volume(volume: HiddenVolume) -> Self {
+        Self {
+            volume,
+            trace: None,
+            choice: None,
+        }
+    }
 }
 
 /// What makes a reconstruction of `scan` to `depth_m` (m behind the slab)

@@ -33,10 +33,11 @@ use ndarray::{Array1, Array3, Axis, Zip, s};
 
 use super::forward::SlabBlur;
 use super::published::{LIGHT_SPEED, crop_bins};
-use super::scan::halves;
 use super::slab_kernel::SlabOptics;
 use super::volume::HiddenVolume;
 use super::{ConfocalError, ConfocalScan, stolt};
+use crate::poisson::deviance::volume_deviance;
+use crate::poisson::thinning::halves;
 
 /// Seed of the halves' thinning.
 pub const HALVES_SEED: u64 = 0x5ca7_2026;
@@ -85,18 +86,6 @@ pub struct PoissonTraceRow {
 struct Estimate {
     tau: Array3<f64>,
     background: Array1<f64>,
-}
-
-/// Poisson deviance of `counts` under `mu` over the bins from `onset`.
-fn deviance(counts: &Array3<f64>, mu: &Array3<f64>, onset: usize) -> f64 {
-    let mut total = 0.0;
-    Zip::from(counts.slice(s![onset.., .., ..]))
-        .and(mu.slice(s![onset.., .., ..]))
-        .for_each(|&y, &m| {
-            let m = m.max(1e-300);
-            total += 2.0 * (if y > 0.0 { y * (y / m).ln() } else { 0.0 } - (y - m));
-        });
-    total
 }
 
 /// `counts / mu` over the bins from `onset` (0 before it and where `mu`
@@ -244,7 +233,7 @@ pub fn reconstruct_poisson(
         // Both halves through one transform each way (forward_pair).
         let (blur_a, blur_b) = blur.forward_pair(&a.tau, &b.tau);
         let (mu_a, mu_b) = (with_background(blur_a, &a), with_background(blur_b, &b));
-        let score = deviance(&second, &mu_a, onset) + deviance(&first, &mu_b, onset);
+        let score = volume_deviance(&second, &mu_a, onset) + volume_deviance(&first, &mu_b, onset);
         trace.push(PoissonTraceRow {
             iteration,
             wall_s: started.elapsed().as_secs_f64(),
@@ -300,4 +289,26 @@ pub fn reconstruct_poisson(
         },
         trace,
     ))
+}
+
+/// The Poisson method with its settings ([`reconstruct_poisson`]).
+#[derive(Debug, Clone, Copy)]
+pub struct PoissonEm(pub PoissonOptions);
+
+impl super::VolumeReconstructor for PoissonEm {
+    fn name(&self) -> &'static str {
+        "poisson"
+    }
+
+    fn reconstruct(
+        &self,
+        scan: &ConfocalScan,
+        optics: &SlabOptics,
+    ) -> Result<super::HiddenResult, ConfocalError> {
+        let (volume, trace) = reconstruct_poisson(scan, optics, &self.0)?;
+        Ok(super::HiddenResult {
+            trace: Some(trace),
+            ..super::HiddenResult::volume(volume)
+        })
+    }
 }

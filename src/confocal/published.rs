@@ -249,3 +249,21 @@ pub fn reconstruct_published(
         ],
     })
 }
+
+/// The published method with its settings.
+#[derive(Debug, Clone, Copy)]
+pub struct Published(pub PublishedOptions);
+
+impl super::VolumeReconstructor for Published {
+    fn name(&self) -> &'static str {
+        "published"
+    }
+
+    fn reconstruct(
+        &self,
+        scan: &ConfocalScan,
+        optics: &SlabOptics,
+    ) -> Result<super::HiddenResult, ConfocalError> {
+        reconstruct_published(scan, optics, &self.0).map(super::HiddenResult::volume)
+    }
+}

@@ -4,9 +4,6 @@
 use std::path::Path;
 
 use ndarray::Array3;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use rand_distr::{Binomial, Distribution};
 
 use super::ConfocalError;
 use crate::formats::detect::Format;
@@ -230,35 +227,11 @@ impl ConfocalScan {
             ));
         }
         Self::new(
-            keep_photons(&self.counts, fraction, seed),
+            crate::poisson::thinning::keep_photons(&self.counts, fraction, seed),
             self.bin_width_ps,
             self.start_ps,
             self.side_m,
             &format!("{} thinned to {fraction} (seed {seed})", self.source),
         )
     }
-}
-
-/// Each photon of `counts` (whole numbers, `fraction` in (0, 1]) kept with
-/// probability `fraction`, seeded; empty elements draw nothing.
-pub fn keep_photons(counts: &Array3<f64>, fraction: f64, seed: u64) -> Array3<f64> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    counts.mapv(|v| {
-        if v <= 0.0 {
-            0.0
-        } else {
-            Binomial::new(v as u64, fraction)
-                .expect("fraction lies in (0, 1]")
-                .sample(&mut rng) as f64
-        }
-    })
-}
-
-/// Splits whole counts into two halves, each photon to the first with
-/// probability 1/2, seeded (the thinned halves the Poisson method's stop
-/// and the default's blur are chosen on).
-pub fn halves(counts: &Array3<f64>, seed: u64) -> (Array3<f64>, Array3<f64>) {
-    let first = keep_photons(counts, 0.5, seed);
-    let second = counts - &first;
-    (first, second)
 }

@@ -58,7 +58,7 @@ use super::data::{Data, flat_level};
 use super::discrepancy::ExpectedDeviance;
 use super::error::ReconstructError;
 use super::likelihood::PoissonLikelihood;
-use super::run::{Estimate, Reconstructor, Run, grid_note};
+use super::run::{Estimate, Reconstructor, Run, WorkShape, grid_note};
 use super::trace::TraceRow;
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::named::named;
@@ -251,6 +251,16 @@ impl Reconstructor for AdmmLbfgs<'_> {
         run: &mut Run<'_>,
     ) -> Result<Estimate, ReconstructError> {
         admm_lbfgs(data, self.denoiser, &self.opts, run)
+    }
+
+    /// As the split solver's (the likelihood's per-bin state on the sensor
+    /// and in the spectrum) plus L-BFGS's stored correction pairs.
+    fn working_bytes(&self, shape: &WorkShape) -> u64 {
+        let (gh, gw) = shape.grid;
+        let pairs = 16 * self.opts.lbfgs_memory as u64;
+        shape
+            .bytes([32, 4, 16], [0, 128 + pairs, 96])
+            .saturating_add(self.denoiser.working_bytes(gh, gw))
     }
 }
 

@@ -14,7 +14,7 @@
 use super::data::Data;
 use super::error::ReconstructError;
 use super::rl_stack::RlStack;
-use super::run::{Estimate, Reconstructor, Run};
+use super::run::{Estimate, Reconstructor, Run, WorkShape};
 use super::trace::Trace;
 
 /// PnP's output deviance z at or above which its output is chosen.
@@ -97,5 +97,15 @@ impl Reconstructor for Auto<'_> {
         };
         run.adopt(trace, notes);
         Ok(out)
+    }
+
+    /// The larger of its two candidates (they run one after the other)
+    /// plus the first's output kept for the choice.
+    fn working_bytes(&self, shape: &WorkShape) -> u64 {
+        let kept = WorkShape { bins: 0, ..*shape }.bytes([0; 3], [16, 0, 0]);
+        self.pnp
+            .working_bytes(shape)
+            .max(self.rl.working_bytes(shape))
+            .saturating_add(kept)
     }
 }

@@ -17,6 +17,7 @@ use ndarray::parallel::prelude::*;
 use ndarray::{Array3, ArrayView2, Axis};
 
 use crate::forward::ForwardModel;
+use crate::poisson::deviance::{m_log_m, point_deviance};
 
 /// Lookup of the mean `f(mu)` and variance `g(mu)` of one data point's
 /// deviance under Poisson noise.
@@ -44,13 +45,6 @@ pub struct DevianceCheck {
 const TABLE_LO: f64 = 1e-8;
 const TABLE_HI: f64 = 400.0;
 const TABLE_N: usize = 4000;
-
-/// One point's Poisson deviance `2 [m log(m/y) - (m - y)]` for count `m`
-/// and mean `y > 0`, with `m log m` ([`m_log_m`]) and `log y` given.
-#[inline]
-pub fn point_deviance(m: f64, m_log_m: f64, y: f64, log_y: f64) -> f64 {
-    2.0 * (m_log_m - m * log_y - (m - y))
-}
 
 impl ExpectedDeviance {
     /// The table, built once per process (about 4000 Poisson sums) and
@@ -94,13 +88,6 @@ fn exact(mu: f64) -> (f64, f64) {
     }
     let mean = (2.0 * (e_mlogm - mu * mu.ln())).max(0.0);
     (mean, (e_d2 - mean * mean).max(0.0))
-}
-
-/// `m log m`, 0 for `m = 0`: the part of a point's deviance that depends on
-/// the count alone.
-#[inline]
-pub fn m_log_m(m: f64) -> f64 {
-    if m > 0.0 { m * m.ln() } else { 0.0 }
 }
 
 impl ExpectedDeviance {

@@ -6,9 +6,9 @@
 use ndarray::Array2;
 use rayon::prelude::*;
 
-use super::discrepancy::point_deviance;
 use super::run::Run;
 use crate::forward::ForwardModel;
+use crate::poisson::deviance::point_deviance;
 
 /// Guard of the RL denominator, relative to the mean count.
 pub const DENOMINATOR_GUARD: f64 = 1e-6;

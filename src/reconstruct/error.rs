@@ -17,36 +17,9 @@ pub enum ReconstructError {
         /// The offending value.
         value: f64,
     },
-    /// A whole count larger than any measurement gives (2^53 and more,
-    /// where counts are no longer exact even in 64-bit floats).
-    #[error(
-        "row {row}, column {col} of {what} is {value:e} photons, more than any measurement counts (whole counts stop being exact at 2^53): check the stack's values"
-    )]
-    ImplausibleCount {
-        /// The image (e.g. "the time-summed counts").
-        what: String,
-        /// Row.
-        row: usize,
-        /// Column.
-        col: usize,
-        /// The offending value.
-        value: f64,
-    },
-    /// Cross-validation by thinning met a count that is not a whole number
-    /// of photons.
-    #[error(
-        "cross-validation by thinning needs whole photon counts: row {row}, column {col} of {what} is {value} (expected counts, or a scaled or background-subtracted stack: stop Richardson-Lucy after a fixed count instead)"
-    )]
-    NotWholeCounts {
-        /// The image (e.g. "the time-summed counts").
-        what: String,
-        /// Row.
-        row: usize,
-        /// Column.
-        col: usize,
-        /// The offending value.
-        value: f64,
-    },
+    /// Counts that cannot be thinned into halves.
+    #[error(transparent)]
+    Counts(#[from] crate::poisson::thinning::CountError),
     /// More memory than the budget.
     #[error(transparent)]
     Memory(#[from] crate::memory::MemoryError),

@@ -10,7 +10,7 @@ use super::em::Stopping;
 use super::problem::Problem;
 use super::rl_stack::RlStack;
 use super::rl_sum::RlSum;
-use super::run::{Reconstruction, Reconstructor};
+use super::run::{Reconstruction, Reconstructor, WorkShape};
 use super::scaled_counts::ScaledCounts;
 use super::split::{Split, SplitOptions};
 use super::trace::TraceRow;
@@ -219,8 +219,133 @@ impl MethodOptions {
     }
 }
 
-/// Runs `method` on `problem`; `bin` selects the bin of single-bin methods
-/// (and of `scaled-counts`, which otherwise sums all bins).
+/// The part of the stack a planned method sees.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum View {
+    /// One bin with its kernel.
+    Bin(usize),
+    /// The sum of every bin with the time-summed kernel.
+    Summed,
+    /// Every bin with its own kernel.
+    Whole,
+}
+
+/// A method planned on a stack: the algorithm apart from the view of the
+/// data it sees, and the memory both need.
+pub struct Plan<'a> {
+    /// The algorithm.
+    pub algorithm: Box<dyn Reconstructor + 'a>,
+    /// What it sees.
+    pub view: View,
+    /// The name its trace carries.
+    pub name: &'static str,
+}
+
+impl<'a> Plan<'a> {
+    /// Plans `method` on a stack of `bins` bins; `bin` selects the bin of
+    /// single-bin methods (and of `scaled-counts`, which otherwise sums
+    /// every bin).
+    pub fn new(
+        method: Method,
+        bin: Option<usize>,
+        bins: usize,
+        denoiser: &'a dyn Denoiser,
+        opts: &MethodOptions,
+    ) -> Result<Self, ReconstructError> {
+        opts.validate()?;
+        if let Some(b) = bin.filter(|&b| b >= bins) {
+            return Err(ReconstructError::Shape(format!(
+                "bin {b} does not exist: the stack has bins 0 to {}",
+                bins.saturating_sub(1)
+            )));
+        }
+        let one_bin = || {
+            bin.map(View::Bin).ok_or_else(|| {
+                ReconstructError::Shape(format!(
+                    "method {} works on one bin; none was chosen",
+                    method.name()
+                ))
+            })
+        };
+        let rl = RlSum {
+            stop: opts.rl_stopping(),
+        };
+        let rl_stack = RlStack {
+            stop: opts.rl_stopping(),
+        };
+        let (algorithm, view): (Box<dyn Reconstructor + 'a>, View) = match method {
+            Method::Auto => (
+                Box::new(Auto {
+                    pnp: opts.pnp(denoiser),
+                    rl: rl_stack,
+                }),
+                View::Whole,
+            ),
+            Method::Pnp => (opts.pnp(denoiser), View::Whole),
+            Method::PnpSlice => (opts.pnp(denoiser), one_bin()?),
+            Method::PnpSum => (opts.pnp(denoiser), View::Summed),
+            Method::Rl => (Box::new(rl), one_bin()?),
+            Method::RlSum => (Box::new(rl), View::Whole),
+            Method::RlStack => (Box::new(rl_stack), View::Whole),
+            Method::ScaledCounts => (Box::new(ScaledCounts), bin.map_or(View::Whole, View::Bin)),
+        };
+        Ok(Self {
+            algorithm,
+            view,
+            name: method.name(),
+        })
+    }
+
+    /// The bytes the run holds beyond the problem: the view's own copies
+    /// (one bin's counts; the summed counts and kernel) and the
+    /// algorithm's working memory on them.
+    pub fn working_bytes(&self, problem: &Problem) -> u64 {
+        let k = problem.counts.shape()[0];
+        let one = WorkShape::new(&problem.model, 1);
+        let (shape, copies) = match self.view {
+            View::Whole => (WorkShape::new(&problem.model, k), 0),
+            View::Bin(_) => (one, one.bytes([8, 0, 0], [0; 3])),
+            View::Summed => (one, one.bytes([8, 0, 16], [0; 3])),
+        };
+        copies.saturating_add(self.algorithm.working_bytes(&shape))
+    }
+
+    /// Runs the plan on `problem`, scored against `truth` when given; each
+    /// trace row goes to `on_iter` as it is produced.
+    pub fn run(
+        &self,
+        problem: &Problem,
+        truth: Option<ArrayView2<f64>>,
+        on_iter: &mut dyn FnMut(&TraceRow),
+    ) -> Result<Reconstruction, ReconstructError> {
+        let model = &problem.model;
+        let mut r = match self.view {
+            View::Whole => {
+                let all = problem.all_bins();
+                self.algorithm
+                    .run(&Data::new(model, &problem.counts, &all)?, truth, on_iter)?
+            }
+            View::Bin(b) => {
+                let counts = problem.single_bin(b);
+                self.algorithm
+                    .run(&Data::new(model, &counts, &[b])?, truth, on_iter)?
+            }
+            View::Summed => {
+                let summed = model.summed(&problem.all_bins());
+                let counts = problem.counts.sum_axis(Axis(0)).insert_axis(Axis(0));
+                self.algorithm
+                    .run(&Data::new(&summed, &counts, &[0])?, truth, on_iter)?
+            }
+        };
+        if self.view == View::Summed {
+            r.trace.method = self.name.into();
+        }
+        Ok(r)
+    }
+}
+
+/// Runs `method` on `problem`: plans it ([`Plan::new`]), checks the
+/// plan's working memory against the budget, and runs it.
 pub fn run_method(
     problem: &Problem,
     method: Method,
@@ -230,77 +355,11 @@ pub fn run_method(
     truth: Option<ArrayView2<f64>>,
     mut on_iter: impl FnMut(&TraceRow),
 ) -> Result<Reconstruction, ReconstructError> {
-    opts.validate()?;
     let k = problem.counts.shape()[0];
+    let plan = Plan::new(method, bin, k, denoiser, opts)?;
     let (gh, gw) = problem.model.grid_shape();
-    crate::memory::check(
-        crate::memory::bytes_of([k, gh, gw], crate::memory::RECONSTRUCT_BYTES)
-            .saturating_add(denoiser.working_bytes(gh, gw)),
-        || format!("{} on {k} bins of a {gw} x {gh} grid", method.name()),
-    )?;
-    if let Some(b) = bin.filter(|&b| b >= k) {
-        return Err(ReconstructError::Shape(format!(
-            "bin {b} does not exist: the stack has bins 0 to {}",
-            k - 1
-        )));
-    }
-    let single = |method: Method| {
-        bin.ok_or_else(|| {
-            ReconstructError::Shape(format!(
-                "method {} works on one bin; none was chosen",
-                method.name()
-            ))
-        })
-    };
-    let all = problem.all_bins();
-    let model = &problem.model;
-    let on_iter: &mut dyn FnMut(&TraceRow) = &mut on_iter;
-    let rl = RlSum {
-        stop: opts.rl_stopping(),
-    };
-    match method {
-        Method::Auto => Auto {
-            pnp: opts.pnp(denoiser),
-            rl: RlStack {
-                stop: opts.rl_stopping(),
-            },
-        }
-        .run(&Data::new(model, &problem.counts, &all)?, truth, on_iter),
-        Method::Pnp => {
-            opts.pnp(denoiser)
-                .run(&Data::new(model, &problem.counts, &all)?, truth, on_iter)
-        }
-        Method::PnpSlice => {
-            let b = single(method)?;
-            let counts = problem.single_bin(b);
-            opts.pnp(denoiser)
-                .run(&Data::new(model, &counts, &[b])?, truth, on_iter)
-        }
-        Method::PnpSum => {
-            let summed = model.summed(&all);
-            let counts = problem.counts.sum_axis(Axis(0)).insert_axis(Axis(0));
-            let mut r =
-                opts.pnp(denoiser)
-                    .run(&Data::new(&summed, &counts, &[0])?, truth, on_iter)?;
-            r.trace.method = method.name().into();
-            Ok(r)
-        }
-        Method::Rl => {
-            let b = single(method)?;
-            let counts = problem.single_bin(b);
-            rl.run(&Data::new(model, &counts, &[b])?, truth, on_iter)
-        }
-        Method::RlSum => rl.run(&Data::new(model, &problem.counts, &all)?, truth, on_iter),
-        Method::RlStack => RlStack {
-            stop: opts.rl_stopping(),
-        }
-        .run(&Data::new(model, &problem.counts, &all)?, truth, on_iter),
-        Method::ScaledCounts => match bin {
-            Some(b) => {
-                let counts = problem.single_bin(b);
-                ScaledCounts.run(&Data::new(model, &counts, &[b])?, truth, on_iter)
-            }
-            None => ScaledCounts.run(&Data::new(model, &problem.counts, &all)?, truth, on_iter),
-        },
-    }
+    crate::memory::check(plan.working_bytes(problem), || {
+        format!("{} on {k} bins of a {gw} x {gh} grid", method.name())
+    })?;
+    plan.run(problem, truth, &mut on_iter)
 }

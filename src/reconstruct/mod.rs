@@ -21,9 +21,10 @@
 //!   for reference.
 //!
 //! What they share sits beside them: [`em`] (the Richardson-Lucy step and
-//! its stopping), [`thinning`] (photon counts split into two independent
-//! halves, for a stop without the truth), [`likelihood`], [`discrepancy`]
-//! and [`operator`].
+//! its stopping), [`likelihood`], [`discrepancy`] and [`operator`]; what
+//! they share with the hidden-volume methods ([`crate::confocal`]) sits
+//! below both, in [`crate::poisson`] (thinning into halves for a stop
+//! without the truth, the Poisson deviance).
 
 pub mod admm_lbfgs;
 pub mod auto;
@@ -41,9 +42,8 @@ pub mod rl_sum;
 pub mod run;
 pub mod scaled_counts;
 pub mod split;
-pub mod thinning;
 pub mod trace;
 
 pub use data::Data;
 pub use error::ReconstructError;
-pub use run::{Reconstruction, Reconstructor};
+pub use run::{Reconstruction, Reconstructor, WorkShape};

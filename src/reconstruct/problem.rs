@@ -135,7 +135,7 @@ impl Problem {
             });
         }
         setup.validate()?;
-        crate::memory::check_setup(setup, crate::memory::RECONSTRUCT_BYTES, "a reconstruction")?;
+        crate::memory::check_setup(setup, crate::memory::PROBLEM_BYTES, "a reconstruction")?;
         let mut all = setup.clone();
         all.min_bin_photons = 0.0;
         let kernels = KernelStack::build(&all, sampling)?;

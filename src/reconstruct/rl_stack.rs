@@ -14,14 +14,14 @@ use ndarray::Axis;
 use rayon::prelude::*;
 
 use super::data::{Data, flat_level};
-use super::discrepancy::m_log_m;
 use super::em::{
     DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps, held_out_deviance,
 };
 use super::error::ReconstructError;
-use super::run::{Estimate, Reconstructor, Run, grid_note};
-use super::thinning::{THINNING_SEED, thin_halves};
+use super::run::{Estimate, Reconstructor, Run, WorkShape, grid_note};
 use crate::forward::ForwardModel;
+use crate::poisson::deviance::m_log_m;
+use crate::poisson::thinning::{THINNING_SEED, thin_halves};
 use crate::time_basis::{BASIS_TOLERANCE, TimeBasis};
 
 /// Whole-stack Richardson-Lucy.
@@ -54,6 +54,14 @@ impl Reconstructor for RlStack {
             Stopping::After(iterations) => fixed(data, iterations, run),
             Stopping::CrossValidated { max_iters } => cross_validated(data, max_iters, run),
         }
+    }
+
+    /// Per bin: the counts, their two thinned halves and their `m log m`,
+    /// each half's prediction (sensor, f64), and the time basis's spectra
+    /// (at most one per bin). Shared: the two estimates and the
+    /// back-projections on the grid.
+    fn working_bytes(&self, shape: &WorkShape) -> u64 {
+        shape.bytes([80, 8, 16], [0, 64, 32])
     }
 }
 

@@ -6,15 +6,15 @@
 use ndarray::{Array2, Array3, Axis};
 
 use super::data::{Data, flat_level};
-use super::discrepancy::m_log_m;
 use super::em::{
     DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps, held_out_deviance,
 };
 use super::error::ReconstructError;
 use super::operator::Convolution;
-use super::run::{Estimate, Reconstructor, Run, grid_note};
-use super::thinning::{THINNING_SEED, thin_halves};
+use super::run::{Estimate, Reconstructor, Run, WorkShape, grid_note};
 use crate::forward::ForwardModel;
+use crate::poisson::deviance::m_log_m;
+use crate::poisson::thinning::{THINNING_SEED, thin_halves};
 
 /// Richardson-Lucy on the sum of the data's bins (one bin: the single-bin
 /// baseline; all bins: RL on the time-summed image).
@@ -63,6 +63,13 @@ impl Reconstructor for RlSum {
             }
             Stopping::CrossValidated { max_iters } => cross_validated(data, max_iters, run),
         }
+    }
+
+    /// One image however many bins: the summed counts, their halves and
+    /// predictions (sensor), the two estimates and the correlations (grid),
+    /// the summed kernel's spectrum and the transforms' buffers.
+    fn working_bytes(&self, shape: &WorkShape) -> u64 {
+        WorkShape { bins: 0, ..*shape }.bytes([0; 3], [64, 80, 64])
     }
 }
 

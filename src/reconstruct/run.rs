@@ -85,6 +85,47 @@ pub struct Estimate {
     pub iteration: usize,
 }
 
+/// The sizes a method's working memory depends on: the bins it sees and
+/// the model's sensor, grid and kernel spectra.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WorkShape {
+    /// Bins of data the method sees.
+    pub bins: usize,
+    /// Sensor pixels (rows x columns).
+    pub sensor: usize,
+    /// Object grid (rows, columns).
+    pub grid: (usize, usize),
+    /// Complex values of one kernel spectrum.
+    pub spectrum: usize,
+}
+
+impl WorkShape {
+    /// The shape of `bins` bins of data on `model`.
+    pub fn new(model: &ForwardModel, bins: usize) -> Self {
+        let (h, w) = model.sensor_shape();
+        Self {
+            bins,
+            sensor: h * w,
+            grid: model.grid_shape(),
+            spectrum: model.fft().spectrum_len(),
+        }
+    }
+
+    /// `per_bin` bytes for every bin plus `shared` bytes, as vectors of
+    /// the shape's sizes: each coefficient counts bytes per sensor pixel,
+    /// grid pixel and spectrum value.
+    pub fn bytes(&self, per_bin: [u64; 3], shared: [u64; 3]) -> u64 {
+        let of = |[sensor, grid, spectrum]: [u64; 3]| {
+            (sensor.saturating_mul(self.sensor as u64))
+                .saturating_add(grid.saturating_mul((self.grid.0 * self.grid.1) as u64))
+                .saturating_add(spectrum.saturating_mul(self.spectrum as u64))
+        };
+        of(per_bin)
+            .saturating_mul(self.bins as u64)
+            .saturating_add(of(shared))
+    }
+}
+
 /// A reconstruction method: Richardson-Lucy, PnP-ADMM, ...
 pub trait Reconstructor {
     /// The method's name in traces for `bins` bins of data (e.g. `rl` on
@@ -95,6 +136,11 @@ pub trait Reconstructor {
     /// note to `run`.
     fn reconstruct(&self, data: &Data<'_>, run: &mut Run<'_>)
     -> Result<Estimate, ReconstructError>;
+
+    /// The most bytes the method holds at once beyond its data and model
+    /// (its state, scratch, trace and prior) on data of `shape`: the
+    /// planner checks them against the memory budget before it runs.
+    fn working_bytes(&self, shape: &WorkShape) -> u64;
 
     /// Runs the method on `data`: scores every iteration against `truth`
     /// when given, shows each trace row to `on_iter` as it is produced, and

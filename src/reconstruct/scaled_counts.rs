@@ -6,7 +6,7 @@ use ndarray::Axis;
 use super::data::Data;
 use super::error::ReconstructError;
 use super::operator::Convolution;
-use super::run::{Estimate, Reconstructor, Run};
+use super::run::{Estimate, Reconstructor, Run, WorkShape};
 use super::trace::TraceRow;
 
 /// Sum of the counts of the data's bins, less their background, divided
@@ -49,5 +49,11 @@ impl Reconstructor for ScaledCounts {
             image,
             iteration: 0,
         })
+    }
+
+    /// The summed counts and the scaled image (sensor), the sensitivity
+    /// (grid).
+    fn working_bytes(&self, shape: &WorkShape) -> u64 {
+        WorkShape { bins: 0, ..*shape }.bytes([0; 3], [24, 4, 0])
     }
 }

@@ -84,14 +84,15 @@ use ndarray::{Array2, Array3, Axis};
 use rustfft::num_complex::{Complex32, Complex64};
 
 use super::data::{Data, flat_level};
-use super::discrepancy::{ExpectedDeviance, m_log_m};
+use super::discrepancy::ExpectedDeviance;
 use super::error::ReconstructError;
 use super::rl_sum::rl_steps;
-use super::run::{Estimate, Reconstructor, Run, grid_note};
+use super::run::{Estimate, Reconstructor, Run, WorkShape, grid_note};
 use super::trace::TraceRow;
 use crate::denoise::{Denoiser, denoise_scaled, denoise_scaled_grid_average};
 use crate::fft2::Fft2;
 use crate::forward::ForwardModel;
+use crate::poisson::deviance::m_log_m;
 
 /// Parameters of the exact-splitting solver.
 #[derive(Debug, Clone, Copy)]
@@ -262,6 +263,18 @@ impl Reconstructor for Split<'_> {
         run: &mut Run<'_>,
     ) -> Result<Estimate, ReconstructError> {
         pnp_split(data, self.denoiser, &self.opts, run)
+    }
+
+    /// Per bin: its counts, their `m log m`, the split variables `z` and
+    /// the multipliers on the sensor (f64), its image on the grid (f32),
+    /// its spectrum and kernel (complex f32). Shared: the object, the
+    /// prior's iterate and their copies on the grid, their spectra, the
+    /// threads' scratch; and the prior's own.
+    fn working_bytes(&self, shape: &WorkShape) -> u64 {
+        let (gh, gw) = shape.grid;
+        shape
+            .bytes([32, 4, 16], [0, 128, 96])
+            .saturating_add(self.denoiser.working_bytes(gh, gw))
     }
 }
 

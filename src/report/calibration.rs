@@ -457,10 +457,10 @@ impl SlabCalibration {
         Ok(written)
     }
 
-    /// The fitted material as a configuration file (`mu_a`, `mu_s` with
-    /// `g = 0` so that it is mu_s', `n`, `medium = "slab"`), without a
-    /// thickness: `scatterscope hidden --medium` reads it for a slab of
-    /// any thickness, `--config` for the reconstructions.
+    /// The fitted material as a configuration file (`mu_a`,
+    /// `mu_s_reduced`, `n`, `medium = "slab"`), without a thickness:
+    /// `scatterscope hidden --material` reads it for a slab of any
+    /// thickness, `--config` for the reconstructions.
     pub fn medium_toml(&self) -> String {
         let f = &self.fit;
         let thicknesses: Vec<String> = self
@@ -469,7 +469,7 @@ impl SlabCalibration {
             .map(|c| format!("{} cm", c.thickness_cm))
             .collect();
         format!(
-            "# the material fitted by calibrate-slab to {} capture(s) ({}), IRF from {}\n# no thickness: give the slab's where the file is used\nmu_a = {:?}\nmu_s = {:?}\ng = 0.0\nn = {:?}\nmedium = \"slab\"\n",
+            "# the material fitted by calibrate-slab to {} capture(s) ({}), IRF from {}\n# no thickness: give the slab's where the file is used\nmu_a = {:?}\nmu_s_reduced = {:?}\nn = {:?}\nmedium = \"slab\"\n",
             self.captures.len(),
             thicknesses.join(", "),
             self.irf.source,

@@ -9,11 +9,13 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::ReportError;
+use crate::confocal::auto::AutoBlur;
+use crate::confocal::poisson::PoissonEm;
+use crate::confocal::published::Published;
 use crate::confocal::published::authors_settings;
 use crate::confocal::volume::{HiddenVolume, Projection, correlation};
 use crate::confocal::{
-    ConfocalScan, PoissonOptions, PublishedOptions, SlabOptics, reconstruct_auto,
-    reconstruct_poisson, reconstruct_published,
+    ConfocalScan, PoissonOptions, PublishedOptions, SlabOptics, VolumeReconstructor,
 };
 use crate::formats::detect::Format;
 
@@ -138,10 +140,12 @@ pub fn run_hidden_bench(
             snr,
             ..PublishedOptions::default()
         };
-        let published = |s: &ConfocalScan| {
-            reconstruct_published(s, &SlabOptics::PUBLISHED_FOAM, &opts)
+        let run = |method: &dyn VolumeReconstructor, s: &ConfocalScan| {
+            method
+                .reconstruct(s, &SlabOptics::PUBLISHED_FOAM)
                 .map_err(|e| ReportError::Input(e.to_string()))
         };
+        let published = |s: &ConfocalScan| run(&Published(opts), s).map(|r| r.volume);
         let reference = published(&scan)?.projection(Projection::Front);
         for &fraction in &cfg.fractions {
             let thinned = if fraction < 1.0 {
@@ -173,22 +177,31 @@ pub fn run_hidden_bench(
                 on_row(&row);
                 rows.push(row);
             }
-            let ((volume, choice), wall_s) = timed(cfg.repeats, || {
-                reconstruct_auto(&thinned, &SlabOptics::PUBLISHED_FOAM, &opts)
-                    .map_err(|e| ReportError::Input(e.to_string()))
-            })?;
-            let mut row = row_of(&name, fraction, &thinned, AUTO, &volume, &reference, wall_s);
-            row.blur = choice.map(|c| c.blur);
+            let (auto, wall_s) = timed(cfg.repeats, || run(&AutoBlur(opts), &thinned))?;
+            let mut row = row_of(
+                &name,
+                fraction,
+                &thinned,
+                AUTO,
+                &auto.volume,
+                &reference,
+                wall_s,
+            );
+            row.blur = auto.choice.map(|c| c.blur);
             on_row(&row);
             rows.push(row);
             if let Some(poisson) = &cfg.poisson {
-                let ((volume, trace), wall_s) = timed(1, || {
-                    reconstruct_poisson(&thinned, &SlabOptics::PUBLISHED_FOAM, poisson)
-                        .map_err(|e| ReportError::Input(e.to_string()))
-                })?;
+                let (result, wall_s) = timed(1, || run(&PoissonEm(*poisson), &thinned))?;
                 let mut row = row_of(
-                    &name, fraction, &thinned, POISSON, &volume, &reference, wall_s,
+                    &name,
+                    fraction,
+                    &thinned,
+                    POISSON,
+                    &result.volume,
+                    &reference,
+                    wall_s,
                 );
+                let trace = result.trace.unwrap_or_default();
                 let chosen = trace
                     .iter()
                     .min_by(|a, b| a.held_out_deviance.total_cmp(&b.held_out_deviance))

@@ -7,8 +7,8 @@ use std::time::Instant;
 use anyhow::Context;
 use scatterscope::confocal::scan::DEFAULT_MAT_DATASET;
 use scatterscope::confocal::{
-    ConfocalScan, HiddenMethod, PoissonOptions, PublishedOptions, SlabOptics, hidden_warnings,
-    reconstruct_hidden,
+    ConfocalScan, HiddenMethod, HiddenResult, PoissonOptions, PublishedOptions, SlabOptics,
+    hidden_warnings,
 };
 use scatterscope::length::parse_positive_cm;
 use scatterscope::report::hidden::write_hidden;
@@ -133,7 +133,8 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
         ),
     }
     let started = Instant::now();
-    let (volume, trace) = reconstruct_hidden(&scan, &optics, args.method, &published, &poisson)?;
+    let method = args.method.reconstructor(&published, &poisson);
+    let HiddenResult { volume, trace, .. } = method.reconstruct(&scan, &optics)?;
     let wall_s = started.elapsed().as_secs_f64();
     for note in &volume.notes {
         println!("{note}");

@@ -16,6 +16,7 @@ use scatterscope::denoise::prior::PriorError;
 use scatterscope::formats::picoquant::{FileError, TtrError};
 use scatterscope::live::server::LiveError;
 use scatterscope::memory::LIMIT_ENV;
+use scatterscope::poisson::thinning::CountError;
 use scatterscope::psf::PsfError;
 use scatterscope::reconstruct::ReconstructError;
 use scatterscope::reconstruct::input::InputError;
@@ -139,7 +140,7 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
     if cause.to_string().contains(LIMIT_ENV) {
         return Some("--memory-limit sets the budget".into());
     }
-    let text = if let Some(ReconstructError::NotWholeCounts { .. }) =
+    let text = if let Some(ReconstructError::Counts(CountError::NotWholeCounts { .. })) =
         cause.downcast_ref::<ReconstructError>()
     {
         "--rl-stop fixed stops Richardson-Lucy after a fixed count"
