@@ -102,7 +102,7 @@ impl Reconstructor for Auto<'_> {
     /// The larger of its two candidates (they run one after the other)
     /// plus the first's output kept for the choice.
     fn working_bytes(&self, shape: &WorkShape) -> u64 {
-        let kept = WorkShape { bins: 0, ..*shape }.bytes([0; 3], [16, 0, 0]);
+        let kept = shape.bytes([0; 3], [16, 0, 0]);
         self.pnp
             .working_bytes(shape)
             .max(self.rl.working_bytes(shape))

@@ -69,7 +69,7 @@ impl Reconstructor for RlSum {
     /// predictions (sensor), the two estimates and the correlations (grid),
     /// the summed kernel's spectrum and the transforms' buffers.
     fn working_bytes(&self, shape: &WorkShape) -> u64 {
-        WorkShape { bins: 0, ..*shape }.bytes([0; 3], [64, 80, 64])
+        shape.bytes([0; 3], [64, 80, 64])
     }
 }
 

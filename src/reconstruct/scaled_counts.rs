@@ -54,6 +54,6 @@ impl Reconstructor for ScaledCounts {
     /// The summed counts and the scaled image (sensor), the sensitivity
     /// (grid).
     fn working_bytes(&self, shape: &WorkShape) -> u64 {
-        WorkShape { bins: 0, ..*shape }.bytes([0; 3], [24, 4, 0])
+        shape.bytes([0; 3], [24, 4, 0])
     }
 }
