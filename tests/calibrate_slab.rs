@@ -840,7 +840,7 @@ fn the_real_reference_is_the_kernels_measured_table() {
     let simulate = |extra: &[&str]| {
         let mut args = vec!["--irf-from", reference.to_str().unwrap()];
         args.extend_from_slice(extra);
-        command::simulate_small(out.path(), &args)
+        command::simulate_disks(out.path(), 32, &args)
     };
     // Without its bin width the reference is refused, naming the flag.
     let o = simulate(&[]);

@@ -6,7 +6,7 @@ mod bench_images;
 #[path = "common/command.rs"]
 mod command;
 use bench_images::{QUICK_BENCH_FLAGS, small_image_set};
-use command::{run_isolated, run_with_data_dir, simulate_small, streams};
+use command::{run_isolated, run_with_data_dir, simulate_disks, streams};
 #[path = "common/shared_data.rs"]
 mod shared_data;
 
@@ -171,23 +171,10 @@ fn help_explains_units() {
     assert!(Path::new(command::PROGRAM).exists());
 }
 
-/// Simulates the disks scene at `size` pixels with the paper's pixel pitch
-/// into `dir/sim`.
-fn simulate_disks(dir: &Path, size: usize) -> std::path::PathBuf {
+/// The disks scene simulated at `size` pixels into `dir/sim`.
+fn simulated_disks(dir: &Path, size: usize) -> std::path::PathBuf {
     let sim = dir.join("sim");
-    let fov = (50.0 * size as f64 / 256.0).to_string();
-    let size = size.to_string();
-    let o = run_isolated(&[
-        "simulate",
-        "--scene",
-        "disks",
-        "--size",
-        &size,
-        "--fov",
-        &fov,
-        "--out",
-        sim.to_str().unwrap(),
-    ]);
+    let o = simulate_disks(&sim, size, &[]);
     assert!(o.status.success(), "{}", streams(&o).1);
     sim
 }
@@ -195,7 +182,7 @@ fn simulate_disks(dir: &Path, size: usize) -> std::path::PathBuf {
 #[test]
 fn reconstruct_a_simulated_stack_with_every_method() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = simulate_disks(dir.path(), 32);
+    let sim = simulated_disks(dir.path(), 32);
     let stack = sim.join("counts.exr");
     let truth = sim.join("truth.exr");
     for (method, bin) in [
@@ -271,7 +258,7 @@ fn reconstruct_a_simulated_stack_with_every_method() {
 #[test]
 fn reconstruct_rejects_non_finite_stacks() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = simulate_disks(dir.path(), 16);
+    let sim = simulated_disks(dir.path(), 16);
     let mut s = Stack::load(&sim.join("counts.exr")).unwrap();
     s.data[[3, 4, 5]] = f32::INFINITY;
     let bad = dir.path().join("bad.exr");
@@ -1279,7 +1266,7 @@ fn calibrate_fits_a_simulated_stack_and_names_bad_parameters() {
     // 100x the paper's light: its profile determines mu_s' (at the paper's
     // 450 photons the data do not, and calibrate refuses to guess).
     let sim = dir.path().join("sim");
-    let o = simulate_small(&sim, &["--photons", "45000"]);
+    let o = simulate_disks(&sim, 32, &["--photons", "45000"]);
     assert!(o.status.success(), "{}", streams(&o).1);
     let stack = sim.join("counts.exr");
     let out = dir.path().join("cal");
@@ -1462,7 +1449,7 @@ fn simulate_takes_its_irf_from_a_reference_recording_and_records_it() {
         let sim = dir.path().join(out);
         let mut args = vec!["--irf-from", reference.to_str().unwrap()];
         args.extend_from_slice(extra);
-        let o = simulate_small(&sim, &args);
+        let o = simulate_disks(&sim, 32, &args);
         let (stdout, stderr) = streams(&o);
         assert!(o.status.success(), "{stderr}");
         let stack = Stack::load(&sim.join("counts.exr")).unwrap();

@@ -44,7 +44,7 @@ fn every_way_to_ask_for_too_much_memory_ends_quickly_with_a_clear_error() {
     forged_npy(&dir.path().join("big.npy"), "<f4", &[20, 32768, 32768]);
     forged_exr(&dir.path().join("forged.exr"), 131_072, 131_072, 17 << 20);
     // A small stack and image for the reads that need one.
-    let o = command::simulate_small(&dir.path().join("sim"), &[]);
+    let o = command::simulate_disks(&dir.path().join("sim"), 32, &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let stack = d("sim/counts.exr");
     let png = d("sim/truth.png");

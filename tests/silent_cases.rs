@@ -3,12 +3,12 @@
 
 #[path = "common/command.rs"]
 mod command;
-use command::{run_isolated, simulate_small, streams};
+use command::{run_isolated, simulate_disks, streams};
 
 /// A simulated 32 x 32 stack in `dir/sim`; returns its counts file.
 fn small_stack(dir: &std::path::Path) -> String {
     let sim = dir.join("sim");
-    let o = simulate_small(&sim, &[]);
+    let o = simulate_disks(&sim, 32, &[]);
     assert!(o.status.success(), "{}", streams(&o).1);
     sim.join("counts.exr").to_str().unwrap().to_string()
 }

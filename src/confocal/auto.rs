@@ -135,10 +135,6 @@ pub fn reconstruct_auto(
 pub struct AutoBlur(pub PublishedOptions);
 
 impl super::VolumeReconstructor for AutoBlur {
-    fn name(&self) -> &'static str {
-        "auto"
-    }
-
     fn reconstruct(
         &self,
         scan: &ConfocalScan,

@@ -78,9 +78,6 @@ impl HiddenMethod {
 /// [`crate::reconstruct::Reconstructor`], one interface for the command,
 /// the benchmark and code.
 pub trait VolumeReconstructor {
-    /// The method's name.
-    fn name(&self) -> &'static str;
-
     /// Reconstructs the volume behind a slab of `optics` from `scan`.
     fn reconstruct(
         &self,

@@ -296,10 +296,6 @@ pub fn reconstruct_poisson(
 pub struct PoissonEm(pub PoissonOptions);
 
 impl super::VolumeReconstructor for PoissonEm {
-    fn name(&self) -> &'static str {
-        "poisson"
-    }
-
     fn reconstruct(
         &self,
         scan: &ConfocalScan,

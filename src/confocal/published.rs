@@ -255,10 +255,6 @@ pub fn reconstruct_published(
 pub struct Published(pub PublishedOptions);
 
 impl super::VolumeReconstructor for Published {
-    fn name(&self) -> &'static str {
-        "published"
-    }
-
     fn reconstruct(
         &self,
         scan: &ConfocalScan,

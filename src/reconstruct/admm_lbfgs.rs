@@ -59,6 +59,7 @@ use super::discrepancy::ExpectedDeviance;
 use super::error::ReconstructError;
 use super::likelihood::PoissonLikelihood;
 use super::run::{Estimate, Reconstructor, Run, WorkShape, grid_note};
+use super::split::pnp_working_bytes;
 use super::trace::TraceRow;
 use crate::denoise::{Denoiser, denoise_scaled};
 use crate::named::named;
@@ -256,11 +257,8 @@ impl Reconstructor for AdmmLbfgs<'_> {
     /// As the split solver's (the likelihood's per-bin state on the sensor
     /// and in the spectrum) plus L-BFGS's stored correction pairs.
     fn working_bytes(&self, shape: &WorkShape) -> u64 {
-        let (gh, gw) = shape.grid;
         let pairs = 16 * self.opts.lbfgs_memory as u64;
-        shape
-            .bytes([32, 4, 16], [0, 128 + pairs, 96])
-            .saturating_add(self.denoiser.working_bytes(gh, gw))
+        pnp_working_bytes(shape, self.denoiser, pairs)
     }
 }
 

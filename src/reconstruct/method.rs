@@ -237,8 +237,8 @@ pub struct Plan<'a> {
     pub algorithm: Box<dyn Reconstructor + 'a>,
     /// What it sees.
     pub view: View,
-    /// The name its trace carries.
-    pub name: &'static str,
+    /// The method planned (a summed view's trace carries its name).
+    pub method: Method,
 }
 
 impl<'a> Plan<'a> {
@@ -292,7 +292,7 @@ impl<'a> Plan<'a> {
         Ok(Self {
             algorithm,
             view,
-            name: method.name(),
+            method,
         })
     }
 
@@ -338,7 +338,7 @@ impl<'a> Plan<'a> {
             }
         };
         if self.view == View::Summed {
-            r.trace.method = self.name.into();
+            r.trace.method = self.method.name().into();
         }
         Ok(r)
     }

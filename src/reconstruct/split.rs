@@ -271,11 +271,21 @@ impl Reconstructor for Split<'_> {
     /// prior's iterate and their copies on the grid, their spectra, the
     /// threads' scratch; and the prior's own.
     fn working_bytes(&self, shape: &WorkShape) -> u64 {
-        let (gh, gw) = shape.grid;
-        shape
-            .bytes([32, 4, 16], [0, 128, 96])
-            .saturating_add(self.denoiser.working_bytes(gh, gw))
+        pnp_working_bytes(shape, self.denoiser, 0)
     }
+}
+
+/// A PnP solver's working memory (see [`Split`]'s), with `grid_extra`
+/// more bytes per grid pixel, and its prior's own.
+pub(super) fn pnp_working_bytes(
+    shape: &WorkShape,
+    denoiser: &dyn Denoiser,
+    grid_extra: u64,
+) -> u64 {
+    let (gh, gw) = shape.grid;
+    shape
+        .bytes([32, 4, 16], [0, 128 + grid_extra, 96])
+        .saturating_add(denoiser.working_bytes(gh, gw))
 }
 
 /// Runs the exact-splitting PnP-ADMM on `data`.

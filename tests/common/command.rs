@@ -64,18 +64,20 @@ pub fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("parsing {}: {e}", path.display()))
 }
 
-/// Runs `simulate` of the small scene the tests share (disks, 32 x 32
-/// pixels over 6.25 cm) with `extra` flags into `out`, apart from the
-/// user's set-up; its counts stack is `out/counts.exr`.
+/// Runs `simulate` of the disks scene on a `size` x `size` sensor at the
+/// paper's pixel pitch (6.25 cm at 32 pixels) with `extra` flags into
+/// `out`, apart from the user's set-up; its counts stack is
+/// `out/counts.exr`.
 #[allow(dead_code)]
-pub fn simulate_small(out: &Path, extra: &[&str]) -> Output {
-    let mut args: Vec<&OsStr> = [
-        "simulate", "--scene", "disks", "--size", "32", "--fov", "6.25cm",
-    ]
-    .iter()
-    .chain(extra)
-    .map(OsStr::new)
-    .collect();
+pub fn simulate_disks(out: &Path, size: usize, extra: &[&str]) -> Output {
+    let (size, fov) = (
+        size.to_string(),
+        format!("{}cm", 50.0 * size as f64 / 256.0),
+    );
+    let scene = [
+        "simulate", "--scene", "disks", "--size", &size, "--fov", &fov,
+    ];
+    let mut args: Vec<&OsStr> = scene.iter().chain(extra).map(OsStr::new).collect();
     args.extend([OsStr::new("--out"), out.as_os_str()]);
     run_isolated(&args)
 }
