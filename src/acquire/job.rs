@@ -12,6 +12,7 @@ use super::calibration::t0_from_reference;
 use super::device::{DeviceSpec, OpenError, open_device};
 use super::pipeline::{AcquireError, Outcome, Plan, Progress, Snapshot, run_watched};
 use super::source::{SourceReport, StopReason};
+use crate::files::{FilePlan, PlanError};
 use crate::formats::png::{SheetScale, write_contact_sheet};
 use crate::physics::Setup;
 use crate::stack::{Stack, StackError};
@@ -84,6 +85,9 @@ pub enum JobError {
     /// An output could not be written.
     #[error(transparent)]
     Output(#[from] StackError),
+    /// The files named cannot be used as named (checked before the run).
+    #[error(transparent)]
+    Files(#[from] PlanError),
     /// The output directory could not be made, or a record not written.
     #[error("{path}: {source}")]
     Io {
@@ -120,6 +124,7 @@ impl Job {
             move |source| JobError::Io { path, source }
         };
         let device = self.device.to_string();
+        self.files().check()?;
         let mut notes = Vec::new();
         let mut plan = self.plan.clone();
         plan.t0_ps = match &self.t0 {
@@ -141,15 +146,7 @@ impl Job {
                 device: device.clone(),
                 source,
             })?;
-        std::fs::create_dir_all(&self.out).map_err(io(&self.out))?;
-        let mut files = Vec::new();
-        if let Some(truth) = &opened.truth {
-            let exr = self.out.join("truth.exr");
-            crate::formats::exr::write_image(truth.mapv(|v| v as f32).view(), &exr)?;
-            let png = self.out.join("truth.png");
-            crate::formats::png::write_png(truth.view(), Some(1.0), &png)?;
-            files.extend([exr, png]);
-        }
+        let truth = opened.truth;
         let mut source = opened.source;
         let outcome =
             run_watched(source.as_mut(), &plan, stop, progress, watch).map_err(|source| {
@@ -160,6 +157,17 @@ impl Job {
             })?;
         let report = source.report(&outcome.ledger, outcome.region, &outcome.end.stop);
         drop(source);
+        // Nothing is written before the run has run: a refused run leaves
+        // no file behind.
+        std::fs::create_dir_all(&self.out).map_err(io(&self.out))?;
+        let mut files = Vec::new();
+        if let Some(truth) = &truth {
+            let exr = self.out.join(TRUTH_EXR);
+            crate::formats::exr::write_image(truth.mapv(|v| v as f32).view(), &exr)?;
+            let png = self.out.join(TRUTH_PNG);
+            crate::formats::png::write_png(truth.view(), Some(1.0), &png)?;
+            files.extend([exr, png]);
+        }
         let mut setup = self.setup.clone();
         if let (Some(budget), Some(s)) = (report.light_budget, setup.as_mut()) {
             s.total_photons = budget;
@@ -173,13 +181,13 @@ impl Job {
             format!("{} acquire --device {device}", plan.software),
         );
         stack.meta.seed = report.seed;
-        let stack_path = self.out.join("stack.exr");
+        let stack_path = self.out.join(STACK_EXR);
         stack.save(&stack_path)?;
         files.push(stack_path);
-        let sheet = self.out.join("stack.png");
+        let sheet = self.out.join(STACK_PNG);
         write_contact_sheet(&stack, SheetScale::Shared, &sheet)?;
         files.push(sheet);
-        let json_path = self.out.join("acquisition.json");
+        let json_path = self.out.join(RECORD_JSON);
         let json = serde_json::to_string_pretty(&outcome.record(&plan)).expect("record serialises");
         crate::files::write_atomic(&json_path, json + "\n").map_err(io(&json_path))?;
         files.push(json_path);
@@ -193,7 +201,62 @@ impl Job {
             files,
         })
     }
+
+    /// Every file the job reads and writes, checked together before the
+    /// device is opened ([`FilePlan::check`]): the recordings, the stack,
+    /// its sheet, the record and a mock's truth in [`Self::out`], against
+    /// each other and against the recording replayed, the reference for
+    /// time zero, a mock's scene image and the vendor's library.
+    pub fn files(&self) -> FilePlan {
+        let mut files = FilePlan::new();
+        match &self.device {
+            DeviceSpec::Replay(r) => {
+                files.input("recording replayed", &r.path);
+            }
+            DeviceSpec::PicoQuant(d) => {
+                if let Some(lib) = &d.library {
+                    files.input("vendor library", lib);
+                }
+            }
+            DeviceSpec::Mock(m) | DeviceSpec::MockSerial(m) => {
+                if let Some(path) = m.scene_file() {
+                    files.input("scene image", path);
+                }
+            }
+            DeviceSpec::Serial(_) | DeviceSpec::Usb(_) => {}
+        }
+        if let TimeZero::FromReference(reference) = &self.t0 {
+            files.input("reference recording", reference);
+        }
+        if let Some(ptu) = &self.plan.ptu {
+            files.output("PTU recording", ptu);
+        }
+        if let Some(tags) = &self.plan.tag_file {
+            files.output("tag file", tags);
+        }
+        files
+            .output("stack", &self.out.join(STACK_EXR))
+            .output("stack's contact sheet", &self.out.join(STACK_PNG))
+            .output("acquisition record", &self.out.join(RECORD_JSON));
+        if self.device.is_mock() {
+            files
+                .output("truth image", &self.out.join(TRUTH_EXR))
+                .output("truth image", &self.out.join(TRUTH_PNG));
+        }
+        files
+    }
 }
+
+/// The stack an acquisition writes in its output folder.
+pub const STACK_EXR: &str = "stack.exr";
+/// The stack's contact sheet.
+pub const STACK_PNG: &str = "stack.png";
+/// The record of the acquisition.
+pub const RECORD_JSON: &str = "acquisition.json";
+/// A mock's scene, as an image.
+pub const TRUTH_EXR: &str = "truth.exr";
+/// A mock's scene, as a picture.
+pub const TRUTH_PNG: &str = "truth.png";
 
 impl Acquisition {
     /// The summary a lab reads: the device, its rates and window, why it
@@ -258,10 +321,10 @@ impl Acquisition {
             .collect();
         if !empty.is_empty() {
             lines.push(format!(
-                "  {} of {} bins are empty (bins {:?})",
+                "  {} of {} bins are empty (bins {})",
                 empty.len(),
                 self.stack.bins(),
-                empty
+                index_ranges(&empty, 8)
             ));
         }
         lines
@@ -322,5 +385,50 @@ impl Acquisition {
             );
         }
         Ok(())
+    }
+}
+
+/// Sorted indices as ranges (`0-1999, 2010, 2020-2499`), at most `most`
+/// of them, then how many more: a line whatever the count.
+pub fn index_ranges(sorted: &[usize], most: usize) -> String {
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for &i in sorted {
+        match runs.last_mut() {
+            Some((_, end)) if *end + 1 == i => *end = i,
+            _ => runs.push((i, i)),
+        }
+    }
+    let mut words: Vec<String> = runs
+        .iter()
+        .take(most)
+        .map(|&(a, b)| {
+            if a == b {
+                a.to_string()
+            } else {
+                format!("{a}-{b}")
+            }
+        })
+        .collect();
+    if runs.len() > most {
+        words.push(format!("and {} more runs", runs.len() - most));
+    }
+    words.join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::index_ranges;
+
+    #[test]
+    fn indices_read_as_ranges_in_a_short_line() {
+        let mut v: Vec<usize> = (0..2000).collect();
+        v.extend([2010, 2011, 2020]);
+        v.extend(2030..2500);
+        assert_eq!(index_ranges(&v, 8), "0-1999, 2010-2011, 2020, 2030-2499");
+        let every_other: Vec<usize> = (0..2500).step_by(2).collect();
+        let text = index_ranges(&every_other, 8);
+        assert!(text.ends_with("and 1242 more runs"), "{text}");
+        assert!(text.len() < 80, "{text}");
+        assert_eq!(index_ranges(&[], 8), "");
     }
 }

@@ -199,6 +199,20 @@ pub enum AcquireError {
     /// The plan does not fit the device.
     #[error("{0}")]
     Plan(String),
+    /// A PTU file cannot keep the pixel of each photon of this sensor.
+    #[error(
+        "PTU recording {}: the sensor has {width} x {height} = {} pixels; a PTU T3 record names at most {MAX_T3_CHANNELS} input channels, so the pixel of each photon cannot be kept",
+        path.display(),
+        usize::from(*width) * usize::from(*height)
+    )]
+    PtuPixels {
+        /// The PTU file asked for.
+        path: PathBuf,
+        /// Sensor columns.
+        width: u16,
+        /// Sensor rows.
+        height: u16,
+    },
     /// A setting of the plan does not fit the device; `name` is the
     /// plan's field (the command line's hints name its flag).
     #[error("{message}")]
@@ -332,8 +346,17 @@ struct PtuRecording {
     error: Option<String>,
 }
 
-impl PtuRecording {
-    fn create(plan: &Plan, facts: &SourceFacts, path: &Path) -> Result<Self, AcquireError> {
+/// A PTU recording checked against the device, not yet created.
+struct PtuPlan {
+    path: PathBuf,
+    record_type: RecordType,
+    header: WriterHeader,
+}
+
+impl PtuPlan {
+    /// The record type and header for `facts`' device; refused when its
+    /// records cannot be kept in a PTU file.
+    fn new(plan: &Plan, facts: &SourceFacts, path: &Path) -> Result<Self, AcquireError> {
         let mut extra = facts.ptu_tags.clone();
         extra.push((
             "CreatorSW_Name".into(),
@@ -351,15 +374,11 @@ impl PtuRecording {
             (RecordFormat::Wire { identity, .. }, _) => {
                 let pixels = usize::from(identity.pixels_x) * usize::from(identity.pixels_y);
                 if pixels > MAX_T3_CHANNELS {
-                    return Err(AcquireError::setting(
-                        "ptu",
-                        format!(
-                            "PTU recording {}: the sensor has {} x {} = {pixels} pixels; a PTU T3 record names at most {MAX_T3_CHANNELS} input channels, so the pixel of each photon cannot be kept. Record losslessly to a tag file (every pixel), or use a sensor of at most {MAX_T3_CHANNELS} pixels",
-                            path.display(),
-                            identity.pixels_x,
-                            identity.pixels_y
-                        ),
-                    ));
+                    return Err(AcquireError::PtuPixels {
+                        path: path.to_path_buf(),
+                        width: identity.pixels_x,
+                        height: identity.pixels_y,
+                    });
                 }
                 extra.push((
                     "Scatterscope_Channels".into(),
@@ -378,18 +397,40 @@ impl PtuRecording {
             imaging,
             extra,
         };
-        let (writer, error) = match PtuWriter::create_recording(path, record_type, &header) {
-            Ok(w) => (Some(w), None),
-            Err(e) => (None, Some(format!("creating {}: {e}", path.display()))),
-        };
         Ok(Self {
             path: path.to_path_buf(),
-            writer,
-            events: 0,
-            error,
+            record_type,
+            header,
         })
     }
 
+    /// Starts the file (its folder made if missing); a file that cannot be
+    /// started is an error of the recording, said in the ledger.
+    fn create(self) -> PtuRecording {
+        let (writer, error) = match make_folder(&self.path)
+            .and_then(|()| PtuWriter::create_recording(&self.path, self.record_type, &self.header))
+        {
+            Ok(w) => (Some(w), None),
+            Err(e) => (None, Some(format!("creating {}: {e}", self.path.display()))),
+        };
+        PtuRecording {
+            path: self.path,
+            writer,
+            events: 0,
+            error,
+        }
+    }
+}
+
+/// Makes the folder `path` goes in, when it is missing.
+fn make_folder(path: &Path) -> std::io::Result<()> {
+    match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => std::fs::create_dir_all(dir),
+        _ => Ok(()),
+    }
+}
+
+impl PtuRecording {
     fn fail(&mut self, e: std::io::Error) {
         self.error = Some(format!("writing {}: {e}", self.path.display()));
         self.writer = None;
@@ -478,12 +519,13 @@ pub fn run_watched(
         resolution_fs: plan.resolution_fs,
     })?;
     let (mut binner, window_ps, region) = make_binner(plan, &facts)?;
-    let mut tags = match (&plan.tag_file, &facts.format) {
+    // Every recording is checked against the device before any is started.
+    let tags_header = match (&plan.tag_file, &facts.format) {
         (None, _) => None,
-        (Some(path), RecordFormat::Wire { identity, config }) => {
-            let header = TagFileHeader::new(&facts.device.link, identity, config, &plan.software);
-            Some(TagFileWriter::create(path, &header).map_err(AcquireError::TagFile)?)
-        }
+        (Some(path), RecordFormat::Wire { identity, config }) => Some((
+            path,
+            TagFileHeader::new(&facts.device.link, identity, config, &plan.software),
+        )),
         (Some(path), RecordFormat::T3(_)) => {
             return Err(AcquireError::setting(
                 "tag_file",
@@ -495,10 +537,26 @@ pub fn run_watched(
             ));
         }
     };
-    let mut ptu = match &plan.ptu {
-        Some(path) => Some(PtuRecording::create(plan, &facts, path)?),
+    let ptu_plan = match &plan.ptu {
+        Some(path) => Some(PtuPlan::new(plan, &facts, path)?),
         None => None,
     };
+    let mut tags = match tags_header {
+        Some((path, header)) => Some(
+            make_folder(path)
+                .map_err(|e| {
+                    AcquireError::TagFile(TagFileError::Io {
+                        path: path.clone(),
+                        source: e,
+                    })
+                })
+                .and_then(|()| {
+                    TagFileWriter::create(path, &header).map_err(AcquireError::TagFile)
+                })?,
+        ),
+        None => None,
+    };
+    let mut ptu = ptu_plan.map(PtuPlan::create);
     let mut decoder = match facts.format {
         RecordFormat::T3(t) => Some(Decoder::new(t)),
         RecordFormat::Wire { .. } => None,

@@ -44,6 +44,12 @@ enum Opened {
     Tags(TagFile),
 }
 
+/// The slowest replay: a thousand times slower than recorded.
+pub const MIN_SPEED: f64 = 1e-3;
+/// The fastest paced replay: a million times faster than recorded (a
+/// second of recording in a microsecond, faster than any file is read).
+pub const MAX_SPEED: f64 = 1e6;
+
 /// The clock of a replay: waits until a record's recorded time, `speed`
 /// times faster, has come.
 struct Pace {
@@ -60,7 +66,10 @@ impl Pace {
             {
                 return false;
             }
-            let due = Duration::from_secs_f64((at_s / self.speed).max(0.0));
+            // A recording hours long at the slowest speed is still far
+            // inside a Duration; a value past it waits "forever".
+            let due =
+                Duration::try_from_secs_f64((at_s / self.speed).max(0.0)).unwrap_or(Duration::MAX);
             let now = self.started.elapsed();
             if now >= due {
                 return true;
@@ -74,10 +83,12 @@ impl FileSource {
     /// `path` (a T3 PTU or a tag file), played at `speed` times its pace;
     /// refused if it is not a whole recording of a kind that replays.
     pub fn open(path: &Path, speed: f64) -> Result<Self, SourceError> {
-        if !(speed.is_finite() && speed > 0.0) {
+        if !(MIN_SPEED..=MAX_SPEED).contains(&speed) {
             return Err(SourceError::setting(
                 "speed",
-                format!("replay speed {speed}: give a positive factor (1 plays the recorded pace)"),
+                format!(
+                    "replay speed {speed:e}: give a factor from {MIN_SPEED} to {MAX_SPEED:e} (1 plays the recorded pace)"
+                ),
             ));
         }
         let err = |e: String| SourceError::Device(e);

@@ -9,6 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::formats::detect::Format;
+use crate::poisson::counts::check_counts;
 use crate::stack::Stack;
 
 /// Most bins before the light whose median is the background.
@@ -60,12 +61,17 @@ pub enum HistogramError {
 }
 
 /// Opens a MATLAB v7.3 file, the error naming it.
-fn open_mat(path: &Path) -> Result<hdf5_reader::Hdf5File, HistogramError> {
+fn open_mat(path: &Path) -> Result<crate::formats::mat::MatFile, HistogramError> {
     crate::formats::mat::open(path).map_err(|m| file_error(path, m))
 }
 
 /// The numbers of a one-dimensional dataset, named `name` in errors.
-fn vector(path: &Path, name: &str, ds: &hdf5_reader::Dataset) -> Result<Vec<f64>, HistogramError> {
+fn vector(
+    path: &Path,
+    file: &crate::formats::mat::MatFile,
+    name: &str,
+    ds: &hdf5_reader::Dataset,
+) -> Result<Vec<f64>, HistogramError> {
     let shape = ds.shape().to_vec();
     if shape.iter().filter(|&&d| d > 1).count() > 1 {
         return Err(file_error(
@@ -73,7 +79,7 @@ fn vector(path: &Path, name: &str, ds: &hdf5_reader::Dataset) -> Result<Vec<f64>
             format!("dataset `{name}` has shape {shape:?}: a histogram is one vector"),
         ));
     }
-    crate::formats::mat::numbers(ds).map_err(|e| {
+    crate::formats::mat::numbers(file, ds).map_err(|e| {
         file_error(
             path,
             format!("dataset `{name}` cannot be read as numbers: {e}"),
@@ -106,35 +112,8 @@ impl TimeHistogram {
         if counts.is_empty() {
             return Err(file_error(source, "the histogram has no bins"));
         }
-        if let Some((i, c)) = counts
-            .iter()
-            .enumerate()
-            .find(|(_, c)| !c.is_finite() || **c < 0.0)
-        {
-            return Err(file_error(
-                source,
-                format!("bin {i} holds {c} counts: counts must be finite and non-negative"),
-            ));
-        }
-        // Above 2^53 a float no longer holds whole counts, and no
-        // measurement comes near it: a file of such values is not counts.
-        if let Some((i, c)) = counts.iter().enumerate().find(|(_, c)| **c > 2f64.powi(53)) {
-            return Err(file_error(
-                source,
-                format!(
-                    "bin {i} holds {c:e} counts, more than any measurement counts (2^53): not a histogram of photon counts"
-                ),
-            ));
-        }
-        if counts.iter().all(|&c| c == 0.0) {
-            return Err(file_error(
-                source,
-                format!(
-                    "all {} bins hold 0 counts: no photon was recorded, so it gives no time profile",
-                    counts.len()
-                ),
-            ));
-        }
+        check_counts(counts.iter().copied(), |i| format!("bin {i}"))
+            .map_err(|e| file_error(source, e.to_string()))?;
         Ok(Self {
             counts,
             bin_width_ps,
@@ -149,7 +128,7 @@ impl TimeHistogram {
     pub fn read_mat(path: &Path, dataset: &str, bin_width_ps: f64) -> Result<Self, HistogramError> {
         let file = open_mat(path)?;
         let ds = crate::formats::mat::dataset(&file, dataset).map_err(|m| file_error(path, m))?;
-        let counts = vector(path, dataset, &ds)?;
+        let counts = vector(path, &file, dataset, &ds)?;
         Self::new(counts, bin_width_ps, 0.0, path)
     }
 
@@ -186,7 +165,7 @@ impl TimeHistogram {
                     .iter()
                     .find(|d| d.address() == address)
                     .ok_or_else(|| fail(format!("cell {i} refers to no dataset of `#refs#`")))?;
-                let counts = vector(path, &format!("{dataset}{{{i}}}"), ds)?;
+                let counts = vector(path, &file, &format!("{dataset}{{{i}}}"), ds)?;
                 let source = format!("{} ({dataset} part {i})", path.display());
                 Self::new(counts, bin_width_ps, 0.0, Path::new(&source))
             })

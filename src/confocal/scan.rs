@@ -7,6 +7,7 @@ use ndarray::Array3;
 
 use super::ConfocalError;
 use crate::formats::detect::Format;
+use crate::poisson::counts::check_counts;
 use crate::stack::Stack;
 
 /// The MATLAB dataset read unless another is named (the confocal diffuse
@@ -35,8 +36,9 @@ pub struct ConfocalScan {
 }
 
 impl ConfocalScan {
-    /// Checks the counts and settings: finite non-negative counts with some
-    /// light, at least [`MIN_SIDE`] points per side and bins, a positive bin
+    /// Checks the counts and settings: photon counts
+    /// ([`check_counts`]: finite, non-negative, at most 2^53, at least one
+    /// photon in all), at least [`MIN_SIDE`] points per side and bins, a positive bin
     /// width and scanned side. Errors name `source`, the setting or the
     /// first bad count.
     pub fn new(
@@ -67,19 +69,16 @@ impl ConfocalScan {
                 format!("{source}: scanned side {side_m} m must be positive and finite"),
             ));
         }
-        if let Some(((k, r, c), v)) = counts
-            .indexed_iter()
-            .find(|(_, v)| !v.is_finite() || **v < 0.0)
-        {
-            return Err(fail(format!(
-                "scan point (row {r}, column {c}) bin {k} holds {v}: counts must be finite and non-negative"
-            )));
-        }
-        if counts.iter().all(|&v| v == 0.0) {
-            return Err(fail(
-                "the scan holds no counts (every bin of every point is 0)".into(),
-            ));
-        }
+        let (rows_, cols_) = (rows, cols);
+        check_counts(counts.iter().copied(), |i| {
+            let (k, rest) = (i / (rows_ * cols_), i % (rows_ * cols_));
+            format!(
+                "scan point (row {}, column {}) bin {k}",
+                rest / cols_,
+                rest % cols_
+            )
+        })
+        .map_err(|e| fail(e.to_string()))?;
         Ok(Self {
             counts,
             bin_width_ps,
@@ -141,7 +140,7 @@ impl ConfocalScan {
                 "dataset `{dataset}` has shape {shape:?}: a confocal scan has three axes (column, row, time)"
             )));
         };
-        let values = crate::formats::mat::numbers(&ds).map_err(|e| {
+        let values = crate::formats::mat::numbers(&file, &ds).map_err(|e| {
             fail(format!(
                 "dataset `{dataset}` cannot be read as numbers: {e}"
             ))

@@ -1,7 +1,9 @@
 //! OpenEXR stack files.
 //!
 //! One layer named `stack`, one `f32` channel per bin named `t000`, `t001`,
-//! ... (bin order), ZIP-compressed (lossless). Header attributes that any EXR
+//! ... (bin order; past 1000 bins every name has as many digits as the
+//! last, `t0000` ... `t3124`, so that name order is time order),
+//! compressed losslessly. Header attributes that any EXR
 //! tool shows: `valueKind`, `binStartPs` (first bin), `binWidthPs`,
 //! `pixelPitchCm` and, when known, `muAPerCm`, `muSPerCm`, `anisotropyG`,
 //! `refractiveIndex`, `thicknessCm`. The complete metadata, including every
@@ -24,9 +26,14 @@ use crate::stack::{F32_EXACT_COUNT, Stack, StackError, StackFile, StackMeta};
 /// Name of the attribute holding the JSON metadata.
 pub const META_ATTRIBUTE: &str = "scatterscope";
 
-/// Channel name of bin `k`.
-pub fn channel_name(k: usize) -> String {
-    format!("{STACK_CHANNEL_PREFIX}{k:03}")
+/// Name of channel `k` of `count` slices: `prefix` and the index, padded
+/// to at least three digits and to the width of the largest index, so
+/// that the names sort in slice order (EXR files list channels sorted by
+/// name, and readers take them in that order: `t0999` before `t1000`,
+/// where `t999` would sort after `t1000`).
+pub fn channel_name(prefix: &str, k: usize, count: usize) -> String {
+    let width = count.saturating_sub(1).to_string().len().max(3);
+    format!("{prefix}{k:0width$}")
 }
 
 /// What the stack's channel names start with.
@@ -87,12 +94,13 @@ fn slice_channels<T: Copy>(
     prefix: &str,
     samples: fn(Vec<T>) -> FlatSamples,
 ) -> SmallVec<[AnyChannel<FlatSamples>; 4]> {
+    let count = volume.dim().0;
     volume
         .axis_iter(Axis(0))
         .enumerate()
         .map(|(i, img)| {
             AnyChannel::new(
-                format!("{prefix}{i:03}").as_str(),
+                channel_name(prefix, i, count).as_str(),
                 samples(img.iter().copied().collect()),
             )
         })
@@ -327,8 +335,9 @@ pub fn read(path: &Path) -> Result<StackFile, StackError> {
             return Err(StackError::format(
                 path,
                 format!(
-                    "time-bin channels are not contiguous: expected {}, found t{got:03}",
-                    channel_name(expect)
+                    "time-bin channels are not contiguous: expected {}, found {}",
+                    channel_name(STACK_CHANNEL_PREFIX, expect, bins.len()),
+                    channel_name(STACK_CHANNEL_PREFIX, *got, bins.len())
                 ),
             ));
         }

@@ -4,11 +4,34 @@
 
 use std::path::Path;
 
-use hdf5_reader::{Dataset, Hdf5File};
+use hdf5_reader::{Dataset, Hdf5File, OpenOptions};
+
+/// Decoded bytes a dataset may hold per byte of its file, past
+/// [`FREE_DECODED_BYTES`]: the shared confocal scans decode to 4.5-7 times
+/// their file, and deflate cannot pass about 1000; a file that claims more
+/// is a decompression bomb or declares data it does not store.
+pub const MAX_EXPANSION: u64 = 64;
+/// Decoded bytes any dataset may hold, whatever its file's size.
+pub const FREE_DECODED_BYTES: u64 = 64 << 20;
+
+/// An open MATLAB v7.3 file and its size.
+pub struct MatFile {
+    file: Hdf5File,
+    bytes: u64,
+}
+
+impl std::ops::Deref for MatFile {
+    type Target = Hdf5File;
+    fn deref(&self) -> &Hdf5File {
+        &self.file
+    }
+}
 
 /// Opens a MATLAB v7.3 file after checking it is a regular file that fits
-/// the memory budget and is not cut short.
-pub fn open(path: &Path) -> Result<Hdf5File, String> {
+/// the memory budget and is not cut short. Reads keep no cache of their
+/// own (the reader's chunk cache and its copy of hot arrays are off), and
+/// no read may decode more than the budget.
+pub fn open(path: &Path) -> Result<MatFile, String> {
     let (_, meta) = crate::files::open_regular(path, "MATLAB file").map_err(|e| e.to_string())?;
     crate::memory::check(meta.len(), || format!("reading {}", path.display()))
         .map_err(|e| e.to_string())?;
@@ -20,16 +43,24 @@ pub fn open(path: &Path) -> Result<Hdf5File, String> {
             meta.len()
         ));
     }
-    Hdf5File::open(path).map_err(|e| {
+    let budget = crate::memory::budget().map_err(|e| e.to_string())?;
+    let options = OpenOptions::default()
+        .with_chunk_cache_bytes(0)
+        .with_max_read_bytes(usize::try_from(budget.bytes).unwrap_or(usize::MAX));
+    let file = Hdf5File::open_with_options(path, options).map_err(|e| {
         format!(
             "not a MATLAB v7.3 (HDF5) file: {e} (older MATLAB formats are not read; save with -v7.3)"
         )
+    })?;
+    Ok(MatFile {
+        file,
+        bytes: meta.len(),
     })
 }
 
 /// Dataset `name` of `file`; the error lists the datasets there are, or
 /// says the file's structure cannot be read when it lists none.
-pub fn dataset(file: &Hdf5File, name: &str) -> Result<Dataset, String> {
+pub fn dataset(file: &MatFile, name: &str) -> Result<Dataset, String> {
     file.dataset(&format!("/{name}")).map_err(|e| {
         let names = file
             .root_group()
@@ -46,9 +77,14 @@ pub fn dataset(file: &Hdf5File, name: &str) -> Result<Dataset, String> {
     })
 }
 
-/// The numbers of a dataset (floating point or integer, as MATLAB stores
-/// counts) in the order HDF5 stores them (C order over `ds.shape()`).
-pub fn numbers(ds: &Dataset) -> Result<Vec<f64>, String> {
+/// The numbers of a dataset of `file` (floating point or integer, as
+/// MATLAB stores counts) in the order HDF5 stores them (C order over
+/// `ds.shape()`). Before anything is decoded, the dataset's decoded size
+/// is held to [`MAX_EXPANSION`] times the file's (past
+/// [`FREE_DECODED_BYTES`]), and what the read allocates (the decoded
+/// values, their copy as numbers, and the caller's reordered copy) to the
+/// memory budget.
+pub fn numbers(file: &MatFile, ds: &Dataset) -> Result<Vec<f64>, String> {
     use hdf5_reader::messages::datatype::Datatype;
     fn all<T: hdf5_reader::H5Type + Copy>(
         ds: &Dataset,
@@ -58,10 +94,26 @@ pub fn numbers(ds: &Dataset) -> Result<Vec<f64>, String> {
             .map(|a| a.iter().map(|&v| to(v)).collect())
             .map_err(|e| e.to_string())
     }
-    let elements: u64 = ds.shape().iter().product();
-    crate::memory::check(elements.saturating_mul(16), || {
-        format!("a dataset of shape {:?}", ds.shape())
-    })
+    let elements: u64 = ds.shape().iter().fold(1u64, |n, &d| n.saturating_mul(d));
+    let item = ds
+        .raw_element_size()
+        .map_or(8, |n| u64::try_from(n.max(1)).unwrap_or(u64::MAX));
+    let decoded = elements.saturating_mul(item);
+    let most = FREE_DECODED_BYTES.max(file.bytes.saturating_mul(MAX_EXPANSION));
+    if decoded > most {
+        return Err(format!(
+            "the dataset of shape {:?} would decode to {} from a file of {}, more than {MAX_EXPANSION} times its size: a compressed file this far past what counts compress to is damaged or forged (a decompression bomb), or declares data it does not store",
+            ds.shape(),
+            crate::memory::size(decoded),
+            crate::memory::size(file.bytes)
+        ));
+    }
+    // The raw bytes and the decoded values (the item size each), the
+    // numbers and the caller's reordered copy (8 bytes each).
+    crate::memory::check(
+        elements.saturating_mul(item.saturating_mul(2).saturating_add(16)),
+        || format!("a dataset of shape {:?}", ds.shape()),
+    )
     .map_err(|e| e.to_string())?;
     match *ds.dtype() {
         Datatype::FloatingPoint { size: 8, .. } => all::<f64>(ds, |v| v),

@@ -7,22 +7,29 @@
 //! acquisition's own threads keep every core but half of one busy (even
 //! in the idle class, a reconstruction at work beside an unpaced 2-core
 //! acquisition cost it about 10 % of its rate, by the caches and the
-//! wake-ups it shares; see BENCHMARKS.md), and the page says so. The whole
-//! run's stack is reconstructed once it ends, whatever the load.
+//! wake-ups it shares; see BENCHMARKS.md), and the page says so. A second
+//! thread (at nice 10) watches the CPU the reconstruction gets: when other
+//! processes take every core and it gets none, the page says so and names
+//! them. The whole run's stack is reconstructed once the acquisition ends
+//! ([`Reconstructor::finish`]), at normal priority, with its progress, and
+//! a stop request (Ctrl-C) skips it.
 
 use std::path::Path;
-use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
-use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
-use std::time::Instant;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::mpsc::{RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
 
 use ndarray::{Array2, ArrayView2};
 
-use super::lower_priority;
+use super::cpu::{OtherProcesses, VIEW_THREAD_PREFIX, describe, threads_cpu_s};
 use super::state::{Image, LiveReconstruction, LiveState, TracePoint};
+use super::{lower_priority, view_priority};
+use crate::denoise::Denoiser;
 use crate::denoise::prior::PriorSpec;
 use crate::reconstruct::input::{InputSpec, prepare};
 use crate::reconstruct::method::{Method, MethodOptions, run_method};
+use crate::reconstruct::run::Reconstruction;
 use crate::stack::Stack;
 
 /// A snapshot to reconstruct.
@@ -30,14 +37,233 @@ struct Snapshot {
     stack: Stack,
     acquired_s: f64,
     photons: u64,
-    /// The whole run's stack, reconstructed whatever the load.
-    last: bool,
 }
 
-/// The reconstruction thread.
+/// The reconstruction of snapshots: its thread, and what it shares with
+/// the thread that watches it.
 pub struct Reconstructor {
     tx: Option<SyncSender<Snapshot>>,
-    thread: Option<JoinHandle<()>>,
+    shared: Arc<Shared>,
+}
+
+/// A snapshot offered and not yet shown (waiting for its thread, or being
+/// reconstructed).
+#[derive(Debug, Clone, Copy)]
+struct Running {
+    acquired_s: f64,
+    photons: u64,
+    started: Instant,
+}
+
+/// What the reconstruction's threads share.
+struct Shared {
+    state: Arc<Mutex<LiveState>>,
+    truth: Option<Array2<f64>>,
+    /// The snapshot offered and not yet done, if any.
+    running: Mutex<Option<Running>>,
+    /// Set when the acquisition has ended: snapshots are no longer shown
+    /// (the whole run's reconstruction is newer) and the watcher stops.
+    ended: AtomicBool,
+}
+
+impl Shared {
+    fn state(&self) -> MutexGuard<'_, LiveState> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn running(&self) -> MutexGuard<'_, Option<Running>> {
+        self.running.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// How the whole run's reconstruction ended.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FinalRun {
+    /// Shown on the page; its run time, s.
+    Shown {
+        /// Seconds it took.
+        run_s: f64,
+        /// The method (`auto` says which it chose).
+        method: String,
+    },
+    /// Skipped by a stop request (Ctrl-C): the page says so.
+    Skipped,
+    /// It failed; the page shows why.
+    Failed(String),
+}
+
+/// Where the whole run's reconstruction is, for a progress line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FinalProgress {
+    /// Seconds since it started.
+    pub elapsed_s: f64,
+    /// Iterations done so far (of every method it runs).
+    pub iterations: usize,
+}
+
+/// A snapshot's reconstruction: the default method on `stack`, its rows
+/// counted in `iterations`; the reconstruction, the bins it kept (indices
+/// into the stack's bins) and what was assumed.
+fn reconstruct(
+    stack: &Stack,
+    denoiser: &dyn Denoiser,
+    iterations: &AtomicUsize,
+) -> Result<(Reconstruction, Vec<usize>, Vec<String>), String> {
+    let input = prepare(
+        stack.data.clone(),
+        Some(stack.meta.clone()),
+        Path::new("the live snapshot"),
+        &InputSpec::default(),
+    )
+    .map_err(|e| e.to_string())?;
+    let kept: Vec<usize> = input
+        .problem
+        .bin_starts_ps
+        .iter()
+        .filter_map(|&t| {
+            let m = &stack.meta;
+            m.bin_starts_ps.iter().position(|&s| (s - t).abs() < 1e-6)
+        })
+        .collect();
+    let rec = run_method(
+        &input.problem,
+        Method::Auto,
+        None,
+        denoiser,
+        &MethodOptions::default(),
+        None,
+        |_| {
+            iterations.fetch_add(1, Ordering::Relaxed);
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    Ok((rec, kept, input.assumed))
+}
+
+/// Shows a reconstruction of `acquired_s` seconds and `photons` photons
+/// (or why it failed) on the page, scored against the truth when known.
+fn show(
+    shared: &Shared,
+    result: Result<(Reconstruction, Vec<usize>, Vec<String>), String>,
+    acquired_s: f64,
+    photons: u64,
+    run_s: f64,
+) {
+    let mut s = shared.state();
+    match result {
+        Ok((rec, kept, assumed)) => {
+            let psnr_db = shared
+                .truth
+                .as_ref()
+                .and_then(|t| psnr_fitted(rec.image.view(), t.view()));
+            let (h, w) = rec.image.dim();
+            let mut notes = assumed;
+            notes.extend(rec.trace.notes.iter().cloned());
+            s.decay.kept = kept;
+            s.trace.push(TracePoint {
+                acquired_s,
+                photons,
+                psnr_db,
+                run_s,
+            });
+            s.reconstruction = Some(LiveReconstruction {
+                acquired_s,
+                photons,
+                method: rec.trace.method.clone(),
+                run_s,
+                image: Image {
+                    width: w,
+                    height: h,
+                    values: rec.image.iter().map(|&v| v as f32).collect(),
+                },
+                notes,
+                psnr_db,
+            });
+            s.reconstruction_error = None;
+            s.reconstruction_paused = None;
+        }
+        Err(e) => s.reconstruction_error = Some(e),
+    }
+    s.reconstruction_status = None;
+    s.version += 1;
+}
+
+/// Seconds a snapshot runs before the watcher judges its CPU.
+const STARVED_AFTER: Duration = Duration::from_secs(3);
+/// Cores the reconstruction must have had since it started not to be
+/// called starved.
+const STARVED_BELOW_CORES: f64 = 0.1;
+
+/// The watcher: once a second, says on the page what the snapshot offered
+/// is doing, and when its threads have had (nearly) no CPU since it was
+/// offered, who has the cores: the acquisition, and other processes by
+/// name.
+fn watch_cpu(shared: Arc<Shared>) {
+    view_priority();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let recon_threads = format!("{VIEW_THREAD_PREFIX}recon");
+    let mut others = OtherProcesses::new();
+    let mut acquisition = Load::new();
+    // The snapshot last seen and its threads' CPU when it was first seen.
+    let mut seen: Option<(Instant, f64)> = None;
+    while !shared.ended.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_secs(1));
+        let busy = others.look();
+        let own = acquisition.busy_cores();
+        let Some(r) = *shared.running() else {
+            seen = None;
+            continue;
+        };
+        let cpu_now = threads_cpu_s(&recon_threads);
+        let cpu_then = match seen {
+            Some((started, cpu)) if started == r.started => Some(cpu),
+            _ => {
+                seen = cpu_now.map(|c| (r.started, c));
+                cpu_now
+            }
+        };
+        let elapsed = r.started.elapsed().as_secs_f64();
+        let had = cpu_now.zip(cpu_then).map(|(now, then)| now - then);
+        let what = format!(
+            "the snapshot of {} photons ({:.1} s of acquisition)",
+            r.photons, r.acquired_s
+        );
+        let status = match had {
+            Some(had)
+                if elapsed >= STARVED_AFTER.as_secs_f64()
+                    && had < STARVED_BELOW_CORES * elapsed =>
+            {
+                let taken: f64 = busy.iter().map(|b| b.cores).sum();
+                let mut by = Vec::new();
+                if let Some(own) = own {
+                    by.push(format!(
+                        "the acquisition keeps {own:.1} of {cores} cores busy"
+                    ));
+                }
+                if !busy.is_empty() {
+                    by.push(format!(
+                        "other processes {taken:.1}: {}",
+                        describe(&busy, 3)
+                    ));
+                }
+                format!(
+                    "starved of CPU: {what} has had {had:.2} s of CPU in {elapsed:.0} s; {}. It runs only on a core nothing else wants, so the acquisition keeps its pace; the whole run is reconstructed when it ends",
+                    if by.is_empty() {
+                        "no other busy process can be seen".to_string()
+                    } else {
+                        by.join(", ")
+                    }
+                )
+            }
+            _ => format!("reconstructing {what}: {elapsed:.0} s so far"),
+        };
+        if shared.ended.load(Ordering::Relaxed) {
+            break;
+        }
+        let mut s = shared.state();
+        s.reconstruction_status = Some(status);
+        s.version += 1;
+    }
 }
 
 /// Cores the acquisition leaves idle, at least, for a snapshot to be
@@ -62,7 +288,7 @@ impl Load {
     /// Cores the acquisition kept busy since the last call (`None` the
     /// first time, or where it cannot be read).
     fn busy_cores(&mut self) -> Option<f64> {
-        let now = (Instant::now(), super::acquisition_cpu_s()?);
+        let now = (Instant::now(), super::cpu::acquisition_cpu_s()?);
         let busy = self.last.and_then(|(t, cpu)| {
             let wall = now.0.duration_since(t).as_secs_f64();
             // A thread that ended takes its CPU with it: never below 0.
@@ -91,113 +317,76 @@ pub fn psnr_fitted(image: ArrayView2<f64>, truth: ArrayView2<f64>) -> Option<f64
 }
 
 impl Reconstructor {
-    /// Starts the thread; results go into `state`, scored against `truth`
+    /// Starts the threads; results go into `state`, scored against `truth`
     /// when it is known.
     pub fn start(state: Arc<Mutex<LiveState>>, truth: Option<Array2<f64>>) -> Self {
         let (tx, rx) = sync_channel::<Snapshot>(1);
-        let thread = std::thread::spawn(move || {
-            lower_priority();
-            let threads = std::thread::available_parallelism()
-                .map_or(1, |n| n.get().saturating_sub(1).max(1));
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .start_handler(|_| lower_priority())
-                .build();
-            let denoiser = PriorSpec::default().build();
-            let mut load = Load::new();
-            for snap in rx {
-                let busy = load.busy_cores();
-                if !snap.last
-                    && let Some(busy) = busy.filter(|b| *b > load.cores - SPARE_CORES)
-                {
-                    let mut s = state.lock().unwrap_or_else(|e| e.into_inner());
-                    s.reconstruction_paused = Some(format!(
-                        "snapshots skipped while the acquisition keeps {busy:.1} of {} cores busy; the whole run is reconstructed when it ends",
-                        load.cores
-                    ));
-                    s.version += 1;
-                    continue;
-                }
-                let started = Instant::now();
-                let result = denoiser
-                    .as_ref()
-                    .map_err(|e| e.to_string())
-                    .and_then(|denoiser| {
-                        let input = prepare(
-                            snap.stack.data.clone(),
-                            Some(snap.stack.meta.clone()),
-                            Path::new("the live snapshot"),
-                            &InputSpec::default(),
-                        )
-                        .map_err(|e| e.to_string())?;
-                        let kept: Vec<usize> = input
-                            .problem
-                            .bin_starts_ps
-                            .iter()
-                            .filter_map(|&t| {
-                                let m = &snap.stack.meta;
-                                m.bin_starts_ps.iter().position(|&s| (s - t).abs() < 1e-6)
-                            })
-                            .collect();
-                        let run = || {
-                            run_method(
-                                &input.problem,
-                                Method::Auto,
-                                None,
-                                denoiser.as_ref(),
-                                &MethodOptions::default(),
-                                None,
-                                |_| {},
-                            )
-                        };
-                        let rec = match &pool {
-                            Ok(pool) => pool.install(run),
-                            Err(_) => run(),
-                        }
-                        .map_err(|e| e.to_string())?;
-                        Ok((rec, kept, input.assumed))
-                    });
-                let run_s = started.elapsed().as_secs_f64();
-                let mut s = state.lock().unwrap_or_else(|e| e.into_inner());
-                match result {
-                    Ok((rec, kept, assumed)) => {
-                        let psnr_db = truth
-                            .as_ref()
-                            .and_then(|t| psnr_fitted(rec.image.view(), t.view()));
-                        let (h, w) = rec.image.dim();
-                        let mut notes = assumed;
-                        notes.extend(rec.trace.notes.iter().cloned());
-                        s.decay.kept = kept;
-                        s.trace.push(TracePoint {
-                            acquired_s: snap.acquired_s,
-                            photons: snap.photons,
-                            psnr_db,
-                            run_s,
-                        });
-                        s.reconstruction = Some(LiveReconstruction {
-                            acquired_s: snap.acquired_s,
-                            photons: snap.photons,
-                            method: rec.trace.method.clone(),
-                            run_s,
-                            image: Image {
-                                width: w,
-                                height: h,
-                                values: rec.image.iter().map(|&v| v as f32).collect(),
-                            },
-                            notes,
-                            psnr_db,
-                        });
-                        s.reconstruction_error = None;
-                        s.reconstruction_paused = None;
-                    }
-                    Err(e) => s.reconstruction_error = Some(e),
-                }
-                s.version += 1;
-            }
+        let shared = Arc::new(Shared {
+            state,
+            truth,
+            running: Mutex::new(None),
+            ended: AtomicBool::new(false),
         });
+        let worker = shared.clone();
+        let spawned = std::thread::Builder::new()
+            .name(format!("{VIEW_THREAD_PREFIX}recon"))
+            .spawn(move || {
+                lower_priority();
+                let threads = std::thread::available_parallelism()
+                    .map_or(1, |n| n.get().saturating_sub(1).max(1));
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .thread_name(|i| format!("{VIEW_THREAD_PREFIX}recon-{i}"))
+                    .start_handler(|_| lower_priority())
+                    .build();
+                let denoiser = PriorSpec::default().build();
+                let mut load = Load::new();
+                for snap in rx {
+                    if worker.ended.load(Ordering::Relaxed) {
+                        break;
+                    }
+                    let busy = load.busy_cores();
+                    if let Some(busy) = busy.filter(|b| *b > load.cores - SPARE_CORES) {
+                        *worker.running() = None;
+                        let mut s = worker.state();
+                        s.reconstruction_paused = Some(format!(
+                            "snapshots skipped while the acquisition keeps {busy:.1} of {} cores busy; the whole run is reconstructed when it ends",
+                            load.cores
+                        ));
+                        s.version += 1;
+                        continue;
+                    }
+                    let started = Instant::now();
+                    let iterations = AtomicUsize::new(0);
+                    let result = denoiser
+                        .as_ref()
+                        .map_err(|e| e.to_string())
+                        .and_then(|denoiser| {
+                            let run = || reconstruct(&snap.stack, denoiser.as_ref(), &iterations);
+                            match &pool {
+                                Ok(pool) => pool.install(run),
+                                Err(_) => run(),
+                            }
+                        });
+                    if worker.ended.load(Ordering::Relaxed) {
+                        break;
+                    }
+                    let run_s = started.elapsed().as_secs_f64();
+                    show(&worker, result, snap.acquired_s, snap.photons, run_s);
+                    *worker.running() = None;
+                }
+            });
+        let watcher = shared.clone();
+        let watching = std::thread::Builder::new()
+            .name(format!("{VIEW_THREAD_PREFIX}cpu"))
+            .spawn(move || watch_cpu(watcher));
+        if let Err(e) = spawned.as_ref().and(watching.as_ref()) {
+            let mut s = shared.state();
+            s.reconstruction_error = Some(format!("no thread for the reconstruction: {e}"));
+        }
         Self {
-            tx: Some(tx),
-            thread: Some(thread),
+            tx: spawned.is_ok().then_some(tx),
+            shared,
         }
     }
 
@@ -207,32 +396,124 @@ impl Reconstructor {
         let Some(tx) = &self.tx else {
             return false;
         };
+        // Set with the send, cleared by the thread when done. Never waits
+        // on the lock (its other users run below the acquisition and may
+        // be preempted holding it): a held lock drops this snapshot.
+        let mut running = match self.shared.running.try_lock() {
+            Ok(guard) => guard,
+            Err(std::sync::TryLockError::Poisoned(e)) => e.into_inner(),
+            Err(std::sync::TryLockError::WouldBlock) => return false,
+        };
+        if running.is_some() {
+            return false;
+        }
         match tx.try_send(Snapshot {
             stack,
             acquired_s,
             photons,
-            last: false,
         }) {
-            Ok(()) => true,
+            Ok(()) => {
+                *running = Some(Running {
+                    acquired_s,
+                    photons,
+                    started: Instant::now(),
+                });
+                true
+            }
             Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => false,
         }
     }
 
-    /// Reconstructs the whole run's `stack` after any snapshot still at
-    /// work (whatever the load: the acquisition has ended), then ends the
-    /// thread.
-    pub fn finish_with(mut self, stack: Stack, acquired_s: f64, photons: u64) {
-        if let Some(tx) = self.tx.take() {
-            let _ = tx.send(Snapshot {
-                stack,
-                acquired_s,
-                photons,
-                last: true,
+    /// Reconstructs the whole run's `stack` (the acquisition has ended) at
+    /// normal priority on a thread of its own, and shows it; a snapshot
+    /// still at work is left behind (it is older) and never shown.
+    /// `progress` sees it every quarter second on the calling thread;
+    /// `stop` (Ctrl-C) skips it at once, and the page says so.
+    pub fn finish(
+        mut self,
+        stack: Stack,
+        acquired_s: f64,
+        photons: u64,
+        stop: &AtomicBool,
+        mut progress: impl FnMut(&FinalProgress),
+    ) -> FinalRun {
+        self.shared.ended.store(true, Ordering::Relaxed);
+        self.tx.take();
+        let shared = self.shared.clone();
+        drop(self);
+        {
+            let mut s = shared.state();
+            s.reconstruction_status = Some(format!(
+                "reconstructing the whole run ({photons} photons, {acquired_s:.1} s of acquisition)"
+            ));
+            s.version += 1;
+        }
+        if stop.load(Ordering::Relaxed) {
+            return skipped(&shared);
+        }
+        let iterations = Arc::new(AtomicUsize::new(0));
+        let (tx, rx) = sync_channel(1);
+        let counted = iterations.clone();
+        let started = Instant::now();
+        let spawned = std::thread::Builder::new()
+            .name("final-reconstruction".into())
+            .spawn(move || {
+                let result = PriorSpec::default()
+                    .build()
+                    .map_err(|e| e.to_string())
+                    .and_then(|d| reconstruct(&stack, d.as_ref(), &counted));
+                let _ = tx.send(result);
             });
+        if let Err(e) = spawned {
+            let e = format!("no thread for the whole run's reconstruction: {e}");
+            shared.state().reconstruction_error = Some(e.clone());
+            return FinalRun::Failed(e);
         }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
+        loop {
+            match rx.recv_timeout(Duration::from_millis(250)) {
+                Ok(result) => {
+                    let run_s = started.elapsed().as_secs_f64();
+                    let end = match &result {
+                        Ok((rec, _, _)) => FinalRun::Shown {
+                            run_s,
+                            method: rec.trace.method.clone(),
+                        },
+                        Err(e) => FinalRun::Failed(e.clone()),
+                    };
+                    show(&shared, result, acquired_s, photons, run_s);
+                    return end;
+                }
+                Err(RecvTimeoutError::Timeout) if stop.load(Ordering::Relaxed) => {
+                    return skipped(&shared);
+                }
+                Err(RecvTimeoutError::Timeout) => progress(&FinalProgress {
+                    elapsed_s: started.elapsed().as_secs_f64(),
+                    iterations: iterations.load(Ordering::Relaxed),
+                }),
+                Err(RecvTimeoutError::Disconnected) => {
+                    let e = "the whole run's reconstruction ended without a result".to_string();
+                    shared.state().reconstruction_error = Some(e.clone());
+                    return FinalRun::Failed(e);
+                }
+            }
         }
+    }
+}
+
+/// Says on the page that the whole run's reconstruction was skipped.
+fn skipped(shared: &Shared) -> FinalRun {
+    let mut s = shared.state();
+    s.reconstruction_status =
+        Some("the whole run's reconstruction was skipped (Ctrl-C); the stack is saved".into());
+    s.version += 1;
+    FinalRun::Skipped
+}
+
+impl Drop for Reconstructor {
+    /// The view is going away: the threads stop at their next look and are
+    /// not waited for.
+    fn drop(&mut self) {
+        self.shared.ended.store(true, Ordering::Relaxed);
     }
 }
 

@@ -5,8 +5,8 @@
 //! address every request needs the random access token printed with the
 //! address, so no one else on the network reads the run.
 //!
-//! axum on a tokio runtime of one thread (in the idle class, as every
-//! thread of the view): an idle keep-alive connection or a browser that
+//! axum on a tokio runtime of one thread (at nice 10, below the
+//! acquisition): an idle keep-alive connection or a browser that
 //! stops reading is a parked task, not a blocked thread, so many open pages
 //! never stall a new one.
 
@@ -23,7 +23,7 @@ use axum::response::sse::{Event, Sse};
 use axum::response::{IntoResponse, Response};
 use ndarray::Array2;
 
-use super::recon::Reconstructor;
+use super::recon::{FinalProgress, FinalRun, Reconstructor};
 use super::state::LiveState;
 use crate::acquire::{Acquisition, Snapshot};
 use crate::physics::Setup;
@@ -69,6 +69,17 @@ pub struct LiveView {
     url: String,
 }
 
+/// The page's address on `bound`, with its token: an IPv6 address in
+/// brackets, as a browser takes it.
+fn page_url(bound: SocketAddr, token: Option<&str>) -> String {
+    let host = match bound.ip() {
+        IpAddr::V4(ip) => ip.to_string(),
+        IpAddr::V6(ip) => format!("[{ip}]"),
+    };
+    let query = token.map_or(String::new(), |t| format!("?token={t}"));
+    format!("http://{host}:{}/{query}", bound.port())
+}
+
 /// A random token of 32 hex digits.
 fn random_token() -> String {
     use rand::RngExt;
@@ -101,17 +112,7 @@ impl LiveView {
             .build()
             .map_err(bind_error)?;
         let token = (!bound.ip().is_loopback()).then(random_token);
-        let host = match bound.ip() {
-            IpAddr::V4(ip) if ip.is_unspecified() => "0.0.0.0".to_string(),
-            ip => ip.to_string(),
-        };
-        let url = format!(
-            "http://{host}:{}/{}",
-            bound.port(),
-            token
-                .as_ref()
-                .map_or(String::new(), |t| format!("?token={t}"))
-        );
+        let url = page_url(bound, token.as_deref());
         let shared = Arc::new(Shared {
             state: Arc::new(Mutex::new(LiveState::default())),
             token,
@@ -123,20 +124,23 @@ impl LiveView {
             let app = axum::Router::new()
                 .fallback(answer)
                 .with_state(shared.clone());
-            std::thread::spawn(move || {
-                super::lower_priority();
-                runtime.block_on(async move {
-                    let Ok(listener) = tokio::net::TcpListener::from_std(listener) else {
-                        return;
-                    };
-                    // Ends at `close`; the runtime's drop then ends every
-                    // connection still open.
-                    tokio::select! {
-                        _ = axum::serve(listener, app) => {}
-                        _ = closing => {}
-                    }
-                });
-            })
+            std::thread::Builder::new()
+                .name(format!("{}server", super::cpu::VIEW_THREAD_PREFIX))
+                .spawn(move || {
+                    super::view_priority();
+                    runtime.block_on(async move {
+                        let Ok(listener) = tokio::net::TcpListener::from_std(listener) else {
+                            return;
+                        };
+                        // Ends at `close`; the runtime's drop then ends every
+                        // connection still open.
+                        tokio::select! {
+                            _ = axum::serve(listener, app) => {}
+                            _ = closing => {}
+                        }
+                    });
+                })
+                .map_err(bind_error)?
         };
         Ok(Self {
             shared,
@@ -237,8 +241,8 @@ pub struct LiveStage {
 impl LiveStage {
     /// Takes in one snapshot (see [`crate::acquire::run_watched`]).
     pub fn watch(&mut self, s: &Snapshot<'_>) {
-        // Never waits on the lock: its other users run in the idle class
-        // and may be preempted holding it; when it is held, this snapshot
+        // Never waits on the lock: its other users run below the
+        // acquisition's priority and may be preempted holding it; when it is held, this snapshot
         // is shown with the next one.
         self.acquired.update(s);
         match self.state.try_lock() {
@@ -269,16 +273,24 @@ impl LiveStage {
         }
     }
 
-    /// Reconstructs the final stack too (the whole run) and waits for it,
-    /// so that a lingering page shows it.
-    pub fn finish(self, done: &Acquisition) {
-        if let Some(r) = self.reconstructor {
-            r.finish_with(
-                done.stack.clone(),
-                done.outcome.end.elapsed.as_secs_f64(),
-                done.outcome.ledger.photons,
-            );
-        }
+    /// Reconstructs the whole run's stack and shows it, so that a
+    /// lingering page shows it ([`Reconstructor::finish`]: normal priority,
+    /// `progress` as it goes, `stop` skips it); `None` when the view has no
+    /// reconstruction (the sample's physics are not known).
+    pub fn finish(
+        self,
+        done: &Acquisition,
+        stop: &AtomicBool,
+        progress: impl FnMut(&FinalProgress),
+    ) -> Option<FinalRun> {
+        let r = self.reconstructor?;
+        Some(r.finish(
+            done.stack.clone(),
+            done.outcome.end.elapsed.as_secs_f64(),
+            done.outcome.ledger.photons,
+            stop,
+            progress,
+        ))
     }
 }
 
@@ -374,4 +386,19 @@ fn events(slot: Slot) -> impl futures_util::Stream<Item = Result<Event, Infallib
 /// The state as the page reads it.
 fn to_json(state: &LiveState) -> String {
     serde_json::to_string(state).expect("the state serialises")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_ipv6_address_is_bracketed_in_the_url() {
+        let v6: SocketAddr = "[::]:8080".parse().unwrap();
+        assert_eq!(page_url(v6, None), "http://[::]:8080/");
+        let loop6: SocketAddr = "[::1]:9".parse().unwrap();
+        assert_eq!(page_url(loop6, Some("ab")), "http://[::1]:9/?token=ab");
+        let v4: SocketAddr = "0.0.0.0:80".parse().unwrap();
+        assert_eq!(page_url(v4, None), "http://0.0.0.0:80/");
+    }
 }

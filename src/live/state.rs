@@ -1,8 +1,9 @@
 //! What the live page shows, updated by the acquisition's watching stage
 //! and by the reconstruction thread, read by the server. The watching
 //! stage keeps its own copy and only tries the shared one's lock: the
-//! server and the reconstruction run in the idle class, and one preempted
-//! while holding the lock would otherwise stall the acquisition.
+//! server and the reconstruction run below the acquisition's priority, and
+//! one preempted while holding the lock would otherwise stall the
+//! acquisition.
 
 use serde::Serialize;
 
@@ -129,6 +130,10 @@ pub struct LiveState {
     /// Why snapshots are being skipped (the acquisition keeps every core
     /// busy), while they are.
     pub reconstruction_paused: Option<String>,
+    /// What the reconstruction is doing now, in words, when no result
+    /// shows it: a snapshot at work, starved of CPU (and by what), the
+    /// whole run's reconstruction, or that it was skipped.
+    pub reconstruction_status: Option<String>,
     /// Increments on every change.
     pub version: u64,
 }

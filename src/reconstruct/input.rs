@@ -16,6 +16,7 @@ use crate::formats::image::read_image;
 use crate::formats::stack_file::missing_meta;
 use crate::forward::Boundary;
 use crate::physics::{Preset, Sampling, Setup};
+use crate::poisson::counts::CountsError;
 use crate::scene::{ImageError, Scene};
 use crate::stack::{Stack, StackError, StackMeta, ValueKind};
 
@@ -80,6 +81,14 @@ pub enum InputError {
         path: PathBuf,
         /// Why.
         source: ProblemError,
+    },
+    /// The stack holds less than one photon: nothing to reconstruct.
+    #[error("{path}: {source}")]
+    Counts {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: CountsError,
     },
     /// The background cannot be used.
     #[error("the background of {path}: {source}")]
@@ -165,6 +174,16 @@ pub fn prepare(
             (Stack::from_parts(data, meta, path)?, setup)
         }
     };
+    let total: f64 = stack.data.iter().map(|&v| f64::from(v)).sum();
+    if total < 1.0 {
+        return Err(InputError::Counts {
+            path: path.into(),
+            source: CountsError::NoLight {
+                elements: stack.data.len(),
+                total,
+            },
+        });
+    }
     if let Some(free) = spec.fit_physics {
         let cal =
             fit_stack_physics(&mut stack, &setup, free).map_err(|source| InputError::Fit {

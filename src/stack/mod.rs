@@ -14,6 +14,7 @@ use scatterscope_physics::{Sampling, Setup};
 use serde::{Deserialize, Serialize};
 
 use crate::forward::Boundary;
+use crate::poisson::counts::check_count;
 
 /// Version of the metadata layout written to files.
 pub const META_VERSION: u32 = 1;
@@ -241,14 +242,8 @@ impl Stack {
         }
         for (b, img) in self.data.axis_iter(Axis(0)).enumerate() {
             for ((r, c), &v) in img.indexed_iter() {
-                if !v.is_finite() || v < 0.0 {
-                    return Err(StackError::format(
-                        path,
-                        format!(
-                            "bin {b} (t{b:03}), row {r}, column {c}: value {v} is not a finite non-negative number"
-                        ),
-                    ));
-                }
+                check_count(f64::from(v), || format!("bin {b}, row {r}, column {c}"))
+                    .map_err(|e| StackError::format(path, e.to_string()))?;
             }
         }
         Ok(())

@@ -10,6 +10,13 @@ use crate::physics::Setup;
 #[derive(Debug, Clone, Default)]
 pub struct MockSpec {}
 
+impl MockSpec {
+    /// No scene, no file.
+    pub fn scene_file(&self) -> Option<&std::path::Path> {
+        None
+    }
+}
+
 /// There is no mock to open in this build.
 pub(crate) fn open_spec(
     _: &MockSpec,

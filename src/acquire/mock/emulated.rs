@@ -37,6 +37,16 @@ pub struct MockSpec {
     pub device: MockOptions,
 }
 
+impl MockSpec {
+    /// The image file the scene is read from, when it is one.
+    pub fn scene_file(&self) -> Option<&std::path::Path> {
+        match &self.scene {
+            Scene::File(path) => Some(path),
+            _ => None,
+        }
+    }
+}
+
 impl Default for MockSpec {
     fn default() -> Self {
         Self {

@@ -5,16 +5,20 @@ use std::time::Duration;
 
 use crate::shared_args::{PhysicsArgs, choice, progress};
 use crate::signals::Interrupted;
+use scatterscope::acquire::Acquisition;
 use scatterscope::acquire::picoquant::{PicoQuantDevice, SettingsRequest};
 use scatterscope::acquire::replay::ReplaySpec;
 use scatterscope::acquire::{DeviceSpec, Job, MockSpec, Plan, StopReason, TimeZero, device};
 use scatterscope::config::{parse_duration, parse_ps};
 use scatterscope::events::Imaging;
 use scatterscope::live::LiveView;
+use scatterscope::live::recon::FinalRun;
+use scatterscope::live::server::LiveStage;
 use scatterscope::scene::Scene;
 use scatterscope::tags::bin_file::Pixels;
 use scatterscope::tags::binning::Region;
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
+use std::sync::atomic::AtomicBool;
 
 /// Acquire a transient stack from a time tagger (or the mock device).
 ///
@@ -417,23 +421,64 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     }
     let names: Vec<String> = done.files.iter().map(|f| f.display().to_string()).collect();
     println!("wrote {}", names.join(", "));
+    let mut skipped = false;
     if let (Some(view), Some(stage)) = (&live, stage) {
         view.finish(&done);
         if !args.linger.is_zero() {
-            stage.finish(&done);
-            println!(
-                "live view: the final page stays up for {:?} (Ctrl-C ends it)",
-                args.linger
-            );
-            view.linger(args.linger, stop);
+            skipped = reconstruct_whole_run(stage, &done, stop);
+            if !skipped {
+                println!(
+                    "live view: the final page stays up for {:?} (Ctrl-C ends it)",
+                    args.linger
+                );
+                view.linger(args.linger, stop);
+            }
         }
     }
     done.verdict().map_err(anyhow::Error::msg)?;
     match done.outcome.end.stop {
         StopReason::Interrupted => Err(Interrupted(INTERRUPTED).into()),
+        _ if skipped => Err(Interrupted(SKIPPED).into()),
         _ => Ok(()),
     }
 }
+
+/// The live view's reconstruction of the whole run, with a progress line
+/// every few seconds on stderr (the command is not silent while it works);
+/// `true` when Ctrl-C skipped it.
+fn reconstruct_whole_run(stage: LiveStage, done: &Acquisition, stop: &AtomicBool) -> bool {
+    const EVERY_S: f64 = 5.0;
+    let mut next_line = EVERY_S;
+    eprintln!(
+        "live view: reconstructing the whole run ({} photons) for the page; Ctrl-C skips it (the outputs are written)",
+        done.outcome.ledger.photons
+    );
+    let end = stage.finish(done, stop, |p| {
+        if p.elapsed_s >= next_line {
+            eprintln!(
+                "live view: reconstructing the whole run: {:.0} s, {} iterations",
+                p.elapsed_s, p.iterations
+            );
+            next_line += EVERY_S;
+        }
+    });
+    match end {
+        Some(FinalRun::Shown { run_s, method }) => {
+            eprintln!("live view: the whole run reconstructed in {run_s:.1} s ({method})");
+            false
+        }
+        Some(FinalRun::Failed(e)) => {
+            eprintln!("live view: the whole run's reconstruction failed: {e}");
+            false
+        }
+        Some(FinalRun::Skipped) => true,
+        None => false,
+    }
+}
+
+/// What an acquisition says when Ctrl-C skipped the live view's final
+/// reconstruction.
+const SKIPPED: &str = "the live view's reconstruction of the whole run was skipped (Ctrl-C); every output is complete";
 
 /// What an acquisition ended by a signal says.
 const INTERRUPTED: &str =

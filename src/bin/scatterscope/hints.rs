@@ -13,6 +13,7 @@ use scatterscope::config::ConfigError;
 use scatterscope::confocal::ConfocalError;
 use scatterscope::denoise::ffdnet::source::ImportError;
 use scatterscope::denoise::prior::PriorError;
+use scatterscope::files::PlanError;
 use scatterscope::formats::picoquant::{FileError, TtrError};
 use scatterscope::live::server::LiveError;
 use scatterscope::memory::LIMIT_ENV;
@@ -86,9 +87,24 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
         };
         return Some(format!("set it with {flag}"));
     }
+    if let Some(JobError::Files(e)) = cause.downcast_ref::<JobError>() {
+        return hint(e);
+    }
+    if let Some(e) = cause.downcast_ref::<PlanError>() {
+        let flag = match e.output_role() {
+            "PTU recording" => "--ptu names the PTU recording",
+            "tag file" => "--tags names the tag file",
+            _ => "--out names the output folder",
+        };
+        return Some(flag.into());
+    }
     if let Some(e) = cause.downcast_ref::<AcquireError>() {
         return match e {
             AcquireError::Source(e) => hint(e),
+            AcquireError::PtuPixels { .. } => Some(
+                "--tags records every pixel losslessly; a PTU file takes a sensor of at most 63 pixels (e.g. --size 7)"
+                    .into(),
+            ),
             AcquireError::Setting { name, .. } => {
                 let flag = match *name {
                     "channel" => "--channel",
