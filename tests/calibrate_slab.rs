@@ -379,7 +379,7 @@ fn references_and_captures_without_light_are_refused_by_name() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("empty.mat") && err.contains("all 500 bins hold 0 counts"),
+        err.contains("empty.mat") && err.contains("all 500 values are 0"),
         "{err}"
     );
     let err = TimeHistogram::new(vec![1.0, f64::NAN], BIN_PS, 0.0, Path::new("x.mat"))

@@ -270,7 +270,7 @@ fn reconstruct_rejects_non_finite_stacks() {
             "--out",
             dir.path().to_str().unwrap(),
         ],
-        &["bad.exr", "bin 3 (t003), row 4, column 5", "inf"],
+        &["bad.exr", "bin 3, row 4, column 5", "inf"],
     );
 }
 
@@ -527,11 +527,12 @@ fn acquire_on_the_mock_then_bin_its_raw_tags_and_reconstruct() {
         "{stdout}"
     );
     // Light reaches the paper's slab's far side from about 16 ps on: the
-    // first four 4 ps bins see none.
-    assert!(
-        stdout.contains("bins are empty (bins [0, 1, 2, 3,"),
-        "{stdout}"
-    );
+    // first four 4 ps bins (at least) see none.
+    let first_empty_run_ends = stdout
+        .split_once("bins are empty (bins 0-")
+        .and_then(|(_, rest)| rest.split(|c: char| !c.is_ascii_digit()).next())
+        .and_then(|n| n.parse::<usize>().ok());
+    assert!(first_empty_run_ends.is_some_and(|n| n >= 3), "{stdout}");
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("acquisition.json")).unwrap())
             .unwrap();

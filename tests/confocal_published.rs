@@ -121,7 +121,10 @@ fn bad_scans_are_refused_with_the_reason() {
     };
     let zeros = Array3::<f64>::zeros((50, 4, 4));
     let e = err(ConfocalScan::new(zeros.clone(), 16.0, 0.0, 0.5, "z.mat"));
-    assert!(e.contains("z.mat") && e.contains("no counts"), "{e}");
+    assert!(
+        e.contains("z.mat") && e.contains("no photon was recorded"),
+        "{e}"
+    );
 
     let mut nan = zeros.clone();
     nan[[7, 2, 1]] = f64::NAN;

@@ -587,3 +587,136 @@ fn a_replay_shows_in_the_live_view() {
     );
     assert_eq!(last["ended"], "the recording reached its end");
 }
+
+/// Busy loops at normal priority on every core, ended on drop.
+struct Hogs(Vec<std::process::Child>);
+
+impl Hogs {
+    fn start() -> Self {
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+        Self(
+            (0..cores)
+                .map(|_| {
+                    std::process::Command::new("sh")
+                        .args(["-c", "while :; do :; done"])
+                        .spawn()
+                        .unwrap()
+                })
+                .collect(),
+        )
+    }
+}
+
+impl Drop for Hogs {
+    fn drop(&mut self) {
+        for h in &mut self.0 {
+            let _ = h.kill();
+            let _ = h.wait();
+        }
+    }
+}
+
+#[test]
+fn under_cpu_hogs_the_page_says_why_and_the_command_keeps_talking() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("acq");
+    let hogs = Hogs::start();
+    let mut child = command::scatterscope()
+        .args([
+            "acquire",
+            "--size",
+            "16",
+            "--fov",
+            "3cm",
+            "--duration",
+            "8s",
+            "--live",
+            "--linger",
+            "1s",
+            "--out",
+        ])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Every line of both streams with the time it came.
+    let (tx, rx) = std::sync::mpsc::channel::<(Instant, String)>();
+    let readers: Vec<_> = [
+        Box::new(child.stdout.take().unwrap()) as Box<dyn Read + Send>,
+        Box::new(child.stderr.take().unwrap()),
+    ]
+    .into_iter()
+    .map(|stream| {
+        let tx = tx.clone();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stream).lines().map_while(Result::ok) {
+                let _ = tx.send((Instant::now(), line));
+            }
+        })
+    })
+    .collect();
+    drop(tx);
+    let (_, first) = rx.recv_timeout(Duration::from_secs(60)).unwrap();
+    let url = first.strip_prefix("live view: ").unwrap().to_string();
+    let addr = url.trim_start_matches("http://").trim_end_matches('/');
+    let mut statuses = Vec::new();
+    let started = Instant::now();
+    let mut light_at = None;
+    loop {
+        let r = http_get(addr, "/state");
+        let body = r.split_once("\r\n\r\n").map_or("", |(_, b)| b);
+        let s: serde_json::Value = serde_json::from_str(body).unwrap();
+        if s["counters"]["photons"].as_u64().unwrap_or(0) > 0 && s["reconstruction"].is_null() {
+            // Photons in, no reconstruction shown: within the watcher's
+            // first looks the page says why, and from then on always.
+            let light = *light_at.get_or_insert_with(Instant::now);
+            let why = [
+                &s["reconstruction_status"],
+                &s["reconstruction_paused"],
+                &s["reconstruction_error"],
+            ];
+            assert!(
+                why.iter().any(|w| w.is_string()) || light.elapsed() < Duration::from_secs(3),
+                "{s}"
+            );
+        }
+        statuses.extend(s["reconstruction_status"].as_str().map(str::to_string));
+        if s["done"] == true {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(120),
+            "the run did not end"
+        );
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    let status = child.wait().unwrap();
+    let exited = Instant::now();
+    drop(hogs);
+    for r in readers {
+        r.join().unwrap();
+    }
+    let lines: Vec<(Instant, String)> = rx.into_iter().collect();
+    let all: Vec<&str> = lines.iter().map(|(_, l)| l.as_str()).collect();
+    assert!(status.success(), "{status:?}: {all:#?}");
+    let starved = statuses.iter().find(|s| s.starts_with("starved of CPU"));
+    assert!(
+        starved.is_some_and(|s| s.contains("sh (pid")),
+        "{statuses:#?}"
+    );
+    assert!(
+        all.iter()
+            .any(|l| l.contains("reconstructing the whole run")),
+        "{all:#?}"
+    );
+    // Never silent for 15 s, to the end.
+    let mut times: Vec<Instant> = lines.iter().map(|(t, _)| *t).collect();
+    times.push(exited);
+    times.sort();
+    let longest = times.windows(2).map(|w| w[1] - w[0]).max().unwrap();
+    assert!(
+        longest < Duration::from_secs(15),
+        "silent for {longest:?}: {all:#?}"
+    );
+}

@@ -347,27 +347,26 @@ fn settings_of_the_other_family_are_refused_by_name() {
 }
 
 #[test]
-fn an_unwritable_ptu_is_a_clear_error_and_the_stack_is_still_saved() {
+fn an_unwritable_ptu_is_refused_before_the_device_is_touched() {
     for (target, words) in [
         // A device is never renamed over: outputs go to regular files.
         ("/dev/full", "not a regular file"),
-        ("/nonexistent/dir/a.ptu", "creating"),
+        (
+            "/nonexistent/dir/a.ptu",
+            "its folder /nonexistent/dir does not exist",
+        ),
     ] {
         let dir = tempfile::tempdir().unwrap();
         let (out, o) = acquire(dir.path(), "picoquant", "", &["--ptu", target]);
         let all = text(&o);
-        assert!(!o.status.success(), "{target}: {all}");
+        assert_eq!(o.status.code(), Some(1), "{target}: {all}");
         assert!(
-            all.contains(words) && all.contains(target),
+            all.contains(words) && all.contains(target) && all.contains("hint: --ptu"),
             "{target}: {all}"
         );
-        let stack = Stack::load(&out.join("stack.exr")).unwrap();
-        let record = json(&out.join("acquisition.json"));
-        assert_eq!(
-            stack.data.sum() as u64,
-            record["ledger"]["binned"].as_u64().unwrap()
-        );
-        assert!(record["ledger"]["binned"].as_u64().unwrap() > 0);
+        // Nothing acquired, nothing written.
+        assert!(!all.contains("ended:"), "{target}: {all}");
+        assert!(!out.exists(), "{target}");
     }
 }
 

@@ -207,6 +207,9 @@ pub enum OpenError {
     /// A device that cannot be opened as asked.
     #[error("{0}")]
     Usage(String),
+    /// A recording that cannot be played back as asked.
+    #[error(transparent)]
+    Replay(super::source::SourceError),
     /// The sensor exceeds what the wire protocol addresses.
     #[error(
         "the sensor is {width} x {height} pixels; the protocol addresses at most {max} pixels (256 x 256)"
@@ -253,8 +256,7 @@ pub fn open_device(spec: &DeviceSpec, setup: Option<&Setup>) -> Result<OpenedDev
         }),
         DeviceSpec::Replay(r) => Ok(OpenedDevice {
             source: Box::new(
-                super::replay::FileSource::open(&r.path, r.speed)
-                    .map_err(|e| OpenError::Usage(e.to_string()))?,
+                super::replay::FileSource::open(&r.path, r.speed).map_err(OpenError::Replay)?,
             ),
             truth: None,
         }),

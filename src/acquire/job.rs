@@ -235,6 +235,7 @@ impl Job {
             files.output("tag file", tags);
         }
         files
+            .folder(&self.out)
             .output("stack", &self.out.join(STACK_EXR))
             .output("stack's contact sheet", &self.out.join(STACK_PNG))
             .output("acquisition record", &self.out.join(RECORD_JSON));

@@ -84,6 +84,23 @@ impl Default for Plan {
     }
 }
 
+/// A micro-time unit of `ps` in the whole femtoseconds a device is asked
+/// for ([`Plan::resolution_fs`]): at least 1 fs and at most what 32 bits
+/// hold (4.3 us), so that no value is cut or wrapped on the way.
+pub fn resolution_fs(ps: f64) -> Result<u32, AcquireError> {
+    let fs = (ps * 1000.0).round();
+    if !(1.0..=f64::from(u32::MAX)).contains(&fs) {
+        return Err(AcquireError::setting(
+            "resolution_fs",
+            format!(
+                "micro-time unit {ps} ps: give one from 0.001 ps to {} ps",
+                f64::from(u32::MAX) / 1000.0
+            ),
+        ));
+    }
+    Ok(fs as u32)
+}
+
 impl Plan {
     /// Bins the window `bins` describes (a set-up's).
     pub fn set_window(&mut self, bins: &crate::physics::TimeBins) {

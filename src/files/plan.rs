@@ -51,14 +51,20 @@ fn existing_ancestor(path: &Path) -> PathBuf {
 
 /// Where `path` leads.
 fn locate(path: &Path) -> Location {
-    if let Some(id) = FileId::at(path) {
-        return Location::Existing(id);
+    match FileId::at(path) {
+        Some(id) => Location::Existing(id),
+        None => Location::New(new_location(path)),
     }
+}
+
+/// `path` as the real path of its nearest existing ancestor and the rest of
+/// its components.
+fn new_location(path: &Path) -> PathBuf {
     let absolute = lexical(&std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf()));
     let base = existing_ancestor(&absolute);
     let rest = absolute.strip_prefix(&base).unwrap_or(Path::new(""));
     let real = std::fs::canonicalize(&base).unwrap_or(base.clone());
-    Location::New(real.join(rest))
+    real.join(rest)
 }
 
 /// Why the files of a command cannot be used as named.
@@ -121,6 +127,7 @@ impl PlanError {
 pub struct FilePlan {
     inputs: Vec<(String, PathBuf)>,
     outputs: Vec<(String, PathBuf)>,
+    folders: Vec<PathBuf>,
 }
 
 /// Counter that keeps probe names apart within the process.
@@ -141,6 +148,14 @@ impl FilePlan {
     /// A file the run writes.
     pub fn output(&mut self, what: impl Into<String>, path: &Path) -> &mut Self {
         self.outputs.push((what.into(), path.to_path_buf()));
+        self
+    }
+
+    /// A folder the run makes when it is missing (an output folder): an
+    /// output may go in it, or below it, before it exists. Any other
+    /// output's folder must exist.
+    pub fn folder(&mut self, path: &Path) -> &mut Self {
+        self.folders.push(path.to_path_buf());
         self
     }
 
@@ -171,7 +186,7 @@ impl FilePlan {
                     input_path: input_path.clone(),
                 });
             }
-            writable(path).map_err(|reason| PlanError::Unwritable {
+            writable(path, &self.folders).map_err(|reason| PlanError::Unwritable {
                 what: what.clone(),
                 path: path.clone(),
                 reason,
@@ -184,14 +199,29 @@ impl FilePlan {
 
 /// Whether a file can be written at `path` as outputs are (a temporary in
 /// its folder, renamed into place): an existing `path` must be a regular
-/// file that is not an input of this process, and the nearest folder that
-/// exists must take a new file (tried with an empty probe, removed at once).
-fn writable(path: &Path) -> Result<(), String> {
+/// file that is not an input of this process; its folder must exist or be
+/// (or lie in) one of `made` (the folders the run makes); and the nearest
+/// folder that exists must take a new file (tried with an empty probe,
+/// removed at once).
+fn writable(path: &Path, made: &[PathBuf]) -> Result<(), String> {
     if path.file_name().is_none() {
         return Err("it names a folder, not a file".into());
     }
     super::output::check_destination(path).map_err(|e| e.to_string())?;
-    let folder = existing_ancestor(path.parent().unwrap_or(Path::new(".")));
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if std::fs::symlink_metadata(parent).is_err() {
+        let wanted = new_location(parent);
+        if !made.iter().any(|m| wanted.starts_with(new_location(m))) {
+            return Err(format!(
+                "its folder {} does not exist (only the output folder is made)",
+                parent.display()
+            ));
+        }
+    }
+    let folder = existing_ancestor(parent);
     let folder = if folder.as_os_str().is_empty() {
         PathBuf::from(".")
     } else {
@@ -286,11 +316,19 @@ mod tests {
     fn outputs_in_a_folder_to_be_made_pass_and_leave_nothing() {
         let dir = tempfile::tempdir().unwrap();
         FilePlan::new()
+            .folder(&dir.path().join("a"))
             .output("stack", &dir.path().join("a/b/stack.exr"))
             .output("PTU recording", &dir.path().join("a/rec.ptu"))
             .check()
             .unwrap();
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+        let err = FilePlan::new()
+            .folder(&dir.path().join("a"))
+            .output("PTU recording", &dir.path().join("elsewhere/rec.ptu"))
+            .check()
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("elsewhere does not exist"), "{err}");
     }
 
     #[cfg(target_os = "linux")]
@@ -303,6 +341,7 @@ mod tests {
             .to_string();
         assert!(err.contains("/proc"), "{err}");
         let err = FilePlan::new()
+            .folder(Path::new("/dev/null"))
             .output("stack", Path::new("/dev/null/x.exr"))
             .check()
             .unwrap_err()
@@ -318,6 +357,6 @@ mod tests {
             .check()
             .unwrap_err()
             .to_string();
-        assert!(err.contains("folder"), "{err}");
+        assert!(err.contains("is not a regular file (a directory)"), "{err}");
     }
 }

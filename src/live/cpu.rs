@@ -160,10 +160,13 @@ impl OtherProcesses {
             let wall = now.0.duration_since(*t).as_secs_f64();
             if wall > 0.05 {
                 for p in &now.1 {
-                    let Some(b) = before.iter().find(|b| b.pid == p.pid) else {
-                        continue;
-                    };
-                    let cores = (p.cpu_s - b.cpu_s).max(0.0) / wall;
+                    // A process new since the last look spent all its CPU
+                    // since then.
+                    let then = before
+                        .iter()
+                        .find(|b| b.pid == p.pid)
+                        .map_or(0.0, |b| b.cpu_s);
+                    let cores = (p.cpu_s - then).max(0.0) / wall;
                     if p.pid != own && cores >= 0.1 {
                         busy.push(Busy {
                             pid: p.pid,

@@ -212,6 +212,7 @@ fn watch_cpu(shared: Arc<Shared>) {
         let own = acquisition.busy_cores();
         let Some(r) = *shared.running() else {
             seen = None;
+            set_status(&shared, None);
             continue;
         };
         let cpu_now = threads_cpu_s(&recon_threads);
@@ -257,11 +258,17 @@ fn watch_cpu(shared: Arc<Shared>) {
             }
             _ => format!("reconstructing {what}: {elapsed:.0} s so far"),
         };
-        if shared.ended.load(Ordering::Relaxed) {
-            break;
-        }
-        let mut s = shared.state();
-        s.reconstruction_status = Some(status);
+        set_status(&shared, Some(status));
+    }
+}
+
+/// The watcher's word on the page, unless the acquisition has ended (the
+/// whole run's reconstruction speaks then): checked under the state's
+/// lock, which [`Reconstructor::finish`] takes after it sets `ended`.
+fn set_status(shared: &Shared, status: Option<String>) {
+    let mut s = shared.state();
+    if !shared.ended.load(Ordering::Relaxed) && s.reconstruction_status != status {
+        s.reconstruction_status = status;
         s.version += 1;
     }
 }

@@ -321,7 +321,10 @@ fn job(args: &AcquireArgs) -> anyhow::Result<Job> {
             (None, DeviceSpec::Replay(_)) => None,
             (None, _) => Some(Duration::from_secs(2)),
         },
-        resolution_fs: args.resolution.map(|ps| (ps * 1000.0).round() as u32),
+        resolution_fs: args
+            .resolution
+            .map(scatterscope::acquire::pipeline::resolution_fs)
+            .transpose()?,
         tag_file: args.tags.clone(),
         ptu: p.ptu.clone(),
         software: format!("scatterscope {}", env!("CARGO_PKG_VERSION")),
@@ -421,12 +424,12 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     }
     let names: Vec<String> = done.files.iter().map(|f| f.display().to_string()).collect();
     println!("wrote {}", names.join(", "));
-    let mut skipped = false;
     if let (Some(view), Some(stage)) = (&live, stage) {
         view.finish(&done);
         if !args.linger.is_zero() {
-            skipped = reconstruct_whole_run(stage, &done, stop);
-            if !skipped {
+            // Ctrl-C while it works ends the page's part as it ends the
+            // lingering: the acquisition's outputs are all written.
+            if !reconstruct_whole_run(stage, &done, stop) {
                 println!(
                     "live view: the final page stays up for {:?} (Ctrl-C ends it)",
                     args.linger
@@ -438,7 +441,6 @@ pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     done.verdict().map_err(anyhow::Error::msg)?;
     match done.outcome.end.stop {
         StopReason::Interrupted => Err(Interrupted(INTERRUPTED).into()),
-        _ if skipped => Err(Interrupted(SKIPPED).into()),
         _ => Ok(()),
     }
 }
@@ -471,14 +473,15 @@ fn reconstruct_whole_run(stage: LiveStage, done: &Acquisition, stop: &AtomicBool
             eprintln!("live view: the whole run's reconstruction failed: {e}");
             false
         }
-        Some(FinalRun::Skipped) => true,
+        Some(FinalRun::Skipped) => {
+            eprintln!(
+                "live view: the whole run's reconstruction skipped (Ctrl-C); every output is written"
+            );
+            true
+        }
         None => false,
     }
 }
-
-/// What an acquisition says when Ctrl-C skipped the live view's final
-/// reconstruction.
-const SKIPPED: &str = "the live view's reconstruction of the whole run was skipped (Ctrl-C); every output is complete";
 
 /// What an acquisition ended by a signal says.
 const INTERRUPTED: &str =

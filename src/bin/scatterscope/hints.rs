@@ -112,6 +112,7 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
                     "region" => "--roi",
                     "tag_file" => "--tags",
                     "ptu" => "--ptu",
+                    "resolution_fs" => "--resolution",
                     _ => return None,
                 };
                 Some(format!("set it with {flag}"))
@@ -136,6 +137,9 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
             _ => return None,
         };
         return Some(format!("set it with {flag}"));
+    }
+    if let Some(OpenError::Replay(e)) = cause.downcast_ref::<OpenError>() {
+        return hint(e);
     }
     // No library of a family, or of any family when none was named (the
     // families' messages joined).
