@@ -1,19 +1,25 @@
 #!/usr/bin/env bash
-# Installs numpy and h5py under target/pydeps for scripts/cdt_reference.py,
-# the independent numpy implementation the confocal test compares against,
-# ptufile, the independent PTU reader the PicoQuant acquisition test
-# decodes our PTU files with, OpenEXR, the OpenEXR project's own library
-# that reads our stack files back in a test, and playwright, which drives the system's
-# Chromium (Debian's package; its own browser download is never used) in
-# the live view's browser test.
-# Nothing is installed system-wide; the test sets PYTHONPATH to that folder.
+# Installs under target/pydeps the independent Python readers the tests
+# check our files against, and what drives the browser test:
+# - numpy and h5py, for scripts/cdt_reference.py (the independent numpy
+#   implementation the confocal test compares against) and forged MATLAB
+#   files;
+# - ptufile, the independent PTU reader our PTU files are decoded with;
+# - OpenEXR, the OpenEXR project's own library, reading our stacks back;
+# - tifffile and ome-types, reading our OME-TIFF files and parsing their
+#   OME-XML;
+# - playwright, which drives the system's Chromium (Debian's package; its
+#   own browser download is never used) in the live view's browser test.
+# Nothing is installed system-wide; the tests set PYTHONPATH to that folder.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dest=target/pydeps
-if PYTHONPATH="$dest" python3 -c "import numpy, h5py, ptufile, OpenEXR, playwright" 2>/dev/null; then
-    echo "already present: numpy, h5py, ptufile, OpenEXR and playwright under $dest"
+packages=(numpy h5py ptufile OpenEXR tifffile ome-types playwright)
+modules="numpy, h5py, ptufile, OpenEXR, tifffile, ome_types, playwright"
+if PYTHONPATH="$dest" python3 -c "import $modules" 2>/dev/null; then
+    echo "already present under $dest: ${packages[*]}"
     exit 0
 fi
 mkdir -p "$dest"
-python3 -m pip install --quiet --disable-pip-version-check --target "$dest" numpy h5py ptufile OpenEXR playwright
-echo "installed numpy, h5py, ptufile, OpenEXR and playwright under $dest"
+python3 -m pip install --quiet --disable-pip-version-check --target "$dest" "${packages[@]}"
+echo "installed under $dest: ${packages[*]}"

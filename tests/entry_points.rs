@@ -89,6 +89,7 @@ fn a_mock_acquisition_writes_its_stack_and_record_and_balances() {
         t0: TimeZero::At(0.0),
         plan,
         out: dir.path().join("acq"),
+        ome_tiff: false,
     };
     let done = job.run(&AtomicBool::new(false), |_| {}).unwrap();
     done.verdict().unwrap();
@@ -133,7 +134,7 @@ fn a_recorded_file_is_surveyed_binned_and_written() {
     assert_eq!(info.records_present, info.records_announced);
     let binned = bin_file(&ptu, &BinSpec::default()).unwrap();
     assert_eq!(binned.accounting.received, photons);
-    let files = binned.write(&dir.path().join("bin"), true).unwrap();
+    let files = binned.write(&dir.path().join("bin"), true, false).unwrap();
     let back = Stack::load(&files[0]).unwrap();
     assert_eq!(back.total() as u64, binned.accounting.binned);
     assert!(dir.path().join("bin/stack.png").is_file());

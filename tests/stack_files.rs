@@ -441,7 +441,7 @@ fn a_bin_of_more_than_2_to_the_24_photons_sums_to_the_ledger() {
         u64::from(n)
     );
     let out = dir.path().join("out");
-    let files = binned.write(&out, true).unwrap();
+    let files = binned.write(&out, true, false).unwrap();
     let back = Stack::load(&files[0]).unwrap();
     let sum: u64 = back
         .exact_counts

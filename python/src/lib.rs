@@ -352,7 +352,8 @@ fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArra
     Ok(img.into_pyarray(py))
 }
 
-/// Writes counts with their metadata (JSON) as EXR or npy + JSON.
+/// Writes counts with their metadata (JSON) as EXR, npy + JSON, or OME-TIFF
+/// (a `.ome.tif` name: one page per bin, for Fiji, napari or FLIMfit).
 #[pyfunction]
 #[pyo3(signature = (path, data, meta_json, counts=None))]
 fn save_stack(
@@ -598,7 +599,11 @@ fn acquire_mock<'py>(
     }
     let setup = overrides(physics)?.resolve().map_err(err)?;
     let mut plan = Plan {
-        duration: Some(Duration::from_secs_f64(duration_s)),
+        duration: Some(Duration::try_from_secs_f64(duration_s).map_err(|_| {
+            msg(format!(
+                "duration_s = {duration_s}: longer than any acquisition can run"
+            ))
+        })?),
         software: format!("scatterscope python {}", env!("CARGO_PKG_VERSION")),
         ..Plan::default()
     };
@@ -618,6 +623,7 @@ fn acquire_mock<'py>(
         setup: Some(setup),
         t0: TimeZero::At(0.0),
         out,
+        ome_tiff: false,
     };
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();

@@ -43,6 +43,8 @@ pub struct Job {
     pub plan: Plan,
     /// Output directory (created if missing).
     pub out: PathBuf,
+    /// Also write the stack as OME-TIFF (`stack.ome.tif`).
+    pub ome_tiff: bool,
 }
 
 /// A finished acquisition and what was written.
@@ -184,6 +186,11 @@ impl Job {
         let stack_path = self.out.join(STACK_EXR);
         stack.save(&stack_path)?;
         files.push(stack_path);
+        if self.ome_tiff {
+            let tif = self.out.join(STACK_OME_TIFF);
+            stack.save(&tif)?;
+            files.push(tif);
+        }
         let sheet = self.out.join(STACK_PNG);
         write_contact_sheet(&stack, SheetScale::Shared, &sheet)?;
         files.push(sheet);
@@ -239,6 +246,9 @@ impl Job {
             .output("stack", &self.out.join(STACK_EXR))
             .output("stack's contact sheet", &self.out.join(STACK_PNG))
             .output("acquisition record", &self.out.join(RECORD_JSON));
+        if self.ome_tiff {
+            files.output("stack as OME-TIFF", &self.out.join(STACK_OME_TIFF));
+        }
         if self.device.is_mock() {
             files
                 .output("truth image", &self.out.join(TRUTH_EXR))
@@ -250,6 +260,8 @@ impl Job {
 
 /// The stack an acquisition writes in its output folder.
 pub const STACK_EXR: &str = "stack.exr";
+/// The stack as OME-TIFF, when asked for.
+pub const STACK_OME_TIFF: &str = "stack.ome.tif";
 /// The stack's contact sheet.
 pub const STACK_PNG: &str = "stack.png";
 /// The record of the acquisition.

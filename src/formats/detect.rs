@@ -27,6 +27,8 @@ pub enum Format {
     Png,
     /// JPEG.
     Jpeg,
+    /// TIFF (`.tif`, `.tiff`; written as OME-TIFF, not read).
+    Tiff,
     /// None of these.
     Unknown,
 }
@@ -72,6 +74,7 @@ impl Format {
             "sstags" => Self::TagFile,
             "png" => Self::Png,
             "jpg" | "jpeg" => Self::Jpeg,
+            "tif" | "tiff" => Self::Tiff,
             _ => Self::Unknown,
         }
     }

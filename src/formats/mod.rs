@@ -9,7 +9,10 @@
 //! Stacks (what binning or simulation makes):
 //! - [`exr`]: OpenEXR, one `f32` channel per bin, with the metadata.
 //! - [`npy`]: NumPy `.npy` with a JSON sidecar.
-//! - [`stack_file`]: either, by the file: `Stack::load`, `Stack::save`.
+//! - [`ome_tiff`]: OME-TIFF out (one page per bin, the lifetime modulo of
+//!   T), for Fiji, napari and FLIMfit; also single reconstructions.
+//! - [`stack_file`]: by the file: `Stack::load` (EXR, npy), `Stack::save`
+//!   (EXR, npy, OME-TIFF).
 //!
 //! Measurements of other instruments:
 //! - [`mat`]: MATLAB v7.3 (HDF5) datasets, e.g. the confocal diffuse
@@ -26,6 +29,7 @@ pub mod exr;
 pub mod image;
 pub mod mat;
 pub mod npy;
+pub mod ome_tiff;
 pub mod picoquant;
 pub mod png;
 pub mod sstags;

@@ -16,9 +16,10 @@ impl Stack {
         match Format::of_extension(path) {
             Format::Exr => super::exr::write(self, path),
             Format::Npy => super::npy::write(self, path),
+            Format::Tiff => super::ome_tiff::write_stack(self, path),
             _ => Err(StackError::format(
                 path,
-                "unknown stack format: use a .exr or .npy file name",
+                "unknown stack format: use a .exr, .npy or .ome.tif file name",
             )),
         }
     }

@@ -46,6 +46,23 @@ impl Reconstruction {
         ])
     }
 
+    /// Writes the image as `reconstruction.ome.tif` into `dir` (a float
+    /// OME-TIFF for Fiji or napari, with `pixel_pitch_cm` as its physical
+    /// pixel size when known); returns the file.
+    pub fn write_ome_tiff(
+        &self,
+        dir: &Path,
+        pixel_pitch_cm: Option<f64>,
+    ) -> Result<PathBuf, StackError> {
+        let tif = dir.join("reconstruction.ome.tif");
+        crate::formats::ome_tiff::write_image(
+            self.image.mapv(|v| v as f32).view(),
+            pixel_pitch_cm,
+            &tif,
+        )?;
+        Ok(tif)
+    }
+
     /// What the run did, one line each: the method and prior, iterations
     /// and time, its notes from the `skip`-th on, and with a truth the
     /// output's PSNR and SSIM and the best iteration by truth.

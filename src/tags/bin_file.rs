@@ -181,10 +181,15 @@ impl BinnedFile<CountStack> {
 
 impl BinnedFile<Stack> {
     /// Writes every stack as EXR into `dir` (created if missing), each
-    /// with a PNG contact sheet when `previews`: `stack.exr`, or
-    /// `stack_f000.exr`, ... when frames are kept apart. Returns the EXR
-    /// files.
-    pub fn write(&self, dir: &Path, previews: bool) -> Result<Vec<PathBuf>, StackError> {
+    /// with a PNG contact sheet when `previews` and as OME-TIFF beside it
+    /// when `ome_tiff`: `stack.exr` (`stack.ome.tif`), or `stack_f000.exr`,
+    /// ... when frames are kept apart. Returns the stack files.
+    pub fn write(
+        &self,
+        dir: &Path,
+        previews: bool,
+        ome_tiff: bool,
+    ) -> Result<Vec<PathBuf>, StackError> {
         std::fs::create_dir_all(dir).map_err(|e| StackError::io(dir, e))?;
         let many = self.stacks.len() > 1;
         let mut files = Vec::new();
@@ -210,6 +215,11 @@ impl BinnedFile<Stack> {
             saved?;
             sheet?;
             files.push(exr);
+            if ome_tiff {
+                let tif = dir.join(format!("{stem}.ome.tif"));
+                stack.save(&tif)?;
+                files.push(tif);
+            }
         }
         Ok(files)
     }

@@ -109,6 +109,11 @@ pub struct AcquireArgs {
     /// (Ctrl-C ends it sooner).
     #[arg(long, value_name = "TIME", value_parser = parse_duration, default_value = "0s", requires = "live")]
     linger: Duration,
+    /// Also write the stack as OME-TIFF (stack.ome.tif: one page per bin,
+    /// the bins as the lifetime axis, counts as integers) for Fiji,
+    /// napari or FLIMfit.
+    #[arg(long)]
+    ome_tiff: bool,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/acquire")]
     out: PathBuf,
@@ -386,6 +391,7 @@ fn job(args: &AcquireArgs) -> anyhow::Result<Job> {
         },
         plan,
         out: args.out.clone(),
+        ome_tiff: args.ome_tiff,
     })
 }
 

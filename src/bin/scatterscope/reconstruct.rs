@@ -48,6 +48,10 @@ pub struct ReconstructArgs {
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/reconstruct")]
     out: PathBuf,
+    /// Also write the image as OME-TIFF (reconstruction.ome.tif, floats,
+    /// the sensor's pixel size) for Fiji or napari.
+    #[arg(long)]
+    ome_tiff: bool,
 }
 
 pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
@@ -111,12 +115,23 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     let printed = input.assumed.len();
     result.trace.notes.splice(0..0, input.assumed);
     result.write(&args.out)?;
+    if args.ome_tiff {
+        // The image is on the stack's sensor grid when it has its size.
+        let (_, h, w) = input.stack.data.dim();
+        let pitch = (result.image.dim() == (h, w)).then_some(input.stack.meta.pixel_pitch_cm);
+        result.write_ome_tiff(&args.out, pitch)?;
+    }
     for line in result.summary(printed, truth.as_ref().map(|t| t.view())) {
         println!("{line}");
     }
     println!(
-        "wrote {}/{{reconstruction.exr, reconstruction.png, trace.csv, trace.json}}",
-        args.out.display()
+        "wrote {}/{{reconstruction.exr, reconstruction.png{}, trace.csv, trace.json}}",
+        args.out.display(),
+        if args.ome_tiff {
+            ", reconstruction.ome.tif"
+        } else {
+            ""
+        }
     );
     Ok(())
 }

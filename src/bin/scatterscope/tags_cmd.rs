@@ -51,6 +51,11 @@ pub struct BinArgs {
     /// small file the sheet takes about a third of the command's time).
     #[arg(long)]
     no_preview: bool,
+    /// Also write each stack as OME-TIFF (stack.ome.tif: one page per bin,
+    /// the bins as the lifetime axis, counts as integers) for Fiji,
+    /// napari or FLIMfit.
+    #[arg(long)]
+    ome_tiff: bool,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/bin")]
     out: PathBuf,
@@ -75,7 +80,7 @@ pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
         allow_truncated: args.allow_truncated,
     };
     let binned = bin_file(&args.file, &spec)?;
-    binned.write(&args.out, !args.no_preview)?;
+    binned.write(&args.out, !args.no_preview, args.ome_tiff)?;
     let mut summary = binned.summary();
     let last = summary.pop().expect("the summary ends with the stacks");
     for line in summary {
