@@ -259,10 +259,21 @@ fn bad_files_give_errors_naming_file_and_field() {
     assert!(e.contains("cut.exr"), "{e}");
     // Unknown extension.
     let e = sample_stack(ValueKind::Counts)
-        .save(&dir.path().join("s.tif"))
+        .save(&dir.path().join("s.png"))
         .unwrap_err()
         .to_string();
-    assert!(e.contains("s.tif") && e.contains(".exr or .npy"), "{e}");
+    assert!(
+        e.contains("s.png") && e.contains(".exr, .npy or .ome.tif"),
+        "{e}"
+    );
+    // OME-TIFF is written, not read: a reader of stacks says so.
+    let tif = dir.path().join("s.ome.tif");
+    sample_stack(ValueKind::Counts).save(&tif).unwrap();
+    let e = Stack::load(&tif).unwrap_err().to_string();
+    assert!(
+        e.contains("s.ome.tif") && e.contains("not read back"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -56,6 +56,10 @@ impl Stack {
         match Format::of_file(path) {
             Format::Exr => super::exr::read(path),
             Format::Npy => super::npy::read(path),
+            Format::Tiff => Err(StackError::format(
+                path,
+                "OME-TIFF is written for other tools (Fiji, napari, FLIMfit), not read back: give the EXR or .npy stack written beside it",
+            )),
             _ => Err(StackError::format(
                 path,
                 "not a stack: neither its first bytes nor its extension say OpenEXR or NumPy .npy",

@@ -61,9 +61,12 @@ struct Shared {
     truth: Option<Array2<f64>>,
     /// The snapshot offered and not yet done, if any.
     running: Mutex<Option<Running>>,
-    /// Set when the acquisition has ended: snapshots are no longer shown
-    /// (the whole run's reconstruction is newer) and the watcher stops.
+    /// Set when the acquisition has ended: no snapshot is taken any more,
+    /// and the watcher stops.
     ended: AtomicBool,
+    /// Set once the whole run's reconstruction is shown: a snapshot that
+    /// ends later only adds its point to the curve.
+    final_shown: AtomicBool,
 }
 
 impl Shared {
@@ -142,30 +145,40 @@ fn reconstruct(
 
 /// Shows a reconstruction of `acquired_s` seconds and `photons` photons
 /// (or why it failed) on the page, scored against the truth when known.
+/// A snapshot that ends after the whole run's reconstruction was shown
+/// (`whole_run` false) only adds its point to the error-against-time
+/// curve: the image stays the whole run's.
 fn show(
     shared: &Shared,
     result: Result<(Reconstruction, Vec<usize>, Vec<String>), String>,
-    acquired_s: f64,
-    photons: u64,
+    (acquired_s, photons): (f64, u64),
     run_s: f64,
+    whole_run: bool,
 ) {
     let mut s = shared.state();
+    let superseded = !whole_run && shared.final_shown.load(Ordering::Relaxed);
     match result {
         Ok((rec, kept, assumed)) => {
             let psnr_db = shared
                 .truth
                 .as_ref()
                 .and_then(|t| psnr_fitted(rec.image.view(), t.view()));
-            let (h, w) = rec.image.dim();
-            let mut notes = assumed;
-            notes.extend(rec.trace.notes.iter().cloned());
-            s.decay.kept = kept;
             s.trace.push(TracePoint {
                 acquired_s,
                 photons,
                 psnr_db,
                 run_s,
             });
+            s.trace
+                .sort_by(|a, b| a.acquired_s.total_cmp(&b.acquired_s));
+            s.version += 1;
+            if superseded {
+                return;
+            }
+            let (h, w) = rec.image.dim();
+            let mut notes = assumed;
+            notes.extend(rec.trace.notes.iter().cloned());
+            s.decay.kept = kept;
             s.reconstruction = Some(LiveReconstruction {
                 acquired_s,
                 photons,
@@ -182,9 +195,16 @@ fn show(
             s.reconstruction_error = None;
             s.reconstruction_paused = None;
         }
+        Err(_) if superseded => return,
         Err(e) => s.reconstruction_error = Some(e),
     }
-    s.reconstruction_status = None;
+    // While the whole run's reconstruction works, its status stays.
+    if whole_run || !shared.ended.load(Ordering::Relaxed) {
+        s.reconstruction_status = None;
+    }
+    if whole_run {
+        shared.final_shown.store(true, Ordering::Relaxed);
+    }
     s.version += 1;
 }
 
@@ -333,6 +353,7 @@ impl Reconstructor {
             truth,
             running: Mutex::new(None),
             ended: AtomicBool::new(false),
+            final_shown: AtomicBool::new(false),
         });
         let worker = shared.clone();
         let spawned = std::thread::Builder::new()
@@ -375,11 +396,8 @@ impl Reconstructor {
                                 Err(_) => run(),
                             }
                         });
-                    if worker.ended.load(Ordering::Relaxed) {
-                        break;
-                    }
                     let run_s = started.elapsed().as_secs_f64();
-                    show(&worker, result, snap.acquired_s, snap.photons, run_s);
+                    show(&worker, result, (snap.acquired_s, snap.photons), run_s, false);
                     *worker.running() = None;
                 }
             });
@@ -433,7 +451,8 @@ impl Reconstructor {
 
     /// Reconstructs the whole run's `stack` (the acquisition has ended) at
     /// normal priority on a thread of its own, and shows it; a snapshot
-    /// still at work is left behind (it is older) and never shown.
+    /// still at work goes on below it and, when it ends, adds its point to
+    /// the error-against-time curve (the image stays the whole run's).
     /// `progress` sees it every quarter second on the calling thread;
     /// `stop` (Ctrl-C) skips it at once, and the page says so.
     pub fn finish(
@@ -487,7 +506,7 @@ impl Reconstructor {
                         },
                         Err(e) => FinalRun::Failed(e.clone()),
                     };
-                    show(&shared, result, acquired_s, photons, run_s);
+                    show(&shared, result, (acquired_s, photons), run_s, true);
                     return end;
                 }
                 Err(RecvTimeoutError::Timeout) if stop.load(Ordering::Relaxed) => {
