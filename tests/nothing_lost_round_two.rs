@@ -50,29 +50,40 @@ fn recording(dir: &Path) -> std::path::PathBuf {
     ptu
 }
 
+/// A 5 s mock acquisition with `extra` flags into `out`, which must be
+/// refused (exit 1) before it acquires; its text.
+fn refused_before_the_run(extra: &[&str], out: &Path) -> String {
+    let t = Instant::now();
+    let mut args = vec![
+        "acquire",
+        "--size",
+        "7",
+        "--duration",
+        "5s",
+        "--out",
+        s(out),
+    ];
+    args.extend_from_slice(extra);
+    let r = run(&args);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(
+        t.elapsed() < Duration::from_secs(4),
+        "acquired first: {}",
+        text(&r)
+    );
+    assert!(!text(&r).contains("DOES NOT BALANCE"), "{}", text(&r));
+    text(&r)
+}
+
 #[test]
 fn two_outputs_by_two_spellings_of_one_file_are_refused_before_the_run() {
     let dir = tempfile::tempdir().unwrap();
     let x = dir.path().join("X");
     let dotted = dir.path().join(".").join("X");
     for (ptu, tags) in [(&x, &x), (&x, &dotted)] {
-        let t = Instant::now();
-        let r = run(&[
-            "acquire",
-            "--size",
-            "7",
-            "--duration",
-            "5s",
-            "--ptu",
-            s(ptu),
-            "--tags",
-            s(tags),
-            "--out",
-            s(&dir.path().join("o")),
-        ]);
-        assert_eq!(r.status.code(), Some(1), "{}", text(&r));
-        assert!(text(&r).contains("are the same file"), "{}", text(&r));
-        assert!(t.elapsed() < Duration::from_secs(4), "acquired first");
+        let t =
+            refused_before_the_run(&["--ptu", s(ptu), "--tags", s(tags)], &dir.path().join("o"));
+        assert!(t.contains("are the same file"), "{t}");
         assert!(names(dir.path()).is_empty(), "{:?}", names(dir.path()));
     }
     // The recording replayed is an input: not an output too.
@@ -102,27 +113,12 @@ fn an_output_that_cannot_be_written_is_refused_before_the_run() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("o");
     for bad in ["/proc/x.ptu", "/dev/null/x.ptu"] {
-        let t = Instant::now();
-        let r = run(&[
-            "acquire",
-            "--size",
-            "7",
-            "--duration",
-            "5s",
-            "--ptu",
-            bad,
-            "--out",
-            s(&out),
-        ]);
-        assert_eq!(r.status.code(), Some(1), "{bad}: {}", text(&r));
+        let t = refused_before_the_run(&["--ptu", bad], &out);
         assert!(
-            text(&r).contains(&format!("the PTU recording {bad} cannot be written")),
-            "{}",
-            text(&r)
+            t.contains(&format!("the PTU recording {bad} cannot be written")),
+            "{t}"
         );
-        assert!(text(&r).contains("hint: --ptu"), "{}", text(&r));
-        assert!(!text(&r).contains("DOES NOT BALANCE"), "{}", text(&r));
-        assert!(t.elapsed() < Duration::from_secs(4), "acquired first");
+        assert!(t.contains("hint: --ptu"), "{t}");
         assert!(!out.exists());
     }
 }
