@@ -236,10 +236,10 @@ impl Job {
             files.input("reference recording", reference);
         }
         if let Some(ptu) = &self.plan.ptu {
-            files.output("PTU recording", ptu);
+            files.output(PTU_ROLE, ptu);
         }
         if let Some(tags) = &self.plan.tag_file {
-            files.output("tag file", tags);
+            files.output(TAGS_ROLE, tags);
         }
         files
             .folder(&self.out)
@@ -257,6 +257,11 @@ impl Job {
         files
     }
 }
+
+/// What [`Job::files`] calls the PTU recording (a [`PlanError`] names it).
+pub const PTU_ROLE: &str = "PTU recording";
+/// What [`Job::files`] calls the tag file.
+pub const TAGS_ROLE: &str = "tag file";
 
 /// The stack an acquisition writes in its output folder.
 pub const STACK_EXR: &str = "stack.exr";

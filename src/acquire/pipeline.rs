@@ -235,7 +235,7 @@ pub enum AcquireError {
     #[error("{message}")]
     Setting {
         /// The setting: a field of [`Plan`] (`channel`, `pixels`,
-        /// `region`, `tag_file`, `ptu`).
+        /// `region`, `tag_file`, `resolution_fs`).
         name: &'static str,
         /// What is wrong, with the value.
         message: String,

@@ -69,13 +69,12 @@ impl ConfocalScan {
                 format!("{source}: scanned side {side_m} m must be positive and finite"),
             ));
         }
-        let (rows_, cols_) = (rows, cols);
         check_counts(counts.iter().copied(), |i| {
-            let (k, rest) = (i / (rows_ * cols_), i % (rows_ * cols_));
+            let (k, rest) = (i / (rows * cols), i % (rows * cols));
             format!(
                 "scan point (row {}, column {}) bin {k}",
-                rest / cols_,
-                rest % cols_
+                rest / cols,
+                rest % cols
             )
         })
         .map_err(|e| fail(e.to_string()))?;

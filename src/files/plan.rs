@@ -165,11 +165,12 @@ impl FilePlan {
     /// or can be made, and takes a new file). Writes nothing that stays.
     pub fn check(&self) -> Result<(), PlanError> {
         let inputs: Vec<Location> = self.inputs.iter().map(|(_, p)| locate(p)).collect();
-        let mut seen: Vec<(usize, Location)> = Vec::new();
-        for (i, (what, path)) in self.outputs.iter().enumerate() {
+        // The locations of the outputs checked so far, in order.
+        let mut seen: Vec<Location> = Vec::new();
+        for (what, path) in &self.outputs {
             let here = locate(path);
-            if let Some((j, _)) = seen.iter().find(|(_, l)| *l == here) {
-                let (first, first_path) = &self.outputs[*j];
+            if let Some(j) = seen.iter().position(|l| *l == here) {
+                let (first, first_path) = &self.outputs[j];
                 return Err(PlanError::SameOutput {
                     first: first.clone(),
                     first_path: first_path.clone(),
@@ -191,7 +192,7 @@ impl FilePlan {
                 path: path.clone(),
                 reason,
             })?;
-            seen.push((i, here));
+            seen.push(here);
         }
         Ok(())
     }

@@ -171,8 +171,8 @@ fn show(
             });
             s.trace
                 .sort_by(|a, b| a.acquired_s.total_cmp(&b.acquired_s));
-            s.version += 1;
             if superseded {
+                s.version += 1;
                 return;
             }
             let (h, w) = rec.image.dim();

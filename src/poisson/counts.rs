@@ -75,6 +75,12 @@ pub fn check_counts(
         total += v;
         elements += 1;
     }
+    check_light(total, elements)
+}
+
+/// `total`, the sum of `elements` counts already checked one by one, when
+/// it is at least one photon; else [`CountsError::NoLight`].
+pub fn check_light(total: f64, elements: usize) -> Result<f64, CountsError> {
     if total < 1.0 {
         return Err(CountsError::NoLight { elements, total });
     }

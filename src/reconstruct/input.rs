@@ -16,7 +16,7 @@ use crate::formats::image::read_image;
 use crate::formats::stack_file::missing_meta;
 use crate::forward::Boundary;
 use crate::physics::{Preset, Sampling, Setup};
-use crate::poisson::counts::CountsError;
+use crate::poisson::counts::{CountsError, check_light};
 use crate::scene::{ImageError, Scene};
 use crate::stack::{Stack, StackError, StackMeta, ValueKind};
 
@@ -174,16 +174,12 @@ pub fn prepare(
             (Stack::from_parts(data, meta, path)?, setup)
         }
     };
+    // Each value was checked as a count when the stack was made.
     let total: f64 = stack.data.iter().map(|&v| f64::from(v)).sum();
-    if total < 1.0 {
-        return Err(InputError::Counts {
-            path: path.into(),
-            source: CountsError::NoLight {
-                elements: stack.data.len(),
-                total,
-            },
-        });
-    }
+    check_light(total, stack.data.len()).map_err(|source| InputError::Counts {
+        path: path.into(),
+        source,
+    })?;
     if let Some(free) = spec.fit_physics {
         let cal =
             fit_stack_physics(&mut stack, &setup, free).map_err(|source| InputError::Fit {

@@ -12,7 +12,7 @@ use super::error::ReconstructError;
 use super::trace::{Trace, TraceRow};
 use crate::forward::{Boundary, ForwardModel};
 use crate::metrics;
-use crate::stack::StackError;
+use crate::stack::{Stack, StackError};
 
 /// A reconstructed image and how it was obtained.
 #[derive(Debug, Clone)]
@@ -47,19 +47,14 @@ impl Reconstruction {
     }
 
     /// Writes the image as `reconstruction.ome.tif` into `dir` (a float
-    /// OME-TIFF for Fiji or napari, with `pixel_pitch_cm` as its physical
-    /// pixel size when known); returns the file.
-    pub fn write_ome_tiff(
-        &self,
-        dir: &Path,
-        pixel_pitch_cm: Option<f64>,
-    ) -> Result<PathBuf, StackError> {
+    /// OME-TIFF for Fiji or napari); its physical pixel size is `stack`'s
+    /// pixel pitch when the image is on the stack's sensor grid (has its
+    /// size). Returns the file.
+    pub fn write_ome_tiff(&self, dir: &Path, stack: &Stack) -> Result<PathBuf, StackError> {
+        let (_, h, w) = stack.data.dim();
+        let pitch = (self.image.dim() == (h, w)).then_some(stack.meta.pixel_pitch_cm);
         let tif = dir.join("reconstruction.ome.tif");
-        crate::formats::ome_tiff::write_image(
-            self.image.mapv(|v| v as f32).view(),
-            pixel_pitch_cm,
-            &tif,
-        )?;
+        crate::formats::ome_tiff::write_image(self.image.mapv(|v| v as f32).view(), pitch, &tif)?;
         Ok(tif)
     }
 

@@ -6,6 +6,7 @@ use std::error::Error;
 
 use scatterscope::acquire::JobError;
 use scatterscope::acquire::device::OpenError;
+use scatterscope::acquire::job::{PTU_ROLE, TAGS_ROLE};
 use scatterscope::acquire::pipeline::AcquireError;
 use scatterscope::acquire::source::SourceError;
 use scatterscope::calibrate::histogram::HistogramError;
@@ -92,8 +93,8 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
     }
     if let Some(e) = cause.downcast_ref::<PlanError>() {
         let flag = match e.output_role() {
-            "PTU recording" => "--ptu names the PTU recording",
-            "tag file" => "--tags names the tag file",
+            PTU_ROLE => "--ptu names the PTU recording",
+            TAGS_ROLE => "--tags names the tag file",
             _ => "--out names the output folder",
         };
         return Some(flag.into());
@@ -111,7 +112,6 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
                     "pixels" => "--pixels",
                     "region" => "--roi",
                     "tag_file" => "--tags",
-                    "ptu" => "--ptu",
                     "resolution_fs" => "--resolution",
                     _ => return None,
                 };

@@ -116,10 +116,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     result.trace.notes.splice(0..0, input.assumed);
     result.write(&args.out)?;
     if args.ome_tiff {
-        // The image is on the stack's sensor grid when it has its size.
-        let (_, h, w) = input.stack.data.dim();
-        let pitch = (result.image.dim() == (h, w)).then_some(input.stack.meta.pixel_pitch_cm);
-        result.write_ome_tiff(&args.out, pitch)?;
+        result.write_ome_tiff(&args.out, &input.stack)?;
     }
     for line in result.summary(printed, truth.as_ref().map(|t| t.view())) {
         println!("{line}");
