@@ -14,6 +14,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Binomial, Distribution};
 
+use super::counts::MAX_COUNT;
+
 /// Seed of the 2-D methods' thinning, so that a reconstruction is
 /// reproducible.
 pub const THINNING_SEED: u64 = 0x7417_2026;
@@ -64,7 +66,7 @@ pub fn thin_halves(
 ) -> Result<(Array2<f64>, Array2<f64>), CountError> {
     if let Some(((row, col), &value)) = counts
         .indexed_iter()
-        .find(|(_, v)| !(v.is_finite() && **v >= 0.0 && v.fract() == 0.0 && **v < 2f64.powi(53)))
+        .find(|(_, v)| !(v.is_finite() && **v >= 0.0 && v.fract() == 0.0 && **v < MAX_COUNT))
     {
         let (what, row, col) = (what.into(), row, col);
         return Err(
