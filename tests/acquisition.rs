@@ -448,7 +448,7 @@ fn bin_raw_file(path: &Path) -> (Array3<u32>, scatterscope::formats::sstags::Tag
             assert_eq!(binned.truncated.is_some(), summary.totals.is_none());
             (counts, summary)
         }
-        Recording::PicoQuant(_) => panic!("{} was not read as a raw file", path.display()),
+        _ => panic!("{} was not read as a raw file", path.display()),
     }
 }
 

@@ -126,7 +126,7 @@ fn a_recorded_file_is_surveyed_binned_and_written() {
     let dir = tempfile::tempdir().unwrap();
     let ptu = dir.path().join("t3.ptu");
     write_synthetic_t3(&ptu, 5_000).unwrap();
-    let Survey::PicoQuant(info, s) = survey(&ptu).unwrap() else {
+    let Survey::PicoQuant(info, s) = survey(&ptu, &Default::default()).unwrap() else {
         panic!("a PTU file is PicoQuant's")
     };
     let photons: u64 = s.photons_per_channel.values().sum();

@@ -898,11 +898,11 @@ fn records_past_the_announced_count_are_said_not_ignored() {
         "{:?}",
         binned.notes
     );
-    let Survey::PicoQuant(_, _) = survey(&path).unwrap() else {
+    let Survey::PicoQuant(_, _) = survey(&path, &Default::default()).unwrap() else {
         panic!("a PTU file")
     };
     assert!(
-        survey(&path)
+        survey(&path, &Default::default())
             .unwrap()
             .lines()
             .iter()

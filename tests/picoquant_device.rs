@@ -466,9 +466,14 @@ fn the_shared_picoquant_samples_convert_to_ptu_photon_for_photon() {
     ] {
         let input = shared_data::shared_data(&format!("picoquant-sample-data/{rel}"));
         let out = dir.path().join(format!("{}.ptu", rel.replace('/', "_")));
-        let c =
-            scatterscope::tags::convert::convert_to_ptu(&input, &out, false, &Default::default())
-                .unwrap();
+        let c = scatterscope::tags::convert::convert_to_ptu(
+            &input,
+            &out,
+            false,
+            &Default::default(),
+            &Default::default(),
+        )
+        .unwrap();
         let (a, b) = (ptu_tags(&input), ptu_tags(&out));
         assert!(!a.is_empty(), "{rel}");
         assert_eq!(tag_tuples(&a), tag_tuples(&b), "{rel}");

@@ -20,6 +20,7 @@ use scatterscope::calibrate::histogram::TimeHistogram;
 use scatterscope::calibrate::transmittance::{Capture, RISING_EDGE_CONVENTION, SlabFitOptions};
 use scatterscope::config::PhysicsOverrides;
 use scatterscope::denoise::prior::{PriorKind, PriorSpec};
+use scatterscope::formats::becker_hickl::spc::{SpcModule, SpcOptions};
 use scatterscope::forward::Boundary;
 use scatterscope::physics::{KernelStack, MediumModel, Preset, Sampling};
 use scatterscope::reconstruct::input::{InputSpec, prepare};
@@ -243,7 +244,7 @@ fn read_tags<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>
 /// Bins a recorded file: (stacks, metadata per stack, ledger, summary
 /// lines).
 #[pyfunction]
-#[pyo3(signature = (path, bin_width_ps=None, t_start_ps=0.0, bins=None, channel=None, pixels="auto", frames="sum", allow_truncated=false, dtype=None))]
+#[pyo3(signature = (path, bin_width_ps=None, t_start_ps=0.0, bins=None, channel=None, pixels="auto", frames="sum", allow_truncated=false, dtype=None, spc_module=None, micro_unit_ps=None))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn bin_file<'py>(
     py: Python<'py>,
@@ -256,6 +257,8 @@ fn bin_file<'py>(
     frames: &str,
     allow_truncated: bool,
     dtype: Option<&str>,
+    spc_module: Option<&str>,
+    micro_unit_ps: Option<f64>,
 ) -> PyResult<(
     Vec<Bound<'py, PyAny>>,
     Vec<Bound<'py, PyAny>>,
@@ -270,6 +273,12 @@ fn bin_file<'py>(
         pixels: named::<Pixels>("pixels", pixels)?,
         frames: frames.parse::<FrameSelect>().map_err(msg)?,
         allow_truncated,
+        spc: SpcOptions {
+            module: spc_module
+                .map(|m| named::<SpcModule>("spc_module", m))
+                .transpose()?,
+            micro_unit_ps,
+        },
     };
     if !matches!(dtype, None | Some("float32" | "uint16" | "uint32")) {
         return Err(ScatterscopeError::new_err(format!(

@@ -23,6 +23,10 @@ pub enum Format {
     PicoQuantLegacy,
     /// The project's tag file (`.sstags`).
     TagFile,
+    /// Becker & Hickl FIFO file (`.spc`; no magic: by extension).
+    BeckerHicklFifo,
+    /// Becker & Hickl histogram file (`.sdt`; no magic: by extension).
+    BeckerHicklHistogram,
     /// PNG.
     Png,
     /// JPEG.
@@ -72,6 +76,8 @@ impl Format {
             "ptu" => Self::Ptu,
             "pt3" | "ht3" | "pt2" | "ht2" => Self::PicoQuantLegacy,
             "sstags" => Self::TagFile,
+            "spc" => Self::BeckerHicklFifo,
+            "sdt" => Self::BeckerHicklHistogram,
             "png" => Self::Png,
             "jpg" | "jpeg" => Self::Jpeg,
             "tif" | "tiff" => Self::Tiff,

@@ -5,6 +5,8 @@
 //!   acquisition (event batches exactly as the device sent them).
 //! - [`picoquant`]: PicoQuant PTU and the legacy PT3/HT3/PT2/HT2 files,
 //!   read in constant memory, and a PTU writer.
+//! - [`becker_hickl`]: Becker & Hickl FIFO files (`.spc`), read in
+//!   constant memory, and their histogram files (`.sdt`).
 //!
 //! Stacks (what binning or simulation makes):
 //! - [`exr`]: OpenEXR, one `f32` channel per bin, with the metadata.
@@ -24,6 +26,7 @@
 //! - [`image`]: single images in and out (PNG, JPEG, EXR, `.npy`).
 //! - [`png`]: 8-bit PNG previews and labelled contact sheets of a stack.
 
+pub mod becker_hickl;
 pub mod detect;
 pub mod exr;
 pub mod image;

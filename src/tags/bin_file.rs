@@ -18,7 +18,9 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::formats::detect::is_tag_file;
+use crate::formats::becker_hickl::sdt::{self, SdtError};
+use crate::formats::becker_hickl::spc::{self, CardFlags, SpcFileError, SpcInfo, SpcOptions};
+use crate::formats::detect::Format;
 use crate::formats::sstags::{TagFile, TagFileError, TagFileSummary};
 use ndarray::{Array3, s};
 
@@ -68,6 +70,9 @@ pub struct BinSpec {
     pub frames: FrameSelect,
     /// Bin the complete records of a cut file instead of failing.
     pub allow_truncated: bool,
+    /// What a Becker & Hickl `.spc` file does not record (its module and
+    /// micro-time unit); refused for other files, whose headers say.
+    pub spc: SpcOptions,
 }
 
 impl Default for BinSpec {
@@ -80,6 +85,7 @@ impl Default for BinSpec {
             pixels: Pixels::Auto,
             frames: FrameSelect::Sum,
             allow_truncated: false,
+            spc: SpcOptions::default(),
         }
     }
 }
@@ -147,6 +153,21 @@ impl CountStack {
 pub enum Recording {
     /// A PicoQuant file and its header.
     PicoQuant(FileInfo),
+    /// A Becker & Hickl FIFO file (`.spc`): its header, and what its
+    /// records flagged.
+    BeckerHicklFifo {
+        /// What the header record says.
+        info: SpcInfo,
+        /// GAP, INVALID and overflow flags counted.
+        flags: CardFlags,
+    },
+    /// A Becker & Hickl histogram file (`.sdt`): one stack per decay block.
+    BeckerHicklHistogram {
+        /// The file's identification and module.
+        id: String,
+        /// Blocks not binned, in words.
+        left_out: Vec<String>,
+    },
     /// A tag file (`.sstags`): its header and frames, and the records'
     /// own counts.
     TagFile {
@@ -237,7 +258,12 @@ impl<S> BinnedFile<S> {
                 "the run that wrote it was interrupted before its planned end (its end frame says so)"
                     .into(),
             ),
-            Recording::TagFile { .. } => {}
+            Recording::TagFile { .. } | Recording::BeckerHicklHistogram { .. } => {}
+            Recording::BeckerHicklFifo { flags, .. } if flags.gaps > 0 => w.push(format!(
+                "{} record(s) carry the GAP flag: the card's FIFO was full and photons before each were lost in the card, so the stack holds fewer than were detected",
+                flags.gaps
+            )),
+            Recording::BeckerHicklFifo { .. } => {}
         }
         w.extend(self.truncated.iter().cloned());
         let acc = self.accounting;
@@ -273,6 +299,29 @@ impl<S> BinnedFile<S> {
                 acc.markers,
                 acc.frames
             ),
+            Recording::BeckerHicklFifo { info, flags } => format!(
+                "{} records ({:.0} M records/s, {}): {} photons, {} binned, {} outside the time window, {} on other channels; {} markers; {} INVALID records dropped, {} overflow count records ({} macro-time overflows), {} GAP flags",
+                acc.records,
+                self.records_per_s / 1e6,
+                info.module.cards(),
+                acc.received,
+                acc.binned,
+                acc.outside_window,
+                acc.other_channel,
+                acc.markers,
+                flags.invalid,
+                flags.overflow_entries,
+                flags.overflows,
+                flags.gaps
+            ),
+            Recording::BeckerHicklHistogram { id, .. } => format!(
+                "{} curve points of {} stack(s) ({id}): {} photons, {} binned, {} outside the time window",
+                acc.records,
+                self.stacks.len(),
+                acc.received,
+                acc.binned,
+                acc.outside_window,
+            ),
             Recording::TagFile { counts, .. } => format!(
                 "{} records ({:.0} M records/s): {} photons, {} binned, {} outside the window, {} lost in the device, {} invalid",
                 acc.records,
@@ -306,6 +355,12 @@ pub enum BinFileError {
     /// The tag file cannot be read.
     #[error(transparent)]
     TagFile(#[from] TagFileError),
+    /// The Becker & Hickl FIFO file cannot be read.
+    #[error(transparent)]
+    Spc(#[from] SpcFileError),
+    /// The Becker & Hickl histogram file cannot be read.
+    #[error(transparent)]
+    Sdt(#[from] SdtError),
     /// More memory than the budget.
     #[error(transparent)]
     Memory(#[from] crate::memory::MemoryError),
@@ -319,8 +374,9 @@ pub enum BinFileError {
     },
 }
 
-/// Bins a recorded tag file into transient stacks: a project tag file
-/// (recognised by its magic) or a PicoQuant T3 file (PTU, PT3, HT3).
+/// Bins a recorded file into transient stacks: a project tag file
+/// (recognised by its magic), a PicoQuant T3 file (PTU, PT3, HT3) or a
+/// Becker & Hickl file (`.spc` photons, `.sdt` histograms).
 pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
     bin_file_counts(path, spec).map(BinnedFile::into_stacks)
 }
@@ -331,10 +387,18 @@ pub fn bin_file_counts(
     path: &Path,
     spec: &BinSpec,
 ) -> Result<BinnedFile<CountStack>, BinFileError> {
-    if is_tag_file(path) {
-        bin_tag_file(path, spec)
-    } else {
-        bin_picoquant(path, spec)
+    let format = Format::of_file(path);
+    if !matches!(format, Format::BeckerHicklFifo) && spec.spc != SpcOptions::default() {
+        return Err(spec_error(
+            path,
+            "the .spc module and micro-time unit apply to Becker & Hickl FIFO files (.spc); this file's header says its own layout and resolution".into(),
+        ));
+    }
+    match format {
+        Format::TagFile => bin_tag_file(path, spec),
+        Format::BeckerHicklFifo => bin_spc(path, spec),
+        Format::BeckerHicklHistogram => bin_sdt(path, spec),
+        _ => bin_picoquant(path, spec),
     }
 }
 
@@ -386,20 +450,155 @@ pub fn window_and_map(
     Ok((window, map))
 }
 
+/// A file of T3 records binned in passes: PicoQuant or Becker & Hickl.
+enum T3File {
+    PicoQuant(FileInfo),
+    Spc(SpcInfo),
+}
+
+impl T3File {
+    /// Records to bin.
+    fn records(&self) -> u64 {
+        match self {
+            T3File::PicoQuant(info) => info.records_to_read(),
+            T3File::Spc(info) => info.records_present,
+        }
+    }
+
+    /// Bins the `part`-th of `parts` consecutive ranges of the records
+    /// with `binner`; the text of a truncation when the part ends early
+    /// and `allow_truncated` lets it, and what the records flagged.
+    fn bin_part(
+        &self,
+        path: &Path,
+        part: usize,
+        parts: usize,
+        binner: Binner,
+        allow_truncated: bool,
+    ) -> Result<(Binner, Option<String>, CardFlags), BinFileError> {
+        match self {
+            T3File::PicoQuant(info) => {
+                let reader = info.split_records(parts)?.swap_remove(part);
+                let (binner, cut) = bin_records(path, info, reader, binner, allow_truncated)?;
+                Ok((binner, cut, CardFlags::default()))
+            }
+            T3File::Spc(info) => bin_spc_records(info, part, parts, binner),
+        }
+    }
+}
+
 /// A PicoQuant T3 file.
 fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFileError> {
-    let spec_err = |reason| spec_error(path, reason);
-    let (info, reader) = open(path)?;
+    let (info, _) = open(path)?;
     info.check_finished(spec.allow_truncated)?;
     if !info.record_type.is_t3() {
-        return Err(spec_err(format!(
-            "{} records carry no micro time; binning needs a T3 file",
-            info.record_type.name()
-        )));
+        return Err(spec_error(
+            path,
+            format!(
+                "{} records carry no micro time; binning needs a T3 file",
+                info.record_type.name()
+            ),
+        ));
     }
     let res_ps = info.resolution_s * 1e12;
-    let (window, map) = window_and_map(spec, res_ps, info.macro_unit_s * 1e12, info.imaging)
-        .map_err(|e| spec_err(e.to_string()))?;
+    let period_ps = info.macro_unit_s * 1e12;
+    let imaging = info.imaging;
+    let notes = info.unread_note().into_iter().collect();
+    let source = format!(
+        "{} ({}, {})",
+        path.display(),
+        info.device,
+        info.record_type.name()
+    );
+    bin_t3(
+        path,
+        spec,
+        T3File::PicoQuant(info),
+        (res_ps, period_ps),
+        imaging,
+        source,
+        notes,
+    )
+}
+
+/// A Becker & Hickl FIFO file: its micro times cover the ADC's channels.
+fn bin_spc(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFileError> {
+    let info = spc::open(path, &spec.spc)?;
+    info.check_whole(spec.allow_truncated)?;
+    let res_ps = info.micro_unit()? * 1e12;
+    let period_ps = f64::from(info.module.adc_channels()) * res_ps;
+    let mut notes = vec![format!(
+        "micro-time unit {res_ps:.6} ps ({})",
+        info.micro_unit_from
+    )];
+    if info.module_assumed {
+        notes.push(format!(
+            "records read as {}: a .spc file does not record its module (an SPC-600/630 file needs --spc-module)",
+            info.module.cards()
+        ));
+    }
+    let source = format!(
+        "{} (Becker & Hickl {})",
+        path.display(),
+        info.module.cards()
+    );
+    bin_t3(
+        path,
+        spec,
+        T3File::Spc(info),
+        (res_ps, period_ps),
+        None,
+        source,
+        notes,
+    )
+}
+
+/// Bins a part of a `.spc` file's records (see [`T3File::bin_part`]).
+fn bin_spc_records(
+    info: &SpcInfo,
+    part: usize,
+    parts: usize,
+    mut binner: Binner,
+) -> Result<(Binner, Option<String>, CardFlags), BinFileError> {
+    let spc_err = |error| SpcFileError {
+        path: info.path.clone(),
+        error,
+    };
+    let mut reader = info.split_records(parts)?.swap_remove(part);
+    let flags = if info.module == spc::SpcModule::Spc600Channels4096 {
+        let mut decoder = spc::Spc48Decoder(info.decoder());
+        let mut chunk = Vec::new();
+        while reader.next_chunk48(&mut chunk).map_err(spc_err)? {
+            binner.bin_chunk(&mut decoder, &chunk);
+        }
+        decoder.0.flags
+    } else {
+        let mut decoder = info.decoder();
+        let mut chunk = Vec::new();
+        while reader.next_chunk32(&mut chunk).map_err(spc_err)? {
+            binner.bin_chunk(&mut decoder, &chunk);
+        }
+        decoder.flags
+    };
+    // The cut tail (refused earlier unless allowed) ends the last part.
+    let cut = (part + 1 == parts && info.trailing_bytes > 0).then(|| info.cut().to_string());
+    Ok((binner, cut, flags))
+}
+
+/// Bins a T3 file of `(micro-time unit, sync period)` in ps, whose default
+/// window is one period, widened to every micro time present.
+fn bin_t3(
+    path: &Path,
+    spec: &BinSpec,
+    file: T3File,
+    (res_ps, period_ps): (f64, f64),
+    imaging: Option<crate::events::Imaging>,
+    source: String,
+    mut notes: Vec<String>,
+) -> Result<BinnedFile<CountStack>, BinFileError> {
+    let spec_err = |reason| spec_error(path, reason);
+    let (window, map) =
+        window_and_map(spec, res_ps, period_ps, imaging).map_err(|e| spec_err(e.to_string()))?;
     // A default window gets a margin past the sync period, so that micro
     // times just past it (a TAC range a little longer than the period, the
     // last step of a period) bin in one pass instead of two.
@@ -418,8 +617,7 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
         window
     };
     check_stack_memory(path, &first, &map)?;
-    let mut notes: Vec<String> = info.unread_note().into_iter().collect();
-    let mut pass = run_pass(path, &info, reader, first, map, spec)?;
+    let mut pass = run_pass(path, &file, first, map, spec)?;
     // Photons past the period: in the margin (binned) and past it.
     let (in_margin, last_bin) = photons_from(&pass.stacks, window.bins);
     let past_photons = pass.past.photons + in_margin;
@@ -446,8 +644,7 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
             if needed <= pass.window.bins {
                 trim(&mut pass, needed);
             } else {
-                let (_, reader) = open(path)?;
-                pass = run_pass(path, &info, reader, wider, map, spec)?;
+                pass = run_pass(path, &file, wider, map, spec)?;
             }
             notes.push(format!(
                 "{where_}: the default window (one sync period, {} bins) was widened to {needed} bins to hold them",
@@ -456,8 +653,7 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
         } else {
             if pass.window.bins != window.bins {
                 // Count the margin's photons outside, as the window says.
-                let (_, reader) = open(path)?;
-                pass = run_pass(path, &info, reader, window, map, spec)?;
+                pass = run_pass(path, &file, window, map, spec)?;
             }
             notes.push(if spec.bins.is_none() {
                 format!(
@@ -476,6 +672,7 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
         window,
         records_per_s,
         truncated,
+        flags,
         ..
     } = pass;
     if accounting.over_budget > 0 {
@@ -510,12 +707,6 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
     } else {
         stacks
     };
-    let source = format!(
-        "{} ({}, {})",
-        path.display(),
-        info.device,
-        info.record_type.name()
-    );
     let shape = stacks[0].dim();
     let stacks = stacks
         .into_iter()
@@ -530,8 +721,12 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
             ),
         })
         .collect();
+    let recording = match file {
+        T3File::PicoQuant(info) => Recording::PicoQuant(info),
+        T3File::Spc(info) => Recording::BeckerHicklFifo { info, flags },
+    };
     Ok(BinnedFile {
-        recording: Recording::PicoQuant(info),
+        recording,
         stacks,
         shape,
         accounting,
@@ -581,19 +776,19 @@ struct Pass {
     window: TimeWindow,
     records_per_s: f64,
     truncated: Option<String>,
+    flags: CardFlags,
 }
 
 fn run_pass(
     path: &Path,
-    info: &FileInfo,
-    reader: RecordReader,
+    file: &T3File,
     window: TimeWindow,
     map: PixelMap,
     spec: &BinSpec,
 ) -> Result<Pass, BinFileError> {
     let start = Instant::now();
     let binner = Binner::new(window, map, spec.channel, spec.frames);
-    let records = info.records_to_read();
+    let records = file.records();
     // Parts of the file binned on the cores at once, where no photon's
     // pixel depends on an earlier record (every map but a scanned image's),
     // each part at least `PART_RECORDS` long and its stack within the
@@ -606,23 +801,23 @@ fn run_pass(
     } else {
         1
     };
-    let (binner, truncated) = if parts > 1 {
-        drop(reader);
-        let readers = info.split_records(parts)?;
-        let done: Vec<_> = readers
+    let (binner, truncated, flags) = if parts > 1 {
+        let done: Vec<_> = (0..parts)
             .into_par_iter()
-            .map(|r| bin_records(path, info, r, binner.clone(), spec.allow_truncated))
+            .map(|i| file.bin_part(path, i, parts, binner.clone(), spec.allow_truncated))
             .collect();
         let mut merged = binner;
         let mut truncated = None;
+        let mut flags = CardFlags::default();
         for part in done {
-            let (b, t) = part?;
+            let (b, t, f) = part?;
             merged.absorb(b);
             truncated = truncated.or(t);
+            flags += f;
         }
-        (merged, truncated)
+        (merged, truncated, flags)
     } else {
-        bin_records(path, info, reader, binner, spec.allow_truncated)?
+        file.bin_part(path, 0, 1, binner, spec.allow_truncated)?
     };
     let seconds = start.elapsed().as_secs_f64();
     let past = binner.past_window();
@@ -634,6 +829,7 @@ fn run_pass(
         past,
         window,
         truncated,
+        flags,
     })
 }
 
@@ -753,4 +949,152 @@ pub struct TagFileRecord {
     pub tag_file_header: crate::formats::sstags::TagFileHeader,
     /// Whether the file ends with the device's totals (else it was cut).
     pub totals_in_file: bool,
+}
+
+/// A Becker & Hickl histogram file: each decay block of the first block's
+/// size and time unit becomes a stack, its curve points summed into the
+/// window's bins (whole points only); other blocks are left out, by name.
+fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFileError> {
+    let spec_err = |reason: &str| spec_error(path, reason.to_string());
+    if spec.channel.is_some() {
+        return Err(spec_err(
+            "an .sdt file holds histograms, one data block per routing channel, and no photon's channel: --channel does not apply (each block becomes a stack)",
+        ));
+    }
+    if spec.frames != FrameSelect::Sum {
+        return Err(spec_err(
+            "an .sdt file's decay blocks each become a stack (stack_f000, ...); --frames applies to scanned PicoQuant files",
+        ));
+    }
+    if spec.pixels == Pixels::Channel {
+        return Err(spec_err(
+            "an .sdt file's curves are placed as its measurement description says (an image or a row of curves); --pixels channel does not apply (auto or single)",
+        ));
+    }
+    let start = Instant::now();
+    let file = sdt::read(path)?;
+    let mut left_out = file.left_out;
+    let mut blocks = file.blocks.into_iter();
+    let first = blocks.next().ok_or_else(|| {
+        spec_err(&format!(
+            "no block of decay curves to bin ({})",
+            if left_out.is_empty() {
+                "the file holds no data blocks".to_string()
+            } else {
+                left_out.join("; ")
+            }
+        ))
+    })?;
+    let unit_ps = first.micro_unit_s * 1e12;
+    let points = first.counts.dim().0;
+    let mut kept = vec![first];
+    for b in blocks {
+        let (d, d0) = (b.counts.dim(), kept[0].counts.dim());
+        if d != d0 || (b.micro_unit_s - kept[0].micro_unit_s).abs() > 1e-9 * kept[0].micro_unit_s {
+            left_out.push(format!(
+                "data block {} ({} points x {} x {} pixels, {:.6} ps per point): not the size and time unit of block {} ({} x {} x {}, {unit_ps:.6} ps), so not one of its stacks",
+                b.index, d.0, d.1, d.2, b.micro_unit_s * 1e12, kept[0].index, d0.0, d0.1, d0.2
+            ));
+        } else {
+            kept.push(b);
+        }
+    }
+    // The window in whole curve points.
+    let whole = |ps: f64, what: &str| -> Result<usize, BinFileError> {
+        let n = (ps / unit_ps).round();
+        if (n * unit_ps - ps).abs() > 1e-6 * unit_ps.max(ps.abs()) || n < 0.0 {
+            return Err(spec_err(&format!(
+                "{what} {ps} ps is not a whole number of the file's curve points ({unit_ps:.6} ps each): histograms are binned in whole points"
+            )));
+        }
+        Ok(n as usize)
+    };
+    let width = match spec.bin_width_ps {
+        Some(w) => whole(w, "the bin width")?.max(1),
+        None => 1,
+    };
+    let offset = whole(spec.t_start_ps, "the window start")?;
+    let bins = spec
+        .bins
+        .unwrap_or_else(|| points.saturating_sub(offset).div_ceil(width).max(1));
+    if bins == 0 || bins > MAX_BINS {
+        return Err(spec_err(&format!("{bins} bins: give 1 to {MAX_BINS}")));
+    }
+    let window = TimeWindow {
+        start: offset as f64,
+        width: width as f64,
+        bins,
+    };
+    let mut accounting = Accounting::default();
+    let mut stacks = Vec::with_capacity(kept.len());
+    for b in kept {
+        let (_, h, w) = b.counts.dim();
+        let (h, w) = if spec.pixels == Pixels::Single {
+            (1, 1)
+        } else {
+            (h, w)
+        };
+        check_stack_memory(path, &window, &PixelMap::Channel { width: h * w })?;
+        let mut counts = Array3::<u32>::zeros((bins, h, w));
+        for (point, plane) in b.counts.outer_iter().enumerate() {
+            let sum: u64 = plane.iter().map(|&c| u64::from(c)).sum();
+            accounting.records += (plane.len()) as u64;
+            accounting.received += sum;
+            let bin = point
+                .checked_sub(offset)
+                .map(|p| p / width)
+                .filter(|&j| j < bins);
+            let Some(bin) = bin else {
+                accounting.outside_window += sum;
+                continue;
+            };
+            accounting.binned += sum;
+            let mut target = counts.index_axis_mut(ndarray::Axis(0), bin);
+            if spec.pixels == Pixels::Single {
+                // Counts of a bin past u32 saturate; an .sdt point holds
+                // at most 2^32 - 1 and a stack bin sums `width` planes.
+                target[[0, 0]] =
+                    target[[0, 0]].saturating_add(u32::try_from(sum).unwrap_or(u32::MAX));
+            } else {
+                target.zip_mut_with(&plane, |t, &c| *t = t.saturating_add(c));
+            }
+        }
+        let source = format!(
+            "{} (Becker & Hickl {} block {}, module {})",
+            path.display(),
+            b.contents,
+            b.index,
+            b.module
+        );
+        stacks.push(CountStack {
+            counts,
+            meta: StackMeta::measured(
+                window.start_ps(unit_ps),
+                window.width_ps(unit_ps),
+                bins,
+                source,
+                None,
+            ),
+        });
+    }
+    let shape = stacks[0].counts.dim();
+    let seconds = start.elapsed().as_secs_f64();
+    let mut notes: Vec<String> = left_out.iter().map(|l| format!("left out: {l}")).collect();
+    if spec.pixels == Pixels::Single && shape != (bins, 1, 1) {
+        notes.push("every curve of a block summed into one pixel (--pixels single)".into());
+    }
+    Ok(BinnedFile {
+        recording: Recording::BeckerHicklHistogram {
+            id: format!("{}, module {}", file.id, file.module),
+            left_out,
+        },
+        stacks,
+        shape,
+        accounting,
+        window,
+        resolution_ps: unit_ps,
+        records_per_s: accounting.records as f64 / seconds.max(1e-9),
+        notes,
+        truncated: None,
+    })
 }

@@ -13,7 +13,8 @@ use firmware_protocol::Event;
 
 use crate::events::Tag;
 use crate::files::Completion;
-use crate::formats::detect::is_tag_file;
+use crate::formats::becker_hickl::spc::{self, SpcFileError, SpcOptions};
+use crate::formats::detect::Format;
 use crate::formats::picoquant::records::{Decoder, RecordType};
 use crate::formats::picoquant::writer::{HeaderEntry, PtuWriter, WriterHeader};
 use crate::formats::picoquant::{FileError, TtrError, open};
@@ -62,6 +63,9 @@ pub enum ConvertError {
     /// The tag file cannot be read.
     #[error(transparent)]
     TagFile(#[from] TagFileError),
+    /// The Becker & Hickl FIFO file cannot be read.
+    #[error(transparent)]
+    Spc(#[from] SpcFileError),
     /// The input holds what PTU cannot, or is out of order.
     #[error("{path}: {reason}")]
     Unsupported {
@@ -93,16 +97,18 @@ fn out_err(path: &Path) -> impl Fn(std::io::Error) -> ConvertError + '_ {
     }
 }
 
-/// Converts `input` (a PicoQuant file or a tag file) into the PTU file
-/// `output`, written whole or not at all; with `allow_truncated`, a cut
-/// PicoQuant file's complete records (or those of a file whose writer
-/// never finished) are converted, and the conversion says so, instead of
-/// failing. `stop` (Ctrl-C) ends it with nothing written. The output is
-/// never the input, however it is spelled ([`crate::files`]).
+/// Converts `input` (a PicoQuant file, a tag file or a Becker & Hickl
+/// `.spc` file read as `spc` says) into the PTU file `output`, written
+/// whole or not at all; with `allow_truncated`, a cut file's complete
+/// records (or those of a file whose writer never finished) are
+/// converted, and the conversion says so, instead of failing. `stop`
+/// (Ctrl-C) ends it with nothing written. The output is never the input,
+/// however it is spelled ([`crate::files`]).
 pub fn convert_to_ptu(
     input: &Path,
     output: &Path,
     allow_truncated: bool,
+    spc: &SpcOptions,
     stop: &AtomicBool,
 ) -> Result<Conversion, ConvertError> {
     if crate::files::input::same_file(input, output) {
@@ -114,11 +120,97 @@ pub fn convert_to_ptu(
             ),
         });
     }
-    if is_tag_file(input) {
-        from_tag_file(input, output, stop)
-    } else {
-        from_picoquant(input, output, allow_truncated, stop)
+    let format = Format::of_file(input);
+    let unsupported = |reason: &str| ConvertError::Unsupported {
+        path: input.to_owned(),
+        reason: reason.into(),
+    };
+    if format != Format::BeckerHicklFifo && *spc != SpcOptions::default() {
+        return Err(unsupported(
+            "the .spc module and micro-time unit apply to Becker & Hickl FIFO files (.spc) only",
+        ));
     }
+    match format {
+        Format::TagFile => from_tag_file(input, output, stop),
+        Format::BeckerHicklFifo => from_spc(input, output, allow_truncated, spc, stop),
+        Format::BeckerHicklHistogram => Err(unsupported(
+            "a Becker & Hickl histogram file (.sdt) holds histograms, not photon records: bin it instead",
+        )),
+        _ => from_picoquant(input, output, allow_truncated, stop),
+    }
+}
+
+/// A Becker & Hickl FIFO file as Generic T3: the routing channel is the
+/// input channel and the macro-time clock the sync; GAP flags (photons
+/// lost in the card) make the output incomplete, said in its warnings.
+fn from_spc(
+    input: &Path,
+    output: &Path,
+    allow_truncated: bool,
+    options: &SpcOptions,
+    stop: &AtomicBool,
+) -> Result<Conversion, ConvertError> {
+    let info = spc::open(input, options)?;
+    info.check_whole(allow_truncated)?;
+    let header = WriterHeader {
+        resolution_s: info.micro_unit()?,
+        sync_rate_hz: 1.0 / info.macro_clock_s,
+        device: format!("Becker & Hickl {}", info.module.cards()),
+        imaging: None,
+        extra: vec![(
+            PROVENANCE_TAG.into(),
+            HeaderEntry::Text(format!(
+                "converted from {}: input channel = routing channel, sync = the {:.3} ns macro-time clock, micro-time unit {}",
+                input.display(),
+                info.macro_clock_s * 1e9,
+                info.micro_unit_from
+            )),
+        )],
+    };
+    let record_type = RecordType::GenericT3;
+    let mut w = PtuWriter::create(output, record_type, &header).map_err(out_err(output))?;
+    let mut c = Conversion {
+        record_type: record_type.name().into(),
+        ..Conversion::default()
+    };
+    if info.module_assumed {
+        c.warnings.push(format!(
+            "records read as {}: a .spc file does not record its module (an SPC-600/630 file needs --spc-module)",
+            info.module.cards()
+        ));
+    }
+    let reader = info.split_records(1)?.swap_remove(0);
+    let flags = spc::decode_each(&info, reader, |tag| {
+        if c.records_in.is_multiple_of(1 << 20) && stop.load(Ordering::Relaxed) {
+            return Err(ConvertError::Interrupted {
+                path: output.to_owned(),
+            });
+        }
+        c.records_in += 1;
+        if let Some(tag) = tag {
+            count(&mut c, &tag);
+            w.write_tag(tag)
+                .map_err(|e| write_error(input, output, format!("record {}", c.records_in), e))?;
+        }
+        Ok(())
+    })?;
+    if flags.gaps > 0 {
+        c.warnings.push(format!(
+            "{} record(s) carry the GAP flag: the card's FIFO was full and photons before each were lost in the card",
+            flags.gaps
+        ));
+    }
+    if info.trailing_bytes > 0 {
+        c.truncated = Some(info.cut().to_string());
+        c.warnings.push(format!("the input is cut: {}", info.cut()));
+    }
+    let completion = if c.warnings.iter().any(|w| !w.starts_with("records read as")) {
+        Completion::Interrupted
+    } else {
+        Completion::Complete
+    };
+    c.records_out = w.finish_as(completion).map_err(out_err(output))?;
+    Ok(c)
 }
 
 /// A writer's error on a tag from the input: the input's fault when the

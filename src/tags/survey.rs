@@ -5,7 +5,9 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::formats::detect::is_tag_file;
+use crate::formats::becker_hickl::sdt::{self, SdtError, SdtFile};
+use crate::formats::becker_hickl::spc::{self, CardFlags, SpcFileError, SpcInfo, SpcOptions};
+use crate::formats::detect::Format;
 use crate::formats::sstags::{TagFileError, TagFileSummary, read_tag_file};
 use firmware_protocol::Event;
 
@@ -112,6 +114,48 @@ pub fn survey_tag_file(path: &Path) -> Result<(TagFileSummary, TagFileSurvey), T
     Ok((summary, s))
 }
 
+/// The records of a Becker & Hickl FIFO file, counted by kind.
+#[derive(Debug, Default)]
+pub struct SpcSurvey {
+    /// Photons per routing channel.
+    pub photons_per_channel: BTreeMap<u16, u64>,
+    /// Marker records.
+    pub markers: u64,
+    /// What the records flagged (GAP, INVALID, overflows).
+    pub flags: CardFlags,
+    /// Time of the last event, seconds.
+    pub last_event_s: f64,
+}
+
+/// Counts the records of a Becker & Hickl `.spc` file read as `options`
+/// say; a cut tail is reported by [`SpcInfo::describe`], not an error.
+pub fn survey_spc(path: &Path, options: &SpcOptions) -> Result<(SpcInfo, SpcSurvey), SpcFileError> {
+    let info = spc::open(path, options)?;
+    let mut s = SpcSurvey::default();
+    let mut last = 0u64;
+    let reader = info.split_records(1)?.swap_remove(0);
+    s.flags = spc::decode_each(&info, reader, |tag| {
+        match tag {
+            Some(Tag::Photon {
+                channel,
+                macro_time,
+                ..
+            }) => {
+                *s.photons_per_channel.entry(channel).or_default() += 1;
+                last = macro_time;
+            }
+            Some(Tag::Marker { macro_time, .. }) => {
+                s.markers += 1;
+                last = macro_time;
+            }
+            Some(Tag::Sync { .. }) | None => {}
+        }
+        Ok::<(), SpcFileError>(())
+    })?;
+    s.last_event_s = last as f64 * info.macro_clock_s;
+    Ok((info, s))
+}
+
 /// What `info` shows of a recorded file: its header and its events
 /// counted by kind.
 #[derive(Debug)]
@@ -120,6 +164,10 @@ pub enum Survey {
     PicoQuant(Box<FileInfo>, PicoQuantSurvey),
     /// The project's tag file.
     TagFile(Box<TagFileSummary>, TagFileSurvey),
+    /// A Becker & Hickl FIFO file.
+    BeckerHicklFifo(Box<SpcInfo>, SpcSurvey),
+    /// A Becker & Hickl histogram file.
+    BeckerHicklHistogram(Box<SdtFile>),
 }
 
 /// Why a file cannot be surveyed.
@@ -131,17 +179,42 @@ pub enum SurveyError {
     /// The tag file cannot be read.
     #[error(transparent)]
     TagFile(#[from] TagFileError),
+    /// The Becker & Hickl FIFO file cannot be read.
+    #[error(transparent)]
+    Spc(#[from] SpcFileError),
+    /// The Becker & Hickl histogram file cannot be read.
+    #[error(transparent)]
+    Sdt(#[from] SdtError),
+    /// Options that do not apply to the file.
+    #[error("{0}")]
+    Options(String),
 }
 
-/// Surveys a recorded file: a tag file (recognised by its magic) or a
-/// PicoQuant file.
-pub fn survey(path: &Path) -> Result<Survey, SurveyError> {
-    Ok(if is_tag_file(path) {
-        let (summary, s) = survey_tag_file(path)?;
-        Survey::TagFile(Box::new(summary), s)
-    } else {
-        let (info, s) = survey_picoquant(path)?;
-        Survey::PicoQuant(Box::new(info), s)
+/// Surveys a recorded file: a tag file (recognised by its magic), a
+/// Becker & Hickl file (`.spc` read as `spc` says, `.sdt`) or a PicoQuant
+/// file.
+pub fn survey(path: &Path, spc: &SpcOptions) -> Result<Survey, SurveyError> {
+    let format = Format::of_file(path);
+    if format != Format::BeckerHicklFifo && *spc != SpcOptions::default() {
+        return Err(SurveyError::Options(format!(
+            "{}: the .spc module and micro-time unit apply to Becker & Hickl FIFO files (.spc) only",
+            path.display()
+        )));
+    }
+    Ok(match format {
+        Format::TagFile => {
+            let (summary, s) = survey_tag_file(path)?;
+            Survey::TagFile(Box::new(summary), s)
+        }
+        Format::BeckerHicklFifo => {
+            let (info, s) = survey_spc(path, spc)?;
+            Survey::BeckerHicklFifo(Box::new(info), s)
+        }
+        Format::BeckerHicklHistogram => Survey::BeckerHicklHistogram(Box::new(sdt::read(path)?)),
+        _ => {
+            let (info, s) = survey_picoquant(path)?;
+            Survey::PicoQuant(Box::new(info), s)
+        }
     })
 }
 
@@ -149,6 +222,44 @@ impl Survey {
     /// The survey in words, one line each; warnings start with `warning:`.
     pub fn lines(&self) -> Vec<String> {
         match self {
+            Survey::BeckerHicklFifo(info, s) => {
+                let mut lines = info.describe();
+                if info.trailing_bytes > 0 {
+                    lines.push(format!("warning: {}", info.cut()));
+                }
+                lines.push(format!("photons per channel: {:?}", s.photons_per_channel));
+                let f = &s.flags;
+                lines.push(format!(
+                    "markers: {}; INVALID records (dropped): {}; overflow count records: {} ({} macro-time overflows in all)",
+                    s.markers, f.invalid, f.overflow_entries, f.overflows
+                ));
+                lines.push(format!(
+                    "measured duration: {:.6} s (last event)",
+                    s.last_event_s
+                ));
+                if f.gaps > 0 {
+                    lines.push(format!(
+                        "warning: {} record(s) carry the GAP flag: the card's FIFO was full and photons before each were lost in the card",
+                        f.gaps
+                    ));
+                }
+                // Routing channels the header says were not used hint at
+                // another module's layout.
+                let used = 1u32 << info.routing_bits;
+                let beyond: u64 = s
+                    .photons_per_channel
+                    .range(used.min(u32::from(u16::MAX)) as u16..)
+                    .map(|(_, n)| n)
+                    .sum();
+                if beyond > 0 && info.routing_bits < 8 {
+                    lines.push(format!(
+                        "warning: {beyond} photon(s) on routing channels from {used} up, though the header declares {} routing bit(s): the records may be another module's layout (--spc-module)",
+                        info.routing_bits
+                    ));
+                }
+                lines
+            }
+            Survey::BeckerHicklHistogram(file) => file.describe(),
             Survey::PicoQuant(info, s) => {
                 let mut lines = info.describe();
                 lines.extend(info.unread_note().map(|n| format!("warning: {n}")));

@@ -83,8 +83,16 @@ def bin_file(
     frames: "str | int" = "sum",
     allow_truncated: bool = False,
     dtype: Optional[str] = None,
+    spc_module: Optional[str] = None,
+    micro_unit_ps: Optional[float] = None,
 ) -> Dict[str, Any]:
     """Bin a recorded file into transient stacks, as ``scatterscope bin``.
+
+    PicoQuant files (PTU, PT3, HT3), tag files (``.sstags``) and Becker &
+    Hickl files: ``.spc`` photons (``spc_module`` ``"spc-130"``, the
+    default, ``"spc-600-256"`` or ``"spc-600-4096"``; ``micro_unit_ps``
+    when no SPCM ``.set`` file lies beside it) and ``.sdt`` histograms
+    (one stack per block of decay curves).
 
     ``bin_width_ps`` defaults to the file's micro-time unit, ``bins`` to
     one sync period (widened to every micro time present); ``pixels`` is
@@ -111,6 +119,8 @@ def bin_file(
         str(frames),
         allow_truncated,
         dtype,
+        spc_module,
+        None if micro_unit_ps is None else float(micro_unit_ps),
     )
     return {
         "stacks": list(stacks),

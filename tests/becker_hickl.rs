@@ -1,0 +1,503 @@
+//! Becker & Hickl files through `info`, `bin`, `convert` and Python's
+//! reader, judged by independent readers: tttrlib decodes the `.spc`
+//! files photon for photon as we do, sdtfile reads the `.sdt` files block
+//! for block as we bin them. The files are made from B&H's documented
+//! layouts (tests/common/bh_files.rs): every module family, every flag, a
+//! cut tail, a zipped block and blocks that are not decay curves.
+
+#[path = "common/bh_files.rs"]
+mod bh_files;
+#[path = "common/command.rs"]
+mod command;
+#[path = "common/pydeps.rs"]
+mod pydeps;
+
+use std::path::Path;
+
+use bh_files::{Layout, SdtBlock, SdtMeasurement, random_spc, sdt_file};
+use command::{run, text};
+use scatterscope::events::Tag;
+use scatterscope::formats::becker_hickl::spc::{self, SpcModule, SpcOptions};
+use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file_counts};
+
+const LAYOUTS: [(Layout, SpcModule); 3] = [
+    (Layout::Spc130, SpcModule::Spc130),
+    (Layout::Spc600_256, SpcModule::Spc600Channels256),
+    (Layout::Spc600_4096, SpcModule::Spc600Channels4096),
+];
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The setup file SPCM saves beside a `.spc`: TAC range 50 ns, gain 4.
+fn write_set(spc: &Path) {
+    std::fs::write(
+        spc.with_extension("set"),
+        b"*IDENTIFICATION\r\n  ID : SPC Setup Script File\r\n*END\r\n*SETUP\r\nSYS_PARA_BEGIN:\r\n#SP [SP_TAC_R,F,5.0e-08]\r\n#SP [SP_TAC_G,I,4]\r\n#SP [SP_ADC_RE,I,4096]\r\nSYS_PARA_END:\r\n*END\r\n",
+    )
+    .unwrap();
+}
+
+/// Photons as (channel, macro time, micro time), markers as (bits, macro
+/// time), and the flags counted.
+type Decoded = (Vec<(u16, u64, u32)>, Vec<(u8, u64)>, spc::CardFlags);
+
+/// Every photon and marker our reader decodes, with the flags it counted.
+fn ours(path: &Path, module: SpcModule) -> Decoded {
+    let options = SpcOptions {
+        module: Some(module),
+        micro_unit_ps: Some(10.0),
+    };
+    let info = spc::open(path, &options).unwrap();
+    let (mut photons, mut markers) = (Vec::new(), Vec::new());
+    let reader = info.split_records(1).unwrap().swap_remove(0);
+    let flags = spc::decode_each(&info, reader, |tag| {
+        match tag {
+            Some(Tag::Photon {
+                channel,
+                macro_time,
+                micro_time,
+            }) => photons.push((channel, macro_time, micro_time)),
+            Some(Tag::Marker { bits, macro_time }) => markers.push((bits, macro_time)),
+            _ => {}
+        }
+        Ok::<(), spc::SpcFileError>(())
+    })
+    .unwrap();
+    (photons, markers, flags)
+}
+
+#[test]
+fn spc_files_bin_with_an_honest_ledger() {
+    let dir = tempfile::tempdir().unwrap();
+    for (layout, module) in LAYOUTS {
+        let path = dir.path().join(format!("{}.spc", layout.ours()));
+        std::fs::write(&path, random_spc(layout, 20_000, 2, 7)).unwrap();
+        write_set(&path);
+        let (photons, markers, flags) = ours(&path, module);
+        let spec = BinSpec {
+            pixels: Pixels::Channel,
+            spc: SpcOptions {
+                module: Some(module),
+                micro_unit_ps: None,
+            },
+            ..BinSpec::default()
+        };
+        let binned = bin_file_counts(&path, &spec).unwrap();
+        let acc = binned.accounting;
+        assert!(acc.balances(), "{acc:?}");
+        assert_eq!(acc.records, 20_000, "{layout:?}");
+        assert_eq!(acc.received, photons.len() as u64);
+        assert_eq!(
+            acc.binned,
+            photons.len() as u64,
+            "every micro time is in the ADC's range"
+        );
+        assert_eq!(acc.markers, markers.len() as u64);
+        // The stack is the histogram of (micro time, channel).
+        let stack = &binned.stacks[0].counts;
+        let channels = module.adc_channels() as usize;
+        assert_eq!(
+            stack.dim().0,
+            channels,
+            "{layout:?}: one bin per ADC channel"
+        );
+        let mut expected = ndarray::Array3::<u32>::zeros(stack.dim());
+        for &(c, _, m) in &photons {
+            expected[[m as usize, 0, c as usize]] += 1;
+        }
+        assert_eq!(stack, &expected, "{layout:?}");
+        // The micro-time unit from the .set: 50 ns / 4 / channels.
+        let unit_ps = 50_000.0 / 4.0 / channels as f64;
+        assert!(
+            (binned.resolution_ps - unit_ps).abs() < 1e-9,
+            "{}",
+            binned.resolution_ps
+        );
+        let summary = binned.summary().join("\n");
+        assert!(
+            summary.contains(&format!("{} INVALID records dropped", flags.invalid)),
+            "{summary}"
+        );
+        assert!(flags.invalid > 0 && flags.overflows > 0, "{flags:?}");
+        if layout != Layout::Spc600_4096 {
+            assert!(flags.overflow_entries > 0, "{flags:?}");
+        }
+        if flags.gaps > 0 {
+            assert!(
+                binned
+                    .warnings()
+                    .iter()
+                    .any(|w| w.contains("GAP flag") && w.contains("lost in the card")),
+                "{:?}",
+                binned.warnings()
+            );
+        }
+    }
+}
+
+#[test]
+fn the_command_bins_converts_and_refuses_spc_files_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.spc");
+    std::fs::write(&path, random_spc(Layout::Spc130, 5_000, 1, 3)).unwrap();
+    // No setup file and no unit: refused, naming both ways to give it.
+    let out = run(&["bin", s(&path), "--out", s(&dir.path().join("a"))]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("run.set") && t.contains("--micro-unit"), "{t}");
+    // With the unit: binned; the layout assumed is said; GAP flags make
+    // a warning (exit 4).
+    let out = run(&[
+        "bin",
+        s(&path),
+        "--micro-unit",
+        "12.5ps",
+        "--out",
+        s(&dir.path().join("b")),
+    ]);
+    let t = text(&out);
+    assert!(matches!(out.status.code(), Some(0 | 4)), "{t}");
+    assert!(
+        t.contains("SPC-130/140/150/160/180/830") && t.contains("--spc-module"),
+        "{t}"
+    );
+    assert!(dir.path().join("b/stack.exr").is_file(), "{t}");
+    // The wrong layout: the 48-bit header is not there.
+    let out = run(&[
+        "info",
+        s(&path),
+        "--spc-module",
+        "spc-600-4096",
+        "--micro-unit",
+        "3ps",
+    ]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("run.spc") && t.contains("--spc-module spc-130"),
+        "{t}"
+    );
+    // A cut tail: refused, then binned when allowed, and said.
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes.extend([0x12, 0x34]);
+    let cut = dir.path().join("cut.spc");
+    std::fs::write(&cut, &bytes).unwrap();
+    let out = run(&[
+        "bin",
+        s(&cut),
+        "--micro-unit",
+        "12.5ps",
+        "--out",
+        s(&dir.path().join("c")),
+    ]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("cut.spc") && t.contains("file is cut") && t.contains("2 bytes"),
+        "{t}"
+    );
+    let out = run(&[
+        "bin",
+        s(&cut),
+        "--micro-unit",
+        "12.5ps",
+        "--allow-truncated",
+        "--out",
+        s(&dir.path().join("d")),
+    ]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(4), "{t}");
+    assert!(t.contains("warning: file is cut"), "{t}");
+    // .spc options on a file of another kind: refused by name.
+    let ptu = dir.path().join("x.ptu");
+    let out = run(&[
+        "convert",
+        s(&path),
+        "--micro-unit",
+        "12.5ps",
+        "--out",
+        s(&ptu),
+    ]);
+    let t = text(&out);
+    assert!(matches!(out.status.code(), Some(0 | 4)), "{t}");
+    let out = run(&[
+        "bin",
+        s(&ptu),
+        "--spc-module",
+        "spc-130",
+        "--out",
+        s(&dir.path().join("e")),
+    ]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("apply to Becker & Hickl FIFO files"), "{t}");
+    // The PTU holds the same photons, routing channel as input channel.
+    let (photons, markers, _) = ours(&path, SpcModule::Spc130);
+    let (info, mut reader) = scatterscope::formats::picoquant::open(&ptu).unwrap();
+    assert!((info.resolution_s - 12.5e-12).abs() < 1e-18);
+    assert!(
+        (info.macro_unit_s - 50e-9).abs() < 1e-15,
+        "{}",
+        info.macro_unit_s
+    );
+    let mut decoder = scatterscope::formats::picoquant::records::Decoder::new(info.record_type);
+    let (mut p, mut m) = (Vec::new(), Vec::new());
+    let mut chunk = Vec::new();
+    while reader.next_chunk(&mut chunk).unwrap() {
+        for &r in &chunk {
+            match decoder.decode(r) {
+                Some(Tag::Photon {
+                    channel,
+                    macro_time,
+                    micro_time,
+                }) => p.push((channel, macro_time, micro_time)),
+                Some(Tag::Marker { bits, macro_time }) => m.push((bits, macro_time)),
+                _ => {}
+            }
+        }
+    }
+    assert_eq!(p, photons);
+    assert_eq!(m, markers);
+}
+
+/// Three measurement blocks: 4 x 3 scans of 64 points (two), one single
+/// curve of 32 points.
+fn sdt_fixture() -> (Vec<u8>, Vec<Vec<f64>>) {
+    let mut rng = bh_files::Rng(99);
+    let mut curves = |n: usize| (0..n).map(|_| rng.below(3000) as f64).collect::<Vec<_>>();
+    let (a, b, c, fcs) = (curves(12 * 64), curves(12 * 64), curves(32), curves(40));
+    let measurements = [
+        SdtMeasurement {
+            tac_r: 12.5e-9,
+            tac_g: 1,
+            adc_re: 64,
+            scan: (4, 3),
+            module: "SPC-150",
+        },
+        SdtMeasurement {
+            tac_r: 50e-9,
+            tac_g: 2,
+            adc_re: 32,
+            scan: (1, 1),
+            module: "SPC-150",
+        },
+    ];
+    let blocks = [
+        SdtBlock {
+            values: a.clone(),
+            item: 2,
+            zipped: false,
+            contents: 0x60,
+            measurement: 0,
+        },
+        SdtBlock {
+            values: fcs,
+            item: 8,
+            zipped: false,
+            contents: 0x20,
+            measurement: 1,
+        },
+        SdtBlock {
+            values: b.clone(),
+            item: 4,
+            zipped: true,
+            contents: 0x60,
+            measurement: 0,
+        },
+        SdtBlock {
+            values: c.clone(),
+            item: 8,
+            zipped: false,
+            contents: 0x00,
+            measurement: 1,
+        },
+    ];
+    (sdt_file(&measurements, &blocks), vec![a, b, c])
+}
+
+#[test]
+fn sdt_blocks_bin_as_stacks_and_what_is_left_out_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scan.sdt");
+    let (bytes, blocks) = sdt_fixture();
+    std::fs::write(&path, &bytes).unwrap();
+    let binned = bin_file_counts(&path, &BinSpec::default()).unwrap();
+    assert_eq!(binned.stacks.len(), 2, "the two image blocks of one size");
+    for (stack, values) in binned.stacks.iter().zip(&blocks) {
+        assert_eq!(stack.counts.dim(), (64, 3, 4));
+        for ((k, y, x), &v) in stack.counts.indexed_iter() {
+            assert_eq!(f64::from(v), values[(y * 4 + x) * 64 + k]);
+        }
+    }
+    assert!((binned.resolution_ps - 12.5e3 / 64.0).abs() < 1e-6);
+    let acc = binned.accounting;
+    assert!(acc.balances());
+    assert_eq!(
+        acc.received as f64,
+        blocks[0].iter().chain(&blocks[1]).sum::<f64>()
+    );
+    let notes = binned.notes.join("\n");
+    assert!(notes.contains("data block 1 (FCS block"), "{notes}");
+    assert!(
+        notes.contains("data block 3") && notes.contains("not the size"),
+        "{notes}"
+    );
+    // Two points a bin from point 8: the sums of pairs.
+    let spec = BinSpec {
+        bin_width_ps: Some(2.0 * 12.5e3 / 64.0),
+        t_start_ps: 8.0 * 12.5e3 / 64.0,
+        ..BinSpec::default()
+    };
+    let wide = bin_file_counts(&path, &spec).unwrap();
+    let s0 = &wide.stacks[0].counts;
+    assert_eq!(s0.dim(), (28, 3, 4));
+    assert_eq!(
+        f64::from(s0[[1, 2, 3]]),
+        blocks[0][(2 * 4 + 3) * 64 + 10] + blocks[0][(2 * 4 + 3) * 64 + 11]
+    );
+    assert_eq!(wide.accounting.outside_window as f64, {
+        let first8 = |v: &Vec<f64>| {
+            (0..12)
+                .map(|c| v[c * 64..c * 64 + 8].iter().sum::<f64>())
+                .sum::<f64>()
+        };
+        first8(&blocks[0]) + first8(&blocks[1])
+    });
+    // A width of a point and a half: refused by name.
+    let spec = BinSpec {
+        bin_width_ps: Some(1.5 * 12.5e3 / 64.0),
+        ..BinSpec::default()
+    };
+    let e = bin_file_counts(&path, &spec).unwrap_err().to_string();
+    assert!(e.contains("scan.sdt") && e.contains("whole number"), "{e}");
+    // A cut file names the block that reaches past its end.
+    let cut = dir.path().join("cut.sdt");
+    std::fs::write(&cut, &bytes[..bytes.len() - 100]).unwrap();
+    let e = bin_file_counts(&cut, &BinSpec::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("cut.sdt") && e.contains("data block 3") && e.contains("cut"),
+        "{e}"
+    );
+    // info lists every block and what is left out.
+    let out = run(&["info", s(&path)]);
+    let t = text(&out);
+    assert!(out.status.success(), "{t}");
+    assert!(
+        t.contains("block 2 (number 3): IMG curves of 64 points as 3 x 4 pixels, u32 zipped"),
+        "{t}"
+    );
+    assert!(t.contains("left out: data block 1 (FCS block"), "{t}");
+}
+
+/// tttrlib's decoding of a `.spc` file as JSON: per event, its type (0
+/// photon, 1 marker), routing channel (marker bits for markers), macro
+/// and micro time.
+const TTTRLIB: &str = r#"
+import json, sys, tttrlib
+t = tttrlib.TTTR(sys.argv[1], sys.argv[2])
+print(json.dumps({
+    "type": [int(v) for v in t.event_types],
+    "channel": [int(v) & 0xFF for v in t.routing_channels],
+    "macro": [int(v) for v in t.macro_times],
+    "micro": [int(v) for v in t.micro_times],
+}))
+"#;
+
+#[test]
+#[ignore = "needs target/pydeps (scripts/fetch_python_deps.sh)"]
+fn spc_files_decode_photon_for_photon_as_tttrlib_does() {
+    let dir = tempfile::tempdir().unwrap();
+    for (layout, module) in LAYOUTS {
+        let path = dir.path().join(format!("{}.spc", layout.ours()));
+        std::fs::write(&path, random_spc(layout, 30_000, 3, 11)).unwrap();
+        let (photons, markers, _) = ours(&path, module);
+        let t: serde_json::Value =
+            serde_json::from_str(&pydeps::python(TTTRLIB, &[s(&path), layout.tttrlib()])).unwrap();
+        let col = |k: &str| -> Vec<u64> {
+            t[k].as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_u64().unwrap())
+                .collect()
+        };
+        let (kind, channel, mt, micro) = (col("type"), col("channel"), col("macro"), col("micro"));
+        let theirs: Vec<usize> = (0..kind.len()).filter(|&i| kind[i] == 0).collect();
+        assert_eq!(theirs.len(), photons.len(), "{layout:?}: photons");
+        for (&i, &(c, m, u)) in theirs.iter().zip(&photons) {
+            assert_eq!(micro[i], u64::from(u), "{layout:?} photon {i}: micro time");
+            match layout {
+                // tttrlib 0.26.2 gives the 48-bit layout's routing byte
+                // inverted (255 - R); B&H's header and libtcspc take it as
+                // stored, as we do.
+                Layout::Spc600_4096 => assert_eq!(channel[i], 255 - u64::from(c), "photon {i}"),
+                _ => assert_eq!(channel[i], u64::from(c), "{layout:?} photon {i}: channel"),
+            }
+            // tttrlib 0.26.2's SPC-600/630 macro times differ from B&H's
+            // header (an overflow period of 2^16, not 2^17; the 48-bit
+            // layout's bytes 4-5 unread), where libtcspc agrees with us:
+            // compared for the SPC-130 family only. Binning uses the
+            // micro time and channel alone.
+            if layout == Layout::Spc130 {
+                assert_eq!(mt[i], m, "photon {i}: macro time");
+            }
+        }
+        let their_markers: Vec<(u8, u64)> = (0..kind.len())
+            .filter(|&i| kind[i] == 1)
+            .map(|i| (channel[i] as u8, mt[i]))
+            .collect();
+        assert_eq!(their_markers, markers, "{layout:?}: markers");
+    }
+}
+
+/// sdtfile's arrays of an `.sdt` file as JSON: per block, shape and
+/// values (C order), and the time axis.
+const SDTFILE: &str = r#"
+import json, sys, sdtfile
+f = sdtfile.SdtFile(sys.argv[1])
+print(json.dumps([
+    {"shape": list(d.shape), "values": d.astype("float64").ravel().tolist(), "dt": float(t[1] - t[0]) if len(t) > 1 else 0.0}
+    for d, t in zip(f.data, f.times)
+]))
+"#;
+
+#[test]
+#[ignore = "needs target/pydeps (scripts/fetch_python_deps.sh)"]
+fn sdt_files_bin_block_for_block_as_sdtfile_reads_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scan.sdt");
+    std::fs::write(&path, sdt_fixture().0).unwrap();
+    let theirs: serde_json::Value =
+        serde_json::from_str(&pydeps::python(SDTFILE, &[s(&path)])).unwrap();
+    let binned = bin_file_counts(&path, &BinSpec::default()).unwrap();
+    // Blocks 0 and 2 are our stacks; sdtfile shapes them (rows, cols, points).
+    for (stack, block) in binned.stacks.iter().zip([0, 2]) {
+        let b = &theirs[block];
+        assert_eq!(b["shape"], serde_json::json!([3, 4, 64]), "block {block}");
+        let values: Vec<f64> = b["values"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        for ((k, y, x), &v) in stack.counts.indexed_iter() {
+            assert_eq!(
+                f64::from(v),
+                values[(y * 4 + x) * 64 + k],
+                "block {block} ({k}, {y}, {x})"
+            );
+        }
+        let dt_ps = b["dt"].as_f64().unwrap() * 1e12;
+        assert!(
+            (dt_ps - stack.meta.bin_width_ps).abs() < 1e-3 * dt_ps,
+            "{dt_ps} vs {}",
+            stack.meta.bin_width_ps
+        );
+    }
+    // The single decay curve we leave out (another size) is sdtfile's
+    // block 3 too, 32 points.
+    assert_eq!(theirs[3]["shape"], serde_json::json!([1, 1, 32]));
+}
