@@ -77,6 +77,30 @@ def test_bin_file_equals_the_command_bin_for_bin(tmp_path):
     assert ours["stacks"][0].sum() == ledger["binned"] > 10_000
 
 
+def test_becker_hickl_spc_bins_as_the_command_with_the_module_and_unit_given(tmp_path):
+    """A .spc file of the SPC-600/630 256-channel layout (B&H's header:
+    ADC bits 0-7, macro time 8-24, routing 25-27, INVALID bit 31): the
+    photons' micro times are 255 - ADC; an invalid record is dropped."""
+    records = [(1 << 31) | (3 << 27) | 500]
+    photons = [(200, 5), (10, 1), (200, 5), (255, 0)]
+    for i, (adc, routing) in enumerate(photons):
+        records.append(adc | ((i * 100) << 8) | (routing << 25))
+    records.append((1 << 31) | 77)
+    spc = tmp_path / "run.spc"
+    spc.write_bytes(np.array(records, dtype="<u4").tobytes())
+    ours = scatterscope.bin_file(spc, pixels="channel", spc_module="spc-600-256", micro_unit_ps=20.0, dtype="uint32")
+    stack = ours["stacks"][0]
+    assert stack.shape == (256, 1, 6)
+    assert stack[55, 0, 5] == 2 and stack[245, 0, 1] == 1 and stack[0, 0, 0] == 1
+    assert ours["ledger"]["received"] == 4 and ours["meta"][0]["bin_width_ps"] == 20.0
+    cli("bin", str(spc), "--pixels", "channel", "--spc-module", "spc-600-256", "--micro-unit", "20ps",
+        "--out", str(tmp_path / "bin"))
+    theirs, _ = scatterscope.load_stack(tmp_path / "bin" / "stack.exr")
+    np.testing.assert_array_equal(stack, theirs)
+    with pytest.raises(ScatterscopeError, match="spc_module `spc-999`"):
+        scatterscope.bin_file(spc, spc_module="spc-999")
+
+
 def test_bin_file_gives_the_counts_in_the_dtype_asked_for(tmp_path):
     ptu = mock_ptu(tmp_path)
     floats = scatterscope.bin_file(ptu, pixels="channel")["stacks"][0]

@@ -1029,6 +1029,19 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFil
     let mut stacks = Vec::with_capacity(kept.len());
     for b in kept {
         let (_, h, w) = b.counts.dim();
+        if offset == 0 && width == 1 && bins == points && spec.pixels != Pixels::Single {
+            // The default window is the block itself: moved, not copied.
+            let sum: u64 = b.counts.iter().map(|&c| u64::from(c)).sum();
+            accounting.records += b.counts.len() as u64;
+            accounting.received += sum;
+            accounting.binned += sum;
+            let source = sdt_source(path, &b);
+            stacks.push(CountStack {
+                meta: StackMeta::measured(0.0, unit_ps, bins, source, None),
+                counts: b.counts,
+            });
+            continue;
+        }
         let (h, w) = if spec.pixels == Pixels::Single {
             (1, 1)
         } else {
@@ -1059,13 +1072,7 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFil
                 target.zip_mut_with(&plane, |t, &c| *t = t.saturating_add(c));
             }
         }
-        let source = format!(
-            "{} (Becker & Hickl {} block {}, module {})",
-            path.display(),
-            b.contents,
-            b.index,
-            b.module
-        );
+        let source = sdt_source(path, &b);
         stacks.push(CountStack {
             counts,
             meta: StackMeta::measured(
@@ -1097,4 +1104,15 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFil
         notes,
         truncated: None,
     })
+}
+
+/// Where a stack binned from an `.sdt` block came from, in words.
+fn sdt_source(path: &Path, b: &sdt::SdtBlock) -> String {
+    format!(
+        "{} (Becker & Hickl {} block {}, module {})",
+        path.display(),
+        b.contents,
+        b.index,
+        b.module
+    )
 }
