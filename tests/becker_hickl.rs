@@ -501,3 +501,42 @@ fn sdt_files_bin_block_for_block_as_sdtfile_reads_them() {
     // block 3 too, 32 points.
     assert_eq!(theirs[3]["shape"], serde_json::json!([1, 1, 32]));
 }
+
+#[test]
+fn a_batch_bins_becker_hickl_files_as_the_command_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let spc = dir.path().join("run.spc");
+    // Without GAP flags (byte 1 bit 6), whose warning would fail the job.
+    let mut bytes = random_spc(Layout::Spc600_4096, 3_000, 4, 5);
+    bytes.chunks_exact_mut(6).for_each(|r| r[1] &= !0x40);
+    std::fs::write(&spc, bytes).unwrap();
+    write_set(&spc);
+    std::fs::write(dir.path().join("scan.sdt"), sdt_fixture().0).unwrap();
+    let manifest = dir.path().join("jobs.toml");
+    std::fs::write(
+        &manifest,
+        "[[job]]\nname = \"fifo\"\ncommand = \"bin\"\ninput = \"run.spc\"\nargs = [\"--spc-module\", \"spc-600-4096\", \"--no-preview\"]\n\n[[job]]\nname = \"histograms\"\ncommand = \"bin\"\ninput = \"scan.sdt\"\nargs = [\"--no-preview\"]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let o = run(&["batch", s(&manifest), "--out", s(&out)]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    let fifo = scatterscope::stack::Stack::load(&out.join("fifo/stack.exr")).unwrap();
+    let direct = bin_file_counts(
+        &spc,
+        &BinSpec {
+            spc: SpcOptions {
+                module: Some(SpcModule::Spc600Channels4096),
+                micro_unit_ps: None,
+            },
+            ..BinSpec::default()
+        },
+    )
+    .unwrap();
+    let counts = direct.stacks[0].counts.mapv(|c| c as f32);
+    assert_eq!(fifo.data, counts);
+    for f in ["stack_f000.exr", "stack_f001.exr"] {
+        assert!(out.join("histograms").join(f).is_file(), "{f}: {t}");
+    }
+}
