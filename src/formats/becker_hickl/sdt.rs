@@ -317,10 +317,15 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
     if blocks_n == 0x7FFF {
         blocks_n = i64::from(h.u32(34, "reserved1")?);
     }
-    if blocks_n < 0 {
+    // Each block has a 22-byte header in the file: a count past what the
+    // file holds is refused before any block is read.
+    if blocks_n < 0 || blocks_n as u64 > size / BLOCK_HEADER_BYTES as u64 {
         return Err(field(
             "bhfile_header.no_of_data_blocks",
-            format!("{blocks_n}"),
+            format!(
+                "{blocks_n}: a {size}-byte file holds at most {} block headers",
+                size / BLOCK_HEADER_BYTES as u64
+            ),
         ));
     }
     let meas_offs = offset(h.i32(24, "meas_desc_block_offs")?, "meas_desc_block_offs")?;
@@ -362,6 +367,16 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
         let meas_no = b.i16(12, "meas_desc_block_no")?;
         let number = b.u32(14, "lblock_no")? & 0x00FF_FFFF;
         let length = b.u32(18, "block_length")? as usize;
+        // The chain of headers runs forward through the file: a pointer
+        // back (or to itself) would read the same blocks forever.
+        if index + 1 < blocks_n as usize && next_offs <= next {
+            return Err(field(
+                &format!("{what} header.next_block_offs"),
+                format!(
+                    "{next_offs} does not lie past this header (byte {next}): the chain of blocks loops"
+                ),
+            ));
+        }
         next = next_offs;
         let contents = block_type & 0xF0;
         let Some(&(_, name)) = DECAY_CONTENTS.iter().find(|(c, _)| *c == contents) else {
