@@ -274,6 +274,7 @@ fn sdt_fixture() -> (Vec<u8>, Vec<Vec<f64>>) {
             tac_g: 1,
             adc_re: 64,
             scan: (4, 3),
+            repeats: (1, 1),
             module: "SPC-150",
         },
         SdtMeasurement {
@@ -281,6 +282,7 @@ fn sdt_fixture() -> (Vec<u8>, Vec<Vec<f64>>) {
             tac_g: 2,
             adc_re: 32,
             scan: (1, 1),
+            repeats: (1, 1),
             module: "SPC-150",
         },
     ];
@@ -539,4 +541,32 @@ fn a_batch_bins_becker_hickl_files_as_the_command_does() {
     for f in ["stack_f000.exr", "stack_f001.exr"] {
         assert!(out.join("histograms").join(f).is_file(), "{f}: {t}");
     }
+}
+
+/// Found by fuzzing (fuzz/fuzz_targets/becker_hickl.rs): scan and image
+/// sizes whose product overflows are sizes that match no block, not a
+/// panic; the block's curves then form a row.
+#[test]
+fn sdt_sizes_whose_product_overflows_place_the_curves_in_a_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("huge.sdt");
+    let measurements = [SdtMeasurement {
+        tac_r: 12.5e-9,
+        tac_g: 1,
+        adc_re: 16,
+        scan: (i32::MAX, i32::MAX),
+        repeats: (i32::MAX, i32::MAX),
+        module: "SPC-150",
+    }];
+    let blocks = [SdtBlock {
+        values: (0..48).map(f64::from).collect(),
+        item: 2,
+        zipped: false,
+        contents: 0x00,
+        measurement: 0,
+    }];
+    std::fs::write(&path, sdt_file(&measurements, &blocks)).unwrap();
+    let binned = bin_file_counts(&path, &BinSpec::default()).unwrap();
+    assert_eq!(binned.stacks[0].counts.dim(), (16, 1, 3));
+    assert_eq!(binned.accounting.received, (0..48).sum::<u64>());
 }

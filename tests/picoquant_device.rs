@@ -66,8 +66,8 @@ fn ptu_tags(path: &Path) -> Vec<Tag> {
 }
 
 #[test]
-fn acquisition_ptu_bins_back_into_the_same_stack_for_both_families() {
-    for family in ["multiharp", "hydraharp"] {
+fn acquisition_ptu_bins_back_into_the_same_stack_for_every_family() {
+    for family in ["multiharp", "hydraharp", "picoharp330"] {
         let dir = tempfile::tempdir().unwrap();
         let truth_file = dir.path().join("truth.json");
         let mock = format!("truth={}", truth_file.display());
@@ -512,7 +512,7 @@ fn the_shared_picoquant_samples_convert_to_ptu_photon_for_photon() {
 #[test]
 #[ignore = "needs ptufile and numpy under target/pydeps (scripts/fetch_python_deps.sh)"]
 fn ptufile_decodes_the_acquisitions_records_and_histogram() {
-    for family in ["multiharp", "hydraharp"] {
+    for family in ["multiharp", "hydraharp", "picoharp330"] {
         let dir = tempfile::tempdir().unwrap();
         let (out, o) = acquire(dir.path(), &format!("picoquant:{family}"), "", &[]);
         assert!(o.status.success(), "{}", text(&o));
@@ -598,7 +598,7 @@ fn ctrl_c_ends_a_picoquant_run_with_everything_read_saved() {
 #[test]
 fn the_t3_offset_reaches_the_library_in_nanoseconds() {
     use scatterscope::formats::picoquant::ptu::TagLookup;
-    for family in ["multiharp", "hydraharp"] {
+    for family in ["multiharp", "hydraharp", "picoharp330"] {
         let dir = tempfile::tempdir().unwrap();
         let truth_file = dir.path().join("truth.json");
         let mock = format!("truth={}", truth_file.display());
@@ -752,4 +752,52 @@ fn count_rates_are_read_during_the_run_at_5_hz_or_more() {
         );
         assert_eq!(s["inputs"].as_array().unwrap().len(), 4, "{s}");
     }
+}
+
+/// What a PicoHarp 330 cannot take is refused by the setting's name
+/// before a library is loaded or a device touched (the library named
+/// here does not exist): a zero cross (this driver sets its inputs to
+/// edge triggers, ph330lib.h's `PH330_SetInputTrgMode`), a trigger level
+/// past ph330defin.h's 1500 mV, a sync divider past its `SYNCDIVMAX` 8
+/// (which a MultiHarp takes: 16 in mhdefin.h).
+#[test]
+fn a_picoharp_330_refuses_what_it_cannot_take_by_name_before_the_device() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("no-such-library.so");
+    let cases: [(&[&str], &str); 3] = [
+        (&["--sync-zero-cross", "10"], "sync_zero_cross_mv"),
+        (&["--input-level", "-1600"], "-1500 to 1500 mV"),
+        (&["--sync-divider", "16"], "divides the sync by 1 to 8"),
+    ];
+    let out = dir.path().join("acq");
+    for (extra, words) in cases {
+        let mut args = vec![
+            "acquire",
+            "--device",
+            "picoquant:picoharp330",
+            "--vendor-lib",
+            missing.to_str().unwrap(),
+            "--duration",
+            "300ms",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = scatterscope_pq(&args, "");
+        let t = text(&o);
+        assert!(!o.status.success(), "{t}");
+        assert!(t.contains(words), "{extra:?}: {t}");
+        assert!(
+            !t.contains("no-such-library"),
+            "refused before the library: {t}"
+        );
+    }
+    // The same divider on a MultiHarp reaches its library.
+    let (_, o) = acquire(
+        dir.path(),
+        "picoquant:multiharp",
+        "",
+        &["--sync-divider", "16"],
+    );
+    assert!(o.status.success(), "{}", text(&o));
 }

@@ -1,16 +1,20 @@
 //! PicoQuant time taggers through the vendor's programming library, loaded
-//! at run time: MHLib (MultiHarp 150/160) and HHLib v3 (HydraHarp 400).
+//! at run time: MHLib (MultiHarp 150/160), HHLib v3 (HydraHarp 400) and
+//! PH330Lib 2.0 (PicoHarp 330).
 //!
 //! Nothing links against the vendor's library: the project builds and its
 //! tests run where none is installed, and [`VendorLib::load`] says which
 //! files it looked for. The stand-in library in `mocks/picoquant` exports
 //! the same C functions, so tests go through this same loader.
 //!
-//! The two libraries differ where the hardware does: MultiHarp inputs have
+//! The libraries differ where the hardware does: MultiHarp inputs have
 //! edge triggers (a level and an edge), HydraHarp inputs constant-fraction
-//! discriminators (a level and a zero cross), and `HH_ReadFiFo` takes the
-//! buffer's length where `MH_ReadFiFo` assumes its fixed one. T3 mode only:
-//! every record carries the sync count and the micro time.
+//! discriminators (a level and a zero cross), PicoHarp 330 inputs either,
+//! chosen per input (`PH330_SetSyncTrgMode`, `PH330_SetInputTrgMode` in
+//! the vendor's ph330lib.h; this driver sets edge triggers), and
+//! `HH_ReadFiFo` takes the buffer's length where `MH_ReadFiFo` and
+//! `PH330_ReadFiFo` assume their fixed one. T3 mode only: every record
+//! carries the sync count and the micro time.
 
 use std::ffi::{CStr, c_char, c_double, c_int, c_uint};
 use std::path::{Path, PathBuf};
@@ -41,17 +45,21 @@ pub enum Family {
     MultiHarp,
     /// HydraHarp 400 (HHLib v3, CFD inputs, HydraHarp v2 T3 records).
     HydraHarp,
+    /// PicoHarp 330 (PH330Lib 2.0, inputs set to edge triggers, Generic
+    /// T3 records).
+    PicoHarp330,
 }
 
 impl Family {
-    /// Both families, in the order `devices` searches them.
-    pub const ALL: [Family; 2] = [Family::MultiHarp, Family::HydraHarp];
+    /// Every family, in the order `devices` searches them.
+    pub const ALL: [Family; 3] = [Family::MultiHarp, Family::HydraHarp, Family::PicoHarp330];
 
     /// The family's name as `--device picoquant:NAME` takes it.
     pub fn name(self) -> &'static str {
         match self {
             Family::MultiHarp => "multiharp",
             Family::HydraHarp => "hydraharp",
+            Family::PicoHarp330 => "picoharp330",
         }
     }
 
@@ -59,18 +67,24 @@ impl Family {
         match self {
             Family::MultiHarp => "MH_",
             Family::HydraHarp => "HH_",
+            Family::PicoHarp330 => "PH330_",
         }
     }
 
     /// Where the vendor's installer puts the library, in search order:
     /// the linker-style name first (found on the library path), then the
-    /// installer's own folder.
+    /// installer's own folder. (The PicoHarp 330's names follow the
+    /// pattern of the other installers; no PH330Lib installer was at hand
+    /// to check them: its file can always be named in
+    /// [`Family::library_env`].)
     pub fn library_candidates(self) -> Vec<PathBuf> {
         let names: &[&str] = match (self, cfg!(windows)) {
             (Family::MultiHarp, false) => &["libmh150.so", "/usr/local/lib64/mh150/mhlib.so"],
             (Family::HydraHarp, false) => &["libhh400.so", "/usr/local/lib64/hh400/hhlib.so"],
+            (Family::PicoHarp330, false) => &["libph330.so", "/usr/local/lib64/ph330/ph330lib.so"],
             (Family::MultiHarp, true) => &["mhlib64.dll"],
             (Family::HydraHarp, true) => &["hhlib64.dll"],
+            (Family::PicoHarp330, true) => &["ph330lib64.dll"],
         };
         names.iter().map(PathBuf::from).collect()
     }
@@ -78,15 +92,25 @@ impl Family {
     /// The PTU record type code of the family's T3 records.
     pub fn t3_record_type(self) -> u32 {
         match self {
-            Family::MultiHarp => 0x0001_0307,
+            Family::MultiHarp | Family::PicoHarp330 => 0x0001_0307,
             Family::HydraHarp => 0x0101_0304,
+        }
+    }
+
+    /// The largest sync divider (`SYNCDIVMAX`: 16 in mhdefin.h and
+    /// hhdefin.h, 8 in ph330defin.h).
+    pub fn sync_divider_max(self) -> i32 {
+        match self {
+            Family::PicoHarp330 => 8,
+            Family::MultiHarp | Family::HydraHarp => 16,
         }
     }
 
     /// Records one `ReadFiFo` may return (`TTREADMAX`).
     pub fn fifo_read_max(self) -> usize {
         match self {
-            Family::MultiHarp => 1_048_576,
+            // TTREADMAX of mhdefin.h and ph330defin.h.
+            Family::MultiHarp | Family::PicoHarp330 => 1_048_576,
             Family::HydraHarp => 131_072,
         }
     }
@@ -96,6 +120,7 @@ impl Family {
         match self {
             Family::MultiHarp => "SCATTERSCOPE_MHLIB",
             Family::HydraHarp => "SCATTERSCOPE_HHLIB",
+            Family::PicoHarp330 => "SCATTERSCOPE_PH330LIB",
         }
     }
 }
@@ -170,6 +195,9 @@ struct Functions {
     set_marker_enable: unsafe extern "C" fn(c_int, c_int, c_int, c_int, c_int) -> c_int,
     set_marker_edges: unsafe extern "C" fn(c_int, c_int, c_int, c_int, c_int) -> c_int,
     set_input_channel_enable: DevIntIntFn,
+    /// `SetSyncTrgMode(devidx, mode)` and `SetInputTrgMode(devidx,
+    /// channel, mode)`: the PicoHarp 330's choice of edge trigger or CFD.
+    set_trigger_modes: Option<(DevIntFn, DevIntIntFn)>,
     get_resolution: DevDoubleFn,
     get_sync_rate: DevOutFn,
     get_count_rate: unsafe extern "C" fn(c_int, c_int, *mut c_int) -> c_int,
@@ -274,12 +302,18 @@ impl VendorLib {
             }};
         }
         let (set_sync_trigger, set_input_trigger) = match family {
-            Family::MultiHarp => (sym!("SetSyncEdgeTrg"), sym!("SetInputEdgeTrg")),
+            Family::MultiHarp | Family::PicoHarp330 => {
+                (sym!("SetSyncEdgeTrg"), sym!("SetInputEdgeTrg"))
+            }
             Family::HydraHarp => (sym!("SetSyncCFD"), sym!("SetInputCFD")),
         };
         let (calibrate, read_fifo) = match family {
-            Family::MultiHarp => (None, ReadFifo::Fixed(sym!("ReadFiFo"))),
+            Family::MultiHarp | Family::PicoHarp330 => (None, ReadFifo::Fixed(sym!("ReadFiFo"))),
             Family::HydraHarp => (Some(sym!("Calibrate")), ReadFifo::Counted(sym!("ReadFiFo"))),
+        };
+        let set_trigger_modes = match family {
+            Family::PicoHarp330 => Some((sym!("SetSyncTrgMode"), sym!("SetInputTrgMode"))),
+            _ => None,
         };
         let functions = Functions {
             get_library_version: sym!("GetLibraryVersion"),
@@ -300,6 +334,7 @@ impl VendorLib {
             set_marker_enable: sym!("SetMarkerEnable"),
             set_marker_edges: sym!("SetMarkerEdges"),
             set_input_channel_enable: sym!("SetInputChannelEnable"),
+            set_trigger_modes,
             get_resolution: sym!("GetResolution"),
             get_sync_rate: sym!("GetSyncRate"),
             get_count_rate: sym!("GetCountRate"),
@@ -377,11 +412,11 @@ impl VendorLib {
     }
 }
 
-/// How an input discriminates pulses: an edge trigger (MultiHarp) or a
-/// constant-fraction discriminator (HydraHarp).
+/// How an input discriminates pulses: an edge trigger (MultiHarp,
+/// PicoHarp 330) or a constant-fraction discriminator (HydraHarp).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Trigger {
-    /// Trigger level (mV, -1200 to 1200) and edge.
+    /// Trigger level (mV: -1200 to 1200, PicoHarp 330 -1500 to 1500) and edge.
     Edge {
         /// Level, mV.
         level_mv: i32,
@@ -402,7 +437,7 @@ impl Trigger {
     /// vendor demos' values).
     pub fn default_for(family: Family) -> Self {
         match family {
-            Family::MultiHarp => Trigger::Edge {
+            Family::MultiHarp | Family::PicoHarp330 => Trigger::Edge {
                 level_mv: -50,
                 rising: false,
             },
@@ -413,12 +448,25 @@ impl Trigger {
         }
     }
 
+    /// Whether `family` can take this trigger for its `what` input (the
+    /// kind and the header's ranges), before any device is touched.
+    pub fn check(self, family: Family, what: &str) -> Result<(), VendorError> {
+        self.args(family, what).map(|_| ())
+    }
+
     fn args(self, family: Family, what: &str) -> Result<(c_int, c_int), VendorError> {
         match (family, self) {
-            (Family::MultiHarp, Trigger::Edge { level_mv, rising }) => {
-                if !(-1200..=1200).contains(&level_mv) {
+            (Family::MultiHarp | Family::PicoHarp330, Trigger::Edge { level_mv, rising }) => {
+                // TRGLVLMIN/MAX: 1200 mV in mhdefin.h, 1500 in ph330defin.h.
+                let max = if family == Family::PicoHarp330 {
+                    1500
+                } else {
+                    1200
+                };
+                if !(-max..=max).contains(&level_mv) {
                     return Err(VendorError::Setting(format!(
-                        "{what} trigger level {level_mv} mV is outside -1200 to 1200 mV"
+                        "{what} trigger level {level_mv} mV is outside -{max} to {max} mV (a {})",
+                        family.name()
                     )));
                 }
                 Ok((level_mv, c_int::from(rising)))
@@ -440,6 +488,9 @@ impl Trigger {
             (Family::MultiHarp, Trigger::Cfd { .. }) => Err(VendorError::Setting(format!(
                 "{what}: a MultiHarp has edge triggers (level and edge), not a CFD"
             ))),
+            (Family::PicoHarp330, Trigger::Cfd { .. }) => Err(VendorError::Setting(format!(
+                "{what}: this driver sets a PicoHarp 330's inputs to edge-trigger mode (level and edge); its CFD mode is not driven"
+            ))),
             (Family::HydraHarp, Trigger::Edge { .. }) => Err(VendorError::Setting(format!(
                 "{what}: a HydraHarp has CFD inputs (level and zero cross), not edge triggers"
             ))),
@@ -450,7 +501,7 @@ impl Trigger {
 /// The settings a lab sets before a T3 measurement.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Settings {
-    /// Sync divider (1 to 16 on a HydraHarp; powers of two on a MultiHarp).
+    /// Sync divider (1 to [`Family::sync_divider_max`]).
     pub sync_divider: i32,
     /// The sync input's discriminator.
     pub sync_trigger: Trigger,
@@ -652,8 +703,13 @@ impl Device {
         // initialised device.
         unsafe {
             lib.check("SetSyncDiv", (f.set_sync_div)(i, s.sync_divider))?;
+            if let Some((sync_mode, _)) = f.set_trigger_modes {
+                // TRGMODE_ETR 0 (ph330defin.h): edge triggers, then their
+                // level and edge below.
+                lib.check("SetSyncTrgMode", sync_mode(i, 0))?;
+            }
             let sync_call = match family {
-                Family::MultiHarp => "SetSyncEdgeTrg",
+                Family::MultiHarp | Family::PicoHarp330 => "SetSyncEdgeTrg",
                 Family::HydraHarp => "SetSyncCFD",
             };
             lib.check(sync_call, (f.set_sync_trigger)(i, sync_a, sync_b))?;
@@ -662,7 +718,7 @@ impl Device {
                 (f.set_sync_channel_offset)(i, s.sync_offset_ps),
             )?;
             let input_call = match family {
-                Family::MultiHarp => "SetInputEdgeTrg",
+                Family::MultiHarp | Family::PicoHarp330 => "SetInputEdgeTrg",
                 Family::HydraHarp => "SetInputCFD",
             };
             for ch in 0..self.info.inputs {
@@ -673,6 +729,9 @@ impl Device {
                     "SetInputChannelEnable",
                     (f.set_input_channel_enable)(i, ch, 1),
                 )?;
+                if let Some((_, input_mode)) = f.set_trigger_modes {
+                    lib.check("SetInputTrgMode", input_mode(i, ch, 0))?;
+                }
                 lib.check(input_call, (f.set_input_trigger)(i, ch, in_a, in_b))?;
                 let offset = s.input_offsets_ps.get(ch as usize).copied().unwrap_or(0);
                 lib.check(

@@ -210,6 +210,10 @@ pub enum OpenError {
     /// A recording that cannot be played back as asked.
     #[error(transparent)]
     Replay(super::source::SourceError),
+    /// A setting the device's family cannot take, refused before it is
+    /// opened.
+    #[error(transparent)]
+    Setting(super::source::SourceError),
     /// The sensor exceeds what the wire protocol addresses.
     #[error(
         "the sensor is {width} x {height} pixels; the protocol addresses at most {max} pixels (256 x 256)"
@@ -250,10 +254,13 @@ pub fn open_device(spec: &DeviceSpec, setup: Option<&Setup>) -> Result<OpenedDev
             path,
             scatterscope_drivers::serial::DEFAULT_BAUD,
         )?)),
-        DeviceSpec::PicoQuant(device) => Ok(OpenedDevice {
-            source: Box::new(PicoQuantSource::open(device)?),
-            truth: None,
-        }),
+        DeviceSpec::PicoQuant(device) => {
+            device.check_settings().map_err(OpenError::Setting)?;
+            Ok(OpenedDevice {
+                source: Box::new(PicoQuantSource::open(device)?),
+                truth: None,
+            })
+        }
         DeviceSpec::Replay(r) => Ok(OpenedDevice {
             source: Box::new(
                 super::replay::FileSource::open(&r.path, r.speed).map_err(OpenError::Replay)?,

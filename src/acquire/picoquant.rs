@@ -33,8 +33,8 @@ const MAX_MEASUREMENT_MS: i32 = 360_000_000;
 /// Which PicoQuant device: `--device picoquant[:FAMILY][:SERIAL]`.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct PicoQuantSpec {
-    /// The family (`None`: MultiHarp, else HydraHarp, whichever library
-    /// loads and has a device).
+    /// The family (`None`: MultiHarp, HydraHarp or PicoHarp 330, the first
+    /// whose library loads and has a device).
     pub family: Option<Family>,
     /// The serial number (`None`: the first device).
     pub serial: Option<String>,
@@ -49,9 +49,10 @@ impl PicoQuantSpec {
             "" => None,
             "multiharp" | "mh" => Some(Family::MultiHarp),
             "hydraharp" | "hh" => Some(Family::HydraHarp),
+            "picoharp330" | "ph330" => Some(Family::PicoHarp330),
             other => {
                 return Err(format!(
-                    "unknown PicoQuant family `{other}`: use multiharp (mh) or hydraharp (hh), e.g. picoquant:multiharp:1045678"
+                    "unknown PicoQuant family `{other}`: use multiharp (mh), hydraharp (hh) or picoharp330 (ph330), e.g. picoquant:multiharp:1045678"
                 ));
             }
         };
@@ -105,12 +106,14 @@ pub struct SettingsRequest {
 }
 
 impl SettingsRequest {
-    /// The settings for `family`; an edge given for a HydraHarp or a zero
-    /// cross for a MultiHarp is an error naming the setting (a field of
+    /// The settings for `family`; an edge given for a HydraHarp, a zero
+    /// cross for a MultiHarp or PicoHarp 330, a level or sync divider out
+    /// of the family's range is an error naming the setting (a field of
     /// this request). The families differ as the vendors' headers do:
     /// mhlib.h sets inputs with `MH_SetSyncEdgeTrg` / `MH_SetInputEdgeTrg`
     /// (level and edge), hhlib.h with `HH_SetSyncCFD` / `HH_SetInputCFD`
-    /// (level and zero cross).
+    /// (level and zero cross), ph330lib.h with either (this driver sets
+    /// edge triggers); levels and dividers as their `*defin.h` bound them.
     pub fn resolve(&self, family: Family, markers: bool) -> Result<Settings, SourceError> {
         let mut s = Settings::default_for(family);
         let trigger = |base: Trigger,
@@ -123,13 +126,15 @@ impl SettingsRequest {
                 (Trigger::Edge { .. }, _, Some(_)) => Err(SourceError::setting(
                     zero_cross,
                     format!(
-                        "{zero_cross}: a MultiHarp input has an edge trigger, not a CFD (set {edge})"
+                        "{zero_cross}: a {} input is driven with an edge trigger, not a CFD (set {edge})",
+                        family.name()
                     ),
                 )),
                 (Trigger::Cfd { .. }, Some(_), _) => Err(SourceError::setting(
                     edge,
                     format!(
-                        "{edge}: a HydraHarp input has a CFD, not an edge trigger (set {zero_cross})"
+                        "{edge}: a {} input has a CFD, not an edge trigger (set {zero_cross})",
+                        family.name()
                     ),
                 )),
                 (
@@ -170,7 +175,25 @@ impl SettingsRequest {
             self.input_zero_cross_mv,
             ["input_rising", "input_zero_cross_mv"],
         )?;
+        for (t, field, what) in [
+            (s.sync_trigger, "sync_level_mv", "sync"),
+            (s.input_trigger, "input_level_mv", "input"),
+        ] {
+            t.check(family, what)
+                .map_err(|e| SourceError::setting(field, e.to_string()))?;
+        }
         s.sync_divider = self.sync_divider.unwrap_or(s.sync_divider);
+        let max = family.sync_divider_max();
+        if !(1..=max).contains(&s.sync_divider) {
+            return Err(SourceError::setting(
+                "sync_divider",
+                format!(
+                    "sync divider {}: a {} divides the sync by 1 to {max}",
+                    s.sync_divider,
+                    family.name()
+                ),
+            ));
+        }
         s.sync_offset_ps = self.sync_offset_ps.unwrap_or(s.sync_offset_ps);
         s.input_offsets_ps = self.input_offsets_ps.clone();
         s.binning = self.binning.unwrap_or(s.binning);
@@ -195,6 +218,21 @@ pub struct PicoQuantDevice {
     /// The scanner's image (its markers enabled); `None`: a point detector
     /// or channels.
     pub scan: Option<Imaging>,
+}
+
+impl PicoQuantDevice {
+    /// With the family named, whether it can take the settings asked for
+    /// ([`SettingsRequest::resolve`]): checked before any library is
+    /// loaded or device touched. Without a family, at the start.
+    pub fn check_settings(&self) -> Result<(), SourceError> {
+        match self.spec.family {
+            Some(family) => self
+                .settings
+                .resolve(family, self.scan.is_some())
+                .map(|_| ()),
+            None => Ok(()),
+        }
+    }
 }
 
 impl std::fmt::Display for PicoQuantDevice {
@@ -568,6 +606,12 @@ mod tests {
             ("", None, None),
             ("multiharp", Some(Family::MultiHarp), None),
             ("hh", Some(Family::HydraHarp), None),
+            ("ph330", Some(Family::PicoHarp330), None),
+            (
+                "picoharp330:1045678",
+                Some(Family::PicoHarp330),
+                Some("1045678"),
+            ),
             (
                 "hydraharp:1045678",
                 Some(Family::HydraHarp),

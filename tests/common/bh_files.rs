@@ -193,6 +193,8 @@ pub struct SdtMeasurement {
     pub tac_g: i16,
     pub adc_re: i16,
     pub scan: (i32, i32),
+    /// Scan repeats (`scan_rx`, `scan_ry`; 1 x 1 but in mosaics).
+    pub repeats: (i32, i32),
     pub module: &'static str,
 }
 
@@ -240,8 +242,8 @@ pub fn sdt_file(measurements: &[SdtMeasurement], blocks: &[SdtBlock]) -> Vec<u8>
         mi[117..117 + m.module.len()].copy_from_slice(m.module.as_bytes());
         mi[173..177].copy_from_slice(&m.scan.0.to_le_bytes());
         mi[177..181].copy_from_slice(&m.scan.1.to_le_bytes());
-        mi[181..185].copy_from_slice(&1i32.to_le_bytes());
-        mi[185..189].copy_from_slice(&1i32.to_le_bytes());
+        mi[181..185].copy_from_slice(&m.repeats.0.to_le_bytes());
+        mi[185..189].copy_from_slice(&m.repeats.1.to_le_bytes());
         out.extend(mi);
     }
     for (i, b) in blocks.iter().enumerate() {

@@ -1,6 +1,7 @@
 //! A stand-in for PicoQuant's programming libraries (MHLib for MultiHarp,
-//! HHLib v3 for HydraHarp 400): a shared library exporting the C functions
-//! `scatterscope_drivers::picoquant` calls, with both prefixes, so that the
+//! HHLib v3 for HydraHarp 400, PH330Lib 2.0 for PicoHarp 330): a shared
+//! library exporting the C functions `scatterscope_drivers::picoquant`
+//! calls, with every family's prefix, so that the
 //! driver, the acquisition and the tests go through the same run-time
 //! loader as with the vendor's library. Not the vendor's code: its
 //! behaviour follows the published API (the vendor's demos), with T3
@@ -51,20 +52,29 @@ pub mod code {
 enum Family {
     MultiHarp,
     HydraHarp,
+    PicoHarp330,
 }
 
 impl Family {
     fn base_resolution_ps(self) -> f64 {
         match self {
             Family::MultiHarp => 5.0,
-            Family::HydraHarp => 1.0,
+            Family::HydraHarp | Family::PicoHarp330 => 1.0,
         }
     }
 
     fn read_max(self) -> usize {
         match self {
-            Family::MultiHarp => 1_048_576,
+            Family::MultiHarp | Family::PicoHarp330 => 1_048_576,
             Family::HydraHarp => 131_072,
+        }
+    }
+
+    /// `SYNCDIVMAX`: 16 in mhdefin.h and hhdefin.h, 8 in ph330defin.h.
+    fn sync_divider_max(self) -> c_int {
+        match self {
+            Family::PicoHarp330 => 8,
+            _ => 16,
         }
     }
 }
@@ -429,11 +439,11 @@ macro_rules! library {
             })
         }
 
-        /// Sync divider 1 to 16.
+        /// Sync divider 1 to the family's `SYNCDIVMAX`.
         #[unsafe(no_mangle)]
         pub extern "C" fn $SetSyncDiv(index: c_int, div: c_int) -> c_int {
             with_ready(index, |d, _| {
-                if !(1..=16).contains(&div) {
+                if !(1..=$family.sync_divider_max()).contains(&div) {
                     return code::INVALID_ARGUMENT;
                 }
                 d.sync_divider = div;
@@ -742,6 +752,38 @@ library!(
     HH_CTCStatus
 );
 
+library!(
+    Family::PicoHarp330,
+    "2.0",
+    "PicoHarp 330",
+    PH330_GetLibraryVersion,
+    PH330_GetErrorString,
+    PH330_OpenDevice,
+    PH330_CloseDevice,
+    PH330_Initialize,
+    PH330_GetHardwareInfo,
+    PH330_GetSerialNumber,
+    PH330_GetNumOfInputChannels,
+    PH330_GetBaseResolution,
+    PH330_SetSyncDiv,
+    PH330_SetSyncChannelOffset,
+    PH330_SetInputChannelOffset,
+    PH330_SetBinning,
+    PH330_SetOffset,
+    PH330_SetMarkerEnable,
+    PH330_SetMarkerEdges,
+    PH330_SetInputChannelEnable,
+    PH330_GetResolution,
+    PH330_GetSyncRate,
+    PH330_GetCountRate,
+    PH330_GetFlags,
+    PH330_GetWarnings,
+    PH330_GetWarningsText,
+    PH330_StartMeas,
+    PH330_StopMeas,
+    PH330_CTCStatus
+);
+
 /// MultiHarp edge trigger of the sync input.
 #[unsafe(no_mangle)]
 pub extern "C" fn MH_SetSyncEdgeTrg(index: c_int, level: c_int, edge: c_int) -> c_int {
@@ -756,6 +798,47 @@ pub extern "C" fn MH_SetInputEdgeTrg(index: c_int, ch: c_int, level: c_int, edge
             return code::INVALID_ARGUMENT;
         }
         edge_trigger(level, edge)
+    })
+}
+
+/// PicoHarp 330 trigger mode of the sync input: `TRGMODE_ETR` 0 or
+/// `TRGMODE_CFD` 1 (ph330defin.h).
+#[unsafe(no_mangle)]
+pub extern "C" fn PH330_SetSyncTrgMode(index: c_int, mode: c_int) -> c_int {
+    with_ready(index, |_, _| in_range(mode, 0, 1))
+}
+
+/// PicoHarp 330 trigger mode of an input (as the sync's).
+#[unsafe(no_mangle)]
+pub extern "C" fn PH330_SetInputTrgMode(index: c_int, ch: c_int, mode: c_int) -> c_int {
+    with_ready(index, |_, _| {
+        if !(0..4).contains(&ch) {
+            return code::INVALID_ARGUMENT;
+        }
+        in_range(mode, 0, 1)
+    })
+}
+
+/// PicoHarp 330 edge trigger of the sync input: level -1500 to 1500 mV
+/// (`TRGLVLMIN`/`TRGLVLMAX` of ph330defin.h).
+#[unsafe(no_mangle)]
+pub extern "C" fn PH330_SetSyncEdgeTrg(index: c_int, level: c_int, edge: c_int) -> c_int {
+    with_ready(index, |_, _| edge_trigger_within(level, edge, 1500))
+}
+
+/// PicoHarp 330 edge trigger of an input.
+#[unsafe(no_mangle)]
+pub extern "C" fn PH330_SetInputEdgeTrg(
+    index: c_int,
+    ch: c_int,
+    level: c_int,
+    edge: c_int,
+) -> c_int {
+    with_ready(index, |_, _| {
+        if !(0..4).contains(&ch) {
+            return code::INVALID_ARGUMENT;
+        }
+        edge_trigger_within(level, edge, 1500)
     })
 }
 
@@ -788,7 +871,11 @@ pub extern "C" fn HH_Calibrate(index: c_int) -> c_int {
 }
 
 fn edge_trigger(level: c_int, edge: c_int) -> c_int {
-    if (-1200..=1200).contains(&level) && (0..=1).contains(&edge) {
+    edge_trigger_within(level, edge, 1200)
+}
+
+fn edge_trigger_within(level: c_int, edge: c_int, max_mv: c_int) -> c_int {
+    if (-max_mv..=max_mv).contains(&level) && (0..=1).contains(&edge) {
         0
     } else {
         code::INVALID_ARGUMENT
@@ -807,6 +894,13 @@ fn cfd(level: c_int, zero_cross: c_int) -> c_int {
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn MH_ReadFiFo(index: c_int, buffer: *mut c_uint, n: *mut c_int) -> c_int {
     unsafe { read_fifo(index, buffer, Family::MultiHarp.read_max(), n) }
+}
+
+/// `PH330_ReadFiFo`: up to 1,048,576 records into `buffer` (`TTREADMAX`
+/// of ph330defin.h; the buffer's length is not passed).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn PH330_ReadFiFo(index: c_int, buffer: *mut c_uint, n: *mut c_int) -> c_int {
+    unsafe { read_fifo(index, buffer, Family::PicoHarp330.read_max(), n) }
 }
 
 /// `HH_ReadFiFo`: up to `count` (at most 131,072) records into `buffer`.

@@ -31,7 +31,8 @@ use std::sync::atomic::AtomicBool;
 pub struct AcquireArgs {
     /// mock (in-process USB), mock-serial (pseudo-terminal),
     /// serial:PATH, usb:VID:PID[:SERIAL], picoquant[:FAMILY][:SERIAL]
-    /// (FAMILY multiharp or hydraharp, through the vendor's library), or
+    /// (FAMILY multiharp, hydraharp or picoharp330, through the vendor's
+    /// library), or
     /// replay:FILE (a PTU or tag file played back at its recorded pace,
     /// e.g. with --live to review a run); see `scatterscope devices`.
     #[arg(long, default_value = "mock")]

@@ -138,7 +138,7 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
         };
         return Some(format!("set it with {flag}"));
     }
-    if let Some(OpenError::Replay(e)) = cause.downcast_ref::<OpenError>() {
+    if let Some(OpenError::Replay(e) | OpenError::Setting(e)) = cause.downcast_ref::<OpenError>() {
         return hint(e);
     }
     // No library of a family, or of any family when none was named (the

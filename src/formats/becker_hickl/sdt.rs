@@ -230,11 +230,14 @@ impl Measurement {
     /// scan, else the image, else a row; `Err` for several scan or image
     /// repeats (mosaics).
     fn layout(&self, curves: usize) -> Result<(usize, usize), String> {
+        // Sizes come from the file: products that overflow match nothing.
+        let product = |v: &[usize]| v.iter().try_fold(1usize, |a, &b| a.checked_mul(b));
         for (name, (x, y, rx, ry)) in [("scan", self.scan), ("image", self.image)] {
-            if x * y == curves && x * y > 0 {
+            let (plane, all) = (product(&[x, y]), product(&[x, y, rx, ry]));
+            if plane == Some(curves) && curves > 0 {
                 return Ok((y, x));
             }
-            if x * y * rx * ry == curves && x * y > 0 && rx * ry > 1 {
+            if all == Some(curves) && curves > 0 && plane != all {
                 return Err(format!(
                     "its {curves} curves are a {name} of {x} x {y} pixels repeated {rx} x {ry} times (a mosaic), which is not read"
                 ));
