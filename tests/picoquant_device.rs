@@ -65,12 +65,22 @@ fn ptu_tags(path: &Path) -> Vec<Tag> {
     tags
 }
 
+/// Every family the stand-in models, with its board setting
+/// (`SCATTERSCOPE_PQ_MOCK`): the TimeHarp 260 as a Pico and as a Nano.
+const BOARDS: [(&str, &str); 5] = [
+    ("multiharp", ""),
+    ("hydraharp", ""),
+    ("timeharp260", "th260=pico"),
+    ("timeharp260", "th260=nano"),
+    ("picoharp330", ""),
+];
+
 #[test]
 fn acquisition_ptu_bins_back_into_the_same_stack_for_every_family() {
-    for family in ["multiharp", "hydraharp", "picoharp330"] {
+    for (family, board) in BOARDS {
         let dir = tempfile::tempdir().unwrap();
         let truth_file = dir.path().join("truth.json");
-        let mock = format!("truth={}", truth_file.display());
+        let mock = format!("truth={},{board}", truth_file.display());
         let (out, o) = acquire(dir.path(), &format!("picoquant:{family}"), &mock, &[]);
         assert!(o.status.success(), "{family}: {}", text(&o));
         let record = json(&out.join("acquisition.json"));
@@ -512,9 +522,9 @@ fn the_shared_picoquant_samples_convert_to_ptu_photon_for_photon() {
 #[test]
 #[ignore = "needs ptufile and numpy under target/pydeps (scripts/fetch_python_deps.sh)"]
 fn ptufile_decodes_the_acquisitions_records_and_histogram() {
-    for family in ["multiharp", "hydraharp", "picoharp330"] {
+    for (family, board) in BOARDS {
         let dir = tempfile::tempdir().unwrap();
-        let (out, o) = acquire(dir.path(), &format!("picoquant:{family}"), "", &[]);
+        let (out, o) = acquire(dir.path(), &format!("picoquant:{family}"), board, &[]);
         assert!(o.status.success(), "{}", text(&o));
         let ptu = out.join("acquisition.ptu");
         let script = r#"
@@ -649,6 +659,18 @@ fn counts_dropped_in_the_device_reach_the_ledger_and_the_summary() {
         "rate=max,fault=drop@200000",
         &[],
     );
+    // A TimeHarp 260 says it with another bit (th260defin.h
+    // `FLAG_EVTS_DROPPED` 0x0008, the others' reference-clock flag).
+    let (_, th) = acquire(
+        dir.path(),
+        "picoquant:timeharp260",
+        "rate=max,fault=drop@200000",
+        &[],
+    );
+    let t = text(&th);
+    assert!(!th.status.success(), "{t}");
+    assert!(t.contains("counts dropped in the device"), "{t}");
+    assert!(!t.contains("reference clock lost"), "{t}");
     let all = text(&o);
     assert!(!o.status.success(), "{all}");
     assert!(all.contains("counts dropped in the device"), "{all}");
@@ -800,4 +822,66 @@ fn a_picoharp_330_refuses_what_it_cannot_take_by_name_before_the_device() {
         &["--sync-divider", "16"],
     );
     assert!(o.status.success(), "{}", text(&o));
+}
+
+/// A TimeHarp 260's library serves the Pico (CFDs) and the Nano (edge
+/// triggers); `TH260_GetHardwareInfo` says which (th260defin.h's
+/// `HWIDENT_PICO`, `HWIDENT_NANO`). The other board's setting is refused
+/// by name before any setting reaches the device, the divider past its
+/// `SYNCDIVMAX` 8 before the library is loaded, and each board's PTU has
+/// its own record type.
+#[test]
+fn a_timeharp_260_is_driven_as_its_board_says() {
+    use scatterscope::formats::picoquant::records::RecordType;
+    let dir = tempfile::tempdir().unwrap();
+    for (board, refused, words, record_type) in [
+        (
+            "th260=pico",
+            ["--sync-edge", "rising"],
+            "TimeHarp 260 Pico input has a CFD",
+            RecordType::TimeHarp260PT3,
+        ),
+        (
+            "th260=nano",
+            ["--input-zero-cross=-10", "--input-level=-50"],
+            "TimeHarp 260 Nano input is driven with an edge trigger",
+            RecordType::TimeHarp260NT3,
+        ),
+    ] {
+        let (_, o) = acquire(dir.path(), "picoquant:timeharp260", board, &refused);
+        let t = text(&o);
+        assert!(!o.status.success(), "{board}: {t}");
+        assert!(t.contains(words), "{board}: {t}");
+        let (out, o) = acquire(dir.path(), "picoquant:th260", board, &[]);
+        assert!(o.status.success(), "{board}: {}", text(&o));
+        let (info, _) = open(&out.join("acquisition.ptu")).unwrap();
+        assert_eq!(info.record_type, record_type, "{board}");
+        let model = if board.ends_with("nano") {
+            "TimeHarp 260 N"
+        } else {
+            "TimeHarp 260 P"
+        };
+        assert_eq!(info.device, model);
+    }
+    let missing = dir.path().join("no-such-library.so");
+    let out = dir.path().join("acq");
+    let o = scatterscope_pq(
+        &[
+            "acquire",
+            "--device",
+            "picoquant:timeharp260",
+            "--vendor-lib",
+            missing.to_str().unwrap(),
+            "--sync-divider",
+            "16",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        "",
+    );
+    let t = text(&o);
+    assert!(
+        t.contains("divides the sync by 1 to 8") && !t.contains("no-such-library"),
+        "{t}"
+    );
 }

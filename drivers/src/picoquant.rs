@@ -1,6 +1,7 @@
 //! PicoQuant time taggers through the vendor's programming library, loaded
-//! at run time: MHLib (MultiHarp 150/160), HHLib v3 (HydraHarp 400) and
-//! PH330Lib 2.0 (PicoHarp 330).
+//! at run time: MHLib (MultiHarp 150/160), HHLib v3 (HydraHarp 400),
+//! TH260Lib 3.1 (TimeHarp 260 Pico and Nano) and PH330Lib 2.0 (PicoHarp
+//! 330).
 //!
 //! Nothing links against the vendor's library: the project builds and its
 //! tests run where none is installed, and [`VendorLib::load`] says which
@@ -9,7 +10,10 @@
 //!
 //! The libraries differ where the hardware does: MultiHarp inputs have
 //! edge triggers (a level and an edge), HydraHarp inputs constant-fraction
-//! discriminators (a level and a zero cross), PicoHarp 330 inputs either,
+//! discriminators (a level and a zero cross), the TimeHarp 260 Pico CFDs
+//! and the Nano edge triggers (one library; `TH260_GetHardwareInfo` says
+//! which board, `TH260_Initialize` takes no reference source), PicoHarp
+//! 330 inputs either,
 //! chosen per input (`PH330_SetSyncTrgMode`, `PH330_SetInputTrgMode` in
 //! the vendor's ph330lib.h; this driver sets edge triggers), and
 //! `HH_ReadFiFo` takes the buffer's length where `MH_ReadFiFo` and
@@ -20,7 +24,8 @@ use std::ffi::{CStr, c_char, c_double, c_int, c_uint};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// Device indices the libraries address (`MAXDEVNUM`).
+/// Device indices the libraries address (`MAXDEVNUM`; 4 in th260defin.h,
+/// [`Family::max_devices`]).
 pub const MAX_DEVICES: i32 = 8;
 /// `Initialize` mode for time tagging with micro times.
 const MODE_T3: c_int = 3;
@@ -32,9 +37,13 @@ pub const FLAG_SYNC_LOST: i32 = 0x0004;
 pub const FLAG_REF_LOST: i32 = 0x0008;
 /// `GetFlags`: a hardware error.
 pub const FLAG_SYS_ERROR: i32 = 0x0010;
-/// `GetFlags` (MultiHarp): counts were dropped in the device (MHLib's
-/// header, mhdefin.h; HHLib v3 has no such flag).
+/// `GetFlags` (MultiHarp, PicoHarp 330): counts were dropped in the
+/// device (mhdefin.h, ph330defin.h; HHLib v3 has no such flag).
 pub const FLAG_CNTS_DROPPED: i32 = 0x0040;
+/// `GetFlags` (TimeHarp 260): events dropped at a high input rate
+/// (`FLAG_EVTS_DROPPED`, th260defin.h), where the others say the
+/// reference clock was lost.
+pub const FLAG_EVTS_DROPPED_TH260: i32 = 0x0008;
 /// The libraries' "no device at this index" error.
 const ERROR_DEVICE_OPEN_FAIL: c_int = -1;
 
@@ -45,6 +54,9 @@ pub enum Family {
     MultiHarp,
     /// HydraHarp 400 (HHLib v3, CFD inputs, HydraHarp v2 T3 records).
     HydraHarp,
+    /// TimeHarp 260 Pico (CFD inputs, TimeHarp 260 P T3 records) or Nano
+    /// (edge triggers, TimeHarp 260 N T3 records): TH260Lib 3.1.
+    TimeHarp260,
     /// PicoHarp 330 (PH330Lib 2.0, inputs set to edge triggers, Generic
     /// T3 records).
     PicoHarp330,
@@ -52,13 +64,19 @@ pub enum Family {
 
 impl Family {
     /// Every family, in the order `devices` searches them.
-    pub const ALL: [Family; 3] = [Family::MultiHarp, Family::HydraHarp, Family::PicoHarp330];
+    pub const ALL: [Family; 4] = [
+        Family::MultiHarp,
+        Family::HydraHarp,
+        Family::TimeHarp260,
+        Family::PicoHarp330,
+    ];
 
     /// The family's name as `--device picoquant:NAME` takes it.
     pub fn name(self) -> &'static str {
         match self {
             Family::MultiHarp => "multiharp",
             Family::HydraHarp => "hydraharp",
+            Family::TimeHarp260 => "timeharp260",
             Family::PicoHarp330 => "picoharp330",
         }
     }
@@ -67,41 +85,56 @@ impl Family {
         match self {
             Family::MultiHarp => "MH_",
             Family::HydraHarp => "HH_",
+            Family::TimeHarp260 => "TH260_",
             Family::PicoHarp330 => "PH330_",
         }
     }
 
     /// Where the vendor's installer puts the library, in search order:
     /// the linker-style name first (found on the library path), then the
-    /// installer's own folder. (The PicoHarp 330's names follow the
-    /// pattern of the other installers; no PH330Lib installer was at hand
-    /// to check them: its file can always be named in
+    /// installer's own folder. (The TimeHarp 260's and PicoHarp 330's
+    /// names follow the pattern of the other installers; no installer of
+    /// theirs was at hand to check them: the file can always be named in
     /// [`Family::library_env`].)
     pub fn library_candidates(self) -> Vec<PathBuf> {
         let names: &[&str] = match (self, cfg!(windows)) {
             (Family::MultiHarp, false) => &["libmh150.so", "/usr/local/lib64/mh150/mhlib.so"],
             (Family::HydraHarp, false) => &["libhh400.so", "/usr/local/lib64/hh400/hhlib.so"],
+            (Family::TimeHarp260, false) => &["libth260.so", "/usr/local/lib64/th260/th260lib.so"],
             (Family::PicoHarp330, false) => &["libph330.so", "/usr/local/lib64/ph330/ph330lib.so"],
             (Family::MultiHarp, true) => &["mhlib64.dll"],
             (Family::HydraHarp, true) => &["hhlib64.dll"],
+            (Family::TimeHarp260, true) => &["th260lib64.dll"],
             (Family::PicoHarp330, true) => &["ph330lib64.dll"],
         };
         names.iter().map(PathBuf::from).collect()
     }
 
-    /// The PTU record type code of the family's T3 records.
-    pub fn t3_record_type(self) -> u32 {
+    /// How the family's inputs discriminate; `None` when it depends on
+    /// the board (the TimeHarp 260 Pico has CFDs, the Nano edge
+    /// triggers: [`Device::inputs`]).
+    pub fn inputs(self) -> Option<Inputs> {
         match self {
-            Family::MultiHarp | Family::PicoHarp330 => 0x0001_0307,
-            Family::HydraHarp => 0x0101_0304,
+            Family::MultiHarp | Family::PicoHarp330 => Some(Inputs::Edge),
+            Family::HydraHarp => Some(Inputs::Cfd),
+            Family::TimeHarp260 => None,
+        }
+    }
+
+    /// Device indices the library addresses (`MAXDEVNUM`: 8, 4 in
+    /// th260defin.h).
+    pub fn max_devices(self) -> i32 {
+        match self {
+            Family::TimeHarp260 => 4,
+            _ => MAX_DEVICES,
         }
     }
 
     /// The largest sync divider (`SYNCDIVMAX`: 16 in mhdefin.h and
-    /// hhdefin.h, 8 in ph330defin.h).
+    /// hhdefin.h, 8 in th260defin.h and ph330defin.h).
     pub fn sync_divider_max(self) -> i32 {
         match self {
-            Family::PicoHarp330 => 8,
+            Family::TimeHarp260 | Family::PicoHarp330 => 8,
             Family::MultiHarp | Family::HydraHarp => 16,
         }
     }
@@ -111,7 +144,7 @@ impl Family {
         match self {
             // TTREADMAX of mhdefin.h and ph330defin.h.
             Family::MultiHarp | Family::PicoHarp330 => 1_048_576,
-            Family::HydraHarp => 131_072,
+            Family::HydraHarp | Family::TimeHarp260 => 131_072,
         }
     }
 
@@ -120,9 +153,19 @@ impl Family {
         match self {
             Family::MultiHarp => "SCATTERSCOPE_MHLIB",
             Family::HydraHarp => "SCATTERSCOPE_HHLIB",
+            Family::TimeHarp260 => "SCATTERSCOPE_TH260LIB",
             Family::PicoHarp330 => "SCATTERSCOPE_PH330LIB",
         }
     }
+}
+
+/// How a device's inputs discriminate pulses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Inputs {
+    /// Edge triggers: a level and an edge.
+    Edge,
+    /// Constant-fraction discriminators: a level and a zero cross.
+    Cfd,
 }
 
 /// Why the vendor library or a device failed.
@@ -181,14 +224,16 @@ struct Functions {
     get_error_string: unsafe extern "C" fn(*mut c_char, c_int) -> c_int,
     open_device: DevStrFn,
     close_device: DevFn,
-    initialize: DevIntIntFn,
+    initialize: Initialize,
     get_hardware_info: unsafe extern "C" fn(c_int, *mut c_char, *mut c_char, *mut c_char) -> c_int,
     get_num_of_input_channels: DevOutFn,
     calibrate: Option<DevFn>,
     set_sync_div: DevIntFn,
-    set_sync_trigger: DevIntIntFn,
+    /// `SetSyncEdgeTrg` and `SetInputEdgeTrg`, where the family has them.
+    edge_triggers: Option<(DevIntIntFn, DevIntIntIntFn)>,
+    /// `SetSyncCFD` and `SetInputCFD`, where the family has them.
+    cfd_triggers: Option<(DevIntIntFn, DevIntIntIntFn)>,
     set_sync_channel_offset: DevIntFn,
-    set_input_trigger: DevIntIntIntFn,
     set_input_channel_offset: DevIntIntFn,
     set_binning: DevIntFn,
     set_offset: DevIntFn,
@@ -208,6 +253,15 @@ struct Functions {
     stop_meas: DevFn,
     ctc_status: DevOutFn,
     read_fifo: ReadFifo,
+}
+
+/// The two shapes of `Initialize`.
+#[derive(Clone, Copy)]
+enum Initialize {
+    /// `Initialize(devidx, mode, refsource)` (MHLib, HHLib, PH330Lib).
+    WithReference(DevIntIntFn),
+    /// `TH260_Initialize(devidx, mode)` (th260lib.h).
+    ModeOnly(DevIntFn),
 }
 
 /// The two shapes of `ReadFiFo`.
@@ -301,15 +355,26 @@ impl VendorLib {
                     .map_err(|e| missing($name, e))?
             }};
         }
-        let (set_sync_trigger, set_input_trigger) = match family {
-            Family::MultiHarp | Family::PicoHarp330 => {
-                (sym!("SetSyncEdgeTrg"), sym!("SetInputEdgeTrg"))
+        let edge_triggers = match family {
+            Family::MultiHarp | Family::PicoHarp330 | Family::TimeHarp260 => {
+                Some((sym!("SetSyncEdgeTrg"), sym!("SetInputEdgeTrg")))
             }
-            Family::HydraHarp => (sym!("SetSyncCFD"), sym!("SetInputCFD")),
+            Family::HydraHarp => None,
+        };
+        let cfd_triggers = match family {
+            Family::HydraHarp | Family::TimeHarp260 => {
+                Some((sym!("SetSyncCFD"), sym!("SetInputCFD")))
+            }
+            Family::MultiHarp | Family::PicoHarp330 => None,
         };
         let (calibrate, read_fifo) = match family {
             Family::MultiHarp | Family::PicoHarp330 => (None, ReadFifo::Fixed(sym!("ReadFiFo"))),
             Family::HydraHarp => (Some(sym!("Calibrate")), ReadFifo::Counted(sym!("ReadFiFo"))),
+            Family::TimeHarp260 => (None, ReadFifo::Counted(sym!("ReadFiFo"))),
+        };
+        let initialize = match family {
+            Family::TimeHarp260 => Initialize::ModeOnly(sym!("Initialize")),
+            _ => Initialize::WithReference(sym!("Initialize")),
         };
         let set_trigger_modes = match family {
             Family::PicoHarp330 => Some((sym!("SetSyncTrgMode"), sym!("SetInputTrgMode"))),
@@ -320,14 +385,14 @@ impl VendorLib {
             get_error_string: sym!("GetErrorString"),
             open_device: sym!("OpenDevice"),
             close_device: sym!("CloseDevice"),
-            initialize: sym!("Initialize"),
+            initialize,
             get_hardware_info: sym!("GetHardwareInfo"),
             get_num_of_input_channels: sym!("GetNumOfInputChannels"),
             calibrate,
             set_sync_div: sym!("SetSyncDiv"),
-            set_sync_trigger,
+            edge_triggers,
+            cfd_triggers,
             set_sync_channel_offset: sym!("SetSyncChannelOffset"),
-            set_input_trigger,
             set_input_channel_offset: sym!("SetInputChannelOffset"),
             set_binning: sym!("SetBinning"),
             set_offset: sym!("SetOffset"),
@@ -396,7 +461,7 @@ impl VendorLib {
     /// again after the look.
     pub fn list(&self) -> Vec<(i32, String)> {
         let mut found = Vec::new();
-        for index in 0..MAX_DEVICES {
+        for index in 0..self.family.max_devices() {
             let mut serial = [0u8; 16];
             // SAFETY: the header asks for an 8-byte serial buffer.
             let code = unsafe { (self.functions.open_device)(index, serial.as_mut_ptr().cast()) };
@@ -413,7 +478,8 @@ impl VendorLib {
 }
 
 /// How an input discriminates pulses: an edge trigger (MultiHarp,
-/// PicoHarp 330) or a constant-fraction discriminator (HydraHarp).
+/// TimeHarp 260 Nano, PicoHarp 330) or a constant-fraction discriminator
+/// (HydraHarp, TimeHarp 260 Pico).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Trigger {
     /// Trigger level (mV: -1200 to 1200, PicoHarp 330 -1500 to 1500) and edge.
@@ -423,7 +489,8 @@ pub enum Trigger {
         /// Rising (else falling) edge.
         rising: bool,
     },
-    /// CFD discriminator level (mV, 0 to 1000) and zero cross (mV, 0 to 40).
+    /// CFD discriminator level and zero cross (mV: 0 to 1000 and 0 to 40
+    /// on a HydraHarp, -1200 to 0 and -40 to 0 on a TimeHarp 260 Pico).
     Cfd {
         /// Level, mV.
         level_mv: i32,
@@ -433,31 +500,45 @@ pub enum Trigger {
 }
 
 impl Trigger {
-    /// The family's usual setting for a negative detector pulse (the
-    /// vendor demos' values).
-    pub fn default_for(family: Family) -> Self {
-        match family {
-            Family::MultiHarp | Family::PicoHarp330 => Trigger::Edge {
+    /// The usual setting of `inputs` on `family` for a negative detector
+    /// pulse (edges at -50 mV falling, as the vendor demos; a HydraHarp's
+    /// CFD at 50 mV, zero cross 10 mV, as its demos; a TimeHarp 260 Pico's
+    /// CFD, whose levels th260defin.h gives as negative, at -50 and -10).
+    pub fn default_for(family: Family, inputs: Inputs) -> Self {
+        match (inputs, family) {
+            (Inputs::Edge, _) => Trigger::Edge {
                 level_mv: -50,
                 rising: false,
             },
-            Family::HydraHarp => Trigger::Cfd {
+            (Inputs::Cfd, Family::TimeHarp260) => Trigger::Cfd {
+                level_mv: -50,
+                zero_cross_mv: -10,
+            },
+            (Inputs::Cfd, _) => Trigger::Cfd {
                 level_mv: 50,
                 zero_cross_mv: 10,
             },
         }
     }
 
-    /// Whether `family` can take this trigger for its `what` input (the
-    /// kind and the header's ranges), before any device is touched.
-    pub fn check(self, family: Family, what: &str) -> Result<(), VendorError> {
-        self.args(family, what).map(|_| ())
+    /// Whether `family`'s `inputs` can take this trigger for its `what`
+    /// input (the kind and the header's ranges), before any device is
+    /// touched.
+    pub fn check(self, family: Family, inputs: Inputs, what: &str) -> Result<(), VendorError> {
+        self.args(family, inputs, what).map(|_| ())
     }
 
-    fn args(self, family: Family, what: &str) -> Result<(c_int, c_int), VendorError> {
-        match (family, self) {
-            (Family::MultiHarp | Family::PicoHarp330, Trigger::Edge { level_mv, rising }) => {
-                // TRGLVLMIN/MAX: 1200 mV in mhdefin.h, 1500 in ph330defin.h.
+    fn args(
+        self,
+        family: Family,
+        inputs: Inputs,
+        what: &str,
+    ) -> Result<(c_int, c_int), VendorError> {
+        let board = family.board(inputs);
+        match (inputs, self) {
+            (Inputs::Edge, Trigger::Edge { level_mv, rising }) => {
+                // TRGLVLMIN/MAX: 1200 mV in mhdefin.h and th260defin.h,
+                // 1500 in ph330defin.h.
                 let max = if family == Family::PicoHarp330 {
                     1500
                 } else {
@@ -465,35 +546,55 @@ impl Trigger {
                 };
                 if !(-max..=max).contains(&level_mv) {
                     return Err(VendorError::Setting(format!(
-                        "{what} trigger level {level_mv} mV is outside -{max} to {max} mV (a {})",
-                        family.name()
+                        "{what} trigger level {level_mv} mV is outside -{max} to {max} mV (a {board})"
                     )));
                 }
                 Ok((level_mv, c_int::from(rising)))
             }
             (
-                Family::HydraHarp,
+                Inputs::Cfd,
                 Trigger::Cfd {
                     level_mv,
                     zero_cross_mv,
                 },
             ) => {
-                if !(0..=1000).contains(&level_mv) || !(0..=40).contains(&zero_cross_mv) {
+                // hhdefin.h: 0 to 1000 and 0 to 40 mV; th260defin.h
+                // (CFDLVLMIN/MAX, CFDZCMIN/MAX): -1200 to 0 and -40 to 0.
+                let (levels, zero_crosses) = if family == Family::TimeHarp260 {
+                    (-1200..=0, -40..=0)
+                } else {
+                    (0..=1000, 0..=40)
+                };
+                if !levels.contains(&level_mv) || !zero_crosses.contains(&zero_cross_mv) {
                     return Err(VendorError::Setting(format!(
-                        "{what} CFD level {level_mv} mV / zero cross {zero_cross_mv} mV: the level must be 0 to 1000 mV, the zero cross 0 to 40 mV"
+                        "{what} CFD level {level_mv} mV / zero cross {zero_cross_mv} mV: a {board} takes levels {} to {} mV and zero crosses {} to {} mV",
+                        levels.start(),
+                        levels.end(),
+                        zero_crosses.start(),
+                        zero_crosses.end()
                     )));
                 }
                 Ok((level_mv, zero_cross_mv))
             }
-            (Family::MultiHarp, Trigger::Cfd { .. }) => Err(VendorError::Setting(format!(
-                "{what}: a MultiHarp has edge triggers (level and edge), not a CFD"
+            (Inputs::Edge, Trigger::Cfd { .. }) => Err(VendorError::Setting(format!(
+                "{what}: a {board} is driven with edge triggers (level and edge), not a CFD"
             ))),
-            (Family::PicoHarp330, Trigger::Cfd { .. }) => Err(VendorError::Setting(format!(
-                "{what}: this driver sets a PicoHarp 330's inputs to edge-trigger mode (level and edge); its CFD mode is not driven"
+            (Inputs::Cfd, Trigger::Edge { .. }) => Err(VendorError::Setting(format!(
+                "{what}: a {board} has CFD inputs (level and zero cross), not edge triggers"
             ))),
-            (Family::HydraHarp, Trigger::Edge { .. }) => Err(VendorError::Setting(format!(
-                "{what}: a HydraHarp has CFD inputs (level and zero cross), not edge triggers"
-            ))),
+        }
+    }
+}
+
+impl Family {
+    /// The family's board with `inputs`, in words.
+    pub fn board(self, inputs: Inputs) -> &'static str {
+        match (self, inputs) {
+            (Family::MultiHarp, _) => "MultiHarp",
+            (Family::HydraHarp, _) => "HydraHarp",
+            (Family::TimeHarp260, Inputs::Cfd) => "TimeHarp 260 Pico",
+            (Family::TimeHarp260, Inputs::Edge) => "TimeHarp 260 Nano",
+            (Family::PicoHarp330, _) => "PicoHarp 330",
         }
     }
 }
@@ -526,13 +627,13 @@ pub struct Settings {
 }
 
 impl Settings {
-    /// The vendor demos' settings for `family`.
-    pub fn default_for(family: Family) -> Self {
+    /// The vendor demos' settings for `family`'s `inputs`.
+    pub fn default_for(family: Family, inputs: Inputs) -> Self {
         Self {
             sync_divider: 1,
-            sync_trigger: Trigger::default_for(family),
+            sync_trigger: Trigger::default_for(family, inputs),
             sync_offset_ps: 0,
-            input_trigger: Trigger::default_for(family),
+            input_trigger: Trigger::default_for(family, inputs),
             input_offsets_ps: Vec::new(),
             binning: 0,
             offset_ns: 0,
@@ -567,11 +668,13 @@ pub struct DeviceInfo {
 pub struct Device {
     lib: Arc<VendorLib>,
     info: DeviceInfo,
+    inputs: Inputs,
 }
 
-/// Status of a running measurement, read between FIFO reads.
+/// Status of a running measurement, read between FIFO reads: the flag
+/// bits and the family whose header gives them their meaning.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Flags(pub i32);
+pub struct Flags(pub i32, pub Family);
 
 impl Flags {
     /// The FIFO overran: records were lost.
@@ -579,20 +682,35 @@ impl Flags {
         self.0 & FLAG_FIFO_FULL != 0
     }
 
+    /// The bit by which the family says it dropped counts.
+    fn dropped_bit(self) -> i32 {
+        match self.1 {
+            Family::TimeHarp260 => FLAG_EVTS_DROPPED_TH260,
+            _ => FLAG_CNTS_DROPPED,
+        }
+    }
+
     /// The device dropped counts before they reached its FIFO.
     pub fn counts_dropped(self) -> bool {
-        self.0 & FLAG_CNTS_DROPPED != 0
+        self.0 & self.dropped_bit() != 0
     }
 
     /// The conditions other than an overrun, in words.
     pub fn problems(self) -> Vec<&'static str> {
+        // A TimeHarp 260 has no reference-clock flag: its 0x0008 is the
+        // dropped events (th260defin.h).
+        let ref_lost = if self.1 == Family::TimeHarp260 {
+            0
+        } else {
+            FLAG_REF_LOST
+        };
         [
             (
-                FLAG_CNTS_DROPPED,
+                self.dropped_bit(),
                 "counts dropped in the device (more than it could take; how many it does not say)",
             ),
             (FLAG_SYNC_LOST, "sync lost"),
-            (FLAG_REF_LOST, "reference clock lost"),
+            (ref_lost, "reference clock lost"),
             (
                 FLAG_SYS_ERROR,
                 "hardware error (the vendor asks to contact support)",
@@ -635,6 +753,7 @@ impl Device {
             (f.open_device)(index, buf.as_mut_ptr().cast())
         })?;
         let mut device = Self {
+            inputs: Inputs::Edge,
             info: DeviceInfo {
                 index,
                 serial: found,
@@ -648,7 +767,14 @@ impl Device {
             lib: lib.clone(),
         };
         // SAFETY: the index is open.
-        lib.check("Initialize", unsafe { (f.initialize)(index, MODE_T3, 0) })?;
+        // SAFETY: the index is open; each shape as its header declares it
+        // (reference source 0: the internal clock).
+        lib.check("Initialize", unsafe {
+            match f.initialize {
+                Initialize::WithReference(init) => init(index, MODE_T3, 0),
+                Initialize::ModeOnly(init) => init(index, MODE_T3),
+            }
+        })?;
         let (mut model, mut part, mut version) = ([0u8; 64], [0u8; 16], [0u8; 32]);
         // SAFETY: buffers at least the header's sizes (32, 8, 16).
         lib.check("GetHardwareInfo", unsafe {
@@ -665,6 +791,19 @@ impl Device {
             (f.get_num_of_input_channels)(index, &mut inputs)
         })?;
         device.info.model = text(&model);
+        device.inputs = match lib.family.inputs() {
+            Some(inputs) => inputs,
+            // HWIDENT_PICO / HWIDENT_NANO of th260defin.h.
+            None if device.info.model.starts_with("TimeHarp 260 P") => Inputs::Cfd,
+            None if device.info.model.starts_with("TimeHarp 260 N") => Inputs::Edge,
+            None => {
+                return Err(VendorError::Setting(format!(
+                    "{} reports the model {:?}, neither a TimeHarp 260 P nor N",
+                    lib.path.display(),
+                    device.info.model
+                )));
+            }
+        };
         device.info.part = text(&part);
         device.info.version = text(&version);
         device.info.inputs = inputs;
@@ -685,13 +824,38 @@ impl Device {
         self.lib.family
     }
 
+    /// How this board's inputs discriminate.
+    pub fn inputs(&self) -> Inputs {
+        self.inputs
+    }
+
+    /// The PTU record type code of this board's T3 records.
+    pub fn t3_record_type(&self) -> u32 {
+        match (self.lib.family, self.inputs) {
+            (Family::MultiHarp | Family::PicoHarp330, _) => 0x0001_0307,
+            (Family::HydraHarp, _) => 0x0101_0304,
+            (Family::TimeHarp260, Inputs::Edge) => 0x0001_0305,
+            (Family::TimeHarp260, Inputs::Cfd) => 0x0001_0306,
+        }
+    }
+
     /// Applies `s`; returns the micro-time resolution (ps) it gives.
     pub fn configure(&mut self, s: &Settings) -> Result<f64, VendorError> {
         let (lib, i) = (&self.lib, self.info.index);
         let f = &lib.functions;
         let family = lib.family;
-        let (sync_a, sync_b) = s.sync_trigger.args(family, "sync")?;
-        let (in_a, in_b) = s.input_trigger.args(family, "input")?;
+        let (sync_a, sync_b) = s.sync_trigger.args(family, self.inputs, "sync")?;
+        let (in_a, in_b) = s.input_trigger.args(family, self.inputs, "input")?;
+        let (triggers, (sync_call, input_call)) = match self.inputs {
+            Inputs::Edge => (f.edge_triggers, ("SetSyncEdgeTrg", "SetInputEdgeTrg")),
+            Inputs::Cfd => (f.cfd_triggers, ("SetSyncCFD", "SetInputCFD")),
+        };
+        let (set_sync_trigger, set_input_trigger) = triggers.ok_or_else(|| {
+            VendorError::Setting(format!(
+                "the {} library has no {sync_call} for its inputs",
+                family.name()
+            ))
+        })?;
         if s.input_offsets_ps.len() > self.info.inputs as usize {
             return Err(VendorError::Setting(format!(
                 "{} input offsets given; the device has {} inputs",
@@ -708,19 +872,11 @@ impl Device {
                 // level and edge below.
                 lib.check("SetSyncTrgMode", sync_mode(i, 0))?;
             }
-            let sync_call = match family {
-                Family::MultiHarp | Family::PicoHarp330 => "SetSyncEdgeTrg",
-                Family::HydraHarp => "SetSyncCFD",
-            };
-            lib.check(sync_call, (f.set_sync_trigger)(i, sync_a, sync_b))?;
+            lib.check(sync_call, set_sync_trigger(i, sync_a, sync_b))?;
             lib.check(
                 "SetSyncChannelOffset",
                 (f.set_sync_channel_offset)(i, s.sync_offset_ps),
             )?;
-            let input_call = match family {
-                Family::MultiHarp | Family::PicoHarp330 => "SetInputEdgeTrg",
-                Family::HydraHarp => "SetInputCFD",
-            };
             for ch in 0..self.info.inputs {
                 // Every input on, not left to the library's default
                 // (`SetInputChannelEnable(devidx, channel, enable)` in the
@@ -732,7 +888,7 @@ impl Device {
                 if let Some((_, input_mode)) = f.set_trigger_modes {
                     lib.check("SetInputTrgMode", input_mode(i, ch, 0))?;
                 }
-                lib.check(input_call, (f.set_input_trigger)(i, ch, in_a, in_b))?;
+                lib.check(input_call, set_input_trigger(i, ch, in_a, in_b))?;
                 let offset = s.input_offsets_ps.get(ch as usize).copied().unwrap_or(0);
                 lib.check(
                     "SetInputChannelOffset",
@@ -819,7 +975,7 @@ impl Device {
         self.lib.check("GetFlags", unsafe {
             (self.lib.functions.get_flags)(self.info.index, &mut flags)
         })?;
-        Ok(Flags(flags))
+        Ok(Flags(flags, self.lib.family))
     }
 
     /// Whether the measurement time has elapsed.

@@ -12,7 +12,8 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use scatterscope_drivers::picoquant::{
-    Device, DeviceInfo as DriverInfo, Family, Flags, Settings, Trigger, VendorError, VendorLib,
+    Device, DeviceInfo as DriverInfo, Family, Flags, Inputs, Settings, Trigger, VendorError,
+    VendorLib,
 };
 
 use super::source::{
@@ -49,10 +50,11 @@ impl PicoQuantSpec {
             "" => None,
             "multiharp" | "mh" => Some(Family::MultiHarp),
             "hydraharp" | "hh" => Some(Family::HydraHarp),
+            "timeharp260" | "th260" => Some(Family::TimeHarp260),
             "picoharp330" | "ph330" => Some(Family::PicoHarp330),
             other => {
                 return Err(format!(
-                    "unknown PicoQuant family `{other}`: use multiharp (mh), hydraharp (hh) or picoharp330 (ph330), e.g. picoquant:multiharp:1045678"
+                    "unknown PicoQuant family `{other}`: use multiharp (mh), hydraharp (hh), timeharp260 (th260) or picoharp330 (ph330), e.g. picoquant:multiharp:1045678"
                 ));
             }
         };
@@ -114,8 +116,13 @@ impl SettingsRequest {
     /// (level and edge), hhlib.h with `HH_SetSyncCFD` / `HH_SetInputCFD`
     /// (level and zero cross), ph330lib.h with either (this driver sets
     /// edge triggers); levels and dividers as their `*defin.h` bound them.
-    pub fn resolve(&self, family: Family, markers: bool) -> Result<Settings, SourceError> {
-        let mut s = Settings::default_for(family);
+    pub fn resolve(
+        &self,
+        family: Family,
+        inputs: Inputs,
+        markers: bool,
+    ) -> Result<Settings, SourceError> {
+        let mut s = Settings::default_for(family, inputs);
         let trigger = |base: Trigger,
                        level: Option<i32>,
                        rising: Option<bool>,
@@ -127,14 +134,14 @@ impl SettingsRequest {
                     zero_cross,
                     format!(
                         "{zero_cross}: a {} input is driven with an edge trigger, not a CFD (set {edge})",
-                        family.name()
+                        family.board(inputs)
                     ),
                 )),
                 (Trigger::Cfd { .. }, Some(_), _) => Err(SourceError::setting(
                     edge,
                     format!(
                         "{edge}: a {} input has a CFD, not an edge trigger (set {zero_cross})",
-                        family.name()
+                        family.board(inputs)
                     ),
                 )),
                 (
@@ -179,21 +186,11 @@ impl SettingsRequest {
             (s.sync_trigger, "sync_level_mv", "sync"),
             (s.input_trigger, "input_level_mv", "input"),
         ] {
-            t.check(family, what)
+            t.check(family, inputs, what)
                 .map_err(|e| SourceError::setting(field, e.to_string()))?;
         }
+        self.check_divider(family)?;
         s.sync_divider = self.sync_divider.unwrap_or(s.sync_divider);
-        let max = family.sync_divider_max();
-        if !(1..=max).contains(&s.sync_divider) {
-            return Err(SourceError::setting(
-                "sync_divider",
-                format!(
-                    "sync divider {}: a {} divides the sync by 1 to {max}",
-                    s.sync_divider,
-                    family.name()
-                ),
-            ));
-        }
         s.sync_offset_ps = self.sync_offset_ps.unwrap_or(s.sync_offset_ps);
         s.input_offsets_ps = self.input_offsets_ps.clone();
         s.binning = self.binning.unwrap_or(s.binning);
@@ -220,17 +217,39 @@ pub struct PicoQuantDevice {
     pub scan: Option<Imaging>,
 }
 
+impl SettingsRequest {
+    /// Whether `family` takes the sync divider asked for (its header's
+    /// `SYNCDIVMAX`).
+    pub fn check_divider(&self, family: Family) -> Result<(), SourceError> {
+        let max = family.sync_divider_max();
+        match self.sync_divider {
+            Some(d) if !(1..=max).contains(&d) => Err(SourceError::setting(
+                "sync_divider",
+                format!(
+                    "sync divider {d}: a {} divides the sync by 1 to {max}",
+                    family.name()
+                ),
+            )),
+            _ => Ok(()),
+        }
+    }
+}
+
 impl PicoQuantDevice {
     /// With the family named, whether it can take the settings asked for
     /// ([`SettingsRequest::resolve`]): checked before any library is
-    /// loaded or device touched. Without a family, at the start.
+    /// loaded or device touched. Without a family, and a TimeHarp 260's
+    /// triggers (Pico or Nano is the board's to say), at the start.
     pub fn check_settings(&self) -> Result<(), SourceError> {
-        match self.spec.family {
-            Some(family) => self
+        let Some(family) = self.spec.family else {
+            return Ok(());
+        };
+        match family.inputs() {
+            Some(inputs) => self
                 .settings
-                .resolve(family, self.scan.is_some())
+                .resolve(family, inputs, self.scan.is_some())
                 .map(|_| ()),
-            None => Ok(()),
+            None => self.settings.check_divider(family),
         }
     }
 }
@@ -424,10 +443,10 @@ impl Source for PicoQuantSource {
         }
         let device = self.device.as_mut().expect("started once");
         let family = device.family();
-        let settings = self
-            .request
-            .settings
-            .resolve(family, self.request.scan.is_some())?;
+        let settings =
+            self.request
+                .settings
+                .resolve(family, device.inputs(), self.request.scan.is_some())?;
         let resolution_ps = device.configure(&settings).map_err(vendor)?;
         // The libraries report valid rates 100-150 ms after a set-up.
         std::thread::sleep(Duration::from_millis(150));
@@ -448,7 +467,7 @@ impl Source for PicoQuantSource {
                 ),
             ));
         }
-        let record_type = RecordType::from_code(family.t3_record_type())
+        let record_type = RecordType::from_code(device.t3_record_type())
             .expect("the family's record type is known");
         let info = device.info().clone();
         Ok(SourceFacts {
@@ -635,15 +654,17 @@ mod tests {
     #[test]
     fn settings_take_the_family_defaults_and_refuse_the_other_familys_fields() {
         let none = SettingsRequest::default();
-        let mh = none.resolve(Family::MultiHarp, false).unwrap();
-        assert_eq!(mh, Settings::default_for(Family::MultiHarp));
+        let mh = none
+            .resolve(Family::MultiHarp, Inputs::Edge, false)
+            .unwrap();
+        assert_eq!(mh, Settings::default_for(Family::MultiHarp, Inputs::Edge));
         let req = SettingsRequest {
             sync_level_mv: Some(-80),
             sync_rising: Some(true),
             binning: Some(2),
             ..SettingsRequest::default()
         };
-        let s = req.resolve(Family::MultiHarp, true).unwrap();
+        let s = req.resolve(Family::MultiHarp, Inputs::Edge, true).unwrap();
         assert_eq!(
             s.sync_trigger,
             Trigger::Edge {
@@ -654,7 +675,7 @@ mod tests {
         assert_eq!(s.binning, 2);
         assert!(s.markers);
         let e = req
-            .resolve(Family::HydraHarp, false)
+            .resolve(Family::HydraHarp, Inputs::Cfd, false)
             .unwrap_err()
             .to_string();
         assert!(e.contains("sync_rising") && e.contains("CFD"), "{e}");
@@ -663,10 +684,10 @@ mod tests {
             ..SettingsRequest::default()
         };
         let e = zc
-            .resolve(Family::MultiHarp, false)
+            .resolve(Family::MultiHarp, Inputs::Edge, false)
             .unwrap_err()
             .to_string();
         assert!(e.contains("input_zero_cross_mv"), "{e}");
-        assert!(zc.resolve(Family::HydraHarp, false).is_ok());
+        assert!(zc.resolve(Family::HydraHarp, Inputs::Cfd, false).is_ok());
     }
 }

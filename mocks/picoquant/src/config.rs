@@ -61,6 +61,9 @@ pub struct MockConfig {
     pub seed: u64,
     /// Where to write the delivered totals.
     pub truth: Option<PathBuf>,
+    /// The TimeHarp 260 board: a Nano (edge triggers) rather than a Pico
+    /// (CFDs).
+    pub th260_nano: bool,
 }
 
 impl Default for MockConfig {
@@ -76,6 +79,7 @@ impl Default for MockConfig {
             fault: None,
             seed: 0,
             truth: None,
+            th260_nano: false,
         }
     }
 }
@@ -107,6 +111,13 @@ impl MockConfig {
                 "seed" => c.seed = value.parse().map_err(|_| bad())?,
                 "drift" => c.drift = value.parse().map_err(|_| bad())?,
                 "truth" => c.truth = Some(PathBuf::from(value)),
+                "th260" => {
+                    c.th260_nano = match value {
+                        "pico" => false,
+                        "nano" => true,
+                        _ => return Err(bad()),
+                    }
+                }
                 "scan" => {
                     let (w, h) = value.split_once('x').ok_or_else(bad)?;
                     let (w, h): (usize, usize) =

@@ -1,5 +1,6 @@
 //! A stand-in for PicoQuant's programming libraries (MHLib for MultiHarp,
-//! HHLib v3 for HydraHarp 400, PH330Lib 2.0 for PicoHarp 330): a shared
+//! HHLib v3 for HydraHarp 400, TH260Lib 3.1 for TimeHarp 260 Pico and
+//! Nano, PH330Lib 2.0 for PicoHarp 330): a shared
 //! library exporting the C functions `scatterscope_drivers::picoquant`
 //! calls, with every family's prefix, so that the
 //! driver, the acquisition and the tests go through the same run-time
@@ -26,6 +27,8 @@ const FLAG_FIFO_FULL: c_int = 0x0002;
 const FLAG_ACTIVE: c_int = 0x0020;
 /// MHLib's "counts were dropped" flag (mhdefin.h).
 const FLAG_CNTS_DROPPED: c_int = 0x0040;
+/// TH260Lib's dropped-events flag (th260defin.h `FLAG_EVTS_DROPPED`).
+const FLAG_EVTS_DROPPED_TH260: c_int = 0x0008;
 const WARNING_INPUT_RATE_HIGH: c_int = 0x0040;
 
 /// Error codes: the vendor's numbers (errorcodes.h of MHLib 2.0 and HHLib
@@ -43,6 +46,11 @@ pub mod code {
     pub const DEVICE_LOST: i32 = -36;
     /// `ERROR_USB_BULKRD_FAIL`: a FIFO read failed (fault `error`).
     pub const READ_FAIL: i32 = -37;
+    /// `TH260_ERROR_UNSUPPORTED_FUNCTION` (TH260Lib's errorcodes.h): the
+    /// stand-in's answer to a Pico-only call on a Nano or the reverse
+    /// (which code the vendor's library gives there its header does not
+    /// say).
+    pub const UNSUPPORTED_FUNCTION: i32 = -80;
     /// The stand-in's own: `SCATTERSCOPE_PQ_MOCK` could not be read.
     pub const CONFIG: i32 = -99;
 }
@@ -52,28 +60,62 @@ pub mod code {
 enum Family {
     MultiHarp,
     HydraHarp,
+    TimeHarp260,
     PicoHarp330,
 }
 
 impl Family {
-    fn base_resolution_ps(self) -> f64 {
+    /// Base resolution, ps. The TimeHarp 260's are the boards' published
+    /// 25 ps (Pico) and 250 ps (Nano); no file of either is at hand.
+    fn base_resolution_ps(self, config: &MockConfig) -> f64 {
         match self {
             Family::MultiHarp => 5.0,
             Family::HydraHarp | Family::PicoHarp330 => 1.0,
+            Family::TimeHarp260 if config.th260_nano => 250.0,
+            Family::TimeHarp260 => 25.0,
+        }
+    }
+
+    /// `MAXINPCHAN`: 2 in th260defin.h; the stand-in's other devices have 4.
+    fn inputs(self) -> c_int {
+        match self {
+            Family::TimeHarp260 => 2,
+            _ => 4,
+        }
+    }
+
+    /// The flag by which the family says it dropped counts.
+    fn dropped_flag(self) -> c_int {
+        match self {
+            Family::TimeHarp260 => FLAG_EVTS_DROPPED_TH260,
+            _ => FLAG_CNTS_DROPPED,
+        }
+    }
+
+    /// The model `GetHardwareInfo` reports (th260defin.h's `HWIDENT_PICO`
+    /// and `HWIDENT_NANO` for the TimeHarp 260).
+    fn model(self, config: &MockConfig) -> &'static str {
+        match self {
+            Family::MultiHarp => "MultiHarp 150",
+            Family::HydraHarp => "HydraHarp 400",
+            Family::TimeHarp260 if config.th260_nano => "TimeHarp 260 N",
+            Family::TimeHarp260 => "TimeHarp 260 P",
+            Family::PicoHarp330 => "PicoHarp 330",
         }
     }
 
     fn read_max(self) -> usize {
         match self {
             Family::MultiHarp | Family::PicoHarp330 => 1_048_576,
-            Family::HydraHarp => 131_072,
+            Family::HydraHarp | Family::TimeHarp260 => 131_072,
         }
     }
 
-    /// `SYNCDIVMAX`: 16 in mhdefin.h and hhdefin.h, 8 in ph330defin.h.
+    /// `SYNCDIVMAX`: 16 in mhdefin.h and hhdefin.h, 8 in th260defin.h and
+    /// ph330defin.h.
     fn sync_divider_max(self) -> c_int {
         match self {
-            Family::PicoHarp330 => 8,
+            Family::TimeHarp260 | Family::PicoHarp330 => 8,
             _ => 16,
         }
     }
@@ -204,6 +246,7 @@ fn error_text(code: c_int) -> &'static str {
         code::INVALID_ARGUMENT => "ERROR_INVALID_ARGUMENT",
         code::NOT_INITIALIZED => "ERROR_NOT_INITIALIZED",
         code::READ_FAIL => "ERROR_USB_BULKRD_FAIL",
+        code::UNSUPPORTED_FUNCTION => "ERROR_UNSUPPORTED_FUNCTION",
         code::DEVICE_LOST => "ERROR_USB_VCMD_FAIL",
         code::CONFIG => "SCATTERSCOPE_PQ_MOCK invalid",
         _ => "unknown error",
@@ -224,8 +267,8 @@ fn sync_period_ps(config: &MockConfig) -> f64 {
     1e12 / config.sync_hz
 }
 
-fn resolution_ps(dev: &Device) -> f64 {
-    dev.family.map_or(1.0, Family::base_resolution_ps) * f64::from(1u32 << dev.binning)
+fn resolution_ps(dev: &Device, config: &MockConfig) -> f64 {
+    dev.family.map_or(1.0, |f| f.base_resolution_ps(config)) * f64::from(1u32 << dev.binning)
 }
 
 fn write_truth(m: &mut Measurement, config: &MockConfig) {
@@ -279,7 +322,9 @@ fn deliver(dev: &mut Device, config: &MockConfig, out: &mut [u32]) -> Result<usi
             dev.gone = true;
             return Err(code::DEVICE_LOST);
         }
-        Some(Fault::DropCounts(n)) if m.delivered >= n => dev.flags |= FLAG_CNTS_DROPPED,
+        Some(Fault::DropCounts(n)) if m.delivered >= n => {
+            dev.flags |= dev.family.map_or(FLAG_CNTS_DROPPED, Family::dropped_flag)
+        }
         Some(Fault::Overrun(n) | Fault::ReadError(n) | Fault::Vanish(n) | Fault::DropCounts(n)) => {
             limit = limit.min(n - m.delivered)
         }
@@ -329,10 +374,54 @@ fn deliver(dev: &mut Device, config: &MockConfig, out: &mut [u32]) -> Result<usi
     Ok(n)
 }
 
+/// Initialises device `index` (mode 3 = T3 only): each family's
+/// `Initialize` ([`library!`] callers), whatever its arguments.
+fn initialize(index: c_int, mode: c_int) -> c_int {
+    with_device(index, |d, _| {
+        if !d.open {
+            return code::DEVICE_NOT_OPEN;
+        }
+        if mode != 3 {
+            return code::INVALID_ARGUMENT;
+        }
+        d.initialized = true;
+        d.sync_divider = 1;
+        0
+    })
+}
+
+/// `MH_Initialize(devidx, mode, refsource)` (mhlib.h).
+#[unsafe(no_mangle)]
+pub extern "C" fn MH_Initialize(index: c_int, mode: c_int, _refsource: c_int) -> c_int {
+    initialize(index, mode)
+}
+
+/// `HH_Initialize(devidx, mode, refsource)` (hhlib.h).
+#[unsafe(no_mangle)]
+pub extern "C" fn HH_Initialize(index: c_int, mode: c_int, _refsource: c_int) -> c_int {
+    initialize(index, mode)
+}
+
+/// `TH260_Initialize(devidx, mode)`: no reference source (th260lib.h).
+#[unsafe(no_mangle)]
+pub extern "C" fn TH260_Initialize(index: c_int, mode: c_int) -> c_int {
+    initialize(index, mode)
+}
+
+/// `PH330_Initialize(devidx, mode, refsource)`: refsource 0 to 3, the
+/// internal clock or an external 10, 100 or 500 MHz one (ph330defin.h).
+#[unsafe(no_mangle)]
+pub extern "C" fn PH330_Initialize(index: c_int, mode: c_int, refsource: c_int) -> c_int {
+    if !(0..=3).contains(&refsource) {
+        return code::INVALID_ARGUMENT;
+    }
+    initialize(index, mode)
+}
+
 macro_rules! library {
-    ($family:expr, $version:literal, $model:literal,
+    ($family:expr, $version:literal,
      $GetLibraryVersion:ident, $GetErrorString:ident, $OpenDevice:ident, $CloseDevice:ident,
-     $Initialize:ident, $GetHardwareInfo:ident, $GetSerialNumber:ident,
+     $GetHardwareInfo:ident, $GetSerialNumber:ident,
      $GetNumOfInputChannels:ident, $GetBaseResolution:ident, $SetSyncDiv:ident,
      $SetSyncChannelOffset:ident, $SetInputChannelOffset:ident, $SetBinning:ident,
      $SetOffset:ident, $SetMarkerEnable:ident, $SetMarkerEdges:ident,
@@ -377,22 +466,6 @@ macro_rules! library {
             })
         }
 
-        /// Initialises the device (mode 3 = T3 only).
-        #[unsafe(no_mangle)]
-        pub extern "C" fn $Initialize(index: c_int, mode: c_int, _refsource: c_int) -> c_int {
-            with_device(index, |d, _| {
-                if !d.open {
-                    return code::DEVICE_NOT_OPEN;
-                }
-                if mode != 3 {
-                    return code::INVALID_ARGUMENT;
-                }
-                d.initialized = true;
-                d.sync_divider = 1;
-                0
-            })
-        }
-
         /// Model, part number and version.
         #[unsafe(no_mangle)]
         pub unsafe extern "C" fn $GetHardwareInfo(
@@ -401,9 +474,9 @@ macro_rules! library {
             part: *mut c_char,
             version: *mut c_char,
         ) -> c_int {
-            with_ready(index, |_, _| {
+            with_ready(index, |_, c| {
                 unsafe {
-                    write_str(model, $model, 16);
+                    write_str(model, $family.model(c), 16);
                     write_str(part, "SSMOCK", 8);
                     write_str(version, "1.0", 8);
                 }
@@ -420,10 +493,10 @@ macro_rules! library {
             })
         }
 
-        /// Four inputs.
+        /// Four inputs (two on a TimeHarp 260).
         #[unsafe(no_mangle)]
         pub unsafe extern "C" fn $GetNumOfInputChannels(index: c_int, n: *mut c_int) -> c_int {
-            with_ready(index, |_, _| unsafe { put(n, 4) })
+            with_ready(index, |_, _| unsafe { put(n, $family.inputs()) })
         }
 
         /// Base resolution (ps) and binning steps.
@@ -433,9 +506,9 @@ macro_rules! library {
             res: *mut c_double,
             steps: *mut c_int,
         ) -> c_int {
-            with_ready(index, |d, _| unsafe {
+            with_ready(index, |d, c| unsafe {
                 put(steps, 24);
-                put(res, d.family.map_or(1.0, Family::base_resolution_ps))
+                put(res, d.family.map_or(1.0, |f| f.base_resolution_ps(c)))
             })
         }
 
@@ -544,7 +617,7 @@ macro_rules! library {
         /// Micro-time unit, ps.
         #[unsafe(no_mangle)]
         pub unsafe extern "C" fn $GetResolution(index: c_int, res: *mut c_double) -> c_int {
-            with_ready(index, |d, _| unsafe { put(res, resolution_ps(d)) })
+            with_ready(index, |d, c| unsafe { put(res, resolution_ps(d, c)) })
         }
 
         /// Sync rate at the input, before the divider, Hz (as the vendor's
@@ -613,7 +686,7 @@ macro_rules! library {
                 if !(1..=360_000_000).contains(&tacq) {
                     return code::INVALID_ARGUMENT;
                 }
-                let res = resolution_ps(d);
+                let res = resolution_ps(d, c);
                 let period = sync_period_ps(c);
                 let pool = match &d.pool {
                     Some((r, p)) if *r == res => p.clone(),
@@ -691,12 +764,10 @@ fn in_range(v: c_int, lo: c_int, hi: c_int) -> c_int {
 library!(
     Family::MultiHarp,
     "3.1",
-    "MultiHarp 150",
     MH_GetLibraryVersion,
     MH_GetErrorString,
     MH_OpenDevice,
     MH_CloseDevice,
-    MH_Initialize,
     MH_GetHardwareInfo,
     MH_GetSerialNumber,
     MH_GetNumOfInputChannels,
@@ -723,12 +794,10 @@ library!(
 library!(
     Family::HydraHarp,
     "3.0",
-    "HydraHarp 400",
     HH_GetLibraryVersion,
     HH_GetErrorString,
     HH_OpenDevice,
     HH_CloseDevice,
-    HH_Initialize,
     HH_GetHardwareInfo,
     HH_GetSerialNumber,
     HH_GetNumOfInputChannels,
@@ -753,14 +822,42 @@ library!(
 );
 
 library!(
+    Family::TimeHarp260,
+    "3.1",
+    TH260_GetLibraryVersion,
+    TH260_GetErrorString,
+    TH260_OpenDevice,
+    TH260_CloseDevice,
+    TH260_GetHardwareInfo,
+    TH260_GetSerialNumber,
+    TH260_GetNumOfInputChannels,
+    TH260_GetBaseResolution,
+    TH260_SetSyncDiv,
+    TH260_SetSyncChannelOffset,
+    TH260_SetInputChannelOffset,
+    TH260_SetBinning,
+    TH260_SetOffset,
+    TH260_SetMarkerEnable,
+    TH260_SetMarkerEdges,
+    TH260_SetInputChannelEnable,
+    TH260_GetResolution,
+    TH260_GetSyncRate,
+    TH260_GetCountRate,
+    TH260_GetFlags,
+    TH260_GetWarnings,
+    TH260_GetWarningsText,
+    TH260_StartMeas,
+    TH260_StopMeas,
+    TH260_CTCStatus
+);
+
+library!(
     Family::PicoHarp330,
     "2.0",
-    "PicoHarp 330",
     PH330_GetLibraryVersion,
     PH330_GetErrorString,
     PH330_OpenDevice,
     PH330_CloseDevice,
-    PH330_Initialize,
     PH330_GetHardwareInfo,
     PH330_GetSerialNumber,
     PH330_GetNumOfInputChannels,
@@ -864,6 +961,74 @@ pub extern "C" fn HH_SetInputCFD(
     })
 }
 
+/// Runs `f` on a TimeHarp 260 that is a Nano (`nano`) or a Pico; the
+/// other board's call fails with [`code::UNSUPPORTED_FUNCTION`]
+/// (th260lib.h marks `SetSyncCFD`/`SetInputCFD` "TH 260 Pico only" and
+/// the edge triggers "TH 260 Nano only").
+fn th260_board(index: c_int, nano: bool, f: impl FnOnce() -> c_int) -> c_int {
+    with_ready(index, |_, c| {
+        if c.th260_nano == nano {
+            f()
+        } else {
+            code::UNSUPPORTED_FUNCTION
+        }
+    })
+}
+
+/// TimeHarp 260 Pico CFD of the sync input: level -1200 to 0 mV, zero
+/// cross -40 to 0 mV (th260defin.h `CFDLVLMIN` ... `CFDZCMAX`).
+#[unsafe(no_mangle)]
+pub extern "C" fn TH260_SetSyncCFD(index: c_int, level: c_int, zero_cross: c_int) -> c_int {
+    th260_board(index, false, || th260_cfd(level, zero_cross))
+}
+
+/// TimeHarp 260 Pico CFD of an input.
+#[unsafe(no_mangle)]
+pub extern "C" fn TH260_SetInputCFD(
+    index: c_int,
+    ch: c_int,
+    level: c_int,
+    zero_cross: c_int,
+) -> c_int {
+    th260_board(index, false, || {
+        if !(0..2).contains(&ch) {
+            return code::INVALID_ARGUMENT;
+        }
+        th260_cfd(level, zero_cross)
+    })
+}
+
+/// TimeHarp 260 Nano edge trigger of the sync input: level -1200 to 1200
+/// mV (th260defin.h `TRGLVLMIN`/`TRGLVLMAX`).
+#[unsafe(no_mangle)]
+pub extern "C" fn TH260_SetSyncEdgeTrg(index: c_int, level: c_int, edge: c_int) -> c_int {
+    th260_board(index, true, || edge_trigger_within(level, edge, 1200))
+}
+
+/// TimeHarp 260 Nano edge trigger of an input.
+#[unsafe(no_mangle)]
+pub extern "C" fn TH260_SetInputEdgeTrg(
+    index: c_int,
+    ch: c_int,
+    level: c_int,
+    edge: c_int,
+) -> c_int {
+    th260_board(index, true, || {
+        if !(0..2).contains(&ch) {
+            return code::INVALID_ARGUMENT;
+        }
+        edge_trigger_within(level, edge, 1200)
+    })
+}
+
+fn th260_cfd(level: c_int, zero_cross: c_int) -> c_int {
+    if (-1200..=0).contains(&level) && (-40..=0).contains(&zero_cross) {
+        0
+    } else {
+        code::INVALID_ARGUMENT
+    }
+}
+
 /// HydraHarp calibration (instant here).
 #[unsafe(no_mangle)]
 pub extern "C" fn HH_Calibrate(index: c_int) -> c_int {
@@ -901,6 +1066,22 @@ pub unsafe extern "C" fn MH_ReadFiFo(index: c_int, buffer: *mut c_uint, n: *mut 
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn PH330_ReadFiFo(index: c_int, buffer: *mut c_uint, n: *mut c_int) -> c_int {
     unsafe { read_fifo(index, buffer, Family::PicoHarp330.read_max(), n) }
+}
+
+/// `TH260_ReadFiFo`: up to `count` records, from `TTREADMIN` 128 to
+/// `TTREADMAX` 131,072 (th260defin.h).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn TH260_ReadFiFo(
+    index: c_int,
+    buffer: *mut c_uint,
+    count: c_int,
+    n: *mut c_int,
+) -> c_int {
+    let max = Family::TimeHarp260.read_max();
+    if !(128..=max as c_int).contains(&count) {
+        return code::INVALID_ARGUMENT;
+    }
+    unsafe { read_fifo(index, buffer, count as usize, n) }
 }
 
 /// `HH_ReadFiFo`: up to `count` (at most 131,072) records into `buffer`.
