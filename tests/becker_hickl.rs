@@ -570,3 +570,39 @@ fn sdt_sizes_whose_product_overflows_place_the_curves_in_a_row() {
     assert_eq!(binned.stacks[0].counts.dim(), (16, 1, 3));
     assert_eq!(binned.accounting.received, (0..48).sum::<u64>());
 }
+
+/// Found by fuzzing: a zipped block whose data lie past the file's end
+/// (and no next block) is an error naming the block, not an overflow.
+#[test]
+fn a_zipped_block_past_the_files_end_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("past.sdt");
+    let measurements = [SdtMeasurement {
+        tac_r: 12.5e-9,
+        tac_g: 1,
+        adc_re: 16,
+        scan: (1, 1),
+        repeats: (1, 1),
+        module: "SPC-150",
+    }];
+    let blocks = [SdtBlock {
+        values: vec![1.0; 16],
+        item: 2,
+        zipped: true,
+        contents: 0x00,
+        measurement: 0,
+    }];
+    let mut bytes = sdt_file(&measurements, &blocks);
+    let header = u32::from_le_bytes(bytes[14..18].try_into().unwrap()) as usize;
+    let past = (bytes.len() + 100) as u32;
+    bytes[header + 2..header + 6].copy_from_slice(&past.to_le_bytes());
+    bytes[header + 6..header + 10].copy_from_slice(&0u32.to_le_bytes());
+    std::fs::write(&path, &bytes).unwrap();
+    let e = bin_file_counts(&path, &BinSpec::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("past.sdt") && e.contains("data block 0") && e.contains("past the file's end"),
+        "{e}"
+    );
+}

@@ -31,8 +31,8 @@ use std::sync::atomic::AtomicBool;
 pub struct AcquireArgs {
     /// mock (in-process USB), mock-serial (pseudo-terminal),
     /// serial:PATH, usb:VID:PID[:SERIAL], picoquant[:FAMILY][:SERIAL]
-    /// (FAMILY multiharp, hydraharp or picoharp330, through the vendor's
-    /// library), or
+    /// (FAMILY multiharp, hydraharp, timeharp260 or picoharp330, through
+    /// the vendor's library), or
     /// replay:FILE (a PTU or tag file played back at its recorded pace,
     /// e.g. with --live to review a run); see `scatterscope devices`.
     #[arg(long, default_value = "mock")]
@@ -135,28 +135,28 @@ struct PicoQuantArgs {
     /// Sync divider.
     #[arg(long, value_name = "N")]
     sync_divider: Option<i32>,
-    /// Sync trigger level (MultiHarp) or CFD level (HydraHarp), mV.
+    /// Sync trigger level (edge-trigger boards) or CFD level (HydraHarp, TimeHarp 260 Pico), mV.
     #[arg(long, value_name = "MV", allow_negative_numbers = true)]
     sync_level: Option<i32>,
-    /// Sync trigger edge (MultiHarp): rising or falling.
+    /// Sync trigger edge (MultiHarp, TimeHarp 260 Nano, PicoHarp 330): rising or falling.
     #[arg(long, value_name = "EDGE", value_parser = parse_edge)]
     sync_edge: Option<bool>,
     /// The scan markers' active edge, rising or falling [default: rising].
     #[arg(long, value_name = "EDGE", value_parser = parse_edge, requires = "scan")]
     marker_edge: Option<bool>,
-    /// Sync CFD zero cross (HydraHarp), mV.
+    /// Sync CFD zero cross (HydraHarp, TimeHarp 260 Pico), mV.
     #[arg(long, value_name = "MV")]
     sync_zero_cross: Option<i32>,
     /// Sync channel offset (default unit ps).
     #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     sync_offset: Option<f64>,
-    /// Input trigger level (MultiHarp) or CFD level (HydraHarp), mV; every input.
+    /// Input trigger level (edge-trigger boards) or CFD level (CFD boards), mV; every input.
     #[arg(long, value_name = "MV", allow_negative_numbers = true)]
     input_level: Option<i32>,
-    /// Input trigger edge (MultiHarp): rising or falling.
+    /// Input trigger edge (MultiHarp, TimeHarp 260 Nano, PicoHarp 330): rising or falling.
     #[arg(long, value_name = "EDGE", value_parser = parse_edge)]
     input_edge: Option<bool>,
-    /// Input CFD zero cross (HydraHarp), mV.
+    /// Input CFD zero cross (HydraHarp, TimeHarp 260 Pico), mV.
     #[arg(long, value_name = "MV")]
     input_zero_cross: Option<i32>,
     /// Per-input offsets, comma-separated (default unit ps), e.g. 0,120ps.

@@ -448,7 +448,9 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
             } else {
                 size
             };
-            let packed = read_at(data_offs, (end - data_offs) as usize, &what)?;
+            // Offsets from the file: one past its end reads nothing and
+            // fails in `read_at`, naming the block.
+            let packed = read_at(data_offs, end.saturating_sub(data_offs) as usize, &what)?;
             unzip_first(&packed, length).map_err(|reason| field(&what, reason))?
         } else {
             read_at(data_offs, length, &what)?
