@@ -9,6 +9,8 @@
 mod bh_files;
 #[path = "common/command.rs"]
 mod command;
+#[path = "common/ptu_tags.rs"]
+mod ptu_tags;
 #[path = "common/pydeps.rs"]
 mod pydeps;
 
@@ -16,6 +18,7 @@ use std::path::Path;
 
 use bh_files::{Layout, SdtBlock, SdtMeasurement, random_spc, sdt_file};
 use command::{run, text};
+use ptu_tags::ptu_tags;
 use scatterscope::events::Tag;
 use scatterscope::formats::becker_hickl::spc::{self, SpcModule, SpcOptions};
 use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file_counts};
@@ -51,7 +54,7 @@ fn ours(path: &Path, module: SpcModule) -> Decoded {
     };
     let info = spc::open(path, &options).unwrap();
     let (mut photons, mut markers) = (Vec::new(), Vec::new());
-    let reader = info.split_records(1).unwrap().swap_remove(0);
+    let reader = info.records_part(0, 1).unwrap();
     let flags = spc::decode_each(&info, reader, |tag| {
         match tag {
             Some(Tag::Photon {
@@ -235,27 +238,23 @@ fn the_command_bins_converts_and_refuses_spc_files_by_name() {
     assert!(t.contains("apply to Becker & Hickl FIFO files"), "{t}");
     // The PTU holds the same photons, routing channel as input channel.
     let (photons, markers, _) = ours(&path, SpcModule::Spc130);
-    let (info, mut reader) = scatterscope::formats::picoquant::open(&ptu).unwrap();
+    let (info, _) = scatterscope::formats::picoquant::open(&ptu).unwrap();
     assert!((info.resolution_s - 12.5e-12).abs() < 1e-18);
     assert!(
         (info.macro_unit_s - 50e-9).abs() < 1e-15,
         "{}",
         info.macro_unit_s
     );
-    let mut decoder = scatterscope::formats::picoquant::records::Decoder::new(info.record_type);
     let (mut p, mut m) = (Vec::new(), Vec::new());
-    let mut chunk = Vec::new();
-    while reader.next_chunk(&mut chunk).unwrap() {
-        for &r in &chunk {
-            match decoder.decode(r) {
-                Some(Tag::Photon {
-                    channel,
-                    macro_time,
-                    micro_time,
-                }) => p.push((channel, macro_time, micro_time)),
-                Some(Tag::Marker { bits, macro_time }) => m.push((bits, macro_time)),
-                _ => {}
-            }
+    for tag in ptu_tags(&ptu) {
+        match tag {
+            Tag::Photon {
+                channel,
+                macro_time,
+                micro_time,
+            } => p.push((channel, macro_time, micro_time)),
+            Tag::Marker { bits, macro_time } => m.push((bits, macro_time)),
+            Tag::Sync { .. } => {}
         }
     }
     assert_eq!(p, photons);

@@ -9,6 +9,8 @@
 #[path = "common/command.rs"]
 mod command;
 use command::{json, text};
+#[path = "common/ptu_tags.rs"]
+mod ptu_tags;
 #[path = "common/pydeps.rs"]
 mod pydeps;
 #[path = "common/shared_data.rs"]
@@ -18,9 +20,9 @@ mod standin;
 
 use std::path::Path;
 
+use ptu_tags::ptu_tags;
 use scatterscope::events::Tag;
 use scatterscope::formats::picoquant::open;
-use scatterscope::formats::picoquant::records::Decoder;
 use scatterscope::formats::sstags::TagFile;
 use scatterscope::stack::Stack;
 use standin::{scatterscope_pq, standin_library, truth};
@@ -51,18 +53,6 @@ fn acquire(
     args.extend_from_slice(extra);
     let o = scatterscope_pq(&args, mock);
     (out, o)
-}
-
-/// Every tag of a PicoQuant file, in order.
-fn ptu_tags(path: &Path) -> Vec<Tag> {
-    let (info, mut reader) = open(path).unwrap();
-    let mut decoder = Decoder::new(info.record_type);
-    let mut chunk = Vec::new();
-    let mut tags = Vec::new();
-    while reader.next_chunk(&mut chunk).unwrap() {
-        tags.extend(chunk.iter().filter_map(|&r| decoder.decode(r)));
-    }
-    tags
 }
 
 /// Every family the stand-in models, with its board setting

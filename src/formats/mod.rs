@@ -37,3 +37,23 @@ pub mod picoquant;
 pub mod png;
 pub mod sstags;
 pub mod stack_file;
+
+/// Reads the next `n` fixed-size records into `out` as stored, replacing
+/// its contents: straight into the records' buffer, one copy from the
+/// page cache (zeroed only when it grows). PicoQuant's and Becker &
+/// Hickl's record readers share it.
+pub(crate) fn read_records<R: bytemuck::Pod + Default>(
+    reader: &mut impl std::io::Read,
+    out: &mut Vec<R>,
+    n: usize,
+) -> std::io::Result<()> {
+    out.resize(n, R::default());
+    reader.read_exact(bytemuck::cast_slice_mut(out.as_mut_slice()))
+}
+
+/// Little-endian 32-bit records, as stored, in the machine's order.
+pub(crate) fn u32_from_le(records: &mut [u32]) {
+    if cfg!(target_endian = "big") {
+        records.iter_mut().for_each(|r| *r = u32::from_le(*r));
+    }
+}

@@ -388,11 +388,8 @@ pub fn bin_file_counts(
     spec: &BinSpec,
 ) -> Result<BinnedFile<CountStack>, BinFileError> {
     let format = Format::of_file(path);
-    if !matches!(format, Format::BeckerHicklFifo) && spec.spc != SpcOptions::default() {
-        return Err(spec_error(
-            path,
-            "the .spc module and micro-time unit apply to Becker & Hickl FIFO files (.spc); this file's header says its own layout and resolution".into(),
-        ));
+    if let Some(reason) = spec.spc.misapplied(format) {
+        return Err(spec_error(path, reason.into()));
     }
     match format {
         Format::TagFile => bin_tag_file(path, spec),
@@ -478,7 +475,7 @@ impl T3File {
     ) -> Result<(Binner, Option<String>, CardFlags), BinFileError> {
         match self {
             T3File::PicoQuant(info) => {
-                let reader = info.split_records(parts)?.swap_remove(part);
+                let reader = info.records_part(part, parts)?;
                 let (binner, cut) = bin_records(path, info, reader, binner, allow_truncated)?;
                 Ok((binner, cut, CardFlags::default()))
             }
@@ -564,7 +561,7 @@ fn bin_spc_records(
         path: info.path.clone(),
         error,
     };
-    let mut reader = info.split_records(parts)?.swap_remove(part);
+    let mut reader = info.records_part(part, parts)?;
     let flags = if info.module == spc::SpcModule::Spc600Channels4096 {
         let mut decoder = spc::Spc48Decoder(info.decoder());
         let mut chunk = Vec::new();

@@ -125,10 +125,8 @@ pub fn convert_to_ptu(
         path: input.to_owned(),
         reason: reason.into(),
     };
-    if format != Format::BeckerHicklFifo && *spc != SpcOptions::default() {
-        return Err(unsupported(
-            "the .spc module and micro-time unit apply to Becker & Hickl FIFO files (.spc) only",
-        ));
+    if let Some(reason) = spc.misapplied(format) {
+        return Err(unsupported(reason));
     }
     match format {
         Format::TagFile => from_tag_file(input, output, stop),
@@ -179,7 +177,7 @@ fn from_spc(
             info.module.cards()
         ));
     }
-    let reader = info.split_records(1)?.swap_remove(0);
+    let reader = info.records_part(0, 1)?;
     let flags = spc::decode_each(&info, reader, |tag| {
         if c.records_in.is_multiple_of(1 << 20) && stop.load(Ordering::Relaxed) {
             return Err(ConvertError::Interrupted {

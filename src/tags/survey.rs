@@ -32,13 +32,47 @@ pub struct PicoQuantSurvey {
     pub cut: Option<TtrError>,
 }
 
+/// Events counted tag by tag, the same for every kind of recording:
+/// photons per channel, markers, syncs and the last event's macro time.
+#[derive(Default)]
+struct Tally {
+    photons_per_channel: BTreeMap<u16, u64>,
+    markers: u64,
+    syncs: u64,
+    last_macro: u64,
+}
+
+impl Tally {
+    fn add(&mut self, tag: Tag) {
+        let macro_time = match tag {
+            Tag::Photon {
+                channel,
+                macro_time,
+                ..
+            } => {
+                *self.photons_per_channel.entry(channel).or_default() += 1;
+                macro_time
+            }
+            Tag::Marker { macro_time, .. } => {
+                self.markers += 1;
+                macro_time
+            }
+            Tag::Sync { macro_time } => {
+                self.syncs += 1;
+                macro_time
+            }
+        };
+        self.last_macro = macro_time;
+    }
+}
+
 /// Counts the records of a PicoQuant file (PTU, HT3, PT3; T2 or T3). A cut
 /// file is counted up to the cut, which is reported, not an error.
 pub fn survey_picoquant(path: &Path) -> Result<(FileInfo, PicoQuantSurvey), FileError> {
     let (info, mut reader) = open(path)?;
     let mut decoder = Decoder::new(info.record_type);
     let mut s = PicoQuantSurvey::default();
-    let mut last = 0u64;
+    let mut tally = Tally::default();
     let mut chunk = Vec::new();
     loop {
         match reader.next_chunk(&mut chunk) {
@@ -52,26 +86,14 @@ pub fn survey_picoquant(path: &Path) -> Result<(FileInfo, PicoQuantSurvey), File
         for &rec in &chunk {
             match decoder.decode(rec) {
                 None => s.overflows += 1,
-                Some(Tag::Photon {
-                    channel,
-                    macro_time,
-                    ..
-                }) => {
-                    *s.photons_per_channel.entry(channel).or_default() += 1;
-                    last = macro_time;
-                }
-                Some(Tag::Marker { macro_time, .. }) => {
-                    s.markers += 1;
-                    last = macro_time;
-                }
-                Some(Tag::Sync { macro_time }) => {
-                    s.syncs += 1;
-                    last = macro_time;
-                }
+                Some(tag) => tally.add(tag),
             }
         }
     }
-    s.last_event_s = last as f64 * info.macro_unit_s;
+    s.photons_per_channel = tally.photons_per_channel;
+    s.markers = tally.markers;
+    s.syncs = tally.syncs;
+    s.last_event_s = tally.last_macro as f64 * info.macro_unit_s;
     Ok((info, s))
 }
 
@@ -131,28 +153,20 @@ pub struct SpcSurvey {
 /// say; a cut tail is reported by [`SpcInfo::describe`], not an error.
 pub fn survey_spc(path: &Path, options: &SpcOptions) -> Result<(SpcInfo, SpcSurvey), SpcFileError> {
     let info = spc::open(path, options)?;
-    let mut s = SpcSurvey::default();
-    let mut last = 0u64;
-    let reader = info.split_records(1)?.swap_remove(0);
-    s.flags = spc::decode_each(&info, reader, |tag| {
-        match tag {
-            Some(Tag::Photon {
-                channel,
-                macro_time,
-                ..
-            }) => {
-                *s.photons_per_channel.entry(channel).or_default() += 1;
-                last = macro_time;
-            }
-            Some(Tag::Marker { macro_time, .. }) => {
-                s.markers += 1;
-                last = macro_time;
-            }
-            Some(Tag::Sync { .. }) | None => {}
+    let mut tally = Tally::default();
+    let reader = info.records_part(0, 1)?;
+    let flags = spc::decode_each(&info, reader, |tag| {
+        if let Some(tag) = tag {
+            tally.add(tag);
         }
         Ok::<(), SpcFileError>(())
     })?;
-    s.last_event_s = last as f64 * info.macro_clock_s;
+    let s = SpcSurvey {
+        photons_per_channel: tally.photons_per_channel,
+        markers: tally.markers,
+        flags,
+        last_event_s: tally.last_macro as f64 * info.macro_clock_s,
+    };
     Ok((info, s))
 }
 
@@ -195,9 +209,9 @@ pub enum SurveyError {
 /// file.
 pub fn survey(path: &Path, spc: &SpcOptions) -> Result<Survey, SurveyError> {
     let format = Format::of_file(path);
-    if format != Format::BeckerHicklFifo && *spc != SpcOptions::default() {
+    if let Some(reason) = spc.misapplied(format) {
         return Err(SurveyError::Options(format!(
-            "{}: the .spc module and micro-time unit apply to Becker & Hickl FIFO files (.spc) only",
+            "{}: {reason}",
             path.display()
         )));
     }

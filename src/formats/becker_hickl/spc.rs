@@ -97,6 +97,18 @@ pub struct SpcOptions {
     pub micro_unit_ps: Option<f64>,
 }
 
+impl SpcOptions {
+    /// Why these options cannot apply to a file of `format`: set for a
+    /// file that is not a `.spc`, whose header says its own layout and
+    /// resolution; `None` when they apply or are unset.
+    pub fn misapplied(&self, format: crate::formats::detect::Format) -> Option<&'static str> {
+        (format != crate::formats::detect::Format::BeckerHicklFifo && *self != Self::default())
+            .then_some(
+                "the .spc module and micro-time unit apply to Becker & Hickl FIFO files (.spc); this file's header says its own layout and resolution",
+            )
+    }
+}
+
 /// Why a `.spc` file cannot be read; the file is named by [`SpcFileError`].
 #[derive(Debug, thiserror::Error)]
 pub enum SpcError {
@@ -231,32 +243,27 @@ impl SpcInfo {
         }
     }
 
-    /// Readers of `parts` consecutive ranges of the records, each on the
-    /// file opened anew.
-    pub fn split_records(&self, parts: usize) -> Result<Vec<SpcReader>, SpcFileError> {
-        let parts = parts.max(1) as u64;
+    /// A reader of the `part`-th of `parts` consecutive ranges of the
+    /// records (`0, 1`: all of them), on the file opened anew.
+    pub fn records_part(&self, part: usize, parts: usize) -> Result<SpcReader, SpcFileError> {
+        let (part, parts) = (part as u64, parts.max(1) as u64);
         let n = self.records_present;
         let bytes = self.module.record_bytes();
-        (0..parts)
-            .map(|i| {
-                let (first, end) = (n * i / parts, n * (i + 1) / parts);
-                let opened = crate::files::open_regular(&self.path, "recording").and_then(
-                    |(mut file, _)| {
-                        file.seek(SeekFrom::Start(bytes * (1 + first)))?;
-                        Ok(file)
-                    },
-                );
-                let file = opened.map_err(|e| SpcFileError {
-                    path: self.path.clone(),
-                    error: e.into(),
-                })?;
-                Ok(SpcReader {
-                    reader: BufReader::with_capacity(1 << 20, file),
-                    remaining: end - first,
-                    bytes,
-                })
-            })
-            .collect()
+        let (first, end) = (n * part / parts, n * (part + 1) / parts);
+        let opened =
+            crate::files::open_regular(&self.path, "recording").and_then(|(mut file, _)| {
+                file.seek(SeekFrom::Start(bytes * (1 + first)))?;
+                Ok(file)
+            });
+        let file = opened.map_err(|e| SpcFileError {
+            path: self.path.clone(),
+            error: e.into(),
+        })?;
+        Ok(SpcReader {
+            reader: BufReader::with_capacity(1 << 20, file),
+            remaining: end - first,
+            bytes,
+        })
     }
 
     /// A decoder of this file's records from time 0.
@@ -397,37 +404,33 @@ pub struct SpcReader {
 const CHUNK_RECORDS: usize = 1 << 20;
 
 impl SpcReader {
-    /// Reads the next chunk of 32-bit records into `out`; false at the end.
-    pub fn next_chunk32(&mut self, out: &mut Vec<u32>) -> Result<bool, SpcError> {
-        debug_assert_eq!(self.bytes, 4);
+    /// Reads the next chunk of records as stored into `out`; false at the
+    /// end.
+    fn next_stored<R: bytemuck::Pod + Default>(
+        &mut self,
+        out: &mut Vec<R>,
+    ) -> Result<bool, SpcError> {
+        debug_assert_eq!(std::mem::size_of::<R>() as u64, self.bytes);
         if self.remaining == 0 {
             out.clear();
             return Ok(false);
         }
         let n = (self.remaining as usize).min(CHUNK_RECORDS);
-        out.resize(n, 0);
-        self.reader
-            .read_exact(bytemuck::cast_slice_mut(out.as_mut_slice()))?;
-        if cfg!(target_endian = "big") {
-            out.iter_mut().for_each(|r| *r = u32::from_le(*r));
-        }
+        crate::formats::read_records(&mut self.reader, out, n)?;
         self.remaining -= n as u64;
         Ok(true)
     }
 
+    /// Reads the next chunk of 32-bit records into `out`; false at the end.
+    pub fn next_chunk32(&mut self, out: &mut Vec<u32>) -> Result<bool, SpcError> {
+        let more = self.next_stored(out)?;
+        crate::formats::u32_from_le(out);
+        Ok(more)
+    }
+
     /// Reads the next chunk of 48-bit records into `out`; false at the end.
     pub fn next_chunk48(&mut self, out: &mut Vec<[u8; 6]>) -> Result<bool, SpcError> {
-        debug_assert_eq!(self.bytes, 6);
-        if self.remaining == 0 {
-            out.clear();
-            return Ok(false);
-        }
-        let n = (self.remaining as usize).min(CHUNK_RECORDS);
-        out.resize(n, [0; 6]);
-        self.reader
-            .read_exact(bytemuck::cast_slice_mut(out.as_mut_slice()))?;
-        self.remaining -= n as u64;
-        Ok(true)
+        self.next_stored(out)
     }
 }
 
@@ -581,7 +584,7 @@ impl ChunkDecoder for Spc48Decoder {
     }
 }
 
-/// Decodes `reader`'s records (one of [`SpcInfo::split_records`]) in
+/// Decodes `reader`'s records (from [`SpcInfo::records_part`]) in
 /// order, handing each record's tag to `each` (`None` for overflow counts
 /// and invalid records), until the end, a read error or `each`'s first
 /// error; returns what the records flagged.

@@ -251,38 +251,41 @@ impl FileInfo {
 
     /// Readers of `parts` consecutive ranges of the records [`open`] reads,
     /// each on the file opened anew, for decoding parts at once where no
-    /// record depends on the state an earlier one left. The last range
-    /// ends as [`open`]'s reader does ([`TtrError::Truncated`] when records
-    /// are missing).
+    /// record depends on the state an earlier one left.
     pub fn split_records(&self, parts: usize) -> Result<Vec<RecordReader>, FileError> {
-        let records = self.records_to_read();
-        let parts = parts.max(1) as u64;
-        (0..parts)
-            .map(|i| {
-                let (first, end) = (records * i / parts, records * (i + 1) / parts);
-                let opened = crate::files::open_regular(&self.path, "recording").and_then(
-                    |(mut file, _)| {
-                        file.seek(SeekFrom::Start(self.data_offset + 4 * first))?;
-                        Ok(file)
-                    },
-                );
-                let file = opened.map_err(|error| FileError {
-                    path: self.path.clone(),
-                    error: error.into(),
-                })?;
-                Ok(RecordReader {
-                    reader: BufReader::with_capacity(1 << 20, file),
-                    remaining: end - first,
-                    read: first,
-                    info_announced: if i + 1 == parts {
-                        self.records_announced
-                    } else {
-                        end
-                    },
-                    trailing: self.trailing_bytes,
-                })
-            })
+        (0..parts.max(1))
+            .map(|i| self.records_part(i, parts))
             .collect()
+    }
+
+    /// A reader of the `part`-th of `parts` consecutive ranges of the
+    /// records [`open`] reads, on the file opened anew. The last range
+    /// ends as [`open`]'s reader does ([`TtrError::Truncated`] when
+    /// records are missing).
+    pub fn records_part(&self, part: usize, parts: usize) -> Result<RecordReader, FileError> {
+        let records = self.records_to_read();
+        let (i, parts) = (part as u64, parts.max(1) as u64);
+        let (first, end) = (records * i / parts, records * (i + 1) / parts);
+        let opened =
+            crate::files::open_regular(&self.path, "recording").and_then(|(mut file, _)| {
+                file.seek(SeekFrom::Start(self.data_offset + 4 * first))?;
+                Ok(file)
+            });
+        let file = opened.map_err(|error| FileError {
+            path: self.path.clone(),
+            error: error.into(),
+        })?;
+        Ok(RecordReader {
+            reader: BufReader::with_capacity(1 << 20, file),
+            remaining: end - first,
+            read: first,
+            info_announced: if i + 1 == parts {
+                self.records_announced
+            } else {
+                end
+            },
+            trailing: self.trailing_bytes,
+        })
     }
 }
 
@@ -315,14 +318,8 @@ impl RecordReader {
             return Ok(false);
         }
         let n = (self.remaining as usize).min(CHUNK_RECORDS);
-        // Read straight into the u32 buffer: one copy from the page cache
-        // (zeroed only when it grows).
-        out.resize(n, 0);
-        self.reader
-            .read_exact(bytemuck::cast_slice_mut(out.as_mut_slice()))?;
-        if cfg!(target_endian = "big") {
-            out.iter_mut().for_each(|r| *r = u32::from_le(*r));
-        }
+        crate::formats::read_records(&mut self.reader, out, n)?;
+        crate::formats::u32_from_le(out);
         self.remaining -= n as u64;
         self.read += n as u64;
         Ok(true)
