@@ -190,31 +190,41 @@ fn a_browser_sees_a_mock_run_form_and_ends_on_its_ledger() {
 
 #[test]
 #[ignore = "needs Chromium (/usr/bin/chromium) and playwright under target/pydeps (scripts/fetch_python_deps.sh)"]
-fn a_browser_sees_a_picoquant_run_with_its_rates_and_ledger() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("acq");
-    let lib = standin::standin_library();
-    let (child, url) = start(
-        &[
-            "--device",
-            "picoquant:multiharp",
-            "--vendor-lib",
-            lib.to_str().unwrap(),
-            "--duration",
-            "10s",
-            "--live",
-            "--linger",
-            "600s",
-            "--out",
-            out.to_str().unwrap(),
-        ],
-        &[("SCATTERSCOPE_PQ_MOCK", "rate=2e6")],
-    );
-    let page = browse(&url, false, "watch", None);
-    let status = stop(child);
-    assert!(status.success(), "{status:?}");
-    assert_shown_and_updating(&page);
-    assert_same_ledger(&page, &json(&out.join("acquisition.json")));
+fn a_browser_sees_each_picoquant_familys_run_with_its_rates_and_ledger() {
+    // The first family for the usual 10 s; the later ones (each its own
+    // library shape and records) for 5 s.
+    for (family, board, duration) in [
+        ("multiharp", "", "10s"),
+        ("timeharp260", ",th260=nano", "5s"),
+        ("picoharp330", "", "5s"),
+        ("picoharp", "", "5s"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("acq");
+        let lib = standin::standin_library();
+        let device = format!("picoquant:{family}");
+        let (child, url) = start(
+            &[
+                "--device",
+                &device,
+                "--vendor-lib",
+                lib.to_str().unwrap(),
+                "--duration",
+                duration,
+                "--live",
+                "--linger",
+                "600s",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            &[("SCATTERSCOPE_PQ_MOCK", &format!("rate=2e6{board}"))],
+        );
+        let page = browse(&url, false, "watch", None);
+        let status = stop(child);
+        assert!(status.success(), "{family}: {status:?}");
+        assert_shown_and_updating(&page);
+        assert_same_ledger(&page, &json(&out.join("acquisition.json")));
+    }
 }
 
 /// A browser closed mid-run changes nothing the run saves: the same seeded

@@ -208,7 +208,11 @@ fn every_record_type_round_trips_through_the_writer() {
                 },
                 1 if !rt.is_t3() && !pico => Tag::Sync { macro_time: t },
                 _ => Tag::Photon {
-                    channel: (i % if pico { 15 } else { 63 }) as u16,
+                    channel: (i % match rt {
+                        RecordType::PicoHarpT3 => 14,
+                        RecordType::PicoHarpT2 => 15,
+                        _ => 63,
+                    }) as u16,
                     macro_time: t,
                     micro_time: (i * 37 % (max_micro + 1)) as u32,
                 },
@@ -515,7 +519,8 @@ fn legacy_pt3_files_decode_with_their_header_values() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("m.pt3");
     // PicoHarp T3 records: channel 4 bits, dtime 12, nsync 16; channel 15
-    // with markers 0 is an overflow of 65536 syncs.
+    // with markers 0 is an overflow of 65536 syncs; photon channels count
+    // from 1 (decoded from 0, as ptufile does).
     let rec = |ch: u32, dtime: u32, nsync: u32| (ch << 28) | (dtime << 16) | nsync;
     let records = [
         rec(1, 100, 5),
@@ -541,17 +546,17 @@ fn legacy_pt3_files_decode_with_their_header_values() {
         tags,
         vec![
             Tag::Photon {
-                channel: 1,
+                channel: 0,
                 macro_time: 5,
                 micro_time: 100
             },
             Tag::Photon {
-                channel: 2,
+                channel: 1,
                 macro_time: 65_535,
                 micro_time: 4095
             },
             Tag::Photon {
-                channel: 1,
+                channel: 0,
                 macro_time: 65_536 + 3,
                 micro_time: 7
             },

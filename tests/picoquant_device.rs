@@ -57,12 +57,13 @@ fn acquire(
 
 /// Every family the stand-in models, with its board setting
 /// (`SCATTERSCOPE_PQ_MOCK`): the TimeHarp 260 as a Pico and as a Nano.
-const BOARDS: [(&str, &str); 5] = [
+const BOARDS: [(&str, &str); 6] = [
     ("multiharp", ""),
     ("hydraharp", ""),
     ("timeharp260", "th260=pico"),
     ("timeharp260", "th260=nano"),
     ("picoharp330", ""),
+    ("picoharp", ""),
 ];
 
 #[test]
@@ -527,6 +528,7 @@ with ptufile.PtuFile(sys.argv[1]) as p:
     hist = np.bincount(photons['dtime'].astype(np.int64))
     print(json.dumps({"records": int(p.number_records),
                       "photons": int(len(photons)),
+                      "channels": sorted(set(photons['channel'].tolist())),
                       "resolution": float(p.tcspc_resolution),
                       "hist": hist.tolist()}))
 "#;
@@ -535,6 +537,9 @@ with ptufile.PtuFile(sys.argv[1]) as p:
         let record = json(&out.join("acquisition.json"));
         assert_eq!(got["records"], record["ledger"]["records_read"], "{family}");
         assert_eq!(got["photons"], record["ledger"]["photons"], "{family}");
+        // The detector is on the first input: channel 0 for ptufile in
+        // every record type (a PicoHarp T3 record's routing channel 1).
+        assert_eq!(got["channels"], serde_json::json!([0]), "{family}");
         let res_ps = record["resolution_ps"].as_f64().unwrap();
         assert!((got["resolution"].as_f64().unwrap() * 1e12 - res_ps).abs() < 1e-6);
         // Our stack: one bin per micro-time unit over the sync period.
@@ -874,4 +879,94 @@ fn a_timeharp_260_is_driven_as_its_board_says() {
         t.contains("divides the sync by 1 to 8") && !t.contains("no-such-library"),
         "{t}"
     );
+}
+
+/// A PicoHarp 300 through PHLib 3.0 as the vendor's phlib.h and phdefin.h
+/// give it: PicoHarp T3 records (photons on routing channel 1, read as
+/// input 0), one input beside the sync, the sync rate as count rate 0,
+/// `PH_SetOffset` in picoseconds, `FLAG_FIFOFULL` 0x0003; what the family
+/// cannot take (per-input offsets, an edge, CFD levels past 800 mV or zero
+/// crosses past 20 mV, binning codes past `BINSTEPSMAX` 8, an offset past
+/// 1e9 ps, a divider past 8) is refused by the setting's name before any
+/// library is loaded.
+#[test]
+fn a_picoharp_300_is_driven_as_phlib_says() {
+    use scatterscope::formats::picoquant::ptu::TagLookup;
+    use scatterscope::formats::picoquant::records::RecordType;
+    let dir = tempfile::tempdir().unwrap();
+    let truth_file = dir.path().join("truth.json");
+    let mock = format!("truth={}", truth_file.display());
+    let (out, o) = acquire(
+        dir.path(),
+        "picoquant:picoharp",
+        &mock,
+        &["--offset", "10ns", "--duration", "600ms", "--binning", "1"],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let t = truth(&truth_file);
+    assert_eq!(t["offset_ps"], 10_000, "{t}");
+    let (info, _) = open(&out.join("acquisition.ptu")).unwrap();
+    assert_eq!(info.record_type, RecordType::PicoHarpT3);
+    assert_eq!(info.device, "PicoHarp 300");
+    assert_eq!(info.tags.int("MeasDesc_Offset"), Some(10));
+    assert_eq!(
+        info.tags.int("HW_InpChannels"),
+        Some(2),
+        "sync and one input"
+    );
+    assert!((info.resolution_s - 8e-12).abs() < 1e-18, "4 ps x 2^1");
+    assert!(
+        ptu_tags(&out.join("acquisition.ptu"))
+            .iter()
+            .all(|t| matches!(t, Tag::Photon { channel: 0, .. })),
+        "every photon on input 0"
+    );
+    let record = json(&out.join("acquisition.json"));
+    assert_eq!(record["sync_rate_hz"], 80e6, "count rate 0 is the sync's");
+    for s in record["rates_during_run"].as_array().unwrap() {
+        assert_eq!(s["inputs"].as_array().unwrap().len(), 1, "{s}");
+    }
+    assert_eq!(record["ledger"]["photons"], t["photons"]);
+
+    // FLAG_FIFOFULL is 0x0003 in phdefin.h.
+    let (out, o) = acquire(
+        dir.path(),
+        "picoquant:picoharp",
+        "rate=max,fault=overrun@300000",
+        &[],
+    );
+    assert!(!o.status.success(), "{}", text(&o));
+    assert_eq!(json(&out.join("acquisition.json"))["stop"], "fifo_overrun");
+
+    let missing = dir.path().join("no-such-library.so");
+    let cases: [(&[&str], &str); 7] = [
+        (&["--input-offsets", "0,120ps"], "a PicoHarp 300 has none"),
+        (&["--sync-edge", "rising"], "PicoHarp 300 input has a CFD"),
+        (&["--input-level", "900"], "levels 0 to 800 mV"),
+        (&["--sync-zero-cross", "30"], "zero crosses 0 to 20 mV"),
+        (&["--binning", "8"], "takes 0 to 7"),
+        (&["--offset", "2000000ns"], "0 to 1 000 000 ns"),
+        (&["--sync-divider", "16"], "divides the sync by 1 to 8"),
+    ];
+    let out = dir.path().join("refused");
+    for (extra, words) in cases {
+        let mut args = vec![
+            "acquire",
+            "--device",
+            "picoquant:ph300",
+            "--vendor-lib",
+            missing.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = scatterscope_pq(&args, "");
+        let t = text(&o);
+        assert!(!o.status.success(), "{extra:?}: {t}");
+        assert!(t.contains(words), "{extra:?}: {t}");
+        assert!(
+            !t.contains("no-such-library"),
+            "refused before the library: {t}"
+        );
+    }
 }

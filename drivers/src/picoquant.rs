@@ -1,7 +1,7 @@
 //! PicoQuant time taggers through the vendor's programming library, loaded
 //! at run time: MHLib (MultiHarp 150/160), HHLib v3 (HydraHarp 400),
-//! TH260Lib 3.1 (TimeHarp 260 Pico and Nano) and PH330Lib 2.0 (PicoHarp
-//! 330).
+//! TH260Lib 3.1 (TimeHarp 260 Pico and Nano), PH330Lib 2.0 (PicoHarp
+//! 330) and PHLib 3.0 (PicoHarp 300).
 //!
 //! Nothing links against the vendor's library: the project builds and its
 //! tests run where none is installed, and [`VendorLib::load`] says which
@@ -17,8 +17,14 @@
 //! chosen per input (`PH330_SetSyncTrgMode`, `PH330_SetInputTrgMode` in
 //! the vendor's ph330lib.h; this driver sets edge triggers), and
 //! `HH_ReadFiFo` takes the buffer's length where `MH_ReadFiFo` and
-//! `PH330_ReadFiFo` assume their fixed one. T3 mode only: every record
-//! carries the sync count and the micro time.
+//! `PH330_ReadFiFo` assume their fixed one. PHLib 3.0 (the vendor's
+//! phlib.h and phdefin.h, `PicoQuant/PH300-v3.x-Demos`) is the oldest
+//! shape: one input beside the sync, both set by `PH_SetInputCFD(devidx,
+//! channel, level, zc)` with channel 0 the sync; a sync offset
+//! (`PH_SetSyncOffset`) and no per-input offsets, enables or input count;
+//! the sync rate read as count rate 0; `PH_SetOffset` in picoseconds; its
+//! own flag bits; PicoHarp T3 records. T3 mode only: every record carries
+//! the sync count and the micro time.
 
 use std::ffi::{CStr, c_char, c_double, c_int, c_uint};
 use std::path::{Path, PathBuf};
@@ -31,6 +37,11 @@ pub const MAX_DEVICES: i32 = 8;
 const MODE_T3: c_int = 3;
 /// `GetFlags`: the FIFO overran; records were lost and the run is over.
 pub const FLAG_FIFO_FULL: i32 = 0x0002;
+/// `PH_GetFlags` (phdefin.h `FLAG_FIFOFULL`): the PicoHarp 300's overrun.
+pub const FLAG_FIFO_FULL_PH300: i32 = 0x0003;
+/// `PH_GetFlags` (phdefin.h `FLAG_SYSERROR`): a PicoHarp 300 hardware
+/// problem.
+pub const FLAG_SYS_ERROR_PH300: i32 = 0x0100;
 /// `GetFlags`: the sync signal was lost.
 pub const FLAG_SYNC_LOST: i32 = 0x0004;
 /// `GetFlags`: the reference clock was lost.
@@ -60,15 +71,19 @@ pub enum Family {
     /// PicoHarp 330 (PH330Lib 2.0, inputs set to edge triggers, Generic
     /// T3 records).
     PicoHarp330,
+    /// PicoHarp 300 (PHLib 3.0, one CFD input besides the sync, PicoHarp
+    /// T3 records).
+    PicoHarp300,
 }
 
 impl Family {
     /// Every family, in the order `devices` searches them.
-    pub const ALL: [Family; 4] = [
+    pub const ALL: [Family; 5] = [
         Family::MultiHarp,
         Family::HydraHarp,
         Family::TimeHarp260,
         Family::PicoHarp330,
+        Family::PicoHarp300,
     ];
 
     /// The family's name as `--device picoquant:NAME` takes it.
@@ -78,6 +93,7 @@ impl Family {
             Family::HydraHarp => "hydraharp",
             Family::TimeHarp260 => "timeharp260",
             Family::PicoHarp330 => "picoharp330",
+            Family::PicoHarp300 => "picoharp",
         }
     }
 
@@ -87,12 +103,14 @@ impl Family {
             Family::HydraHarp => "HH_",
             Family::TimeHarp260 => "TH260_",
             Family::PicoHarp330 => "PH330_",
+            Family::PicoHarp300 => "PH_",
         }
     }
 
     /// Where the vendor's installer puts the library, in search order:
     /// the linker-style name first (found on the library path), then the
-    /// installer's own folder. (The TimeHarp 260's and PicoHarp 330's
+    /// installer's own folder (for the PicoHarp 300 the folder its Linux
+    /// demos' makefiles link from). (The TimeHarp 260's and PicoHarp 330's
     /// names follow the pattern of the other installers; no installer of
     /// theirs was at hand to check them: the file can always be named in
     /// [`Family::library_env`].)
@@ -102,10 +120,12 @@ impl Family {
             (Family::HydraHarp, false) => &["libhh400.so", "/usr/local/lib64/hh400/hhlib.so"],
             (Family::TimeHarp260, false) => &["libth260.so", "/usr/local/lib64/th260/th260lib.so"],
             (Family::PicoHarp330, false) => &["libph330.so", "/usr/local/lib64/ph330/ph330lib.so"],
+            (Family::PicoHarp300, false) => &["libph300.so", "/usr/local/lib64/ph300/phlib.so"],
             (Family::MultiHarp, true) => &["mhlib64.dll"],
             (Family::HydraHarp, true) => &["hhlib64.dll"],
             (Family::TimeHarp260, true) => &["th260lib64.dll"],
             (Family::PicoHarp330, true) => &["ph330lib64.dll"],
+            (Family::PicoHarp300, true) => &["phlib64.dll"],
         };
         names.iter().map(PathBuf::from).collect()
     }
@@ -116,7 +136,7 @@ impl Family {
     pub fn inputs(self) -> Option<Inputs> {
         match self {
             Family::MultiHarp | Family::PicoHarp330 => Some(Inputs::Edge),
-            Family::HydraHarp => Some(Inputs::Cfd),
+            Family::HydraHarp | Family::PicoHarp300 => Some(Inputs::Cfd),
             Family::TimeHarp260 => None,
         }
     }
@@ -131,10 +151,10 @@ impl Family {
     }
 
     /// The largest sync divider (`SYNCDIVMAX`: 16 in mhdefin.h and
-    /// hhdefin.h, 8 in th260defin.h and ph330defin.h).
+    /// hhdefin.h, 8 in th260defin.h, ph330defin.h and phdefin.h).
     pub fn sync_divider_max(self) -> i32 {
         match self {
-            Family::TimeHarp260 | Family::PicoHarp330 => 8,
+            Family::TimeHarp260 | Family::PicoHarp330 | Family::PicoHarp300 => 8,
             Family::MultiHarp | Family::HydraHarp => 16,
         }
     }
@@ -144,7 +164,36 @@ impl Family {
         match self {
             // TTREADMAX of mhdefin.h and ph330defin.h.
             Family::MultiHarp | Family::PicoHarp330 => 1_048_576,
-            Family::HydraHarp | Family::TimeHarp260 => 131_072,
+            // TTREADMAX of hhdefin.h, th260defin.h and phdefin.h.
+            Family::HydraHarp | Family::TimeHarp260 | Family::PicoHarp300 => 131_072,
+        }
+    }
+
+    /// The largest binning code, where the family's header bounds it
+    /// below what a micro-time unit needs (`BINSTEPSMAX` 8 in phdefin.h:
+    /// codes 0 to 7); `None`: the library's own check.
+    pub fn binning_max(self) -> Option<i32> {
+        match self {
+            Family::PicoHarp300 => Some(7),
+            _ => None,
+        }
+    }
+
+    /// The T3 offset as `SetOffset` takes it: nanoseconds for every
+    /// family but the PicoHarp 300, whose `PH_SetOffset` takes
+    /// picoseconds, 0 to 1 000 000 000 (phdefin.h `OFFSETMIN`/`OFFSETMAX`);
+    /// an offset it cannot take is refused by name.
+    pub fn offset_arg(self, offset_ns: i32) -> Result<c_int, VendorError> {
+        match self {
+            Family::PicoHarp300 => offset_ns
+                .checked_mul(1000)
+                .filter(|ps| (0..=1_000_000_000).contains(ps))
+                .ok_or_else(|| {
+                    VendorError::Setting(format!(
+                        "T3 offset {offset_ns} ns: a PicoHarp 300 takes 0 to 1 000 000 ns (PH_SetOffset's 0 to 1e9 ps)"
+                    ))
+                }),
+            _ => Ok(offset_ns),
         }
     }
 
@@ -155,6 +204,7 @@ impl Family {
             Family::HydraHarp => "SCATTERSCOPE_HHLIB",
             Family::TimeHarp260 => "SCATTERSCOPE_TH260LIB",
             Family::PicoHarp330 => "SCATTERSCOPE_PH330LIB",
+            Family::PicoHarp300 => "SCATTERSCOPE_PHLIB",
         }
     }
 }
@@ -226,25 +276,21 @@ struct Functions {
     close_device: DevFn,
     initialize: Initialize,
     get_hardware_info: unsafe extern "C" fn(c_int, *mut c_char, *mut c_char, *mut c_char) -> c_int,
-    get_num_of_input_channels: DevOutFn,
+    channels: Channels,
     calibrate: Option<DevFn>,
     set_sync_div: DevIntFn,
     /// `SetSyncEdgeTrg` and `SetInputEdgeTrg`, where the family has them.
     edge_triggers: Option<(DevIntIntFn, DevIntIntIntFn)>,
     /// `SetSyncCFD` and `SetInputCFD`, where the family has them.
     cfd_triggers: Option<(DevIntIntFn, DevIntIntIntFn)>,
-    set_sync_channel_offset: DevIntFn,
-    set_input_channel_offset: DevIntIntFn,
     set_binning: DevIntFn,
     set_offset: DevIntFn,
     set_marker_enable: unsafe extern "C" fn(c_int, c_int, c_int, c_int, c_int) -> c_int,
     set_marker_edges: unsafe extern "C" fn(c_int, c_int, c_int, c_int, c_int) -> c_int,
-    set_input_channel_enable: DevIntIntFn,
     /// `SetSyncTrgMode(devidx, mode)` and `SetInputTrgMode(devidx,
     /// channel, mode)`: the PicoHarp 330's choice of edge trigger or CFD.
     set_trigger_modes: Option<(DevIntFn, DevIntIntFn)>,
     get_resolution: DevDoubleFn,
-    get_sync_rate: DevOutFn,
     get_count_rate: unsafe extern "C" fn(c_int, c_int, *mut c_int) -> c_int,
     get_flags: DevOutFn,
     get_warnings: DevOutFn,
@@ -255,12 +301,34 @@ struct Functions {
     read_fifo: ReadFifo,
 }
 
+/// How a library addresses the sync and the inputs.
+#[derive(Clone, Copy)]
+enum Channels {
+    /// Numbered inputs with their own offsets and enables, and a sync rate
+    /// of its own (MHLib, HHLib, TH260Lib, PH330Lib).
+    Numbered {
+        get_num_of_input_channels: DevOutFn,
+        set_sync_channel_offset: DevIntFn,
+        set_input_channel_offset: DevIntIntFn,
+        set_input_channel_enable: DevIntIntFn,
+        get_sync_rate: DevOutFn,
+    },
+    /// PHLib 3.0: the sync and one input as channels 0 and 1 of
+    /// `PH_SetInputCFD(devidx, channel, level, zc)` and of
+    /// `PH_GetCountRate`, and `PH_SetSyncOffset(devidx, ps)`.
+    SyncAndOne {
+        set_input_cfd: DevIntIntIntFn,
+        set_sync_offset: DevIntFn,
+    },
+}
+
 /// The two shapes of `Initialize`.
 #[derive(Clone, Copy)]
 enum Initialize {
     /// `Initialize(devidx, mode, refsource)` (MHLib, HHLib, PH330Lib).
     WithReference(DevIntIntFn),
-    /// `TH260_Initialize(devidx, mode)` (th260lib.h).
+    /// `TH260_Initialize(devidx, mode)` (th260lib.h), `PH_Initialize`
+    /// (phlib.h).
     ModeOnly(DevIntFn),
 }
 
@@ -359,21 +427,36 @@ impl VendorLib {
             Family::MultiHarp | Family::PicoHarp330 | Family::TimeHarp260 => {
                 Some((sym!("SetSyncEdgeTrg"), sym!("SetInputEdgeTrg")))
             }
-            Family::HydraHarp => None,
+            Family::HydraHarp | Family::PicoHarp300 => None,
         };
         let cfd_triggers = match family {
             Family::HydraHarp | Family::TimeHarp260 => {
                 Some((sym!("SetSyncCFD"), sym!("SetInputCFD")))
             }
-            Family::MultiHarp | Family::PicoHarp330 => None,
+            Family::MultiHarp | Family::PicoHarp330 | Family::PicoHarp300 => None,
+        };
+        let channels = match family {
+            Family::PicoHarp300 => Channels::SyncAndOne {
+                set_input_cfd: sym!("SetInputCFD"),
+                set_sync_offset: sym!("SetSyncOffset"),
+            },
+            _ => Channels::Numbered {
+                get_num_of_input_channels: sym!("GetNumOfInputChannels"),
+                set_sync_channel_offset: sym!("SetSyncChannelOffset"),
+                set_input_channel_offset: sym!("SetInputChannelOffset"),
+                set_input_channel_enable: sym!("SetInputChannelEnable"),
+                get_sync_rate: sym!("GetSyncRate"),
+            },
         };
         let (calibrate, read_fifo) = match family {
             Family::MultiHarp | Family::PicoHarp330 => (None, ReadFifo::Fixed(sym!("ReadFiFo"))),
-            Family::HydraHarp => (Some(sym!("Calibrate")), ReadFifo::Counted(sym!("ReadFiFo"))),
+            Family::HydraHarp | Family::PicoHarp300 => {
+                (Some(sym!("Calibrate")), ReadFifo::Counted(sym!("ReadFiFo")))
+            }
             Family::TimeHarp260 => (None, ReadFifo::Counted(sym!("ReadFiFo"))),
         };
         let initialize = match family {
-            Family::TimeHarp260 => Initialize::ModeOnly(sym!("Initialize")),
+            Family::TimeHarp260 | Family::PicoHarp300 => Initialize::ModeOnly(sym!("Initialize")),
             _ => Initialize::WithReference(sym!("Initialize")),
         };
         let set_trigger_modes = match family {
@@ -387,21 +470,17 @@ impl VendorLib {
             close_device: sym!("CloseDevice"),
             initialize,
             get_hardware_info: sym!("GetHardwareInfo"),
-            get_num_of_input_channels: sym!("GetNumOfInputChannels"),
+            channels,
             calibrate,
             set_sync_div: sym!("SetSyncDiv"),
             edge_triggers,
             cfd_triggers,
-            set_sync_channel_offset: sym!("SetSyncChannelOffset"),
-            set_input_channel_offset: sym!("SetInputChannelOffset"),
             set_binning: sym!("SetBinning"),
             set_offset: sym!("SetOffset"),
             set_marker_enable: sym!("SetMarkerEnable"),
             set_marker_edges: sym!("SetMarkerEdges"),
-            set_input_channel_enable: sym!("SetInputChannelEnable"),
             set_trigger_modes,
             get_resolution: sym!("GetResolution"),
-            get_sync_rate: sym!("GetSyncRate"),
             get_count_rate: sym!("GetCountRate"),
             get_flags: sym!("GetFlags"),
             get_warnings: sym!("GetWarnings"),
@@ -490,7 +569,8 @@ pub enum Trigger {
         rising: bool,
     },
     /// CFD discriminator level and zero cross (mV: 0 to 1000 and 0 to 40
-    /// on a HydraHarp, -1200 to 0 and -40 to 0 on a TimeHarp 260 Pico).
+    /// on a HydraHarp, -1200 to 0 and -40 to 0 on a TimeHarp 260 Pico, 0
+    /// to 800 and 0 to 20 on a PicoHarp 300).
     Cfd {
         /// Level, mV.
         level_mv: i32,
@@ -559,11 +639,12 @@ impl Trigger {
                 },
             ) => {
                 // hhdefin.h: 0 to 1000 and 0 to 40 mV; th260defin.h
-                // (CFDLVLMIN/MAX, CFDZCMIN/MAX): -1200 to 0 and -40 to 0.
-                let (levels, zero_crosses) = if family == Family::TimeHarp260 {
-                    (-1200..=0, -40..=0)
-                } else {
-                    (0..=1000, 0..=40)
+                // (CFDLVLMIN/MAX, CFDZCMIN/MAX): -1200 to 0 and -40 to 0;
+                // phdefin.h (DISCRMIN/MAX, ZCMIN/MAX): 0 to 800 and 0 to 20.
+                let (levels, zero_crosses) = match family {
+                    Family::TimeHarp260 => (-1200..=0, -40..=0),
+                    Family::PicoHarp300 => (0..=800, 0..=20),
+                    _ => (0..=1000, 0..=40),
                 };
                 if !levels.contains(&level_mv) || !zero_crosses.contains(&zero_cross_mv) {
                     return Err(VendorError::Setting(format!(
@@ -595,6 +676,7 @@ impl Family {
             (Family::TimeHarp260, Inputs::Cfd) => "TimeHarp 260 Pico",
             (Family::TimeHarp260, Inputs::Edge) => "TimeHarp 260 Nano",
             (Family::PicoHarp330, _) => "PicoHarp 330",
+            (Family::PicoHarp300, _) => "PicoHarp 300",
         }
     }
 }
@@ -627,6 +709,54 @@ pub struct Settings {
 }
 
 impl Settings {
+    /// Whether `family` can take what these settings ask besides the
+    /// triggers, for a device of `inputs` inputs: per-input offsets (none
+    /// on a PicoHarp 300, whose PHLib has no `SetInputChannelOffset`; no
+    /// more than the inputs elsewhere), the binning code (below
+    /// `BINSTEPSMAX` where the header bounds it) and the T3 offset
+    /// ([`Family::offset_arg`]). A refusal names the field of these
+    /// settings it is about.
+    pub fn check_family(
+        &self,
+        family: Family,
+        inputs: i32,
+    ) -> Result<(), (&'static str, VendorError)> {
+        if family == Family::PicoHarp300 && !self.input_offsets_ps.is_empty() {
+            return Err((
+                "input_offsets_ps",
+                VendorError::Setting(
+                    "input offsets: a PicoHarp 300 has none (PHLib sets only a sync offset, PH_SetSyncOffset)".into(),
+                ),
+            ));
+        }
+        if self.input_offsets_ps.len() > usize::try_from(inputs).unwrap_or(0) {
+            return Err((
+                "input_offsets_ps",
+                VendorError::Setting(format!(
+                    "{} input offsets given; the device has {inputs} inputs",
+                    self.input_offsets_ps.len()
+                )),
+            ));
+        }
+        if let Some(max) = family.binning_max()
+            && !(0..=max).contains(&self.binning)
+        {
+            return Err((
+                "binning",
+                VendorError::Setting(format!(
+                    "binning code {}: a {} takes 0 to {max} (BINSTEPSMAX {} in its header)",
+                    self.binning,
+                    family.name(),
+                    max + 1
+                )),
+            ));
+        }
+        family
+            .offset_arg(self.offset_ns)
+            .map(|_| ())
+            .map_err(|e| ("offset_ns", e))
+    }
+
     /// The vendor demos' settings for `family`'s `inputs`.
     pub fn default_for(family: Family, inputs: Inputs) -> Self {
         Self {
@@ -679,13 +809,19 @@ pub struct Flags(pub i32, pub Family);
 impl Flags {
     /// The FIFO overran: records were lost.
     pub fn fifo_full(self) -> bool {
-        self.0 & FLAG_FIFO_FULL != 0
+        let bits = match self.1 {
+            Family::PicoHarp300 => FLAG_FIFO_FULL_PH300,
+            _ => FLAG_FIFO_FULL,
+        };
+        self.0 & bits != 0
     }
 
-    /// The bit by which the family says it dropped counts.
+    /// The bit by which the family says it dropped counts (phdefin.h has
+    /// none).
     fn dropped_bit(self) -> i32 {
         match self.1 {
             Family::TimeHarp260 => FLAG_EVTS_DROPPED_TH260,
+            Family::PicoHarp300 => 0,
             _ => FLAG_CNTS_DROPPED,
         }
     }
@@ -698,21 +834,22 @@ impl Flags {
     /// The conditions other than an overrun, in words.
     pub fn problems(self) -> Vec<&'static str> {
         // A TimeHarp 260 has no reference-clock flag: its 0x0008 is the
-        // dropped events (th260defin.h).
-        let ref_lost = if self.1 == Family::TimeHarp260 {
-            0
-        } else {
-            FLAG_REF_LOST
+        // dropped events (th260defin.h). A PicoHarp 300 has neither sync
+        // nor reference flags, and its own system-error bit (phdefin.h).
+        let (sync_lost, ref_lost, sys_error) = match self.1 {
+            Family::TimeHarp260 => (FLAG_SYNC_LOST, 0, FLAG_SYS_ERROR),
+            Family::PicoHarp300 => (0, 0, FLAG_SYS_ERROR_PH300),
+            _ => (FLAG_SYNC_LOST, FLAG_REF_LOST, FLAG_SYS_ERROR),
         };
         [
             (
                 self.dropped_bit(),
                 "counts dropped in the device (more than it could take; how many it does not say)",
             ),
-            (FLAG_SYNC_LOST, "sync lost"),
+            (sync_lost, "sync lost"),
             (ref_lost, "reference clock lost"),
             (
-                FLAG_SYS_ERROR,
+                sys_error,
                 "hardware error (the vendor asks to contact support)",
             ),
         ]
@@ -785,11 +922,21 @@ impl Device {
                 version.as_mut_ptr().cast(),
             )
         })?;
-        let mut inputs = 0;
-        // SAFETY: one int out.
-        lib.check("GetNumOfInputChannels", unsafe {
-            (f.get_num_of_input_channels)(index, &mut inputs)
-        })?;
+        let inputs = match f.channels {
+            Channels::Numbered {
+                get_num_of_input_channels,
+                ..
+            } => {
+                let mut inputs = 0;
+                // SAFETY: one int out.
+                lib.check("GetNumOfInputChannels", unsafe {
+                    get_num_of_input_channels(index, &mut inputs)
+                })?;
+                inputs
+            }
+            // Channel 1 of `PH_SetInputCFD`, the one input.
+            Channels::SyncAndOne { .. } => 1,
+        };
         device.info.model = text(&model);
         device.inputs = match lib.family.inputs() {
             Some(inputs) => inputs,
@@ -836,6 +983,7 @@ impl Device {
             (Family::HydraHarp, _) => 0x0101_0304,
             (Family::TimeHarp260, Inputs::Edge) => 0x0001_0305,
             (Family::TimeHarp260, Inputs::Cfd) => 0x0001_0306,
+            (Family::PicoHarp300, _) => 0x0001_0303,
         }
     }
 
@@ -846,57 +994,69 @@ impl Device {
         let family = lib.family;
         let (sync_a, sync_b) = s.sync_trigger.args(family, self.inputs, "sync")?;
         let (in_a, in_b) = s.input_trigger.args(family, self.inputs, "input")?;
-        let (triggers, (sync_call, input_call)) = match self.inputs {
-            Inputs::Edge => (f.edge_triggers, ("SetSyncEdgeTrg", "SetInputEdgeTrg")),
-            Inputs::Cfd => (f.cfd_triggers, ("SetSyncCFD", "SetInputCFD")),
-        };
-        let (set_sync_trigger, set_input_trigger) = triggers.ok_or_else(|| {
-            VendorError::Setting(format!(
-                "the {} library has no {sync_call} for its inputs",
-                family.name()
-            ))
-        })?;
-        if s.input_offsets_ps.len() > self.info.inputs as usize {
-            return Err(VendorError::Setting(format!(
-                "{} input offsets given; the device has {} inputs",
-                s.input_offsets_ps.len(),
-                self.info.inputs
-            )));
-        }
+        s.check_family(family, self.info.inputs)
+            .map_err(|(_, e)| e)?;
+        let offset = family.offset_arg(s.offset_ns)?;
         // SAFETY (every call below): plain integer arguments on an open,
         // initialised device.
         unsafe {
             lib.check("SetSyncDiv", (f.set_sync_div)(i, s.sync_divider))?;
-            if let Some((sync_mode, _)) = f.set_trigger_modes {
-                // TRGMODE_ETR 0 (ph330defin.h): edge triggers, then their
-                // level and edge below.
-                lib.check("SetSyncTrgMode", sync_mode(i, 0))?;
-            }
-            lib.check(sync_call, set_sync_trigger(i, sync_a, sync_b))?;
-            lib.check(
-                "SetSyncChannelOffset",
-                (f.set_sync_channel_offset)(i, s.sync_offset_ps),
-            )?;
-            for ch in 0..self.info.inputs {
-                // Every input on, not left to the library's default
-                // (`SetInputChannelEnable(devidx, channel, enable)` in the
-                // vendor's hhlib.h and mhlib.h).
-                lib.check(
-                    "SetInputChannelEnable",
-                    (f.set_input_channel_enable)(i, ch, 1),
-                )?;
-                if let Some((_, input_mode)) = f.set_trigger_modes {
-                    lib.check("SetInputTrgMode", input_mode(i, ch, 0))?;
+            match f.channels {
+                Channels::Numbered {
+                    set_sync_channel_offset,
+                    set_input_channel_offset,
+                    set_input_channel_enable,
+                    ..
+                } => {
+                    let (triggers, (sync_call, input_call)) = match self.inputs {
+                        Inputs::Edge => (f.edge_triggers, ("SetSyncEdgeTrg", "SetInputEdgeTrg")),
+                        Inputs::Cfd => (f.cfd_triggers, ("SetSyncCFD", "SetInputCFD")),
+                    };
+                    let (set_sync_trigger, set_input_trigger) = triggers.ok_or_else(|| {
+                        VendorError::Setting(format!(
+                            "the {} library has no {sync_call} for its inputs",
+                            family.name()
+                        ))
+                    })?;
+                    if let Some((sync_mode, _)) = f.set_trigger_modes {
+                        // TRGMODE_ETR 0 (ph330defin.h): edge triggers, then
+                        // their level and edge below.
+                        lib.check("SetSyncTrgMode", sync_mode(i, 0))?;
+                    }
+                    lib.check(sync_call, set_sync_trigger(i, sync_a, sync_b))?;
+                    lib.check(
+                        "SetSyncChannelOffset",
+                        set_sync_channel_offset(i, s.sync_offset_ps),
+                    )?;
+                    for ch in 0..self.info.inputs {
+                        // Every input on, not left to the library's default
+                        // (`SetInputChannelEnable(devidx, channel, enable)`
+                        // in the vendor's hhlib.h and mhlib.h).
+                        lib.check("SetInputChannelEnable", set_input_channel_enable(i, ch, 1))?;
+                        if let Some((_, input_mode)) = f.set_trigger_modes {
+                            lib.check("SetInputTrgMode", input_mode(i, ch, 0))?;
+                        }
+                        lib.check(input_call, set_input_trigger(i, ch, in_a, in_b))?;
+                        let offset = s.input_offsets_ps.get(ch as usize).copied().unwrap_or(0);
+                        lib.check(
+                            "SetInputChannelOffset",
+                            set_input_channel_offset(i, ch, offset),
+                        )?;
+                    }
                 }
-                lib.check(input_call, set_input_trigger(i, ch, in_a, in_b))?;
-                let offset = s.input_offsets_ps.get(ch as usize).copied().unwrap_or(0);
-                lib.check(
-                    "SetInputChannelOffset",
-                    (f.set_input_channel_offset)(i, ch, offset),
-                )?;
+                Channels::SyncAndOne {
+                    set_input_cfd,
+                    set_sync_offset,
+                } => {
+                    // The vendor's TTTR demo: the sync offset, then the CFD
+                    // of channel 0 (the sync) and of channel 1 (the input).
+                    lib.check("SetSyncOffset", set_sync_offset(i, s.sync_offset_ps))?;
+                    lib.check("SetInputCFD", set_input_cfd(i, 0, sync_a, sync_b))?;
+                    lib.check("SetInputCFD", set_input_cfd(i, 1, in_a, in_b))?;
+                }
             }
             lib.check("SetBinning", (f.set_binning)(i, s.binning))?;
-            lib.check("SetOffset", (f.set_offset)(i, s.offset_ns))?;
+            lib.check("SetOffset", (f.set_offset)(i, offset))?;
             let m = c_int::from(s.markers);
             if s.markers {
                 // `SetMarkerEdges(devidx, me1, me2, me3, me4)`, each
@@ -914,21 +1074,27 @@ impl Device {
     /// Sync rate (Hz) and per-input count rates (counts/s).
     pub fn rates(&self) -> Result<(i32, Vec<i32>), VendorError> {
         let (lib, i) = (&self.lib, self.info.index);
-        let mut sync = 0;
-        // SAFETY: one int out.
-        lib.check("GetSyncRate", unsafe {
-            (lib.functions.get_sync_rate)(i, &mut sync)
-        })?;
-        let mut rates = Vec::new();
-        for ch in 0..self.info.inputs {
+        let count_rate = |ch: c_int| {
             let mut r = 0;
             // SAFETY: one int out.
             lib.check("GetCountRate", unsafe {
                 (lib.functions.get_count_rate)(i, ch, &mut r)
-            })?;
-            rates.push(r);
+            })
+            .map(|()| r)
+        };
+        match lib.functions.channels {
+            Channels::Numbered { get_sync_rate, .. } => {
+                let mut sync = 0;
+                // SAFETY: one int out.
+                lib.check("GetSyncRate", unsafe { get_sync_rate(i, &mut sync) })?;
+                let rates = (0..self.info.inputs)
+                    .map(count_rate)
+                    .collect::<Result<_, _>>()?;
+                Ok((sync, rates))
+            }
+            // PHLib: count rate 0 is the sync's, 1 the input's.
+            Channels::SyncAndOne { .. } => Ok((count_rate(0)?, vec![count_rate(1)?])),
         }
-        Ok((sync, rates))
     }
 
     /// The library's warnings about the current rates and settings, as

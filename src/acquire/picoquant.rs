@@ -1,4 +1,5 @@
-//! A PicoQuant time tagger (MultiHarp, HydraHarp) through the vendor's
+//! A PicoQuant time tagger (MultiHarp, HydraHarp, TimeHarp 260, PicoHarp
+//! 330, PicoHarp 300) through the vendor's
 //! library as an acquisition source: its address and settings, the library
 //! found and loaded, the device opened and set up, and its FIFO read in a
 //! loop on its own thread, the records handed raw to the pipeline (which
@@ -34,8 +35,8 @@ const MAX_MEASUREMENT_MS: i32 = 360_000_000;
 /// Which PicoQuant device: `--device picoquant[:FAMILY][:SERIAL]`.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct PicoQuantSpec {
-    /// The family (`None`: MultiHarp, HydraHarp or PicoHarp 330, the first
-    /// whose library loads and has a device).
+    /// The family (`None`: the first of [`Family::ALL`] whose library loads
+    /// and has a device).
     pub family: Option<Family>,
     /// The serial number (`None`: the first device).
     pub serial: Option<String>,
@@ -52,9 +53,10 @@ impl PicoQuantSpec {
             "hydraharp" | "hh" => Some(Family::HydraHarp),
             "timeharp260" | "th260" => Some(Family::TimeHarp260),
             "picoharp330" | "ph330" => Some(Family::PicoHarp330),
+            "picoharp" | "picoharp300" | "ph300" => Some(Family::PicoHarp300),
             other => {
                 return Err(format!(
-                    "unknown PicoQuant family `{other}`: use multiharp (mh), hydraharp (hh), timeharp260 (th260) or picoharp330 (ph330), e.g. picoquant:multiharp:1045678"
+                    "unknown PicoQuant family `{other}`: use multiharp (mh), hydraharp (hh), timeharp260 (th260), picoharp330 (ph330) or picoharp (picoharp300, ph300), e.g. picoquant:multiharp:1045678"
                 ));
             }
         };
@@ -197,6 +199,10 @@ impl SettingsRequest {
         s.offset_ns = self.offset_ns.unwrap_or(s.offset_ns);
         s.markers = markers;
         s.markers_rising = self.markers_rising.unwrap_or(s.markers_rising);
+        // The inputs' count is the device's to say; what the family cannot
+        // take whatever it is, is refused here.
+        s.check_family(family, i32::MAX)
+            .map_err(|(field, e)| SourceError::setting(field, e.to_string()))?;
         Ok(s)
     }
 }

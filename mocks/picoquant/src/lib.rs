@@ -1,6 +1,7 @@
 //! A stand-in for PicoQuant's programming libraries (MHLib for MultiHarp,
 //! HHLib v3 for HydraHarp 400, TH260Lib 3.1 for TimeHarp 260 Pico and
-//! Nano, PH330Lib 2.0 for PicoHarp 330): a shared
+//! Nano, PH330Lib 2.0 for PicoHarp 330, PHLib 3.0 for PicoHarp 300): a
+//! shared
 //! library exporting the C functions `scatterscope_drivers::picoquant`
 //! calls, with every family's prefix, so that the
 //! driver, the acquisition and the tests go through the same run-time
@@ -20,10 +21,12 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
 use config::{Fault, MockConfig};
-use pool::Pool;
+use pool::{Pool, Records};
 
 const MAX_DEVICES: usize = 8;
 const FLAG_FIFO_FULL: c_int = 0x0002;
+/// PHLib's `FLAG_FIFOFULL` (phdefin.h): two bits where the others have one.
+const FLAG_FIFO_FULL_PH300: c_int = 0x0003;
 const FLAG_ACTIVE: c_int = 0x0020;
 /// MHLib's "counts were dropped" flag (mhdefin.h).
 const FLAG_CNTS_DROPPED: c_int = 0x0040;
@@ -62,6 +65,7 @@ enum Family {
     HydraHarp,
     TimeHarp260,
     PicoHarp330,
+    PicoHarp300,
 }
 
 impl Family {
@@ -73,22 +77,73 @@ impl Family {
             Family::HydraHarp | Family::PicoHarp330 => 1.0,
             Family::TimeHarp260 if config.th260_nano => 250.0,
             Family::TimeHarp260 => 25.0,
+            // The PicoHarp 300's published 4 ps.
+            Family::PicoHarp300 => 4.0,
         }
     }
 
-    /// `MAXINPCHAN`: 2 in th260defin.h; the stand-in's other devices have 4.
+    /// `MAXINPCHAN`: 2 in th260defin.h; the stand-in's other devices have
+    /// 4; a PicoHarp 300 has one input besides its sync (channel 1 of
+    /// `PH_SetInputCFD`).
     fn inputs(self) -> c_int {
         match self {
             Family::TimeHarp260 => 2,
+            Family::PicoHarp300 => 1,
             _ => 4,
         }
     }
 
-    /// The flag by which the family says it dropped counts.
+    /// The flag by which the family says it dropped counts (none in
+    /// phdefin.h).
     fn dropped_flag(self) -> c_int {
         match self {
             Family::TimeHarp260 => FLAG_EVTS_DROPPED_TH260,
+            Family::PicoHarp300 => 0,
             _ => FLAG_CNTS_DROPPED,
+        }
+    }
+
+    /// The flags an overrun sets.
+    fn fifo_full_flag(self) -> c_int {
+        match self {
+            Family::PicoHarp300 => FLAG_FIFO_FULL_PH300,
+            _ => FLAG_FIFO_FULL,
+        }
+    }
+
+    /// The flag bits `GetFlags` reports: phdefin.h defines no "active"
+    /// flag.
+    fn reported_flags(self, flags: c_int) -> c_int {
+        match self {
+            Family::PicoHarp300 => flags & !FLAG_ACTIVE,
+            _ => flags,
+        }
+    }
+
+    /// Binning steps (`GetBaseResolution`'s `binsteps`): `BINSTEPSMAX` 8
+    /// in phdefin.h; 24 for the others here.
+    fn binning_steps(self) -> c_int {
+        match self {
+            Family::PicoHarp300 => 8,
+            _ => 24,
+        }
+    }
+
+    /// `SetOffset`'s unit (ps) and range in it: picoseconds, 0 to
+    /// 1 000 000 000, in phdefin.h (`OFFSETMIN`/`OFFSETMAX`); nanoseconds,
+    /// 0 to 100 000 000, in mhdefin.h (the others here alike).
+    fn offset_unit_and_range(self) -> (i64, c_int) {
+        match self {
+            Family::PicoHarp300 => (1, 1_000_000_000),
+            _ => (1000, 100_000_000),
+        }
+    }
+
+    /// The T3 records the FIFO delivers.
+    fn records(self) -> Records {
+        match self {
+            Family::PicoHarp300 => Records::PicoHarp,
+            _ => Records::Wide,
         }
     }
 
@@ -101,21 +156,23 @@ impl Family {
             Family::TimeHarp260 if config.th260_nano => "TimeHarp 260 N",
             Family::TimeHarp260 => "TimeHarp 260 P",
             Family::PicoHarp330 => "PicoHarp 330",
+            Family::PicoHarp300 => "PicoHarp 300",
         }
     }
 
+    /// `TTREADMAX`.
     fn read_max(self) -> usize {
         match self {
             Family::MultiHarp | Family::PicoHarp330 => 1_048_576,
-            Family::HydraHarp | Family::TimeHarp260 => 131_072,
+            Family::HydraHarp | Family::TimeHarp260 | Family::PicoHarp300 => 131_072,
         }
     }
 
-    /// `SYNCDIVMAX`: 16 in mhdefin.h and hhdefin.h, 8 in th260defin.h and
-    /// ph330defin.h.
+    /// `SYNCDIVMAX`: 16 in mhdefin.h and hhdefin.h, 8 in th260defin.h,
+    /// ph330defin.h and phdefin.h.
     fn sync_divider_max(self) -> c_int {
         match self {
-            Family::TimeHarp260 | Family::PicoHarp330 => 8,
+            Family::TimeHarp260 | Family::PicoHarp330 | Family::PicoHarp300 => 8,
             _ => 16,
         }
     }
@@ -134,8 +191,8 @@ struct Measurement {
     pixel_counts: Vec<u64>,
     ended: bool,
     truth_written: bool,
-    /// The T3 offset the device was set to (ns).
-    offset_ns: c_int,
+    /// The T3 offset the device was set to (ps).
+    offset_ps: i64,
     /// The marker edges set, and the inputs enabled, at the start.
     marker_edges: Option<[c_int; 4]>,
     inputs_enabled: [Option<bool>; 4],
@@ -149,13 +206,13 @@ struct Device {
     family: Option<Family>,
     binning: i32,
     sync_divider: i32,
-    offset_ns: c_int,
+    offset_ps: i64,
     /// Marker edges as set (`None`: never set).
     marker_edges: Option<[c_int; 4]>,
     /// Each input's enable as set (`None`: never set).
     inputs_enabled: [Option<bool>; 4],
     flags: c_int,
-    pool: Option<(f64, Arc<Pool>)>,
+    pool: Option<(f64, Records, Arc<Pool>)>,
     measurement: Option<Measurement>,
 }
 
@@ -279,12 +336,13 @@ fn write_truth(m: &mut Measurement, config: &MockConfig) {
     m.truth_written = true;
     let pixels: Vec<String> = m.pixel_counts.iter().map(u64::to_string).collect();
     let json = format!(
-        "{{\"records\": {}, \"photons\": {}, \"markers\": {}, \"overflows\": {}, \"offset_ns\": {}, \"marker_edges\": {}, \"inputs_enabled\": [{}], \"pixel_photons\": [{}]}}\n",
+        "{{\"records\": {}, \"photons\": {}, \"markers\": {}, \"overflows\": {}, \"offset_ns\": {}, \"offset_ps\": {}, \"marker_edges\": {}, \"inputs_enabled\": [{}], \"pixel_photons\": [{}]}}\n",
         m.delivered,
         m.photons,
         m.markers,
         m.delivered - m.photons - m.markers,
-        m.offset_ns,
+        m.offset_ps as f64 / 1000.0,
+        m.offset_ps,
         m.marker_edges
             .map_or("null".to_string(), |e| format!("{e:?}")),
         m.inputs_enabled
@@ -311,7 +369,7 @@ fn deliver(dev: &mut Device, config: &MockConfig, out: &mut [u32]) -> Result<usi
     let mut limit = out.len() as u64;
     match config.fault {
         Some(Fault::Overrun(n)) if m.delivered >= n => {
-            dev.flags |= FLAG_FIFO_FULL;
+            dev.flags |= dev.family.map_or(FLAG_FIFO_FULL, Family::fifo_full_flag);
             dev.flags &= !FLAG_ACTIVE;
             m.ended = true;
             return Ok(0);
@@ -354,12 +412,12 @@ fn deliver(dev: &mut Device, config: &MockConfig, out: &mut [u32]) -> Result<usi
         let range = m.pos..m.pos + take;
         out[n..n + take].copy_from_slice(&pool.records[range.clone()]);
         for (&rec, i) in pool.records[range.clone()].iter().zip(range) {
-            if pool::is_photon(rec) {
+            if pool.layout.is_photon(rec) {
                 m.photons += 1;
                 if let Some(&p) = pool.pixel_of.get(i) {
                     m.pixel_counts[p as usize] += 1;
                 }
-            } else if pool::is_marker(rec) {
+            } else if pool.layout.is_marker(rec) {
                 m.markers += 1;
             }
         }
@@ -408,6 +466,13 @@ pub extern "C" fn TH260_Initialize(index: c_int, mode: c_int) -> c_int {
     initialize(index, mode)
 }
 
+/// `PH_Initialize(devidx, mode)`: no reference source (phlib.h, PHLib
+/// 3.0).
+#[unsafe(no_mangle)]
+pub extern "C" fn PH_Initialize(index: c_int, mode: c_int) -> c_int {
+    initialize(index, mode)
+}
+
 /// `PH330_Initialize(devidx, mode, refsource)`: refsource 0 to 3, the
 /// internal clock or an external 10, 100 or 500 MHz one (ph330defin.h).
 #[unsafe(no_mangle)]
@@ -422,11 +487,9 @@ macro_rules! library {
     ($family:expr, $version:literal,
      $GetLibraryVersion:ident, $GetErrorString:ident, $OpenDevice:ident, $CloseDevice:ident,
      $GetHardwareInfo:ident, $GetSerialNumber:ident,
-     $GetNumOfInputChannels:ident, $GetBaseResolution:ident, $SetSyncDiv:ident,
-     $SetSyncChannelOffset:ident, $SetInputChannelOffset:ident, $SetBinning:ident,
+     $GetBaseResolution:ident, $SetSyncDiv:ident, $SetBinning:ident,
      $SetOffset:ident, $SetMarkerEnable:ident, $SetMarkerEdges:ident,
-     $SetInputChannelEnable:ident, $GetResolution:ident,
-     $GetSyncRate:ident, $GetCountRate:ident, $GetFlags:ident, $GetWarnings:ident,
+     $GetResolution:ident, $GetCountRate:ident, $GetFlags:ident, $GetWarnings:ident,
      $GetWarningsText:ident, $StartMeas:ident, $StopMeas:ident, $CTCStatus:ident) => {
         /// The library's version string.
         #[unsafe(no_mangle)]
@@ -493,12 +556,6 @@ macro_rules! library {
             })
         }
 
-        /// Four inputs (two on a TimeHarp 260).
-        #[unsafe(no_mangle)]
-        pub unsafe extern "C" fn $GetNumOfInputChannels(index: c_int, n: *mut c_int) -> c_int {
-            with_ready(index, |_, _| unsafe { put(n, $family.inputs()) })
-        }
-
         /// Base resolution (ps) and binning steps.
         #[unsafe(no_mangle)]
         pub unsafe extern "C" fn $GetBaseResolution(
@@ -507,7 +564,7 @@ macro_rules! library {
             steps: *mut c_int,
         ) -> c_int {
             with_ready(index, |d, c| unsafe {
-                put(steps, 24);
+                put(steps, $family.binning_steps());
                 put(res, d.family.map_or(1.0, |f| f.base_resolution_ps(c)))
             })
         }
@@ -524,28 +581,11 @@ macro_rules! library {
             })
         }
 
-        /// Sync offset, ps (accepted).
-        #[unsafe(no_mangle)]
-        pub extern "C" fn $SetSyncChannelOffset(index: c_int, ps: c_int) -> c_int {
-            with_ready(index, |_, _| in_range(ps, -99_999, 99_999))
-        }
-
-        /// Input offset, ps (accepted).
-        #[unsafe(no_mangle)]
-        pub extern "C" fn $SetInputChannelOffset(index: c_int, ch: c_int, ps: c_int) -> c_int {
-            with_ready(index, |_, _| {
-                if !(0..4).contains(&ch) {
-                    return code::INVALID_ARGUMENT;
-                }
-                in_range(ps, -99_999, 99_999)
-            })
-        }
-
-        /// Binning code 0 to 24.
+        /// Binning code 0 to the family's steps less one.
         #[unsafe(no_mangle)]
         pub extern "C" fn $SetBinning(index: c_int, binning: c_int) -> c_int {
             with_ready(index, |d, _| {
-                if !(0..=24).contains(&binning) {
+                if !(0..$family.binning_steps()).contains(&binning) {
                     return code::INVALID_ARGUMENT;
                 }
                 d.binning = binning;
@@ -553,14 +593,15 @@ macro_rules! library {
             })
         }
 
-        /// T3 offset in ns (MHLib's header: 0 to 100 000 000 ns), kept for
-        /// the truth file.
+        /// T3 offset in the family's unit
+        /// ([`Family::offset_unit_and_range`]), kept for the truth file.
         #[unsafe(no_mangle)]
-        pub extern "C" fn $SetOffset(index: c_int, ns: c_int) -> c_int {
+        pub extern "C" fn $SetOffset(index: c_int, offset: c_int) -> c_int {
             with_ready(index, |d, _| {
-                let r = in_range(ns, 0, 100_000_000);
+                let (unit_ps, max) = $family.offset_unit_and_range();
+                let r = in_range(offset, 0, max);
                 if r == 0 {
-                    d.offset_ns = ns;
+                    d.offset_ps = i64::from(offset) * unit_ps;
                 }
                 r
             })
@@ -600,36 +641,16 @@ macro_rules! library {
             })
         }
 
-        /// Enables (1) or disables (0) input `ch`: the vendor's
-        /// `SetInputChannelEnable(devidx, channel, enable)` (hhlib.h); kept
-        /// for the truth file.
-        #[unsafe(no_mangle)]
-        pub extern "C" fn $SetInputChannelEnable(index: c_int, ch: c_int, enable: c_int) -> c_int {
-            with_ready(index, |d, _| {
-                if !(0..4).contains(&ch) || !(0..=1).contains(&enable) {
-                    return code::INVALID_ARGUMENT;
-                }
-                d.inputs_enabled[ch as usize] = Some(enable == 1);
-                0
-            })
-        }
-
         /// Micro-time unit, ps.
         #[unsafe(no_mangle)]
         pub unsafe extern "C" fn $GetResolution(index: c_int, res: *mut c_double) -> c_int {
             with_ready(index, |d, c| unsafe { put(res, resolution_ps(d, c)) })
         }
 
-        /// Sync rate at the input, before the divider, Hz (as the vendor's
-        /// file at [`sync_period_ps`] records it).
-        #[unsafe(no_mangle)]
-        pub unsafe extern "C" fn $GetSyncRate(index: c_int, rate: *mut c_int) -> c_int {
-            with_ready(index, |_, c| unsafe {
-                put(rate, c.sync_hz as c_int)
-            })
-        }
-
-        /// Count rate of input `ch` (the detector is on input 0).
+        /// Count rate of input `ch` (the detector is on input 0). PHLib's
+        /// `PH_GetCountRate(devidx, channel, *rate)` counts the sync on
+        /// channel 0 and the input on 1 (its demos read both; it has no
+        /// `GetSyncRate`).
         #[unsafe(no_mangle)]
         pub unsafe extern "C" fn $GetCountRate(
             index: c_int,
@@ -637,7 +658,13 @@ macro_rules! library {
             rate: *mut c_int,
         ) -> c_int {
             with_ready(index, |_, c| {
-                let r = if ch == 0 { c.rate_hz + c.dark_hz } else { 0.0 };
+                let r = match ($family, ch) {
+                    (Family::PicoHarp300, 0) => c.sync_hz,
+                    (Family::PicoHarp300, 1) => c.rate_hz + c.dark_hz,
+                    (Family::PicoHarp300, _) => return code::INVALID_ARGUMENT,
+                    (_, 0) => c.rate_hz + c.dark_hz,
+                    _ => 0.0,
+                };
                 unsafe { put(rate, r.min(f64::from(c_int::MAX)) as c_int) }
             })
         }
@@ -645,7 +672,7 @@ macro_rules! library {
         /// Status flags.
         #[unsafe(no_mangle)]
         pub unsafe extern "C" fn $GetFlags(index: c_int, flags: *mut c_int) -> c_int {
-            with_ready(index, |d, _| unsafe { put(flags, d.flags) })
+            with_ready(index, |d, _| unsafe { put(flags, $family.reported_flags(d.flags)) })
         }
 
         /// Warning bits: input rate above 5 % of the sync rate (pile-up).
@@ -688,12 +715,13 @@ macro_rules! library {
                 }
                 let res = resolution_ps(d, c);
                 let period = sync_period_ps(c);
+                let layout = $family.records();
                 let pool = match &d.pool {
-                    Some((r, p)) if *r == res => p.clone(),
-                    _ => match pool::build(c, res, period) {
+                    Some((r, l, p)) if *r == res && *l == layout => p.clone(),
+                    _ => match pool::build(c, res, period, layout) {
                         Ok(p) => {
                             let p = Arc::new(p);
-                            d.pool = Some((res, p.clone()));
+                            d.pool = Some((res, layout, p.clone()));
                             p
                         }
                         Err(e) => {
@@ -721,7 +749,7 @@ macro_rules! library {
                     pixel_counts: vec![0; pixels],
                     ended: false,
                     truth_written: false,
-                    offset_ns: d.offset_ns,
+                    offset_ps: d.offset_ps,
                     marker_edges: d.marker_edges,
                     inputs_enabled: d.inputs_enabled,
                 });
@@ -753,6 +781,58 @@ macro_rules! library {
     };
 }
 
+/// The functions of the families whose inputs are numbered channels with
+/// their own offsets and enables, and whose sync rate has its own call
+/// (mhlib.h, hhlib.h, th260lib.h, ph330lib.h); PHLib 3.0 has none of them.
+macro_rules! channel_functions {
+    ($family:expr, $GetNumOfInputChannels:ident, $SetSyncChannelOffset:ident,
+     $SetInputChannelOffset:ident, $SetInputChannelEnable:ident, $GetSyncRate:ident) => {
+        /// Four inputs (two on a TimeHarp 260).
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetNumOfInputChannels(index: c_int, n: *mut c_int) -> c_int {
+            with_ready(index, |_, _| unsafe { put(n, $family.inputs()) })
+        }
+
+        /// Sync offset, ps (accepted).
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetSyncChannelOffset(index: c_int, ps: c_int) -> c_int {
+            with_ready(index, |_, _| in_range(ps, -99_999, 99_999))
+        }
+
+        /// Input offset, ps (accepted).
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetInputChannelOffset(index: c_int, ch: c_int, ps: c_int) -> c_int {
+            with_ready(index, |_, _| {
+                if !(0..4).contains(&ch) {
+                    return code::INVALID_ARGUMENT;
+                }
+                in_range(ps, -99_999, 99_999)
+            })
+        }
+
+        /// Enables (1) or disables (0) input `ch`: the vendor's
+        /// `SetInputChannelEnable(devidx, channel, enable)` (hhlib.h); kept
+        /// for the truth file.
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $SetInputChannelEnable(index: c_int, ch: c_int, enable: c_int) -> c_int {
+            with_ready(index, |d, _| {
+                if !(0..4).contains(&ch) || !(0..=1).contains(&enable) {
+                    return code::INVALID_ARGUMENT;
+                }
+                d.inputs_enabled[ch as usize] = Some(enable == 1);
+                0
+            })
+        }
+
+        /// Sync rate at the input, before the divider, Hz (as the vendor's
+        /// file at [`sync_period_ps`] records it).
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $GetSyncRate(index: c_int, rate: *mut c_int) -> c_int {
+            with_ready(index, |_, c| unsafe { put(rate, c.sync_hz as c_int) })
+        }
+    };
+}
+
 fn in_range(v: c_int, lo: c_int, hi: c_int) -> c_int {
     if (lo..=hi).contains(&v) {
         0
@@ -770,18 +850,13 @@ library!(
     MH_CloseDevice,
     MH_GetHardwareInfo,
     MH_GetSerialNumber,
-    MH_GetNumOfInputChannels,
     MH_GetBaseResolution,
     MH_SetSyncDiv,
-    MH_SetSyncChannelOffset,
-    MH_SetInputChannelOffset,
     MH_SetBinning,
     MH_SetOffset,
     MH_SetMarkerEnable,
     MH_SetMarkerEdges,
-    MH_SetInputChannelEnable,
     MH_GetResolution,
-    MH_GetSyncRate,
     MH_GetCountRate,
     MH_GetFlags,
     MH_GetWarnings,
@@ -789,6 +864,15 @@ library!(
     MH_StartMeas,
     MH_StopMeas,
     MH_CTCStatus
+);
+
+channel_functions!(
+    Family::MultiHarp,
+    MH_GetNumOfInputChannels,
+    MH_SetSyncChannelOffset,
+    MH_SetInputChannelOffset,
+    MH_SetInputChannelEnable,
+    MH_GetSyncRate
 );
 
 library!(
@@ -800,18 +884,13 @@ library!(
     HH_CloseDevice,
     HH_GetHardwareInfo,
     HH_GetSerialNumber,
-    HH_GetNumOfInputChannels,
     HH_GetBaseResolution,
     HH_SetSyncDiv,
-    HH_SetSyncChannelOffset,
-    HH_SetInputChannelOffset,
     HH_SetBinning,
     HH_SetOffset,
     HH_SetMarkerEnable,
     HH_SetMarkerEdges,
-    HH_SetInputChannelEnable,
     HH_GetResolution,
-    HH_GetSyncRate,
     HH_GetCountRate,
     HH_GetFlags,
     HH_GetWarnings,
@@ -819,6 +898,15 @@ library!(
     HH_StartMeas,
     HH_StopMeas,
     HH_CTCStatus
+);
+
+channel_functions!(
+    Family::HydraHarp,
+    HH_GetNumOfInputChannels,
+    HH_SetSyncChannelOffset,
+    HH_SetInputChannelOffset,
+    HH_SetInputChannelEnable,
+    HH_GetSyncRate
 );
 
 library!(
@@ -830,18 +918,13 @@ library!(
     TH260_CloseDevice,
     TH260_GetHardwareInfo,
     TH260_GetSerialNumber,
-    TH260_GetNumOfInputChannels,
     TH260_GetBaseResolution,
     TH260_SetSyncDiv,
-    TH260_SetSyncChannelOffset,
-    TH260_SetInputChannelOffset,
     TH260_SetBinning,
     TH260_SetOffset,
     TH260_SetMarkerEnable,
     TH260_SetMarkerEdges,
-    TH260_SetInputChannelEnable,
     TH260_GetResolution,
-    TH260_GetSyncRate,
     TH260_GetCountRate,
     TH260_GetFlags,
     TH260_GetWarnings,
@@ -849,6 +932,15 @@ library!(
     TH260_StartMeas,
     TH260_StopMeas,
     TH260_CTCStatus
+);
+
+channel_functions!(
+    Family::TimeHarp260,
+    TH260_GetNumOfInputChannels,
+    TH260_SetSyncChannelOffset,
+    TH260_SetInputChannelOffset,
+    TH260_SetInputChannelEnable,
+    TH260_GetSyncRate
 );
 
 library!(
@@ -860,18 +952,13 @@ library!(
     PH330_CloseDevice,
     PH330_GetHardwareInfo,
     PH330_GetSerialNumber,
-    PH330_GetNumOfInputChannels,
     PH330_GetBaseResolution,
     PH330_SetSyncDiv,
-    PH330_SetSyncChannelOffset,
-    PH330_SetInputChannelOffset,
     PH330_SetBinning,
     PH330_SetOffset,
     PH330_SetMarkerEnable,
     PH330_SetMarkerEdges,
-    PH330_SetInputChannelEnable,
     PH330_GetResolution,
-    PH330_GetSyncRate,
     PH330_GetCountRate,
     PH330_GetFlags,
     PH330_GetWarnings,
@@ -880,6 +967,93 @@ library!(
     PH330_StopMeas,
     PH330_CTCStatus
 );
+
+channel_functions!(
+    Family::PicoHarp330,
+    PH330_GetNumOfInputChannels,
+    PH330_SetSyncChannelOffset,
+    PH330_SetInputChannelOffset,
+    PH330_SetInputChannelEnable,
+    PH330_GetSyncRate
+);
+
+library!(
+    Family::PicoHarp300,
+    "3.0",
+    PH_GetLibraryVersion,
+    PH_GetErrorString,
+    PH_OpenDevice,
+    PH_CloseDevice,
+    PH_GetHardwareInfo,
+    PH_GetSerialNumber,
+    PH_GetBaseResolution,
+    PH_SetSyncDiv,
+    PH_SetBinning,
+    PH_SetOffset,
+    PH_SetMarkerEnable,
+    PH_SetMarkerEdges,
+    PH_GetResolution,
+    PH_GetCountRate,
+    PH_GetFlags,
+    PH_GetWarnings,
+    PH_GetWarningsText,
+    PH_StartMeas,
+    PH_StopMeas,
+    PH_CTCStatus
+);
+
+/// PicoHarp 300 CFD of channel 0 (the sync) or 1 (the input): level 0 to
+/// 800 mV, zero cross 0 to 20 mV (`DISCRMIN`/`DISCRMAX`, `ZCMIN`/`ZCMAX`
+/// of phdefin.h; `PH_SetInputCFD(devidx, channel, level, zc)` of phlib.h).
+#[unsafe(no_mangle)]
+pub extern "C" fn PH_SetInputCFD(
+    index: c_int,
+    ch: c_int,
+    level: c_int,
+    zero_cross: c_int,
+) -> c_int {
+    with_ready(index, |_, _| {
+        if !(0..=1).contains(&ch) {
+            return code::INVALID_ARGUMENT;
+        }
+        if (0..=800).contains(&level) && (0..=20).contains(&zero_cross) {
+            0
+        } else {
+            code::INVALID_ARGUMENT
+        }
+    })
+}
+
+/// PicoHarp 300 sync offset, ps: -99,999 to 99,999 (`SYNCOFFSMIN`/`MAX`
+/// of phdefin.h), where the other libraries set a sync channel offset.
+#[unsafe(no_mangle)]
+pub extern "C" fn PH_SetSyncOffset(index: c_int, ps: c_int) -> c_int {
+    with_ready(index, |_, _| in_range(ps, -99_999, 99_999))
+}
+
+/// PicoHarp 300 calibration (instant here; the vendor's demos call it
+/// after `PH_Initialize`).
+#[unsafe(no_mangle)]
+pub extern "C" fn PH_Calibrate(index: c_int) -> c_int {
+    with_ready(index, |_, _| 0)
+}
+
+/// `PH_ReadFiFo(devidx, buffer, count, *nactual)`: up to `count` records,
+/// at most `TTREADMAX` 131,072 (phdefin.h) and, as the vendor's TTTR demo
+/// says of its block size, in steps of 512.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn PH_ReadFiFo(
+    index: c_int,
+    buffer: *mut c_uint,
+    count: c_int,
+    n: *mut c_int,
+) -> c_int {
+    let max = Family::PicoHarp300.read_max();
+    if !(512..=max as c_int).contains(&count) || count % 512 != 0 {
+        return code::INVALID_ARGUMENT;
+    }
+    unsafe { read_fifo(index, buffer, count as usize, n) }
+}
 
 /// MultiHarp edge trigger of the sync input.
 #[unsafe(no_mangle)]

@@ -10,8 +10,84 @@ use scatterscope_physics::params::Preset;
 
 use crate::config::MockConfig;
 
-/// Syncs per overflow record of the T3 layout both families use.
-pub const WRAP: u64 = 1024;
+/// The T3 record layout a family's FIFO delivers, as PicoQuant's
+/// file-reading demos decode each record type (the PTU demos' `ProcessHHT3`
+/// and `ProcessPHT3`): the stand-in encodes photons on input 0, markers and
+/// overflows in the family's own bits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Records {
+    /// HydraHarp v2, TimeHarp 260, MultiHarp and PicoHarp 330 T3: special
+    /// 1 bit, channel 6, dtime 15, nsync 10; special channel 63 counts
+    /// overflows of 1024 syncs in its nsync field, special 1-15 markers.
+    Wide,
+    /// PicoHarp 300 T3 (0x00010303): channel 4 bits, dtime 12, nsync 16;
+    /// routing channel 1 the input, channel 15 special (dtime 0 one
+    /// overflow of 65,536 syncs, else the marker bits).
+    PicoHarp,
+}
+
+impl Records {
+    /// Syncs per overflow.
+    pub fn wrap(self) -> u64 {
+        match self {
+            Records::Wide => 1024,
+            Records::PicoHarp => 65_536,
+        }
+    }
+
+    /// The largest micro time (dtime) a record holds.
+    fn max_micro(self) -> u32 {
+        match self {
+            Records::Wide => 0x7FFF,
+            Records::PicoHarp => 0xFFF,
+        }
+    }
+
+    /// Overflows one record can count.
+    fn overflows_per_record(self) -> u64 {
+        match self {
+            Records::Wide => 1023,
+            Records::PicoHarp => 1,
+        }
+    }
+
+    fn photon(self, micro: u32, nsync: u32) -> u32 {
+        match self {
+            Records::Wide => (micro << 10) | nsync,
+            Records::PicoHarp => (1 << 28) | (micro << 16) | nsync,
+        }
+    }
+
+    fn marker(self, bits: u32, nsync: u32) -> u32 {
+        match self {
+            Records::Wide => (1 << 31) | (bits << 25) | nsync,
+            Records::PicoHarp => (15 << 28) | (bits << 16) | nsync,
+        }
+    }
+
+    fn overflow(self, n: u64) -> u32 {
+        match self {
+            Records::Wide => (1 << 31) | (63 << 25) | n as u32,
+            Records::PicoHarp => 15 << 28,
+        }
+    }
+
+    /// Whether `rec` is a photon record.
+    pub fn is_photon(self, rec: u32) -> bool {
+        match self {
+            Records::Wide => rec >> 31 == 0,
+            Records::PicoHarp => rec >> 28 != 15,
+        }
+    }
+
+    /// Whether `rec` is a marker record.
+    pub fn is_marker(self, rec: u32) -> bool {
+        match self {
+            Records::Wide => rec >> 31 == 1 && (rec >> 25) & 63 != 63 && (rec >> 25) & 63 != 0,
+            Records::PicoHarp => rec >> 28 == 15 && (rec >> 16) & 0xF != 0,
+        }
+    }
+}
 /// Marker bits of the scanner's clocks (line start, line stop, frame).
 pub const LINE_START: u32 = 1;
 /// Line stop marker bit.
@@ -37,14 +113,16 @@ pub struct Pool {
     pub records: Vec<u32>,
     /// Sync count at each record (its time), from the pool's start.
     pub sync_at: Vec<u64>,
-    /// Syncs the pool spans (a multiple of [`WRAP`]).
+    /// Syncs the pool spans (a multiple of the layout's wrap).
     pub span: u64,
-    /// Syncs of one frame of a scan (a multiple of [`WRAP`]; frame `f`
+    /// Syncs of one frame of a scan (a multiple of the wrap; frame `f`
     /// starts at `f * frame_span`); the whole span for a point detector.
     pub frame_span: u64,
     /// Scan pixel of each photon record (`u32::MAX` for other records);
     /// empty for a point detector.
     pub pixel_of: Vec<u32>,
+    /// The records' layout.
+    pub layout: Records,
 }
 
 /// An event before encoding: sync count, and a photon's (channel, micro
@@ -105,9 +183,15 @@ fn emitter(cfg: &MockConfig, w: usize, h: usize, period_ps: f64) -> Result<Emitt
 }
 
 /// Builds the pool for `cfg` at a micro-time unit of `resolution_ps` and a
-/// sync period of `period_ps`.
-pub fn build(cfg: &MockConfig, resolution_ps: f64, period_ps: f64) -> Result<Pool, String> {
-    let micro = |delay_ps: f64| ((delay_ps / resolution_ps) as u32).min(0x7FFF);
+/// sync period of `period_ps`, in `layout`'s records.
+pub fn build(
+    cfg: &MockConfig,
+    resolution_ps: f64,
+    period_ps: f64,
+    layout: Records,
+) -> Result<Pool, String> {
+    let wrap = layout.wrap();
+    let micro = |delay_ps: f64| ((delay_ps / resolution_ps) as u32).min(layout.max_micro());
     let mut events = Vec::new();
     match cfg.scan {
         None => {
@@ -126,7 +210,7 @@ pub fn build(cfg: &MockConfig, resolution_ps: f64, period_ps: f64) -> Result<Poo
             let mut e = emitter(cfg, w, h, period_ps)?;
             let line = w as u64 * DWELL_SYNCS + RETRACE_SYNCS;
             let frame_syncs = h as u64 * line;
-            let frame_span = frame_syncs.div_ceil(WRAP) * WRAP;
+            let frame_span = frame_syncs.div_ceil(wrap) * wrap;
             // The clocks first: a photon at the same sync as a line's start
             // follows it (the sort below is stable).
             for frame in 0..SCAN_FRAMES {
@@ -173,23 +257,30 @@ pub fn build(cfg: &MockConfig, resolution_ps: f64, period_ps: f64) -> Result<Poo
                 });
             }
             events.sort_by_key(Event::sync);
-            return Ok(encode(&events, Some(SCAN_FRAMES * frame_span), frame_span));
+            return Ok(encode(
+                &events,
+                Some(SCAN_FRAMES * frame_span),
+                frame_span,
+                layout,
+            ));
         }
     }
-    Ok(encode(&events, None, 0))
+    Ok(encode(&events, None, 0, layout))
 }
 
-/// Encodes `events`; a scan's pool (`span` given) ends at that span, its
-/// frames `frame_span` apart; a point detector's on the wrap after its last
-/// event.
-fn encode(events: &[Event], span: Option<u64>, frame_span: u64) -> Pool {
+/// Encodes `events` in `layout`'s records; a scan's pool (`span` given)
+/// ends at that span, its frames `frame_span` apart; a point detector's on
+/// the wrap after its last event.
+fn encode(events: &[Event], span: Option<u64>, frame_span: u64, layout: Records) -> Pool {
     let scanned = span.is_some();
+    let wrap = layout.wrap();
     let mut pool = Pool {
         records: Vec::with_capacity(events.len() * 21 / 20),
         sync_at: Vec::with_capacity(events.len() * 21 / 20),
         span: 0,
         frame_span,
         pixel_of: Vec::new(),
+        layout,
     };
     let mut base = 0u64;
     let push = |pool: &mut Pool, rec: u32, sync: u64, pixel: u32| {
@@ -199,37 +290,35 @@ fn encode(events: &[Event], span: Option<u64>, frame_span: u64) -> Pool {
             pool.pixel_of.push(pixel);
         }
     };
-    let overflow = |n: u64| (1u32 << 31) | (63 << 25) | n as u32;
+    let per_record = layout.overflows_per_record();
     for ev in events {
         let s = ev.sync();
-        while s - base >= WRAP {
-            let n = ((s - base) / WRAP).min(1023);
-            base += n * WRAP;
-            push(&mut pool, overflow(n), base, u32::MAX);
+        while s - base >= wrap {
+            let n = ((s - base) / wrap).min(per_record);
+            base += n * wrap;
+            push(&mut pool, layout.overflow(n), base, u32::MAX);
         }
         let nsync = (s - base) as u32;
         match *ev {
             Event::Photon { micro, pixel, .. } => {
-                push(&mut pool, (micro << 10) | nsync, s, pixel);
+                push(&mut pool, layout.photon(micro, nsync), s, pixel);
             }
-            Event::Marker { bits, .. } => {
-                push(&mut pool, (1 << 31) | (bits << 25) | nsync, s, u32::MAX)
-            }
+            Event::Marker { bits, .. } => push(&mut pool, layout.marker(bits, nsync), s, u32::MAX),
         }
     }
     match span {
         // Close the pool on its span, so that frames replay in step.
         Some(span) => {
             while base < span {
-                let n = ((span - base) / WRAP).min(1023);
-                base += n * WRAP;
-                push(&mut pool, overflow(n), base, u32::MAX);
+                let n = ((span - base) / wrap).min(per_record);
+                base += n * wrap;
+                push(&mut pool, layout.overflow(n), base, u32::MAX);
             }
         }
         // Close the pool on an overflow boundary past its last event.
         None => {
-            base += WRAP;
-            push(&mut pool, overflow(1), base, u32::MAX);
+            base += wrap;
+            push(&mut pool, layout.overflow(1), base, u32::MAX);
             pool.frame_span = base;
         }
     }
@@ -237,33 +326,32 @@ fn encode(events: &[Event], span: Option<u64>, frame_span: u64) -> Pool {
     pool
 }
 
-/// Whether `rec` is a photon record (not special).
-pub fn is_photon(rec: u32) -> bool {
-    rec >> 31 == 0
-}
-
-/// Whether `rec` is a marker record.
-pub fn is_marker(rec: u32) -> bool {
-    rec >> 31 == 1 && (rec >> 25) & 63 != 63 && (rec >> 25) & 63 != 0
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     /// Decodes a pool's records back to (sync, record) for photons and
-    /// markers, with the wide T3 layout's overflow rule.
-    fn decode(records: &[u32]) -> Vec<(u64, u32)> {
+    /// markers, with each layout's overflow rule.
+    fn decode(records: &[u32], layout: Records) -> Vec<(u64, u32)> {
         let mut base = 0u64;
         let mut out = Vec::new();
         for &r in records {
-            let special = r >> 31 == 1;
-            let ch = (r >> 25) & 63;
-            let nsync = u64::from(r & 1023);
-            if special && ch == 63 {
-                base += WRAP * nsync.max(1);
-            } else {
-                out.push((base + nsync, r));
+            let overflow = match layout {
+                Records::Wide if r >> 31 == 1 && (r >> 25) & 63 == 63 => {
+                    Some(u64::from(r & 1023).max(1))
+                }
+                Records::PicoHarp if r >> 28 == 15 && (r >> 16) & 0xFFF == 0 => Some(1),
+                _ => None,
+            };
+            match overflow {
+                Some(n) => base += layout.wrap() * n,
+                None => {
+                    let nsync = match layout {
+                        Records::Wide => r & 1023,
+                        Records::PicoHarp => r & 0xFFFF,
+                    };
+                    out.push((base + u64::from(nsync), r))
+                }
             }
         }
         out
@@ -275,36 +363,45 @@ mod tests {
             scan: Some((4, 3)),
             ..MockConfig::default()
         };
-        let pool = build(&cfg, 5.0, 12_500.0).unwrap();
-        assert_eq!(pool.span % WRAP, 0);
-        let decoded = decode(&pool.records);
-        let times: Vec<u64> = pool
-            .records
-            .iter()
-            .zip(&pool.sync_at)
-            .filter(|(r, _)| !(*r >> 31 == 1 && (*r >> 25) & 63 == 63))
-            .map(|(_, &s)| s)
-            .collect();
-        assert_eq!(decoded.iter().map(|d| d.0).collect::<Vec<_>>(), times);
-        assert!(times.windows(2).all(|w| w[0] <= w[1]));
-        assert!(*times.last().unwrap() < pool.span);
-        let markers = pool.records.iter().filter(|&&r| is_marker(r)).count();
-        assert_eq!(
-            markers as u64,
-            SCAN_FRAMES * (1 + 2 * 3),
-            "a frame marker and two per line"
-        );
-        assert_eq!(pool.span, SCAN_FRAMES * pool.frame_span);
-        // Every photon lies in its pixel's dwell.
-        let line = 4 * DWELL_SYNCS + RETRACE_SYNCS;
-        for ((&r, &s), &p) in pool.records.iter().zip(&pool.sync_at).zip(&pool.pixel_of) {
-            if is_photon(r) {
-                let (x, y) = (u64::from(p) % 4, u64::from(p) / 4);
-                let start = s / pool.frame_span * pool.frame_span + y * line + 1 + x * DWELL_SYNCS;
-                assert!(
-                    (start..start + DWELL_SYNCS).contains(&s),
-                    "pixel {p} at {s}"
-                );
+        for layout in [Records::Wide, Records::PicoHarp] {
+            let pool = build(&cfg, 5.0, 12_500.0, layout).unwrap();
+            assert_eq!(pool.span % layout.wrap(), 0);
+            let decoded = decode(&pool.records, layout);
+            let times: Vec<u64> = pool
+                .records
+                .iter()
+                .zip(&pool.sync_at)
+                .filter(|(r, _)| layout.is_photon(**r) || layout.is_marker(**r))
+                .map(|(_, &s)| s)
+                .collect();
+            assert_eq!(decoded.iter().map(|d| d.0).collect::<Vec<_>>(), times);
+            assert!(times.windows(2).all(|w| w[0] <= w[1]));
+            assert!(*times.last().unwrap() < pool.span);
+            let markers = pool.records.iter().filter(|&&r| layout.is_marker(r));
+            assert_eq!(
+                markers.count() as u64,
+                SCAN_FRAMES * (1 + 2 * 3),
+                "a frame marker and two per line ({layout:?})"
+            );
+            assert_eq!(pool.span, SCAN_FRAMES * pool.frame_span);
+            // Every photon lies in its pixel's dwell, on the layout's first
+            // input (PicoHarp routing channel 1).
+            let line = 4 * DWELL_SYNCS + RETRACE_SYNCS;
+            for ((&r, &s), &p) in pool.records.iter().zip(&pool.sync_at).zip(&pool.pixel_of) {
+                if layout.is_photon(r) {
+                    let (x, y) = (u64::from(p) % 4, u64::from(p) / 4);
+                    let start =
+                        s / pool.frame_span * pool.frame_span + y * line + 1 + x * DWELL_SYNCS;
+                    assert!(
+                        (start..start + DWELL_SYNCS).contains(&s),
+                        "pixel {p} at {s}"
+                    );
+                    let channel = match layout {
+                        Records::Wide => (r >> 25) & 63,
+                        Records::PicoHarp => r >> 28,
+                    };
+                    assert_eq!(channel, u32::from(layout == Records::PicoHarp));
+                }
             }
         }
     }
@@ -314,7 +411,7 @@ mod tests {
         let frames = (pool.span / pool.frame_span) as usize;
         let mut images = vec![vec![0u64; pixels]; frames];
         for ((&r, &s), &p) in pool.records.iter().zip(&pool.sync_at).zip(&pool.pixel_of) {
-            if is_photon(r) {
+            if pool.layout.is_photon(r) {
                 images[(s / pool.frame_span) as usize][p as usize] += 1;
             }
         }
@@ -328,7 +425,7 @@ mod tests {
             rate_hz: 2e7,
             ..MockConfig::default()
         };
-        let images = frame_images(&build(&still, 5.0, 12_500.0).unwrap(), 128);
+        let images = frame_images(&build(&still, 5.0, 12_500.0, Records::Wide).unwrap(), 128);
         assert_eq!(images.len() as u64, SCAN_FRAMES);
         for pair in images.windows(2) {
             assert_ne!(pair[0], pair[1], "two frames identical count for count");
@@ -346,7 +443,10 @@ mod tests {
         // A drift of 2 points a frame moves the image's centroid right
         // (the bright bar sits at a fifth of the width).
         let drifting = MockConfig { drift: 2, ..still };
-        let images = frame_images(&build(&drifting, 5.0, 12_500.0).unwrap(), 128);
+        let images = frame_images(
+            &build(&drifting, 5.0, 12_500.0, Records::Wide).unwrap(),
+            128,
+        );
         let centroid = |img: &Vec<u64>| {
             let (mut sx, mut n) = (0.0, 0.0);
             for (p, &c) in img.iter().enumerate() {

@@ -31,7 +31,8 @@ use std::sync::atomic::AtomicBool;
 pub struct AcquireArgs {
     /// mock (in-process USB), mock-serial (pseudo-terminal),
     /// serial:PATH, usb:VID:PID[:SERIAL], picoquant[:FAMILY][:SERIAL]
-    /// (FAMILY multiharp, hydraharp, timeharp260 or picoharp330, through
+    /// (FAMILY multiharp, hydraharp, timeharp260, picoharp330 or picoharp
+    /// for the PicoHarp 300, through
     /// the vendor's library), or
     /// replay:FILE (a PTU or tag file played back at its recorded pace,
     /// e.g. with --live to review a run); see `scatterscope devices`.
@@ -127,15 +128,16 @@ pub struct AcquireArgs {
 #[derive(Debug, clap::Args)]
 #[command(next_help_heading = "PicoQuant devices")]
 struct PicoQuantArgs {
-    /// The vendor library file (default: $SCATTERSCOPE_MHLIB or
-    /// $SCATTERSCOPE_HHLIB, then libmh150.so / libhh400.so and
-    /// /usr/local/lib64/{mh150,hh400}/).
+    /// The vendor library file (default: the family's variable,
+    /// $SCATTERSCOPE_MHLIB, _HHLIB, _TH260LIB, _PH330LIB or _PHLIB, then
+    /// the installer's libmh150.so, libhh400.so, libth260.so, libph330.so
+    /// or libph300.so and /usr/local/lib64/{mh150,hh400,th260,ph330,ph300}/).
     #[arg(long, value_name = "FILE")]
     vendor_lib: Option<PathBuf>,
     /// Sync divider.
     #[arg(long, value_name = "N")]
     sync_divider: Option<i32>,
-    /// Sync trigger level (edge-trigger boards) or CFD level (HydraHarp, TimeHarp 260 Pico), mV.
+    /// Sync trigger level (edge-trigger boards) or CFD level (HydraHarp, TimeHarp 260 Pico, PicoHarp 300), mV.
     #[arg(long, value_name = "MV", allow_negative_numbers = true)]
     sync_level: Option<i32>,
     /// Sync trigger edge (MultiHarp, TimeHarp 260 Nano, PicoHarp 330): rising or falling.
@@ -144,10 +146,10 @@ struct PicoQuantArgs {
     /// The scan markers' active edge, rising or falling [default: rising].
     #[arg(long, value_name = "EDGE", value_parser = parse_edge, requires = "scan")]
     marker_edge: Option<bool>,
-    /// Sync CFD zero cross (HydraHarp, TimeHarp 260 Pico), mV.
+    /// Sync CFD zero cross (HydraHarp, TimeHarp 260 Pico, PicoHarp 300), mV.
     #[arg(long, value_name = "MV")]
     sync_zero_cross: Option<i32>,
-    /// Sync channel offset (default unit ps).
+    /// Sync channel offset (default unit ps; a PicoHarp 300's sync offset).
     #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
     sync_offset: Option<f64>,
     /// Input trigger level (edge-trigger boards) or CFD level (CFD boards), mV; every input.
@@ -156,13 +158,15 @@ struct PicoQuantArgs {
     /// Input trigger edge (MultiHarp, TimeHarp 260 Nano, PicoHarp 330): rising or falling.
     #[arg(long, value_name = "EDGE", value_parser = parse_edge)]
     input_edge: Option<bool>,
-    /// Input CFD zero cross (HydraHarp, TimeHarp 260 Pico), mV.
+    /// Input CFD zero cross (HydraHarp, TimeHarp 260 Pico, PicoHarp 300), mV.
     #[arg(long, value_name = "MV")]
     input_zero_cross: Option<i32>,
-    /// Per-input offsets, comma-separated (default unit ps), e.g. 0,120ps.
+    /// Per-input offsets, comma-separated (default unit ps), e.g. 0,120ps
+    /// (none on a PicoHarp 300).
     #[arg(long, value_name = "TIMES", value_delimiter = ',', value_parser = parse_ps, allow_negative_numbers = true)]
     input_offsets: Vec<f64>,
-    /// Binning code: micro-time unit = base resolution x 2^N.
+    /// Binning code: micro-time unit = base resolution x 2^N (0 to 7 on a
+    /// PicoHarp 300).
     #[arg(long, value_name = "N")]
     binning: Option<i32>,
     /// T3 offset: a time with its unit (e.g. 10ns); the device takes whole

@@ -134,6 +134,10 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
             "sync_zero_cross_mv" => "--sync-zero-cross",
             "input_rising" => "--input-edge",
             "input_zero_cross_mv" => "--input-zero-cross",
+            "sync_divider" => "--sync-divider",
+            "input_offsets_ps" => "--input-offsets",
+            "binning" => "--binning",
+            "offset_ns" => "--offset",
             _ => return None,
         };
         return Some(format!("set it with {flag}"));

@@ -3,7 +3,11 @@
 //! Layouts (32-bit little-endian records):
 //! - PicoHarp T3: sync 16 bits, dtime 12, channel 4. Channel 15 is special:
 //!   dtime 0 is one overflow of 65536 syncs, otherwise the low 4 dtime bits
-//!   are markers.
+//!   are markers. Photon channels count from 1 (PicoQuant's routing
+//!   channels 1-4; its file demos call 0 illegal): the tag's channel is the
+//!   record's less one, as ptufile numbers them, so that input 0 is channel
+//!   0 for every family; an illegal 0 becomes channel 15, which no record
+//!   can otherwise give.
 //! - PicoHarp T2: time 28 bits, channel 4. Channel 15: low 4 bits 0 is one
 //!   overflow of 210,698,240, otherwise markers.
 //! - HydraHarp, TimeHarp 260, MultiHarp, PicoHarp 330 T3: sync 10 bits,
@@ -192,7 +196,7 @@ impl Decoder {
                     });
                 }
                 Some(Tag::Photon {
-                    channel: u16::from(channel),
+                    channel: u16::from(channel.wrapping_sub(1) & 15),
                     macro_time: self.base.saturating_add(nsync),
                     micro_time: dtime,
                 })
@@ -325,12 +329,13 @@ mod tests {
     #[test]
     fn picoharp_t3_by_hand() {
         let mut d = Decoder::new(RecordType::PicoHarpT3);
-        // channel 2, dtime 0x123, nsync 7
+        // routing channel 2 (the second input: channel 1), dtime 0x123,
+        // nsync 7
         let photon = (2 << 28) | (0x123 << 16) | 7;
         assert_eq!(
             d.decode(photon),
             Some(Tag::Photon {
-                channel: 2,
+                channel: 1,
                 macro_time: 7,
                 micro_time: 0x123
             })
@@ -339,8 +344,17 @@ mod tests {
         assert_eq!(
             d.decode(photon),
             Some(Tag::Photon {
-                channel: 2,
+                channel: 1,
                 macro_time: 65_536 + 7,
+                micro_time: 0x123
+            })
+        );
+        // The illegal routing channel 0 stays a photon, on channel 15.
+        assert_eq!(
+            d.decode(0x123 << 16),
+            Some(Tag::Photon {
+                channel: 15,
+                macro_time: 65_536,
                 micro_time: 0x123
             })
         );

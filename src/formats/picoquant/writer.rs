@@ -394,7 +394,13 @@ impl PtuWriter {
                 macro_time,
                 micro_time,
             } => {
-                let max_channel = if pico { 14 } else { 62 };
+                // PicoHarp T3 routing channels count from 1 (channel 0 is
+                // record 1); 15 is special.
+                let max_channel = match rt {
+                    RecordType::PicoHarpT3 => 13,
+                    RecordType::PicoHarpT2 => 14,
+                    _ => 62,
+                };
                 if channel > max_channel {
                     return Err(invalid(format!(
                         "channel {channel} exceeds {max_channel} for {}",
@@ -415,7 +421,7 @@ impl PtuWriter {
                 let d = self.advance_to(macro_time)? as u32;
                 let ch = u32::from(channel);
                 match rt {
-                    RecordType::PicoHarpT3 => (ch << 28) | (micro_time << 16) | d,
+                    RecordType::PicoHarpT3 => ((ch + 1) << 28) | (micro_time << 16) | d,
                     RecordType::PicoHarpT2 => (ch << 28) | d,
                     t if t.is_t3() => (ch << 25) | (micro_time << 10) | d,
                     _ => (ch << 25) | d,
