@@ -13,11 +13,16 @@
 
 use std::path::Path;
 
+use exr::block::{BlockIndex, UncompressedBlock};
+use exr::image::write::channels::{ChannelsWriter, WritableChannels};
+use exr::math::RoundingMode;
+use exr::meta::attribute::{ChannelDescription, ChannelList, LevelMode, SampleType};
+use exr::meta::header::Header;
 use exr::prelude::{
     AnyChannel, AnyChannels, AttributeValue, Compression, Encoding, FlatSamples, Image, Layer,
     LayerAttributes, ReadChannels, ReadLayers, SmallVec, Text, WritableImage,
 };
-use ndarray::{Array3, Axis};
+use ndarray::{Array3, ArrayView3, Axis};
 
 use crate::files::ReadError;
 use crate::memory::bytes_of;
@@ -70,10 +75,10 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
     };
     match &stack.exact_counts {
         // Counts above 2^24 go in 32-bit unsigned channels, exactly.
-        Some(counts) => write_channels(
-            slice_channels(counts.view(), STACK_CHANNEL_PREFIX, FlatSamples::U32),
-            counts.dim(),
+        Some(counts) => write_slices(
+            counts.view(),
             "stack",
+            STACK_CHANNEL_PREFIX,
             attributes,
             path,
         ),
@@ -87,24 +92,82 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
     }
 }
 
-/// One channel per slice of `volume` along its first axis, named `prefix`
-/// and the slice index, its samples of the type `samples` makes.
-fn slice_channels<T: Copy>(
-    volume: ndarray::ArrayView3<T>,
-    prefix: &str,
-    samples: fn(Vec<T>) -> FlatSamples,
-) -> SmallVec<[AnyChannel<FlatSamples>; 4]> {
-    let count = volume.dim().0;
-    volume
-        .axis_iter(Axis(0))
-        .enumerate()
-        .map(|(i, img)| {
-            AnyChannel::new(
-                channel_name(prefix, i, count).as_str(),
-                samples(img.iter().copied().collect()),
-            )
+/// A sample type an EXR channel holds.
+trait ChannelSample: exr::io::Data + Copy + Sync + 'static {
+    /// Its type in the file.
+    const SAMPLE_TYPE: SampleType;
+}
+
+impl ChannelSample for f32 {
+    const SAMPLE_TYPE: SampleType = SampleType::F32;
+}
+
+impl ChannelSample for u32 {
+    const SAMPLE_TYPE: SampleType = SampleType::U32;
+}
+
+/// The slices of a volume along its first axis as EXR channels, named
+/// `prefix` and the slice index, each line read from the volume when the
+/// encoder asks for its block. The exr crate's own `AnyChannels` wants
+/// every channel's samples in a `Vec` of its own: a copy of the whole
+/// volume (64 MB for a 256 x 256 x 256 stack), whose fresh pages the
+/// kernel zeroes, which was most of `bin`'s time on a large `.sdt` file on
+/// our 2-core machine (BENCHMARKS.md); these bytes are the same.
+struct SliceChannels<'a, T> {
+    volume: ArrayView3<'a, T>,
+    prefix: &'a str,
+}
+
+impl<'s, T: ChannelSample> WritableChannels<'s> for SliceChannels<'_, T> {
+    fn infer_channel_list(&self) -> ChannelList {
+        let count = self.volume.dim().0;
+        // Names sort in slice order ([`channel_name`]), so the file's
+        // sorted channel `k` is slice `k`.
+        ChannelList::new(
+            (0..count)
+                .map(|k| {
+                    ChannelDescription::named(
+                        channel_name(self.prefix, k, count).as_str(),
+                        T::SAMPLE_TYPE,
+                    )
+                })
+                .collect(),
+        )
+    }
+
+    fn infer_level_modes(&self) -> (LevelMode, RoundingMode) {
+        (LevelMode::Singular, RoundingMode::Down)
+    }
+
+    type Writer = SliceWriter<'s, T>;
+
+    fn create_writer(&'s self, _header: &Header) -> Self::Writer {
+        SliceWriter {
+            volume: self.volume.view(),
+        }
+    }
+}
+
+/// Lines of a volume's slices for the encoder.
+struct SliceWriter<'a, T> {
+    volume: ArrayView3<'a, T>,
+}
+
+impl<T: ChannelSample> ChannelsWriter for SliceWriter<'_, T> {
+    fn extract_uncompressed_block(&self, header: &Header, block: BlockIndex) -> Vec<u8> {
+        UncompressedBlock::collect_block_data_from_lines(&header.channels, block, |line| {
+            let at = line.location;
+            let (x, y) = (at.position.x(), at.position.y());
+            let row = self
+                .volume
+                .slice(ndarray::s![at.channel, y, x..x + at.sample_count]);
+            let written = match row.as_slice() {
+                Some(samples) => line.write_samples_from_slice(samples),
+                None => line.write_samples(|i| row[i]),
+            };
+            written.expect("a line's bytes hold its samples");
         })
-        .collect()
+    }
 }
 
 /// Writes a volume as one layer named `layer` with one `f32` channel per
@@ -141,48 +204,47 @@ pub fn write_volume(
 /// axis, named `prefix` and the slice index, with the attributes
 /// `attributes` makes once the volume is known not to be empty (`what`
 /// names it then).
-fn write_slices(
-    volume: ndarray::ArrayView3<f32>,
+fn write_slices<T: ChannelSample>(
+    volume: ArrayView3<T>,
     what: &str,
     prefix: &str,
     attributes: impl FnOnce() -> Result<LayerAttributes, StackError>,
     path: &Path,
 ) -> Result<(), StackError> {
-    let channels = slice_channels(volume, prefix, FlatSamples::F32);
-    write_channels(channels, volume.dim(), what, attributes, path)
-}
-
-/// One layer of `channels` (the slices of a `dim` volume) with the
-/// attributes `attributes` makes once the volume is known not to be empty.
-fn write_channels(
-    channels: SmallVec<[AnyChannel<FlatSamples>; 4]>,
-    (k, h, w): (usize, usize, usize),
-    what: &str,
-    attributes: impl FnOnce() -> Result<LayerAttributes, StackError>,
-    path: &Path,
-) -> Result<(), StackError> {
+    let (k, h, w) = volume.dim();
     if k == 0 || h == 0 || w == 0 {
         return Err(StackError::format(
             path,
             format!("cannot write an empty {k} x {h} x {w} {what}"),
         ));
     }
-    // PIZ (wavelet and Huffman, lossless for every sample type): on a
-    // 125 x 256 x 256 FLIM stack it wrote in 137 ms to 1.15 MB where
-    // ZIP16 took 207 ms for 1.53 MB, and on the demo's 30 x 256 x 256
-    // stack 30 ms to 0.70 MB against 87 ms for 1.00 MB; it reads back 20
-    // to 25 ms slower, once per reconstruction (BENCHMARKS.md).
-    let encoding = Encoding {
+    let layer = Layer::new(
+        (w, h),
+        attributes()?,
+        volume_encoding(),
+        SliceChannels { volume, prefix },
+    );
+    write_layer(layer, path)
+}
+
+/// How volumes are stored: PIZ (wavelet and Huffman, lossless for every
+/// sample type): on a 125 x 256 x 256 FLIM stack it wrote in 137 ms to
+/// 1.15 MB where ZIP16 took 207 ms for 1.53 MB, and on the demo's 30 x
+/// 256 x 256 stack 30 ms to 0.70 MB against 87 ms for 1.00 MB; it reads
+/// back 20 to 25 ms slower, once per reconstruction (BENCHMARKS.md).
+fn volume_encoding() -> Encoding {
+    Encoding {
         compression: Compression::PIZ,
         ..Encoding::SMALL_LOSSLESS
-    };
-    let layer = Layer::new((w, h), attributes()?, encoding, AnyChannels::sort(channels));
-    write_layer(layer, path)
+    }
 }
 
 /// Encodes one layer and writes it to `path`, header attributes in name
 /// order.
-fn write_layer(layer: Layer<AnyChannels<FlatSamples>>, path: &Path) -> Result<(), StackError> {
+fn write_layer<C>(layer: Layer<C>, path: &Path) -> Result<(), StackError>
+where
+    C: for<'s> WritableChannels<'s>,
+{
     let mut bytes = Vec::new();
     Image::from_layer(layer)
         .write()
@@ -408,4 +470,76 @@ pub fn write_image(img: ndarray::ArrayView2<f32>, path: &Path) -> Result<(), Sta
         AnyChannels::sort(SmallVec::from_vec(vec![channel])),
     );
     write_layer(layer, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The file the exr crate's own channels (each slice copied into a
+    /// `Vec`) make of `volume`.
+    fn written_by_any_channels<T: ChannelSample>(
+        volume: ArrayView3<T>,
+        samples: fn(Vec<T>) -> FlatSamples,
+        path: &Path,
+    ) -> Vec<u8> {
+        let count = volume.dim().0;
+        let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = volume
+            .axis_iter(Axis(0))
+            .enumerate()
+            .map(|(k, slice)| {
+                AnyChannel::new(
+                    channel_name("t", k, count).as_str(),
+                    samples(slice.iter().copied().collect()),
+                )
+            })
+            .collect();
+        let (_, h, w) = volume.dim();
+        let layer = Layer::new(
+            (w, h),
+            LayerAttributes::named("stack"),
+            volume_encoding(),
+            AnyChannels::sort(channels),
+        );
+        write_layer(layer, path).unwrap();
+        std::fs::read(path).unwrap()
+    }
+
+    /// Lines read from the volume as the encoder asks give the same bytes
+    /// as the crate's channels of copied slices: f32 and u32 samples, a
+    /// size that is no multiple of PIZ's 32-line blocks, a volume not in
+    /// standard layout, and more than 1000 slices (names of 4 digits).
+    #[test]
+    fn slices_read_in_place_write_the_bytes_the_crates_channels_write() {
+        let dir = tempfile::tempdir().unwrap();
+        let f32s = Array3::from_shape_fn((5, 37, 9), |(k, y, x)| (k * 1000 + y * 10 + x) as f32);
+        let u32s = Array3::from_shape_fn((3, 40, 33), |(k, y, x)| (k << 30 | y << 8 | x) as u32);
+        let many = Array3::from_shape_fn((1001, 2, 3), |(k, y, x)| (k + y + x) as f32);
+        let transposed = f32s.view().permuted_axes([0, 2, 1]);
+        let ours = |path: &Path, write: &dyn Fn(&Path)| {
+            write(path);
+            std::fs::read(path).unwrap()
+        };
+        let attributes = || Ok(LayerAttributes::named("stack"));
+        for (i, volume) in [f32s.view(), many.view(), transposed]
+            .into_iter()
+            .enumerate()
+        {
+            let mine = ours(&dir.path().join(format!("f{i}.exr")), &|p| {
+                write_slices(volume, "stack", "t", attributes, p).unwrap()
+            });
+            let theirs = written_by_any_channels(
+                volume,
+                FlatSamples::F32,
+                &dir.path().join(format!("g{i}.exr")),
+            );
+            assert_eq!(mine, theirs, "f32 volume {i}");
+        }
+        let mine = ours(&dir.path().join("u.exr"), &|p| {
+            write_slices(u32s.view(), "stack", "t", attributes, p).unwrap()
+        });
+        let theirs =
+            written_by_any_channels(u32s.view(), FlatSamples::U32, &dir.path().join("v.exr"));
+        assert_eq!(mine, theirs, "u32 volume");
+    }
 }

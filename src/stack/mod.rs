@@ -105,10 +105,14 @@ pub const F32_EXACT_COUNT: u32 = 1 << 24;
 /// A copy of `counts` when some exceed 2^24, where `f32` rounds them;
 /// `None` when `f32` holds them all.
 pub fn exact_copy(counts: ArrayView3<u32>) -> Option<Array3<u32>> {
-    counts
-        .iter()
-        .any(|&c| c > F32_EXACT_COUNT)
-        .then(|| counts.to_owned())
+    // The largest count by a flat fold where the counts are one slice (the
+    // compiler vectorises it; `any` over the array's iterator took 10-15
+    // ms of a 256 x 256 x 256 stack's `bin`).
+    let largest = match counts.as_slice_memory_order() {
+        Some(flat) => flat.iter().fold(0, |a, &c| a.max(c)),
+        None => counts.iter().fold(0, |a, &c| a.max(c)),
+    };
+    (largest > F32_EXACT_COUNT).then(|| counts.to_owned())
 }
 
 /// Counts as `f32` values, with their [`exact_copy`].

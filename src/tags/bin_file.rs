@@ -1028,7 +1028,10 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFil
         let (_, h, w) = b.counts.dim();
         if offset == 0 && width == 1 && bins == points && spec.pixels != Pixels::Single {
             // The default window is the block itself: moved, not copied.
-            let sum: u64 = b.counts.iter().map(|&c| u64::from(c)).sum();
+            let sum: u64 = match b.counts.as_slice_memory_order() {
+                Some(flat) => flat.iter().map(|&c| u64::from(c)).sum(),
+                None => b.counts.iter().map(|&c| u64::from(c)).sum(),
+            };
             accounting.records += b.counts.len() as u64;
             accounting.received += sum;
             accounting.binned += sum;

@@ -247,34 +247,70 @@ impl Measurement {
     }
 }
 
+/// The file being read, each read checked against its size.
+struct Source<'p> {
+    file: std::fs::File,
+    size: u64,
+    path: &'p Path,
+}
+
+impl Source<'_> {
+    /// The file positioned at `offset`, where `len` bytes (`what`) must lie
+    /// within it.
+    fn seek_to(
+        &mut self,
+        offset: u64,
+        len: usize,
+        what: &str,
+    ) -> Result<&mut std::fs::File, SdtError> {
+        if offset.saturating_add(len as u64) > self.size {
+            return Err(SdtError::Field {
+                path: self.path.to_owned(),
+                field: what.into(),
+                reason: format!(
+                    "{len} bytes at byte {offset} reach past the file's end ({} bytes): the file is cut",
+                    self.size
+                ),
+            });
+        }
+        self.file
+            .seek(SeekFrom::Start(offset))
+            .map_err(|source| SdtError::Io {
+                path: self.path.to_owned(),
+                source,
+            })?;
+        Ok(&mut self.file)
+    }
+
+    /// The `len` bytes (`what`) at `offset`.
+    fn read_at(&mut self, offset: u64, len: usize, what: &str) -> Result<Vec<u8>, SdtError> {
+        let mut buf = vec![0; len];
+        let path = self.path;
+        self.seek_to(offset, len, what)?
+            .read_exact(&mut buf)
+            .map_err(|source| SdtError::Io {
+                path: path.to_owned(),
+                source,
+            })?;
+        Ok(buf)
+    }
+}
+
 /// Reads every decay-curve block of the `.sdt` file at `path`.
 pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
     let io = |source| SdtError::Io {
         path: path.to_owned(),
         source,
     };
-    let (mut file, meta) = crate::files::open_regular(path, "histogram file").map_err(io)?;
+    let (file, meta) = crate::files::open_regular(path, "histogram file").map_err(io)?;
     let size = meta.len();
     let field = |field: &str, reason: String| SdtError::Field {
         path: path.to_owned(),
         field: field.into(),
         reason,
     };
-    let mut read_at = |offset: u64, len: usize, what: &str| -> Result<Vec<u8>, SdtError> {
-        if offset.saturating_add(len as u64) > size {
-            return Err(field(
-                what,
-                format!(
-                    "{len} bytes at byte {offset} reach past the file's end ({size} bytes): the file is cut"
-                ),
-            ));
-        }
-        let mut buf = vec![0; len];
-        file.seek(SeekFrom::Start(offset)).map_err(io)?;
-        file.read_exact(&mut buf).map_err(io)?;
-        Ok(buf)
-    };
-    let head = read_at(0, HEADER_BYTES, "bhfile_header")?;
+    let mut source = Source { file, size, path };
+    let head = source.read_at(0, HEADER_BYTES, "bhfile_header")?;
     let h = Fields {
         path,
         what: "bhfile_header".into(),
@@ -296,7 +332,7 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
     };
     let info_offs = offset(h.i32(2, "info_offs")?, "info_offs")?;
     let info_len = h.i16(6, "info_length")?.max(0) as usize;
-    let info = read_at(info_offs, info_len, "info")?;
+    let info = source.read_at(info_offs, info_len, "info")?;
     let info = String::from_utf8_lossy(&info);
     let id = info
         .lines()
@@ -336,7 +372,7 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
     let meas_len = h.i16(30, "meas_desc_block_length")?.max(0) as usize;
     let mut measurements = Vec::with_capacity(meas_n);
     for i in 0..meas_n {
-        let bytes = read_at(
+        let bytes = source.read_at(
             meas_offs + (i * meas_len) as u64,
             meas_len,
             &format!("measurement description block {i}"),
@@ -353,7 +389,7 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
     let mut left_out = Vec::new();
     for index in 0..blocks_n as usize {
         let what = format!("data block {index}");
-        let bh = read_at(next, BLOCK_HEADER_BYTES, &format!("{what} header"))?;
+        let bh = source.read_at(next, BLOCK_HEADER_BYTES, &format!("{what} header"))?;
         let b = Fields {
             path,
             what: format!("{what} header"),
@@ -442,7 +478,7 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
                 )
             },
         )?;
-        let data = if zipped {
+        let points = if zipped {
             let end = if next_offs > data_offs {
                 next_offs
             } else {
@@ -450,12 +486,31 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
             };
             // Offsets from the file: one past its end reads nothing and
             // fails in `read_at`, naming the block.
-            let packed = read_at(data_offs, end.saturating_sub(data_offs) as usize, &what)?;
-            unzip_first(&packed, length).map_err(|reason| field(&what, reason))?
+            let packed =
+                source.read_at(data_offs, end.saturating_sub(data_offs) as usize, &what)?;
+            let data = unzip_first(&packed, length).map_err(|reason| field(&what, reason))?;
+            if data.len() != length {
+                return Err(field(
+                    &what,
+                    format!(
+                        "its zip member decompresses to {} bytes, the block header says {length}",
+                        data.len()
+                    ),
+                ));
+            }
+            let mut rest = &data[..];
+            decode_points(item, m.adc_re, curves, |buf| rest.read_exact(buf))
         } else {
-            read_at(data_offs, length, &what)?
-        };
-        let points = decode_points(&data, item, m.adc_re).map_err(|reason| field(&what, reason))?;
+            // Straight from the file, a few curves at a time: no copy of
+            // the block (32 MB for a 256 x 256 x 256 u16 image) whose
+            // fresh pages the kernel would zero.
+            let file = source.seek_to(data_offs, length, &what)?;
+            decode_points(item, m.adc_re, curves, |buf| file.read_exact(buf))
+        }
+        .map_err(|e| match e {
+            PointsError::Value(reason) => field(&what, reason),
+            PointsError::Read(e) => io(e),
+        })?;
         let counts = Array3::from_shape_vec((m.adc_re, rows, cols), points)
             .expect("whole curves of the layout's size");
         let tac_g = if m.tac_g == 0 {
@@ -517,44 +572,81 @@ fn unzip_first(packed: &[u8], length: usize) -> Result<Vec<u8>, String> {
     Ok(out)
 }
 
-/// Counts in (point, curve) order from curves of `points` little-endian
-/// values of `item` bytes (u16, u32, f64) stored curve after curve; an
-/// `f64` must be a whole count of at most `u32::MAX`.
-fn decode_points(data: &[u8], item: usize, points: usize) -> Result<Vec<u32>, String> {
-    let curves = data.len() / (item * points);
-    let value = |i: usize| -> Result<u32, String> {
-        let b = &data[i * item..(i + 1) * item];
-        Ok(match item {
-            2 => u32::from(u16::from_le_bytes([b[0], b[1]])),
-            4 => u32::from_le_bytes(b.try_into().expect("4 bytes")),
-            _ => {
-                let v = f64::from_le_bytes(b.try_into().expect("8 bytes"));
-                if !(v.is_finite() && v >= 0.0 && v.fract() == 0.0 && v <= f64::from(u32::MAX)) {
-                    return Err(format!(
-                        "value {i} is {v}: a histogram point must be a whole count from 0 to 2^32 - 1"
-                    ));
-                }
-                v as u32
-            }
-        })
-    };
-    // A transpose in tiles of 64 curves x 64 points, each tile's reads and
-    // writes within a few cache lines: `info` of a 256 x 256 x 256 u16
-    // block took 0.19 s with ndarray's transposing copy (a point-major
-    // walk over the whole file), 0.11-0.13 s so (BENCHMARKS.md).
-    const TILE: usize = 64;
+/// Why a block's points could not be decoded.
+enum PointsError {
+    /// A value that is no count.
+    Value(String),
+    /// The bytes could not be read.
+    Read(std::io::Error),
+}
+
+/// Counts in (point, curve) order from `curves` curves of `points`
+/// little-endian values of `item` bytes (u16, u32, f64) stored curve after
+/// curve, which `fill` delivers in order, a few curves to a call (it fills
+/// the buffer it is given); an `f64` must be a whole count of at most
+/// `u32::MAX`.
+fn decode_points(
+    item: usize,
+    points: usize,
+    curves: usize,
+    fill: impl FnMut(&mut [u8]) -> std::io::Result<()>,
+) -> Result<Vec<u32>, PointsError> {
+    match item {
+        2 => transpose::<2>(points, curves, fill),
+        4 => transpose::<4>(points, curves, fill),
+        _ => transpose::<8>(points, curves, fill),
+    }
+}
+
+/// [`decode_points`] for values of `ITEM` bytes: the curves read
+/// [`CURVES_PER_READ`] at a time (a buffer that stays in cache), each
+/// point's values of those curves written side by side. One loop per
+/// value width, so that the width is no branch in the inner loop: `info`
+/// of a 256 x 256 x 256 u16 block took 0.19 s with ndarray's transposing
+/// copy (a point-major walk over the whole file), 0.11-0.13 s with a
+/// width-generic tiled loop, and 0.0 s so (BENCHMARKS.md).
+fn transpose<const ITEM: usize>(
+    points: usize,
+    curves: usize,
+    mut fill: impl FnMut(&mut [u8]) -> std::io::Result<()>,
+) -> Result<Vec<u32>, PointsError> {
     let mut out = vec![0u32; curves * points];
-    for c0 in (0..curves).step_by(TILE) {
-        for k0 in (0..points).step_by(TILE) {
-            for c in c0..(c0 + TILE).min(curves) {
-                for k in k0..(k0 + TILE).min(points) {
-                    out[k * curves + c] = value(c * points + k)?;
-                }
+    let mut data = vec![0u8; CURVES_PER_READ * points * ITEM];
+    for c0 in (0..curves).step_by(CURVES_PER_READ) {
+        let n = CURVES_PER_READ.min(curves - c0);
+        let data = &mut data[..n * points * ITEM];
+        fill(data).map_err(PointsError::Read)?;
+        for k in 0..points {
+            let row = &mut out[k * curves + c0..k * curves + c0 + n];
+            for (c, slot) in row.iter_mut().enumerate() {
+                let at = (c * points + k) * ITEM;
+                let b: [u8; ITEM] = data[at..at + ITEM].try_into().expect("ITEM bytes");
+                *slot = match ITEM {
+                    2 => u32::from(u16::from_le_bytes([b[0], b[1]])),
+                    4 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+                    _ => {
+                        let v = f64::from_le_bytes(b[..8].try_into().expect("8 bytes"));
+                        if !(v.is_finite()
+                            && v >= 0.0
+                            && v.fract() == 0.0
+                            && v <= f64::from(u32::MAX))
+                        {
+                            return Err(PointsError::Value(format!(
+                                "value {} is {v}: a histogram point must be a whole count from 0 to 2^32 - 1",
+                                (c0 + c) * points + k
+                            )));
+                        }
+                        v as u32
+                    }
+                };
             }
         }
     }
     Ok(out)
 }
+
+/// Curves [`transpose`] reads at a time.
+const CURVES_PER_READ: usize = 128;
 
 /// The module of a file header's `revision` bits 4-11, per the header's
 /// list (hex code when unlisted).
