@@ -604,7 +604,7 @@ fn decode_points(
 /// value width, so that the width is no branch in the inner loop: `info`
 /// of a 256 x 256 x 256 u16 block took 0.19 s with ndarray's transposing
 /// copy (a point-major walk over the whole file), 0.11-0.13 s with a
-/// width-generic tiled loop, and 0.0 s so (BENCHMARKS.md).
+/// width-generic tiled loop, and 0.04 s so (BENCHMARKS.md).
 fn transpose<const ITEM: usize>(
     points: usize,
     curves: usize,
