@@ -4,8 +4,9 @@
 //! modules that cannot be read, tested or moved apart; data flows one way
 //! (source -> tags -> stack -> reconstruction -> report).
 //!
-//! The graph is read from the source text: every `crate::a::b` path and
-//! every `super::b`, outside comments and `#[cfg(test)]` modules.
+//! The graph is read from the source text: every path from `crate::`,
+//! `self::` or `super::` (`super::super::` too, and `{...}` groups
+//! expanded), outside comments and `#[cfg(test)]` modules.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -38,31 +39,85 @@ fn module_of(src: &Path, file: &Path) -> Vec<String> {
     parts
 }
 
-/// The identifiers that follow each `prefix` in `code` (`crate::a::b`
-/// gives `[a, b]`).
-fn paths_after(code: &str, prefix: &str) -> Vec<Vec<String>> {
-    code.match_indices(prefix)
-        .filter(|(at, _)| {
-            // A whole word: not the tail of another identifier.
-            !code[..*at]
-                .chars()
-                .next_back()
-                .is_some_and(|c| c.is_alphanumeric() || c == '_')
-        })
-        .map(|(at, _)| {
-            code[at + prefix.len()..]
-                .split("::")
-                .map(|seg| {
-                    seg.chars()
-                        .take_while(|c| c.is_alphanumeric() || *c == '_')
-                        .collect::<String>()
-                })
-                .take_while(|seg| seg.chars().next().is_some_and(|c| c.is_ascii_lowercase()))
-                .take(2)
-                .collect()
-        })
-        .filter(|p: &Vec<String>| !p.is_empty())
-        .collect()
+/// The paths `code` (of module `me`) names from the crate: every path
+/// that starts with `crate::`, `self::` or `super::` (any number of them,
+/// each one level up from `me`), resolved to a path from the crate root,
+/// with `{...}` groups expanded item by item. A path is the run of
+/// lower-case segments (modules, and functions, whose module the cut to a
+/// depth keeps); a type or `self` ends it.
+fn paths_from_crate(code: &str, me: &[String]) -> Vec<Vec<String>> {
+    let mut out = Vec::new();
+    for prefix in ["crate::", "self::", "super::"] {
+        for (at, _) in code.match_indices(prefix) {
+            // A path's first segment: not the tail of an identifier, and not
+            // the second `super` of `super::super::`.
+            let before = code[..at].trim_end();
+            if before.ends_with("::")
+                || code[..at]
+                    .chars()
+                    .next_back()
+                    .is_some_and(|c| c.is_alphanumeric() || c == '_')
+            {
+                continue;
+            }
+            let mut base: Vec<String> = match prefix {
+                "crate::" => Vec::new(),
+                "self::" => me.to_vec(),
+                _ => me[..me.len().saturating_sub(1)].to_vec(),
+            };
+            let mut rest = &code[at + prefix.len()..];
+            while let Some(r) = rest.trim_start().strip_prefix("super::") {
+                base.pop();
+                rest = r;
+            }
+            expand(rest, base, &mut out);
+        }
+    }
+    out.retain(|p| !p.is_empty());
+    out
+}
+
+/// The paths `rest` (what follows `base::`) names: a `{...}` group's
+/// items, each in turn, or one run of lower-case segments.
+fn expand(rest: &str, base: Vec<String>, out: &mut Vec<Vec<String>>) {
+    let rest = rest.trim_start();
+    if let Some(group) = rest.strip_prefix('{') {
+        let (mut depth, mut start) = (0usize, 0usize);
+        for (i, c) in group.char_indices() {
+            match c {
+                '{' => depth += 1,
+                '}' if depth > 0 => depth -= 1,
+                '}' | ',' if depth == 0 => {
+                    expand(&group[start..i], base.clone(), out);
+                    if c == '}' {
+                        return;
+                    }
+                    start = i + 1;
+                }
+                _ => {}
+            }
+        }
+        return;
+    }
+    let mut path = base;
+    let mut s = rest;
+    loop {
+        let ident: String = s
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect();
+        if ident == "self" || !ident.starts_with(|c: char| c.is_ascii_lowercase()) {
+            break;
+        }
+        s = &s[ident.len()..];
+        path.push(ident);
+        match s.strip_prefix("::") {
+            Some(r) if r.trim_start().starts_with('{') => return expand(r, path, out),
+            Some(r) => s = r,
+            None => break,
+        }
+    }
+    out.push(path);
 }
 
 /// Module -> the modules it imports, each cut to `depth` levels.
@@ -86,13 +141,7 @@ fn import_graph(depth: usize) -> BTreeMap<String, BTreeSet<String>> {
             .join("\n");
         let me = cut(&module);
         // `super::` in `a/b.rs` and in `a/b/mod.rs` both name `a`'s items.
-        let parent = &module[..module.len() - 1];
-        let mut targets: Vec<Vec<String>> = paths_after(&code, "crate::");
-        targets.extend(
-            paths_after(&code, "super::")
-                .into_iter()
-                .map(|p| parent.iter().cloned().chain(p).collect()),
-        );
+        let targets = paths_from_crate(&code, &module);
         let entry = graph.entry(me.clone()).or_default();
         for target in targets.iter().filter(|t| !t.is_empty()) {
             let to = cut(target);
@@ -142,7 +191,7 @@ fn no_second_level_module_of_the_library_imports_itself_back() {
 }
 
 #[test]
-fn the_circle_finder_finds_a_circle_and_reads_both_kinds_of_path() {
+fn the_circle_finder_finds_a_circle_and_reads_every_kind_of_path() {
     let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     graph.entry("a".into()).or_default().insert("b".into());
     graph.entry("b".into()).or_default().insert("c".into());
@@ -153,12 +202,35 @@ fn the_circle_finder_finds_a_circle_and_reads_both_kinds_of_path() {
         3,
         "each of a, b and c reaches itself"
     );
+    let me: Vec<String> = ["acquire", "mock", "emulated"].map(String::from).to_vec();
+    let paths = |code: &str| -> Vec<String> {
+        let mut p: Vec<String> = paths_from_crate(code, &me)
+            .into_iter()
+            .map(|p| p.join("::"))
+            .collect();
+        p.sort();
+        p
+    };
+    assert_eq!(paths("use crate::stack::{Stack}; x_crate::no"), ["stack"]);
     assert_eq!(
-        paths_after("use crate::stack::{Stack}; x_crate::no", "crate::"),
-        vec![vec!["stack".to_string()]]
+        paths("super::method::MethodOptions"),
+        ["acquire::mock::method"]
+    );
+    // Each `super` one level up; `self` is the module itself; groups are
+    // expanded, nested ones too.
+    assert_eq!(
+        paths("use super::super::device::OpenError;"),
+        ["acquire::device"]
     );
     assert_eq!(
-        paths_after("super::method::MethodOptions", "super::"),
-        vec![vec!["method".to_string()]]
+        paths("use self::conv::{a, B};"),
+        [
+            "acquire::mock::emulated::conv",
+            "acquire::mock::emulated::conv::a"
+        ]
+    );
+    assert_eq!(
+        paths("use crate::{files::write_atomic, physics::{kernel, Setup}, Thing};"),
+        ["files::write_atomic", "physics", "physics::kernel"]
     );
 }

@@ -5,7 +5,6 @@
 
 use std::str::FromStr;
 
-use scatterscope_drivers::LinkError;
 pub use scatterscope_drivers::discovery::DeviceEntry;
 use scatterscope_drivers::discovery::{serial_ports, usb_devices};
 use scatterscope_drivers::usb::UsbSelector;
@@ -13,6 +12,7 @@ use scatterscope_drivers::usb::UsbSelector;
 use ndarray::Array2;
 
 use super::mock::MockSpec;
+use super::open_error::OpenError;
 use super::picoquant::{PicoQuantDevice, PicoQuantSource};
 use super::source::Source;
 use crate::physics::Setup;
@@ -190,45 +190,6 @@ pub struct OpenedDevice {
     pub source: Box<dyn Source>,
     /// For a mock, its scene as the sensor sees it (the truth).
     pub truth: Option<Array2<f64>>,
-}
-
-/// Why a device cannot be opened.
-#[derive(Debug, thiserror::Error)]
-pub enum OpenError {
-    /// Transport failure.
-    #[error(transparent)]
-    Link(#[from] LinkError),
-    /// The vendor's library or its device.
-    #[error(transparent)]
-    Vendor(#[from] scatterscope_drivers::picoquant::VendorError),
-    /// The mock's scene or physics is unusable.
-    #[error("the mock's scene or physics: {0}")]
-    Mock(String),
-    /// A device that cannot be opened as asked.
-    #[error("{0}")]
-    Usage(String),
-    /// A recording that cannot be played back as asked.
-    #[error(transparent)]
-    Replay(super::source::SourceError),
-    /// A setting the device's family cannot take, refused before it is
-    /// opened.
-    #[error(transparent)]
-    Setting(super::source::SourceError),
-    /// The sensor exceeds what the wire protocol addresses.
-    #[error(
-        "the sensor is {width} x {height} pixels; the protocol addresses at most {max} pixels (256 x 256)"
-    )]
-    SensorTooLarge {
-        /// Columns.
-        width: usize,
-        /// Rows.
-        height: usize,
-        /// The protocol's limit.
-        max: usize,
-    },
-    /// The pseudo-terminal could not be created.
-    #[error("creating the mock's pseudo-terminal: {0}")]
-    Pty(std::io::Error),
 }
 
 /// Opens `spec` as an acquisition source; a mock is built from `setup`

@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use super::calibration::t0_from_reference;
-use super::device::{DeviceSpec, OpenError, open_device};
+use super::device::{DeviceSpec, open_device};
+use super::open_error::OpenError;
 use super::pipeline::{AcquireError, Outcome, Plan, Progress, Snapshot, run_watched};
 use super::source::{SourceReport, StopReason};
 use crate::files::{FilePlan, PlanError};

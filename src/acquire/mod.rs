@@ -5,6 +5,7 @@
 //! and the binner into a K x H x W stack, and accounts for every photon.
 //!
 //! - [`device`]: what `--device` names, and opening it as a source.
+//! - [`open_error`]: why a device cannot be opened.
 //! - [`source`]: the source interface, and what a source says about itself.
 //! - [`link`]: our own devices on the wire protocol.
 //! - [`picoquant`]: PicoQuant devices through the vendor's library.
@@ -24,6 +25,7 @@ pub mod job;
 pub mod ledger;
 pub mod link;
 pub mod mock;
+pub mod open_error;
 pub mod picoquant;
 pub mod pipeline;
 pub mod record;

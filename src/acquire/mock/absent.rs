@@ -2,7 +2,7 @@
 
 use ndarray::Array2;
 
-use super::super::device::OpenError;
+use super::super::open_error::OpenError;
 use super::super::source::Source;
 use crate::physics::Setup;
 

@@ -8,9 +8,9 @@ use scatterscope_drivers::Link;
 use scatterscope_mocks::{Emitter, MockDevice};
 pub use scatterscope_mocks::{EmitterOptions, MockHandle, MockOptions, Truth};
 
-use super::super::device::OpenError;
 use super::super::ledger::Ledger;
 use super::super::link::LinkSource;
+use super::super::open_error::OpenError;
 use super::super::source::{
     Delivery, Source, SourceEnd, SourceError, SourceFacts, SourceReport, StartRequest, StopReason,
 };

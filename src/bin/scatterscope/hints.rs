@@ -5,8 +5,8 @@
 use std::error::Error;
 
 use scatterscope::acquire::JobError;
-use scatterscope::acquire::device::OpenError;
 use scatterscope::acquire::job::{PTU_ROLE, TAGS_ROLE};
+use scatterscope::acquire::open_error::OpenError;
 use scatterscope::acquire::pipeline::AcquireError;
 use scatterscope::acquire::source::SourceError;
 use scatterscope::calibrate::histogram::HistogramError;
