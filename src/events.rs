@@ -35,6 +35,28 @@ pub enum Tag {
     },
 }
 
+impl Tag {
+    /// A wire event of our devices as a tag: a photon (its sensor pixel
+    /// as the channel) or a marker; `None` for a loss, which the ledger
+    /// counts and no tag carries. The one conversion from the wire to
+    /// tags, for the acquisition's PTU recording, `convert` and the tag
+    /// table.
+    pub fn from_wire(event: firmware_protocol::Event) -> Option<Tag> {
+        match event {
+            firmware_protocol::Event::Photon { pixel, micro, sync } => Some(Tag::Photon {
+                channel: pixel,
+                macro_time: sync,
+                micro_time: micro,
+            }),
+            firmware_protocol::Event::Marker { bits, sync } => Some(Tag::Marker {
+                bits,
+                macro_time: sync,
+            }),
+            firmware_protocol::Event::Lost { .. } => None,
+        }
+    }
+}
+
 /// Scanned-image (FLIM) description from `ImgHdr_*` tags.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Imaging {

@@ -13,7 +13,6 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use firmware_protocol::Event;
 use ndarray::Array3;
 
 use super::ledger::{Ledger, Recording};
@@ -466,18 +465,9 @@ impl PtuRecording {
             return;
         };
         for event in batch.events() {
-            let tag = match event {
-                Ok(Event::Photon { pixel, micro, sync }) => Tag::Photon {
-                    channel: pixel,
-                    macro_time: sync,
-                    micro_time: micro,
-                },
-                Ok(Event::Marker { bits, sync }) => Tag::Marker {
-                    bits,
-                    macro_time: sync,
-                },
-                // Losses are in the ledger; undecodable records too.
-                Ok(Event::Lost { .. }) | Err(_) => continue,
+            // Losses are in the ledger; undecodable records too.
+            let Some(tag) = event.ok().and_then(Tag::from_wire) else {
+                continue;
             };
             if let Err(e) = w.write_tag(tag) {
                 let e = std::io::Error::new(e.kind(), format!("batch {}: {e}", batch.header.seq));

@@ -381,35 +381,30 @@ fn from_tag_file(
         }
         for event in batch.events() {
             c.records_in += 1;
-            let tag = match event {
-                Ok(Event::Photon { pixel, micro, sync }) => {
-                    if micro > 0x7FFF {
-                        failure = Some(unsupported(format!(
-                            "micro time {micro} of batch {} exceeds the 15 bits of a T3 record",
-                            batch.header.seq
-                        )));
-                        return;
-                    }
-                    Tag::Photon {
-                        channel: pixel,
-                        macro_time: sync,
-                        micro_time: micro,
-                    }
-                }
-                Ok(Event::Marker { bits, sync }) => Tag::Marker {
-                    bits,
-                    macro_time: sync,
-                },
-                Ok(Event::Lost { count }) => {
-                    c.lost_in_device += count;
-                    continue;
-                }
+            let event = match event {
+                Ok(event) => event,
                 Err(e) => {
                     failure = Some(unsupported(format!(
                         "record {:#018x} of batch {} does not decode",
                         e.raw, batch.header.seq
                     )));
                     return;
+                }
+            };
+            let tag = match Tag::from_wire(event) {
+                Some(Tag::Photon { micro_time, .. }) if micro_time > 0x7FFF => {
+                    failure = Some(unsupported(format!(
+                        "micro time {micro_time} of batch {} exceeds the 15 bits of a T3 record",
+                        batch.header.seq
+                    )));
+                    return;
+                }
+                Some(tag) => tag,
+                None => {
+                    if let Event::Lost { count } = event {
+                        c.lost_in_device += count;
+                    }
+                    continue;
                 }
             };
             count(&mut c, &tag);

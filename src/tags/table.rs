@@ -6,8 +6,6 @@
 
 use std::path::Path;
 
-use firmware_protocol::Event;
-
 use crate::events::Tag;
 use crate::formats::detect::is_tag_file;
 use crate::formats::picoquant::records::Decoder;
@@ -102,16 +100,11 @@ pub fn read_tags(path: &Path) -> Result<TagTable, TableError> {
         file.read(|batch| {
             for e in batch.events() {
                 match e {
-                    Ok(Event::Photon { pixel, micro, sync }) => table.push(Tag::Photon {
-                        channel: pixel,
-                        macro_time: sync,
-                        micro_time: micro,
-                    }),
-                    Ok(Event::Marker { bits, sync }) => table.push(Tag::Marker {
-                        bits,
-                        macro_time: sync,
-                    }),
-                    Ok(Event::Lost { .. }) => {}
+                    Ok(event) => {
+                        if let Some(tag) = Tag::from_wire(event) {
+                            table.push(tag);
+                        }
+                    }
                     Err(e) => {
                         bad.get_or_insert(format!(
                             "{}: record {:#018x} of batch {} does not decode",
