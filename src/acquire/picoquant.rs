@@ -398,8 +398,8 @@ fn ptu_tags(
         ("MeasDesc_BinningFactor".into(), HeaderEntry::Int(binning)),
         (
             "MeasDesc_Offset".into(),
-            // In the unit the device was programmed in (ns), as the
-            // library reports it.
+            // In ns, the unit the libraries take (a PicoHarp 300 was sent
+            // the same offset in ps, `Family::offset_arg`).
             HeaderEntry::Int(i64::from(settings.offset_ns)),
         ),
     ];
