@@ -605,3 +605,40 @@ fn a_zipped_block_past_the_files_end_is_refused_by_name() {
         "{e}"
     );
 }
+
+/// Found by fuzzing: a zipped block whose next block lies a terabyte on
+/// (the offset's high byte of a revision-15 header) is an error naming
+/// the block, checked before any buffer of that length is made (such a
+/// buffer aborted the process).
+#[test]
+fn a_zipped_block_reaching_a_terabyte_past_the_end_is_refused_before_reading() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("far.sdt");
+    let measurements = [SdtMeasurement {
+        tac_r: 12.5e-9,
+        tac_g: 1,
+        adc_re: 16,
+        scan: (1, 1),
+        repeats: (1, 1),
+        module: "SPC-150",
+    }];
+    let blocks = [SdtBlock {
+        values: vec![1.0; 16],
+        item: 2,
+        zipped: true,
+        contents: 0x00,
+        measurement: 0,
+    }];
+    let mut bytes = sdt_file(&measurements, &blocks);
+    let header = u32::from_le_bytes(bytes[14..18].try_into().unwrap()) as usize;
+    // next_block_offs's extension byte: 0xFF << 32, a terabyte on.
+    bytes[header + 1] = 0xFF;
+    std::fs::write(&path, &bytes).unwrap();
+    let e = bin_file_counts(&path, &BinSpec::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("far.sdt") && e.contains("data block 0") && e.contains("past the file's end"),
+        "{e}"
+    );
+}

@@ -284,14 +284,16 @@ impl Source<'_> {
 
     /// The `len` bytes (`what`) at `offset`.
     fn read_at(&mut self, offset: u64, len: usize, what: &str) -> Result<Vec<u8>, SdtError> {
-        let mut buf = vec![0; len];
         let path = self.path;
-        self.seek_to(offset, len, what)?
-            .read_exact(&mut buf)
-            .map_err(|source| SdtError::Io {
-                path: path.to_owned(),
-                source,
-            })?;
+        // Checked against the file's size before the buffer is made: a
+        // length from a damaged header must not allocate first (found by
+        // fuzzing, RELIABILITY.md).
+        let file = self.seek_to(offset, len, what)?;
+        let mut buf = vec![0; len];
+        file.read_exact(&mut buf).map_err(|source| SdtError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
         Ok(buf)
     }
 }
