@@ -570,12 +570,12 @@ fn sdt_sizes_whose_product_overflows_place_the_curves_in_a_row() {
     assert_eq!(binned.accounting.received, (0..48).sum::<u64>());
 }
 
-/// Found by fuzzing: a zipped block whose data lie past the file's end
-/// (and no next block) is an error naming the block, not an overflow.
-#[test]
-fn a_zipped_block_past_the_files_end_is_refused_by_name() {
+/// The error `bin` gives for a file `name` of one zipped block of 16
+/// points, its bytes changed by `damage` (given them and the offset of
+/// the block's header).
+fn error_of_a_damaged_zipped_block(name: &str, damage: impl FnOnce(&mut [u8], usize)) -> String {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("past.sdt");
+    let path = dir.path().join(name);
     let measurements = [SdtMeasurement {
         tac_r: 12.5e-9,
         tac_g: 1,
@@ -593,13 +593,22 @@ fn a_zipped_block_past_the_files_end_is_refused_by_name() {
     }];
     let mut bytes = sdt_file(&measurements, &blocks);
     let header = u32::from_le_bytes(bytes[14..18].try_into().unwrap()) as usize;
-    let past = (bytes.len() + 100) as u32;
-    bytes[header + 2..header + 6].copy_from_slice(&past.to_le_bytes());
-    bytes[header + 6..header + 10].copy_from_slice(&0u32.to_le_bytes());
+    damage(&mut bytes, header);
     std::fs::write(&path, &bytes).unwrap();
-    let e = bin_file_counts(&path, &BinSpec::default())
+    bin_file_counts(&path, &BinSpec::default())
         .unwrap_err()
-        .to_string();
+        .to_string()
+}
+
+/// Found by fuzzing: a zipped block whose data lie past the file's end
+/// (and no next block) is an error naming the block, not an overflow.
+#[test]
+fn a_zipped_block_past_the_files_end_is_refused_by_name() {
+    let e = error_of_a_damaged_zipped_block("past.sdt", |bytes, header| {
+        let past = (bytes.len() + 100) as u32;
+        bytes[header + 2..header + 6].copy_from_slice(&past.to_le_bytes());
+        bytes[header + 6..header + 10].copy_from_slice(&0u32.to_le_bytes());
+    });
     assert!(
         e.contains("past.sdt") && e.contains("data block 0") && e.contains("past the file's end"),
         "{e}"
@@ -612,31 +621,8 @@ fn a_zipped_block_past_the_files_end_is_refused_by_name() {
 /// buffer aborted the process).
 #[test]
 fn a_zipped_block_reaching_a_terabyte_past_the_end_is_refused_before_reading() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("far.sdt");
-    let measurements = [SdtMeasurement {
-        tac_r: 12.5e-9,
-        tac_g: 1,
-        adc_re: 16,
-        scan: (1, 1),
-        repeats: (1, 1),
-        module: "SPC-150",
-    }];
-    let blocks = [SdtBlock {
-        values: vec![1.0; 16],
-        item: 2,
-        zipped: true,
-        contents: 0x00,
-        measurement: 0,
-    }];
-    let mut bytes = sdt_file(&measurements, &blocks);
-    let header = u32::from_le_bytes(bytes[14..18].try_into().unwrap()) as usize;
     // next_block_offs's extension byte: 0xFF << 32, a terabyte on.
-    bytes[header + 1] = 0xFF;
-    std::fs::write(&path, &bytes).unwrap();
-    let e = bin_file_counts(&path, &BinSpec::default())
-        .unwrap_err()
-        .to_string();
+    let e = error_of_a_damaged_zipped_block("far.sdt", |bytes, header| bytes[header + 1] = 0xFF);
     assert!(
         e.contains("far.sdt") && e.contains("data block 0") && e.contains("past the file's end"),
         "{e}"

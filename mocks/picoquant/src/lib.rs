@@ -1016,11 +1016,7 @@ pub extern "C" fn PH_SetInputCFD(
         if !(0..=1).contains(&ch) {
             return code::INVALID_ARGUMENT;
         }
-        if (0..=800).contains(&level) && (0..=20).contains(&zero_cross) {
-            0
-        } else {
-            code::INVALID_ARGUMENT
-        }
+        cfd_within(level, zero_cross, 0..=800, 0..=20)
     })
 }
 
@@ -1195,12 +1191,9 @@ pub extern "C" fn TH260_SetInputEdgeTrg(
     })
 }
 
+/// TimeHarp 260 Pico CFD ranges (th260defin.h `CFDLVLMIN` ... `CFDZCMAX`).
 fn th260_cfd(level: c_int, zero_cross: c_int) -> c_int {
-    if (-1200..=0).contains(&level) && (-40..=0).contains(&zero_cross) {
-        0
-    } else {
-        code::INVALID_ARGUMENT
-    }
+    cfd_within(level, zero_cross, -1200..=0, -40..=0)
 }
 
 /// HydraHarp calibration (instant here).
@@ -1221,8 +1214,20 @@ fn edge_trigger_within(level: c_int, edge: c_int, max_mv: c_int) -> c_int {
     }
 }
 
+/// HydraHarp CFD ranges (hhdefin.h: 0 to 1000 mV, zero cross 0 to 40).
 fn cfd(level: c_int, zero_cross: c_int) -> c_int {
-    if (0..=1000).contains(&level) && (0..=40).contains(&zero_cross) {
+    cfd_within(level, zero_cross, 0..=1000, 0..=40)
+}
+
+/// 0 when a CFD's level and zero cross lie in their ranges (mV), else
+/// `ERROR_INVALID_ARGUMENT`.
+fn cfd_within(
+    level: c_int,
+    zero_cross: c_int,
+    levels: std::ops::RangeInclusive<c_int>,
+    zero_crosses: std::ops::RangeInclusive<c_int>,
+) -> c_int {
+    if levels.contains(&level) && zero_crosses.contains(&zero_cross) {
         0
     } else {
         code::INVALID_ARGUMENT
