@@ -51,6 +51,27 @@ pub(crate) fn read_records<R: bytemuck::Pod + Default>(
     reader.read_exact(bytemuck::cast_slice_mut(out.as_mut_slice()))
 }
 
+/// The `part`-th of `parts` consecutive ranges of `records` records of
+/// `record_bytes` each, stored from byte `data_offset` of `path`: a
+/// buffered reader of the file opened anew at the range's first record,
+/// and the range (first record, end). PicoQuant's and Becker & Hickl's
+/// record readers share it.
+pub(crate) fn open_part(
+    path: &std::path::Path,
+    data_offset: u64,
+    record_bytes: u64,
+    records: u64,
+    part: usize,
+    parts: usize,
+) -> std::io::Result<(std::io::BufReader<std::fs::File>, u64, u64)> {
+    use std::io::Seek;
+    let (part, parts) = (part as u64, parts.max(1) as u64);
+    let (first, end) = (records * part / parts, records * (part + 1) / parts);
+    let (mut file, _) = crate::files::open_regular(path, "recording")?;
+    file.seek(std::io::SeekFrom::Start(data_offset + record_bytes * first))?;
+    Ok((std::io::BufReader::with_capacity(1 << 20, file), first, end))
+}
+
 /// Little-endian 32-bit records, as stored, in the machine's order.
 pub(crate) fn u32_from_le(records: &mut [u32]) {
     if cfg!(target_endian = "big") {

@@ -26,7 +26,7 @@
 //! the layout from the caller (the SPC-130 family when unsaid).
 
 use std::fs::File;
-use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 
 use super::setup::SetupText;
@@ -246,21 +246,16 @@ impl SpcInfo {
     /// A reader of the `part`-th of `parts` consecutive ranges of the
     /// records (`0, 1`: all of them), on the file opened anew.
     pub fn records_part(&self, part: usize, parts: usize) -> Result<SpcReader, SpcFileError> {
-        let (part, parts) = (part as u64, parts.max(1) as u64);
-        let n = self.records_present;
         let bytes = self.module.record_bytes();
-        let (first, end) = (n * part / parts, n * (part + 1) / parts);
-        let opened =
-            crate::files::open_regular(&self.path, "recording").and_then(|(mut file, _)| {
-                file.seek(SeekFrom::Start(bytes * (1 + first)))?;
-                Ok(file)
-            });
-        let file = opened.map_err(|e| SpcFileError {
-            path: self.path.clone(),
-            error: e.into(),
-        })?;
+        // The records follow the one header record.
+        let (reader, first, end) =
+            crate::formats::open_part(&self.path, bytes, bytes, self.records_present, part, parts)
+                .map_err(|e| SpcFileError {
+                    path: self.path.clone(),
+                    error: e.into(),
+                })?;
         Ok(SpcReader {
-            reader: BufReader::with_capacity(1 << 20, file),
+            reader,
             remaining: end - first,
             bytes,
         })

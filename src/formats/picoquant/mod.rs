@@ -263,23 +263,23 @@ impl FileInfo {
     /// ends as [`open`]'s reader does ([`TtrError::Truncated`] when
     /// records are missing).
     pub fn records_part(&self, part: usize, parts: usize) -> Result<RecordReader, FileError> {
-        let records = self.records_to_read();
-        let (i, parts) = (part as u64, parts.max(1) as u64);
-        let (first, end) = (records * i / parts, records * (i + 1) / parts);
-        let opened =
-            crate::files::open_regular(&self.path, "recording").and_then(|(mut file, _)| {
-                file.seek(SeekFrom::Start(self.data_offset + 4 * first))?;
-                Ok(file)
-            });
-        let file = opened.map_err(|error| FileError {
+        let (reader, first, end) = crate::formats::open_part(
+            &self.path,
+            self.data_offset,
+            4,
+            self.records_to_read(),
+            part,
+            parts,
+        )
+        .map_err(|error| FileError {
             path: self.path.clone(),
             error: error.into(),
         })?;
         Ok(RecordReader {
-            reader: BufReader::with_capacity(1 << 20, file),
+            reader,
             remaining: end - first,
             read: first,
-            info_announced: if i + 1 == parts {
+            info_announced: if part + 1 == parts.max(1) {
                 self.records_announced
             } else {
                 end
