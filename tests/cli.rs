@@ -1176,6 +1176,39 @@ fn bench_recon_scores_pnp_against_richardson_lucy_on_a_manifest() {
         "{summary}"
     );
     assert!(out.join("traces/wide_1_pnp_split_tv.csv").exists());
+    assert!(
+        out.join("traces/wide_1_rl-stack_(cross-validated_stop).csv")
+            .exists()
+    );
+    // The last column holds the stack's photons: the same for every row
+    // of a case.
+    let photons = |image: &str| -> Vec<f64> {
+        rows.lines()
+            .filter(|l| l.starts_with(image))
+            .map(|l| l.rsplit(',').next().unwrap().parse().unwrap())
+            .collect()
+    };
+    let disks = photons("disks,tuning");
+    assert!(
+        disks[0] > 0.0 && disks.iter().all(|&p| p == disks[0]),
+        "{disks:?}"
+    );
+    // --methods runs only those (and the reference).
+    let only = dir.path().join("bench-rl-sum");
+    let mut args = vec!["bench-recon", images.to_str().unwrap()];
+    args.extend(QUICK_BENCH_FLAGS);
+    args.extend(["--methods", "rl-sum", "--out", only.to_str().unwrap()]);
+    let o = run_isolated(&args);
+    assert!(o.status.success(), "{}", streams(&o).1);
+    let rows = std::fs::read_to_string(only.join("rows.csv")).unwrap();
+    assert!(rows.contains("\"rl-sum (cross-validated stop)\""), "{rows}");
+    assert!(
+        rows.contains("\"rl-sum (best iteration by truth)\""),
+        "{rows}"
+    );
+    for absent in ["pnp", "rl-stack", "auto"] {
+        assert!(!rows.contains(&format!("\"{absent}")), "{absent}: {rows}");
+    }
     // An object grid too small for the kernels is refused, naming both.
     let o = run_isolated(&[
         "bench-recon",

@@ -14,7 +14,7 @@ use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup, TimeBins};
 use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions};
 use scatterscope::reconstruct::data::validate_counts;
-use scatterscope::reconstruct::em::Stopping;
+use scatterscope::reconstruct::em::{Acceleration, Stopping};
 use scatterscope::reconstruct::likelihood::{PoissonLikelihood, SurrogateLog};
 use scatterscope::reconstruct::operator::Convolution;
 use scatterscope::reconstruct::rl_stack::RlStack;
@@ -133,7 +133,10 @@ fn cross_validated_rl_stops_early_on_smooth_light_and_late_on_sharp_edges() {
         let c = case_of(size, truth, 5);
         let cv = reconstruct(
             &RlSum {
-                stop: Stopping::CrossValidated { max_iters: 400 },
+                stop: Stopping::CrossValidated {
+                    max_iters: 400,
+                    acceleration: Acceleration::None,
+                },
             },
             &c.model,
             &c.counts,
@@ -189,7 +192,10 @@ fn cross_validated_rl_refuses_fractional_counts_and_keeps_zero_light_zero() {
     let mut scaled = c.counts.clone();
     scaled[[2, 5, 7]] += 0.5;
     let zeros = Array3::zeros(c.counts.dim());
-    let stop = Stopping::CrossValidated { max_iters: 50 };
+    let stop = Stopping::CrossValidated {
+        max_iters: 50,
+        acceleration: Acceleration::None,
+    };
     // The time-summed image names the pixel; the whole stack its bin too.
     let methods: [(&dyn Reconstructor, &str); 2] = [
         (&RlSum { stop }, "row 5, column 7"),
@@ -275,7 +281,10 @@ fn whole_stack_rl_uses_the_time_axis() {
     let c = case(48, "disks", 3);
     let stack = reconstruct(
         &RlStack {
-            stop: Stopping::CrossValidated { max_iters: 400 },
+            stop: Stopping::CrossValidated {
+                max_iters: 400,
+                acceleration: Acceleration::None,
+            },
         },
         &c.model,
         &c.counts,
@@ -285,7 +294,10 @@ fn whole_stack_rl_uses_the_time_axis() {
     .unwrap();
     let summed = reconstruct(
         &RlSum {
-            stop: Stopping::CrossValidated { max_iters: 400 },
+            stop: Stopping::CrossValidated {
+                max_iters: 400,
+                acceleration: Acceleration::None,
+            },
         },
         &c.model,
         &c.counts,
@@ -527,7 +539,10 @@ fn extreme_inputs_give_finite_images() {
     }
     let r = reconstruct(
         &RlStack {
-            stop: Stopping::CrossValidated { max_iters: 50 },
+            stop: Stopping::CrossValidated {
+                max_iters: 50,
+                acceleration: Acceleration::None,
+            },
         },
         &c.model,
         &one,
@@ -571,7 +586,10 @@ fn nearly_delta_kernel_recovers_the_object() {
     // limits it (measured 53.0 dB).
     let rl = reconstruct(
         &RlStack {
-            stop: Stopping::CrossValidated { max_iters: 200 },
+            stop: Stopping::CrossValidated {
+                max_iters: 200,
+                acceleration: Acceleration::None,
+            },
         },
         &model,
         &counts,

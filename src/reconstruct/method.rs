@@ -6,6 +6,7 @@ use super::ReconstructError;
 use super::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions};
 use super::auto::Auto;
 use super::data::Data;
+pub use super::em::Acceleration;
 use super::em::Stopping;
 use super::problem::Problem;
 use super::rl_stack::RlStack;
@@ -87,6 +88,11 @@ pub enum RlStop {
     CrossValidated,
 }
 
+named!(Acceleration {
+    None => "none",
+    Extrapolated => "extrapolated",
+});
+
 named!(RlStop {
     Fixed => "fixed",
     CrossValidated => "cv",
@@ -108,6 +114,8 @@ pub struct MethodOptions {
     /// The most Richardson-Lucy iterations the cross-validated stop
     /// searches.
     pub rl_max_iters: usize,
+    /// How the cross-validated search steps.
+    pub rl_acceleration: Acceleration,
 }
 
 impl Default for MethodOptions {
@@ -126,6 +134,7 @@ impl Default for MethodOptions {
             rl_iters: 200,
             rl_stop: RlStop::CrossValidated,
             rl_max_iters: 1000,
+            rl_acceleration: Acceleration::None,
         }
     }
 }
@@ -199,6 +208,7 @@ impl MethodOptions {
             RlStop::Fixed => Stopping::After(self.rl_iters),
             RlStop::CrossValidated => Stopping::CrossValidated {
                 max_iters: self.rl_max_iters,
+                acceleration: self.rl_acceleration,
             },
         }
     }

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use super::data::{Data, flat_level};
 use super::em::{
-    DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps, held_out_deviance,
+    Acceleration, DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps, half_scores,
 };
 use super::error::ReconstructError;
 use super::run::{Estimate, Reconstructor, Run, WorkShape, grid_note};
@@ -52,7 +52,10 @@ impl Reconstructor for RlStack {
     ) -> Result<Estimate, ReconstructError> {
         match self.stop {
             Stopping::After(iterations) => fixed(data, iterations, run),
-            Stopping::CrossValidated { max_iters } => cross_validated(data, max_iters, run),
+            Stopping::CrossValidated {
+                max_iters,
+                acceleration,
+            } => cross_validated(data, max_iters, acceleration, run),
         }
     }
 
@@ -102,6 +105,7 @@ fn fixed(
 fn cross_validated(
     data: &Data<'_>,
     max_iters: usize,
+    acceleration: Acceleration,
     run: &mut Run<'_>,
 ) -> Result<Estimate, ReconstructError> {
     let (model, counts, bins) = (data.model, data.counts, data.bins);
@@ -148,9 +152,20 @@ fn cross_validated(
         model,
         o,
         max_iters,
+        acceleration,
         run,
         |x| em.forward(x),
-        |y, half| stack_held_out_deviance(y, &halves[1 - half], &halves_log[1 - half], bg, guard),
+        |y, half| {
+            let other = 1 - half;
+            stack_half_scores(
+                y,
+                &halves[half],
+                &halves[other],
+                &halves_log[other],
+                bg,
+                guard,
+            )
+        },
         |half, x, y| {
             // The cross-validated search scores the held-back half, not
             // this likelihood: its logarithms are left out.
@@ -258,18 +273,18 @@ impl<'a> StackEm<'a> {
     }
 }
 
-/// Poisson deviance of every bin's counts `m` against the prediction
-/// `y + bg` (guarded below by `guard`), summed over the bins.
-fn stack_held_out_deviance(
+/// [`half_scores`] of every bin, summed over the bins.
+fn stack_half_scores(
     y: &[Vec<f64>],
-    m: &[Vec<f64>],
-    m_log_m: &[Vec<f64>],
+    own: &[Vec<f64>],
+    other: &[Vec<f64>],
+    other_log: &[Vec<f64>],
     bg: f64,
     guard: f64,
-) -> f64 {
+) -> (f64, f64) {
     y.par_iter()
-        .zip(m.par_iter())
-        .zip(m_log_m.par_iter())
-        .map(|((yk, mk), lk)| held_out_deviance(yk, mk, lk, bg, guard))
-        .sum()
+        .zip(own.par_iter())
+        .zip(other.par_iter().zip(other_log.par_iter()))
+        .map(|((yk, mk), (ok, lk))| half_scores(yk, mk, ok, lk, bg, guard))
+        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
 }

@@ -7,7 +7,7 @@ use ndarray::{Array2, Array3, Axis};
 
 use super::data::{Data, flat_level};
 use super::em::{
-    DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps, held_out_deviance,
+    Acceleration, DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps, half_scores,
 };
 use super::error::ReconstructError;
 use super::operator::Convolution;
@@ -61,7 +61,10 @@ impl Reconstructor for RlSum {
                     iteration: iterations,
                 })
             }
-            Stopping::CrossValidated { max_iters } => cross_validated(data, max_iters, run),
+            Stopping::CrossValidated {
+                max_iters,
+                acceleration,
+            } => cross_validated(data, max_iters, acceleration, run),
         }
     }
 
@@ -113,6 +116,7 @@ pub(crate) fn rl_steps(
 fn cross_validated(
     data: &Data<'_>,
     max_iters: usize,
+    acceleration: Acceleration,
     run: &mut Run<'_>,
 ) -> Result<Estimate, ReconstructError> {
     let model = data.model;
@@ -149,9 +153,20 @@ fn cross_validated(
         model,
         o,
         max_iters,
+        acceleration,
         run,
         |x| rl.op.apply(x),
-        |y, half| held_out_deviance(y, &halves[1 - half], &halves_log[1 - half], bg, guard),
+        |y, half| {
+            let other = 1 - half;
+            half_scores(
+                y,
+                &halves[half],
+                &halves[other],
+                &halves_log[other],
+                bg,
+                guard,
+            )
+        },
         |half, x, y| {
             rl.update(x, y, &halves[half], bg, guard);
         },

@@ -13,7 +13,7 @@
 //! Reconstruction then sees a sensor with edges and models it with its own
 //! padded grid and truncated margin.
 
-use crate::named::Named;
+use crate::named::{Named, named};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -250,6 +250,8 @@ pub struct BenchRow {
     pub deviance_z: Option<f64>,
     /// What `auto` chose (its rows only).
     pub chose: Option<String>,
+    /// Photons in the case's stack (every bin the model keeps).
+    pub photons: f64,
 }
 
 /// A PnP configuration of the benchmark.
@@ -294,21 +296,47 @@ pub fn pnp_entries<'a>(
     entries
 }
 
-/// Runs every PnP entry and Richardson-Lucy on the time-summed stack
-/// (`rl_iters` iterations: the output at `opts.rl_iters` is RL's default,
-/// the best iteration by truth its oracle; and RL with its stop chosen by
-/// cross-validation, searched up to `opts.rl_max_iters`) on one case. `on_trace` gets each
-/// PnP trace (PSNR against wall time) with its label.
+/// The methods a benchmark run may run (RL's best iteration, the
+/// reference, always runs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BenchMethod {
+    /// Every PnP entry.
+    Pnp,
+    /// Richardson-Lucy on the time-summed stack, cross-validated stop.
+    RlSum,
+    /// Richardson-Lucy on the whole stack, cross-validated stop.
+    RlStack,
+    /// The default, `auto`, with the headline prior.
+    Auto,
+}
+
+named!(BenchMethod {
+    Pnp => "pnp",
+    RlSum => "rl-sum",
+    RlStack => "rl-stack",
+    Auto => "auto",
+});
+
+/// Runs the `methods` on one case: every PnP entry, Richardson-Lucy on
+/// the time-summed stack and on the whole stack with their stop chosen by
+/// cross-validation (searched up to `opts.rl_max_iters`), `auto`; and
+/// always RL on the time-summed stack for `rl_iters` iterations (the
+/// output at `opts.rl_iters` is RL's default, the best iteration by truth
+/// its oracle). `on_trace` gets each PnP, cross-validated RL and `auto`
+/// trace (PSNR against wall time) with its label.
+#[allow(clippy::too_many_arguments)]
 pub fn run_case(
     image: &BenchImage,
     level: f64,
     case: &BenchCase,
     entries: &[PnpEntry],
+    methods: &[BenchMethod],
     opts: &MethodOptions,
     rl_iters: usize,
     mut on_trace: impl FnMut(&str, &Trace),
 ) -> Result<Vec<BenchRow>, ReportError> {
     let truth = case.truth.view();
+    let photons = case.problem.counts.sum();
     let row = |method: String, image_out: ArrayView2<f64>, trace: &Trace| {
         let last = trace.rows.last().expect("every method records a row");
         let best = trace.best_psnr().expect("truth is known");
@@ -330,10 +358,12 @@ pub fn run_case(
             deviance_z: out_row
                 .and_then(|r| Some((r.deviance? - r.expected_deviance?) / r.deviance_sd?)),
             chose: None,
+            photons,
         }
     };
     let mut rows = Vec::new();
-    for e in entries {
+    let runs = |m: BenchMethod| methods.contains(&m);
+    for e in entries.iter().filter(|_| runs(BenchMethod::Pnp)) {
         let mut o = *opts;
         o.solver = e.solver;
         let r = run_method(
@@ -363,12 +393,23 @@ pub fn run_case(
         rl_stop: RlStop::CrossValidated,
         ..*opts
     };
-    for (method, label) in [(Method::RlSum, RL_CV), (Method::RlStack, RL_STACK_CV)] {
+    for (method, label) in [
+        (BenchMethod::RlSum, RL_CV),
+        (BenchMethod::RlStack, RL_STACK_CV),
+    ] {
+        if !runs(method) {
+            continue;
+        }
+        let method = match method {
+            BenchMethod::RlSum => Method::RlSum,
+            _ => Method::RlStack,
+        };
         let r = run_rl(method, &cross_validated)?;
+        on_trace(label, &r.trace);
         rows.push(row(label.into(), r.image.view(), &r.trace));
     }
     // The default, with the headline prior.
-    if let Some(e) = entries.first() {
+    if let Some(e) = entries.first().filter(|_| runs(BenchMethod::Auto)) {
         let r = run_method(
             &case.problem,
             Method::Auto,
@@ -425,12 +466,12 @@ pub fn run_case(
 /// CSV of all rows.
 pub fn rows_csv(rows: &[BenchRow]) -> String {
     let mut csv = String::from(
-        "image,split,category,level,method,psnr,ssim,wall_s,iterations,output_iteration,best_psnr,best_iteration,deviance_z,chose\n",
+        "image,split,category,level,method,psnr,ssim,wall_s,iterations,output_iteration,best_psnr,best_iteration,deviance_z,chose,photons\n",
     );
     for r in rows {
         writeln!(
             csv,
-            "{},{},\"{}\",{},\"{}\",{:.4},{:.5},{:.3},{},{},{:.4},{},{},{}",
+            "{},{},\"{}\",{},\"{}\",{:.4},{:.5},{:.3},{},{},{:.4},{},{},{},{}",
             r.image,
             r.split,
             r.category,
@@ -444,7 +485,8 @@ pub fn rows_csv(rows: &[BenchRow]) -> String {
             r.best_psnr,
             r.best_iteration,
             r.deviance_z.map_or(String::new(), |z| format!("{z:.2}")),
-            r.chose.as_deref().unwrap_or("")
+            r.chose.as_deref().unwrap_or(""),
+            r.photons
         )
         .expect("String");
     }
@@ -475,9 +517,9 @@ pub fn rows_from_csv(text: &str) -> Result<Vec<BenchRow>, ReportError> {
             }
         }
         fields.push(cur);
-        if fields.len() != 14 {
+        if fields.len() != 15 {
             return Err(ReportError::Input(format!(
-                "rows.csv line {}: {} fields, 14 expected",
+                "rows.csv line {}: {} fields, 15 expected",
                 i + 1,
                 fields.len()
             )));
@@ -509,6 +551,7 @@ pub fn rows_from_csv(text: &str) -> Result<Vec<BenchRow>, ReportError> {
                 Some(num(12, "deviance_z")?)
             },
             chose: (!fields[13].is_empty()).then(|| fields[13].clone()),
+            photons: num(14, "photons")?,
         });
     }
     Ok(rows)
@@ -766,6 +809,8 @@ pub struct BenchConfig {
     pub priors: Vec<PriorSpec>,
     /// Also run PnP on the time-summed stack.
     pub time_summed: bool,
+    /// The methods run besides RL's best iteration.
+    pub methods: Vec<BenchMethod>,
     /// Richardson-Lucy iterations searched for its best iteration.
     pub rl_best_iters: usize,
     /// Side of the simulated object grid; the sensor sees its centre.
@@ -853,6 +898,7 @@ pub fn run_benchmark(
                 level,
                 &case,
                 &entries,
+                &cfg.methods,
                 &cfg.opts,
                 cfg.rl_best_iters,
                 |label, trace| {
@@ -983,6 +1029,7 @@ mod tests {
             best_iteration: 80,
             deviance_z: z,
             chose: chose.map(str::to_string),
+            photons: 1_234_567.0,
         }
     }
 

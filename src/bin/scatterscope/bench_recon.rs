@@ -4,7 +4,9 @@ use std::path::PathBuf;
 
 use scatterscope::denoise::prior::{PriorKind, PriorSpec};
 use scatterscope::reconstruct::method::Solver;
-use scatterscope::report::bench::{BenchConfig, batch_jobs, merge_benchmark, run_benchmark};
+use scatterscope::report::bench::{
+    BenchConfig, BenchMethod, batch_jobs, merge_benchmark, run_benchmark,
+};
 
 use crate::recon_args::ReconArgs;
 use crate::shared_args::{PhysicsArgs, choice};
@@ -41,6 +43,14 @@ pub struct BenchReconArgs {
     /// Skip PnP on the time-summed stack.
     #[arg(long)]
     no_sum: bool,
+    /// Methods to run (RL's best iteration, the reference, always runs).
+    #[arg(
+        long,
+        value_parser = choice::<BenchMethod>(),
+        value_delimiter = ',',
+        default_value = "pnp,rl-sum,rl-stack,auto"
+    )]
+    methods: Vec<BenchMethod>,
     /// Richardson-Lucy iterations searched for its best iteration.
     #[arg(long, default_value_t = 1000)]
     rl_best_iters: usize,
@@ -110,6 +120,7 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
             })
             .collect(),
         time_summed: !args.no_sum,
+        methods: args.methods.clone(),
         rl_best_iters: args.rl_best_iters,
         object_px: args.object_px,
         setup: args.physics.resolve()?,

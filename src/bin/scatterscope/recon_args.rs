@@ -5,8 +5,9 @@ use std::path::PathBuf;
 
 use scatterscope::denoise::Denoiser;
 use scatterscope::denoise::prior::{PriorKind, PriorSpec};
+use scatterscope::named::Named;
 use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgsOptions, StopRule};
-use scatterscope::reconstruct::method::{MethodOptions, RlStop, Solver};
+use scatterscope::reconstruct::method::{Acceleration, MethodOptions, RlStop, Solver};
 use scatterscope::reconstruct::split::SplitOptions;
 
 /// The denoiser and its settings (`reconstruct`, `report`, `denoise`).
@@ -135,6 +136,10 @@ pub struct ReconArgs {
     /// The most iterations --rl-stop cv searches.
     #[arg(long, default_value_t = MethodOptions::default().rl_max_iters)]
     pub rl_max_iters: usize,
+    /// How --rl-stop cv steps: none (plain EM steps) or extrapolated
+    /// (vector extrapolation, the likelihood never going up).
+    #[arg(long, value_parser = choice::<Acceleration>(), default_value = MethodOptions::default().rl_acceleration.name())]
+    pub rl_acceleration: Acceleration,
 }
 
 impl ReconArgs {
@@ -152,7 +157,8 @@ impl ReconArgs {
             dual_tol: self.residual_tol,
             lbfgs_memory: 7,
             lbfgs_grad_tol: self.lbfgs_tol);
-        let opts = same_fields!(self => MethodOptions { solver, rl_iters, rl_stop, rl_max_iters }
+        let opts = same_fields!(self => MethodOptions { solver, rl_iters, rl_stop, rl_max_iters,
+            rl_acceleration }
             split, admm_lbfgs);
         opts.validate()?;
         Ok(opts)
