@@ -266,10 +266,10 @@ pub(crate) fn cv_search<Y: Send + Sync>(
             .for_each(|(half, (walker, (y, _)))| {
                 if accelerate {
                     walker.begin_step();
-                    update(half, &mut walker.point, y);
+                }
+                update(half, &mut walker.point, y);
+                if accelerate {
                     walker.extrapolate();
-                } else {
-                    update(half, &mut walker.point, y);
                 }
             });
     }

@@ -107,7 +107,7 @@ pub(crate) fn rl_steps(
     run.note_background(model);
     let step = |o: &mut [f64]| {
         let y = rl.op.apply(o);
-        rl.update(o, &y, &m, bg, guard)
+        rl.update(o, &y, &m, bg, guard, true)
     };
     Some(fixed_steps(model, o, iterations, run, step))
 }
@@ -168,7 +168,9 @@ fn cross_validated(
             )
         },
         |half, x, y| {
-            rl.update(x, y, &halves[half], bg, guard);
+            // The search has this likelihood from its scores: its
+            // logarithms are left out here.
+            rl.update(x, y, &halves[half], bg, guard, false);
         },
     );
     Ok(Estimate { image, iteration })
@@ -198,15 +200,26 @@ impl RlOperator {
     /// One RL step of `o` for counts `m` given `y = H o`: `o <- o H^T(m /
     /// (y + bg)) / H^T 1`, the denominator guarded at `guard`. Object pixels
     /// the sensor does not see keep their value. Returns the negative
-    /// log-likelihood at `o` before the step.
-    fn update(&self, o: &mut [f64], y: &[f64], m: &[f64], bg: f64, guard: f64) -> f64 {
+    /// log-likelihood at `o` before the step when `with_nll` (else 0: its
+    /// logarithm per pixel is the largest cost outside the transforms).
+    fn update(
+        &self,
+        o: &mut [f64],
+        y: &[f64],
+        m: &[f64],
+        bg: f64,
+        guard: f64,
+        with_nll: bool,
+    ) -> f64 {
         let mut nll = 0.0;
         let ratio: Vec<f64> = y
             .iter()
             .zip(m)
             .map(|(&yj, &mj)| {
                 let d = (yj + bg).max(guard);
-                nll += d - if mj > 0.0 { mj * d.ln() } else { 0.0 };
+                if with_nll {
+                    nll += d - if mj > 0.0 { mj * d.ln() } else { 0.0 };
+                }
                 mj / d
             })
             .collect();

@@ -393,17 +393,13 @@ pub fn run_case(
         rl_stop: RlStop::CrossValidated,
         ..*opts
     };
-    for (method, label) in [
-        (BenchMethod::RlSum, RL_CV),
-        (BenchMethod::RlStack, RL_STACK_CV),
+    for (wanted, method, label) in [
+        (BenchMethod::RlSum, Method::RlSum, RL_CV),
+        (BenchMethod::RlStack, Method::RlStack, RL_STACK_CV),
     ] {
-        if !runs(method) {
+        if !runs(wanted) {
             continue;
         }
-        let method = match method {
-            BenchMethod::RlSum => Method::RlSum,
-            _ => Method::RlStack,
-        };
         let r = run_rl(method, &cross_validated)?;
         on_trace(label, &r.trace);
         rows.push(row(label.into(), r.image.view(), &r.trace));
