@@ -188,6 +188,46 @@ fn a_browser_sees_a_mock_run_form_and_ends_on_its_ledger() {
     assert_same_ledger(&page, &json(&out.join("acquisition.json")));
 }
 
+/// Issue 63's check: a 20 s run of the mock at its defaults (256 x 256
+/// pixels, 2 Mcps), watched in a browser, shows at least 5
+/// reconstructions while it runs (each snapshot continues the last one's
+/// search), their error against the truth falling as the light grows.
+#[test]
+#[ignore = "needs Chromium (/usr/bin/chromium) and playwright under target/pydeps (scripts/fetch_python_deps.sh)"]
+fn a_20_s_run_shows_a_reconstruction_every_few_seconds() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("acq");
+    let (child, url) = start(
+        &[
+            "--device",
+            "mock",
+            "--duration",
+            "20s",
+            "--live",
+            "--linger",
+            "600s",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[],
+    );
+    let page = browse(&url, true, "watch", None);
+    let status = stop(child);
+    assert!(status.success(), "{status:?}");
+    let shown = page["shown_during_run"].as_array().unwrap();
+    assert!(shown.len() >= 5, "{shown:?}");
+    let trace = page["trace"].as_array().unwrap();
+    let psnr: Vec<f64> = trace
+        .iter()
+        .map(|p| p["psnr_db"].as_f64().unwrap())
+        .collect();
+    assert!(
+        psnr.last().unwrap() > psnr.first().unwrap(),
+        "PSNR against acquisition time: {psnr:?}"
+    );
+    assert_eq!(page["reconstruction"]["method"], "rl-sum", "{page}");
+}
+
 #[test]
 #[ignore = "needs Chromium (/usr/bin/chromium) and playwright under target/pydeps (scripts/fetch_python_deps.sh)"]
 fn a_browser_sees_each_picoquant_familys_run_with_its_rates_and_ledger() {

@@ -18,6 +18,11 @@ use firmware_protocol::{
 use crate::emitter::{Emitter, Origin};
 use crate::{DevicePort, PortClosed};
 
+/// How long a real-time stream that has emitted every detection due waits
+/// for the host before its next step (a fifth of the default batch
+/// interval).
+const AHEAD_WAIT: Duration = Duration::from_millis(1);
+
 /// Response id of messages the device sends on its own.
 pub const UNSOLICITED_ID: u16 = 0xFFFF;
 
@@ -330,9 +335,12 @@ impl Firmware {
 
     fn run(&mut self) -> Result<(), PortClosed> {
         loop {
-            // While streaming, poll the host quickly; idle, wait longer.
-            let wait = if self.running || !self.outbox.is_empty() {
+            // While streaming, poll the host quickly (waiting only while
+            // ahead of schedule); idle, wait longer.
+            let wait = if !self.outbox.is_empty() {
                 Duration::ZERO
+            } else if self.running {
+                self.ahead_of_schedule()
             } else {
                 Duration::from_millis(20)
             };
@@ -364,6 +372,27 @@ impl Firmware {
                 // The link is full: let the host catch up.
                 std::thread::sleep(Duration::from_micros(200));
             }
+        }
+    }
+
+    /// How long a real-time stream may wait before its next step:
+    /// [`AHEAD_WAIT`] once it has emitted every detection due (zero when it
+    /// runs behind, unpaced or replaying), so its detections leave in
+    /// bursts of a millisecond, each with its own time, within the
+    /// batches' 5 ms. A real device keeps time on its own clock; the
+    /// emulated one waits instead of spinning, so it leaves the host's
+    /// cores to the host (spinning, it kept one core busy whatever the
+    /// rate, and starved the live view's reconstruction).
+    fn ahead_of_schedule(&self) -> Duration {
+        if !self.device.options.real_time || !self.replay.batches.is_empty() {
+            return Duration::ZERO;
+        }
+        let ahead =
+            self.device.emitter.time_s() - self.emit_origin - self.started.elapsed().as_secs_f64();
+        if ahead > 0.0 {
+            AHEAD_WAIT
+        } else {
+            Duration::ZERO
         }
     }
 

@@ -1,7 +1,9 @@
 //! The reconstruction of snapshots of a running acquisition, on a thread
-//! of its own: the default method (`auto`) with the default prior, on the
-//! stack accumulated so far; a snapshot offered while one runs is dropped
-//! (the next one is newer), so the acquisition never waits for it. Its
+//! of its own: Richardson-Lucy on the time-summed stack accumulated so
+//! far, stopped by cross-validation, each snapshot continuing the last
+//! one's search ([`Series`]: seconds where the default method takes tens
+//! of them); a snapshot offered while one runs is dropped (the next one is
+//! newer), so the acquisition never waits for it. Its
 //! threads run at the lowest scheduling priority, on all cores but one,
 //! and the acquisition comes first: a snapshot is skipped while the
 //! acquisition's own threads keep every core but half of one busy (even
@@ -11,8 +13,10 @@
 //! thread (at nice 10) watches the CPU the reconstruction gets: when other
 //! processes take every core and it gets none, the page says so and names
 //! them. The whole run's stack is reconstructed once the acquisition ends
-//! ([`Reconstructor::finish`]), at normal priority, with its progress, and
-//! a stop request (Ctrl-C) skips it.
+//! ([`Reconstructor::finish`]), the series continued once more, at normal
+//! priority, with its progress and an estimate of the time left, and a
+//! stop request (Ctrl-C) skips it. The default method's reconstruction of
+//! the saved stack is `reconstruct`'s.
 
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -25,11 +29,10 @@ use ndarray::{Array2, ArrayView2};
 use super::cpu::{OtherProcesses, VIEW_THREAD_PREFIX, describe, threads_cpu_s};
 use super::state::{Image, LiveReconstruction, LiveState, TracePoint};
 use super::{lower_priority, view_priority};
-use crate::denoise::Denoiser;
-use crate::denoise::prior::PriorSpec;
 use crate::reconstruct::input::{InputSpec, prepare};
-use crate::reconstruct::method::{Method, MethodOptions, run_method};
+use crate::reconstruct::method::MethodOptions;
 use crate::reconstruct::run::Reconstruction;
+use crate::reconstruct::series::Series;
 use crate::stack::Stack;
 
 /// A snapshot to reconstruct.
@@ -67,6 +70,8 @@ struct Shared {
     /// Set once the whole run's reconstruction is shown: a snapshot that
     /// ends later only adds its point to the curve.
     final_shown: AtomicBool,
+    /// The snapshots' searches, continued by each (held while one runs).
+    series: Mutex<Series>,
 }
 
 impl Shared {
@@ -76,6 +81,10 @@ impl Shared {
 
     fn running(&self) -> MutexGuard<'_, Option<Running>> {
         self.running.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn series(&self) -> MutexGuard<'_, Series> {
+        self.series.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
 
@@ -100,16 +109,53 @@ pub enum FinalRun {
 pub struct FinalProgress {
     /// Seconds since it started.
     pub elapsed_s: f64,
-    /// Iterations done so far (of every method it runs).
+    /// Iterations done so far.
     pub iterations: usize,
+    /// Iterations it will need: as many as the last snapshot's search ran
+    /// when that stopped by itself, else the cap (`None` before it is
+    /// known).
+    pub expected_iterations: Option<usize>,
+    /// Whether `expected_iterations` is the cap (at most) rather than the
+    /// last snapshot's count (about).
+    pub expected_is_cap: bool,
 }
 
-/// A snapshot's reconstruction: the default method on `stack`, its rows
-/// counted in `iterations`; the reconstruction, the bins it kept (indices
-/// into the stack's bins) and what was assumed.
+impl FinalProgress {
+    /// Seconds left, about: the iterations still expected at the pace so
+    /// far.
+    pub fn left_s(&self) -> Option<f64> {
+        let expected = self.expected_iterations?;
+        (self.iterations > 0 && expected > self.iterations)
+            .then(|| self.elapsed_s / self.iterations as f64 * (expected - self.iterations) as f64)
+    }
+
+    /// The progress in words: seconds, iterations, and the time left when
+    /// known.
+    pub fn describe(&self) -> String {
+        let mut line = format!("{:.0} s, {} iterations", self.elapsed_s, self.iterations);
+        if let (Some(expected), Some(left)) = (self.expected_iterations, self.left_s()) {
+            let about = if self.expected_is_cap {
+                "at most"
+            } else {
+                "about"
+            };
+            line = format!(
+                "{:.0} s, {} of {about} {expected} iterations, {about} {left:.0} s left",
+                self.elapsed_s, self.iterations
+            );
+        }
+        line
+    }
+}
+
+/// A snapshot's reconstruction: `series` continued on `stack` for at most
+/// `max_iters` iterations, its rows counted in `iterations`; the
+/// reconstruction, the bins it kept (indices into the stack's bins) and
+/// what was assumed.
 fn reconstruct(
     stack: &Stack,
-    denoiser: &dyn Denoiser,
+    series: &mut Series,
+    max_iters: usize,
     iterations: &AtomicUsize,
 ) -> Result<(Reconstruction, Vec<usize>, Vec<String>), String> {
     let input = prepare(
@@ -128,18 +174,11 @@ fn reconstruct(
             m.bin_starts_ps.iter().position(|&s| (s - t).abs() < 1e-6)
         })
         .collect();
-    let rec = run_method(
-        &input.problem,
-        Method::Auto,
-        None,
-        denoiser,
-        &MethodOptions::default(),
-        None,
-        |_| {
+    let rec = series
+        .reconstruct(&input.problem, max_iters, None, |_| {
             iterations.fetch_add(1, Ordering::Relaxed);
-        },
-    )
-    .map_err(|e| e.to_string())?;
+        })
+        .map_err(|e| e.to_string())?;
     Ok((rec, kept, input.assumed))
 }
 
@@ -206,6 +245,25 @@ fn show(
         shared.final_shown.store(true, Ordering::Relaxed);
     }
     s.version += 1;
+}
+
+/// Seconds of iterations a snapshot's search may take, at the pace of the
+/// last snapshot (the page gains a point every few seconds; the next
+/// snapshot continues the search).
+const SNAPSHOT_SEARCH_S: f64 = 1.5;
+/// The fewest iterations a snapshot's search may take (twice the
+/// cross-validated stop's patience).
+const SNAPSHOT_MIN_ITERATIONS: usize = 2 * crate::reconstruct::em::CV_PATIENCE;
+
+/// The iterations a snapshot's search may take: [`SNAPSHOT_SEARCH_S`] at
+/// `per_iteration_s` (the last snapshot's pace; the first snapshot's
+/// search is the default's), within [`SNAPSHOT_MIN_ITERATIONS`] and the
+/// default cap.
+fn snapshot_iterations(per_iteration_s: Option<f64>) -> usize {
+    let cap = MethodOptions::default().rl_max_iters;
+    per_iteration_s.filter(|t| *t > 0.0).map_or(cap, |t| {
+        ((SNAPSHOT_SEARCH_S / t) as usize).clamp(SNAPSHOT_MIN_ITERATIONS, cap)
+    })
 }
 
 /// Seconds a snapshot runs before the watcher judges its CPU.
@@ -354,6 +412,7 @@ impl Reconstructor {
             running: Mutex::new(None),
             ended: AtomicBool::new(false),
             final_shown: AtomicBool::new(false),
+            series: Mutex::new(Series::new()),
         });
         let worker = shared.clone();
         let spawned = std::thread::Builder::new()
@@ -367,8 +426,8 @@ impl Reconstructor {
                     .thread_name(|i| format!("{VIEW_THREAD_PREFIX}recon-{i}"))
                     .start_handler(|_| lower_priority())
                     .build();
-                let denoiser = PriorSpec::default().build();
                 let mut load = Load::new();
+                let mut per_iteration_s = None;
                 for snap in rx {
                     if worker.ended.load(Ordering::Relaxed) {
                         break;
@@ -386,17 +445,21 @@ impl Reconstructor {
                     }
                     let started = Instant::now();
                     let iterations = AtomicUsize::new(0);
-                    let result = denoiser
-                        .as_ref()
-                        .map_err(|e| e.to_string())
-                        .and_then(|denoiser| {
-                            let run = || reconstruct(&snap.stack, denoiser.as_ref(), &iterations);
-                            match &pool {
-                                Ok(pool) => pool.install(run),
-                                Err(_) => run(),
-                            }
-                        });
+                    let max_iters = snapshot_iterations(per_iteration_s);
+                    let result = {
+                        let mut guard = worker.series();
+                        let series: &mut Series = &mut guard;
+                        let mut run = || reconstruct(&snap.stack, series, max_iters, &iterations);
+                        match &pool {
+                            Ok(pool) => pool.install(run),
+                            Err(_) => run(),
+                        }
+                    };
                     let run_s = started.elapsed().as_secs_f64();
+                    let done = iterations.load(Ordering::Relaxed);
+                    if result.is_ok() && done > 0 {
+                        per_iteration_s = Some(run_s / done as f64);
+                    }
                     show(&worker, result, (snap.acquired_s, snap.photons), run_s, false);
                     *worker.running() = None;
                 }
@@ -478,17 +541,27 @@ impl Reconstructor {
             return skipped(&shared);
         }
         let iterations = Arc::new(AtomicUsize::new(0));
+        // Iterations the last snapshot's search ran, plus one; 0 unknown.
+        let expected = Arc::new(AtomicUsize::new(0));
+        let is_cap = Arc::new(AtomicBool::new(false));
         let (tx, rx) = sync_channel(1);
-        let counted = iterations.clone();
+        let (counted, expecting, series) = (iterations.clone(), expected.clone(), shared.clone());
+        let capped = is_cap.clone();
         let started = Instant::now();
         let spawned = std::thread::Builder::new()
             .name("final-reconstruction".into())
             .spawn(move || {
-                let result = PriorSpec::default()
-                    .build()
-                    .map_err(|e| e.to_string())
-                    .and_then(|d| reconstruct(&stack, d.as_ref(), &counted));
-                let _ = tx.send(result);
+                // A snapshot still at work ends first (the cores are free
+                // now), and this one continues its search.
+                let mut series = series.series();
+                let max_iters = MethodOptions::default().rl_max_iters;
+                // The last snapshot's search, if it stopped by itself: the
+                // whole run's needs about as many; else at most the cap
+                // (and the start).
+                let last = series.stopped_after();
+                expecting.store(last.map_or(max_iters + 1, |n| n), Ordering::Relaxed);
+                capped.store(last.is_none(), Ordering::Relaxed);
+                let _ = tx.send(reconstruct(&stack, &mut series, max_iters, &counted));
             });
         if let Err(e) = spawned {
             let e = format!("no thread for the whole run's reconstruction: {e}");
@@ -512,10 +585,24 @@ impl Reconstructor {
                 Err(RecvTimeoutError::Timeout) if stop.load(Ordering::Relaxed) => {
                     return skipped(&shared);
                 }
-                Err(RecvTimeoutError::Timeout) => progress(&FinalProgress {
-                    elapsed_s: started.elapsed().as_secs_f64(),
-                    iterations: iterations.load(Ordering::Relaxed),
-                }),
+                Err(RecvTimeoutError::Timeout) => {
+                    let p = FinalProgress {
+                        elapsed_s: started.elapsed().as_secs_f64(),
+                        iterations: iterations.load(Ordering::Relaxed),
+                        expected_iterations: Some(expected.load(Ordering::Relaxed))
+                            .filter(|&n| n > 0),
+                        expected_is_cap: is_cap.load(Ordering::Relaxed),
+                    };
+                    {
+                        let mut s = shared.state();
+                        s.reconstruction_status = Some(format!(
+                            "reconstructing the whole run ({photons} photons, {acquired_s:.1} s of acquisition): {}",
+                            p.describe()
+                        ));
+                        s.version += 1;
+                    }
+                    progress(&p);
+                }
                 Err(RecvTimeoutError::Disconnected) => {
                     let e = "the whole run's reconstruction ended without a result".to_string();
                     shared.state().reconstruction_error = Some(e.clone());

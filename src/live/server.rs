@@ -33,7 +33,7 @@ const PAGE: &str = include_str!("page.html");
 /// Shortest time between two events to one browser.
 const EVENT_EVERY: Duration = Duration::from_millis(250);
 /// How often a snapshot is offered to the reconstruction.
-const RECONSTRUCT_EVERY: Duration = Duration::from_secs(3);
+const RECONSTRUCT_EVERY: Duration = Duration::from_millis(2500);
 /// Browsers served events at once; more are refused (503).
 const MAX_CLIENTS: usize = 16;
 
@@ -161,7 +161,7 @@ impl LiveView {
     }
 
     /// The watching stage for [`crate::acquire::Job::run_watched`]: copies
-    /// each snapshot into the state and offers one every 3 s to the
+    /// each snapshot into the state and offers one every 2.5 s to the
     /// reconstruction (`setup`: the sample's physics, without which there is
     /// none; `truth`: the scene, for the error against run time).
     pub fn stage(&self, setup: Option<Setup>, truth: Option<Array2<f64>>) -> LiveStage {

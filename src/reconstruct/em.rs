@@ -199,21 +199,24 @@ impl Walker {
 /// negative log-likelihood on its own. The search stops [`CV_PATIENCE`]
 /// iterations (or a quarter of the best count, if more) past the best
 /// summed score, or at `max_iters`. Returns the best iteration and the sum
-/// of the halves' estimates there on the sensor window, with the stop's
-/// notes in `run`.
+/// of the halves' estimates there on the sensor window (with `keep_points`
+/// each half's estimate there on the grid too), with the stop's notes in
+/// `run`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn cv_search<Y: Send + Sync>(
     model: &ForwardModel,
     o: Vec<Vec<f64>>,
     max_iters: usize,
     acceleration: Acceleration,
+    keep_points: bool,
     run: &mut Run<'_>,
     forward: impl Fn(&[f64]) -> Y + Sync,
     evaluate: impl Fn(&Y, usize) -> (f64, f64) + Sync,
     update: impl Fn(usize, &mut [f64], &Y) + Sync,
-) -> (usize, Array2<f64>) {
+) -> CvBest {
     let (h, w) = model.sensor_shape();
     let accelerate = acceleration == Acceleration::Extrapolated;
+    let mut best_points = if keep_points { o.clone() } else { Vec::new() };
     let mut walkers: Vec<Walker> = o.into_iter().map(|o| Walker::new(o, accelerate)).collect();
     let crop_sum = |walkers: &[Walker]| {
         let sum: Vec<f64> = walkers[0]
@@ -253,6 +256,9 @@ pub(crate) fn cv_search<Y: Send + Sync>(
             run.score(&mut row, estimate.view());
             if improved {
                 best = (score_cv, it, estimate);
+                for (kept, walker) in best_points.iter_mut().zip(&walkers) {
+                    kept.copy_from_slice(&walker.point);
+                }
             }
         }
         run.push(row);
@@ -289,7 +295,22 @@ pub(crate) fn cv_search<Y: Send + Sync>(
         ));
     }
     run.note(format!("output: iteration {k}"));
-    (k, image)
+    CvBest {
+        iteration: k,
+        image,
+        points: best_points,
+    }
+}
+
+/// What the cross-validated search found.
+pub(crate) struct CvBest {
+    /// The best iteration.
+    pub iteration: usize,
+    /// The sum of the halves' estimates there, on the sensor window.
+    pub image: Array2<f64>,
+    /// Each half's estimate there, on the model's grid (empty unless
+    /// asked for).
+    pub points: Vec<Vec<f64>>,
 }
 
 /// The two scores of one half's prediction `y + bg` (guarded below by
@@ -399,11 +420,16 @@ mod tests {
             let start = vec![vec![1.0; sensitivity.len()]; 2];
             let mut on_iter = |_: &crate::reconstruct::trace::TraceRow| {};
             let mut run = Run::new("test", Some(truth.view()), &mut on_iter);
-            let (k, image) = cv_search(
+            let CvBest {
+                iteration: k,
+                image,
+                ..
+            } = cv_search(
                 &model,
                 start,
                 2000,
                 acceleration,
+                false,
                 &mut run,
                 |x| op.apply(x),
                 |y, half| {

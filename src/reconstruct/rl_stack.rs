@@ -148,11 +148,12 @@ fn cross_validated(
     ));
     run.note(em.note(model, guard));
     run.note_background(model);
-    let (iteration, image) = cv_search(
+    let best = cv_search(
         model,
         o,
         max_iters,
         acceleration,
+        false,
         run,
         |x| em.forward(x),
         |y, half| {
@@ -172,7 +173,10 @@ fn cross_validated(
             em.update(x, y, &halves[half], bg, guard, false);
         },
     );
-    Ok(Estimate { image, iteration })
+    Ok(Estimate {
+        image: best.image,
+        iteration: best.iteration,
+    })
 }
 
 /// The whole-stack EM operator: every kept bin's kernel (through a

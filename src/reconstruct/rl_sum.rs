@@ -7,7 +7,8 @@ use ndarray::{Array2, Array3, Axis};
 
 use super::data::{Data, flat_level};
 use super::em::{
-    Acceleration, DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps, half_scores,
+    Acceleration, CvBest, DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps,
+    half_scores,
 };
 use super::error::ReconstructError;
 use super::operator::Convolution;
@@ -119,41 +120,77 @@ fn cross_validated(
     acceleration: Acceleration,
     run: &mut Run<'_>,
 ) -> Result<Estimate, ReconstructError> {
-    let model = data.model;
-    let (h, w) = model.sensor_shape();
-    let rl = RlOperator::new(model, data.bins);
+    let rl = RlOperator::new(data.model, data.bins);
     let summed = data.counts.sum_axis(Axis(0));
-    let total = summed.sum();
-    if total == 0.0 || rl.mass <= 0.0 {
-        return Ok(run.no_photons((h, w)));
+    if summed.sum() == 0.0 || rl.mass <= 0.0 {
+        return Ok(run.no_photons(data.model.sensor_shape()));
     }
     let (first, second) = thin_halves(&summed, THINNING_SEED, "the time-summed counts")?;
-    let halves: [Vec<f64>; 2] = [
-        first.iter().copied().collect(),
-        second.iter().copied().collect(),
-    ];
+    let how = format!(
+        "the counts thinned into two halves of {} and {} photons (seed {THINNING_SEED:#x})",
+        first.sum(),
+        second.sum()
+    );
+    let best = search_halves(
+        data,
+        &rl,
+        [&first, &second],
+        None,
+        &how,
+        (max_iters, acceleration),
+        false,
+        run,
+    );
+    Ok(Estimate {
+        image: best.image,
+        iteration: best.iteration,
+    })
+}
+
+/// The cross-validated search on two halves of the summed counts, `how`
+/// saying how they were made: RL on each from `start` (each half's
+/// estimate on the model's grid; the flat object when `None`), each scored
+/// on the other's counts, up to `max_iters` steps of `acceleration`; with
+/// `keep_points` each half's estimate at the best iteration comes back.
+/// The halves hold photons ([`RlOperator::mass`] > 0 and some counts).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn search_halves(
+    data: &Data<'_>,
+    rl: &RlOperator,
+    halves: [&Array2<f64>; 2],
+    start: Option<Vec<Vec<f64>>>,
+    how: &str,
+    (max_iters, acceleration): (usize, Acceleration),
+    keep_points: bool,
+    run: &mut Run<'_>,
+) -> CvBest {
+    let model = data.model;
+    let (h, w) = model.sensor_shape();
+    let total: f64 = halves.iter().map(|m| m.sum()).sum();
+    let halves: [Vec<f64>; 2] = halves.map(|m| m.iter().copied().collect());
     let halves_log = halves
         .each_ref()
         .map(|m| m.iter().map(|&x| m_log_m(x)).collect::<Vec<f64>>());
     // Each half holds half the light and half the background.
     let bg = model.background() * data.bins.len() as f64 / 2.0;
     let guard = DENOMINATOR_GUARD * total / 2.0 / (h * w) as f64;
-    let o: Vec<Vec<f64>> = halves
-        .iter()
-        .map(|m| vec![flat_level(m.iter().sum(), bg, 1, rl.mass, h * w); rl.sensitivity.len()])
-        .collect();
+    let o: Vec<Vec<f64>> = start.unwrap_or_else(|| {
+        halves
+            .iter()
+            .map(|m| vec![flat_level(m.iter().sum(), bg, 1, rl.mass, h * w); rl.sensitivity.len()])
+            .collect()
+    });
     run.note(format!(
-        "stop chosen by two-fold cross-validation: the counts thinned into two halves of {} and {} photons (seed {THINNING_SEED:#x}), RL on each, each scored on the other's counts; 8 FFTs per iteration; {}",
-        first.sum(),
-        second.sum(),
+        "stop chosen by two-fold cross-validation: {how}, RL on each, each scored on the other's counts; 8 FFTs per iteration; {}",
         grid_note(model)
     ));
     run.note_background(model);
-    let (iteration, image) = cv_search(
+    cv_search(
         model,
         o,
         max_iters,
         acceleration,
+        keep_points,
         run,
         |x| rl.op.apply(x),
         |y, half| {
@@ -172,15 +209,14 @@ fn cross_validated(
             // logarithms are left out here.
             rl.update(x, y, &halves[half], bg, guard, false);
         },
-    );
-    Ok(Estimate { image, iteration })
+    )
 }
 
 /// The operator of RL on a sum of bins, with its normaliser.
-struct RlOperator {
+pub(crate) struct RlOperator {
     op: Convolution,
     /// Kernel mass.
-    mass: f64,
+    pub(crate) mass: f64,
     /// `H^T 1` over the window: the normaliser of RL with a sensor of
     /// finite size (Bertero and Boccacci 2005); the kernel mass for a
     /// periodic model.
@@ -188,7 +224,8 @@ struct RlOperator {
 }
 
 impl RlOperator {
-    fn new(model: &ForwardModel, bins: &[usize]) -> Self {
+    /// The operator of the sum of `bins`.
+    pub(crate) fn new(model: &ForwardModel, bins: &[usize]) -> Self {
         let op = Convolution::from_bins(model, bins);
         Self {
             mass: op.mass(),

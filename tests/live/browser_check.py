@@ -1,7 +1,8 @@
 """Opens a live view in headless Chromium (Debian's package, driven by
 playwright with the system browser) and reports what the page showed, as
 JSON on stdout: whether rates, decay, image and reconstruction appeared and
-updated, and the ledger as the page printed it once the run ended; with a
+updated, the reconstructions shown while the run went on, and the ledger
+as the page printed it once the run ended; with a
 SCREENSHOT path, the page as it ended. With MODE `close`, it only opens the
 page, sees it update and closes the browser mid-run.
 
@@ -68,6 +69,18 @@ with sync_playwright() as p:
         }
         report["inked"]["recon"] = page.evaluate(INKED, "recon")
         report["recon_info"] = page.inner_text("#recon-info")
+        # Each reconstruction the page showed while the run went on (by
+        # the acquisition time of its snapshot), looked at 5 times a second.
+        shown = set()
+        while True:
+            done, at = page.evaluate(
+                "[window.liveState.done, window.liveState.reconstruction && window.liveState.reconstruction.acquired_s]")
+            if done:
+                break
+            if at is not None:
+                shown.add(at)
+            time.sleep(0.2)
+        report["shown_during_run"] = sorted(shown)
     page.wait_for_function("window.liveState.done", timeout=240000)
     if expect_recon:
         # The whole run's reconstruction follows the end.

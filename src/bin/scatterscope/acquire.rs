@@ -468,10 +468,7 @@ fn reconstruct_whole_run(stage: LiveStage, done: &Acquisition, stop: &AtomicBool
     );
     let end = stage.finish(done, stop, |p| {
         if p.elapsed_s >= next_line {
-            eprintln!(
-                "live view: reconstructing the whole run: {:.0} s, {} iterations",
-                p.elapsed_s, p.iterations
-            );
+            eprintln!("live view: reconstructing the whole run: {}", p.describe());
             next_line += EVERY_S;
         }
     });
