@@ -600,40 +600,35 @@ fn acquire_mock<'py>(
     seed: u64,
     physics: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<(Bound<'py, PyArray3<f32>>, String, String, Vec<String>)> {
-    use scatterscope::acquire::{DeviceSpec, Job, MockSpec, Plan, TimeZero};
+    use scatterscope::acquire::request::Request;
+    use scatterscope::acquire::{DeviceSpec, MockSpec};
     if !(duration_s.is_finite() && duration_s > 0.0) {
         return Err(msg(format!(
             "duration_s = {duration_s}: give a positive number of seconds"
         )));
     }
-    let setup = overrides(physics)?.resolve().map_err(err)?;
-    let mut plan = Plan {
+    let mock = MockSpec {
+        scene: scatterscope::scene::Scene::parse(scene),
+        emitter: scatterscope_mocks::EmitterOptions {
+            rate_hz,
+            dark_rate_hz,
+            seed,
+            ..scatterscope_mocks::EmitterOptions::default()
+        },
+        device: scatterscope_mocks::MockOptions::default(),
+    };
+    let request = Request {
         duration: Some(Duration::try_from_secs_f64(duration_s).map_err(|_| {
             msg(format!(
                 "duration_s = {duration_s}: longer than any acquisition can run"
             ))
         })?),
+        physics: overrides(physics)?,
+        mock: mock.clone(),
         software: format!("scatterscope python {}", env!("CARGO_PKG_VERSION")),
-        ..Plan::default()
+        ..Request::new(DeviceSpec::Mock(mock), out)
     };
-    plan.set_window(&setup.bins);
-    let job = Job {
-        device: DeviceSpec::Mock(MockSpec {
-            scene: scatterscope::scene::Scene::parse(scene),
-            emitter: scatterscope_mocks::EmitterOptions {
-                rate_hz,
-                dark_rate_hz,
-                seed,
-                ..scatterscope_mocks::EmitterOptions::default()
-            },
-            device: scatterscope_mocks::MockOptions::default(),
-        }),
-        plan,
-        setup: Some(setup),
-        t0: TimeZero::At(0.0),
-        out,
-        ome_tiff: false,
-    };
+    let (job, _) = request.job().map_err(err)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     let done = interruptible(py, stop, move || {

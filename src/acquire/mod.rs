@@ -15,8 +15,9 @@
 //! - [`ledger`]: where every photon and record went; the totals balance.
 //! - [`record`]: the outcome as a stack, with the typed record of the
 //!   acquisition.
-//! - [`job`]: one acquisition as the `acquire` command runs it, outputs
-//!   included.
+//! - [`request`]: one acquisition as every front end asks for it, checked
+//!   once (every device default and refusal) into a [`Job`].
+//! - [`job`]: one acquisition as it runs, outputs included.
 //! - [`calibration`]: time zero from a reference measurement.
 
 pub mod calibration;
@@ -30,6 +31,7 @@ pub mod picoquant;
 pub mod pipeline;
 pub mod record;
 pub mod replay;
+pub mod request;
 pub mod source;
 
 pub use device::{DeviceSpec, OpenedDevice, open_device};

@@ -35,9 +35,10 @@ use crate::formats::png::{SheetScale, write_contact_sheet};
 use crate::stack::{Stack, StackError, StackMeta};
 
 /// How input channels and markers become pixels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Pixels {
     /// The scanned image for imaging files, else one pixel.
+    #[default]
     Auto,
     /// One pixel: every photon in one time histogram.
     Single,

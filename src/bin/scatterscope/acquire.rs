@@ -6,9 +6,8 @@ use std::time::Duration;
 use crate::shared_args::{PhysicsArgs, choice, progress};
 use crate::signals::Interrupted;
 use scatterscope::acquire::Acquisition;
-use scatterscope::acquire::picoquant::{PicoQuantDevice, SettingsRequest};
-use scatterscope::acquire::replay::ReplaySpec;
-use scatterscope::acquire::{DeviceSpec, Job, MockSpec, Plan, StopReason, TimeZero, device};
+use scatterscope::acquire::request::{PicoQuantRequest, Request};
+use scatterscope::acquire::{DeviceSpec, MockSpec, StopReason, TimeZero, device};
 use scatterscope::config::{parse_duration, parse_ps};
 use scatterscope::events::Imaging;
 use scatterscope::live::LiveView;
@@ -219,81 +218,29 @@ fn parse_scan(s: &str) -> Result<Imaging, String> {
     })
 }
 
-/// Whole picoseconds for the library's integer settings.
-fn whole_ps(v: f64, flag: &str) -> anyhow::Result<i32> {
-    let r = v.round();
-    anyhow::ensure!(
-        (r - v).abs() < 1e-9 && r.abs() <= f64::from(i32::MAX),
-        "--{flag} {v} ps: the device takes whole picoseconds"
-    );
-    Ok(r as i32)
-}
-
 impl PicoQuantArgs {
-    /// The PicoQuant-only flags given, by name: refused for other devices,
-    /// which would otherwise ignore them without a word.
-    fn vendor_only(&self) -> Vec<&'static str> {
-        let set = [
-            ("--vendor-lib", self.vendor_lib.is_some()),
-            ("--sync-divider", self.sync_divider.is_some()),
-            ("--sync-level", self.sync_level.is_some()),
-            ("--sync-edge", self.sync_edge.is_some()),
-            ("--marker-edge", self.marker_edge.is_some()),
-            ("--sync-zero-cross", self.sync_zero_cross.is_some()),
-            ("--sync-offset", self.sync_offset.is_some()),
-            ("--input-level", self.input_level.is_some()),
-            ("--input-edge", self.input_edge.is_some()),
-            ("--input-zero-cross", self.input_zero_cross.is_some()),
-            ("--input-offsets", !self.input_offsets.is_empty()),
-            ("--binning", self.binning.is_some()),
-            ("--offset", self.offset.is_some()),
-            ("--scan", self.scan.is_some()),
-            ("--channel", self.channel.is_some()),
-            ("--pixels", self.pixels != Pixels::Auto),
-            ("--no-ptu", self.no_ptu),
-        ];
-        set.into_iter()
-            .filter(|(_, on)| *on)
-            .map(|(f, _)| f)
-            .collect()
-    }
-}
-
-/// `--offset` (ps, as parsed) in the whole nanoseconds the device takes.
-fn whole_ns(v_ps: f64) -> anyhow::Result<i32> {
-    let ns = v_ps / 1000.0;
-    let r = ns.round();
-    anyhow::ensure!(
-        (r - ns).abs() < 1e-9 && r.abs() <= f64::from(i32::MAX),
-        "--offset {v_ps} ps: the device takes whole nanoseconds (e.g. 10ns)"
-    );
-    Ok(r as i32)
-}
-
-impl PicoQuantArgs {
-    /// The device's settings as given.
-    fn settings(&self) -> anyhow::Result<SettingsRequest> {
-        Ok(SettingsRequest {
+    /// The PicoQuant settings as given.
+    fn request(&self) -> PicoQuantRequest {
+        PicoQuantRequest {
+            library: self.vendor_lib.clone(),
             sync_divider: self.sync_divider,
             sync_level_mv: self.sync_level,
             sync_rising: self.sync_edge,
+            markers_rising: self.marker_edge,
             sync_zero_cross_mv: self.sync_zero_cross,
-            sync_offset_ps: self
-                .sync_offset
-                .map(|v| whole_ps(v, "sync-offset"))
-                .transpose()?,
+            sync_offset_ps: self.sync_offset,
             input_level_mv: self.input_level,
             input_rising: self.input_edge,
-            markers_rising: self.marker_edge,
             input_zero_cross_mv: self.input_zero_cross,
-            input_offsets_ps: self
-                .input_offsets
-                .iter()
-                .map(|&v| whole_ps(v, "input-offsets"))
-                .collect::<anyhow::Result<_>>()?,
+            input_offsets_ps: self.input_offsets.clone(),
             binning: self.binning,
-            offset_ns: self.offset.map(whole_ns).transpose()?,
-        })
+            offset_ps: self.offset,
+            scan: self.scan,
+            channel: self.channel,
+            pixels: self.pixels,
+            ptu: self.ptu.clone(),
+            no_ptu: self.no_ptu,
+        }
     }
 }
 
@@ -319,90 +266,32 @@ fn mock_spec(args: &AcquireArgs) -> MockSpec {
     }
 }
 
-/// The job the flags describe, for any device.
-fn job(args: &AcquireArgs) -> anyhow::Result<Job> {
-    let p = &args.picoquant;
-    let mut plan = Plan {
-        region: args.roi,
-        channel: p.channel,
-        pixels: p.pixels,
-        duration: match (args.duration, &args.device) {
-            (Some(d), _) => (!d.is_zero()).then_some(d),
-            (None, DeviceSpec::Replay(_)) => None,
-            (None, _) => Some(Duration::from_secs(2)),
-        },
-        resolution_fs: args
-            .resolution
-            .map(scatterscope::acquire::pipeline::resolution_fs)
-            .transpose()?,
-        tag_file: args.tags.clone(),
-        ptu: p.ptu.clone(),
-        software: format!("scatterscope {}", env!("CARGO_PKG_VERSION")),
-        ..Plan::default()
-    };
-    let device = match &args.device {
-        DeviceSpec::PicoQuant(d) => {
-            // The vendor's device: its settings and a PTU by default.
-            if !p.no_ptu && plan.ptu.is_none() {
-                plan.ptu = Some(args.out.join("acquisition.ptu"));
-            }
-            DeviceSpec::PicoQuant(PicoQuantDevice {
-                spec: d.spec.clone(),
-                library: p.vendor_lib.clone(),
-                settings: p.settings()?,
-                scan: p.scan,
-            })
-        }
-        other => {
-            let given = p.vendor_only();
-            anyhow::ensure!(
-                given.is_empty(),
-                "{} set a PicoQuant device (--device picoquant); {other} would ignore them",
-                given.join(", ")
-            );
-            match other {
-                DeviceSpec::Mock(_) => DeviceSpec::Mock(mock_spec(args)),
-                DeviceSpec::MockSerial(_) => DeviceSpec::MockSerial(mock_spec(args)),
-                DeviceSpec::Replay(r) => DeviceSpec::Replay(ReplaySpec {
-                    path: r.path.clone(),
-                    speed: args.speed,
-                }),
-                hardware => hardware.clone(),
-            }
-        }
-    };
-    anyhow::ensure!(
-        args.speed == 1.0 || matches!(device, DeviceSpec::Replay(_)),
-        "--speed plays a recording back faster (--device replay:FILE); {device} runs at its own pace"
-    );
-    let setup = if device.is_sensor() {
-        let setup = args.physics.resolve()?;
-        plan.set_window(&setup.bins);
-        Some(setup)
-    } else {
-        // A vendor's device or its recording: the window the flags give
-        // (default: one sync period); its physics are not assumed.
-        plan.bin_width_ps = args.physics.bin_width;
-        plan.t_start_ps = args.physics.t_start.unwrap_or(0.0);
-        plan.bins = args.physics.bins;
-        None
-    };
-    Ok(Job {
-        device,
-        setup,
+/// The request the flags make.
+fn request(args: &AcquireArgs) -> Request {
+    Request {
+        duration: args.duration,
+        physics: args.physics.overrides(),
         t0: match &args.t0_from {
             Some(reference) => TimeZero::FromReference(reference.clone()),
             None => TimeZero::At(args.t0),
         },
-        plan,
-        out: args.out.clone(),
+        region: args.roi,
+        resolution_ps: args.resolution,
+        tags: args.tags.clone(),
+        mock: mock_spec(args),
+        picoquant: args.picoquant.request(),
+        speed: args.speed,
         ome_tiff: args.ome_tiff,
-    })
+        ..Request::new(args.device.clone(), args.out.clone())
+    }
 }
 
 pub fn run(args: &AcquireArgs) -> anyhow::Result<()> {
     let stop = crate::signals::stop_flag();
-    let job = job(args)?;
+    let (job, notes) = request(args).job()?;
+    for note in notes {
+        println!("{note}");
+    }
     let live = args
         .live
         .as_deref()

@@ -1,0 +1,438 @@
+//! One acquisition as every front end asks for it: the command line, the
+//! Python package and scripts build a [`Request`] from what the user gave,
+//! and [`Request::job`] checks it once and makes it the [`Job`] that runs.
+//! Every device default and refusal lives here: the duration a device
+//! runs by default, the settings only a PicoQuant device takes (refused by
+//! name for any other, which would ignore them), the units a vendor's
+//! library takes them in, the PTU a vendor's device records by default,
+//! and the window a stack is binned into.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use super::DeviceSpec;
+use super::job::{Job, TimeZero};
+use super::mock::MockSpec;
+use super::picoquant::{PicoQuantDevice, SettingsRequest};
+use super::pipeline::{AcquireError, Plan, resolution_fs};
+use super::replay::ReplaySpec;
+use crate::config::{ConfigError, PhysicsOverrides};
+use crate::events::Imaging;
+use crate::tags::bin_file::Pixels;
+use crate::tags::binning::Region;
+
+/// How long an acquisition runs when the request does not say (a replay
+/// runs to the end of its recording).
+pub const DEFAULT_DURATION: Duration = Duration::from_secs(2);
+
+/// One acquisition, as asked for. [`Request::new`] holds the defaults of
+/// every setting (those of `scatterscope acquire`).
+#[derive(Debug, Clone)]
+pub struct Request {
+    /// The device.
+    pub device: DeviceSpec,
+    /// How long: `None` for the device's default ([`DEFAULT_DURATION`]; a
+    /// replay: its whole recording), zero until the device stops (or a
+    /// stop request).
+    pub duration: Option<Duration>,
+    /// The sample's physics as given (preset, file, values). A device
+    /// whose sensor is the image (ours, the mocks) bins into the window
+    /// they resolve to and records them with the stack; a vendor's device
+    /// or a recording takes only the window given (`bin_width`, `t_start`,
+    /// `bins`; by default one sync period at the device's unit), and no
+    /// physics are assumed for it.
+    pub physics: PhysicsOverrides,
+    /// Time zero.
+    pub t0: TimeZero,
+    /// The region of the sensor binned (all of it when `None`).
+    pub region: Option<Region>,
+    /// The micro-time unit to configure, ps (the device's own when
+    /// `None`).
+    pub resolution_ps: Option<f64>,
+    /// A tag file recording every event batch, losslessly.
+    pub tags: Option<PathBuf>,
+    /// The mock's scene and behaviour (used by the mock devices only).
+    pub mock: MockSpec,
+    /// What only a PicoQuant device takes.
+    pub picoquant: PicoQuantRequest,
+    /// How many times faster than recorded a replay plays (1 for every
+    /// other device).
+    pub speed: f64,
+    /// Also write the stack as OME-TIFF.
+    pub ome_tiff: bool,
+    /// The output directory.
+    pub out: PathBuf,
+    /// The software named in the outputs.
+    pub software: String,
+}
+
+/// The settings only a PicoQuant device takes, in the units a user gives
+/// them (ps, mV); unset ones take the vendor demos' values.
+#[derive(Debug, Clone, Default)]
+pub struct PicoQuantRequest {
+    /// The vendor's library (its usual name on the loader's path when
+    /// `None`).
+    pub library: Option<PathBuf>,
+    /// Sync divider.
+    pub sync_divider: Option<i32>,
+    /// Sync trigger level, mV.
+    pub sync_level_mv: Option<i32>,
+    /// Sync on the rising edge (else falling).
+    pub sync_rising: Option<bool>,
+    /// Markers on the rising edge (else falling).
+    pub markers_rising: Option<bool>,
+    /// Sync zero-cross level, mV.
+    pub sync_zero_cross_mv: Option<i32>,
+    /// Sync offset, ps (whole ps).
+    pub sync_offset_ps: Option<f64>,
+    /// Input trigger level, mV.
+    pub input_level_mv: Option<i32>,
+    /// Inputs on the rising edge (else falling).
+    pub input_rising: Option<bool>,
+    /// Input zero-cross level, mV.
+    pub input_zero_cross_mv: Option<i32>,
+    /// Per-input offsets, ps (whole ps).
+    pub input_offsets_ps: Vec<f64>,
+    /// Binning step (the unit is the base resolution times 2^binning).
+    pub binning: Option<i32>,
+    /// T3 offset, ps (whole ns).
+    pub offset_ps: Option<f64>,
+    /// The scan of an imaging measurement.
+    pub scan: Option<Imaging>,
+    /// Only this input channel.
+    pub channel: Option<u16>,
+    /// How channels map to pixels.
+    pub pixels: Pixels,
+    /// The PTU file to record (default: `acquisition.ptu` in the output
+    /// directory).
+    pub ptu: Option<PathBuf>,
+    /// Record no PTU.
+    pub no_ptu: bool,
+}
+
+impl PicoQuantRequest {
+    /// The settings given, by their command-line names.
+    fn given(&self) -> Vec<&'static str> {
+        let set = [
+            ("--vendor-lib", self.library.is_some()),
+            ("--sync-divider", self.sync_divider.is_some()),
+            ("--sync-level", self.sync_level_mv.is_some()),
+            ("--sync-edge", self.sync_rising.is_some()),
+            ("--marker-edge", self.markers_rising.is_some()),
+            ("--sync-zero-cross", self.sync_zero_cross_mv.is_some()),
+            ("--sync-offset", self.sync_offset_ps.is_some()),
+            ("--input-level", self.input_level_mv.is_some()),
+            ("--input-edge", self.input_rising.is_some()),
+            ("--input-zero-cross", self.input_zero_cross_mv.is_some()),
+            ("--input-offsets", !self.input_offsets_ps.is_empty()),
+            ("--binning", self.binning.is_some()),
+            ("--offset", self.offset_ps.is_some()),
+            ("--scan", self.scan.is_some()),
+            ("--channel", self.channel.is_some()),
+            ("--pixels", self.pixels != Pixels::Auto),
+            ("--no-ptu", self.no_ptu),
+        ];
+        set.into_iter()
+            .filter(|(_, on)| *on)
+            .map(|(f, _)| f)
+            .collect()
+    }
+
+    /// The library's settings: offsets in the whole units it takes.
+    fn settings(&self) -> Result<SettingsRequest, RequestError> {
+        Ok(SettingsRequest {
+            sync_divider: self.sync_divider,
+            sync_level_mv: self.sync_level_mv,
+            sync_rising: self.sync_rising,
+            sync_zero_cross_mv: self.sync_zero_cross_mv,
+            sync_offset_ps: self
+                .sync_offset_ps
+                .map(|v| whole(v, 1.0, "sync-offset"))
+                .transpose()?,
+            input_level_mv: self.input_level_mv,
+            input_rising: self.input_rising,
+            markers_rising: self.markers_rising,
+            input_zero_cross_mv: self.input_zero_cross_mv,
+            input_offsets_ps: self
+                .input_offsets_ps
+                .iter()
+                .map(|&v| whole(v, 1.0, "input-offsets"))
+                .collect::<Result<_, _>>()?,
+            binning: self.binning,
+            offset_ns: self
+                .offset_ps
+                .map(|v| whole(v, 1000.0, "offset"))
+                .transpose()?,
+        })
+    }
+}
+
+/// `v_ps` in whole units of `unit_ps` (1: ps, 1000: ns), as the vendor's
+/// library takes `setting`.
+fn whole(v_ps: f64, unit_ps: f64, setting: &'static str) -> Result<i32, RequestError> {
+    let v = v_ps / unit_ps;
+    let r = v.round();
+    if (r - v).abs() < 1e-9 && r.abs() <= f64::from(i32::MAX) {
+        Ok(r as i32)
+    } else {
+        Err(RequestError::NotWhole {
+            setting,
+            value_ps: v_ps,
+            unit: if unit_ps == 1.0 {
+                "picoseconds"
+            } else {
+                "nanoseconds (e.g. 10ns)"
+            },
+        })
+    }
+}
+
+/// Why a request cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum RequestError {
+    /// Settings only a PicoQuant device takes, for another device.
+    #[error("{} set a PicoQuant device (--device picoquant); {device} would ignore them", given.join(", "))]
+    PicoQuantOnly {
+        /// The settings given, by their command-line names.
+        given: Vec<&'static str>,
+        /// The device asked for.
+        device: String,
+    },
+    /// An offset the vendor's library takes in whole units.
+    #[error("--{setting} {value_ps} ps: the device takes whole {unit}")]
+    NotWhole {
+        /// The setting.
+        setting: &'static str,
+        /// Its value, ps.
+        value_ps: f64,
+        /// The unit it must be whole in.
+        unit: &'static str,
+    },
+    /// A replay speed for a device that is not a replay.
+    #[error(
+        "--speed plays a recording back faster (--device replay:FILE); {device} runs at its own pace"
+    )]
+    SpeedNotReplay {
+        /// The device asked for.
+        device: String,
+    },
+    /// The physics given do not resolve.
+    #[error(transparent)]
+    Physics(#[from] ConfigError),
+    /// A setting out of range.
+    #[error(transparent)]
+    Setting(#[from] AcquireError),
+}
+
+impl Request {
+    /// A request for `device` writing into `out`, every other setting at
+    /// its default.
+    pub fn new(device: DeviceSpec, out: PathBuf) -> Self {
+        Self {
+            device,
+            duration: None,
+            physics: PhysicsOverrides::default(),
+            t0: TimeZero::At(0.0),
+            region: None,
+            resolution_ps: None,
+            tags: None,
+            mock: MockSpec::default(),
+            picoquant: PicoQuantRequest::default(),
+            speed: 1.0,
+            ome_tiff: false,
+            out,
+            software: format!("scatterscope {}", env!("CARGO_PKG_VERSION")),
+        }
+    }
+
+    /// Checks the request and makes it the job that runs, with the notes
+    /// resolving its physics gave (a reference recording's instrument
+    /// response). Refuses by name a setting the device cannot take,
+    /// before the device is touched.
+    pub fn job(&self) -> Result<(Job, Vec<String>), RequestError> {
+        let p = &self.picoquant;
+        let mut plan = Plan {
+            region: self.region,
+            channel: p.channel,
+            pixels: p.pixels,
+            duration: match (self.duration, &self.device) {
+                (Some(d), _) => (!d.is_zero()).then_some(d),
+                (None, DeviceSpec::Replay(_)) => None,
+                (None, _) => Some(DEFAULT_DURATION),
+            },
+            resolution_fs: self.resolution_ps.map(resolution_fs).transpose()?,
+            tag_file: self.tags.clone(),
+            ptu: p.ptu.clone(),
+            software: self.software.clone(),
+            ..Plan::default()
+        };
+        let device = match &self.device {
+            DeviceSpec::PicoQuant(d) => {
+                // The vendor's device: its settings and a PTU by default.
+                if !p.no_ptu && plan.ptu.is_none() {
+                    plan.ptu = Some(self.out.join("acquisition.ptu"));
+                }
+                DeviceSpec::PicoQuant(PicoQuantDevice {
+                    spec: d.spec.clone(),
+                    library: p.library.clone(),
+                    settings: p.settings()?,
+                    scan: p.scan,
+                })
+            }
+            other => {
+                let given = p.given();
+                if !given.is_empty() {
+                    return Err(RequestError::PicoQuantOnly {
+                        given,
+                        device: other.to_string(),
+                    });
+                }
+                match other {
+                    DeviceSpec::Mock(_) => DeviceSpec::Mock(self.mock.clone()),
+                    DeviceSpec::MockSerial(_) => DeviceSpec::MockSerial(self.mock.clone()),
+                    DeviceSpec::Replay(r) => DeviceSpec::Replay(ReplaySpec {
+                        path: r.path.clone(),
+                        speed: self.speed,
+                    }),
+                    hardware => hardware.clone(),
+                }
+            }
+        };
+        if self.speed != 1.0 && !matches!(device, DeviceSpec::Replay(_)) {
+            return Err(RequestError::SpeedNotReplay {
+                device: device.to_string(),
+            });
+        }
+        let mut notes = Vec::new();
+        let setup = if device.is_sensor() {
+            let (setup, resolved) = self.physics.resolve_noted(None)?;
+            notes = resolved;
+            plan.set_window(&setup.bins);
+            Some(setup)
+        } else {
+            // A vendor's device or its recording: the window given
+            // (default: one sync period); its physics are not assumed.
+            plan.bin_width_ps = self.physics.bin_width;
+            plan.t_start_ps = self.physics.t_start.unwrap_or(0.0);
+            plan.bins = self.physics.bins;
+            None
+        };
+        Ok((
+            Job {
+                device,
+                setup,
+                t0: self.t0.clone(),
+                plan,
+                out: self.out.clone(),
+                ome_tiff: self.ome_tiff,
+            },
+            notes,
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn request(device: &str) -> Request {
+        Request::new(device.parse().unwrap(), PathBuf::from("out/x"))
+    }
+
+    #[test]
+    fn a_device_runs_two_seconds_by_default_a_replay_to_its_end_and_zero_until_stopped() {
+        let (job, _) = request("mock").job().unwrap();
+        assert_eq!(job.plan.duration, Some(DEFAULT_DURATION));
+        let (job, _) = request("replay:run.ptu").job().unwrap();
+        assert_eq!(job.plan.duration, None);
+        let mut r = request("mock");
+        r.duration = Some(Duration::ZERO);
+        assert_eq!(r.job().unwrap().0.plan.duration, None);
+        r.duration = Some(Duration::from_millis(500));
+        assert_eq!(
+            r.job().unwrap().0.plan.duration,
+            Some(Duration::from_millis(500))
+        );
+    }
+
+    #[test]
+    fn picoquant_settings_are_refused_by_name_for_any_other_device() {
+        let mut r = request("mock");
+        r.picoquant.sync_level_mv = Some(-50);
+        r.picoquant.offset_ps = Some(10_000.0);
+        r.picoquant.pixels = Pixels::Channel;
+        let e = r.job().unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "--sync-level, --offset, --pixels set a PicoQuant device (--device picoquant); mock would ignore them"
+        );
+        for device in ["mock-serial", "replay:run.ptu", "serial:/dev/ttyACM0"] {
+            let mut r = request(device);
+            r.picoquant.no_ptu = true;
+            assert!(r.job().unwrap_err().to_string().starts_with("--no-ptu set"));
+        }
+    }
+
+    #[test]
+    fn offsets_go_to_the_library_in_its_whole_units_or_are_refused() {
+        let mut r = request("picoquant");
+        r.picoquant.offset_ps = Some(10_000.0);
+        r.picoquant.sync_offset_ps = Some(-25.0);
+        r.picoquant.input_offsets_ps = vec![0.0, 12.0];
+        let (job, _) = r.job().unwrap();
+        let DeviceSpec::PicoQuant(d) = &job.device else {
+            panic!("{:?}", job.device)
+        };
+        assert_eq!(d.settings.offset_ns, Some(10));
+        assert_eq!(d.settings.sync_offset_ps, Some(-25));
+        assert_eq!(d.settings.input_offsets_ps, vec![0, 12]);
+        r.picoquant.offset_ps = Some(10_500.0);
+        assert_eq!(
+            r.job().unwrap_err().to_string(),
+            "--offset 10500 ps: the device takes whole nanoseconds (e.g. 10ns)"
+        );
+        r.picoquant.offset_ps = None;
+        r.picoquant.input_offsets_ps = vec![0.5];
+        assert_eq!(
+            r.job().unwrap_err().to_string(),
+            "--input-offsets 0.5 ps: the device takes whole picoseconds"
+        );
+    }
+
+    #[test]
+    fn a_vendors_device_records_a_ptu_by_default_and_takes_only_the_window() {
+        let mut r = request("picoquant:hydraharp");
+        r.physics.bin_width = Some(8.0);
+        r.physics.bins = Some(100);
+        let (job, _) = r.job().unwrap();
+        assert_eq!(job.plan.ptu, Some(PathBuf::from("out/x/acquisition.ptu")));
+        assert!(job.setup.is_none());
+        assert_eq!(
+            (job.plan.bin_width_ps, job.plan.bins),
+            (Some(8.0), Some(100))
+        );
+        r.picoquant.no_ptu = true;
+        assert_eq!(r.job().unwrap().0.plan.ptu, None);
+        // A sensor device bins into the window its physics resolve to.
+        let (job, _) = request("mock").job().unwrap();
+        let setup = job.setup.unwrap();
+        assert_eq!(job.plan.bin_width_ps, Some(setup.bins.width_ps));
+    }
+
+    #[test]
+    fn only_a_replay_takes_a_speed() {
+        let mut r = request("mock");
+        r.speed = 10.0;
+        assert_eq!(
+            r.job().unwrap_err().to_string(),
+            "--speed plays a recording back faster (--device replay:FILE); mock runs at its own pace"
+        );
+        let mut r = request("replay:run.ptu");
+        r.speed = 10.0;
+        let (job, _) = r.job().unwrap();
+        assert!(matches!(
+            job.device,
+            DeviceSpec::Replay(ReplaySpec { speed: 10.0, .. })
+        ));
+    }
+}
