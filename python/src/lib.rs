@@ -585,50 +585,105 @@ fn err_text(e: &dyn std::error::Error) -> String {
     text
 }
 
-/// Acquires from the emulated device: (stack, metadata JSON, record JSON,
-/// summary lines).
-#[pyfunction]
-#[pyo3(signature = (duration_s, out, scene="usaf", rate_hz=2e6, dark_rate_hz=0.0, seed=0, **physics))]
-#[allow(clippy::too_many_arguments, clippy::type_complexity)]
-fn acquire_mock<'py>(
-    py: Python<'py>,
-    duration_s: f64,
+/// The acquisition settings among `kw` (the library's request, with the
+/// command's defaults; the mock's settings start from `mock`); the rest
+/// are the physics.
+fn acquisition_request(
+    py: Python<'_>,
+    device: &str,
     out: PathBuf,
-    scene: &str,
-    rate_hz: f64,
-    dark_rate_hz: f64,
-    seed: u64,
-    physics: Option<&Bound<'py, PyDict>>,
-) -> PyResult<(Bound<'py, PyArray3<f32>>, String, String, Vec<String>)> {
-    use scatterscope::acquire::request::Request;
-    use scatterscope::acquire::{DeviceSpec, MockSpec};
-    if !(duration_s.is_finite() && duration_s > 0.0) {
-        return Err(msg(format!(
-            "duration_s = {duration_s}: give a positive number of seconds"
-        )));
-    }
-    let mock = MockSpec {
-        scene: scatterscope::scene::Scene::parse(scene),
-        emitter: scatterscope_mocks::EmitterOptions {
-            rate_hz,
-            dark_rate_hz,
-            seed,
-            ..scatterscope_mocks::EmitterOptions::default()
-        },
-        device: scatterscope_mocks::MockOptions::default(),
-    };
-    let request = Request {
-        duration: Some(Duration::try_from_secs_f64(duration_s).map_err(|_| {
+    duration_s: Option<f64>,
+    kw: Option<&Bound<'_, PyDict>>,
+) -> PyResult<scatterscope::acquire::request::Request> {
+    use scatterscope::acquire::TimeZero;
+    use scatterscope::acquire::request::{Request, parse_edge, parse_scan};
+    let device = device
+        .parse()
+        .map_err(|e: String| msg(format!("device `{device}`: {e}")))?;
+    let mut r = Request::new(device, out);
+    r.software = format!("scatterscope python {}", env!("CARGO_PKG_VERSION"));
+    if let Some(d) = duration_s {
+        if !(d.is_finite() && d >= 0.0) {
+            return Err(msg(format!(
+                "duration_s = {d}: give a number of seconds >= 0 (0: until the device stops)"
+            )));
+        }
+        r.duration = Some(Duration::try_from_secs_f64(d).map_err(|_| {
             msg(format!(
-                "duration_s = {duration_s}: longer than any acquisition can run"
+                "duration_s = {d}: longer than any acquisition can run"
             ))
-        })?),
-        physics: overrides(physics)?,
-        mock: mock.clone(),
-        software: format!("scatterscope python {}", env!("CARGO_PKG_VERSION")),
-        ..Request::new(DeviceSpec::Mock(mock), out)
+        })?);
+    }
+    let physics = PyDict::new(py);
+    let text = |v: &Bound<'_, PyAny>| v.extract::<String>();
+    let edge = |v: &Bound<'_, PyAny>| -> PyResult<bool> {
+        parse_edge(&v.extract::<String>()?).map_err(msg)
     };
-    let (job, _) = request.job().map_err(err)?;
+    let (m, p) = (&mut r.mock, &mut r.picoquant);
+    for (key, value) in kw.into_iter().flat_map(|k| k.iter()) {
+        let key: String = key.extract()?;
+        if value.is_none() {
+            continue;
+        }
+        match key.as_str() {
+            "scene" => m.scene = scatterscope::scene::Scene::parse(&text(&value)?),
+            "rate_hz" => m.emitter.rate_hz = value.extract()?,
+            "dark_rate_hz" => m.emitter.dark_rate_hz = value.extract()?,
+            "afterpulse" => m.emitter.afterpulse_probability = value.extract()?,
+            "seed" => m.emitter.seed = value.extract()?,
+            "mock_delay_ps" => m.emitter.t0_delay_ps = value.extract()?,
+            "max_photons" => m.device.max_photons = value.extract()?,
+            "unpaced" => m.device.real_time = !value.extract::<bool>()?,
+            "replay_batches" => m.device.replay_batches = value.extract()?,
+            "faults" => m.device.faults = text(&value)?.parse().map_err(msg)?,
+            "t0_ps" => r.t0 = TimeZero::At(value.extract()?),
+            "t0_from" => r.t0 = TimeZero::FromReference(PathBuf::from(text(&value)?)),
+            "roi" => r.region = Some(text(&value)?.parse().map_err(msg)?),
+            "resolution_ps" => r.resolution_ps = Some(value.extract()?),
+            "tags" => r.tags = Some(PathBuf::from(text(&value)?)),
+            "speed" => r.speed = value.extract()?,
+            "ome_tiff" => r.ome_tiff = value.extract()?,
+            "vendor_lib" => p.library = Some(PathBuf::from(text(&value)?)),
+            "sync_divider" => p.sync_divider = Some(value.extract()?),
+            "sync_level_mv" => p.sync_level_mv = Some(value.extract()?),
+            "sync_edge" => p.sync_rising = Some(edge(&value)?),
+            "marker_edge" => p.markers_rising = Some(edge(&value)?),
+            "sync_zero_cross_mv" => p.sync_zero_cross_mv = Some(value.extract()?),
+            "sync_offset_ps" => p.sync_offset_ps = Some(value.extract()?),
+            "input_level_mv" => p.input_level_mv = Some(value.extract()?),
+            "input_edge" => p.input_rising = Some(edge(&value)?),
+            "input_zero_cross_mv" => p.input_zero_cross_mv = Some(value.extract()?),
+            "input_offsets_ps" => p.input_offsets_ps = value.extract()?,
+            "binning" => p.binning = Some(value.extract()?),
+            "offset_ps" => p.offset_ps = Some(value.extract()?),
+            "scan" => p.scan = Some(parse_scan(&text(&value)?).map_err(msg)?),
+            "channel" => p.channel = Some(value.extract()?),
+            "pixels" => p.pixels = named("pixels", &text(&value)?)?,
+            "ptu" => p.ptu = Some(PathBuf::from(text(&value)?)),
+            "no_ptu" => p.no_ptu = value.extract()?,
+            _ => physics.set_item(key, value)?,
+        }
+    }
+    r.physics = overrides(Some(&physics))?;
+    Ok(r)
+}
+
+/// Acquires from `device` (as `scatterscope acquire --device` names it)
+/// into `out`, with the command's defaults, refusals and outputs: (stack,
+/// metadata JSON, record JSON, summary lines).
+#[pyfunction]
+#[pyo3(signature = (device, out, duration_s=None, **settings))]
+#[allow(clippy::type_complexity)]
+fn acquire<'py>(
+    py: Python<'py>,
+    device: &str,
+    out: PathBuf,
+    duration_s: Option<f64>,
+    settings: Option<&Bound<'py, PyDict>>,
+) -> PyResult<(Bound<'py, PyArray3<f32>>, String, String, Vec<String>)> {
+    let (job, _) = acquisition_request(py, device, out, duration_s, settings)?
+        .job()
+        .map_err(err)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     let done = interruptible(py, stop, move || {
@@ -768,7 +823,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(simulate_scene, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
-    m.add_function(wrap_pyfunction!(acquire_mock, m)?)?;
+    m.add_function(wrap_pyfunction!(acquire, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_slab, m)?)?;
     m.add_function(wrap_pyfunction!(renamed_parameters, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;

@@ -267,6 +267,80 @@ def test_acquire_mock_accounts_for_every_photon(tmp_path):
     assert any("photons" in line for line in done["summary"])
 
 
+def cli_error(*args: str) -> str:
+    """The command's error message (its stderr after "error: ") for args
+    it refuses."""
+    out = subprocess.run([str(cli_path()), *args], capture_output=True, text=True)
+    assert out.returncode != 0, out.stdout
+    return out.stderr.strip().removeprefix("error: ")
+
+
+def standin_library() -> Path:
+    """The stand-in PicoQuant library (built with the workspace; built here
+    the first time it is missing)."""
+    name = "libscatterscope_mock_picoquant.so"
+    for d in ("debug", "release"):
+        p = REPO / "target" / d / name
+        if p.exists():
+            return p
+    built = subprocess.run(
+        ["cargo", "build", "-p", "scatterscope-mock-picoquant"], cwd=REPO, capture_output=True, text=True
+    )
+    assert built.returncode == 0, "building the stand-in library failed:\n" + built.stderr
+    return REPO / "target" / "debug" / name
+
+
+def test_acquire_from_the_mock_equals_the_commands_run(tmp_path):
+    # The mock unpaced to a photon count: the same request gives the same
+    # photons, so the stacks and ledgers agree exactly.
+    flags = {"size": 16, "unpaced": True, "max_photons": 60_000, "seed": 5}
+    cli("acquire", "--device", "mock", "--size", "16", "--unpaced", "--max-photons", "60000", "--seed", "5",
+        "--duration", "0", "--out", str(tmp_path / "cli"))
+    done = scatterscope.acquire("mock", tmp_path / "py", 0, **flags)
+    data, meta = scatterscope.load_stack(tmp_path / "cli" / "stack.exr")
+    assert np.array_equal(done["stack"], data)
+    record = json.loads((tmp_path / "cli" / "acquisition.json").read_text())
+    for field in ("records_read", "photons", "binned", "outside_window", "lost_in_device"):
+        assert done["record"]["ledger"][field] == record["ledger"][field], field
+    assert done["meta"]["bin_starts_ps"] == meta["bin_starts_ps"]
+    assert sorted(p.name for p in (tmp_path / "py").iterdir()) == sorted(p.name for p in (tmp_path / "cli").iterdir())
+
+
+def test_acquire_refuses_what_the_command_refuses_with_its_words(tmp_path):
+    out = str(tmp_path / "x")
+    cases = [
+        (["--device", "mock", "--sync-level", "-50"], dict(device="mock", sync_level_mv=-50)),
+        (["--device", "mock", "--speed", "4"], dict(device="mock", speed=4.0)),
+        (["--device", "picoquant", "--vendor-lib", str(standin_library()), "--offset", "10500ps"],
+         dict(device="picoquant", vendor_lib=str(standin_library()), offset_ps=10500.0)),
+    ]
+    for flags, kwargs in cases:
+        theirs = cli_error("acquire", *flags, "--out", out)
+        device = kwargs.pop("device")
+        with pytest.raises(ScatterscopeError) as raised:
+            scatterscope.acquire(device, out, 0.1, **kwargs)
+        assert str(raised.value) == theirs
+    assert not (tmp_path / "x").exists()
+
+
+def test_acquire_from_the_standin_library_with_the_commands_defaults(tmp_path):
+    lib = str(standin_library())
+    cli("acquire", "--device", "picoquant:hydraharp", "--vendor-lib", lib, "--duration", "200ms",
+        "--out", str(tmp_path / "cli"))
+    done = scatterscope.acquire("picoquant:hydraharp", tmp_path / "py", 0.2, vendor_lib=lib)
+    data, meta = scatterscope.load_stack(tmp_path / "cli" / "stack.exr")
+    # The same window (one sync period at the device's unit), a PTU by
+    # default, every record binned or accounted for.
+    assert done["stack"].shape == data.shape
+    assert done["meta"]["bin_starts_ps"] == meta["bin_starts_ps"]
+    for d in ("cli", "py"):
+        assert (tmp_path / d / "acquisition.ptu").stat().st_size > 0
+    ledger = done["record"]["ledger"]
+    assert ledger["photons"] > 0 and done["stack"].sum() == ledger["binned"]
+    record = json.loads((tmp_path / "cli" / "acquisition.json").read_text())
+    assert done["record"]["device"] == record["device"]
+
+
 def test_bad_input_raises_with_the_librarys_message(tmp_path):
     sim = scatterscope.simulate("disks", seed=0, size=16)
     bad = sim["counts"].copy()

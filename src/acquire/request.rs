@@ -167,6 +167,34 @@ impl PicoQuantRequest {
     }
 }
 
+/// An edge by name: `rising` (true) or `falling`.
+pub fn parse_edge(s: &str) -> Result<bool, String> {
+    match s {
+        "rising" => Ok(true),
+        "falling" => Ok(false),
+        _ => Err(format!("edge `{s}`: use rising or falling")),
+    }
+}
+
+/// A scan's points, `WIDTHxHEIGHT` (e.g. `64x64`), with the markers the
+/// PicoQuant demos use (line start 1, line stop 2, frame 4; one way).
+pub fn parse_scan(s: &str) -> Result<Imaging, String> {
+    let bad = || format!("scan `{s}`: give WIDTHxHEIGHT in points, e.g. 64x64");
+    let (w, h) = s.split_once('x').ok_or_else(bad)?;
+    let (w, h): (usize, usize) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
+    if w == 0 || h == 0 {
+        return Err(bad());
+    }
+    Ok(Imaging {
+        pixels_x: w,
+        pixels_y: h,
+        line_start: 1,
+        line_stop: 2,
+        frame: 4,
+        bidirectional: false,
+    })
+}
+
 /// `v_ps` in whole units of `unit_ps` (1: ps, 1000: ns), as the vendor's
 /// library takes `setting`.
 fn whole(v_ps: f64, unit_ps: f64, setting: &'static str) -> Result<i32, RequestError> {

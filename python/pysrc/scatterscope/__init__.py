@@ -13,7 +13,8 @@ The same library as the ``scatterscope`` command, numpy in and out:
   reconstruct`` by name), returning the image, the trace and the notes;
 - calibration: :func:`calibrate_slab` (a slab's mu_a and mu_s' from
   transmittance captures);
-- acquisition: :func:`acquire_mock` (the emulated time tagger).
+- acquisition: :func:`acquire` (any device, as the command), and
+  :func:`acquire_mock` (the emulated time tagger).
 
 Physics keywords use the library's units: ``mu_a`` and ``mu_s`` in 1/cm,
 ``thickness_cm``, ``fov_cm``, times in ps (``bin_width_ps``,
@@ -46,6 +47,7 @@ __all__ = [
     "psf_kernels",
     "simulate",
     "reconstruct",
+    "acquire",
     "acquire_mock",
     "calibrate_slab",
     "__version__",
@@ -272,6 +274,40 @@ def reconstruct(
     return image, _trace(json.loads(trace)), list(notes)
 
 
+def acquire(
+    device: str,
+    out: "os.PathLike[str] | str",
+    duration_s: Optional[float] = None,
+    **settings: Any,
+) -> Dict[str, Any]:
+    """Acquire from ``device`` as ``scatterscope acquire --device DEVICE``.
+
+    One request in the library serves both: the same defaults (2 s; a
+    replay: the whole recording; ``duration_s=0``: until the device stops),
+    the same refusals and messages (a PicoQuant-only setting for another
+    device, an offset the vendor's library cannot take) and the same files
+    in ``out``. ``settings`` are the command's flags in the library's
+    units: the mock's ``scene``, ``rate_hz``, ``dark_rate_hz``,
+    ``afterpulse``, ``seed``, ``mock_delay_ps``, ``max_photons``,
+    ``unpaced``, ``replay_batches``, ``faults``; ``t0_ps`` or ``t0_from``,
+    ``roi`` (``"X,Y,W,H"``), ``resolution_ps``, ``tags``, ``speed``,
+    ``ome_tiff``; a PicoQuant device's ``vendor_lib``, ``sync_divider``,
+    ``sync_level_mv``, ``sync_edge`` and ``marker_edge`` and ``input_edge``
+    (``"rising"``/``"falling"``), ``sync_zero_cross_mv``,
+    ``sync_offset_ps``, ``input_level_mv``, ``input_zero_cross_mv``,
+    ``input_offsets_ps`` (a list), ``binning``, ``offset_ps``, ``scan``
+    (``"64x64"``), ``channel``, ``pixels``, ``ptu``, ``no_ptu``; any other
+    keyword is a physics keyword (``size``, ``bin_width_ps``, ...).
+    Returns ``stack``, ``meta``, ``record`` and ``summary`` as
+    :func:`acquire_mock`. Ctrl-C ends it cleanly, then raises
+    KeyboardInterrupt.
+    """
+    stack, meta, record, summary = _native.acquire(
+        device, _path(out), None if duration_s is None else float(duration_s), **settings
+    )
+    return {"stack": stack, "meta": json.loads(meta), "record": json.loads(record), "summary": list(summary)}
+
+
 def acquire_mock(
     duration_s: float,
     out: "os.PathLike[str] | str",
@@ -289,12 +325,15 @@ def acquire_mock(
     Returns ``stack`` (float32 ``(bins, rows, cols)``), ``meta``, ``record``
     (the acquisition's record: device, the ledger of every photon, why it ended) and
     ``summary`` (the lines ``scatterscope acquire`` prints). Ctrl-C ends it
-    cleanly, then raises KeyboardInterrupt.
+    cleanly, then raises KeyboardInterrupt. :func:`acquire` with
+    ``device="mock"``.
     """
-    stack, meta, record, summary = _native.acquire_mock(
-        float(duration_s), _path(out), scene, float(rate_hz), float(dark_rate_hz), int(seed), **physics
+    if not (duration_s > 0):
+        raise ScatterscopeError(f"duration_s = {duration_s}: give a positive number of seconds")
+    return acquire(
+        "mock", out, duration_s, scene=scene, rate_hz=float(rate_hz), dark_rate_hz=float(dark_rate_hz),
+        seed=int(seed), **physics
     )
-    return {"stack": stack, "meta": json.loads(meta), "record": json.loads(record), "summary": list(summary)}
 
 
 def calibrate_slab(

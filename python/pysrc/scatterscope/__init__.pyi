@@ -61,6 +61,14 @@ def reconstruct(
 ) -> Tuple[np.ndarray, Dict[str, Any], List[str]]:
     """Reconstruct the object from counts, as ``scatterscope reconstruct``."""
 
+def acquire(
+    device: str,
+    out: _Path,
+    duration_s: Optional[float] = None,
+    **settings: Any,
+) -> Dict[str, Any]:
+    """Acquire from ``device`` as ``scatterscope acquire --device`` does."""
+
 def acquire_mock(
     duration_s: float,
     out: _Path,

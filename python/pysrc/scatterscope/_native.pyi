@@ -42,14 +42,11 @@ def reconstruct(
     max_iters: Optional[int] = ...,
     **physics: Any,
 ) -> Tuple[np.ndarray, str, List[str]]: ...
-def acquire_mock(
-    duration_s: float,
+def acquire(
+    device: str,
     out: str,
-    scene: str = ...,
-    rate_hz: float = ...,
-    dark_rate_hz: float = ...,
-    seed: int = ...,
-    **physics: Any,
+    duration_s: Optional[float] = ...,
+    **settings: Any,
 ) -> Tuple[np.ndarray, str, str, List[str]]: ...
 def calibrate_slab(
     reference: Any,

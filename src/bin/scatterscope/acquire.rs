@@ -6,7 +6,7 @@ use std::time::Duration;
 use crate::shared_args::{PhysicsArgs, choice, progress};
 use crate::signals::Interrupted;
 use scatterscope::acquire::Acquisition;
-use scatterscope::acquire::request::{PicoQuantRequest, Request};
+use scatterscope::acquire::request::{PicoQuantRequest, Request, parse_edge, parse_scan};
 use scatterscope::acquire::{DeviceSpec, MockSpec, StopReason, TimeZero, device};
 use scatterscope::config::{parse_duration, parse_ps};
 use scatterscope::events::Imaging;
@@ -191,31 +191,6 @@ struct PicoQuantArgs {
     /// Do not write a PTU file (PicoQuant devices).
     #[arg(long, conflicts_with = "ptu")]
     no_ptu: bool,
-}
-
-fn parse_edge(s: &str) -> Result<bool, String> {
-    match s {
-        "rising" => Ok(true),
-        "falling" => Ok(false),
-        _ => Err(format!("edge `{s}`: use rising or falling")),
-    }
-}
-
-fn parse_scan(s: &str) -> Result<Imaging, String> {
-    let bad = || format!("scan `{s}`: give WIDTHxHEIGHT in points, e.g. 64x64");
-    let (w, h) = s.split_once('x').ok_or_else(bad)?;
-    let (w, h): (usize, usize) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
-    if w == 0 || h == 0 {
-        return Err(bad());
-    }
-    Ok(Imaging {
-        pixels_x: w,
-        pixels_y: h,
-        line_start: 1,
-        line_stop: 2,
-        frame: 4,
-        bidirectional: false,
-    })
 }
 
 impl PicoQuantArgs {
