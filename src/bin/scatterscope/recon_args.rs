@@ -62,7 +62,7 @@ pub struct ReconArgs {
     #[command(flatten)]
     pub prior: PriorArgs,
     /// PnP solver: split (exact splitting, P4IP) or admm-lbfgs (Algorithm 1).
-    #[arg(long, value_parser = choice::<Solver>(), default_value = "split")]
+    #[arg(long, value_parser = choice::<Solver>(), default_value = MethodOptions::default().solver.name())]
     pub solver: Solver,
     /// Split: data penalty rho, relative to the flat object's Poisson curvature.
     #[arg(long, default_value_t = SplitOptions::default().rho)]
@@ -96,10 +96,10 @@ pub struct ReconArgs {
     #[arg(long, default_value = "fixed", value_parser = ["fixed", "average"])]
     pub prior_grid: String,
     /// admm-lbfgs: initial penalty lambda_0.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = AdmmLbfgsOptions::default().lambda0)]
     pub lambda0: f64,
     /// admm-lbfgs: lambda grows by this factor per iteration.
-    #[arg(long, default_value_t = 1.1)]
+    #[arg(long, default_value_t = AdmmLbfgsOptions::default().lambda_step)]
     pub lambda_step: f64,
     /// admm-lbfgs: prior weight beta (sigma^2 = beta / lambda).
     #[arg(long, default_value_t = AdmmLbfgsOptions::default().beta)]
@@ -109,29 +109,29 @@ pub struct ReconArgs {
     pub max_iters: Option<usize>,
     /// admm-lbfgs stopping rule: agreement (smallest primal residual the
     /// noise allows), deviance, iterations, or auto (agreement for FFDNet).
-    #[arg(long, value_parser = choice::<StopRule>(), default_value = "auto")]
+    #[arg(long, value_parser = choice::<StopRule>(), default_value = AdmmLbfgsOptions::default().stop.name())]
     pub stop: StopRule,
     /// admm-lbfgs: iterations without a new pick [default: 10, deviance 30].
     #[arg(long)]
     pub patience: Option<usize>,
     /// ADMM primal and dual residual tolerance (RMS per pixel).
-    #[arg(long, default_value_t = 1e-4)]
+    #[arg(long, default_value_t = AdmmLbfgsOptions::default().primal_tol)]
     pub residual_tol: f64,
     /// L-BFGS iterations per o-update.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = AdmmLbfgsOptions::default().lbfgs_iters)]
     pub lbfgs_iters: u64,
     /// L-BFGS gradient-norm tolerance.
-    #[arg(long, default_value_t = 1e-8)]
+    #[arg(long, default_value_t = AdmmLbfgsOptions::default().lbfgs_grad_tol)]
     pub lbfgs_tol: f64,
     /// Switch point of the surrogate logarithm (Eq. 16).
-    #[arg(long, default_value_t = 1e-10)]
+    #[arg(long, default_value_t = AdmmLbfgsOptions::default().eps)]
     pub eps: f64,
     /// Richardson-Lucy iterations (with --rl-stop fixed).
     #[arg(long, default_value_t = MethodOptions::default().rl_iters)]
     pub rl_iters: usize,
     /// When Richardson-Lucy stops: fixed (--rl-iters) or cv (two-fold
     /// cross-validation on thinned halves of the counts).
-    #[arg(long, value_parser = choice::<RlStop>(), default_value = "cv")]
+    #[arg(long, value_parser = choice::<RlStop>(), default_value = MethodOptions::default().rl_stop.name())]
     pub rl_stop: RlStop,
     /// The most iterations --rl-stop cv searches.
     #[arg(long, default_value_t = MethodOptions::default().rl_max_iters)]
@@ -155,7 +155,7 @@ impl ReconArgs {
             max_iters: self.max_iters.unwrap_or(AdmmLbfgsOptions::default().max_iters),
             primal_tol: self.residual_tol,
             dual_tol: self.residual_tol,
-            lbfgs_memory: 7,
+            lbfgs_memory: AdmmLbfgsOptions::default().lbfgs_memory,
             lbfgs_grad_tol: self.lbfgs_tol);
         let opts = same_fields!(self => MethodOptions { solver, rl_iters, rl_stop, rl_max_iters,
             rl_acceleration }
