@@ -145,7 +145,7 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Vec<JobSpec>, BatchErro
             )));
         }
         if let Some(t) = &job.timeout {
-            crate::config::parse_duration(t)
+            crate::units::parse_duration(t)
                 .map_err(|e| bad(format!("job `{}`: timeout {e}", job.name)))?;
         }
         if let Some(input) = &job.input {
@@ -339,7 +339,7 @@ pub fn run_job(
     let _ = std::fs::remove_file(dir.join(RECORD));
     let timeout = match &job.timeout {
         Some(t) => Some(
-            crate::config::parse_duration(t)
+            crate::units::parse_duration(t)
                 .map_err(|e| BatchError::Io(format!("job `{}`: timeout {e}", job.name)))?,
         ),
         None => timeout,

@@ -14,16 +14,7 @@ use std::path::{Path, PathBuf};
 use scatterscope_physics::{InstrumentResponse, Irf, MediumModel, Preset, Setup};
 use serde::Deserialize;
 
-use crate::length::parse_cm_or_bare;
-
-/// Parses a time with an optional unit (`fs`, `ps`, `ns`, `us`); plain numbers are ps.
-pub fn parse_ps(s: &str) -> Result<f64, String> {
-    parse_unit(
-        s,
-        &[("fs", 1e-3), ("ps", 1.0), ("ns", 1e3), ("us", 1e6)],
-        "ps",
-    )
-}
+use crate::units::{parse_cm_or_bare, parse_ps};
 
 /// Parses a noise level on the [0, 1] scale: a number or a fraction such
 /// as `25/255`; finite and not negative.
@@ -42,59 +33,6 @@ pub fn parse_noise_sigma(s: &str) -> Result<f64, String> {
     } else {
         Err(format!("`{s}`: sigma must be finite and not negative"))
     }
-}
-
-/// Parses a duration with its unit: `ms`, `s` (default), `m` or `h`;
-/// finite and not negative.
-pub fn parse_duration(s: &str) -> Result<std::time::Duration, String> {
-    let t = s.trim();
-    let (num, scale) = if let Some(n) = t.strip_suffix("ms") {
-        (n, 1e-3)
-    } else if let Some(n) = t.strip_suffix('s') {
-        (n, 1.0)
-    } else if let Some(n) = t.strip_suffix('m') {
-        (n, 60.0)
-    } else if let Some(n) = t.strip_suffix('h') {
-        (n, 3600.0)
-    } else {
-        (t, 1.0)
-    };
-    let v: f64 = num
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{s}` is not a duration (e.g. 10s, 500ms, 2m)"))?;
-    if !(v >= 0.0 && v.is_finite()) {
-        return Err(format!("`{s}`: a duration must be finite and not negative"));
-    }
-    std::time::Duration::try_from_secs_f64(v * scale)
-        .map_err(|_| format!("`{s}`: longer than any clock counts"))
-}
-
-fn parse_unit(s: &str, units: &[(&str, f64)], default: &str) -> Result<f64, String> {
-    let t = s.trim();
-    let split = t
-        .find(|c: char| c.is_ascii_alphabetic() && c != 'e' && c != 'E')
-        .unwrap_or(t.len());
-    let (num, unit) = t.split_at(split);
-    let value: f64 = num
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{s}` is not a number with an optional unit"))?;
-    let unit = unit.trim();
-    if unit.is_empty() {
-        return Ok(value);
-    }
-    units
-        .iter()
-        .find(|(u, _)| *u == unit)
-        .map(|(_, f)| value * f)
-        .ok_or_else(|| {
-            let names: Vec<_> = units.iter().map(|(u, _)| *u).collect();
-            format!(
-                "unknown unit `{unit}` in `{s}` (use {}; default {default})",
-                names.join(", ")
-            )
-        })
 }
 
 /// The medium and instrument of `setup` as a TOML file of this module's
@@ -701,19 +639,6 @@ mod tests {
         assert!(
             e.contains("invalid mu_a_per_cm = -1") && e.contains("key `mu_a`") && !e.contains("--"),
             "{e}"
-        );
-    }
-
-    #[test]
-    fn units() {
-        assert_eq!(parse_ps("4"), Ok(4.0));
-        assert_eq!(parse_ps("4ps"), Ok(4.0));
-        assert_eq!(parse_ps("0.004 ns"), Ok(4.0));
-        assert_eq!(parse_ps("1e-3ns"), Ok(1.0));
-        assert!(
-            parse_ps("4 parsecs")
-                .unwrap_err()
-                .contains("unknown unit `parsecs`")
         );
     }
 }

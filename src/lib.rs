@@ -85,7 +85,6 @@ pub mod files;
 pub mod font;
 pub mod formats;
 pub mod forward;
-pub mod length;
 pub mod live;
 pub mod memory;
 pub mod metrics;
@@ -100,6 +99,7 @@ pub mod simulate;
 pub mod stack;
 pub mod tags;
 pub mod time_basis;
+pub mod units;
 
 pub use scatterscope_physics as physics;
 

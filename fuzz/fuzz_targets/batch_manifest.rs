@@ -20,7 +20,7 @@ fuzz_target!(|data: &[u8]| {
                 assert!(!job.command.is_empty() && job.command != "batch");
                 assert!(job.input.as_deref().is_none_or(|i| i.starts_with('/')));
                 if let Some(t) = &job.timeout {
-                    scatterscope::config::parse_duration(t).expect("a checked time limit");
+                    scatterscope::units::parse_duration(t).expect("a checked time limit");
                 }
             }
         }

@@ -127,7 +127,7 @@ pub struct Capture {
 
 impl Capture {
     /// The capture `FILE=THICKNESS` (THICKNESS with its unit, see
-    /// [`crate::length::parse_positive_cm`]), read by [`TimeHistogram::read`] with
+    /// [`crate::units::parse_positive_cm`]), read by [`TimeHistogram::read`] with
     /// `dataset` and `bin_width_ps`, labelled by the file's stem.
     pub fn from_spec(
         spec: &str,
@@ -160,7 +160,7 @@ fn parse_spec(spec: &str) -> Result<(PathBuf, f64, String), CalibrateError> {
     let (file, thickness) = spec
         .rsplit_once('=')
         .ok_or_else(|| fail("expected FILE=THICKNESS".into()))?;
-    let thickness_cm = crate::length::parse_positive_cm(thickness).map_err(fail)?;
+    let thickness_cm = crate::units::parse_positive_cm(thickness).map_err(fail)?;
     let path = PathBuf::from(file);
     let label = path
         .file_stem()

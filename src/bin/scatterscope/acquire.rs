@@ -8,7 +8,6 @@ use crate::signals::Interrupted;
 use scatterscope::acquire::Acquisition;
 use scatterscope::acquire::request::{PicoQuantRequest, Request, parse_edge, parse_scan};
 use scatterscope::acquire::{DeviceSpec, MockSpec, StopReason, TimeZero, device};
-use scatterscope::config::{parse_duration, parse_ps};
 use scatterscope::events::Imaging;
 use scatterscope::live::LiveView;
 use scatterscope::live::recon::FinalRun;
@@ -16,6 +15,7 @@ use scatterscope::live::server::LiveStage;
 use scatterscope::scene::Scene;
 use scatterscope::tags::bin_file::Pixels;
 use scatterscope::tags::binning::Region;
+use scatterscope::units::{parse_duration, parse_ps};
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
 use std::sync::atomic::AtomicBool;
 

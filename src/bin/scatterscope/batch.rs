@@ -30,7 +30,7 @@ pub struct BatchArgs {
     threads_per_job: usize,
     /// Time limit of every job whose table sets no `timeout` (e.g. 30m);
     /// a job past it is ended (SIGTERM, then SIGKILL) and recorded as such.
-    #[arg(long, value_parser = scatterscope::config::parse_duration)]
+    #[arg(long, value_parser = scatterscope::units::parse_duration)]
     job_timeout: Option<std::time::Duration>,
     /// Submit as a Slurm job array with sbatch (one task per job).
     #[arg(long, conflicts_with = "collect")]

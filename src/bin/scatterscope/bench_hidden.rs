@@ -3,11 +3,11 @@
 
 use std::path::PathBuf;
 
-use scatterscope::config::parse_ps;
 use scatterscope::confocal::PoissonOptions;
 use scatterscope::report::hidden_bench::{
     BLUR_BASELINE, HiddenBenchConfig, rows_csv, run_hidden_bench,
 };
+use scatterscope::units::parse_ps;
 
 use crate::shared_args::note_renamed_flag;
 

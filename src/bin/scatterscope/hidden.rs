@@ -10,8 +10,8 @@ use scatterscope::confocal::{
     ConfocalScan, HiddenMethod, HiddenResult, PoissonOptions, PublishedOptions, SlabOptics,
     hidden_warnings,
 };
-use scatterscope::length::parse_positive_cm;
 use scatterscope::report::hidden::write_hidden;
+use scatterscope::units::parse_positive_cm;
 
 use crate::shared_args::{FileBinWidthArgs, choice, note_renamed_flag};
 

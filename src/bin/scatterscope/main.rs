@@ -21,7 +21,7 @@ mod tags_cmd;
 mod weights_cmd;
 
 use clap::{Parser, Subcommand};
-use scatterscope::memory::parse_size;
+use scatterscope::units::parse_size;
 
 /// The allocator: the reconstructions free and allocate images of 0.5-1 MB
 /// per bin and iteration on several threads, and the system allocator

@@ -4,9 +4,10 @@
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::Named;
-use scatterscope::config::{PhysicsOverrides, parse_ps};
-use scatterscope::length::parse_cm_or_bare;
+use scatterscope::config::PhysicsOverrides;
 use scatterscope::physics::{MediumModel, Preset, Setup};
+use scatterscope::units::parse_cm_or_bare;
+use scatterscope::units::parse_ps;
 use std::path::PathBuf;
 
 /// A struct of the library's from the flags of the same names (cloned),

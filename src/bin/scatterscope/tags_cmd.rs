@@ -21,7 +21,7 @@ pub struct SpcArgs {
     /// Micro-time unit of a .spc file (default unit ps: TAC range / TAC
     /// gain / ADC channels); default: from the SPCM setup file beside it
     /// (NAME.set).
-    #[arg(long, value_name = "TIME", value_parser = scatterscope::config::parse_ps)]
+    #[arg(long, value_name = "TIME", value_parser = scatterscope::units::parse_ps)]
     micro_unit: Option<f64>,
 }
 
@@ -56,10 +56,10 @@ pub struct BinArgs {
     /// The file.
     file: PathBuf,
     /// Bin width (default unit ps; default: the file's TCSPC resolution).
-    #[arg(long, value_parser = scatterscope::config::parse_ps)]
+    #[arg(long, value_parser = scatterscope::units::parse_ps)]
     bin_width: Option<f64>,
     /// Start of the first bin after the sync (default unit ps).
-    #[arg(long, default_value = "0", value_parser = scatterscope::config::parse_ps)]
+    #[arg(long, default_value = "0", value_parser = scatterscope::units::parse_ps)]
     t_start: f64,
     /// Number of bins (default: enough to cover one sync period).
     #[arg(long)]
