@@ -117,6 +117,12 @@ pub fn parse_positive_cm(text: &str) -> Result<f64, String> {
     }
 }
 
+/// [`parse_positive_cm`] in metres, the unit of the hidden-volume methods
+/// ([`crate::confocal`]).
+pub fn parse_positive_m(text: &str) -> Result<f64, String> {
+    parse_positive_cm(text).map(|cm| cm / 100.0)
+}
+
 /// [`parse_cm`] with bare numbers in cm: the value parser of the physics
 /// flags.
 pub fn parse_cm_or_bare(text: &str) -> Result<f64, String> {

@@ -234,3 +234,59 @@ fn the_circle_finder_finds_a_circle_and_reads_every_kind_of_path() {
         ["files::write_atomic", "physics", "physics::kernel"]
     );
 }
+
+/// What the command line (`src/bin`) must not hold, with what it would be:
+/// the library's request ([`scatterscope::acquire::request`]), units
+/// ([`scatterscope::units`]) and options hold them, once, for every front
+/// end. Each was in `src/bin` before the request moved them (9b42eb9).
+const NOT_IN_THE_COMMAND_LINE: [(&str, &str); 8] = [
+    ("/ 100.0", "a length converted between cm and m by hand"),
+    ("/ 1000.0", "a time converted between ps and ns by hand"),
+    (
+        "set a PicoQuant device",
+        "the rule of the PicoQuant-only settings",
+    ),
+    ("whole nanoseconds", "the unit a vendor's library takes"),
+    ("whole picoseconds", "the unit a vendor's library takes"),
+    (
+        "Duration::from_secs(2)",
+        "the default duration of an acquisition",
+    ),
+    (
+        "join(\"acquisition.ptu\")",
+        "the PTU a vendor's device records by default",
+    ),
+    ("lbfgs_memory: 7", "a default of admm-lbfgs restated"),
+];
+
+#[test]
+fn the_command_line_holds_no_unit_conversion_device_rule_or_restated_default() {
+    let bin = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/bin");
+    let mut files = Vec::new();
+    rust_files(&bin, &mut files);
+    assert!(files.len() > 10, "read {} files", files.len());
+    let mut found = Vec::new();
+    for file in &files {
+        let text = std::fs::read_to_string(file).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            if line.trim_start().starts_with("//") {
+                continue;
+            }
+            for (pattern, what) in NOT_IN_THE_COMMAND_LINE {
+                if line.contains(pattern) {
+                    found.push(format!(
+                        "{}:{}: {what}: {}",
+                        file.display(),
+                        n + 1,
+                        line.trim()
+                    ));
+                }
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "in the command line:\n{}",
+        found.join("\n")
+    );
+}

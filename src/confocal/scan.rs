@@ -36,6 +36,19 @@ pub struct ConfocalScan {
 }
 
 impl ConfocalScan {
+    /// The scan in words: where it came from, its points over its side (in
+    /// cm), its bins and its counts.
+    pub fn describe(&self) -> String {
+        let (rows, cols, bins) = self.dim();
+        format!(
+            "{} ({rows} x {cols} points over {:.1} cm, {bins} bins of {} ps, {:.0} counts)",
+            self.source,
+            self.side_m * 100.0,
+            self.bin_width_ps,
+            self.total()
+        )
+    }
+
     /// Checks the counts and settings: photon counts
     /// ([`check_counts`]: finite, non-negative, at most 2^53, at least one
     /// photon in all), at least [`MIN_SIDE`] points per side and bins, a positive bin

@@ -72,6 +72,17 @@ impl HiddenVolume {
         (depth, peak)
     }
 
+    /// [`Self::object_depth`] in words (in cm), `None` for an empty
+    /// volume.
+    pub fn describe_object_depth(&self) -> Option<String> {
+        self.object_depth().map(|d| {
+            format!(
+                "object depth (median over points at half the brightest or more): {:.1} cm behind the slab",
+                d * 100.0
+            )
+        })
+    }
+
     /// Depth of the object (m): the median refined depth over the scan
     /// points whose front projection reaches [`OBJECT_LEVEL`] of its
     /// maximum; `None` for an empty volume.

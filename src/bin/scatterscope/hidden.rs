@@ -11,7 +11,7 @@ use scatterscope::confocal::{
     hidden_warnings,
 };
 use scatterscope::report::hidden::write_hidden;
-use scatterscope::units::parse_positive_cm;
+use scatterscope::units::parse_positive_m;
 
 use crate::shared_args::{FileBinWidthArgs, choice, note_renamed_flag};
 
@@ -84,18 +84,15 @@ pub struct HiddenArgs {
 }
 
 pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
-    let side_m = parse_positive_cm(&args.scan_side)
+    let side_m = parse_positive_m(&args.scan_side)
         .map_err(anyhow::Error::msg)
-        .context("--scan-side")?
-        / 100.0;
-    let thickness_m = parse_positive_cm(&args.slab_thickness)
+        .context("--scan-side")?;
+    let thickness_m = parse_positive_m(&args.slab_thickness)
         .map_err(anyhow::Error::msg)
-        .context("--slab-thickness")?
-        / 100.0;
-    let depth_m = parse_positive_cm(&args.depth)
+        .context("--slab-thickness")?;
+    let depth_m = parse_positive_m(&args.depth)
         .map_err(anyhow::Error::msg)
-        .context("--depth")?
-        / 100.0;
+        .context("--depth")?;
     let bin_width = args.bin_width.resolve();
     let mut scan = ConfocalScan::open(&args.scan, &args.dataset, bin_width, side_m)?;
     if let Some(fraction) = args.thin.filter(|&f| f != 1.0) {
@@ -117,14 +114,7 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
         depth_m,
         ..PoissonOptions::default()
     };
-    let (rows, cols, bins) = scan.dim();
-    println!(
-        "scan: {} ({rows} x {cols} points over {:.1} cm, {bins} bins of {} ps, {:.0} counts)",
-        scan.source,
-        side_m * 100.0,
-        scan.bin_width_ps,
-        scan.total()
-    );
+    println!("scan: {}", scan.describe());
     match material {
         Some(path) => println!("material: {} ({})", path.display(), optics.describe()),
         None => println!(
@@ -139,11 +129,8 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
     for note in &volume.notes {
         println!("{note}");
     }
-    if let Some(d) = volume.object_depth() {
-        println!(
-            "object depth (median over points at half the brightest or more): {:.1} cm behind the slab",
-            d * 100.0
-        );
+    if let Some(line) = volume.describe_object_depth() {
+        println!("{line}");
     }
     println!("reconstructed in {wall_s:.3} s");
     let warnings = hidden_warnings(&scan, &volume, depth_m);
