@@ -66,9 +66,39 @@ fn gaussian_filter(img: ArrayView2<f64>) -> Array2<f64> {
     })
 }
 
+/// PSNR of `image` against `truth` after the gain that best fits the truth
+/// (least squares); `None` when the shapes differ or the image is dark.
+pub fn psnr_fitted(image: ArrayView2<f64>, truth: ArrayView2<f64>) -> Option<f64> {
+    if image.dim() != truth.dim() {
+        return None;
+    }
+    let (xy, xx) = image
+        .iter()
+        .zip(truth.iter())
+        .fold((0.0, 0.0), |(xy, xx), (&x, &y)| (xy + x * y, xx + x * x));
+    if xx <= 0.0 {
+        return None;
+    }
+    let scaled = image.mapv(|v| v * xy / xx);
+    Some(psnr(scaled.view(), truth))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_fitted_psnr_ignores_the_gain_and_sees_the_error() {
+        let truth = Array2::from_shape_fn((8, 8), |(y, x)| ((x + y) % 3) as f64);
+        let scaled = truth.mapv(|v| 7.0 * v);
+        assert!(psnr_fitted(scaled.view(), truth.view()).unwrap() > 100.0);
+        let mut off = scaled.clone();
+        off[(2, 2)] += 5.0;
+        let p = psnr_fitted(off.view(), truth.view()).unwrap();
+        assert!(p.is_finite() && p < 60.0, "{p}");
+        assert!(psnr_fitted(Array2::zeros((8, 8)).view(), truth.view()).is_none());
+        assert!(psnr_fitted(Array2::ones((4, 8)).view(), truth.view()).is_none());
+    }
 
     #[test]
     fn psnr_of_a_known_error() {

@@ -22,9 +22,10 @@ pub const TIME_UNITS: [(&str, f64); 4] = [("fs", 1e-3), ("ps", 1.0), ("ns", 1e3)
 /// The units of a duration and their size in s.
 const DURATION_UNITS: [(&str, f64); 4] = [("ms", 1e-3), ("s", 1.0), ("m", 60.0), ("h", 3600.0)];
 
-/// The units of a size (any case) and their size in bytes: decimal `k`,
-/// `M`, `G`, `T` (with or without `B`) and binary `KiB` to `TiB`.
-const SIZE_UNITS: [(&str, f64); 10] = [
+/// The units of a size (matched in lower case) and their size in bytes:
+/// decimal `k`, `M`, `G`, `T` (with or without `B`) and binary `KiB` to
+/// `TiB`.
+const SIZE_UNITS: [(&str, f64); 13] = [
     ("b", 1.0),
     ("k", 1e3),
     ("kb", 1e3),
@@ -35,10 +36,6 @@ const SIZE_UNITS: [(&str, f64); 10] = [
     ("t", 1e12),
     ("tb", 1e12),
     ("kib", 1024.0),
-];
-
-/// The binary units of a size beyond KiB.
-const BINARY_SIZE_UNITS: [(&str, f64); 3] = [
     ("mib", 1048576.0),
     ("gib", 1073741824.0),
     ("tib", 1099511627776.0),
@@ -159,8 +156,7 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
 /// case); at least one byte.
 pub fn parse_size(s: &str) -> Result<u64, String> {
     let lower = s.to_ascii_lowercase();
-    let table: Vec<(&str, f64)> = SIZE_UNITS.into_iter().chain(BINARY_SIZE_UNITS).collect();
-    let (v, scale) = read(&lower, &table).map_err(|fault| match fault {
+    let (v, scale) = read(&lower, &SIZE_UNITS).map_err(|fault| match fault {
         Fault::NotANumber(number) => format!("`{number}` is not a number of bytes"),
         Fault::UnknownUnit(other) => {
             format!("unknown unit `{other}` (use B, MB, GB, MiB, GiB, ...)")

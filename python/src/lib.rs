@@ -585,9 +585,9 @@ fn err_text(e: &dyn std::error::Error) -> String {
     text
 }
 
-/// The acquisition settings among `kw` (the library's request, with the
-/// command's defaults; the mock's settings start from `mock`); the rest
-/// are the physics.
+/// The request for `device` into `out`: the library's defaults (the
+/// command's), the acquisition settings among `kw` over them, the rest of
+/// `kw` as the physics.
 fn acquisition_request(
     py: Python<'_>,
     device: &str,

@@ -147,7 +147,7 @@ impl PicoQuantRequest {
             sync_zero_cross_mv: self.sync_zero_cross_mv,
             sync_offset_ps: self
                 .sync_offset_ps
-                .map(|v| whole(v, 1.0, "sync-offset"))
+                .map(|v| whole(v, WHOLE_PS, "sync-offset"))
                 .transpose()?,
             input_level_mv: self.input_level_mv,
             input_rising: self.input_rising,
@@ -156,12 +156,12 @@ impl PicoQuantRequest {
             input_offsets_ps: self
                 .input_offsets_ps
                 .iter()
-                .map(|&v| whole(v, 1.0, "input-offsets"))
+                .map(|&v| whole(v, WHOLE_PS, "input-offsets"))
                 .collect::<Result<_, _>>()?,
             binning: self.binning,
             offset_ns: self
                 .offset_ps
-                .map(|v| whole(v, 1000.0, "offset"))
+                .map(|v| whole(v, WHOLE_NS, "offset"))
                 .transpose()?,
         })
     }
@@ -195,9 +195,20 @@ pub fn parse_scan(s: &str) -> Result<Imaging, String> {
     })
 }
 
-/// `v_ps` in whole units of `unit_ps` (1: ps, 1000: ns), as the vendor's
-/// library takes `setting`.
-fn whole(v_ps: f64, unit_ps: f64, setting: &'static str) -> Result<i32, RequestError> {
+/// A unit a vendor's library takes offsets in whole: its size in ps and
+/// its name in an error.
+type WholeUnit = (f64, &'static str);
+/// Whole picoseconds.
+const WHOLE_PS: WholeUnit = (1.0, "picoseconds");
+/// Whole nanoseconds.
+const WHOLE_NS: WholeUnit = (1000.0, "nanoseconds (e.g. 10ns)");
+
+/// `v_ps` in whole `unit`s, as the vendor's library takes `setting`.
+fn whole(
+    v_ps: f64,
+    (unit_ps, unit): WholeUnit,
+    setting: &'static str,
+) -> Result<i32, RequestError> {
     let v = v_ps / unit_ps;
     let r = v.round();
     if (r - v).abs() < 1e-9 && r.abs() <= f64::from(i32::MAX) {
@@ -206,11 +217,7 @@ fn whole(v_ps: f64, unit_ps: f64, setting: &'static str) -> Result<i32, RequestE
         Err(RequestError::NotWhole {
             setting,
             value_ps: v_ps,
-            unit: if unit_ps == 1.0 {
-                "picoseconds"
-            } else {
-                "nanoseconds (e.g. 10ns)"
-            },
+            unit,
         })
     }
 }

@@ -21,10 +21,10 @@
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc::{RecvTimeoutError, SyncSender, TrySendError, sync_channel};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::{Duration, Instant};
 
-use ndarray::{Array2, ArrayView2};
+use ndarray::Array2;
 
 use super::cpu::{OtherProcesses, VIEW_THREAD_PREFIX, describe, threads_cpu_s};
 use super::state::{Image, LiveReconstruction, LiveState, TracePoint};
@@ -132,19 +132,20 @@ impl FinalProgress {
     /// The progress in words: seconds, iterations, and the time left when
     /// known.
     pub fn describe(&self) -> String {
-        let mut line = format!("{:.0} s, {} iterations", self.elapsed_s, self.iterations);
-        if let (Some(expected), Some(left)) = (self.expected_iterations, self.left_s()) {
-            let about = if self.expected_is_cap {
-                "at most"
-            } else {
-                "about"
-            };
-            line = format!(
-                "{:.0} s, {} of {about} {expected} iterations, {about} {left:.0} s left",
-                self.elapsed_s, self.iterations
-            );
+        let (elapsed, done) = (self.elapsed_s, self.iterations);
+        match (self.expected_iterations, self.left_s()) {
+            (Some(expected), Some(left)) => {
+                let about = if self.expected_is_cap {
+                    "at most"
+                } else {
+                    "about"
+                };
+                format!(
+                    "{elapsed:.0} s, {done} of {about} {expected} iterations, {about} {left:.0} s left"
+                )
+            }
+            _ => format!("{elapsed:.0} s, {done} iterations"),
         }
-        line
     }
 }
 
@@ -201,7 +202,7 @@ fn show(
             let psnr_db = shared
                 .truth
                 .as_ref()
-                .and_then(|t| psnr_fitted(rec.image.view(), t.view()));
+                .and_then(|t| crate::metrics::psnr_fitted(rec.image.view(), t.view()));
             s.trace.push(TracePoint {
                 acquired_s,
                 photons,
@@ -384,23 +385,6 @@ impl Load {
     }
 }
 
-/// PSNR of `image` against `truth` after the gain that best fits the truth
-/// (least squares); `None` when the shapes differ or the image is dark.
-pub fn psnr_fitted(image: ArrayView2<f64>, truth: ArrayView2<f64>) -> Option<f64> {
-    if image.dim() != truth.dim() {
-        return None;
-    }
-    let (xy, xx) = image
-        .iter()
-        .zip(truth.iter())
-        .fold((0.0, 0.0), |(xy, xx), (&x, &y)| (xy + x * y, xx + x * x));
-    if xx <= 0.0 {
-        return None;
-    }
-    let scaled = image.mapv(|v| v * xy / xx);
-    Some(crate::metrics::psnr(scaled.view(), truth))
-}
-
 impl Reconstructor {
     /// Starts the threads; results go into `state`, scored against `truth`
     /// when it is known.
@@ -541,12 +525,11 @@ impl Reconstructor {
             return skipped(&shared);
         }
         let iterations = Arc::new(AtomicUsize::new(0));
-        // Iterations the last snapshot's search ran, plus one; 0 unknown.
-        let expected = Arc::new(AtomicUsize::new(0));
-        let is_cap = Arc::new(AtomicBool::new(false));
+        // The iterations it expects, and whether that is the cap: set once
+        // the series is free (see the thread).
+        let expected: Arc<OnceLock<(usize, bool)>> = Arc::default();
         let (tx, rx) = sync_channel(1);
         let (counted, expecting, series) = (iterations.clone(), expected.clone(), shared.clone());
-        let capped = is_cap.clone();
         let started = Instant::now();
         let spawned = std::thread::Builder::new()
             .name("final-reconstruction".into())
@@ -558,9 +541,11 @@ impl Reconstructor {
                 // The last snapshot's search, if it stopped by itself: the
                 // whole run's needs about as many; else at most the cap
                 // (and the start).
-                let last = series.stopped_after();
-                expecting.store(last.map_or(max_iters + 1, |n| n), Ordering::Relaxed);
-                capped.store(last.is_none(), Ordering::Relaxed);
+                let _ = expecting.set(
+                    series
+                        .stopped_after()
+                        .map_or((max_iters + 1, true), |n| (n, false)),
+                );
                 let _ = tx.send(reconstruct(&stack, &mut series, max_iters, &counted));
             });
         if let Err(e) = spawned {
@@ -589,9 +574,8 @@ impl Reconstructor {
                     let p = FinalProgress {
                         elapsed_s: started.elapsed().as_secs_f64(),
                         iterations: iterations.load(Ordering::Relaxed),
-                        expected_iterations: Some(expected.load(Ordering::Relaxed))
-                            .filter(|&n| n > 0),
-                        expected_is_cap: is_cap.load(Ordering::Relaxed),
+                        expected_iterations: expected.get().map(|e| e.0),
+                        expected_is_cap: expected.get().is_some_and(|e| e.1),
                     };
                     {
                         let mut s = shared.state();
@@ -627,23 +611,5 @@ impl Drop for Reconstructor {
     /// not waited for.
     fn drop(&mut self) {
         self.shared.ended.store(true, Ordering::Relaxed);
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_fitted_psnr_ignores_the_gain_and_sees_the_error() {
-        let truth = Array2::from_shape_fn((8, 8), |(y, x)| ((x + y) % 3) as f64);
-        let scaled = truth.mapv(|v| 7.0 * v);
-        assert!(psnr_fitted(scaled.view(), truth.view()).unwrap() > 100.0);
-        let mut off = scaled.clone();
-        off[(2, 2)] += 5.0;
-        let p = psnr_fitted(off.view(), truth.view()).unwrap();
-        assert!(p.is_finite() && p < 60.0, "{p}");
-        assert!(psnr_fitted(Array2::zeros((8, 8)).view(), truth.view()).is_none());
-        assert!(psnr_fitted(Array2::ones((4, 8)).view(), truth.view()).is_none());
     }
 }

@@ -340,7 +340,7 @@ pub(crate) fn half_scores(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use std::sync::Mutex;
 
     use ndarray::Axis;
@@ -352,6 +352,20 @@ mod tests {
     use crate::poisson::thinning::{THINNING_SEED, thin_halves};
     use crate::reconstruct::operator::Convolution;
     use crate::scene::Scene;
+
+    /// The paper's setup on a sensor of `size` x `size` pixels (its field
+    /// of view scaled with it, periodic edges) and the disks scene: the
+    /// small sharp problem the Richardson-Lucy searches are tested on.
+    pub(crate) fn paper_disks(size: usize) -> (ForwardModel, Array2<f64>) {
+        let mut setup = Preset::Paper.setup();
+        setup.sensor.width_px = size;
+        setup.sensor.height_px = size;
+        setup.sensor.fov_cm = 50.0 * size as f64 / 256.0;
+        let kernels = KernelStack::build(&setup, Sampling::Integrated).unwrap();
+        let model = ForwardModel::new(&kernels, Boundary::Periodic);
+        let truth = Scene::parse("disks").render(size, size).unwrap();
+        (model, truth)
+    }
 
     /// What the search did to one half: each scoring's training
     /// likelihood, and each step taken.
@@ -398,16 +412,9 @@ mod tests {
     /// search's steps, within 0.3 dB of the plain search's output.
     #[test]
     fn extrapolation_keeps_the_likelihood_falling_and_needs_fewer_steps() {
-        let size = 32;
-        let mut setup = Preset::Paper.setup();
-        setup.sensor.width_px = size;
-        setup.sensor.height_px = size;
-        setup.sensor.fov_cm = 50.0 * size as f64 / 256.0;
-        let kernels = KernelStack::build(&setup, Sampling::Integrated).unwrap();
-        let model = ForwardModel::new(&kernels, Boundary::Periodic);
-        let truth = Scene::parse("disks").render(size, size).unwrap();
+        let (model, truth) = paper_disks(32);
         let counts = poisson_counts(&model.expected((&truth * 4.0).view()).counts, 7);
-        let bins: Vec<usize> = (0..kernels.len()).collect();
+        let bins: Vec<usize> = (0..model.bins()).collect();
         let op = Convolution::from_bins(&model, &bins);
         let (sensitivity, mass) = (op.sensitivity(), op.mass());
         let (a, b) = thin_halves(&counts.sum_axis(Axis(0)), THINNING_SEED, "test").unwrap();
@@ -450,8 +457,7 @@ mod tests {
             );
             // The estimate is in the model's units: PSNR after the gain
             // that fits it to the truth best.
-            let gain = (&image * &truth).sum() / (&image * &image).sum();
-            let psnr = crate::metrics::psnr((&image * gain).view(), truth.view());
+            let psnr = crate::metrics::psnr_fitted(image.view(), truth.view()).unwrap();
             (k, psnr, events.into_inner().unwrap())
         };
         let (k_plain, psnr_plain, _) = search(Acceleration::None);

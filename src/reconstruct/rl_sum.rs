@@ -125,12 +125,7 @@ fn cross_validated(
     if summed.sum() == 0.0 || rl.mass <= 0.0 {
         return Ok(run.no_photons(data.model.sensor_shape()));
     }
-    let (first, second) = thin_halves(&summed, THINNING_SEED, "the time-summed counts")?;
-    let how = format!(
-        "the counts thinned into two halves of {} and {} photons (seed {THINNING_SEED:#x})",
-        first.sum(),
-        second.sum()
-    );
+    let ([first, second], how) = thinned_halves(&summed)?;
     let best = search_halves(
         data,
         &rl,
@@ -145,6 +140,20 @@ fn cross_validated(
         image: best.image,
         iteration: best.iteration,
     })
+}
+
+/// The summed counts thinned into the cross-validated search's two halves
+/// (seed [`THINNING_SEED`]), with the words that say so.
+pub(crate) fn thinned_halves(
+    summed: &Array2<f64>,
+) -> Result<([Array2<f64>; 2], String), ReconstructError> {
+    let (first, second) = thin_halves(summed, THINNING_SEED, "the time-summed counts")?;
+    let how = format!(
+        "the counts thinned into two halves of {} and {} photons (seed {THINNING_SEED:#x})",
+        first.sum(),
+        second.sum()
+    );
+    Ok(([first, second], how))
 }
 
 /// The cross-validated search on two halves of the summed counts, `how`

@@ -20,7 +20,7 @@ use super::data::Data;
 use super::em::{Acceleration, CvBest};
 use super::error::ReconstructError;
 use super::problem::Problem;
-use super::rl_sum::{RlOperator, search_halves};
+use super::rl_sum::{RlOperator, search_halves, thinned_halves};
 use super::run::{Estimate, Reconstruction, Reconstructor, Run, WorkShape};
 use super::trace::TraceRow;
 use crate::poisson::thinning::{THINNING_SEED, thin_halves};
@@ -158,13 +158,8 @@ impl Reconstructor for Continued<'_> {
                         "started afresh: the grid changed or some count went down since the last snapshot (not the same acquisition)",
                     );
                 }
-                let (a, b) = thin_halves(&summed, THINNING_SEED, "the time-summed counts")?;
-                let how = format!(
-                    "the counts thinned into two halves of {} and {} photons (seed {THINNING_SEED:#x})",
-                    a.sum(),
-                    b.sum()
-                );
-                ([a, b], None, how, 1)
+                let (halves, how) = thinned_halves(&summed)?;
+                (halves, None, how, 1)
             }
         };
         let CvBest {
@@ -204,22 +199,11 @@ impl Reconstructor for Continued<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::forward::{Boundary, ForwardModel, poisson_counts};
-    use crate::physics::{KernelStack, Preset, Sampling};
+    use crate::forward::{ForwardModel, poisson_counts};
+    use crate::metrics::psnr_fitted;
+    use crate::physics::Preset;
+    use crate::reconstruct::em::tests::paper_disks;
     use crate::reconstruct::method::{Method, MethodOptions, run_method};
-    use crate::scene::Scene;
-
-    /// The model of `size` pixels on the paper's setup, and a truth.
-    fn setup(size: usize) -> (ForwardModel, Array2<f64>) {
-        let mut setup = Preset::Paper.setup();
-        setup.sensor.width_px = size;
-        setup.sensor.height_px = size;
-        setup.sensor.fov_cm = 50.0 * size as f64 / 256.0;
-        let kernels = KernelStack::build(&setup, Sampling::Integrated).unwrap();
-        let model = ForwardModel::new(&kernels, Boundary::Periodic);
-        let truth = Scene::parse("disks").render(size, size).unwrap();
-        (model, truth)
-    }
 
     /// The problem of `counts` on `model`.
     fn problem(model: &ForwardModel, counts: &ndarray::Array3<f64>) -> Problem {
@@ -255,7 +239,7 @@ mod tests {
     /// (within 0.3 dB, after the gain that fits the truth).
     #[test]
     fn a_continued_search_needs_fewer_iterations_and_is_as_good() {
-        let (model, truth) = setup(32);
+        let (model, truth) = paper_disks(32);
         let stacks = snapshots(&model, &truth, 4);
         let mut series = Series::new();
         let mut continued = None;
@@ -284,10 +268,7 @@ mod tests {
             "{:?}",
             continued.trace.notes
         );
-        let psnr = |image: &Array2<f64>| {
-            let gain = (image * &truth).sum() / (image * image).sum();
-            crate::metrics::psnr((image * gain).view(), truth.view())
-        };
+        let psnr = |image: &Array2<f64>| psnr_fitted(image.view(), truth.view()).unwrap();
         let (c, a) = (psnr(&continued.image), psnr(&afresh.image));
         assert!(c > a - 0.3, "PSNR {c:.2} continued, {a:.2} afresh");
         // Afresh, the series is rl-sum with its cross-validated stop.
@@ -308,7 +289,7 @@ mod tests {
     /// afresh, and says so.
     #[test]
     fn counts_that_go_down_start_afresh() {
-        let (model, truth) = setup(16);
+        let (model, truth) = paper_disks(16);
         let stacks = snapshots(&model, &truth, 2);
         let (more, fewer) = (problem(&model, &stacks[1]), problem(&model, &stacks[0]));
         let afresh = Series::new()
