@@ -15,7 +15,7 @@ mod photons;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use firmware_protocol::{EventBatch, FrameDecoder, FrameKind, encode_frame};
-use scatterscope::acquire::Plan;
+use scatterscope::acquire::StreamPlan;
 use scatterscope::acquire::mock::{MockSetup, MockSource};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::scene::Scene;
@@ -91,9 +91,9 @@ const SERIAL: bool = true;
 /// One acquisition through the pipeline `acquire` runs; the photons binned.
 fn run_mock(serial: bool, device: MockOptions) -> u64 {
     let setup = Preset::Paper.setup();
-    let mut plan = Plan {
+    let mut plan = StreamPlan {
         software: "bench".into(),
-        ..Plan::default()
+        ..StreamPlan::default()
     };
     plan.set_window(&setup.bins);
     plan.t_start_ps = 0.0;
@@ -101,8 +101,8 @@ fn run_mock(serial: bool, device: MockOptions) -> u64 {
     let out =
         scatterscope::acquire::run(&mut source, &plan, &AtomicBool::new(false), |_| {}).unwrap();
     source.join();
-    assert!(out.ledger.balances() && out.ledger.lost_in_device == 0);
-    out.ledger.binned
+    assert!(out.ledger.balances() && out.ledger.counts.lost_in_device == 0);
+    out.ledger.counts.binned
 }
 
 fn benches(c: &mut Criterion) {

@@ -59,7 +59,7 @@ fn benches(c: &mut Criterion) {
     g.throughput(Throughput::Elements(records));
     g.sample_size(10);
     g.bench_function("decode_bin_generic_t3_from_page_cache", |b| {
-        b.iter(|| bin_file(&path, &spec).unwrap().accounting.binned)
+        b.iter(|| bin_file(&path, &spec).unwrap().counts.binned)
     });
     // A raw tag file onto its 256 x 256 sensor in the paper's 30 bins of
     // 4 ps (a 7.9 MB stack).
@@ -70,10 +70,10 @@ fn benches(c: &mut Criterion) {
         bins: Some(30),
         ..BinSpec::default()
     };
-    assert_eq!(bin_file(&raw, &spec).unwrap().accounting.binned, RECORDS);
+    assert_eq!(bin_file(&raw, &spec).unwrap().counts.binned, RECORDS);
     g.throughput(Throughput::Elements(RECORDS));
     g.bench_function("decode_bin_raw_tag_file_from_page_cache", |b| {
-        b.iter(|| bin_file(&raw, &spec).unwrap().accounting.binned)
+        b.iter(|| bin_file(&raw, &spec).unwrap().counts.binned)
     });
     // A 256 x 256 FLIM image (two frames, summed) as Python's `bin_file`
     // bins it: the counts as binned, narrowed to u16.

@@ -48,7 +48,7 @@ def read_events(url):
 
 
 def run(out, view, browser):
-    cmd = [CLI, "acquire", "--size", "32", "--fov", "6cm", "--unpaced", "--replay", "16",
+    cmd = [CLI, "acquire", "--size", "32", "--fov", "6cm", "--unpaced", "--mock-replay", "16",
            "--max-photons", PHOTONS, "--duration", "0", "--out", out]
     if view is not None:
         cmd += ["--live"]

@@ -43,7 +43,7 @@ bal = l["photons"] == l["binned"] + l["outside_window"] + l["other_channel"] + l
 assert bal, "photons lost between decoding and binning"
 if sys.argv[2] != "none":
     r = l["recordings"][0]
-    assert r["whole"] and r["records"] == l["records_read"], "records missing from the PTU"
+    assert r["whole"] and r["records"] == l["records"], "records missing from the PTU"
 print(f'{a["records_per_s"] / 1e6:.1f}')
 PY
 )

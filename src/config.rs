@@ -41,7 +41,7 @@ pub fn parse_noise_sigma(s: &str) -> Result<f64, String> {
 /// comment lines of `header`: what `--config` reads back over a stack's
 /// own sensor and bins. A measured IRF table has no keys: it is left out
 /// (a comment says so), so the stack's own table stays in force.
-pub fn medium_toml(setup: &Setup, header: &str) -> String {
+pub fn material_toml(setup: &Setup, header: &str) -> String {
     let m = &setup.medium;
     let mut out: String = header.lines().map(|l| format!("# {l}\n")).collect();
     out.push_str(&format!(
@@ -385,7 +385,7 @@ fn invalid(path: &Path, reason: impl Into<String>) -> ConfigError {
 }
 
 /// A material file: the optics of a medium as a configuration file
-/// states them (e.g. the `medium.toml` that `calibrate-slab` writes):
+/// states them (e.g. the `material.toml` that `calibrate-slab` writes):
 /// `mu_a`, `n` and `mu_s_reduced` (or `mu_s`) required, `g` (0 when
 /// absent) and `thickness` optional.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -503,7 +503,7 @@ mod tests {
     #[test]
     fn a_file_states_reduced_scattering_by_its_own_name() {
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("medium.toml");
+        let path = dir.path().join("material.toml");
         std::fs::write(&path, "mu_a = 0.01\nmu_s_reduced = 5.0\nn = 1.12\n").unwrap();
         let m = read_material(&path).unwrap();
         assert_eq!((m.mu_s_per_cm, m.g), (5.0, 0.0));
@@ -531,7 +531,7 @@ mod tests {
         ] {
             std::fs::write(&path, text).unwrap();
             let e = read_material(&path).unwrap_err().to_string();
-            assert!(e.contains("medium.toml") && e.contains(needle), "{e}");
+            assert!(e.contains("material.toml") && e.contains(needle), "{e}");
         }
     }
 

@@ -65,8 +65,8 @@
 //! write_synthetic_t3(&path, 10_000)?;
 //! // One time histogram over one sync period, at the file's resolution.
 //! let binned = bin_file(&path, &BinSpec::default())?;
-//! assert!(binned.accounting.balances());
-//! assert_eq!(binned.stacks[0].total() as u64, binned.accounting.binned);
+//! assert!(binned.counts.balances());
+//! assert_eq!(binned.stacks[0].total() as u64, binned.counts.binned);
 //! std::fs::remove_file(&path)?;
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
@@ -111,4 +111,5 @@ pub use scatterscope_physics::{KernelStack, Preset, Sampling, Setup};
 pub use scene::Scene;
 pub use stack::{Stack, StackMeta, ValueKind};
 pub use tags::bin_file::{BinSpec, BinnedFile, bin_file, bin_file_counts};
-pub use tags::binning::{Accounting, Binner, TimeWindow};
+pub use tags::binning::{Binner, TimeWindow};
+pub use tags::counts::Counts;

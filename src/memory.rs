@@ -168,7 +168,7 @@ pub const PSF_BYTES: u64 = 24;
 /// the kernels and their spectra on a grid up to twice the sensor's side
 /// (57 measured on a 32 x 32 sensor, whose grid is that large). Each
 /// method's own memory is its plan's
-/// ([`crate::reconstruct::method::Plan::working_bytes`]).
+/// ([`crate::reconstruct::method::MethodPlan::working_bytes`]).
 pub const PROBLEM_BYTES: u64 = 80;
 
 /// Checks a job on `setup`'s sensor and bins against the budget at

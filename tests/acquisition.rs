@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use ndarray::{Array3, Axis};
 use scatterscope::acquire::mock::{MockSetup, MockSource};
-use scatterscope::acquire::{AcquireError, Outcome, Plan, StopReason};
+use scatterscope::acquire::{AcquireError, Outcome, StopReason, StreamPlan};
 use scatterscope::formats::sstags::read_tag_file;
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup};
 use scatterscope::scene::Scene;
@@ -50,11 +50,11 @@ fn mock(seed: u64, max_photons: u64, faults: Faults, delay_ps: f64) -> MockSetup
     }
 }
 
-fn plan(t0_ps: f64) -> Plan {
-    let mut p = Plan {
+fn plan(t0_ps: f64) -> StreamPlan {
+    let mut p = StreamPlan {
         t0_ps,
         software: "test".into(),
-        ..Plan::default()
+        ..StreamPlan::default()
     };
     p.set_window(&setup().bins);
     p
@@ -65,13 +65,17 @@ const USB: bool = false;
 /// The mock behind a pseudo-terminal, opened as a serial port.
 const SERIAL: bool = true;
 
-fn try_run(serial: bool, m: MockSetup, plan: &Plan) -> (Result<Outcome, AcquireError>, Truth) {
+fn try_run(
+    serial: bool,
+    m: MockSetup,
+    plan: &StreamPlan,
+) -> (Result<Outcome, AcquireError>, Truth) {
     let mut source = MockSource::open(m, serial, 1.0).unwrap();
     let outcome = scatterscope::acquire::run(&mut source, plan, &AtomicBool::new(false), |_| {});
     (outcome, source.join())
 }
 
-fn run(serial: bool, m: MockSetup, plan: &Plan) -> (Outcome, Truth) {
+fn run(serial: bool, m: MockSetup, plan: &StreamPlan) -> (Outcome, Truth) {
     let (outcome, truth) = try_run(serial, m, plan);
     (outcome.unwrap(), truth)
 }
@@ -123,12 +127,16 @@ fn usb_mock_stack_balances_and_agrees_with_the_forward_model() {
     assert_eq!(acc.detected, Some(n));
     assert_eq!(truth.photons_detected, n);
     assert_eq!(
-        (acc.photons, acc.lost_in_device, acc.lost_in_transit()),
+        (
+            acc.counts.photons,
+            acc.counts.lost_in_device,
+            acc.lost_in_transit()
+        ),
         (n, 0, 0)
     );
     assert_eq!(
         out.counts.iter().map(|&c| u64::from(c)).sum::<u64>(),
-        acc.binned
+        acc.counts.binned
     );
 
     // Independent check of the sampler (alias sampling of the ST-PSF per
@@ -143,7 +151,7 @@ fn usb_mock_stack_balances_and_agrees_with_the_forward_model() {
     let kept: Vec<usize> = kernels.kept_bins().map(|b| b.index).collect();
     assert_eq!(kept.len(), s.bins.count);
     let expected = linear_convolution(&kernels, &scene);
-    let scale = acc.binned as f64 / expected.sum();
+    let scale = acc.counts.binned as f64 / expected.sum();
     for (pos, &k) in kept.iter().enumerate() {
         let e = expected.index_axis(Axis(0), pos).sum() * scale;
         let o = bin_total(&out.counts, k);
@@ -201,7 +209,7 @@ fn a_mock_with_an_irf_and_background_matches_the_irf_kernels_plus_background() {
     let background = truth.dark_counts as f64 * s.bins.width_ps / 12_500.0 / (h * w) as f64;
     let dark_in_window = background * (bins * h * w) as f64;
     let expected = linear_convolution(&kernels, &scene);
-    let binned = out.ledger.binned as f64;
+    let binned = out.ledger.counts.binned as f64;
     let scale = (binned - dark_in_window) / expected.sum();
     let share = dark_in_window / (binned - dark_in_window);
     assert!(
@@ -293,7 +301,7 @@ fn t0_calibration_undoes_the_instrument_delay() {
     assert_eq!(plain.counts, delayed.counts);
     let (uncalibrated, _) = run(USB, mock(3, 30_000, Faults::default(), 300.0), &plan(0.0));
     assert!(
-        uncalibrated.ledger.outside_window > 25_000,
+        uncalibrated.ledger.counts.outside_window > 25_000,
         "{}",
         uncalibrated.ledger.table().join("\n")
     );
@@ -375,7 +383,10 @@ fn device_fifo_overflow_is_reported_exactly() {
     });
     assert!(truth.photons_lost_fifo >= 3 * 777, "{truth:?}");
     assert_eq!(truth.photons_lost_fifo % 777, 0);
-    assert_eq!(out.ledger.photons + out.ledger.lost_in_device, 120_000);
+    assert_eq!(
+        out.ledger.counts.photons + out.ledger.counts.lost_in_device,
+        120_000
+    );
 }
 
 #[test]
@@ -395,7 +406,7 @@ fn a_disconnect_mid_stream_ends_cleanly_with_a_lower_bound() {
     assert_eq!(acc.detected, None);
     assert!(!acc.transit.unwrap().exact);
     assert_eq!(acc.transit.unwrap().batches_received, 5);
-    assert_eq!(acc.photons, truth.photons_sent);
+    assert_eq!(acc.counts.photons, truth.photons_sent);
     assert!(acc.balances(), "{}", acc.table().join("\n"));
 }
 
@@ -423,8 +434,8 @@ fn a_slow_host_makes_the_device_fifo_overflow_and_says_so() {
     let truth = source.join();
     let acc = out.ledger.clone();
     assert!(acc.balances(), "{}", acc.table().join("\n"));
-    assert!(acc.lost_in_device > 0, "{}", acc.table().join("\n"));
-    assert_eq!(acc.lost_in_device, truth.photons_lost_fifo);
+    assert!(acc.counts.lost_in_device > 0, "{}", acc.table().join("\n"));
+    assert_eq!(acc.counts.lost_in_device, truth.photons_lost_fifo);
     assert_eq!(acc.detected, Some(truth.photons_detected));
     assert_eq!(acc.lost_in_transit(), 0);
 }
@@ -439,12 +450,12 @@ fn bin_raw_file(path: &Path) -> (Array3<u32>, scatterscope::formats::sstags::Tag
         ..BinSpec::default()
     };
     let binned = bin_file(path, &spec).unwrap();
-    assert!(binned.accounting.balances(), "{:?}", binned.accounting);
+    assert!(binned.counts.balances(), "{:?}", binned.counts);
     assert_eq!(binned.stacks.len(), 1);
     let counts = binned.stacks[0].data.mapv(|c| c as u32);
     match binned.recording {
-        Recording::TagFile { summary, counts: c } => {
-            assert_eq!(c.invalid_records, 0);
+        Recording::TagFile { summary } => {
+            assert_eq!(binned.counts.invalid_records, 0);
             assert_eq!(binned.truncated.is_some(), summary.totals.is_none());
             (counts, summary)
         }
@@ -475,8 +486,8 @@ fn raw_recordings_round_trip_and_survive_a_cut() {
     // What `info` shows: the file's events counted by kind agree with the
     // acquisition's ledger.
     let (_, survey) = scatterscope::tags::survey::survey_tag_file(&path).unwrap();
-    assert_eq!(survey.photons, out.ledger.photons);
-    assert_eq!(survey.lost_in_device, out.ledger.lost_in_device);
+    assert_eq!(survey.photons, out.ledger.counts.photons);
+    assert_eq!(survey.lost_in_device, out.ledger.counts.lost_in_device);
     assert_eq!(survey.invalid_records, 0);
     assert!(survey.last_event_s > 0.0);
 
@@ -621,8 +632,8 @@ fn a_region_of_interest_bins_its_pixels_and_counts_the_rest() {
     );
     assert!(region.ledger.balances());
     assert_eq!(
-        region.ledger.outside_region,
-        50_000 - region.ledger.binned - region.ledger.outside_window
+        region.ledger.counts.outside_region,
+        50_000 - region.ledger.counts.binned - region.ledger.counts.outside_window
     );
 }
 
@@ -651,7 +662,7 @@ fn afterpulses_and_dark_counts_arrive_at_their_rates() {
     );
     // Dark counts and afterpulses spread over the whole sync period: most
     // land outside the 120 ps window.
-    let outside = out.ledger.outside_window as f64;
+    let outside = out.ledger.counts.outside_window as f64;
     assert!(
         outside > 0.9 * (truth.dark_counts + truth.afterpulses) as f64 * 0.98,
         "{}",
@@ -715,9 +726,9 @@ fn replay_beyond_the_host_rate_overflows_and_counts_every_photon() {
         truth.photons_lost_fifo > 0,
         "the host kept up with 10^10/s? {ctx}"
     );
-    assert_eq!(acc.lost_in_device, truth.photons_lost_fifo, "{ctx}");
+    assert_eq!(acc.counts.lost_in_device, truth.photons_lost_fifo, "{ctx}");
     assert_eq!(
-        acc.photons + acc.lost_in_device,
+        acc.counts.photons + acc.counts.lost_in_device,
         truth.photons_detected,
         "{ctx}"
     );

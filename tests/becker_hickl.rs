@@ -88,10 +88,10 @@ fn spc_files_bin_with_an_honest_ledger() {
             ..BinSpec::default()
         };
         let binned = bin_file_counts(&path, &spec).unwrap();
-        let acc = binned.accounting;
+        let acc = binned.counts;
         assert!(acc.balances(), "{acc:?}");
         assert_eq!(acc.records, 20_000, "{layout:?}");
-        assert_eq!(acc.received, photons.len() as u64);
+        assert_eq!(acc.photons, photons.len() as u64);
         assert_eq!(
             acc.binned,
             photons.len() as u64,
@@ -333,10 +333,10 @@ fn sdt_blocks_bin_as_stacks_and_what_is_left_out_is_said() {
         }
     }
     assert!((binned.resolution_ps - 12.5e3 / 64.0).abs() < 1e-6);
-    let acc = binned.accounting;
+    let acc = binned.counts;
     assert!(acc.balances());
     assert_eq!(
-        acc.received as f64,
+        acc.photons as f64,
         blocks[0].iter().chain(&blocks[1]).sum::<f64>()
     );
     let notes = binned.notes.join("\n");
@@ -358,7 +358,7 @@ fn sdt_blocks_bin_as_stacks_and_what_is_left_out_is_said() {
         f64::from(s0[[1, 2, 3]]),
         blocks[0][(2 * 4 + 3) * 64 + 10] + blocks[0][(2 * 4 + 3) * 64 + 11]
     );
-    assert_eq!(wide.accounting.outside_window as f64, {
+    assert_eq!(wide.counts.outside_window as f64, {
         let first8 = |v: &Vec<f64>| {
             (0..12)
                 .map(|c| v[c * 64..c * 64 + 8].iter().sum::<f64>())
@@ -567,7 +567,7 @@ fn sdt_sizes_whose_product_overflows_place_the_curves_in_a_row() {
     std::fs::write(&path, sdt_file(&measurements, &blocks)).unwrap();
     let binned = bin_file_counts(&path, &BinSpec::default()).unwrap();
     assert_eq!(binned.stacks[0].counts.dim(), (16, 1, 3));
-    assert_eq!(binned.accounting.received, (0..48).sum::<u64>());
+    assert_eq!(binned.counts.photons, (0..48).sum::<u64>());
 }
 
 /// The error `bin` gives for a file `name` of one zipped block of 16

@@ -124,7 +124,7 @@ fn empty_or_bad_profiles_are_refused() {
 /// middle of a sensor wide enough to hold its light, `photons` detections,
 /// with `irf` and `dark_rate_hz`; the time profile and the setup used.
 fn mock_profile(photons: u64, irf: Option<Irf>, dark_rate_hz: f64) -> (Vec<f64>, Setup) {
-    use scatterscope::acquire::Plan;
+    use scatterscope::acquire::StreamPlan;
     use scatterscope::acquire::mock::{MockSetup, MockSource};
     use scatterscope::physics::{KernelStack, Sampling};
     use scatterscope_mocks::{EmitterOptions, MockOptions};
@@ -151,10 +151,10 @@ fn mock_profile(photons: u64, irf: Option<Irf>, dark_rate_hz: f64) -> (Vec<f64>,
             ..MockOptions::default()
         },
     };
-    let mut plan = Plan {
+    let mut plan = StreamPlan {
         t0_ps: 1000.0,
         software: "test".into(),
-        ..Plan::default()
+        ..StreamPlan::default()
     };
     plan.set_window(&s.bins);
     let mut source = MockSource::open(mock, false, s.total_photons).unwrap();

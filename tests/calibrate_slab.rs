@@ -674,7 +674,7 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     );
     // The fitted material as a medium file, read back as `hidden --medium`
     // reads it: no thickness, n as given, mu_s' in the foam's range.
-    let medium = scatterscope::config::read_material(&out.path().join("medium.toml")).unwrap();
+    let medium = scatterscope::config::read_material(&out.path().join("material.toml")).unwrap();
     assert_eq!(medium.thickness_cm, None);
     assert_eq!((medium.refractive_index, medium.g), (1.12, 0.0));
     assert!(
@@ -682,7 +682,7 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
         "{medium:?}"
     );
     let optics = scatterscope::confocal::SlabOptics::from_material_file(
-        &out.path().join("medium.toml"),
+        &out.path().join("material.toml"),
         0.0254,
     )
     .unwrap();
@@ -714,7 +714,7 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
         "{stderr}"
     );
     assert!(
-        stderr.contains("note: --mu-s is now --mu-s-reduced")
+        stderr.contains("note: calibrate-slab's --mu-s is now --mu-s-reduced")
             && stderr.contains("note: --fit `mu_s` is now `mu_s_reduced`")
             && stderr.contains("note: --bin-ps is now --bin-width"),
         "{stderr}"

@@ -8,7 +8,7 @@ use std::sync::atomic::AtomicBool;
 
 use ndarray::{Array2, Array3};
 use ndarray_npy::WriteNpyExt;
-use scatterscope::acquire::{DeviceSpec, Job, MockSpec, Plan, TimeZero};
+use scatterscope::acquire::{DeviceSpec, Job, MockSpec, StreamPlan, TimeZero};
 use scatterscope::config::PhysicsOverrides;
 use scatterscope::formats::image::{read_image, write_image};
 use scatterscope::formats::picoquant::writer::write_synthetic_t3;
@@ -77,10 +77,10 @@ fn a_mock_acquisition_writes_its_stack_and_record_and_balances() {
     mock.device.real_time = false;
     mock.device.max_photons = 200_000;
     let setup = small(32);
-    let mut plan = Plan {
+    let mut plan = StreamPlan {
         tag_file: Some(dir.path().join("tags.sstags")),
         software: "entry-point test".into(),
-        ..Plan::default()
+        ..StreamPlan::default()
     };
     plan.set_window(&setup.bins);
     let job = Job {
@@ -94,13 +94,13 @@ fn a_mock_acquisition_writes_its_stack_and_record_and_balances() {
     let done = job.run(&AtomicBool::new(false), |_| {}).unwrap();
     done.verdict().unwrap();
     let acc = &done.outcome.ledger;
-    assert_eq!(acc.photons, 200_000);
+    assert_eq!(acc.counts.photons, 200_000);
     // Every file it lists exists, and the stack holds what was binned.
     for f in &done.files {
         assert!(f.is_file(), "{}", f.display());
     }
     let stack = Stack::load(&dir.path().join("acq/stack.exr")).unwrap();
-    assert_eq!(stack.total() as u64, acc.binned);
+    assert_eq!(stack.total() as u64, acc.counts.binned);
     assert!(done.summary().iter().any(|l| l.contains("200000 photons")));
     // The tag file reads back to the same stack.
     let binned = bin_file(
@@ -133,10 +133,10 @@ fn a_recorded_file_is_surveyed_binned_and_written() {
     assert_eq!(photons, 5_000);
     assert_eq!(info.records_present, info.records_announced);
     let binned = bin_file(&ptu, &BinSpec::default()).unwrap();
-    assert_eq!(binned.accounting.received, photons);
+    assert_eq!(binned.counts.photons, photons);
     let files = binned.write(&dir.path().join("bin"), true, false).unwrap();
     let back = Stack::load(&files[0]).unwrap();
-    assert_eq!(back.total() as u64, binned.accounting.binned);
+    assert_eq!(back.total() as u64, binned.counts.binned);
     assert!(dir.path().join("bin/stack.png").is_file());
 }
 

@@ -94,7 +94,7 @@ fn assert_same_ledger(page: &serde_json::Value, record: &serde_json::Value) {
     let on_page = &page["ledger_on_page"];
     let ledger = &record["ledger"];
     for field in [
-        "records_read",
+        "records",
         "photons",
         "binned",
         "outside_window",

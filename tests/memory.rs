@@ -203,7 +203,9 @@ proptest! {
 fn each_method_declares_the_working_memory_it_uses() {
     use scatterscope::denoise::tv::TotalVariation;
     use scatterscope::forward::poisson_counts;
-    use scatterscope::reconstruct::method::{Method, MethodOptions, Plan, Solver, run_method};
+    use scatterscope::reconstruct::method::{
+        Method, MethodOptions, MethodPlan, Solver, run_method,
+    };
     use scatterscope::{
         Boundary, ForwardModel, KernelStack, Named, Problem, Scene, StackMeta, ValueKind,
     };
@@ -244,7 +246,7 @@ fn each_method_declares_the_working_memory_it_uses() {
             opts.split.max_iters = 4;
             opts.admm_lbfgs.max_iters = 4;
             opts.rl_max_iters = 10;
-            let declared = Plan::new(method, bin, k, &prior, &opts)
+            let declared = MethodPlan::new(method, bin, k, &prior, &opts)
                 .unwrap()
                 .working_bytes(&problem);
             let (r, peak) =

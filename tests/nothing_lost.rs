@@ -246,7 +246,7 @@ fn a_slab_fit_with_swapped_thicknesses_warns_and_writes_no_medium_file() {
     assert_eq!(r.status.code(), Some(4), "{all}");
     assert!(all.contains("warning: chi2/dof = "), "{all}");
     assert!(dir.path().join("fit.csv").exists());
-    assert!(!dir.path().join("medium.toml").exists());
+    assert!(!dir.path().join("material.toml").exists());
 }
 
 #[test]
@@ -348,14 +348,14 @@ fn picoquant_flags_given_to_another_device_are_refused_by_name() {
         "100ms",
         "--ptu",
         s(&ptu),
-        "--offset",
+        "--t3-offset",
         "10ns",
         "--out",
         s(&dir.path().join("o")),
     ]);
     assert_eq!(r.status.code(), Some(1), "{}", text(&r));
     assert!(
-        text(&r).contains("--offset set a PicoQuant device"),
+        text(&r).contains("--t3-offset set a PicoQuant device"),
         "{}",
         text(&r)
     );

@@ -346,7 +346,7 @@ fn a_recording_whose_writer_never_finished_is_flagged_and_binned_only_when_allow
         ..BinSpec::default()
     };
     let binned = bin_file(&partial[0], &allowed).unwrap();
-    assert_eq!(binned.accounting.received, 10);
+    assert_eq!(binned.counts.photons, 10);
     assert!(
         binned
             .warnings()
@@ -722,9 +722,9 @@ fn default_window_holds_micro_times_past_the_sync_period() {
         .collect();
     write(&path, RecordType::PicoHarpT3, &header(), &tags);
     let binned = bin_file(&path, &BinSpec::default()).unwrap();
-    let acc = binned.accounting;
+    let acc = binned.counts;
     assert!(acc.balances());
-    assert_eq!((acc.received, acc.binned, acc.outside_window), (6, 6, 0));
+    assert_eq!((acc.photons, acc.binned, acc.outside_window), (6, 6, 0));
     assert_eq!(
         binned.window.bins, 3201,
         "bins 0..=3200 hold every micro time"
@@ -747,10 +747,7 @@ fn default_window_holds_micro_times_past_the_sync_period() {
     };
     let binned = bin_file(&path, &spec).unwrap();
     assert_eq!(binned.window.bins, 3125);
-    assert_eq!(
-        (binned.accounting.binned, binned.accounting.outside_window),
-        (3, 3)
-    );
+    assert_eq!((binned.counts.binned, binned.counts.outside_window), (3, 3));
     assert!(
         binned.notes[0].contains("3201 bins would hold them"),
         "{}",
@@ -894,7 +891,7 @@ fn records_past_the_announced_count_are_said_not_ignored() {
     bytes[at..at + 8].copy_from_slice(&(announced - 100).to_le_bytes());
     std::fs::write(&path, &bytes).unwrap();
     let binned = bin_file(&path, &BinSpec::default()).unwrap();
-    assert_eq!(binned.accounting.records, announced - 100);
+    assert_eq!(binned.counts.records, announced - 100);
     assert!(
         binned.notes.iter().any(|n| n.contains(&format!(
             "announces {} records (TTResult_NumberOfRecords) but the file holds {announced}: the 100 after them are not read",
@@ -975,11 +972,8 @@ fn binning_a_file_in_parts_equals_one_pass() {
         let one = on(1, path, spec);
         let three = on(3, path, spec);
         let label = format!("{} {spec:?}", path.display());
-        assert_eq!(one.accounting, three.accounting, "{label}");
-        assert!(
-            one.accounting.balances() && one.accounting.binned > 0,
-            "{label}"
-        );
+        assert_eq!(one.counts, three.counts, "{label}");
+        assert!(one.counts.balances() && one.counts.binned > 0, "{label}");
         assert_eq!(one.window, three.window, "{label}");
         assert_eq!(one.notes, three.notes, "{label}");
         assert_eq!(one.truncated, three.truncated, "{label}");

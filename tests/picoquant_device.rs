@@ -77,7 +77,7 @@ fn acquisition_ptu_bins_back_into_the_same_stack_for_every_family() {
         let record = json(&out.join("acquisition.json"));
         let t = truth(&truth_file);
         let ledger = &record["ledger"];
-        assert_eq!(ledger["records_read"], t["records"], "{family}");
+        assert_eq!(ledger["records"], t["records"], "{family}");
         assert_eq!(ledger["photons"], t["photons"], "{family}");
         assert_eq!(ledger["recordings"][0]["records"], t["records"], "{family}");
         assert!(t["photons"].as_u64().unwrap() > 100_000, "{family}: {t}");
@@ -134,8 +134,8 @@ fn every_fault_mode_ends_the_run_with_the_ledger_balanced_and_the_stack_saved() 
         let t = truth(&truth_file);
         let ledger = &record["ledger"];
         assert_eq!(t["records"], 300_000, "{fault}: the stand-in delivered");
-        assert_eq!(ledger["records_read"], t["records"], "{fault}");
-        assert_eq!(ledger["records_read"], t["records"], "{fault}");
+        assert_eq!(ledger["records"], t["records"], "{fault}");
+        assert_eq!(ledger["records"], t["records"], "{fault}");
         assert_eq!(ledger["photons"], t["photons"], "{fault}");
         assert_eq!(ledger["recordings"][0]["records"], t["records"], "{fault}");
         let photons = ledger["photons"].as_u64().unwrap();
@@ -535,7 +535,7 @@ with ptufile.PtuFile(sys.argv[1]) as p:
         let py = pydeps::python(script, &[&ptu]);
         let got: serde_json::Value = serde_json::from_str(&py).unwrap();
         let record = json(&out.join("acquisition.json"));
-        assert_eq!(got["records"], record["ledger"]["records_read"], "{family}");
+        assert_eq!(got["records"], record["ledger"]["records"], "{family}");
         assert_eq!(got["photons"], record["ledger"]["photons"], "{family}");
         // The detector is on the first input: channel 0 for ptufile in
         // every record type (a PicoHarp T3 record's routing channel 1).
@@ -589,7 +589,7 @@ fn ctrl_c_ends_a_picoquant_run_with_everything_read_saved() {
     let record = json(&out.join("acquisition.json"));
     assert_eq!(record["stop"], "interrupted");
     let t = truth(&truth_file);
-    assert_eq!(record["ledger"]["records_read"], t["records"]);
+    assert_eq!(record["ledger"]["records"], t["records"]);
     assert_eq!(record["ledger"]["recordings"][0]["records"], t["records"]);
     assert!(t["records"].as_u64().unwrap() > 100_000, "{t}");
     let (info, _) = open(&ptu).unwrap();
@@ -614,6 +614,11 @@ fn the_t3_offset_reaches_the_library_in_nanoseconds() {
             &["--offset", "10ns"],
         );
         assert!(o.status.success(), "{family}: {}", text(&o));
+        assert!(
+            text(&o).contains("note: acquire's --offset is now --t3-offset"),
+            "the old name works, with a note: {}",
+            text(&o)
+        );
         assert_eq!(truth(&truth_file)["offset_ns"], 10, "{family}");
         let (info, _) = open(&out.join("acquisition.ptu")).unwrap();
         assert_eq!(info.tags.int("MeasDesc_Offset"), Some(10), "{family}");
@@ -622,7 +627,7 @@ fn the_t3_offset_reaches_the_library_in_nanoseconds() {
             dir.path(),
             &format!("picoquant:{family}"),
             &mock,
-            &["--offset", "10"],
+            &["--t3-offset", "10"],
         );
         assert!(!o.status.success());
         assert!(text(&o).contains("whole nanoseconds"), "{}", text(&o));
@@ -631,7 +636,7 @@ fn the_t3_offset_reaches_the_library_in_nanoseconds() {
             dir.path(),
             &format!("picoquant:{family}"),
             &mock,
-            &["--offset", "200000000ns"],
+            &["--t3-offset", "200000000ns"],
         );
         assert!(!o.status.success());
         assert!(
@@ -900,7 +905,14 @@ fn a_picoharp_300_is_driven_as_phlib_says() {
         dir.path(),
         "picoquant:picoharp",
         &mock,
-        &["--offset", "10ns", "--duration", "600ms", "--binning", "1"],
+        &[
+            "--t3-offset",
+            "10ns",
+            "--duration",
+            "600ms",
+            "--binning",
+            "1",
+        ],
     );
     assert!(o.status.success(), "{}", text(&o));
     let t = truth(&truth_file);
@@ -945,7 +957,7 @@ fn a_picoharp_300_is_driven_as_phlib_says() {
         (&["--input-level", "900"], "levels 0 to 800 mV"),
         (&["--sync-zero-cross", "30"], "zero crosses 0 to 20 mV"),
         (&["--binning", "8"], "takes 0 to 7"),
-        (&["--offset", "2000000ns"], "0 to 1 000 000 ns"),
+        (&["--t3-offset", "2000000ns"], "0 to 1 000 000 ns"),
         (&["--sync-divider", "16"], "divides the sync by 1 to 8"),
     ];
     let out = dir.path().join("refused");

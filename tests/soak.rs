@@ -13,7 +13,7 @@ mod ledger;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use scatterscope::acquire::Plan;
+use scatterscope::acquire::StreamPlan;
 use scatterscope::acquire::mock::{MockSetup, MockSource};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::scene::Scene;
@@ -72,10 +72,10 @@ fn soak_with_every_fault_at_random_times_balances_and_stays_flat() {
             ..MockOptions::default()
         },
     };
-    let mut plan = Plan {
+    let mut plan = StreamPlan {
         duration: Some(Duration::from_secs(seconds)),
         software: "soak".into(),
-        ..Plan::default()
+        ..StreamPlan::default()
     };
     plan.set_window(&setup.bins);
     let mut source = MockSource::open(mock, false, setup.total_photons).unwrap();

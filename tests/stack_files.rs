@@ -441,7 +441,7 @@ fn a_bin_of_more_than_2_to_the_24_photons_sums_to_the_ledger() {
     w.write_records(&vec![record; n as usize]).unwrap();
     w.finish().unwrap();
     let binned = bin_file(&ptu, &BinSpec::default()).unwrap();
-    assert_eq!(binned.accounting.binned, u64::from(n));
+    assert_eq!(binned.counts.binned, u64::from(n));
     let stack = &binned.stacks[0];
     let exact = stack
         .exact_counts
@@ -460,7 +460,7 @@ fn a_bin_of_more_than_2_to_the_24_photons_sums_to_the_ledger() {
         .iter()
         .map(|&c| u64::from(c))
         .sum();
-    assert_eq!(sum, binned.accounting.binned);
+    assert_eq!(sum, binned.counts.binned);
 }
 
 /// The OpenEXR project's own library reads the stack files we write,

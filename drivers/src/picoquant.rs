@@ -183,17 +183,17 @@ impl Family {
     /// family but the PicoHarp 300, whose `PH_SetOffset` takes
     /// picoseconds, 0 to 1 000 000 000 (phdefin.h `OFFSETMIN`/`OFFSETMAX`);
     /// an offset it cannot take is refused by name.
-    pub fn offset_arg(self, offset_ns: i32) -> Result<c_int, VendorError> {
+    pub fn offset_arg(self, t3_offset_ns: i32) -> Result<c_int, VendorError> {
         match self {
-            Family::PicoHarp300 => offset_ns
+            Family::PicoHarp300 => t3_offset_ns
                 .checked_mul(1000)
                 .filter(|ps| (0..=1_000_000_000).contains(ps))
                 .ok_or_else(|| {
                     VendorError::Setting(format!(
-                        "T3 offset {offset_ns} ns: a PicoHarp 300 takes 0 to 1 000 000 ns (PH_SetOffset's 0 to 1e9 ps)"
+                        "T3 offset {t3_offset_ns} ns: a PicoHarp 300 takes 0 to 1 000 000 ns (PH_SetOffset's 0 to 1e9 ps)"
                     ))
                 }),
-            _ => Ok(offset_ns),
+            _ => Ok(t3_offset_ns),
         }
     }
 
@@ -701,7 +701,7 @@ pub struct Settings {
     /// gives `MH_SetOffset`'s range 0 to 100 000 000 ns; the HHLib manual
     /// calls it the histogram time offset in ns, though HHLib's header
     /// comments its 0 to 500 000 range as ps).
-    pub offset_ns: i32,
+    pub t3_offset_ns: i32,
     /// Enable the four marker inputs (line and frame clocks of a scanner).
     pub markers: bool,
     /// The markers' active edge: rising (else falling); set with them.
@@ -752,9 +752,9 @@ impl Settings {
             ));
         }
         family
-            .offset_arg(self.offset_ns)
+            .offset_arg(self.t3_offset_ns)
             .map(|_| ())
-            .map_err(|e| ("offset_ns", e))
+            .map_err(|e| ("t3_offset_ns", e))
     }
 
     /// The vendor demos' settings for `family`'s `inputs`.
@@ -766,7 +766,7 @@ impl Settings {
             input_trigger: Trigger::default_for(family, inputs),
             input_offsets_ps: Vec::new(),
             binning: 0,
-            offset_ns: 0,
+            t3_offset_ns: 0,
             markers: false,
             markers_rising: true,
         }
@@ -996,7 +996,7 @@ impl Device {
         let (in_a, in_b) = s.input_trigger.args(family, self.inputs, "input")?;
         s.check_family(family, self.info.inputs)
             .map_err(|(_, e)| e)?;
-        let offset = family.offset_arg(s.offset_ns)?;
+        let offset = family.offset_arg(s.t3_offset_ns)?;
         // SAFETY (every call below): plain integer arguments on an open,
         // initialised device.
         unsafe {

@@ -290,7 +290,7 @@ fn bin_file<'py>(
         .detach(|| lib_bin_file_counts(&path, &spec))
         .map_err(err)?;
     let summary = binned.summary();
-    let ledger = to_py(py, &binned.accounting)?;
+    let ledger = to_py(py, &binned.counts)?;
     let mut arrays = Vec::new();
     let mut metas = Vec::new();
     for (frame, stack) in binned.stacks.into_iter().enumerate() {
@@ -639,7 +639,7 @@ fn acquisition_request(
             "t0_ps" => r.t0 = TimeZero::At(value.extract()?),
             "t0_from" => r.t0 = TimeZero::FromReference(PathBuf::from(text(&value)?)),
             "roi" => r.region = Some(text(&value)?.parse().map_err(msg)?),
-            "resolution_ps" => r.resolution_ps = Some(value.extract()?),
+            "micro_time_unit_ps" => r.micro_time_unit_ps = Some(value.extract()?),
             "tags" => r.tags = Some(PathBuf::from(text(&value)?)),
             "speed" => r.speed = value.extract()?,
             "ome_tiff" => r.ome_tiff = value.extract()?,
@@ -655,7 +655,7 @@ fn acquisition_request(
             "input_zero_cross_mv" => p.input_zero_cross_mv = Some(value.extract()?),
             "input_offsets_ps" => p.input_offsets_ps = value.extract()?,
             "binning" => p.binning = Some(value.extract()?),
-            "offset_ps" => p.offset_ps = Some(value.extract()?),
+            "t3_offset_ps" => p.t3_offset_ps = Some(value.extract()?),
             "scan" => p.scan = Some(parse_scan(&text(&value)?).map_err(msg)?),
             "channel" => p.channel = Some(value.extract()?),
             "pixels" => p.pixels = named("pixels", &text(&value)?)?,
@@ -734,7 +734,7 @@ fn renamed_parameters(names: Vec<String>) -> Vec<(&'static str, &'static str)> {
 }
 
 /// Fits a slab's mu_a and mu_s' to transmittance captures: (result JSON
-/// with the estimates, lines, medium.toml text).
+/// with the estimates, lines, material.toml text).
 #[pyfunction]
 #[pyo3(signature = (reference, captures, refractive_index, predict=Vec::new(), bin_width_ps=None, dataset="out", irf_extent="period", mu_a=0.01, mu_s_reduced=5.0, fit=vec!["mu_a".to_string(), "mu_s_reduced".to_string()], offset_cm=0.0, rising_edge_share=RISING_EDGE_CONVENTION))]
 #[allow(clippy::too_many_arguments)]
@@ -799,7 +799,7 @@ fn calibrate_slab<'py>(
         "chi2_per_dof": f.chi2_per_dof,
         "seconds": done.seconds,
         "lines": done.lines(),
-        "medium_toml": done.medium_toml(),
+        "material_toml": done.material_toml(),
     });
     Ok(out.to_string())
 }

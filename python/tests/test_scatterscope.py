@@ -71,7 +71,7 @@ def test_bin_file_equals_the_command_bin_for_bin(tmp_path):
     np.testing.assert_array_equal(ours["stacks"][0], theirs)
     assert ours["meta"][0] == meta
     ledger = ours["ledger"]
-    assert ledger["received"] == ledger["binned"] + ledger["outside_window"] + ledger["other_channel"] + ledger[
+    assert ledger["photons"] == ledger["binned"] + ledger["outside_window"] + ledger["other_channel"] + ledger[
         "outside_region"
     ]
     assert ours["stacks"][0].sum() == ledger["binned"] > 10_000
@@ -92,7 +92,7 @@ def test_becker_hickl_spc_bins_as_the_command_with_the_module_and_unit_given(tmp
     stack = ours["stacks"][0]
     assert stack.shape == (256, 1, 6)
     assert stack[55, 0, 5] == 2 and stack[245, 0, 1] == 1 and stack[0, 0, 0] == 1
-    assert ours["ledger"]["received"] == 4 and ours["meta"][0]["bin_width_ps"] == 20.0
+    assert ours["ledger"]["photons"] == 4 and ours["meta"][0]["bin_width_ps"] == 20.0
     cli("bin", str(spc), "--pixels", "channel", "--spc-module", "spc-600-256", "--micro-unit", "20ps",
         "--out", str(tmp_path / "bin"))
     theirs, _ = scatterscope.load_stack(tmp_path / "bin" / "stack.exr")
@@ -125,7 +125,7 @@ def test_read_tags_agrees_with_bin_file(tmp_path):
     assert len(tags["channel"]) == len(tags["macro_time"]) == len(tags["micro_time"])
     assert np.all(np.diff(tags["macro_time"].astype(np.int64)) >= 0)
     binned = scatterscope.bin_file(ptu, pixels="channel")
-    assert binned["ledger"]["received"] == len(tags["channel"])
+    assert binned["ledger"]["photons"] == len(tags["channel"])
     # The stack's time profile is the histogram of the micro times.
     profile = binned["stacks"][0].sum(axis=(1, 2))
     hist = np.bincount(tags["micro_time"], minlength=len(profile))
@@ -232,7 +232,7 @@ def test_calibrate_slab_equals_the_command_from_files_and_from_arrays(tmp_path):
         cal / "capture_direct.mat", [(cal / "capture_3_0_inch.mat", 7.62)], 1.12,
         predict=[(cal / "capture_3_5_inch.mat", 8.89)], bin_width_ps=8.0,
     )
-    assert files["medium_toml"] == (tmp_path / "cli" / "medium.toml").read_text()
+    assert files["material_toml"] == (tmp_path / "cli" / "material.toml").read_text()
     for line in files["lines"]:
         if "s)" not in line:  # wall times differ
             assert line in out, line
@@ -300,7 +300,7 @@ def test_acquire_from_the_mock_equals_the_commands_run(tmp_path):
     data, meta = scatterscope.load_stack(tmp_path / "cli" / "stack.exr")
     assert np.array_equal(done["stack"], data)
     record = json.loads((tmp_path / "cli" / "acquisition.json").read_text())
-    for field in ("records_read", "photons", "binned", "outside_window", "lost_in_device"):
+    for field in ("records", "photons", "binned", "outside_window", "lost_in_device"):
         assert done["record"]["ledger"][field] == record["ledger"][field], field
     assert done["meta"]["bin_starts_ps"] == meta["bin_starts_ps"]
     assert sorted(p.name for p in (tmp_path / "py").iterdir()) == sorted(p.name for p in (tmp_path / "cli").iterdir())
@@ -311,8 +311,8 @@ def test_acquire_refuses_what_the_command_refuses_with_its_words(tmp_path):
     cases = [
         (["--device", "mock", "--sync-level", "-50"], dict(device="mock", sync_level_mv=-50)),
         (["--device", "mock", "--speed", "4"], dict(device="mock", speed=4.0)),
-        (["--device", "picoquant", "--vendor-lib", str(standin_library()), "--offset", "10500ps"],
-         dict(device="picoquant", vendor_lib=str(standin_library()), offset_ps=10500.0)),
+        (["--device", "picoquant", "--vendor-lib", str(standin_library()), "--t3-offset", "10500ps"],
+         dict(device="picoquant", vendor_lib=str(standin_library()), t3_offset_ps=10500.0)),
     ]
     for flags, kwargs in cases:
         theirs = cli_error("acquire", *flags, "--out", out)

@@ -11,7 +11,7 @@ use std::sync::atomic::AtomicBool;
 use super::calibration::t0_from_reference;
 use super::device::{DeviceSpec, open_device};
 use super::open_error::OpenError;
-use super::pipeline::{AcquireError, Outcome, Plan, Progress, Snapshot, run_watched};
+use super::pipeline::{AcquireError, Outcome, Progress, Snapshot, StreamPlan, run_watched};
 use super::source::{SourceReport, StopReason};
 use crate::files::{FilePlan, PlanError};
 use crate::formats::png::{SheetScale, write_contact_sheet};
@@ -41,7 +41,7 @@ pub struct Job {
     pub t0: TimeZero,
     /// The window, the pixels, the duration and the recordings (its `t0_ps`
     /// is set from [`Self::t0`]).
-    pub plan: Plan,
+    pub plan: StreamPlan,
     /// Output directory (created if missing).
     pub out: PathBuf,
     /// Also write the stack as OME-TIFF (`stack.ome.tif`).
@@ -52,7 +52,7 @@ pub struct Job {
 #[derive(Debug)]
 pub struct Acquisition {
     /// What was planned (the window, time zero, the region).
-    pub plan: Plan,
+    pub plan: StreamPlan,
     /// What happened (counts, ledger, why it ended).
     pub outcome: Outcome,
     /// What the source added (a mock's truth).
@@ -318,8 +318,8 @@ impl Acquisition {
         lines.push(format!(
             "ended: {} after {secs:.2} s ({} photons, {:.2} Mcps; {:.1} M records/s)",
             o.end.stop.describe(),
-            l.photons,
-            l.photons as f64 / secs / 1e6,
+            l.counts.photons,
+            l.counts.photons as f64 / secs / 1e6,
             o.records_per_s() / 1e6
         ));
         lines.extend(l.table());
@@ -359,7 +359,7 @@ impl Acquisition {
             StopReason::Disconnected(e) => {
                 return Err(format!(
                     "the device disconnected ({e}); the {} photons received before are in the outputs",
-                    l.photons
+                    l.counts.photons
                 ));
             }
             StopReason::NoStopAnswer => {
@@ -381,7 +381,7 @@ impl Acquisition {
                 r.error.as_deref().unwrap_or_default()
             ));
         }
-        if l.photons == 0 {
+        if l.counts.photons == 0 {
             let transit = l.transit.map_or(String::new(), |t| {
                 format!(
                     " ({} frames failed their checks, {} batches were lost)",

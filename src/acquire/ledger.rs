@@ -17,6 +17,8 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
+use crate::tags::counts::Counts;
+
 /// What the transport between the device and the host lost or repaired
 /// (our own devices' links; a vendor library keeps its own).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -62,8 +64,6 @@ pub struct Recording {
 pub struct Ledger {
     /// Photons the device detected, from its totals.
     pub detected: Option<u64>,
-    /// Photons the device counted as lost (its FIFO).
-    pub lost_in_device: u64,
     /// Its FIFO overran (how many records it lost it does not say).
     pub fifo_overrun: bool,
     /// It dropped counts before its FIFO (MultiHarp's `FLAG_CNTS_DROPPED`;
@@ -71,25 +71,10 @@ pub struct Ledger {
     pub counts_dropped: bool,
     /// The transport's losses and repairs (a link of our own).
     pub transit: Option<Transit>,
-    /// Records read from the device (photons, markers, overflows, losses).
-    pub records_read: u64,
-    /// Records with an unknown type (skipped).
-    pub invalid_records: u64,
-    /// Photon records.
-    pub photons: u64,
-    /// Photons in a stack bin.
-    pub binned: u64,
-    /// Photons whose arrival time is outside the binned window.
-    pub outside_window: u64,
-    /// Photons on other inputs than the one selected.
-    pub other_channel: u64,
-    /// Photons on no pixel of the stack (outside the region of a sensor,
-    /// or outside a scan's image).
-    pub outside_region: u64,
-    /// Marker records.
-    pub markers: u64,
-    /// Frames seen (scans).
-    pub frames: u64,
+    /// Where the records and photons read went (the device's own loss
+    /// total, where it sends one, in `lost_in_device`).
+    #[serde(flatten)]
+    pub counts: Counts,
     /// The recordings.
     pub recordings: Vec<Recording>,
 }
@@ -109,10 +94,11 @@ impl Ledger {
     /// Whether every line of the balance holds (the first only when the
     /// device's totals are known).
     pub fn balances(&self) -> bool {
-        self.photons == self.binned + self.outside_window + self.other_channel + self.outside_region
+        let c = &self.counts;
+        c.balances()
             && self
                 .detected
-                .is_none_or(|d| d == self.photons + self.lost_in_transit() + self.lost_in_device)
+                .is_none_or(|d| d == c.photons + self.lost_in_transit() + c.lost_in_device)
             && self.recordings.iter().all(|r| r.whole)
     }
 
@@ -120,18 +106,19 @@ impl Ledger {
     /// apply to this source are left out.
     pub fn table(&self) -> Vec<String> {
         let line = |name: &str, v: String| format!("  {name:<30} {v:>14}");
+        let c = &self.counts;
         let mut t = Vec::new();
         if let Some(d) = self.detected {
             t.push(line("detected by the device", d.to_string()));
         }
         let flagged = |on: bool| if on { "yes, count unknown" } else { "0" };
-        if self.fifo_overrun || self.lost_in_device > 0 || self.detected.is_some() {
+        if self.fifo_overrun || c.lost_in_device > 0 || self.detected.is_some() {
             t.push(line(
                 "lost in the device (FIFO)",
                 if self.fifo_overrun {
                     flagged(true).into()
                 } else {
-                    self.lost_in_device.to_string()
+                    c.lost_in_device.to_string()
                 },
             ));
         }
@@ -144,31 +131,31 @@ impl Ledger {
                 format!("{}{}", if tr.exact { "" } else { ">= " }, tr.lost_photons),
             ));
         }
-        t.push(line("records read", self.records_read.to_string()));
-        t.push(line("  photons", self.photons.to_string()));
-        t.push(line("    binned", self.binned.to_string()));
+        t.push(line("records read", c.records.to_string()));
+        t.push(line("  photons", c.photons.to_string()));
+        t.push(line("    binned", c.binned.to_string()));
         t.push(line(
             "    outside the time window",
-            self.outside_window.to_string(),
+            c.outside_window.to_string(),
         ));
-        if self.other_channel > 0 {
+        if c.other_channel > 0 {
+            t.push(line("    on other channels", c.other_channel.to_string()));
+        }
+        t.push(line("    outside the region", c.outside_region.to_string()));
+        if c.over_budget > 0 {
             t.push(line(
-                "    on other channels",
-                self.other_channel.to_string(),
+                "    past the memory budget",
+                c.over_budget.to_string(),
             ));
         }
-        t.push(line(
-            "    outside the region",
-            self.outside_region.to_string(),
-        ));
-        if self.markers > 0 {
-            t.push(line("  markers", self.markers.to_string()));
+        if c.markers > 0 {
+            t.push(line("  markers", c.markers.to_string()));
         }
-        if self.frames > 0 {
-            t.push(line("  frames", self.frames.to_string()));
+        if c.frames > 0 {
+            t.push(line("  frames", c.frames.to_string()));
         }
-        if self.invalid_records > 0 {
-            t.push(line("  invalid records", self.invalid_records.to_string()));
+        if c.invalid_records > 0 {
+            t.push(line("  invalid records", c.invalid_records.to_string()));
         }
         if let Some(tr) = &self.transit {
             t.push(line("batches received", tr.batches_received.to_string()));
@@ -222,17 +209,20 @@ mod tests {
     fn the_ledger_balances_only_when_every_photon_and_record_is_placed() {
         let mut l = Ledger {
             detected: Some(12),
-            lost_in_device: 2,
             transit: Some(Transit {
                 lost_photons: 2,
                 exact: true,
                 ..Transit::default()
             }),
-            records_read: 10,
-            photons: 8,
-            binned: 5,
-            outside_window: 2,
-            other_channel: 1,
+            counts: Counts {
+                records: 10,
+                lost_in_device: 2,
+                photons: 8,
+                binned: 5,
+                outside_window: 2,
+                other_channel: 1,
+                ..Counts::default()
+            },
             ..Ledger::default()
         };
         assert!(l.balances());
@@ -240,9 +230,9 @@ mod tests {
         assert!(!l.balances(), "a photon the device detected is missing");
         l.detected = None;
         assert!(l.balances());
-        l.binned = 4;
+        l.counts.binned = 4;
         assert!(!l.balances(), "a photon received is in no category");
-        l.binned = 5;
+        l.counts.binned = 5;
         l.recordings.push(Recording {
             path: "a.ptu".into(),
             format: "ptu".into(),
@@ -257,9 +247,12 @@ mod tests {
     #[test]
     fn a_flagged_loss_balances_but_says_the_measurement_is_not_whole() {
         let l = Ledger {
-            records_read: 3,
-            photons: 3,
-            binned: 3,
+            counts: Counts {
+                records: 3,
+                photons: 3,
+                binned: 3,
+                ..Counts::default()
+            },
             counts_dropped: true,
             ..Ledger::default()
         };

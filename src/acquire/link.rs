@@ -4,7 +4,7 @@
 //! duration, on request (Ctrl-C) or when the device stops by itself, and
 //! collect the device's totals.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use firmware_protocol::{Config, EventBatch, Request, Response};
@@ -15,7 +15,7 @@ use scatterscope_drivers::pipeline::Delivery as LinkDelivery;
 use super::ledger::Transit;
 use super::source::{
     Delivery, DeviceInfo, Layout, RecordFormat, Source, SourceEnd, SourceError, SourceFacts,
-    StartRequest, StopReason,
+    StartRequest, StopReason, Until,
 };
 use crate::formats::picoquant::writer::HeaderEntry;
 
@@ -98,12 +98,8 @@ impl Source for LinkSource {
         })
     }
 
-    fn stream(
-        &mut self,
-        duration: Option<Duration>,
-        stop: &AtomicBool,
-        sink: &mut dyn FnMut(Delivery<'_>),
-    ) -> SourceEnd {
+    fn stream(&mut self, until: Until<'_>, sink: &mut dyn FnMut(Delivery<'_>)) -> SourceEnd {
+        let Until { duration, stop } = until;
         let mut device = self.device.take().expect("streamed once");
         if let Err(e) = device.start() {
             return SourceEnd::ended(StopReason::Disconnected(e.to_string()));

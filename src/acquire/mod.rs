@@ -38,6 +38,6 @@ pub use device::{DeviceSpec, OpenedDevice, open_device};
 pub use job::{Acquisition, Job, JobError, TimeZero};
 pub use ledger::{Ledger, Recording};
 pub use mock::MockSpec;
-pub use pipeline::{AcquireError, Outcome, Plan, Progress, Snapshot, run, run_watched};
+pub use pipeline::{AcquireError, Outcome, Progress, Snapshot, StreamPlan, run, run_watched};
 pub use record::AcquisitionRecord;
 pub use source::{Source, SourceFacts, StopReason};

@@ -8,7 +8,7 @@
 //! read; Ctrl-C ends it the same way.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -19,7 +19,7 @@ use scatterscope_drivers::picoquant::{
 
 use super::source::{
     Delivery, DeviceInfo, Layout, RateSample, RecordFormat, Source, SourceEnd, SourceError,
-    SourceFacts, StartRequest, StopReason,
+    SourceFacts, StartRequest, StopReason, Until,
 };
 use crate::events::Imaging;
 use crate::formats::picoquant::records::RecordType;
@@ -106,7 +106,7 @@ pub struct SettingsRequest {
     /// Binning code (micro-time unit = base resolution x 2^binning).
     pub binning: Option<i32>,
     /// T3 offset, ns (the unit the vendor's libraries take).
-    pub offset_ns: Option<i32>,
+    pub t3_offset_ns: Option<i32>,
 }
 
 impl SettingsRequest {
@@ -196,7 +196,7 @@ impl SettingsRequest {
         s.sync_offset_ps = self.sync_offset_ps.unwrap_or(s.sync_offset_ps);
         s.input_offsets_ps = self.input_offsets_ps.clone();
         s.binning = self.binning.unwrap_or(s.binning);
-        s.offset_ns = self.offset_ns.unwrap_or(s.offset_ns);
+        s.t3_offset_ns = self.t3_offset_ns.unwrap_or(s.t3_offset_ns);
         s.markers = markers;
         s.markers_rising = self.markers_rising.unwrap_or(s.markers_rising);
         // The inputs' count is the device's to say; what the family cannot
@@ -400,7 +400,7 @@ fn ptu_tags(
             "MeasDesc_Offset".into(),
             // In ns, the unit the libraries take (a PicoHarp 300 was sent
             // the same offset in ps, `Family::offset_arg`).
-            HeaderEntry::Int(i64::from(settings.offset_ns)),
+            HeaderEntry::Int(i64::from(settings.t3_offset_ns)),
         ),
     ];
     match settings.input_trigger {
@@ -441,12 +441,9 @@ fn vendor(e: VendorError) -> SourceError {
 
 impl Source for PicoQuantSource {
     fn start(&mut self, request: &StartRequest) -> Result<SourceFacts, SourceError> {
-        if request.resolution_fs.is_some() {
-            return Err(SourceError::setting(
-                "resolution_fs",
-                "a micro-time unit in femtoseconds configures our own devices; a PicoQuant device takes a binning code N instead (unit = base resolution x 2^N)",
-            ));
-        }
+        request.refuse_micro_time_unit(
+            "a micro-time unit in femtoseconds configures our own devices; a PicoQuant device takes a binning code N instead (unit = base resolution x 2^N)",
+        )?;
         let device = self.device.as_mut().expect("started once");
         let family = device.family();
         let settings =
@@ -501,12 +498,8 @@ impl Source for PicoQuantSource {
         })
     }
 
-    fn stream(
-        &mut self,
-        duration: Option<Duration>,
-        stop: &AtomicBool,
-        sink: &mut dyn FnMut(Delivery<'_>),
-    ) -> SourceEnd {
+    fn stream(&mut self, until: Until<'_>, sink: &mut dyn FnMut(Delivery<'_>)) -> SourceEnd {
+        let Until { duration, stop } = until;
         let mut device = self.device.take().expect("streamed once");
         let duration_ms = duration.map_or(MAX_MEASUREMENT_MS, |d| {
             (d.as_millis() as i32).clamp(1, MAX_MEASUREMENT_MS)

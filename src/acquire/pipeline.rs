@@ -18,7 +18,7 @@ use ndarray::Array3;
 use super::ledger::{Ledger, Recording};
 use super::source::{
     Delivery, Layout, RateSample, RecordFormat, Source, SourceEnd, SourceError, SourceFacts,
-    StartRequest,
+    StartRequest, Until,
 };
 use crate::events::Tag;
 use crate::files::Completion;
@@ -28,6 +28,7 @@ use crate::formats::sstags::{TagFileError, TagFileHeader, TagFileWriter};
 use crate::tags::bin_file::{BinSpec, Pixels, window_and_map};
 use crate::tags::binning::{Binner, FrameSelect, PixelMap, Region, TimeWindow};
 use crate::tags::convert::MAX_T3_CHANNELS;
+use crate::tags::counts::Counts;
 use crate::tags::wire::bin_batch;
 
 /// How often the progress callback runs.
@@ -37,7 +38,7 @@ const WATCH_EVERY: Duration = Duration::from_millis(250);
 
 /// What to acquire and how to bin and record it.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Plan {
+pub struct StreamPlan {
     /// Time zero: micro time of the instrument's zero, ps.
     pub t0_ps: f64,
     /// Start of the first bin after time zero, ps.
@@ -64,7 +65,7 @@ pub struct Plan {
     pub software: String,
 }
 
-impl Default for Plan {
+impl Default for StreamPlan {
     fn default() -> Self {
         Self {
             t0_ps: 0.0,
@@ -84,7 +85,7 @@ impl Default for Plan {
 }
 
 /// A micro-time unit of `ps` in the whole femtoseconds a device is asked
-/// for ([`Plan::resolution_fs`]): at least 1 fs and at most what 32 bits
+/// for ([`StreamPlan::resolution_fs`]): at least 1 fs and at most what 32 bits
 /// hold (4.3 us), so that no value is cut or wrapped on the way.
 pub fn resolution_fs(ps: f64) -> Result<u32, AcquireError> {
     let fs = (ps * 1000.0).round();
@@ -100,7 +101,7 @@ pub fn resolution_fs(ps: f64) -> Result<u32, AcquireError> {
     Ok(fs as u32)
 }
 
-impl Plan {
+impl StreamPlan {
     /// Bins the window `bins` describes (a set-up's).
     pub fn set_window(&mut self, bins: &crate::physics::TimeBins) {
         self.t_start_ps = bins.start_ps;
@@ -114,18 +115,10 @@ impl Plan {
 pub struct Progress {
     /// Since the start.
     pub elapsed: Duration,
-    /// Records read so far.
-    pub records: u64,
-    /// Photons received so far.
-    pub photons: u64,
+    /// Where the records and photons read so far went.
+    pub counts: Counts,
     /// Photons received per second since the previous report.
     pub rate_hz: f64,
-    /// Photons binned so far.
-    pub binned: u64,
-    /// Photons the device reported lost so far.
-    pub lost_in_device: u64,
-    /// Marker records so far.
-    pub markers: u64,
     /// Frames rejected by their checks so far (a link of our own).
     pub damaged_frames: u64,
     /// The latest rates the device reported.
@@ -135,13 +128,14 @@ pub struct Progress {
 impl Progress {
     /// The counters in words, for a progress line.
     pub fn describe(&self) -> String {
-        let mut s = format!("{} photons, {:.2} Mcps", self.photons, self.rate_hz / 1e6);
-        if self.records != self.photons {
+        let c = &self.counts;
+        let mut s = format!("{} photons, {:.2} Mcps", c.photons, self.rate_hz / 1e6);
+        if c.records != c.photons {
             let secs = self.elapsed.as_secs_f64().max(1e-3);
             s.push_str(&format!(
                 ", {} records ({:.1} M records/s)",
-                self.records,
-                self.records as f64 / secs / 1e6
+                c.records,
+                c.records as f64 / secs / 1e6
             ));
         }
         if let Some(r) = &self.rates {
@@ -152,7 +146,7 @@ impl Progress {
                 inputs.join(" ")
             ));
         }
-        s.push_str(&format!(", lost in device {}", self.lost_in_device));
+        s.push_str(&format!(", lost in device {}", c.lost_in_device));
         if self.damaged_frames > 0 {
             s.push_str(&format!(", damaged frames {}", self.damaged_frames));
         }
@@ -199,7 +193,7 @@ pub struct Outcome {
 impl Outcome {
     /// Records read per second of measurement.
     pub fn records_per_s(&self) -> f64 {
-        self.ledger.records_read as f64 / self.end.elapsed.as_secs_f64().max(1e-9)
+        self.ledger.counts.records as f64 / self.end.elapsed.as_secs_f64().max(1e-9)
     }
 }
 
@@ -233,7 +227,7 @@ pub enum AcquireError {
     /// plan's field (the command line's hints name its flag).
     #[error("{message}")]
     Setting {
-        /// The setting: a field of [`Plan`] (`channel`, `pixels`,
+        /// The setting: a field of [`StreamPlan`] (`channel`, `pixels`,
         /// `region`, `tag_file`, `resolution_fs`).
         name: &'static str,
         /// What is wrong, with the value.
@@ -257,7 +251,7 @@ type Binning = (Binner, (f64, f64), Option<Region>);
 
 /// The binner for `plan` on the source `facts` describe: the window
 /// checked against the micro-time unit, the region against the sensor.
-fn make_binner(plan: &Plan, facts: &SourceFacts) -> Result<Binning, AcquireError> {
+fn make_binner(plan: &StreamPlan, facts: &SourceFacts) -> Result<Binning, AcquireError> {
     let res_ps = facts.resolution_ps;
     let start_ps = plan.t0_ps + plan.t_start_ps;
     let plan_err = |e: String| {
@@ -372,7 +366,7 @@ struct PtuPlan {
 impl PtuPlan {
     /// The record type and header for `facts`' device; refused when its
     /// records cannot be kept in a PTU file.
-    fn new(plan: &Plan, facts: &SourceFacts, path: &Path) -> Result<Self, AcquireError> {
+    fn new(plan: &StreamPlan, facts: &SourceFacts, path: &Path) -> Result<Self, AcquireError> {
         let mut extra = facts.ptu_tags.clone();
         extra.push((
             "CreatorSW_Name".into(),
@@ -505,7 +499,7 @@ impl PtuRecording {
 /// totals are still collected); `progress` sees it every 100 ms.
 pub fn run(
     source: &mut dyn Source,
-    plan: &Plan,
+    plan: &StreamPlan,
     stop: &AtomicBool,
     progress: impl FnMut(&Progress),
 ) -> Result<Outcome, AcquireError> {
@@ -517,7 +511,7 @@ pub fn run(
 /// copies what it shows and hands slow work to a thread of its own).
 pub fn run_watched(
     source: &mut dyn Source,
-    plan: &Plan,
+    plan: &StreamPlan,
     stop: &AtomicBool,
     mut progress: impl FnMut(&Progress),
     watch: &mut dyn FnMut(&Snapshot<'_>),
@@ -568,36 +562,40 @@ pub fn run_watched(
         RecordFormat::T3(t) => Some(Decoder::new(t)),
         RecordFormat::Wire { .. } => None,
     };
-    let mut records_read = 0u64;
-    let mut counted_lost = 0u64;
-    let mut invalid_records = 0u64;
     let mut rates_during_run = Vec::new();
     let mut latest_rates: Option<RateSample> = None;
     let mut damaged_frames = 0u64;
     let started = Instant::now();
     let (mut last_progress, mut last_photons) = (started, 0u64);
     let mut last_watch = started;
-    let end = source.stream(plan.duration, stop, &mut |delivery| {
+    let until = Until {
+        duration: plan.duration,
+        stop,
+    };
+    let end = source.stream(until, &mut |delivery| {
         match delivery {
             Delivery::Batch { payload, batch } => {
-                records_read += (batch.record_bytes().len() / 8) as u64;
                 if let Some(w) = tags.as_mut() {
                     w.write_batch(payload);
                 }
                 if let Some(p) = ptu.as_mut() {
                     p.batch(batch);
                 }
-                let counts = bin_batch(batch, &mut binner);
-                counted_lost += counts.lost_in_device;
-                invalid_records += counts.invalid_records;
+                bin_batch(batch, &mut binner);
             }
             Delivery::Records(records) => {
-                records_read += records.len() as u64;
                 if let Some(p) = ptu.as_mut() {
                     p.records(records);
                 }
-                if let Some(d) = decoder.as_mut() {
-                    binner.bin_chunk(d, records);
+                match decoder.as_mut() {
+                    Some(d) => binner.bin_chunk(d, records),
+                    // Records of a format this pipeline does not decode
+                    // (none of today's sources sends them): read, counted
+                    // and left unbinned.
+                    None => binner.count_other_records(Counts {
+                        records: records.len() as u64,
+                        ..Counts::default()
+                    }),
                 }
             }
             Delivery::Rates(r) => {
@@ -607,22 +605,18 @@ pub fn run_watched(
             Delivery::Idle { damaged_frames: d } => damaged_frames = d,
         }
         if last_progress.elapsed() >= PROGRESS_EVERY {
-            let acc = binner.accounting();
+            let counts = binner.counts();
             let dt = last_progress.elapsed().as_secs_f64();
             let p = Progress {
                 elapsed: started.elapsed(),
-                records: records_read,
-                photons: acc.received,
-                rate_hz: acc.received.saturating_sub(last_photons) as f64 / dt,
-                binned: acc.binned,
-                lost_in_device: counted_lost,
-                markers: acc.markers,
+                counts,
+                rate_hz: counts.photons.saturating_sub(last_photons) as f64 / dt,
                 damaged_frames,
                 rates: latest_rates.clone(),
             };
             progress(&p);
             last_progress = Instant::now();
-            last_photons = acc.received;
+            last_photons = counts.photons;
             if last_watch.elapsed() >= WATCH_EVERY
                 && let Some(counts) = binner.counts_so_far()
             {
@@ -643,11 +637,11 @@ pub fn run_watched(
     } else {
         Completion::Interrupted
     };
-    let (mut stacks, acc) = binner.finish();
+    let (mut stacks, mut counts) = binner.finish();
     let mut recordings = Vec::new();
     if let Some(p) = ptu {
         let wire = decoder.is_none();
-        let (photons, markers) = (acc.received, acc.markers);
+        let (photons, markers, records_read) = (counts.photons, counts.markers, counts.records);
         recordings.push(p.finish(completion, |records, events| {
             if wire {
                 events == photons + markers
@@ -671,21 +665,15 @@ pub fn run_watched(
             error,
         });
     }
+    // The device's own loss total, where it sends one, over the losses its
+    // records reported.
+    counts.lost_in_device = end.lost_in_device.unwrap_or(counts.lost_in_device);
     let ledger = Ledger {
         detected: end.detected,
-        lost_in_device: end.lost_in_device.unwrap_or(counted_lost),
         fifo_overrun: end.fifo_overrun,
         counts_dropped: end.counts_dropped,
         transit: end.transit,
-        records_read,
-        invalid_records,
-        photons: acc.received,
-        binned: acc.binned,
-        outside_window: acc.outside_window,
-        other_channel: acc.other_channel,
-        outside_region: acc.outside_region + acc.over_budget,
-        markers: acc.markers,
-        frames: acc.frames,
+        counts,
         recordings,
     };
     Ok(Outcome {

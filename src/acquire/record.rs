@@ -7,7 +7,7 @@ use firmware_protocol::{Config, Totals};
 use serde::{Deserialize, Serialize};
 
 use super::ledger::Ledger;
-use super::pipeline::{Outcome, Plan};
+use super::pipeline::{Outcome, StreamPlan};
 use super::source::{DeviceInfo, RateSample, RecordFormat, StopReason};
 use crate::physics::{Sampling, Setup};
 use crate::stack::{Stack, StackMeta};
@@ -61,7 +61,7 @@ pub struct AcquisitionRecord {
 
 impl Outcome {
     /// The record of this acquisition of `plan`.
-    pub fn record(&self, plan: &Plan) -> AcquisitionRecord {
+    pub fn record(&self, plan: &StreamPlan) -> AcquisitionRecord {
         let f = &self.facts;
         AcquisitionRecord {
             device: f.device.clone(),
@@ -102,7 +102,7 @@ impl Outcome {
     /// in the metadata, and `setup` (the sample's physics on the whole
     /// sensor, when known) cut to the binned region, so the stack
     /// reconstructs as it is. `source` says how it was made.
-    pub fn stack(&self, plan: &Plan, setup: Option<&Setup>, source: String) -> Stack {
+    pub fn stack(&self, plan: &StreamPlan, setup: Option<&Setup>, source: String) -> Stack {
         let record = serde_json::to_value(self.record(plan)).expect("the record serialises");
         stack_of(
             self.counts.view(),

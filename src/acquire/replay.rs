@@ -12,7 +12,7 @@ use firmware_protocol::{Config, Identity};
 
 use super::source::{
     Delivery, DeviceInfo, Layout, RecordFormat, Source, SourceEnd, SourceError, SourceFacts,
-    StartRequest, StopReason,
+    StartRequest, StopReason, Until,
 };
 use crate::events::Tag;
 use crate::formats::detect::is_tag_file;
@@ -116,12 +116,9 @@ impl FileSource {
 
 impl Source for FileSource {
     fn start(&mut self, request: &StartRequest) -> Result<SourceFacts, SourceError> {
-        if request.resolution_fs.is_some() {
-            return Err(SourceError::setting(
-                "resolution_fs",
-                "a micro-time unit configures a device; a recording keeps its own",
-            ));
-        }
+        request.refuse_micro_time_unit(
+            "a micro-time unit configures a device; a recording keeps its own",
+        )?;
         let link = format!("replay of {}", self.path.display());
         Ok(match self.opened.as_ref().expect("started once") {
             Opened::Ptu(info, _) => SourceFacts {
@@ -186,12 +183,8 @@ impl Source for FileSource {
         })
     }
 
-    fn stream(
-        &mut self,
-        duration: Option<Duration>,
-        stop: &AtomicBool,
-        sink: &mut dyn FnMut(Delivery<'_>),
-    ) -> SourceEnd {
+    fn stream(&mut self, until: Until<'_>, sink: &mut dyn FnMut(Delivery<'_>)) -> SourceEnd {
+        let Until { duration, stop } = until;
         let pace = Pace {
             started: Instant::now(),
             speed: self.speed,

@@ -14,7 +14,7 @@ use super::DeviceSpec;
 use super::job::{Job, TimeZero};
 use super::mock::MockSpec;
 use super::picoquant::{PicoQuantDevice, SettingsRequest};
-use super::pipeline::{AcquireError, Plan, resolution_fs};
+use super::pipeline::{AcquireError, StreamPlan, resolution_fs};
 use super::replay::ReplaySpec;
 use crate::config::{ConfigError, PhysicsOverrides};
 use crate::events::Imaging;
@@ -48,7 +48,7 @@ pub struct Request {
     pub region: Option<Region>,
     /// The micro-time unit to configure, ps (the device's own when
     /// `None`).
-    pub resolution_ps: Option<f64>,
+    pub micro_time_unit_ps: Option<f64>,
     /// A tag file recording every event batch, losslessly.
     pub tags: Option<PathBuf>,
     /// The mock's scene and behaviour (used by the mock devices only).
@@ -96,7 +96,7 @@ pub struct PicoQuantRequest {
     /// Binning step (the unit is the base resolution times 2^binning).
     pub binning: Option<i32>,
     /// T3 offset, ps (whole ns).
-    pub offset_ps: Option<f64>,
+    pub t3_offset_ps: Option<f64>,
     /// The scan of an imaging measurement.
     pub scan: Option<Imaging>,
     /// Only this input channel.
@@ -126,7 +126,7 @@ impl PicoQuantRequest {
             ("--input-zero-cross", self.input_zero_cross_mv.is_some()),
             ("--input-offsets", !self.input_offsets_ps.is_empty()),
             ("--binning", self.binning.is_some()),
-            ("--offset", self.offset_ps.is_some()),
+            ("--t3-offset", self.t3_offset_ps.is_some()),
             ("--scan", self.scan.is_some()),
             ("--channel", self.channel.is_some()),
             ("--pixels", self.pixels != Pixels::Auto),
@@ -159,9 +159,9 @@ impl PicoQuantRequest {
                 .map(|&v| whole(v, WHOLE_PS, "input-offsets"))
                 .collect::<Result<_, _>>()?,
             binning: self.binning,
-            offset_ns: self
-                .offset_ps
-                .map(|v| whole(v, WHOLE_NS, "offset"))
+            t3_offset_ns: self
+                .t3_offset_ps
+                .map(|v| whole(v, WHOLE_NS, "t3-offset"))
                 .transpose()?,
         })
     }
@@ -269,7 +269,7 @@ impl Request {
             physics: PhysicsOverrides::default(),
             t0: TimeZero::At(0.0),
             region: None,
-            resolution_ps: None,
+            micro_time_unit_ps: None,
             tags: None,
             mock: MockSpec::default(),
             picoquant: PicoQuantRequest::default(),
@@ -286,7 +286,7 @@ impl Request {
     /// before the device is touched.
     pub fn job(&self) -> Result<(Job, Vec<String>), RequestError> {
         let p = &self.picoquant;
-        let mut plan = Plan {
+        let mut plan = StreamPlan {
             region: self.region,
             channel: p.channel,
             pixels: p.pixels,
@@ -295,11 +295,11 @@ impl Request {
                 (None, DeviceSpec::Replay(_)) => None,
                 (None, _) => Some(DEFAULT_DURATION),
             },
-            resolution_fs: self.resolution_ps.map(resolution_fs).transpose()?,
+            resolution_fs: self.micro_time_unit_ps.map(resolution_fs).transpose()?,
             tag_file: self.tags.clone(),
             ptu: p.ptu.clone(),
             software: self.software.clone(),
-            ..Plan::default()
+            ..StreamPlan::default()
         };
         let device = match &self.device {
             DeviceSpec::PicoQuant(d) => {
@@ -394,12 +394,12 @@ mod tests {
     fn picoquant_settings_are_refused_by_name_for_any_other_device() {
         let mut r = request("mock");
         r.picoquant.sync_level_mv = Some(-50);
-        r.picoquant.offset_ps = Some(10_000.0);
+        r.picoquant.t3_offset_ps = Some(10_000.0);
         r.picoquant.pixels = Pixels::Channel;
         let e = r.job().unwrap_err().to_string();
         assert_eq!(
             e,
-            "--sync-level, --offset, --pixels set a PicoQuant device (--device picoquant); mock would ignore them"
+            "--sync-level, --t3-offset, --pixels set a PicoQuant device (--device picoquant); mock would ignore them"
         );
         for device in ["mock-serial", "replay:run.ptu", "serial:/dev/ttyACM0"] {
             let mut r = request(device);
@@ -411,22 +411,22 @@ mod tests {
     #[test]
     fn offsets_go_to_the_library_in_its_whole_units_or_are_refused() {
         let mut r = request("picoquant");
-        r.picoquant.offset_ps = Some(10_000.0);
+        r.picoquant.t3_offset_ps = Some(10_000.0);
         r.picoquant.sync_offset_ps = Some(-25.0);
         r.picoquant.input_offsets_ps = vec![0.0, 12.0];
         let (job, _) = r.job().unwrap();
         let DeviceSpec::PicoQuant(d) = &job.device else {
             panic!("{:?}", job.device)
         };
-        assert_eq!(d.settings.offset_ns, Some(10));
+        assert_eq!(d.settings.t3_offset_ns, Some(10));
         assert_eq!(d.settings.sync_offset_ps, Some(-25));
         assert_eq!(d.settings.input_offsets_ps, vec![0, 12]);
-        r.picoquant.offset_ps = Some(10_500.0);
+        r.picoquant.t3_offset_ps = Some(10_500.0);
         assert_eq!(
             r.job().unwrap_err().to_string(),
-            "--offset 10500 ps: the device takes whole nanoseconds (e.g. 10ns)"
+            "--t3-offset 10500 ps: the device takes whole nanoseconds (e.g. 10ns)"
         );
-        r.picoquant.offset_ps = None;
+        r.picoquant.t3_offset_ps = None;
         r.picoquant.input_offsets_ps = vec![0.5];
         assert_eq!(
             r.job().unwrap_err().to_string(),

@@ -265,19 +265,35 @@ pub struct StartRequest {
     pub resolution_fs: Option<u32>,
 }
 
+impl StartRequest {
+    /// Refuses a micro-time unit, which only our own devices configure;
+    /// `instead` says what this source takes.
+    pub fn refuse_micro_time_unit(&self, instead: &str) -> Result<(), SourceError> {
+        match self.resolution_fs {
+            Some(_) => Err(SourceError::setting("resolution_fs", instead)),
+            None => Ok(()),
+        }
+    }
+}
+
+/// When a stream ends, besides the device's own end: after `duration`
+/// (none: no limit) or once `stop` is set (Ctrl-C, a caller's request).
+#[derive(Debug, Clone, Copy)]
+pub struct Until<'a> {
+    /// How long to stream.
+    pub duration: Option<Duration>,
+    /// Set to end the stream early.
+    pub stop: &'a AtomicBool,
+}
+
 /// An acquisition source.
 pub trait Source {
     /// Identifies and configures the device; what the pipeline needs.
     fn start(&mut self, request: &StartRequest) -> Result<SourceFacts, SourceError>;
 
-    /// Streams until `duration`, `stop` or the device's own end, handing
+    /// Streams until `until` or the device's own end, handing
     /// every delivery to `sink` on the caller's thread, in order.
-    fn stream(
-        &mut self,
-        duration: Option<Duration>,
-        stop: &AtomicBool,
-        sink: &mut dyn FnMut(Delivery<'_>),
-    ) -> SourceEnd;
+    fn stream(&mut self, until: Until<'_>, sink: &mut dyn FnMut(Delivery<'_>)) -> SourceEnd;
 
     /// What the source adds once the pipeline has placed every photon of
     /// `ledger` (the pixels `region` binned, the run ended by `stop`): a

@@ -45,7 +45,8 @@ pub struct Free {
 /// Parameter names that changed, old and new: `mu_s` named the reduced
 /// scattering coefficient mu_s', which the physics settings call `mu_s`
 /// only for the scattering coefficient itself (mu_s' = (1 - g) mu_s).
-pub const RENAMED_PARAMETERS: [(&str, &str); 1] = [("mu_s", "mu_s_reduced")];
+pub const RENAMED_PARAMETERS: [(&str, &str); 2] =
+    [("mu_s", "mu_s_reduced"), ("offset", "detector_offset")];
 
 /// `name` as the fits read it: an old name ([`RENAMED_PARAMETERS`]) as its
 /// new one, any other as it is.

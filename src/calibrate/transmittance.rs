@@ -283,10 +283,10 @@ impl SlabFitOptions {
             match super::current_parameter_name(name.as_ref()) {
                 "mu_a" => self.fit_mu_a = true,
                 "mu_s_reduced" => self.fit_mu_s_reduced = true,
-                "offset" => self.fit_offset = true,
+                "detector_offset" => self.fit_offset = true,
                 other => {
                     return Err(CalibrateError::Invalid(format!(
-                        "unknown parameter `{other}` (use mu_a, mu_s_reduced, offset)"
+                        "unknown parameter `{other}` (use mu_a, mu_s_reduced, detector_offset)"
                     )));
                 }
             }

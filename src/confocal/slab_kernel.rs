@@ -70,7 +70,7 @@ impl SlabOptics {
     }
 
     /// The optics of the material file at `path` (e.g. the
-    /// `medium.toml` that `calibrate-slab` writes) for a slab
+    /// `material.toml` that `calibrate-slab` writes) for a slab
     /// `thickness_m` thick. A file that names another thickness is refused
     /// with both.
     pub fn from_material_file(

@@ -190,11 +190,7 @@ impl LiveView {
         s.ended = Some(done.outcome.end.stop.describe());
         s.ledger = Some(done.outcome.ledger.clone());
         s.ledger_table = done.outcome.ledger.table();
-        s.counters.photons = done.outcome.ledger.photons;
-        s.counters.binned = done.outcome.ledger.binned;
-        s.counters.records = done.outcome.ledger.records_read;
-        s.counters.markers = done.outcome.ledger.markers;
-        s.counters.lost_in_device = done.outcome.ledger.lost_in_device;
+        s.counters.counts = done.outcome.ledger.counts;
         s.version += 1;
     }
 
@@ -256,7 +252,7 @@ impl LiveStage {
             && self
                 .last_offer
                 .is_none_or(|t| t.elapsed() >= RECONSTRUCT_EVERY)
-            && s.progress.binned > 0
+            && s.progress.counts.binned > 0
         {
             let stack = crate::acquire::record::stack_of(
                 s.counts,
@@ -267,7 +263,11 @@ impl LiveStage {
                 "live snapshot".into(),
                 None,
             );
-            if r.offer(stack, s.progress.elapsed.as_secs_f64(), s.progress.photons) {
+            if r.offer(
+                stack,
+                s.progress.elapsed.as_secs_f64(),
+                s.progress.counts.photons,
+            ) {
                 self.last_offer = Some(Instant::now());
             }
         }
@@ -287,7 +287,7 @@ impl LiveStage {
         Some(r.finish(
             done.stack.clone(),
             done.outcome.end.elapsed.as_secs_f64(),
-            done.outcome.ledger.photons,
+            done.outcome.ledger.counts.photons,
             stop,
             progress,
         ))

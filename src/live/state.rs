@@ -8,6 +8,7 @@
 use serde::Serialize;
 
 use crate::acquire::{Ledger, Snapshot};
+use crate::tags::counts::Counts;
 
 /// Rates kept for the page: the last minute.
 pub const RATE_HISTORY_S: f64 = 60.0;
@@ -51,16 +52,9 @@ pub struct Image {
 /// The counters so far.
 #[derive(Debug, Clone, Default, Serialize, PartialEq)]
 pub struct Counters {
-    /// Records read.
-    pub records: u64,
-    /// Photons received.
-    pub photons: u64,
-    /// Photons binned.
-    pub binned: u64,
-    /// Photons the device reported lost.
-    pub lost_in_device: u64,
-    /// Marker records.
-    pub markers: u64,
+    /// Where the records and photons read went.
+    #[serde(flatten)]
+    pub counts: Counts,
     /// Frames that failed their checks.
     pub damaged_frames: u64,
 }
@@ -149,11 +143,7 @@ impl LiveState {
         );
         self.elapsed_s = p.elapsed.as_secs_f64();
         self.counters = Counters {
-            records: p.records,
-            photons: p.photons,
-            binned: p.binned,
-            lost_in_device: p.lost_in_device,
-            markers: p.markers,
+            counts: p.counts,
             damaged_frames: p.damaged_frames,
         };
         self.rates.push(RatePoint {

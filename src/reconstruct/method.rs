@@ -242,7 +242,7 @@ pub enum View {
 
 /// A method planned on a stack: the algorithm apart from the view of the
 /// data it sees, and the memory both need.
-pub struct Plan<'a> {
+pub struct MethodPlan<'a> {
     /// The algorithm.
     pub algorithm: Box<dyn Reconstructor + 'a>,
     /// What it sees.
@@ -251,7 +251,7 @@ pub struct Plan<'a> {
     pub method: Method,
 }
 
-impl<'a> Plan<'a> {
+impl<'a> MethodPlan<'a> {
     /// Plans `method` on a stack of `bins` bins; `bin` selects the bin of
     /// single-bin methods (and of `scaled-counts`, which otherwise sums
     /// every bin).
@@ -354,7 +354,7 @@ impl<'a> Plan<'a> {
     }
 }
 
-/// Runs `method` on `problem`: plans it ([`Plan::new`]), checks the
+/// Runs `method` on `problem`: plans it ([`MethodPlan::new`]), checks the
 /// plan's working memory against the budget, and runs it.
 pub fn run_method(
     problem: &Problem,
@@ -366,7 +366,7 @@ pub fn run_method(
     mut on_iter: impl FnMut(&TraceRow),
 ) -> Result<Reconstruction, ReconstructError> {
     let k = problem.counts.shape()[0];
-    let plan = Plan::new(method, bin, k, denoiser, opts)?;
+    let plan = MethodPlan::new(method, bin, k, denoiser, opts)?;
     let (gh, gw) = problem.model.grid_shape();
     crate::memory::check(plan.working_bytes(problem), || {
         format!("{} on {k} bins of a {gw} x {gh} grid", method.name())

@@ -14,7 +14,7 @@ use crate::calibrate::transmittance::{
     Capture, MediumEstimate, SlabFit, SlabFitOptions, fit_slab, predict_captures, read_captures,
 };
 use crate::calibrate::{CalibrateError, Calibration, Free, calibrate, time_profile};
-use crate::config::{ConfigError, PhysicsOverrides, medium_toml};
+use crate::config::{ConfigError, PhysicsOverrides, material_toml};
 use crate::physics::Setup;
 use crate::plot::{Series, chart};
 use crate::stack::Stack;
@@ -132,7 +132,7 @@ impl Calibration {
                 shift.value
             ));
         }
-        write(&toml_path, &medium_toml(&self.setup, &header))?;
+        write(&toml_path, &material_toml(&self.setup, &header))?;
         Ok(vec![csv_path, png, toml_path])
     }
 }
@@ -145,7 +145,11 @@ impl SlabFit {
         for (name, est, unit) in [
             ("mu_a", self.mu_a, "/cm"),
             ("mu_s'", self.mu_s_reduced, "/cm"),
-            ("offset", self.offset, "cm (detector from the laser's axis)"),
+            (
+                "detector_offset",
+                self.offset,
+                "cm (detector from the laser's axis)",
+            ),
         ] {
             let value = match (est.fitted, est.standard_error) {
                 (true, Some(se)) => format!(
@@ -441,7 +445,7 @@ impl SlabCalibration {
     }
 
     /// Writes `fit.csv` and the plots ([`write_slab_fits`]) into `dir`,
-    /// and `medium.toml` unless the fit is doubtful ([`Self::warnings`]):
+    /// and `material.toml` unless the fit is doubtful ([`Self::warnings`]):
     /// a material file is used without a second look.
     pub fn write(&self, dir: &Path) -> Result<Vec<PathBuf>, CalibrateError> {
         let mut groups = vec![(&self.captures[..], &self.fit, "fitted")];
@@ -450,8 +454,8 @@ impl SlabCalibration {
         }
         let mut written = write_slab_fits(dir, &groups)?;
         if self.warnings().is_empty() {
-            let path = dir.join("medium.toml");
-            write(&path, &self.medium_toml())?;
+            let path = dir.join("material.toml");
+            write(&path, &self.material_toml())?;
             written.push(path);
         }
         Ok(written)
@@ -461,7 +465,7 @@ impl SlabCalibration {
     /// `mu_s_reduced`, `n`, `medium = "slab"`), without a thickness:
     /// `scatterscope hidden --material` reads it for a slab of any
     /// thickness, `--config` for the reconstructions.
-    pub fn medium_toml(&self) -> String {
+    pub fn material_toml(&self) -> String {
         let f = &self.fit;
         let thicknesses: Vec<String> = self
             .captures

@@ -25,10 +25,10 @@ use crate::formats::sstags::{TagFile, TagFileError, TagFileSummary};
 use ndarray::{Array3, s};
 
 use super::binning::{
-    Accounting, Binner, FrameSelect, MAX_BINS, PastWindow, PixelMap, Region, TimeWindow,
-    WindowError,
+    Binner, FrameSelect, MAX_BINS, PastWindow, PixelMap, Region, TimeWindow, WindowError,
 };
-use super::wire::{BatchCounts, bin_batch};
+use super::counts::Counts;
+use super::wire::bin_batch;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, RecordReader, TtrError, open};
 use crate::formats::png::{SheetScale, write_contact_sheet};
@@ -103,8 +103,8 @@ pub struct BinnedFile<S = Stack> {
     pub stacks: Vec<S>,
     /// Each stack's bins, rows and columns.
     pub shape: (usize, usize, usize),
-    /// Photon accounting of the (last) pass: it balances.
-    pub accounting: Accounting,
+    /// Where the records and photons of the (last) pass went: they balance.
+    pub counts: Counts,
     /// The window binned.
     pub window: TimeWindow,
     /// Micro-time resolution (ps): the window's unit.
@@ -174,8 +174,6 @@ pub enum Recording {
     TagFile {
         /// What the file holds.
         summary: TagFileSummary,
-        /// Photons the device reported lost, and records that did not decode.
-        counts: BatchCounts,
     },
 }
 
@@ -191,7 +189,7 @@ impl BinnedFile<CountStack> {
                 .collect(),
             recording: self.recording,
             shape: self.shape,
-            accounting: self.accounting,
+            counts: self.counts,
             window: self.window,
             resolution_ps: self.resolution_ps,
             records_per_s: self.records_per_s,
@@ -267,13 +265,13 @@ impl<S> BinnedFile<S> {
             Recording::BeckerHicklFifo { .. } => {}
         }
         w.extend(self.truncated.iter().cloned());
-        let acc = self.accounting;
+        let acc = self.counts;
         if acc.binned == 0 {
             let end = self.window.start_ps(self.resolution_ps)
                 + self.window.width_ps(self.resolution_ps) * self.window.bins as f64;
             w.push(format!(
                 "the stack is empty: none of the {} photons was binned ({} outside the time window {} to {end} ps, {} on other channels, {} outside the image or its kept frames, {} of frames past the memory budget)",
-                acc.received,
+                acc.photons,
                 acc.outside_window,
                 self.window.start_ps(self.resolution_ps),
                 acc.other_channel,
@@ -286,13 +284,13 @@ impl<S> BinnedFile<S> {
 
     /// Where every record went, the notes and the window, one line each.
     pub fn summary(&self) -> Vec<String> {
-        let acc = self.accounting;
+        let acc = self.counts;
         let mut lines = vec![match &self.recording {
             Recording::PicoQuant(_) => format!(
                 "{} records ({:.0} M records/s): {} photons, {} binned, {} outside the time window, {} on other channels, {} outside the image; {} markers, {} frames",
                 acc.records,
                 self.records_per_s / 1e6,
-                acc.received,
+                acc.photons,
                 acc.binned,
                 acc.outside_window,
                 acc.other_channel,
@@ -305,7 +303,7 @@ impl<S> BinnedFile<S> {
                 acc.records,
                 self.records_per_s / 1e6,
                 info.module.cards(),
-                acc.received,
+                acc.photons,
                 acc.binned,
                 acc.outside_window,
                 acc.other_channel,
@@ -319,19 +317,19 @@ impl<S> BinnedFile<S> {
                 "{} curve points of {} stack(s) ({id}): {} photons, {} binned, {} outside the time window",
                 acc.records,
                 self.stacks.len(),
-                acc.received,
+                acc.photons,
                 acc.binned,
                 acc.outside_window,
             ),
-            Recording::TagFile { counts, .. } => format!(
+            Recording::TagFile { .. } => format!(
                 "{} records ({:.0} M records/s): {} photons, {} binned, {} outside the window, {} lost in the device, {} invalid",
                 acc.records,
                 self.records_per_s / 1e6,
-                acc.received,
+                acc.photons,
                 acc.binned,
                 acc.outside_window,
-                counts.lost_in_device,
-                counts.invalid_records
+                acc.lost_in_device,
+                acc.invalid_records
             ),
         }];
         lines.extend(self.notes.iter().map(|n| format!("note: {n}")));
@@ -666,17 +664,17 @@ fn bin_t3(
     }
     let Pass {
         stacks,
-        accounting,
+        counts: tally,
         window,
         records_per_s,
         truncated,
         flags,
         ..
     } = pass;
-    if accounting.over_budget > 0 {
+    if tally.over_budget > 0 {
         notes.push(format!(
             "{} photon(s) of frames past the first {} were not kept: the memory budget holds {} stacks of {} bins of {} x {} pixels (bin the frames summed, or one at a time)",
-            accounting.over_budget,
+            tally.over_budget,
             stacks.len(),
             stacks.len(),
             window.bins,
@@ -727,7 +725,7 @@ fn bin_t3(
         recording,
         stacks,
         shape,
-        accounting,
+        counts: tally,
         window,
         resolution_ps: res_ps,
         records_per_s,
@@ -769,7 +767,7 @@ const PART_RECORDS: u64 = 1 << 22;
 /// One read -> decode -> bin pass over the records.
 struct Pass {
     stacks: Vec<Array3<u32>>,
-    accounting: Accounting,
+    counts: Counts,
     past: PastWindow,
     window: TimeWindow,
     records_per_s: f64,
@@ -819,11 +817,11 @@ fn run_pass(
     };
     let seconds = start.elapsed().as_secs_f64();
     let past = binner.past_window();
-    let (stacks, accounting) = binner.finish();
+    let (stacks, tally) = binner.finish();
     Ok(Pass {
-        records_per_s: accounting.records as f64 / seconds.max(1e-9),
+        records_per_s: tally.records as f64 / seconds.max(1e-9),
         stacks,
-        accounting,
+        counts: tally,
         past,
         window,
         truncated,
@@ -902,10 +900,9 @@ fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, B
     check_stack_memory(path, &window, &map)?;
     let mut binner = Binner::new(window, map, spec.channel, FrameSelect::Sum);
     let start = Instant::now();
-    let mut counts = BatchCounts::default();
-    let summary = raw.read(|batch| counts += bin_batch(batch, &mut binner))?;
+    let summary = raw.read(|batch| bin_batch(batch, &mut binner))?;
     let seconds = start.elapsed().as_secs_f64();
-    let (mut stacks, accounting) = binner.finish();
+    let (mut stacks, tally) = binner.finish();
     let counts_binned = stacks.swap_remove(0);
     let source = format!("{} ({} {})", path.display(), header.model, header.serial);
     let record = TagFileRecord {
@@ -928,13 +925,13 @@ fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, B
         .is_none()
         .then(|| "no end frame: the recording was cut (crash or disconnect)".to_string());
     Ok(BinnedFile {
-        recording: Recording::TagFile { summary, counts },
+        recording: Recording::TagFile { summary },
         stacks: vec![stack],
         shape,
-        accounting,
+        counts: tally,
         window,
         resolution_ps: res_ps,
-        records_per_s: accounting.records as f64 / seconds.max(1e-9),
+        records_per_s: tally.records as f64 / seconds.max(1e-9),
         notes: Vec::new(),
         truncated,
     })
@@ -1023,7 +1020,7 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFil
         width: width as f64,
         bins,
     };
-    let mut accounting = Accounting::default();
+    let mut tally = Counts::default();
     let mut stacks = Vec::with_capacity(kept.len());
     for b in kept {
         let (_, h, w) = b.counts.dim();
@@ -1033,9 +1030,9 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFil
                 Some(flat) => flat.iter().map(|&c| u64::from(c)).sum(),
                 None => b.counts.iter().map(|&c| u64::from(c)).sum(),
             };
-            accounting.records += b.counts.len() as u64;
-            accounting.received += sum;
-            accounting.binned += sum;
+            tally.records += b.counts.len() as u64;
+            tally.photons += sum;
+            tally.binned += sum;
             let source = sdt_source(path, &b);
             stacks.push(CountStack {
                 meta: StackMeta::measured(0.0, unit_ps, bins, source, None),
@@ -1052,17 +1049,17 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFil
         let mut counts = Array3::<u32>::zeros((bins, h, w));
         for (point, plane) in b.counts.outer_iter().enumerate() {
             let sum: u64 = plane.iter().map(|&c| u64::from(c)).sum();
-            accounting.records += (plane.len()) as u64;
-            accounting.received += sum;
+            tally.records += (plane.len()) as u64;
+            tally.photons += sum;
             let bin = point
                 .checked_sub(offset)
                 .map(|p| p / width)
                 .filter(|&j| j < bins);
             let Some(bin) = bin else {
-                accounting.outside_window += sum;
+                tally.outside_window += sum;
                 continue;
             };
-            accounting.binned += sum;
+            tally.binned += sum;
             let mut target = counts.index_axis_mut(ndarray::Axis(0), bin);
             if spec.pixels == Pixels::Single {
                 // Counts of a bin past u32 saturate; an .sdt point holds
@@ -1098,10 +1095,10 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFil
         },
         stacks,
         shape,
-        accounting,
+        counts: tally,
         window,
         resolution_ps: unit_ps,
-        records_per_s: accounting.records as f64 / seconds.max(1e-9),
+        records_per_s: tally.records as f64 / seconds.max(1e-9),
         notes,
         truncated: None,
     })

@@ -8,6 +8,7 @@
 
 use ndarray::Array3;
 
+use super::counts::Counts;
 use crate::events::{ChunkDecoder, Imaging, Tag, TagSink};
 
 /// How photons map to pixels.
@@ -125,63 +126,8 @@ pub struct TimeWindow {
     pub bins: usize,
 }
 
-/// Photon bookkeeping; `received = binned + outside_window + other_channel
-/// + outside_region`.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
-pub struct Accounting {
-    /// Records decoded (overflows included).
-    pub records: u64,
-    /// Photon records.
-    pub received: u64,
-    /// Photons in a stack bin.
-    pub binned: u64,
-    /// Photons whose micro time falls outside the window.
-    pub outside_window: u64,
-    /// Photons on channels that were not selected.
-    pub other_channel: u64,
-    /// Photons on no pixel of the stack: outside the region binned (sensor
-    /// maps), or before the first line, between lines, beyond the last line
-    /// or frame (scanned images). The acquisition ledger uses the same
-    /// words: received, binned, outside the window, outside the region.
-    pub outside_region: u64,
-    /// Marker records.
-    pub markers: u64,
-    /// Frames seen (scanned images).
-    pub frames: u64,
-    /// Photons of frames kept apart (`FrameSelect::All`) past the most
-    /// stacks the memory budget holds.
-    pub over_budget: u64,
-}
-
-impl std::ops::AddAssign for Accounting {
-    /// Counts of two parts of one stream, added.
-    fn add_assign(&mut self, other: Accounting) {
-        self.records += other.records;
-        self.received += other.received;
-        self.binned += other.binned;
-        self.outside_window += other.outside_window;
-        self.other_channel += other.other_channel;
-        self.outside_region += other.outside_region;
-        self.markers += other.markers;
-        self.frames += other.frames;
-        self.over_budget += other.over_budget;
-    }
-}
-
-impl Accounting {
-    /// Whether every photon is in exactly one category.
-    pub fn balances(&self) -> bool {
-        self.received
-            == self.binned
-                + self.outside_window
-                + self.other_channel
-                + self.outside_region
-                + self.over_budget
-    }
-}
-
 /// Photons whose micro time fell at or past the end of the window (a
-/// subset of [`Accounting::outside_window`]): how many, and the largest such
+/// subset of [`Counts::outside_window`]): how many, and the largest such
 /// micro time, so that a caller can widen a default window to hold them.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct PastWindow {
@@ -339,7 +285,7 @@ pub struct Binner {
     shape: (usize, usize, usize),
     /// Flat row-major counts of each kept frame (one when summing).
     stacks: Vec<Vec<u32>>,
-    accounting: Accounting,
+    counts: Counts,
     scan: ScanState,
     /// For [`PixelMap::Sensor`]: flat stack pixel of every sensor pixel,
     /// or [`OUTSIDE_REGION`]; one table lookup per photon instead of a
@@ -429,7 +375,7 @@ impl Binner {
             frames,
             shape,
             stacks: Vec::new(),
-            accounting: Accounting::default(),
+            counts: Counts::default(),
             scan: ScanState::default(),
             pixel_lut,
             offsets: Vec::new(),
@@ -595,9 +541,9 @@ impl Binner {
         // The loop counts the exceptions only; photons and binned photons
         // follow from them.
         let photons = records.len() as u64 - f.markers - f.other_records;
-        let acc = &mut self.accounting;
+        let acc = &mut self.counts;
         acc.records += records.len() as u64;
-        acc.received += photons;
+        acc.photons += photons;
         acc.markers += f.markers;
         acc.other_channel += f.other_channel;
         acc.outside_window += f.outside_window;
@@ -625,7 +571,7 @@ impl Binner {
                 None => self.stacks.push(stack),
             }
         }
-        self.accounting += other.accounting;
+        self.counts += other.counts;
         self.past.photons += other.past.photons;
         self.past.max_micro = self.past.max_micro.max(other.past.max_micro);
     }
@@ -633,7 +579,7 @@ impl Binner {
     /// Feeds one decoded record's tag (`None` for overflow records).
     #[inline]
     pub fn push(&mut self, tag: Option<Tag>) {
-        self.accounting.records += 1;
+        self.counts.records += 1;
         match tag {
             None | Some(Tag::Sync { .. }) => {}
             Some(Tag::Photon {
@@ -641,13 +587,13 @@ impl Binner {
                 macro_time,
                 micro_time,
             }) => {
-                self.accounting.received += 1;
+                self.counts.photons += 1;
                 if self.channel.is_some_and(|c| c != channel) {
-                    self.accounting.other_channel += 1;
+                    self.counts.other_channel += 1;
                     return;
                 }
                 let Some(bin) = self.micro_bin(micro_time) else {
-                    self.accounting.outside_window += 1;
+                    self.counts.outside_window += 1;
                     self.past.note(&self.window, micro_time);
                     return;
                 };
@@ -657,7 +603,7 @@ impl Binner {
                         if usize::from(channel) < width {
                             self.bin_at(0, bin, 0, usize::from(channel));
                         } else {
-                            self.accounting.outside_region += 1;
+                            self.counts.outside_region += 1;
                         }
                     }
                     PixelMap::Sensor { .. } => self.bin_sensor_pixel(bin, channel),
@@ -665,13 +611,13 @@ impl Binner {
                         if self.scan.line_start.is_some() {
                             self.scan.pending.push((macro_time, bin));
                         } else {
-                            self.accounting.outside_region += 1;
+                            self.counts.outside_region += 1;
                         }
                     }
                 }
             }
             Some(Tag::Marker { bits, macro_time }) => {
-                self.accounting.markers += 1;
+                self.counts.markers += 1;
                 if let PixelMap::Scan(img) = self.map {
                     self.scan_marker(img, bits, macro_time);
                 }
@@ -720,18 +666,25 @@ impl Binner {
         for &o in offsets.iter() {
             stack[o as usize] += 1;
         }
-        self.accounting.records += n;
-        self.accounting.received += n;
-        self.accounting.binned += offsets.len() as u64;
-        self.accounting.outside_window += outside_window;
-        self.accounting.outside_region += outside_region;
+        self.counts.records += n;
+        self.counts.photons += n;
+        self.counts.binned += offsets.len() as u64;
+        self.counts.outside_window += outside_window;
+        self.counts.outside_region += outside_region;
         self.offsets = offsets;
+    }
+
+    /// Adds the counts of records that place no photon (overflows, losses,
+    /// records that do not decode), read by the caller.
+    pub fn count_other_records(&mut self, other: Counts) {
+        debug_assert_eq!(other.photons + other.markers, 0);
+        self.counts += other;
     }
 
     /// Counts marker records that need no other handling (sensor maps).
     pub fn count_markers(&mut self, n: u64) {
-        self.accounting.records += n;
-        self.accounting.markers += n;
+        self.counts.records += n;
+        self.counts.markers += n;
     }
 
     /// Bins a photon of a [`PixelMap::Sensor`] map.
@@ -743,7 +696,7 @@ impl Binner {
             .copied()
             .unwrap_or(OUTSIDE_REGION);
         if flat == OUTSIDE_REGION {
-            self.accounting.outside_region += 1;
+            self.counts.outside_region += 1;
             return;
         }
         let (_, h, w) = self.shape;
@@ -751,7 +704,7 @@ impl Binner {
             self.stacks.push(vec![0; self.shape.0 * h * w]);
         }
         self.stacks[0][bin * h * w + flat as usize] += 1;
-        self.accounting.binned += 1;
+        self.counts.binned += 1;
     }
 
     // Always inlined: as a call it cost half the decode + bin time of
@@ -763,10 +716,10 @@ impl Binner {
         match self.stack_for_frame(frame) {
             Some(stack) => {
                 stack[(bin * h + row) * w + col] += 1;
-                self.accounting.binned += 1;
+                self.counts.binned += 1;
             }
-            None if all => self.accounting.over_budget += 1,
-            None => self.accounting.outside_region += 1,
+            None if all => self.counts.over_budget += 1,
+            None => self.counts.outside_region += 1,
         }
     }
 
@@ -796,7 +749,7 @@ impl Binner {
             }));
         }
         let placed = offsets.len() as u64;
-        self.accounting.outside_region += pending.len() as u64 - placed;
+        self.counts.outside_region += pending.len() as u64 - placed;
         let all = self.frames == FrameSelect::All;
         // A line with no photon placed makes no stack (a frame's first
         // stack is made by its first photon, as everywhere).
@@ -810,10 +763,10 @@ impl Binner {
                 for &o in &offsets {
                     stack[o as usize] += 1;
                 }
-                self.accounting.binned += placed;
+                self.counts.binned += placed;
             }
-            None if all => self.accounting.over_budget += placed,
-            None => self.accounting.outside_region += placed,
+            None if all => self.counts.over_budget += placed,
+            None => self.counts.outside_region += placed,
         }
         pending.clear();
         self.scan.pending = pending;
@@ -823,7 +776,7 @@ impl Binner {
     fn scan_marker(&mut self, img: Imaging, bits: u8, t: u64) {
         if bits & img.line_start != 0 {
             // A start without a stop: photons of the unfinished line are lost.
-            self.accounting.outside_region += self.scan.pending.len() as u64;
+            self.counts.outside_region += self.scan.pending.len() as u64;
             self.scan.pending.clear();
             self.scan.line_start = Some(t);
         }
@@ -840,7 +793,7 @@ impl Binner {
             // if it has lines, so neither convention loses or splits a frame.
             if self.scan.lines_in_frame > 0 {
                 self.scan.frame += 1;
-                self.accounting.frames += 1;
+                self.counts.frames += 1;
             }
             self.scan.line = 0;
             self.scan.lines_in_frame = 0;
@@ -856,16 +809,16 @@ impl Binner {
     }
 
     /// Counts so far.
-    pub fn accounting(&self) -> Accounting {
-        self.accounting
+    pub fn counts(&self) -> Counts {
+        self.counts
     }
 
     /// Ends the stream: photons of an unfinished line count as outside the
     /// image; a last frame with lines counts as a frame.
-    pub fn finish(mut self) -> (Vec<Array3<u32>>, Accounting) {
-        self.accounting.outside_region += self.scan.pending.len() as u64;
+    pub fn finish(mut self) -> (Vec<Array3<u32>>, Counts) {
+        self.counts.outside_region += self.scan.pending.len() as u64;
         if self.scan.lines_in_frame > 0 {
-            self.accounting.frames += 1;
+            self.counts.frames += 1;
         }
         if self.stacks.is_empty() {
             let (k, h, w) = self.shape;
@@ -876,7 +829,7 @@ impl Binner {
             .into_iter()
             .map(|s| Array3::from_shape_vec(self.shape, s).expect("stack length matches its shape"))
             .collect();
-        (stacks, self.accounting)
+        (stacks, self.counts)
     }
 }
 

@@ -12,12 +12,14 @@
 //! - [`bin_file`]: a recorded file (PicoQuant or `.sstags`) -> stacks, in one
 //!   call.
 //! - [`survey`]: what a recorded file holds, counted by kind.
+//! - [`counts`]: where the records and photons of a stream went.
 //! - [`convert`]: a recorded file -> PTU, photon for photon.
 //! - [`table`]: a recorded file's tags as columns (array front ends).
 
 pub mod bin_file;
 pub mod binning;
 pub mod convert;
+pub mod counts;
 pub mod survey;
 pub mod table;
 pub mod wire;

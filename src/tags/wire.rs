@@ -4,34 +4,21 @@
 //! there and in `firmware-protocol/PROTOCOL.md`.
 
 use firmware_protocol::EventBatch;
-use firmware_protocol::record::Record;
+use firmware_protocol::record::{Record, RecordError};
 
 use super::binning::Binner;
+use super::counts::Counts;
 use crate::events::Tag;
 
-/// Counts of one batch beyond what the binner keeps.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
-pub struct BatchCounts {
-    /// Photons the device reported lost (lost records).
-    pub lost_in_device: u64,
-    /// Records that did not decode.
-    pub invalid_records: u64,
-}
-
-impl std::ops::AddAssign for BatchCounts {
-    fn add_assign(&mut self, o: Self) {
-        self.lost_in_device += o.lost_in_device;
-        self.invalid_records += o.invalid_records;
-    }
-}
-
-/// Feeds every event of a batch payload to `binner`.
+/// Feeds every event of a batch payload to `binner`, which counts every
+/// record: photons and markers as it bins them, overflows, losses (and the
+/// photons they report lost) and records that do not decode here.
 ///
 /// The record loop is the throughput-critical path of live acquisition and
 /// of reading raw files (see BENCHMARKS.md): records are decoded in place,
 /// wraps applied to a running base, no intermediate event list.
-pub fn bin_batch(batch: &EventBatch<'_>, binner: &mut Binner) -> BatchCounts {
-    let mut counts = BatchCounts::default();
+pub fn bin_batch(batch: &EventBatch<'_>, binner: &mut Binner) {
+    let mut counts = Counts::default();
     if binner.is_sensor() {
         // Photons in bulk (see `Binner::push_sensor_photons`); the rare
         // other records are handled on the way.
@@ -41,15 +28,14 @@ pub fn bin_batch(batch: &EventBatch<'_>, binner: &mut Binner) -> BatchCounts {
             match Record::decode(raw) {
                 Ok(Record::Photon { pixel, micro, .. }) => return Some((pixel, micro)),
                 Ok(Record::Marker { .. }) => markers += 1,
-                Ok(Record::Wrap { .. }) => {}
-                Ok(Record::Lost { count }) => counts.lost_in_device += count,
-                Err(_) => counts.invalid_records += 1,
+                other => count_other(&mut counts, &other),
             }
             None
         });
         binner.push_sensor_photons(photons);
         binner.count_markers(markers);
-        return counts;
+        binner.count_other_records(counts);
+        return;
     }
     let mut base = batch.header.sync_base;
     for raw in batch.raw_records() {
@@ -68,11 +54,23 @@ pub fn bin_batch(batch: &EventBatch<'_>, binner: &mut Binner) -> BatchCounts {
                 macro_time: base + u64::from(sync_offset),
             })),
             Ok(Record::Wrap { count }) => {
-                base += u64::from(count) << firmware_protocol::record::SYNC_BITS
+                counts.records += 1;
+                base += u64::from(count) << firmware_protocol::record::SYNC_BITS;
             }
-            Ok(Record::Lost { count }) => counts.lost_in_device += count,
-            Err(_) => counts.invalid_records += 1,
+            other => count_other(&mut counts, &other),
         }
     }
-    counts
+    binner.count_other_records(counts);
+}
+
+/// Counts a record that places no photon: an overflow, a loss (with the
+/// photons it reports lost) or one that does not decode.
+#[inline]
+fn count_other(counts: &mut Counts, record: &Result<Record, RecordError>) {
+    counts.records += 1;
+    match record {
+        Ok(Record::Lost { count }) => counts.lost_in_device += count,
+        Err(_) => counts.invalid_records += 1,
+        Ok(_) => {}
+    }
 }

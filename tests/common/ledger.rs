@@ -12,16 +12,16 @@ pub fn assert_exact(out: &Outcome, truth: &Truth, ctx: &str) {
     assert!(acc.balances(), "{ctx}");
     assert_eq!(acc.detected, Some(truth.photons_detected), "{ctx}");
     assert!(acc.transit.unwrap().exact, "{ctx}");
-    assert_eq!(acc.lost_in_device, truth.photons_lost_fifo, "{ctx}");
+    assert_eq!(acc.counts.lost_in_device, truth.photons_lost_fifo, "{ctx}");
     assert_eq!(acc.lost_in_transit(), truth.photons_damaged, "{ctx}");
     assert_eq!(
-        acc.photons,
+        acc.counts.photons,
         truth.photons_sent - truth.photons_damaged,
         "{ctx}"
     );
     assert_eq!(
         out.counts.iter().map(|&c| u64::from(c)).sum::<u64>(),
-        acc.binned,
+        acc.counts.binned,
         "{ctx}"
     );
 }

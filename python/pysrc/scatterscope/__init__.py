@@ -107,8 +107,10 @@ def bin_file(
 
     Returns a dict: ``stacks`` (list of arrays ``(bins, rows, cols)``, one
     per kept frame, of the type ``dtype`` says), ``meta`` (their metadata dicts),
-    ``ledger`` (where every photon went: ``received = binned +
-    outside_window + other_channel + outside_region``) and ``summary`` (the
+    ``ledger`` (where every record and photon went, the acquisition
+    ledger's words: ``photons = binned + outside_window + other_channel +
+    outside_region + over_budget``; earlier builds called ``photons``
+    ``received``) and ``summary`` (the
     lines the command prints).
     """
     stacks, metas, ledger, summary = _native.bin_file(
@@ -290,18 +292,24 @@ def acquire(
     units: the mock's ``scene``, ``rate_hz``, ``dark_rate_hz``,
     ``afterpulse``, ``seed``, ``mock_delay_ps``, ``max_photons``,
     ``unpaced``, ``replay_batches``, ``faults``; ``t0_ps`` or ``t0_from``,
-    ``roi`` (``"X,Y,W,H"``), ``resolution_ps``, ``tags``, ``speed``,
+    ``roi`` (``"X,Y,W,H"``), ``micro_time_unit_ps``, ``tags``, ``speed``,
     ``ome_tiff``; a PicoQuant device's ``vendor_lib``, ``sync_divider``,
     ``sync_level_mv``, ``sync_edge`` and ``marker_edge`` and ``input_edge``
     (``"rising"``/``"falling"``), ``sync_zero_cross_mv``,
     ``sync_offset_ps``, ``input_level_mv``, ``input_zero_cross_mv``,
-    ``input_offsets_ps`` (a list), ``binning``, ``offset_ps``, ``scan``
+    ``input_offsets_ps`` (a list), ``binning``, ``t3_offset_ps``, ``scan``
     (``"64x64"``), ``channel``, ``pixels``, ``ptu``, ``no_ptu``; any other
-    keyword is a physics keyword (``size``, ``bin_width_ps``, ...).
+    keyword is a physics keyword (``size``, ``bin_width_ps``, ...). The
+    old keys ``resolution_ps`` and ``offset_ps`` still work, with a
+    ``FutureWarning``.
     Returns ``stack``, ``meta``, ``record`` and ``summary`` as
     :func:`acquire_mock`. Ctrl-C ends it cleanly, then raises
     KeyboardInterrupt.
     """
+    for old, new in (("resolution_ps", "micro_time_unit_ps"), ("offset_ps", "t3_offset_ps")):
+        if old in settings:
+            warnings.warn(f"acquire: {old} is now {new}; the old name still works", FutureWarning, stacklevel=2)
+            settings[new] = settings.pop(old)
     stack, meta, record, summary = _native.acquire(
         device, _path(out), None if duration_s is None else float(duration_s), **settings
     )
@@ -368,8 +376,9 @@ def calibrate_slab(
 
     Returns ``mu_a_per_cm``, ``mu_s_reduced_per_cm`` and ``offset_cm`` (each
     ``value``, ``standard_error``, ``fitted``), ``chi2_per_dof``,
-    ``seconds``, ``lines`` (what the command prints) and ``medium_toml``
-    (the material file ``scatterscope hidden --material`` reads).
+    ``seconds``, ``lines`` (what the command prints) and ``material_toml``
+    (the material file ``scatterscope hidden --material`` reads; called
+    ``medium_toml`` in earlier builds).
     """
 
     def arg(h: Any) -> Any:

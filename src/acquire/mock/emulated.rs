@@ -1,8 +1,5 @@
 //! The emulated time tagger (the `mock` feature).
 
-use std::sync::atomic::AtomicBool;
-use std::time::Duration;
-
 use ndarray::{Array2, Array3, s};
 use scatterscope_drivers::Link;
 use scatterscope_mocks::{Emitter, MockDevice};
@@ -13,6 +10,7 @@ use super::super::link::LinkSource;
 use super::super::open_error::OpenError;
 use super::super::source::{
     Delivery, Source, SourceEnd, SourceError, SourceFacts, SourceReport, StartRequest, StopReason,
+    Until,
 };
 use crate::forward::{Boundary, ForwardModel};
 use crate::physics::{KernelStack, Sampling, Setup};
@@ -134,19 +132,14 @@ impl Source for MockSource {
         self.link.start(request)
     }
 
-    fn stream(
-        &mut self,
-        duration: Option<Duration>,
-        stop: &AtomicBool,
-        sink: &mut dyn FnMut(Delivery<'_>),
-    ) -> SourceEnd {
-        self.link.stream(duration, stop, sink)
+    fn stream(&mut self, until: Until<'_>, sink: &mut dyn FnMut(Delivery<'_>)) -> SourceEnd {
+        self.link.stream(until, sink)
     }
 
     fn report(&self, ledger: &Ledger, region: Option<Region>, stop: &StopReason) -> SourceReport {
         let t = self.handle.truth();
         let mut notes = Vec::new();
-        if *stop == StopReason::Duration && self.quota > 0 && ledger.photons < self.quota {
+        if *stop == StopReason::Duration && self.quota > 0 && ledger.counts.photons < self.quota {
             notes.push(format!(
                 "note: the duration ended the acquisition before the mock's photon quota ({}) was reached; without a duration it runs until the device stops",
                 self.quota
@@ -163,7 +156,7 @@ impl Source for MockSource {
         ));
         let light_budget = region.and_then(|r| {
             self.reference
-                .light_budget(self.total_photons, r, ledger.binned, &t)
+                .light_budget(self.total_photons, r, ledger.counts.binned, &t)
         });
         SourceReport {
             notes,

@@ -55,12 +55,12 @@ pub struct AcquireArgs {
     /// Bin only this region of the sensor: X,Y,WIDTH,HEIGHT in pixels.
     #[arg(long)]
     roi: Option<Region>,
-    /// Micro-time unit to configure (default: the device's TDC resolution).
+    /// Micro-time unit of our own devices to configure (default: the
+    /// device's TDC resolution; --binning sets a PicoQuant device's).
     #[arg(long, value_name = "TIME", value_parser = parse_ps)]
-    resolution: Option<f64>,
-    /// Also record every event batch losslessly to this tag file
-    /// (.sstags; `--raw` is the old name of this flag).
-    #[arg(long, value_name = "FILE", alias = "raw")]
+    micro_time_unit: Option<f64>,
+    /// Also record every event batch losslessly to this tag file (.sstags).
+    #[arg(long, value_name = "FILE")]
     tags: Option<PathBuf>,
     /// Mock: the scene behind the medium (usaf, star, text, disks or an image).
     #[arg(long, default_value = "usaf", value_name = "SCENE|FILE")]
@@ -88,8 +88,8 @@ pub struct AcquireArgs {
     unpaced: bool,
     /// Mock: draw this many batches once and replay them (load tests at
     /// hardware rates). 0: draw every photon.
-    #[arg(long, default_value_t = 0)]
-    replay: usize,
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    mock_replay: usize,
     /// Mock: faults every n-th batch, e.g. corrupt=10,duplicate=7,reorder=5,
     /// drop-bytes=9,overflow=4:1000,disconnect=50 (random=SEED: at random).
     #[arg(long, default_value = "")]
@@ -171,7 +171,7 @@ struct PicoQuantArgs {
     /// T3 offset: a time with its unit (e.g. 10ns); the device takes whole
     /// nanoseconds.
     #[arg(long, value_name = "TIME", value_parser = parse_ps)]
-    offset: Option<f64>,
+    t3_offset: Option<f64>,
     /// A galvo scan of WxH points clocked by markers 1 (line start), 2
     /// (line stop) and 3 (frame); the stack is its image.
     #[arg(long, value_name = "WxH", value_parser = parse_scan)]
@@ -209,7 +209,7 @@ impl PicoQuantArgs {
             input_zero_cross_mv: self.input_zero_cross,
             input_offsets_ps: self.input_offsets.clone(),
             binning: self.binning,
-            offset_ps: self.offset,
+            t3_offset_ps: self.t3_offset,
             scan: self.scan,
             channel: self.channel,
             pixels: self.pixels,
@@ -235,7 +235,7 @@ fn mock_spec(args: &AcquireArgs) -> MockSpec {
             real_time: !args.unpaced,
             max_photons: args.max_photons,
             faults: args.faults.clone(),
-            replay_batches: args.replay,
+            replay_batches: args.mock_replay,
             ..MockOptions::default()
         },
     }
@@ -251,7 +251,7 @@ fn request(args: &AcquireArgs) -> Request {
             None => TimeZero::At(args.t0),
         },
         region: args.roi,
-        resolution_ps: args.resolution,
+        micro_time_unit_ps: args.micro_time_unit,
         tags: args.tags.clone(),
         mock: mock_spec(args),
         picoquant: args.picoquant.request(),
@@ -328,7 +328,7 @@ fn reconstruct_whole_run(stage: LiveStage, done: &Acquisition, stop: &AtomicBool
     let mut next_line = EVERY_S;
     eprintln!(
         "live view: reconstructing the whole run ({} photons) for the page; Ctrl-C skips it (the outputs are written)",
-        done.outcome.ledger.photons
+        done.outcome.ledger.counts.photons
     );
     let end = stage.finish(done, stop, |p| {
         if p.elapsed_s >= next_line {

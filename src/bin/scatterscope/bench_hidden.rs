@@ -9,8 +9,6 @@ use scatterscope::report::hidden_bench::{
 };
 use scatterscope::units::parse_ps;
 
-use crate::shared_args::note_renamed_flag;
-
 /// Benchmark the hidden-object reconstructions on the confocal scans of a
 /// folder (named as the published ones: letter_s.mat, letter_u_50.mat, ...).
 ///
@@ -27,9 +25,6 @@ pub struct BenchHiddenArgs {
     /// record it.
     #[arg(long, value_name = "TIME", value_parser = parse_ps, default_value = "16")]
     bin_width: f64,
-    /// The old name of --bin-width; still read, with a note.
-    #[arg(long = "bin-ps", value_name = "TIME", value_parser = parse_ps, hide = true, conflicts_with = "bin_width")]
-    bin_ps_old: Option<f64>,
     /// Fractions of the counts kept.
     #[arg(long, value_delimiter = ',', default_value = "1,0.1,0.01")]
     fractions: Vec<f64>,
@@ -57,10 +52,9 @@ pub struct BenchHiddenArgs {
 }
 
 pub fn run(args: &BenchHiddenArgs) -> anyhow::Result<()> {
-    note_renamed_flag(args.bin_ps_old.is_some(), "--bin-ps", "--bin-width");
     let cfg = HiddenBenchConfig {
         dir: args.dir.clone(),
-        bin_width_ps: args.bin_ps_old.unwrap_or(args.bin_width),
+        bin_width_ps: args.bin_width,
         fractions: args.fractions.clone(),
         seed: args.seed,
         repeats: args.repeats,

@@ -8,7 +8,7 @@ use scatterscope::calibrate::histogram::{DEFAULT_MAT_DATASET, DEFAULT_MAT_PARTS}
 use scatterscope::calibrate::transmittance::{RISING_EDGE_CONVENTION, SlabFitOptions};
 use scatterscope::report::calibration::{IrfExtent, SlabJob};
 
-use crate::shared_args::{FileBinWidthArgs, choice, note_renamed_flag, note_renamed_parameters};
+use crate::shared_args::{FileBinWidthArgs, choice, note_renamed_parameters};
 
 /// Fit mu_s' and mu_a to transmittance captures through slabs.
 ///
@@ -49,15 +49,11 @@ pub struct CalibrateSlabArgs {
     /// Starting reduced scattering coefficient mu_s' (1/cm).
     #[arg(long, default_value_t = 5.0)]
     mu_s_reduced: f64,
-    /// The old name of --mu-s-reduced (the physics flags' --mu-s is mu_s,
-    /// not mu_s'); still read, with a note.
-    #[arg(long = "mu-s", hide = true, conflicts_with = "mu_s_reduced")]
-    mu_s_old: Option<f64>,
     /// Starting (or fixed) distance of the detector from the axis (cm).
-    #[arg(long, default_value_t = 0.0)]
-    offset_cm: f64,
+    #[arg(long, value_name = "CM", default_value_t = 0.0)]
+    detector_offset: f64,
     /// What to fit, comma-separated: mu_a, mu_s_reduced (`mu_s`, its old
-    /// name, still works), offset.
+    /// name, still works), detector_offset (`offset`, its old name).
     #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s_reduced")]
     fit: Vec<String>,
     /// Leave out the rising edge before the excess reaches this share of
@@ -73,19 +69,14 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
     let mut options = SlabFitOptions {
         refractive_index: args.refractive_index,
         mu_a_per_cm: args.mu_a,
-        mu_s_reduced_per_cm: args.mu_s_old.unwrap_or(args.mu_s_reduced),
+        mu_s_reduced_per_cm: args.mu_s_reduced,
         fit_mu_a: false,
         fit_mu_s_reduced: false,
-        offset_cm: args.offset_cm,
+        offset_cm: args.detector_offset,
         fit_offset: false,
         rising_edge_share: args.rising_edge_share,
     };
-    note_renamed_flag(
-        args.mu_s_old.is_some(),
-        "--mu-s",
-        "--mu-s-reduced (the reduced scattering coefficient mu_s')",
-    );
-    let bin_width_ps = args.bin_width.resolve();
+    let bin_width_ps = args.bin_width.bin_width;
     note_renamed_parameters("--fit", &args.fit);
     options.free_named(&args.fit).context("--fit")?;
     let job = SlabJob {
@@ -112,8 +103,8 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
         .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
         .collect();
     println!("wrote {}/{{{}}}", args.out.display(), names.join(", "));
-    if !files.iter().any(|f| f.ends_with("medium.toml")) {
-        println!("medium.toml not written: the fit is doubtful (see the warnings)");
+    if !files.iter().any(|f| f.ends_with("material.toml")) {
+        println!("material.toml not written: the fit is doubtful (see the warnings)");
     }
     crate::signals::warned(warnings.len())
 }

@@ -13,7 +13,7 @@ use scatterscope::confocal::{
 use scatterscope::report::hidden::write_hidden;
 use scatterscope::units::parse_positive_m;
 
-use crate::shared_args::{FileBinWidthArgs, choice, note_renamed_flag};
+use crate::shared_args::{FileBinWidthArgs, choice};
 
 /// Reconstruct what hides behind a slab from a confocal scan of its face.
 ///
@@ -41,19 +41,10 @@ pub struct HiddenArgs {
     #[arg(long, value_name = "LENGTH")]
     slab_thickness: String,
     /// The slab's material: a material file (e.g. calibrate-slab's
-    /// OUT/medium.toml: mu_a, mu_s, g, n). Without it the published foam
+    /// OUT/material.toml: mu_a, mu_s, g, n). Without it the published foam
     /// fit is assumed (n 1.12, mu_a 0.53 /m, mu_s' 262 /m, z_e 3.6 mm).
     #[arg(long, value_name = "FILE")]
     material: Option<PathBuf>,
-    /// The old name of --material (the physics flags' --medium is the
-    /// diffusion model, infinite or slab); still read, with a note.
-    #[arg(
-        long = "medium",
-        value_name = "FILE",
-        hide = true,
-        conflicts_with = "material"
-    )]
-    medium_old: Option<PathBuf>,
     #[command(flatten)]
     bin_width: FileBinWidthArgs,
     /// Dataset holding the counts in MATLAB files.
@@ -93,17 +84,12 @@ pub fn run(args: &HiddenArgs) -> anyhow::Result<()> {
     let depth_m = parse_positive_m(&args.depth)
         .map_err(anyhow::Error::msg)
         .context("--depth")?;
-    let bin_width = args.bin_width.resolve();
+    let bin_width = args.bin_width.bin_width;
     let mut scan = ConfocalScan::open(&args.scan, &args.dataset, bin_width, side_m)?;
     if let Some(fraction) = args.thin.filter(|&f| f != 1.0) {
         scan = scan.thinned(fraction, args.thin_seed).context("--thin")?;
     }
-    note_renamed_flag(
-        args.medium_old.is_some(),
-        "hidden's --medium",
-        "--material (the material file; --medium is the physics flags' diffusion model)",
-    );
-    let material = args.material.as_deref().or(args.medium_old.as_deref());
+    let material = args.material.as_deref();
     let optics = SlabOptics::for_slab(material, thickness_m)?;
     let published = PublishedOptions {
         snr: args.snr,

@@ -112,7 +112,7 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
                     "pixels" => "--pixels",
                     "region" => "--roi",
                     "tag_file" => "--tags",
-                    "resolution_fs" => "--resolution",
+                    "resolution_fs" => "--micro-time-unit",
                     _ => return None,
                 };
                 Some(format!("set it with {flag}"))
@@ -125,7 +125,7 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
             "speed" => "--speed",
             "resolution_fs" => {
                 return Some(
-                    "--resolution sets our own devices' micro-time unit; --binning a PicoQuant device's"
+                    "--micro-time-unit sets our own devices' micro-time unit; --binning a PicoQuant device's"
                         .into(),
                 );
             }
@@ -137,7 +137,7 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
             "sync_divider" => "--sync-divider",
             "input_offsets_ps" => "--input-offsets",
             "binning" => "--binning",
-            "offset_ns" => "--offset",
+            "t3_offset_ns" => "--t3-offset",
             _ => return None,
         };
         return Some(format!("set it with {flag}"));

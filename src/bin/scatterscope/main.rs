@@ -13,6 +13,7 @@ mod hints;
 mod psf;
 mod recon_args;
 mod reconstruct;
+mod renames;
 mod report;
 mod shared_args;
 mod signals;
@@ -118,7 +119,11 @@ fn s(p: &std::path::Path) -> anyhow::Result<&str> {
 /// implausible result, an incomplete input); 130 any other command ended by
 /// a signal, the outputs it was writing removed. A panic (101) is a bug.
 fn main() -> std::process::ExitCode {
-    let cli = Cli::parse();
+    let (args, notes) = renames::new_spellings(std::env::args_os());
+    for note in notes {
+        eprintln!("{note}");
+    }
+    let cli = Cli::parse_from(args);
     scatterscope::memory::set_limit(cli.memory_limit);
     // One command per process: no output may replace a file it read.
     scatterscope::files::input::remember_inputs();

@@ -91,25 +91,14 @@ pub struct PhysicsArgs {
     /// Bin width of an --irf-from file that records none (default unit ps).
     #[arg(long, value_name = "TIME", value_parser = parse_ps, requires = "irf_from")]
     pub irf_bin_width: Option<f64>,
-    /// The old name of --irf-bin-width; still read, with a note.
-    #[arg(long = "irf-bin-ps", value_name = "TIME", value_parser = parse_ps, hide = true,
-          requires = "irf_from", conflicts_with = "irf_bin_width")]
-    pub irf_bin_ps_old: Option<f64>,
 }
 
 impl PhysicsArgs {
-    /// The flags as the library's overrides (saying so on stderr when an
-    /// old flag name was given).
+    /// The flags as the library's overrides.
     pub fn overrides(&self) -> PhysicsOverrides {
-        note_renamed_flag(
-            self.irf_bin_ps_old.is_some(),
-            "--irf-bin-ps",
-            "--irf-bin-width",
-        );
         same_fields!(self => PhysicsOverrides { preset, config, mu_a, mu_s, g, n, thickness,
             medium, fov, size, bin_width, t_start, bins, photons, min_bin_photons, irf_fwhm,
-            irf_tail, irf_from, irf_parametric }
-            irf_bin_width: self.irf_bin_width.or(self.irf_bin_ps_old))
+            irf_tail, irf_from, irf_parametric, irf_bin_width })
     }
 
     /// Resolves preset, config file and flags into a validated setup,
@@ -143,33 +132,13 @@ pub fn progress(millis: Option<u128>) -> ProgressBar {
 }
 
 /// The bin width of MATLAB files, which do not record theirs (`hidden`,
-/// `calibrate-slab`), with its old flag name.
+/// `calibrate-slab`).
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct FileBinWidthArgs {
     /// Bin width of MATLAB files, which do not record it (default unit ps;
     /// e.g. 16ps).
     #[arg(long, value_name = "TIME", value_parser = parse_ps)]
-    bin_width: Option<f64>,
-    /// The old name of --bin-width; still read, with a note.
-    #[arg(long = "bin-ps", value_name = "TIME", value_parser = parse_ps, hide = true, conflicts_with = "bin_width")]
-    bin_ps_old: Option<f64>,
-}
-
-impl FileBinWidthArgs {
-    /// The bin width given under either name (ps), saying so on stderr
-    /// when the old one was used.
-    pub fn resolve(&self) -> Option<f64> {
-        note_renamed_flag(self.bin_ps_old.is_some(), "--bin-ps", "--bin-width");
-        self.bin_width.or(self.bin_ps_old)
-    }
-}
-
-/// Says on stderr that `old`, a flag the command was given, is now `new`
-/// (the old spelling still works).
-pub fn note_renamed_flag(given: bool, old: &str, new: &str) {
-    if given {
-        eprintln!("note: {old} is now {new}; the old name still works");
-    }
+    pub bin_width: Option<f64>,
 }
 
 /// Says on stderr which of `names`, given to `flag`, are old spellings of
