@@ -20,25 +20,10 @@ use scatterscope::denoise::ffdnet::winograd::{conv3x3_winograd, transform_weight
 use scatterscope::denoise::ffdnet::{Ffdnet, source};
 use scatterscope::denoise::tv::TotalVariation;
 
+/// The architecture's stand-in weights, as a file of them loads.
 fn stand_in(arch: &Architecture) -> FfdnetWeights {
-    let tensors: BTreeMap<String, Vec<f32>> = arch
-        .tensor_shapes()
-        .into_iter()
-        .map(|(name, shape)| {
-            let n: usize = shape.iter().product();
-            let v = (0..n)
-                .map(|i| {
-                    if name.ends_with("running_var") {
-                        1.0
-                    } else {
-                        ((i * 7919 % 97) as f32 / 97.0 - 0.5) * 0.1
-                    }
-                })
-                .collect();
-            (name, v)
-        })
-        .collect();
-    let bytes = to_safetensors(arch, &tensors, &BTreeMap::new(), "bench").expect("valid");
+    let bytes =
+        to_safetensors(arch, &arch.stand_in_tensors(), &BTreeMap::new(), "bench").expect("valid");
     FfdnetWeights::from_bytes(&bytes, "bench").expect("valid")
 }
 

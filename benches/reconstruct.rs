@@ -15,6 +15,7 @@ use rustfft::num_complex::Complex64;
 use scatterscope::denoise::ffdnet::Ffdnet;
 use scatterscope::denoise::ffdnet::source::embedded;
 use scatterscope::denoise::tv::TotalVariation;
+use scatterscope::denoise::{Denoiser, NoPrior};
 use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
 use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions, StopRule};
@@ -78,58 +79,28 @@ fn benches(c: &mut Criterion) {
     };
     let ffdnet = Ffdnet::new(embedded(), "embedded");
     let defaults = MethodOptions::default();
-    group.bench_function("pnp_split_ffdnet_256x256x20_default", |b| {
-        b.iter(|| {
-            run_method(
-                &problem,
-                Method::Pnp,
-                None,
-                &ffdnet,
-                &defaults,
-                None,
-                |_| {},
-            )
-            .unwrap()
-        })
-    });
-    // The per-stack choice between rl-stack and PnP (runs both).
-    group.bench_function("auto_256x256x20", |b| {
-        b.iter(|| {
-            run_method(
-                &problem,
-                Method::Auto,
-                None,
-                &ffdnet,
-                &defaults,
-                None,
-                |_| {},
-            )
-            .unwrap()
-        })
-    });
     let cv = MethodOptions {
         rl_stop: RlStop::CrossValidated,
         ..defaults
     };
-    // Richardson-Lucy on the time-summed stack, and on the whole stack
-    // (every bin with its own kernel), both with the cross-validated stop.
-    for (name, method) in [
-        ("rl_sum_cv_256x256x20", Method::RlSum),
-        ("rl_stack_cv_256x256x20", Method::RlStack),
-    ] {
+    // PnP (split solver, learned prior) at its defaults; the per-stack
+    // choice between rl-stack and PnP (runs both); Richardson-Lucy on the
+    // time-summed stack and on the whole stack (every bin with its own
+    // kernel), both with the cross-validated stop.
+    let cases: [(&str, Method, &dyn Denoiser, &MethodOptions); 4] = [
+        (
+            "pnp_split_ffdnet_256x256x20_default",
+            Method::Pnp,
+            &ffdnet,
+            &defaults,
+        ),
+        ("auto_256x256x20", Method::Auto, &ffdnet, &defaults),
+        ("rl_sum_cv_256x256x20", Method::RlSum, &NoPrior, &cv),
+        ("rl_stack_cv_256x256x20", Method::RlStack, &NoPrior, &cv),
+    ];
+    for (name, method, prior, opts) in cases {
         group.bench_function(name, |b| {
-            b.iter(|| {
-                run_method(
-                    &problem,
-                    method,
-                    None,
-                    &scatterscope::denoise::NoPrior,
-                    &cv,
-                    None,
-                    |_| {},
-                )
-                .unwrap()
-            })
+            b.iter(|| run_method(&problem, method, None, prior, opts, None, |_| {}).unwrap())
         });
     }
     group.finish();

@@ -83,7 +83,7 @@ pub fn simulate(
     crate::memory::check_setup(setup, crate::memory::SIMULATE_BYTES, "a simulation")?;
     let truth = scene.render(setup.sensor.height_px, setup.sensor.width_px)?;
     let source = format!("simulated scene {}", scene.name());
-    through_setup(setup, truth, sampling, boundary, seed, source)
+    simulate_image(setup, truth, sampling, boundary, seed, source)
 }
 
 /// Simulates the image `truth` (the sensor's `setup` size, values >= 0)
@@ -111,19 +111,6 @@ pub fn simulate_image(
         )));
     }
     crate::memory::check_setup(setup, crate::memory::SIMULATE_BYTES, "a simulation")?;
-    through_setup(setup, truth, sampling, boundary, seed, source)
-}
-
-/// The kernels of a checked `setup`, then the counts of `truth` through
-/// them.
-fn through_setup(
-    setup: &Setup,
-    truth: Array2<f64>,
-    sampling: Sampling,
-    boundary: Boundary,
-    seed: u64,
-    source: String,
-) -> Result<Simulation, SimulateError> {
     let t = Instant::now();
     let kernels = KernelStack::build(setup, sampling)?;
     let psf_s = t.elapsed().as_secs_f64();

@@ -127,26 +127,6 @@ fn the_original_weights_cut_anywhere_are_an_error() {
     }
 }
 
-/// Unfolded tensors of a small architecture, deterministic values.
-fn small_tensors(arch: &Architecture) -> BTreeMap<String, Vec<f32>> {
-    arch.tensor_shapes()
-        .into_iter()
-        .map(|(name, shape)| {
-            let n: usize = shape.iter().product();
-            let v = (0..n)
-                .map(|i| {
-                    if name.ends_with("running_var") {
-                        1.0 + (i % 3) as f32
-                    } else {
-                        ((i * 7919 % 101) as f32 / 101.0 - 0.5) * 0.2
-                    }
-                })
-                .collect();
-            (name, v)
-        })
-        .collect()
-}
-
 #[test]
 fn weight_files_round_trip_and_mismatches_are_named() {
     let arch = Architecture {
@@ -155,7 +135,7 @@ fn weight_files_round_trip_and_mismatches_are_named() {
         sigma_max: 0.3,
         batchnorm_eps: 1e-5,
     };
-    let good = small_tensors(&arch);
+    let good = arch.stand_in_tensors();
     let none = BTreeMap::new();
     let bytes = to_safetensors(&arch, &good, &none, "test").unwrap();
     let w = FfdnetWeights::from_bytes(&bytes, "test").unwrap();
@@ -193,7 +173,7 @@ fn weight_files_round_trip_and_mismatches_are_named() {
         channels: 8,
         ..arch.clone()
     };
-    let mut bytes8 = to_safetensors(&wider, &small_tensors(&wider), &none, "w").unwrap();
+    let mut bytes8 = to_safetensors(&wider, &wider.stand_in_tensors(), &none, "w").unwrap();
     let header_len = u64::from_le_bytes(bytes8[..8].try_into().unwrap()) as usize;
     let header = String::from_utf8(bytes8[8..8 + header_len].to_vec()).unwrap();
     let lied = header.replace("\"channels\":\"8\"", "\"channels\":\"6\"");
@@ -231,7 +211,7 @@ fn batchnorm_folding_matches_an_unfolded_reference_layer() {
         sigma_max: 0.3,
         batchnorm_eps: 1e-5,
     };
-    let t = small_tensors(&arch);
+    let t = arch.stand_in_tensors();
     let w = FfdnetWeights::from_bytes(
         &to_safetensors(&arch, &t, &BTreeMap::new(), "t").unwrap(),
         "t",

@@ -22,6 +22,33 @@ fn setup(irf: Option<Irf>) -> Setup {
     s
 }
 
+/// Every bin of `a` holds the light of `b`'s, to 1e-6 of `total`.
+fn assert_same_light(a: &KernelStack, b: &KernelStack, total: f64) {
+    for (x, y) in a.bins.iter().zip(&b.bins) {
+        assert!(
+            (x.photons - y.photons).abs() <= 1e-6 * total,
+            "bin {}: {} vs {}",
+            x.index,
+            x.photons,
+            y.photons
+        );
+    }
+}
+
+/// `setup` with an IRF of `fwhm_ps` and `tail_ps`.
+fn with_irf(fwhm_ps: f64, tail_ps: f64) -> Setup {
+    setup(Some(Irf { fwhm_ps, tail_ps }))
+}
+
+/// `setup` with an IRF of `fwhm_ps` and `tail_ps` and a window of `bins`
+/// bins opening at `start_ps`, before time zero.
+fn opening_early(fwhm_ps: f64, tail_ps: f64, start_ps: f64, bins: usize) -> Setup {
+    let mut s = with_irf(fwhm_ps, tail_ps);
+    s.bins.start_ps = start_ps;
+    s.bins.count = bins;
+    s
+}
+
 /// A stack of a flat object through `s` with `background` counts per pixel
 /// and bin in every bin; the truth on the sensor.
 fn measured(s: &Setup, background: f64, seed: u64) -> (Stack, Array2<f64>) {
@@ -71,22 +98,11 @@ fn levels(stack: &Stack, s: &Setup, choice: BackgroundChoice) -> Vec<(Method, f6
 #[test]
 fn an_irf_far_narrower_than_a_bin_is_the_ideal_instrument() {
     // 0.01 ps against 4 ps bins: the kernels are the ideal ones.
-    let narrow = setup(Some(Irf {
-        fwhm_ps: 0.01,
-        tail_ps: 0.0,
-    }));
+    let narrow = with_irf(0.01, 0.0);
     let a = KernelStack::build(&narrow, Sampling::Integrated).unwrap();
     let b = KernelStack::build(&setup(None), Sampling::Integrated).unwrap();
     assert_eq!(a.len(), b.len());
-    for (x, y) in a.bins.iter().zip(&b.bins) {
-        assert!(
-            (x.photons - y.photons).abs() <= 1e-6 * narrow.total_photons,
-            "bin {}: {} vs {}",
-            x.index,
-            x.photons,
-            y.photons
-        );
-    }
+    assert_same_light(&a, &b, narrow.total_photons);
     let (stack, truth) = measured(&narrow, 0.0, 3);
     for (method, level) in levels(&stack, &narrow, BackgroundChoice::None) {
         let t = truth.mean().unwrap();
@@ -103,10 +119,7 @@ fn an_irf_far_wider_than_the_window_spreads_light_over_every_bin() {
     // 2 ns FWHM against a 120 ps window: every bin holds about the same
     // light, and the time axis carries almost no information; the kernels
     // stay finite and the reconstructions too.
-    let wide = setup(Some(Irf {
-        fwhm_ps: 2000.0,
-        tail_ps: 500.0,
-    }));
+    let wide = with_irf(2000.0, 500.0);
     let k = KernelStack::build(&wide, Sampling::Integrated).unwrap();
     assert_eq!(k.len(), 30, "every bin receives light");
     let masses: Vec<f64> = k.bins.iter().map(|b| b.photons).collect();
@@ -129,12 +142,7 @@ fn a_background_far_above_the_signal_is_fitted_not_imaged() {
     // Background ten times the mean signal count per pixel and bin; the
     // window opens 100 ps early so that bins before the IRF-spread light
     // measure the background, as a lab would set it.
-    let mut s = setup(Some(Irf {
-        fwhm_ps: 20.0,
-        tail_ps: 5.0,
-    }));
-    s.bins.start_ps = -100.0;
-    s.bins.count = 55;
+    let s = opening_early(20.0, 5.0, -100.0, 55);
     let (probe, _) = measured(&s, 0.0, 1);
     let lit: Vec<f64> = probe
         .data
@@ -186,12 +194,7 @@ fn bins_lit_only_by_the_irf_far_tail_are_left_out_not_overflowed() {
     // A 50 ps IRF and a window opening 300 ps early: the first bins' kernels
     // carry 1e-30 of the light and less, and hold only background counts.
     // Their Poisson weights would overflow; they are left out instead.
-    let mut s = setup(Some(Irf {
-        fwhm_ps: 50.0,
-        tail_ps: 0.0,
-    }));
-    s.bins.start_ps = -300.0;
-    s.bins.count = 105;
+    let mut s = opening_early(50.0, 0.0, -300.0, 105);
     s.min_bin_photons = 0.0;
     let (stack, truth) = measured(&s, 0.01, 6);
     let problem = Problem::new(&stack, &s, Sampling::Integrated, Boundary::Sensor).unwrap();
@@ -233,15 +236,7 @@ fn measured_tables_narrower_than_a_bin_or_wider_than_the_window_stay_exact_and_f
     narrow.irf = Some(IrfTable::new(0.01, -0.005, vec![1.0]).unwrap().into());
     let k = KernelStack::build(&narrow, Sampling::Integrated).unwrap();
     assert_eq!(k.len(), ideal.len());
-    for (x, y) in k.bins.iter().zip(&ideal.bins) {
-        assert!(
-            (x.photons - y.photons).abs() <= 1e-6 * narrow.total_photons,
-            "bin {}: {} vs {}",
-            x.index,
-            x.photons,
-            y.photons
-        );
-    }
+    assert_same_light(&k, &ideal, narrow.total_photons);
     // A flat table 3 ns wide against the 120 ps window: every bin gets
     // about the same light, all finite.
     let mut wide = setup(None);

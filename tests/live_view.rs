@@ -6,7 +6,7 @@
 
 #[path = "common/command.rs"]
 mod command;
-use command::json;
+use command::{SMALL_SENSOR, json};
 #[path = "common/pydeps.rs"]
 mod pydeps;
 #[path = "common/standin.rs"]
@@ -473,23 +473,17 @@ fn bad_cases_are_refused_clearly_and_the_run_goes_on() {
 fn a_stuck_browser_does_not_stall_the_acquisition() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("acq");
-    let (mut child, url) = start(
-        &[
-            "--size",
-            "16",
-            "--fov",
-            "3cm",
-            "--unpaced",
-            "--max-photons",
-            "3000000",
-            "--duration",
-            "0",
-            "--live",
-            "--out",
-            out.to_str().unwrap(),
-        ],
-        &[],
-    );
+    let run = [
+        "--unpaced",
+        "--max-photons",
+        "3000000",
+        "--duration",
+        "0",
+        "--live",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let (mut child, url) = start(&[&SMALL_SENSOR[..], &run].concat(), &[]);
     let addr = url.trim_start_matches("http://").trim_end_matches('/');
     let mut stuck = Vec::new();
     for _ in 0..3 {
@@ -672,19 +666,9 @@ fn under_cpu_hogs_the_page_says_why_and_the_command_keeps_talking() {
     let out = dir.path().join("acq");
     let hogs = Hogs::start();
     let mut child = command::scatterscope()
-        .args([
-            "acquire",
-            "--size",
-            "16",
-            "--fov",
-            "3cm",
-            "--duration",
-            "8s",
-            "--live",
-            "--linger",
-            "1s",
-            "--out",
-        ])
+        .arg("acquire")
+        .args(SMALL_SENSOR)
+        .args(["--duration", "8s", "--live", "--linger", "1s", "--out"])
         .arg(&out)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

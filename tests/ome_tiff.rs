@@ -8,7 +8,7 @@ mod command;
 #[path = "common/pydeps.rs"]
 mod pydeps;
 
-use command::{run, text};
+use command::{SMALL_SENSOR, run, text};
 use std::path::Path;
 
 use ndarray::Array3;
@@ -152,18 +152,8 @@ fn large_counts_and_gaps_in_time_are_kept_exactly() {
 fn acquire_and_reconstruct_write_ome_tiff_beside_their_exr() {
     let dir = tempfile::tempdir().unwrap();
     let acq = dir.path().join("acq");
-    let r = run(&[
-        "acquire",
-        "--size",
-        "16",
-        "--fov",
-        "3cm",
-        "--duration",
-        "300ms",
-        "--ome-tiff",
-        "--out",
-        s(&acq),
-    ]);
+    let flags = ["--duration", "300ms", "--ome-tiff", "--out", s(&acq)];
+    let r = run(&[&["acquire"][..], &SMALL_SENSOR, &flags].concat());
     assert!(r.status.success(), "{}", text(&r));
     let exr = Stack::load(&acq.join("stack.exr")).unwrap();
     let tif = read(&acq.join("stack.ome.tif"));

@@ -20,7 +20,7 @@ use scatterscope::reconstruct::operator::Convolution;
 use scatterscope::reconstruct::rl_stack::RlStack;
 use scatterscope::reconstruct::rl_sum::RlSum;
 use scatterscope::reconstruct::trace::TraceRow;
-use scatterscope::reconstruct::{ReconstructError, Reconstructor};
+use scatterscope::reconstruct::{ReconstructError, Reconstruction, Reconstructor};
 use scatterscope::scene::Scene;
 
 fn setup(size: usize) -> Setup {
@@ -36,6 +36,17 @@ struct Case {
     truth: Array2<f64>,
     counts: Array3<f64>,
     bins: Vec<usize>,
+}
+
+/// Richardson-Lucy's cross-validated stop searched up to 400 iterations.
+const CV_400: Stopping = Stopping::CrossValidated {
+    max_iters: 400,
+    acceleration: Acceleration::None,
+};
+
+/// `method` run on the case's counts, scored against its truth.
+fn scored(method: &dyn Reconstructor, c: &Case) -> Reconstruction {
+    reconstruct(method, &c.model, &c.counts, &c.bins, Some(c.truth.view())).unwrap()
 }
 
 fn case(size: usize, scene: &str, seed: u64) -> Case {
@@ -131,19 +142,7 @@ fn cross_validated_rl_stops_early_on_smooth_light_and_late_on_sharp_edges() {
     let mut stops = Vec::new();
     for (name, truth) in [("smooth", smooth), ("disks", disks)] {
         let c = case_of(size, truth, 5);
-        let cv = reconstruct(
-            &RlSum {
-                stop: Stopping::CrossValidated {
-                    max_iters: 400,
-                    acceleration: Acceleration::None,
-                },
-            },
-            &c.model,
-            &c.counts,
-            &c.bins,
-            Some(c.truth.view()),
-        )
-        .unwrap();
+        let cv = scored(&RlSum { stop: CV_400 }, &c);
         let k = cv
             .trace
             .output_iteration()
@@ -161,16 +160,12 @@ fn cross_validated_rl_stops_early_on_smooth_light_and_late_on_sharp_edges() {
             "{name}"
         );
         // Within a dB of plain RL's best iteration chosen with the truth.
-        let plain = reconstruct(
+        let plain = scored(
             &RlSum {
                 stop: Stopping::After(400),
             },
-            &c.model,
-            &c.counts,
-            &c.bins,
-            Some(c.truth.view()),
-        )
-        .unwrap();
+            &c,
+        );
         let best = plain.trace.best_psnr().unwrap();
         assert!(
             psnr > best.psnr.unwrap() - 1.0,
@@ -221,26 +216,9 @@ fn whole_stack_rl_on_one_bin_is_richardson_lucy_and_its_likelihood_falls() {
     // One bin: the whole-stack iteration is plain RL on that bin.
     let k = 3;
     let one = c.counts.slice(ndarray::s![k..k + 1, .., ..]).to_owned();
-    let stack = reconstruct(
-        &RlStack {
-            stop: Stopping::After(25),
-        },
-        &c.model,
-        &one,
-        &[k],
-        None,
-    )
-    .unwrap();
-    let plain = reconstruct(
-        &RlSum {
-            stop: Stopping::After(25),
-        },
-        &c.model,
-        &one,
-        &[k],
-        None,
-    )
-    .unwrap();
+    let on_one = |m: &dyn Reconstructor| reconstruct(m, &c.model, &one, &[k], None).unwrap();
+    let stop = Stopping::After(25);
+    let (stack, plain) = (on_one(&RlStack { stop }), on_one(&RlSum { stop }));
     let scale = plain.image.iter().fold(0.0f64, |a, &v| a.max(v));
     let diff = (&stack.image - &plain.image)
         .iter()
@@ -279,32 +257,8 @@ fn whole_stack_rl_on_one_bin_is_richardson_lucy_and_its_likelihood_falls() {
 #[test]
 fn whole_stack_rl_uses_the_time_axis() {
     let c = case(48, "disks", 3);
-    let stack = reconstruct(
-        &RlStack {
-            stop: Stopping::CrossValidated {
-                max_iters: 400,
-                acceleration: Acceleration::None,
-            },
-        },
-        &c.model,
-        &c.counts,
-        &c.bins,
-        Some(c.truth.view()),
-    )
-    .unwrap();
-    let summed = reconstruct(
-        &RlSum {
-            stop: Stopping::CrossValidated {
-                max_iters: 400,
-                acceleration: Acceleration::None,
-            },
-        },
-        &c.model,
-        &c.counts,
-        &c.bins,
-        Some(c.truth.view()),
-    )
-    .unwrap();
+    let stack = scored(&RlStack { stop: CV_400 }, &c);
+    let summed = scored(&RlSum { stop: CV_400 }, &c);
     let psnr = |image: &Array2<f64>| scatterscope::metrics::psnr(image.view(), c.truth.view());
     // The early bins' narrower kernels carry detail the time-summed image
     // has lost.
@@ -327,16 +281,12 @@ fn richardson_lucy_conserves_counts_and_improves_on_raw() {
     let c = case(32, "disks", 2);
     let total: f64 = c.counts.sum();
     let op = Convolution::from_bins(&c.model, &c.bins);
-    let r = reconstruct(
+    let r = scored(
         &RlSum {
             stop: Stopping::After(30),
         },
-        &c.model,
-        &c.counts,
-        &c.bins,
-        Some(c.truth.view()),
-    )
-    .unwrap();
+        &c,
+    );
     // RL keeps sum(H o) = sum(m) after every step (H^T 1 = mass).
     assert!((r.image.sum() * op.mass() - total).abs() < 1e-8 * total);
     assert_eq!(r.trace.rows.len(), 30);
@@ -349,27 +299,19 @@ fn richardson_lucy_conserves_counts_and_improves_on_raw() {
 fn pnp_on_the_stack_beats_richardson_lucy_on_the_sum() {
     let c = case(48, "disks", 3);
     let tv = TotalVariation::default();
-    let pnp = reconstruct(
+    let pnp = scored(
         &AdmmLbfgs {
             denoiser: &tv,
             opts: AdmmLbfgsOptions::default(),
         },
-        &c.model,
-        &c.counts,
-        &c.bins,
-        Some(c.truth.view()),
-    )
-    .unwrap();
-    let rl = reconstruct(
+        &c,
+    );
+    let rl = scored(
         &RlSum {
             stop: Stopping::After(200),
         },
-        &c.model,
-        &c.counts,
-        &c.bins,
-        Some(c.truth.view()),
-    )
-    .unwrap();
+        &c,
+    );
     let p = scatterscope::metrics::psnr(pnp.image.view(), c.truth.view());
     let best_rl = rl.trace.best_psnr().unwrap().psnr.unwrap();
     assert!(p > best_rl, "pnp {p} dB vs best RL {best_rl} dB");
@@ -397,17 +339,13 @@ fn agreement_rule_returns_the_iterate_the_trace_says_it_should() {
         patience: Some(4),
         ..Default::default()
     };
-    let r = reconstruct(
+    let r = scored(
         &AdmmLbfgs {
             denoiser: &prior,
             opts,
         },
-        &c.model,
-        &c.counts,
-        &c.bins,
-        Some(c.truth.view()),
-    )
-    .unwrap();
+        &c,
+    );
     // The learned prior does not fade to the identity: auto picks agreement.
     assert!(
         r.trace

@@ -3,7 +3,7 @@
 
 #[path = "common/command.rs"]
 mod command;
-use command::{run_isolated, simulate_disks, streams};
+use command::{SMALL_SENSOR, run_isolated, simulate_disks, streams};
 
 /// A simulated 32 x 32 stack in `dir/sim`; returns its counts file.
 fn small_stack(dir: &std::path::Path) -> String {
@@ -17,20 +17,17 @@ fn small_stack(dir: &std::path::Path) -> String {
 fn an_acquisition_that_receives_nothing_fails() {
     let dir = tempfile::tempdir().unwrap();
     // Every batch's frame corrupted: the host accepts none.
-    let o = run_isolated(&[
-        "acquire",
-        "--size",
-        "16",
-        "--fov",
-        "3cm",
+    let out = dir.path().join("acq");
+    let run = [
         "--unpaced",
         "--max-photons",
         "50000",
         "--faults",
         "corrupt=1",
         "--out",
-        dir.path().join("acq").to_str().unwrap(),
-    ]);
+        out.to_str().unwrap(),
+    ];
+    let o = run_isolated(&[&["acquire"][..], &SMALL_SENSOR, &run].concat());
     let (stdout, stderr) = streams(&o);
     assert_eq!(o.status.code(), Some(1), "{stdout}\n{stderr}");
     assert!(

@@ -10,14 +10,19 @@ use common_reconstruct::reconstruct;
 use ndarray::{Array2, Array3, Axis};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use scatterscope::denoise::NoPrior;
 use scatterscope::denoise::tv::TotalVariation;
+use scatterscope::denoise::{Denoiser, NoPrior};
 use scatterscope::forward::{Boundary, EDGE_TAIL, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup};
 use scatterscope::reconstruct::em::Stopping;
 use scatterscope::reconstruct::likelihood::PoissonLikelihood;
 use scatterscope::reconstruct::rl_sum::RlSum;
 use scatterscope::reconstruct::split::{Split, SplitOptions, poisson_prox};
+
+/// The split solver with `denoiser` as its prior.
+fn split(denoiser: &dyn Denoiser, opts: SplitOptions) -> Split<'_> {
+    Split { denoiser, opts }
+}
 
 fn setup(size: usize, pitch_cm: f64, photons: f64) -> Setup {
     let mut s = Preset::Paper.setup();
@@ -267,17 +272,7 @@ fn split_solver_with_no_prior_reaches_the_maximum_likelihood_of_newtons_method()
             patience: usize::MAX,
             ..Default::default()
         };
-        let r = reconstruct(
-            &Split {
-                denoiser: &NoPrior,
-                opts,
-            },
-            &model,
-            &counts,
-            &[0, 1],
-            None,
-        )
-        .unwrap();
+        let r = reconstruct(&split(&NoPrior, opts), &model, &counts, &[0, 1], None).unwrap();
         let got: Vec<f64> = r.image.iter().copied().collect();
         let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for (g, w) in got.iter().zip(&want) {
@@ -299,17 +294,8 @@ fn split_solver_with_no_prior_reaches_the_maximum_likelihood_of_newtons_method()
         if bg > 0.0 {
             // Ignoring the background gives a different, brighter object.
             let plain = ForwardModel::new(&k, Boundary::Periodic);
-            let wrong = reconstruct(
-                &Split {
-                    denoiser: &NoPrior,
-                    opts,
-                },
-                &plain,
-                &counts,
-                &[0, 1],
-                None,
-            )
-            .unwrap();
+            let wrong =
+                reconstruct(&split(&NoPrior, opts), &plain, &counts, &[0, 1], None).unwrap();
             let (a, b) = (wrong.image.sum(), r.image.sum());
             assert!(a > 1.2 * b, "without background {a}, with {b}");
         }
@@ -347,32 +333,14 @@ fn split_solver_is_finite_on_extreme_inputs() {
             warm_start: 50,
             ..opts
         };
-        let w = reconstruct(
-            &Split {
-                denoiser: &tv,
-                opts: warm,
-            },
-            &model,
-            &counts,
-            &bins,
-            None,
-        )
-        .unwrap_or_else(|e| panic!("{name}, RL start: {e}"));
+        let w = reconstruct(&split(&tv, warm), &model, &counts, &bins, None)
+            .unwrap_or_else(|e| panic!("{name}, RL start: {e}"));
         assert!(
             w.image.iter().all(|v| v.is_finite() && *v >= 0.0),
             "{name}, RL start"
         );
-        let r = reconstruct(
-            &Split {
-                denoiser: &tv,
-                opts,
-            },
-            &model,
-            &counts,
-            &bins,
-            None,
-        )
-        .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let r = reconstruct(&split(&tv, opts), &model, &counts, &bins, None)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(r.image.dim(), (32, 32), "{name}");
         assert!(r.image.iter().all(|v| v.is_finite() && *v >= 0.0), "{name}");
         if name == "all zero" {
@@ -393,17 +361,7 @@ fn split_solver_is_finite_on_extreme_inputs() {
     }
     let mut bad = Array3::<f64>::zeros(shape);
     bad[[1, 2, 3]] = f64::NAN;
-    let e = reconstruct(
-        &Split {
-            denoiser: &tv,
-            opts,
-        },
-        &model,
-        &bad,
-        &bins,
-        None,
-    )
-    .unwrap_err();
+    let e = reconstruct(&split(&tv, opts), &model, &bad, &bins, None).unwrap_err();
     assert!(e.to_string().contains("bin 1, row 2, column 3"), "{e}");
 }
 
@@ -441,10 +399,7 @@ fn split_solver_starts_from_richardson_lucy_on_the_summed_stack_when_asked() {
             ..Default::default()
         };
         let r = reconstruct(
-            &Split {
-                denoiser: &NoPrior,
-                opts,
-            },
+            &split(&NoPrior, opts),
             &model,
             &counts,
             &bins,
@@ -495,53 +450,13 @@ fn prior_grid_average_touches_only_unshuffling_priors() {
     };
     let note = "averaged over its 2x2 grid";
     let tv = TotalVariation::default();
-    let a = reconstruct(
-        &Split {
-            denoiser: &tv,
-            opts: fixed,
-        },
-        &model,
-        &counts,
-        &bins,
-        None,
-    )
-    .unwrap();
-    let b = reconstruct(
-        &Split {
-            denoiser: &tv,
-            opts: averaged,
-        },
-        &model,
-        &counts,
-        &bins,
-        None,
-    )
-    .unwrap();
+    let a = reconstruct(&split(&tv, fixed), &model, &counts, &bins, None).unwrap();
+    let b = reconstruct(&split(&tv, averaged), &model, &counts, &bins, None).unwrap();
     assert_eq!(a.image, b.image, "TV has no grid to average");
     assert!(!b.trace.notes.iter().any(|n| n.contains(note)));
     let ffdnet = Ffdnet::new(source::embedded(), "embedded");
-    let c = reconstruct(
-        &Split {
-            denoiser: &ffdnet,
-            opts: fixed,
-        },
-        &model,
-        &counts,
-        &bins,
-        None,
-    )
-    .unwrap();
-    let d = reconstruct(
-        &Split {
-            denoiser: &ffdnet,
-            opts: averaged,
-        },
-        &model,
-        &counts,
-        &bins,
-        None,
-    )
-    .unwrap();
+    let c = reconstruct(&split(&ffdnet, fixed), &model, &counts, &bins, None).unwrap();
+    let d = reconstruct(&split(&ffdnet, averaged), &model, &counts, &bins, None).unwrap();
     assert!(d.trace.notes.iter().any(|n| n.contains(note)));
     assert!(!c.trace.notes.iter().any(|n| n.contains(note)));
     assert!(d.image.iter().all(|v| v.is_finite() && *v >= 0.0));

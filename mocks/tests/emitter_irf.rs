@@ -41,6 +41,21 @@ fn chi2_per_bin(emitter: &mut Emitter, expected: &KernelStack, t0: f64, n: usize
     chi2 / used as f64
 }
 
+/// A point in the middle of the 32 x 32 sensor, the pulse 300 ps after
+/// the sync, and the emitter's options with `seed`.
+fn point_at_t0(seed: u64) -> (Vec<f64>, f64, EmitterOptions) {
+    let mut scene = vec![0.0; 32 * 32];
+    scene[16 * 32 + 16] = 1.0;
+    let t0 = 300.0;
+    let options = EmitterOptions {
+        t0_delay_ps: t0,
+        sync_period_ps: 12_500.0,
+        seed,
+        ..EmitterOptions::default()
+    };
+    (scene, t0, options)
+}
+
 #[test]
 fn recorded_times_follow_the_irf_convolved_kernels() {
     let irf = Irf {
@@ -48,15 +63,7 @@ fn recorded_times_follow_the_irf_convolved_kernels() {
         tail_ps: 10.0,
     };
     let with = KernelStack::build(&setup(Some(irf)), Sampling::Integrated).unwrap();
-    let mut scene = vec![0.0; 32 * 32];
-    scene[16 * 32 + 16] = 1.0;
-    let t0 = 300.0;
-    let options = EmitterOptions {
-        t0_delay_ps: t0,
-        sync_period_ps: 12_500.0,
-        seed: 7,
-        ..EmitterOptions::default()
-    };
+    let (scene, t0, options) = point_at_t0(7);
     let mut jittered = Emitter::new(&scene, &with, options.clone()).unwrap();
     let chi2 = chi2_per_bin(&mut jittered, &with, t0, 400_000);
     assert!(
@@ -91,15 +98,7 @@ fn recorded_times_follow_the_kernels_of_a_measured_table() {
     let mut s = setup(None);
     s.irf = Some(table.into());
     let with = KernelStack::build(&s, Sampling::Integrated).unwrap();
-    let mut scene = vec![0.0; 32 * 32];
-    scene[16 * 32 + 16] = 1.0;
-    let t0 = 300.0;
-    let options = EmitterOptions {
-        t0_delay_ps: t0,
-        sync_period_ps: 12_500.0,
-        seed: 11,
-        ..EmitterOptions::default()
-    };
+    let (scene, t0, options) = point_at_t0(11);
     let mut emitter = Emitter::new(&scene, &with, options.clone()).unwrap();
     let chi2 = chi2_per_bin(&mut emitter, &with, t0, 400_000);
     assert!(

@@ -18,11 +18,11 @@ use pyo3::types::PyDict;
 use scatterscope::Named;
 use scatterscope::calibrate::histogram::TimeHistogram;
 use scatterscope::calibrate::transmittance::{Capture, RISING_EDGE_CONVENTION, SlabFitOptions};
-use scatterscope::config::PhysicsOverrides;
+use scatterscope::config::{PhysicsOverrides, parse_medium, parse_preset};
 use scatterscope::denoise::prior::{PriorKind, PriorSpec};
 use scatterscope::formats::becker_hickl::spc::{SpcModule, SpcOptions};
 use scatterscope::forward::Boundary;
-use scatterscope::physics::{KernelStack, MediumModel, Preset, Sampling};
+use scatterscope::physics::{KernelStack, Sampling};
 use scatterscope::reconstruct::input::{InputSpec, prepare};
 use scatterscope::reconstruct::method::{Method, MethodOptions, Solver, run_method};
 use scatterscope::reconstruct::problem::BackgroundChoice;
@@ -124,32 +124,14 @@ fn overrides(kw: Option<&Bound<'_, PyDict>>) -> PyResult<PhysicsOverrides> {
         let f = || value.extract::<f64>();
         let u = || value.extract::<usize>();
         match key.as_str() {
-            "preset" => {
-                let name: String = value.extract()?;
-                o.preset = Some(
-                    Preset::ALL
-                        .iter()
-                        .copied()
-                        .find(|p| p.name() == name)
-                        .ok_or_else(|| msg(format!("preset `{name}`: use paper")))?,
-                );
-            }
+            "preset" => o.preset = Some(parse_preset(&value.extract::<String>()?).map_err(msg)?),
             "config" => o.config = Some(PathBuf::from(value.extract::<String>()?)),
             "mu_a" => o.mu_a = Some(f()?),
             "mu_s" => o.mu_s = Some(f()?),
             "g" => o.g = Some(f()?),
             "n" => o.n = Some(f()?),
             "thickness_cm" => o.thickness = Some(f()?),
-            "medium" => {
-                let name: String = value.extract()?;
-                o.medium = Some(
-                    MediumModel::ALL
-                        .iter()
-                        .copied()
-                        .find(|m| m.name() == name)
-                        .ok_or_else(|| msg(format!("medium `{name}`: use infinite or slab")))?,
-                );
-            }
+            "medium" => o.medium = Some(parse_medium(&value.extract::<String>()?).map_err(msg)?),
             "fov_cm" => o.fov = Some(f()?),
             "size" => o.size = Some(u()?),
             "bin_width_ps" => o.bin_width = Some(f()?),
@@ -449,12 +431,29 @@ fn simulate<'py>(
             )
         })
         .map_err(err)?;
+    let (counts, expected, meta, _) = simulated(py, sim);
+    Ok((counts, expected, meta))
+}
+
+/// A simulation for Python: (counts, expected counts, metadata JSON,
+/// truth).
+#[allow(clippy::type_complexity)]
+fn simulated(
+    py: Python<'_>,
+    sim: scatterscope::simulate::Simulation,
+) -> (
+    Bound<'_, PyArray3<f32>>,
+    Bound<'_, PyArray3<f32>>,
+    String,
+    Bound<'_, PyArray2<f64>>,
+) {
     let meta = to_json(&sim.counts.meta);
-    Ok((
+    (
         sim.counts.data.into_pyarray(py),
         sim.expected.data.into_pyarray(py),
         meta,
-    ))
+        sim.truth.into_pyarray(py),
+    )
 }
 
 /// Simulates a built-in scene or an image file (as `scatterscope
@@ -482,13 +481,7 @@ fn simulate_scene<'py>(
             scatterscope::simulate::simulate(&setup, &scene, Sampling::Integrated, boundary, seed)
         })
         .map_err(err)?;
-    let meta = to_json(&sim.counts.meta);
-    Ok((
-        sim.counts.data.into_pyarray(py),
-        sim.expected.data.into_pyarray(py),
-        meta,
-        sim.truth.into_pyarray(py),
-    ))
+    Ok(simulated(py, sim))
 }
 
 /// Reconstructs counts: (image, trace JSON, notes).

@@ -345,9 +345,9 @@ impl<S> BinnedFile<S> {
     }
 }
 
-/// Why a file cannot be binned.
+/// Why a recorded file cannot be binned or surveyed.
 #[derive(Debug, thiserror::Error)]
-pub enum BinFileError {
+pub enum RecordedFileError {
     /// The PicoQuant file cannot be read.
     #[error(transparent)]
     File(#[from] FileError),
@@ -363,7 +363,8 @@ pub enum BinFileError {
     /// More memory than the budget.
     #[error(transparent)]
     Memory(#[from] crate::memory::MemoryError),
-    /// The request does not fit the file.
+    /// The request (its window, pixels, channel or `.spc` reading) does
+    /// not fit the file.
     #[error("{path}: {reason}")]
     Spec {
         /// The file.
@@ -376,7 +377,7 @@ pub enum BinFileError {
 /// Bins a recorded file into transient stacks: a project tag file
 /// (recognised by its magic), a PicoQuant T3 file (PTU, PT3, HT3) or a
 /// Becker & Hickl file (`.spc` photons, `.sdt` histograms).
-pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError> {
+pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, RecordedFileError> {
     bin_file_counts(path, spec).map(BinnedFile::into_stacks)
 }
 
@@ -385,7 +386,7 @@ pub fn bin_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile, BinFileError>
 pub fn bin_file_counts(
     path: &Path,
     spec: &BinSpec,
-) -> Result<BinnedFile<CountStack>, BinFileError> {
+) -> Result<BinnedFile<CountStack>, RecordedFileError> {
     let format = Format::of_file(path);
     if let Some(reason) = spec.spc.misapplied(format) {
         return Err(spec_error(path, reason.into()));
@@ -404,7 +405,7 @@ fn check_stack_memory(
     path: &Path,
     window: &TimeWindow,
     map: &PixelMap,
-) -> Result<(), BinFileError> {
+) -> Result<(), RecordedFileError> {
     let (h, w) = map.image_size();
     crate::memory::check(crate::memory::bytes_of([window.bins, h, w], 8), || {
         format!(
@@ -416,8 +417,8 @@ fn check_stack_memory(
     Ok(())
 }
 
-fn spec_error(path: &Path, reason: String) -> BinFileError {
-    BinFileError::Spec {
+fn spec_error(path: &Path, reason: String) -> RecordedFileError {
+    RecordedFileError::Spec {
         path: path.to_owned(),
         reason,
     }
@@ -471,7 +472,7 @@ impl T3File {
         parts: usize,
         binner: Binner,
         allow_truncated: bool,
-    ) -> Result<(Binner, Option<String>, CardFlags), BinFileError> {
+    ) -> Result<(Binner, Option<String>, CardFlags), RecordedFileError> {
         match self {
             T3File::PicoQuant(info) => {
                 let reader = info.records_part(part, parts)?;
@@ -484,7 +485,7 @@ impl T3File {
 }
 
 /// A PicoQuant T3 file.
-fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFileError> {
+fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, RecordedFileError> {
     let (info, _) = open(path)?;
     info.check_finished(spec.allow_truncated)?;
     if !info.record_type.is_t3() {
@@ -518,7 +519,7 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
 }
 
 /// A Becker & Hickl FIFO file: its micro times cover the ADC's channels.
-fn bin_spc(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFileError> {
+fn bin_spc(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, RecordedFileError> {
     let info = spc::open(path, &spec.spc)?;
     info.check_whole(spec.allow_truncated)?;
     let res_ps = info.micro_unit()? * 1e12;
@@ -555,7 +556,7 @@ fn bin_spc_records(
     part: usize,
     parts: usize,
     mut binner: Binner,
-) -> Result<(Binner, Option<String>, CardFlags), BinFileError> {
+) -> Result<(Binner, Option<String>, CardFlags), RecordedFileError> {
     let spc_err = |error| SpcFileError {
         path: info.path.clone(),
         error,
@@ -591,7 +592,7 @@ fn bin_t3(
     imaging: Option<crate::events::Imaging>,
     source: String,
     mut notes: Vec<String>,
-) -> Result<BinnedFile<CountStack>, BinFileError> {
+) -> Result<BinnedFile<CountStack>, RecordedFileError> {
     let spec_err = |reason| spec_error(path, reason);
     let (window, map) =
         window_and_map(spec, res_ps, period_ps, imaging).map_err(|e| spec_err(e.to_string()))?;
@@ -781,7 +782,7 @@ fn run_pass(
     window: TimeWindow,
     map: PixelMap,
     spec: &BinSpec,
-) -> Result<Pass, BinFileError> {
+) -> Result<Pass, RecordedFileError> {
     let start = Instant::now();
     let binner = Binner::new(window, map, spec.channel, spec.frames);
     let records = file.records();
@@ -837,7 +838,7 @@ fn bin_records(
     mut reader: RecordReader,
     mut binner: Binner,
     allow_truncated: bool,
-) -> Result<(Binner, Option<String>), BinFileError> {
+) -> Result<(Binner, Option<String>), RecordedFileError> {
     let mut decoder = Decoder::new(info.record_type);
     let mut chunk = Vec::new();
     loop {
@@ -859,7 +860,7 @@ fn bin_records(
 }
 
 /// A tag file: the device's whole sensor, micro time from the sync.
-fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFileError> {
+fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, RecordedFileError> {
     let spec_err = |reason| spec_error(path, reason);
     if !matches!(spec.pixels, Pixels::Auto) || spec.frames != FrameSelect::Sum {
         return Err(spec_err(
@@ -949,7 +950,7 @@ pub struct TagFileRecord {
 /// A Becker & Hickl histogram file: each decay block of the first block's
 /// size and time unit becomes a stack, its curve points summed into the
 /// window's bins (whole points only); other blocks are left out, by name.
-fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFileError> {
+fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, RecordedFileError> {
     let spec_err = |reason: &str| spec_error(path, reason.to_string());
     if spec.channel.is_some() {
         return Err(spec_err(
@@ -995,7 +996,7 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, BinFil
         }
     }
     // The window in whole curve points.
-    let whole = |ps: f64, what: &str| -> Result<usize, BinFileError> {
+    let whole = |ps: f64, what: &str| -> Result<usize, RecordedFileError> {
         let n = (ps / unit_ps).round();
         if (n * unit_ps - ps).abs() > 1e-6 * unit_ps.max(ps.abs()) || n < 0.0 {
             return Err(spec_err(&format!(

@@ -202,7 +202,18 @@ fn from_spc(
         c.truncated = Some(info.cut().to_string());
         c.warnings.push(format!("the input is cut: {}", info.cut()));
     }
-    let completion = if c.warnings.iter().any(|w| !w.starts_with("records read as")) {
+    close(c, w, output, |w| !w.starts_with("records read as"))
+}
+
+/// Closes the PTU `w`: marked interrupted when a warning `against` the
+/// input was said, else complete.
+fn close(
+    mut c: Conversion,
+    w: PtuWriter,
+    output: &Path,
+    against: fn(&str) -> bool,
+) -> Result<Conversion, ConvertError> {
+    let completion = if c.warnings.iter().any(|w| against(w)) {
         Completion::Interrupted
     } else {
         Completion::Complete
@@ -314,13 +325,7 @@ fn from_picoquant(
     if let Some(t) = &c.truncated {
         c.warnings.push(format!("the input is cut: {t}"));
     }
-    let completion = if c.warnings.is_empty() {
-        Completion::Complete
-    } else {
-        Completion::Interrupted
-    };
-    c.records_out = w.finish_as(completion).map_err(out_err(output))?;
-    Ok(c)
+    close(c, w, output, |_| true)
 }
 
 fn from_tag_file(
@@ -431,13 +436,7 @@ fn from_tag_file(
                 .into(),
         );
     }
-    let completion = if c.warnings.is_empty() {
-        Completion::Complete
-    } else {
-        Completion::Interrupted
-    };
-    c.records_out = w.finish_as(completion).map_err(out_err(output))?;
-    Ok(c)
+    close(c, w, output, |_| true)
 }
 
 impl Conversion {

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::formats::becker_hickl::sdt::{self, SdtError, SdtFile};
+use crate::formats::becker_hickl::sdt::{self, SdtFile};
 use crate::formats::becker_hickl::spc::{self, CardFlags, SpcFileError, SpcInfo, SpcOptions};
 use crate::formats::detect::Format;
 use crate::formats::sstags::{TagFileError, TagFileSummary, read_tag_file};
@@ -14,6 +14,7 @@ use firmware_protocol::Event;
 use crate::events::Tag;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, TtrError, open};
+use crate::tags::bin_file::RecordedFileError;
 
 /// The records of a PicoQuant file, counted by kind.
 #[derive(Debug, Default)]
@@ -184,36 +185,16 @@ pub enum Survey {
     BeckerHicklHistogram(Box<SdtFile>),
 }
 
-/// Why a file cannot be surveyed.
-#[derive(Debug, thiserror::Error)]
-pub enum SurveyError {
-    /// The PicoQuant file cannot be read.
-    #[error(transparent)]
-    PicoQuant(#[from] FileError),
-    /// The tag file cannot be read.
-    #[error(transparent)]
-    TagFile(#[from] TagFileError),
-    /// The Becker & Hickl FIFO file cannot be read.
-    #[error(transparent)]
-    Spc(#[from] SpcFileError),
-    /// The Becker & Hickl histogram file cannot be read.
-    #[error(transparent)]
-    Sdt(#[from] SdtError),
-    /// Options that do not apply to the file.
-    #[error("{0}")]
-    Options(String),
-}
-
 /// Surveys a recorded file: a tag file (recognised by its magic), a
 /// Becker & Hickl file (`.spc` read as `spc` says, `.sdt`) or a PicoQuant
 /// file.
-pub fn survey(path: &Path, spc: &SpcOptions) -> Result<Survey, SurveyError> {
+pub fn survey(path: &Path, spc: &SpcOptions) -> Result<Survey, RecordedFileError> {
     let format = Format::of_file(path);
     if let Some(reason) = spc.misapplied(format) {
-        return Err(SurveyError::Options(format!(
-            "{}: {reason}",
-            path.display()
-        )));
+        return Err(RecordedFileError::Spec {
+            path: path.to_path_buf(),
+            reason: reason.into(),
+        });
     }
     Ok(match format {
         Format::TagFile => {

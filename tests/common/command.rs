@@ -9,6 +9,10 @@ use std::process::{Command, Output};
 /// The program built for this test run.
 pub const PROGRAM: &str = env!("CARGO_BIN_EXE_scatterscope");
 
+/// A 16 x 16 sensor over 3 cm: a mock acquisition small enough for a test.
+#[allow(dead_code)]
+pub const SMALL_SENSOR: [&str; 4] = ["--size", "16", "--fov", "3cm"];
+
 /// A `scatterscope` command with no arguments yet.
 pub fn scatterscope() -> Command {
     Command::new(PROGRAM)

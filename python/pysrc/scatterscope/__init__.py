@@ -53,7 +53,7 @@ __all__ = [
     "__version__",
 ]
 
-__version__ = _native.version()
+__version__: str = _native.version()
 
 
 def _path(p: "os.PathLike[str] | str") -> str:

@@ -25,7 +25,7 @@ use scatterscope::reconstruct::input::InputError;
 use scatterscope::reconstruct::problem::ProblemError;
 use scatterscope::report::calibration::StackCalibrationError;
 use scatterscope::simulate::SimulateError;
-use scatterscope::tags::bin_file::BinFileError;
+use scatterscope::tags::bin_file::RecordedFileError;
 use scatterscope_drivers::picoquant::VendorError;
 
 /// The hints for the errors in `err`'s chain, one line each.
@@ -51,7 +51,7 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
             _ => None,
         };
     }
-    if let Some(BinFileError::File(e)) = cause.downcast_ref::<BinFileError>() {
+    if let Some(RecordedFileError::File(e)) = cause.downcast_ref::<RecordedFileError>() {
         return hint(e);
     }
     if let Some(StackCalibrationError::Config(e)) = cause.downcast_ref::<StackCalibrationError>() {

@@ -103,31 +103,7 @@ fn band_conv(
             }
         }
     }
-    // SAFETY: the pointers cover m x k, k x cout and m x cout row-major
-    // matrices that live in `cols`, `layer.matrix` and `prod`, sized above.
-    unsafe {
-        gemm::gemm(
-            m,
-            cout,
-            k,
-            prod.as_mut_ptr(),
-            1,
-            cout as isize,
-            false,
-            cols.as_ptr(),
-            1,
-            k as isize,
-            layer.matrix.as_ptr(),
-            1,
-            cout as isize,
-            0.0,
-            1.0,
-            false,
-            false,
-            false,
-            gemm::Parallelism::None,
-        );
-    }
+    matmul(prod, cols, &layer.matrix, (m, cout, k));
     let row_len = (w + 2) * cout;
     for r in 0..rows {
         let out = &mut out_rows[r * row_len + cout..][..w * cout];
@@ -153,6 +129,37 @@ pub(super) fn store_activated(layer: &FoldedConv, dst: &mut [f32], src: &[f32]) 
         if layer.relu {
             o.iter_mut().for_each(|v| *v = v.max(0.0));
         }
+    }
+}
+
+/// `dst = lhs rhs` for row-major `lhs` (m x k), `rhs` (k x n) and `dst`
+/// (m x n) at the slices' starts, on the calling thread (the layers run
+/// their tiles on rayon's threads themselves).
+pub(super) fn matmul(dst: &mut [f32], lhs: &[f32], rhs: &[f32], (m, n, k): (usize, usize, usize)) {
+    assert!(dst.len() >= m * n && lhs.len() >= m * k && rhs.len() >= k * n);
+    // SAFETY: the assert: the pointers cover the three row-major matrices.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            1,
+            n as isize,
+            false,
+            lhs.as_ptr(),
+            1,
+            k as isize,
+            rhs.as_ptr(),
+            1,
+            n as isize,
+            0.0,
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        );
     }
 }
 

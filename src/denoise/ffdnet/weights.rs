@@ -193,6 +193,30 @@ impl Architecture {
         }
         out
     }
+
+    /// Deterministic tensors of this architecture's shapes, not a trained
+    /// network: the work of a call does not depend on the values, so a
+    /// benchmark of an architecture, or a test of the file format and the
+    /// BatchNorm folding, needs no download. Running variances are
+    /// positive and vary by channel.
+    pub fn stand_in_tensors(&self) -> BTreeMap<String, Vec<f32>> {
+        self.tensor_shapes()
+            .into_iter()
+            .map(|(name, shape)| {
+                let n: usize = shape.iter().product();
+                let v = (0..n)
+                    .map(|i| {
+                        if name.ends_with("running_var") {
+                            1.0 + (i % 3) as f32
+                        } else {
+                            ((i * 7919 % 101) as f32 / 101.0 - 0.5) * 0.2
+                        }
+                    })
+                    .collect();
+                (name, v)
+            })
+            .collect()
+    }
 }
 
 /// One 3x3 convolution with BatchNorm folded in, ready for the engine.

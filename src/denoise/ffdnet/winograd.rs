@@ -11,7 +11,7 @@
 
 use rayon::prelude::*;
 
-use super::conv::{FeatureMap, store_activated};
+use super::conv::{FeatureMap, matmul, store_activated};
 use super::weights::FoldedConv;
 
 /// G (6x3): weight transform.
@@ -185,31 +185,12 @@ fn block(
         }
     }
     for e in 0..36 {
-        // SAFETY: row-major nt x cin, cin x cout and nt x cout matrices
-        // inside `v`, `wino.u` and `m`, sized above.
-        unsafe {
-            gemm::gemm(
-                nt,
-                cout,
-                cin,
-                m.as_mut_ptr().add(e * nt * cout),
-                1,
-                cout as isize,
-                false,
-                v.as_ptr().add(e * nt * cin),
-                1,
-                cin as isize,
-                wino.u.as_ptr().add(e * cin * cout),
-                1,
-                cout as isize,
-                0.0,
-                1.0,
-                false,
-                false,
-                false,
-                gemm::Parallelism::None,
-            );
-        }
+        matmul(
+            &mut m[e * nt * cout..],
+            &v[e * nt * cin..],
+            &wino.u[e * cin * cout..],
+            (nt, cout, cin),
+        );
     }
     // scratch, reused: the 4x6 column-transformed products, then the 4x4
     // output tile.

@@ -67,29 +67,38 @@ impl Cursor<'_> {
             .trim()
             .to_string())
     }
+    /// The next `N` bytes.
+    fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N], TtrError> {
+        Ok(self.bytes(N, what)?.try_into().expect("N bytes"))
+    }
     fn i32(&mut self, what: &str) -> Result<i32, TtrError> {
-        Ok(i32::from_le_bytes(
-            self.bytes(4, what)?.try_into().expect("4 bytes"),
-        ))
+        self.array(what).map(i32::from_le_bytes)
     }
     fn f32(&mut self, what: &str) -> Result<f32, TtrError> {
-        Ok(f32::from_le_bytes(
-            self.bytes(4, what)?.try_into().expect("4 bytes"),
-        ))
+        self.array(what).map(f32::from_le_bytes)
     }
     fn f64(&mut self, what: &str) -> Result<f64, TtrError> {
-        Ok(f64::from_le_bytes(
-            self.bytes(8, what)?.try_into().expect("8 bytes"),
-        ))
+        self.array(what).map(f64::from_le_bytes)
     }
     fn i64(&mut self, what: &str) -> Result<i64, TtrError> {
-        Ok(i64::from_le_bytes(
-            self.bytes(8, what)?.try_into().expect("8 bytes"),
-        ))
+        self.array(what).map(i64::from_le_bytes)
     }
     fn skip(&mut self, n: usize, what: &str) -> Result<(), TtrError> {
         self.bytes(n, what).map(|_| ())
     }
+}
+
+/// `ImgHdrSize`: the 32-bit words of the image header that follows.
+fn image_header_ints(c: &mut Cursor<'_>) -> Result<i32, TtrError> {
+    let at = c.offset;
+    let ints = c.i32("ImgHdrSize")?;
+    if !(0..=1 << 20).contains(&ints) {
+        return Err(TtrError::header(
+            at,
+            format!("ImgHdrSize = {ints} is not plausible"),
+        ));
+    }
+    Ok(ints)
 }
 
 /// The text part: the 16-byte ident (must be `ident`), then format version
@@ -155,14 +164,7 @@ pub fn parse_hydraharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
     c.skip(28 + 20 * channels as usize, "channel settings and rates")?;
     let sync_rate = c.i32("SyncRate")?;
     c.skip(8, "StopAfter and StopReason")?;
-    let img_offset = c.offset;
-    let img_ints = c.i32("ImgHdrSize")?;
-    if !(0..=1 << 20).contains(&img_ints) {
-        return Err(TtrError::header(
-            img_offset,
-            format!("ImgHdrSize = {img_ints} is not plausible"),
-        ));
-    }
+    let img_ints = image_header_ints(&mut c)?;
     let records_offset = c.offset;
     let records = c.i64("nRecords")?;
     let records = u64::try_from(records).map_err(|_| {
@@ -249,14 +251,7 @@ pub fn parse_picoharp(r: &mut dyn Read) -> Result<LegacyHeader, TtrError> {
     let records = u32::try_from(records).map_err(|_| {
         TtrError::header(records_offset, format!("Records = {records} is negative"))
     })?;
-    let img_offset = c.offset;
-    let img_ints = c.i32("ImgHdrSize")?;
-    if !(0..=1 << 20).contains(&img_ints) {
-        return Err(TtrError::header(
-            img_offset,
-            format!("ImgHdrSize = {img_ints} is not plausible"),
-        ));
-    }
+    let img_ints = image_header_ints(&mut c)?;
     c.skip(4 * img_ints as usize, "ImgHdr")?;
     let record_type = match mode {
         3 => RecordType::PicoHarpT3,
