@@ -238,8 +238,9 @@ fn the_circle_finder_finds_a_circle_and_reads_every_kind_of_path() {
 /// What the command line (`src/bin`) must not hold, with what it would be:
 /// the library's request ([`scatterscope::acquire::request`]), units
 /// ([`scatterscope::units`]) and options hold them, once, for every front
-/// end. Each was in `src/bin` before the request moved them (9b42eb9).
-const NOT_IN_THE_COMMAND_LINE: [(&str, &str); 8] = [
+/// end. Each was in `src/bin` before the request moved them (9b42eb9,
+/// and ca1cf09 for the last three).
+const NOT_IN_THE_COMMAND_LINE: [(&str, &str); 11] = [
     ("/ 100.0", "a length converted between cm and m by hand"),
     ("/ 1000.0", "a time converted between ps and ns by hand"),
     (
@@ -257,6 +258,15 @@ const NOT_IN_THE_COMMAND_LINE: [(&str, &str); 8] = [
         "the PTU a vendor's device records by default",
     ),
     ("lbfgs_memory: 7", "a default of admm-lbfgs restated"),
+    ("default_value_t = 2e6", "the mock's photon rate restated"),
+    (
+        "std::env::args()",
+        "the command line read again besides the parser",
+    ),
+    (
+        "hide = true, conflicts_with",
+        "an old flag name kept by hand",
+    ),
 ];
 
 #[test]

@@ -66,29 +66,29 @@ pub struct AcquireArgs {
     #[arg(long, default_value = "usaf", value_name = "SCENE|FILE")]
     scene: String,
     /// Mock: detected signal photons per second.
-    #[arg(long, default_value_t = 2e6)]
+    #[arg(long, default_value_t = EmitterOptions::default().rate_hz)]
     rate: f64,
     /// Mock: dark counts per second over the sensor.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = EmitterOptions::default().dark_rate_hz)]
     dark_rate: f64,
     /// Mock: probability of an afterpulse (mean delay 50 ns) per detection.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = EmitterOptions::default().afterpulse_probability)]
     afterpulse: f64,
     /// Mock: random seed (same seed, same photons).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = EmitterOptions::default().seed)]
     seed: u64,
     /// Mock: delay of the pulse after the laser sync (default unit ps).
-    #[arg(long, default_value = "0", value_parser = parse_ps)]
+    #[arg(long, default_value_t = EmitterOptions::default().t0_delay_ps, value_parser = parse_ps)]
     mock_delay: f64,
     /// Mock: stop by itself after this many detected photons (0 = never).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = MockOptions::default().max_photons)]
     max_photons: u64,
     /// Mock: emit as fast as the link takes photons instead of in real time.
     #[arg(long)]
     unpaced: bool,
     /// Mock: draw this many batches once and replay them (load tests at
     /// hardware rates). 0: draw every photon.
-    #[arg(long, value_name = "N", default_value_t = 0)]
+    #[arg(long, value_name = "N", default_value_t = MockOptions::default().replay_batches)]
     mock_replay: usize,
     /// Mock: faults every n-th batch, e.g. corrupt=10,duplicate=7,reorder=5,
     /// drop-bytes=9,overflow=4:1000,disconnect=50 (random=SEED: at random).

@@ -9,7 +9,7 @@ use scatterscope::report::bench::{
 };
 
 use crate::recon_args::ReconArgs;
-use crate::shared_args::{PhysicsArgs, choice};
+use crate::shared_args::{PhysicsArgs, choice, given_flags};
 
 /// Reconstruction benchmark on images the methods were not tuned on.
 ///
@@ -80,28 +80,20 @@ pub struct BenchReconArgs {
     /// summary a single run writes.
     #[arg(long)]
     merge: bool,
+    /// The flags each job of --write-batch runs with ([`forwarded`]).
+    #[arg(skip)]
+    pub forwarded: Vec<String>,
 }
 
-/// This run's flags without the positional folder, --image, --out and the
-/// batch flags: what each job of a batch runs with.
-fn forwarded_args(images: &std::path::Path) -> Vec<String> {
-    let all: Vec<String> = std::env::args().skip(2).collect();
-    let mut out = Vec::new();
-    let mut skip_next = false;
-    for a in all {
-        if skip_next {
-            skip_next = false;
-            continue;
-        }
-        let flag = a.split('=').next().unwrap_or("");
-        match flag {
-            "--image" | "--out" | "--write-batch" => skip_next = !a.contains('='),
-            "--merge" | "--resume" => {}
-            _ if std::path::Path::new(&a) == images => {}
-            _ => out.push(a),
-        }
-    }
-    out
+/// This run's flags as parsed, without the image folder, --image, --out
+/// and the batch flags: what each job of a batch runs with.
+pub fn forwarded(matches: &clap::ArgMatches) -> Vec<String> {
+    let command = <BenchReconArgs as clap::Args>::augment_args(clap::Command::new("bench-recon"));
+    given_flags(
+        matches,
+        &command,
+        &["images", "only", "out", "write_batch", "merge", "resume"],
+    )
 }
 
 pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
@@ -130,7 +122,7 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
         resume: args.resume,
     };
     if let Some(manifest) = &args.write_batch {
-        let jobs = batch_jobs(&cfg, &forwarded_args(&args.images))?;
+        let jobs = batch_jobs(&cfg, &args.forwarded)?;
         scatterscope::batch::write_manifest(manifest, &jobs)?;
         println!(
             "wrote {} ({} jobs): run it with `scatterscope batch {} --out OUT` (or --slurm), then `scatterscope bench-recon {} --merge --out OUT` with the same flags",

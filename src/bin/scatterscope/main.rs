@@ -21,7 +21,7 @@ mod simulate;
 mod tags_cmd;
 mod weights_cmd;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use scatterscope::units::parse_size;
 
 /// The allocator: the reconstructions free and allocate images of 0.5-1 MB
@@ -123,7 +123,11 @@ fn main() -> std::process::ExitCode {
     for note in notes {
         eprintln!("{note}");
     }
-    let cli = Cli::parse_from(args);
+    let matches = Cli::command().get_matches_from(args);
+    let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    if let (Command::BenchRecon(args), Some((_, m))) = (&mut cli.command, matches.subcommand()) {
+        args.forwarded = bench_recon::forwarded(m);
+    }
     scatterscope::memory::set_limit(cli.memory_limit);
     // One command per process: no output may replace a file it read.
     scatterscope::files::input::remember_inputs();

@@ -141,6 +141,35 @@ pub struct FileBinWidthArgs {
     pub bin_width: Option<f64>,
 }
 
+/// The flags given on the command line to `command` (as parsed: new
+/// spellings, one `--flag=value` per value), leaving out the arguments
+/// whose ids `skip` names and the positional ones.
+pub fn given_flags(
+    matches: &clap::ArgMatches,
+    command: &clap::Command,
+    skip: &[&str],
+) -> Vec<String> {
+    let mut out = Vec::new();
+    for arg in command.get_arguments() {
+        let id = arg.get_id().as_str();
+        let given = matches.value_source(id) == Some(clap::parser::ValueSource::CommandLine);
+        let Some(long) = arg.get_long().filter(|_| given && !skip.contains(&id)) else {
+            continue;
+        };
+        match arg.get_action().takes_values() {
+            true => out.extend(
+                matches
+                    .get_raw(id)
+                    .into_iter()
+                    .flatten()
+                    .map(|v| format!("--{long}={}", v.to_string_lossy())),
+            ),
+            false => out.push(format!("--{long}")),
+        }
+    }
+    out
+}
+
 /// Says on stderr which of `names`, given to `flag`, are old spellings of
 /// a fitted parameter, and the new ones (the old still work).
 pub fn note_renamed_parameters(flag: &str, names: &[String]) {
