@@ -431,28 +431,21 @@ fn simulate<'py>(
             )
         })
         .map_err(err)?;
-    let (counts, expected, meta, _) = simulated(py, sim);
-    Ok((counts, expected, meta))
+    Ok(simulated(py, sim.counts, sim.expected))
 }
 
-/// A simulation for Python: (counts, expected counts, metadata JSON,
-/// truth).
-#[allow(clippy::type_complexity)]
+/// A simulation's stacks for Python: (counts, expected counts, metadata
+/// JSON).
 fn simulated(
     py: Python<'_>,
-    sim: scatterscope::simulate::Simulation,
-) -> (
-    Bound<'_, PyArray3<f32>>,
-    Bound<'_, PyArray3<f32>>,
-    String,
-    Bound<'_, PyArray2<f64>>,
-) {
-    let meta = to_json(&sim.counts.meta);
+    counts: Stack,
+    expected: Stack,
+) -> (Bound<'_, PyArray3<f32>>, Bound<'_, PyArray3<f32>>, String) {
+    let meta = to_json(&counts.meta);
     (
-        sim.counts.data.into_pyarray(py),
-        sim.expected.data.into_pyarray(py),
+        counts.data.into_pyarray(py),
+        expected.data.into_pyarray(py),
         meta,
-        sim.truth.into_pyarray(py),
     )
 }
 
@@ -481,7 +474,8 @@ fn simulate_scene<'py>(
             scatterscope::simulate::simulate(&setup, &scene, Sampling::Integrated, boundary, seed)
         })
         .map_err(err)?;
-    Ok(simulated(py, sim))
+    let (counts, expected, meta) = simulated(py, sim.counts, sim.expected);
+    Ok((counts, expected, meta, sim.truth.into_pyarray(py)))
 }
 
 /// Reconstructs counts: (image, trace JSON, notes).

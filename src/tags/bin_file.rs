@@ -417,7 +417,8 @@ fn check_stack_memory(
     Ok(())
 }
 
-fn spec_error(path: &Path, reason: String) -> RecordedFileError {
+/// The request does not fit the file at `path`, for `reason`.
+pub(crate) fn spec_error(path: &Path, reason: String) -> RecordedFileError {
     RecordedFileError::Spec {
         path: path.to_owned(),
         reason,

@@ -14,7 +14,7 @@ use firmware_protocol::Event;
 use crate::events::Tag;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, TtrError, open};
-use crate::tags::bin_file::RecordedFileError;
+use crate::tags::bin_file::{RecordedFileError, spec_error};
 
 /// The records of a PicoQuant file, counted by kind.
 #[derive(Debug, Default)]
@@ -191,10 +191,7 @@ pub enum Survey {
 pub fn survey(path: &Path, spc: &SpcOptions) -> Result<Survey, RecordedFileError> {
     let format = Format::of_file(path);
     if let Some(reason) = spc.misapplied(format) {
-        return Err(RecordedFileError::Spec {
-            path: path.to_path_buf(),
-            reason: reason.into(),
-        });
+        return Err(spec_error(path, reason.into()));
     }
     Ok(match format {
         Format::TagFile => {
