@@ -18,9 +18,9 @@ use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::denoise::{Denoiser, NoPrior};
 use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling};
-use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions, StopRule};
+use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions, PnpStop};
 use scatterscope::reconstruct::likelihood::PoissonLikelihood;
-use scatterscope::reconstruct::method::{Method, MethodOptions, RlStop, run_method};
+use scatterscope::reconstruct::method::{Method, MethodOptions, run_method};
 use scatterscope::reconstruct::problem::Problem;
 use scatterscope::reconstruct::{Data, Reconstructor};
 use scatterscope::scene::Scene;
@@ -56,7 +56,7 @@ fn benches(c: &mut Criterion) {
     });
     let opts = AdmmLbfgsOptions {
         max_iters: 10,
-        stop: StopRule::Iterations,
+        stop: PnpStop::Iterations,
         ..Default::default()
     };
     let tv = TotalVariation::default();
@@ -79,10 +79,6 @@ fn benches(c: &mut Criterion) {
     };
     let ffdnet = Ffdnet::new(embedded(), "embedded");
     let defaults = MethodOptions::default();
-    let cv = MethodOptions {
-        rl_stop: RlStop::CrossValidated,
-        ..defaults
-    };
     // PnP (split solver, learned prior) at its defaults; the per-stack
     // choice between rl-stack and PnP (runs both); Richardson-Lucy on the
     // time-summed stack and on the whole stack (every bin with its own
@@ -95,8 +91,13 @@ fn benches(c: &mut Criterion) {
             &defaults,
         ),
         ("auto_256x256x20", Method::Auto, &ffdnet, &defaults),
-        ("rl_sum_cv_256x256x20", Method::RlSum, &NoPrior, &cv),
-        ("rl_stack_cv_256x256x20", Method::RlStack, &NoPrior, &cv),
+        ("rl_sum_cv_256x256x20", Method::RlSum, &NoPrior, &defaults),
+        (
+            "rl_stack_cv_256x256x20",
+            Method::RlStack,
+            &NoPrior,
+            &defaults,
+        ),
     ];
     for (name, method, prior, opts) in cases {
         group.bench_function(name, |b| {

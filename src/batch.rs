@@ -26,6 +26,7 @@
 //! schedules, retries and accounts, and [`collect`] reads the records into
 //! the same summary.
 
+use std::ffi::OsString;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -57,6 +58,37 @@ pub struct JobSpec {
     /// Time limit (`90s`, `30m`, `2h`); none when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub timeout: Option<String>,
+}
+
+impl JobSpec {
+    /// The job's command line after the program's name: its command, its
+    /// input, its arguments and `--out` with its folder under `out`.
+    pub fn command_line(&self, out: &Path) -> Vec<OsString> {
+        let mut line = vec![OsString::from(&self.command)];
+        line.extend(self.input.iter().map(OsString::from));
+        line.extend(self.args.iter().map(OsString::from));
+        line.push("--out".into());
+        line.push(out.join(&self.name).into_os_string());
+        line
+    }
+}
+
+/// Checks every job's command line with `check` (the front end's parser,
+/// and for an acquisition its request) before any job runs; the first
+/// refused is named with the manifest and why.
+pub fn check_jobs(
+    manifest: &Path,
+    jobs: &[JobSpec],
+    out: &Path,
+    check: impl Fn(&[OsString]) -> Result<(), String>,
+) -> Result<(), BatchError> {
+    for job in jobs {
+        check(&job.command_line(out)).map_err(|reason| BatchError::Manifest {
+            path: manifest.to_owned(),
+            reason: format!("job `{}` ({}): {reason}", job.name, job.command),
+        })?;
+    }
+    Ok(())
 }
 
 /// Largest manifest read (a manifest of ten thousand jobs is far smaller).
@@ -349,13 +381,7 @@ pub fn run_job(
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0.0, |d| d.as_secs_f64());
     let mut cmd = std::process::Command::new(exe);
-    cmd.arg(&job.command);
-    if let Some(input) = &job.input {
-        cmd.arg(input);
-    }
-    cmd.args(&job.args)
-        .arg("--out")
-        .arg(&dir)
+    cmd.args(job.command_line(out))
         .env("RAYON_NUM_THREADS", threads.to_string())
         .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::piped())

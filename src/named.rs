@@ -46,7 +46,7 @@ mod tests {
     use super::Named;
     use crate::formats::png::SheetScale;
     use crate::forward::Boundary;
-    use crate::reconstruct::admm_lbfgs::StopRule;
+    use crate::reconstruct::admm_lbfgs::PnpStop;
     use crate::reconstruct::method::{Method, RlStop, Solver};
 
     fn round_trips<T: Named + PartialEq + std::fmt::Debug>() {
@@ -63,7 +63,7 @@ mod tests {
         round_trips::<Method>();
         round_trips::<Solver>();
         round_trips::<RlStop>();
-        round_trips::<StopRule>();
+        round_trips::<PnpStop>();
         round_trips::<Boundary>();
         round_trips::<SheetScale>();
         assert_eq!(Solver::from_name("admm-lbfgs"), Some(Solver::AdmmLbfgs));

@@ -93,7 +93,7 @@ fn stated_z(trace: &scatterscope::reconstruct::trace::Trace) -> String {
 fn auto_runs_pnp_with_the_solver_the_options_choose() {
     use scatterscope::denoise::tv::TotalVariation;
     use scatterscope::forward::poisson_counts;
-    use scatterscope::reconstruct::method::Solver;
+    use scatterscope::reconstruct::method::{Acceleration, RlStop, Solver};
     use scatterscope::{
         Boundary, ForwardModel, KernelStack, Problem, Sampling, Scene, Stack, StackMeta, ValueKind,
     };
@@ -118,7 +118,10 @@ fn auto_runs_pnp_with_the_solver_the_options_choose() {
         };
         opts.split.max_iters = 8;
         opts.admm_lbfgs.max_iters = 8;
-        opts.rl_max_iters = 20;
+        opts.rl_stop = RlStop::CrossValidated {
+            max_iters: 20,
+            acceleration: Acceleration::None,
+        };
         run_method(&problem, method, None, &prior, &opts, None, |_| {}).unwrap()
     };
     let z_of =

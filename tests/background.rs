@@ -83,10 +83,7 @@ fn every_method_fits_the_background_instead_of_brightening_the_object() {
     // bin: ignored, it shows up as extra object brightness.
     let (stack, truth, _) = stack_with_background(0.3, 5);
     let level = truth.mean().unwrap();
-    let opts = MethodOptions {
-        rl_iters: 50,
-        ..Default::default()
-    };
+    let opts = MethodOptions::default();
     for method in [Method::RlSum, Method::ScaledCounts, Method::Pnp] {
         let mean_level = |choice| {
             let problem =

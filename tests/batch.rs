@@ -236,11 +236,27 @@ fn a_manifest_with_mistakes_is_refused_naming_them() {
             "[[job]]\nname = \"../up\"\ncommand = \"psf\"\n",
             "plain folder name",
         ),
+        // Checked as the command line checks them, before any job runs.
+        (
+            "[[job]]\nname = \"ok\"\ncommand = \"psf\"\n[[job]]\nname = \"typo\"\ncommand = \"psf\"\nargs = [\"--mu-z\", \"1\"]\n",
+            "job `typo` (psf): unexpected argument '--mu-z'",
+        ),
+        (
+            "[[job]]\nname = \"ok\"\ncommand = \"psf\"\n[[job]]\nname = \"lab\"\ncommand = \"acquire\"\nargs = [\"--device\", \"mock\", \"--sync-level\", \"-50\"]\n",
+            "job `lab` (acquire): --sync-level set a PicoQuant device",
+        ),
     ] {
         let path = dir.path().join("m.toml");
         std::fs::write(&path, body).unwrap();
-        let o = run(&["batch", path.to_str().unwrap(), "--out", "/tmp/never"]);
+        let out = dir.path().join("out");
+        let o = run(&[
+            "batch",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
         assert!(!o.status.success());
+        assert!(!out.exists(), "{words}: a job ran");
         assert!(
             text(&o).contains(words) && text(&o).contains("m.toml"),
             "{words}: {}",

@@ -23,10 +23,7 @@ fn ignoring_the_background_costs_psnr_and_every_variant_is_reported() {
         .into(),
     );
     let tv = TotalVariation::default();
-    let mut opts = MethodOptions {
-        rl_iters: 100,
-        ..Default::default()
-    };
+    let mut opts = MethodOptions::default();
     opts.split.max_iters = 40;
     let (b, rows) = instrument_costs(
         &Scene::parse("disks"),

@@ -74,10 +74,7 @@ fn measured(s: &Setup, background: f64, seed: u64) -> (Stack, Array2<f64>) {
 
 /// Every method's output on `stack` with `choice`: finite, and its mean.
 fn levels(stack: &Stack, s: &Setup, choice: BackgroundChoice) -> Vec<(Method, f64)> {
-    let opts = MethodOptions {
-        rl_iters: 40,
-        ..Default::default()
-    };
+    let opts = MethodOptions::default();
     let mut out = Vec::new();
     for method in [Method::RlSum, Method::ScaledCounts, Method::Pnp] {
         let problem = Problem::new(stack, s, Sampling::Integrated, Boundary::Sensor).unwrap();

@@ -204,7 +204,7 @@ fn each_method_declares_the_working_memory_it_uses() {
     use scatterscope::denoise::tv::TotalVariation;
     use scatterscope::forward::poisson_counts;
     use scatterscope::reconstruct::method::{
-        Method, MethodOptions, MethodPlan, Solver, run_method,
+        Acceleration, Method, MethodOptions, MethodPlan, RlStop, Solver, run_method,
     };
     use scatterscope::{
         Boundary, ForwardModel, KernelStack, Named, Problem, Scene, StackMeta, ValueKind,
@@ -245,7 +245,10 @@ fn each_method_declares_the_working_memory_it_uses() {
             };
             opts.split.max_iters = 4;
             opts.admm_lbfgs.max_iters = 4;
-            opts.rl_max_iters = 10;
+            opts.rl_stop = RlStop::CrossValidated {
+                max_iters: 10,
+                acceleration: Acceleration::None,
+            };
             let declared = MethodPlan::new(method, bin, k, &prior, &opts)
                 .unwrap()
                 .working_bytes(&problem);

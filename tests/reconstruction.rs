@@ -14,7 +14,7 @@ use scatterscope::forward::{Boundary, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup, TimeBins};
 use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions};
 use scatterscope::reconstruct::data::validate_counts;
-use scatterscope::reconstruct::em::{Acceleration, Stopping};
+use scatterscope::reconstruct::em::{Acceleration, RlStop};
 use scatterscope::reconstruct::likelihood::{PoissonLikelihood, SurrogateLog};
 use scatterscope::reconstruct::operator::Convolution;
 use scatterscope::reconstruct::rl_stack::RlStack;
@@ -39,7 +39,7 @@ struct Case {
 }
 
 /// Richardson-Lucy's cross-validated stop searched up to 400 iterations.
-const CV_400: Stopping = Stopping::CrossValidated {
+const CV_400: RlStop = RlStop::CrossValidated {
     max_iters: 400,
     acceleration: Acceleration::None,
 };
@@ -162,7 +162,7 @@ fn cross_validated_rl_stops_early_on_smooth_light_and_late_on_sharp_edges() {
         // Within a dB of plain RL's best iteration chosen with the truth.
         let plain = scored(
             &RlSum {
-                stop: Stopping::After(400),
+                stop: RlStop::After(400),
             },
             &c,
         );
@@ -187,7 +187,7 @@ fn cross_validated_rl_refuses_fractional_counts_and_keeps_zero_light_zero() {
     let mut scaled = c.counts.clone();
     scaled[[2, 5, 7]] += 0.5;
     let zeros = Array3::zeros(c.counts.dim());
-    let stop = Stopping::CrossValidated {
+    let stop = RlStop::CrossValidated {
         max_iters: 50,
         acceleration: Acceleration::None,
     };
@@ -217,7 +217,7 @@ fn whole_stack_rl_on_one_bin_is_richardson_lucy_and_its_likelihood_falls() {
     let k = 3;
     let one = c.counts.slice(ndarray::s![k..k + 1, .., ..]).to_owned();
     let on_one = |m: &dyn Reconstructor| reconstruct(m, &c.model, &one, &[k], None).unwrap();
-    let stop = Stopping::After(25);
+    let stop = RlStop::After(25);
     let (stack, plain) = (on_one(&RlStack { stop }), on_one(&RlSum { stop }));
     let scale = plain.image.iter().fold(0.0f64, |a, &v| a.max(v));
     let diff = (&stack.image - &plain.image)
@@ -228,7 +228,7 @@ fn whole_stack_rl_on_one_bin_is_richardson_lucy_and_its_likelihood_falls() {
     // keeps sum_k sum(H_k o) = sum(m) (periodic model: H^T 1 is the mass).
     let r = reconstruct(
         &RlStack {
-            stop: Stopping::After(40),
+            stop: RlStop::After(40),
         },
         &c.model,
         &c.counts,
@@ -283,7 +283,7 @@ fn richardson_lucy_conserves_counts_and_improves_on_raw() {
     let op = Convolution::from_bins(&c.model, &c.bins);
     let r = scored(
         &RlSum {
-            stop: Stopping::After(30),
+            stop: RlStop::After(30),
         },
         &c,
     );
@@ -308,7 +308,7 @@ fn pnp_on_the_stack_beats_richardson_lucy_on_the_sum() {
     );
     let rl = scored(
         &RlSum {
-            stop: Stopping::After(200),
+            stop: RlStop::After(200),
         },
         &c,
     );
@@ -411,7 +411,7 @@ fn extreme_inputs_give_finite_images() {
     assert!(r.trace.notes.iter().any(|n| n.contains("no photons")));
     let rl = reconstruct(
         &RlSum {
-            stop: Stopping::After(5),
+            stop: RlStop::After(5),
         },
         &c.model,
         &zeros,
@@ -427,7 +427,7 @@ fn extreme_inputs_give_finite_images() {
     assert!(finite_non_negative(
         &reconstruct(
             &RlSum {
-                stop: Stopping::After(20)
+                stop: RlStop::After(20)
             },
             &c.model,
             &one,
@@ -464,7 +464,7 @@ fn extreme_inputs_give_finite_images() {
     for counts in [&one, &bright] {
         let r = reconstruct(
             &RlStack {
-                stop: Stopping::After(20),
+                stop: RlStop::After(20),
             },
             &c.model,
             counts,
@@ -477,7 +477,7 @@ fn extreme_inputs_give_finite_images() {
     }
     let r = reconstruct(
         &RlStack {
-            stop: Stopping::CrossValidated {
+            stop: RlStop::CrossValidated {
                 max_iters: 50,
                 acceleration: Acceleration::None,
             },
@@ -524,7 +524,7 @@ fn nearly_delta_kernel_recovers_the_object() {
     // limits it (measured 53.0 dB).
     let rl = reconstruct(
         &RlStack {
-            stop: Stopping::CrossValidated {
+            stop: RlStop::CrossValidated {
                 max_iters: 200,
                 acceleration: Acceleration::None,
             },
@@ -577,7 +577,7 @@ fn nan_and_negative_counts_are_rejected_with_position() {
     assert!(
         reconstruct(
             &RlSum {
-                stop: Stopping::After(3)
+                stop: RlStop::After(3)
             },
             &c.model,
             &bad,

@@ -14,7 +14,7 @@ use scatterscope::denoise::tv::TotalVariation;
 use scatterscope::denoise::{Denoiser, NoPrior};
 use scatterscope::forward::{Boundary, EDGE_TAIL, ForwardModel, poisson_counts};
 use scatterscope::physics::{KernelStack, Preset, Sampling, Setup};
-use scatterscope::reconstruct::em::Stopping;
+use scatterscope::reconstruct::em::RlStop;
 use scatterscope::reconstruct::likelihood::PoissonLikelihood;
 use scatterscope::reconstruct::rl_sum::RlSum;
 use scatterscope::reconstruct::split::{Split, SplitOptions, poisson_prox};
@@ -383,7 +383,7 @@ fn split_solver_starts_from_richardson_lucy_on_the_summed_stack_when_asked() {
     let counts = poisson_counts(&model.expected(grid.view()).counts, 11);
     let rl = reconstruct(
         &RlSum {
-            stop: Stopping::After(30),
+            stop: RlStop::After(30),
         },
         &model,
         &counts,

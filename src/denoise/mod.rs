@@ -30,7 +30,7 @@ pub trait Denoiser: Sync {
     /// Whether the denoiser tends to the identity as sigma -> 0 (TV, whose
     /// weight is proportional to sigma, and the identity itself). PnP-ADMM's
     /// primal residual `||o - v||` then falls to zero with sigma and carries
-    /// no stopping signal, so [`crate::reconstruct::admm_lbfgs::StopRule::Auto`]
+    /// no stopping signal, so [`crate::reconstruct::admm_lbfgs::PnpStop::Auto`]
     /// stops such priors on the deviance instead.
     fn fades_to_identity(&self) -> bool {
         true

@@ -29,8 +29,8 @@ use ndarray::Array2;
 use super::cpu::{OtherProcesses, VIEW_THREAD_PREFIX, describe, threads_cpu_s};
 use super::state::{Image, LiveReconstruction, LiveState, TracePoint};
 use super::{lower_priority, view_priority};
+use crate::reconstruct::em::RlStop;
 use crate::reconstruct::input::{InputSpec, prepare};
-use crate::reconstruct::method::MethodOptions;
 use crate::reconstruct::run::Reconstruction;
 use crate::reconstruct::series::Series;
 use crate::stack::Stack;
@@ -261,7 +261,7 @@ const SNAPSHOT_MIN_ITERATIONS: usize = 2 * crate::reconstruct::em::CV_PATIENCE;
 /// search is the default's), within [`SNAPSHOT_MIN_ITERATIONS`] and the
 /// default cap.
 fn snapshot_iterations(per_iteration_s: Option<f64>) -> usize {
-    let cap = MethodOptions::default().rl_max_iters;
+    let cap = RlStop::DEFAULT_MAX_ITERS;
     per_iteration_s.filter(|t| *t > 0.0).map_or(cap, |t| {
         ((SNAPSHOT_SEARCH_S / t) as usize).clamp(SNAPSHOT_MIN_ITERATIONS, cap)
     })
@@ -537,7 +537,7 @@ impl Reconstructor {
                 // A snapshot still at work ends first (the cores are free
                 // now), and this one continues its search.
                 let mut series = series.series();
-                let max_iters = MethodOptions::default().rl_max_iters;
+                let max_iters = RlStop::DEFAULT_MAX_ITERS;
                 // The last snapshot's search, if it stopped by itself: the
                 // whole run's needs about as many; else at most the cap
                 // (and the start).

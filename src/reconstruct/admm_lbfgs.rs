@@ -19,7 +19,7 @@
 //! Output: `v`, the iterate the prior has seen; at convergence `o = v`.
 //!
 //! Stopping: an iteration cap, primal and dual residual tolerances, and by
-//! default a rule that needs no truth ([`StopRule::Auto`]). As sigma
+//! default a rule that needs no truth ([`PnpStop::Auto`]). As sigma
 //! keeps shrinking, ADMM eventually fits noise and the image degrades, so
 //! some iterate must be chosen from the data alone. Two facts shape the rule
 //! (measured on 150-iteration traces, BENCHMARKS.md):
@@ -42,7 +42,7 @@
 //! `patience` (10) iterations. It needs a prior that stays a prior at small
 //! sigma: TV's weight is proportional to sigma, so with TV `||o - v||`
 //! falls steadily to zero and the rule would run to the cap (0.5-1 dB past
-//! the best iterate). The default [`StopRule::Auto`] therefore uses it for
+//! the best iterate). The default [`PnpStop::Auto`] therefore uses it for
 //! the learned prior and the smallest-deviance rule (patience 30) for priors
 //! that fade to the identity. How close each comes to the best iteration
 //! chosen with the truth is measured in BENCHMARKS.md.
@@ -66,7 +66,7 @@ use crate::named::named;
 
 /// When ADMM stops, besides the iteration cap and residual tolerances.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum StopRule {
+pub enum PnpStop {
     /// `agreement` for priors that do not fade to the identity at small
     /// sigma (the learned one), `deviance` for those that do (TV, identity).
     Auto,
@@ -80,7 +80,7 @@ pub enum StopRule {
     Iterations,
 }
 
-named!(StopRule {
+named!(PnpStop {
     Auto => "auto",
     Agreement => "agreement",
     Deviance => "deviance",
@@ -103,7 +103,7 @@ pub struct AdmmLbfgsOptions {
     /// ... and the dual residual lambda ||v - v_prev|| / sqrt(N) below this.
     pub dual_tol: f64,
     /// Data-driven stopping rule.
-    pub stop: StopRule,
+    pub stop: PnpStop,
     /// Iterations without a new pick before the stopping rule stops; `None`
     /// takes the rule's own default (agreement 10, deviance 30).
     pub patience: Option<usize>,
@@ -126,7 +126,7 @@ impl Default for AdmmLbfgsOptions {
             max_iters: 100,
             primal_tol: 1e-4,
             dual_tol: 1e-4,
-            stop: StopRule::Auto,
+            stop: PnpStop::Auto,
             patience: None,
             lbfgs_iters: 20,
             lbfgs_memory: 7,
@@ -296,19 +296,19 @@ fn admm_lbfgs(
     }
     let deviance = ExpectedDeviance::shared();
     let stop = match opts.stop {
-        StopRule::Auto if denoiser.fades_to_identity() => StopRule::Deviance,
-        StopRule::Auto => StopRule::Agreement,
+        PnpStop::Auto if denoiser.fades_to_identity() => PnpStop::Deviance,
+        PnpStop::Auto => PnpStop::Agreement,
         rule => rule,
     };
     let patience = opts.patience.unwrap_or(match stop {
-        StopRule::Deviance => 30,
+        PnpStop::Deviance => 30,
         _ => 10,
     });
-    if stop != StopRule::Iterations {
+    if stop != PnpStop::Iterations {
         run.note(format!(
             "stopping rule: {} with patience {patience}",
             match stop {
-                StopRule::Agreement =>
+                PnpStop::Agreement =>
                     "agreement (smallest primal residual among iterates the data cannot reject)",
                 _ => "deviance (smallest Poisson deviance)",
             }
@@ -396,7 +396,7 @@ fn admm_lbfgs(
         }
         run.push(row);
         lambda *= opts.lambda_step;
-        if stop != StopRule::Iterations {
+        if stop != PnpStop::Iterations {
             smallest_deviance = smallest_deviance.min(check.deviance);
             // Eligible: within one noise standard deviation of the smallest
             // deviance seen (a later iterate can void an earlier pick) and,
@@ -404,14 +404,14 @@ fn admm_lbfgs(
             // DISCREPANCY_Z standard deviations above what the noise gives.
             let relative = smallest_deviance + check.sd;
             let tolerance = match stop {
-                StopRule::Agreement => relative.min(check.expected + DISCREPANCY_Z * check.sd),
+                PnpStop::Agreement => relative.min(check.expected + DISCREPANCY_Z * check.sd),
                 _ => relative,
             };
             if pick.as_ref().is_some_and(|p| p.deviance > tolerance) {
                 pick = None;
             }
             let score = match stop {
-                StopRule::Agreement => primal,
+                PnpStop::Agreement => primal,
                 _ => check.deviance,
             };
             if check.deviance <= tolerance && pick.as_ref().is_none_or(|p| score < p.score) {
@@ -428,7 +428,7 @@ fn admm_lbfgs(
                 stopped = format!(
                     "{} for {} iterations; returning iteration {} (deviance {:.1}, {:.1} +- {:.1} expected from Poisson noise, smallest seen {smallest_deviance:.1})",
                     match stop {
-                        StopRule::Agreement =>
+                        PnpStop::Agreement =>
                             "no smaller primal residual among the iterates the data cannot reject",
                         _ => "deviance has not decreased",
                     },
@@ -463,7 +463,7 @@ fn admm_lbfgs(
     let (output, iteration) = match pick {
         Some(p) => (p.image, p.iteration),
         None => {
-            if stop == StopRule::Agreement {
+            if stop == PnpStop::Agreement {
                 run.note(format!(
                     "no iterate passed the discrepancy test (deviance at most {DISCREPANCY_Z} noise standard deviations above its expectation); returning the last"
                 ));

@@ -18,9 +18,9 @@ pub const DENOMINATOR_GUARD: f64 = 1e-6;
 pub const CV_PATIENCE: usize = 25;
 
 /// When Richardson-Lucy stops (its only regularisation is its iteration
-/// count).
+/// count). By name (settings, flags, reports): `fixed` or `cv`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Stopping {
+pub enum RlStop {
     /// After this many iterations.
     After(usize),
     /// At the iteration chosen by two-fold cross-validation on thinned
@@ -31,6 +31,43 @@ pub enum Stopping {
         /// How the search steps.
         acceleration: Acceleration,
     },
+}
+
+impl RlStop {
+    /// Iterations of a fixed stop unless set.
+    pub const DEFAULT_ITERS: usize = 200;
+    /// The most iterations the cross-validated stop searches unless set.
+    pub const DEFAULT_MAX_ITERS: usize = 1000;
+
+    /// The same rule with its counts: `iters` for a fixed stop,
+    /// `max_iters` and `acceleration` for the cross-validated one (the
+    /// other rule's settings are not used).
+    pub fn with_counts(self, iters: usize, max_iters: usize, acceleration: Acceleration) -> Self {
+        match self {
+            Self::After(_) => Self::After(iters),
+            Self::CrossValidated { .. } => Self::CrossValidated {
+                max_iters,
+                acceleration,
+            },
+        }
+    }
+}
+
+/// The rules by name, each with its default counts.
+impl crate::named::Named for RlStop {
+    const ALL: &'static [Self] = &[
+        Self::After(Self::DEFAULT_ITERS),
+        Self::CrossValidated {
+            max_iters: Self::DEFAULT_MAX_ITERS,
+            acceleration: Acceleration::None,
+        },
+    ];
+    fn name(self) -> &'static str {
+        match self {
+            Self::After(_) => "fixed",
+            Self::CrossValidated { .. } => "cv",
+        }
+    }
 }
 
 /// The multiplicative EM step shared by both Richardson-Lucy variants:
@@ -72,9 +109,10 @@ pub(crate) fn fixed_steps(
 }
 
 /// How the cross-validated search moves between Richardson-Lucy steps.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Acceleration {
-    /// Plain EM steps, each from the last.
+    /// Plain EM steps, each from the last (the default).
+    #[default]
     None,
     /// Vector extrapolation (Biggs and Andrews 1997, as in MATLAB's
     /// `deconvlucy`): each step starts from the last iterate pushed along

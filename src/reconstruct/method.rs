@@ -6,8 +6,7 @@ use super::ReconstructError;
 use super::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions};
 use super::auto::Auto;
 use super::data::Data;
-pub use super::em::Acceleration;
-use super::em::Stopping;
+pub use super::em::{Acceleration, RlStop};
 use super::problem::Problem;
 use super::rl_stack::RlStack;
 use super::rl_sum::RlSum;
@@ -76,26 +75,9 @@ named!(Solver {
     AdmmLbfgs => "admm-lbfgs",
 });
 
-/// When Richardson-Lucy stops (RL's only regularisation is its iteration
-/// count).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RlStop {
-    /// After `rl_iters` iterations.
-    Fixed,
-    /// At the iteration chosen by two-fold cross-validation on thinned
-    /// halves of the counts, searched up to `rl_max_iters`
-    /// ([`super::rl_sum::RlSum`]).
-    CrossValidated,
-}
-
 named!(Acceleration {
     None => "none",
     Extrapolated => "extrapolated",
-});
-
-named!(RlStop {
-    Fixed => "fixed",
-    CrossValidated => "cv",
 });
 
 /// Settings of every method.
@@ -107,15 +89,8 @@ pub struct MethodOptions {
     pub split: SplitOptions,
     /// Settings of Algorithm 1 (L-BFGS solver).
     pub admm_lbfgs: AdmmLbfgsOptions,
-    /// Richardson-Lucy iterations (with [`RlStop::Fixed`]).
-    pub rl_iters: usize,
     /// When Richardson-Lucy stops.
     pub rl_stop: RlStop,
-    /// The most Richardson-Lucy iterations the cross-validated stop
-    /// searches.
-    pub rl_max_iters: usize,
-    /// How the cross-validated search steps.
-    pub rl_acceleration: Acceleration,
 }
 
 impl Default for MethodOptions {
@@ -131,10 +106,10 @@ impl Default for MethodOptions {
             solver: Solver::Split,
             split: SplitOptions::default(),
             admm_lbfgs: AdmmLbfgsOptions::default(),
-            rl_iters: 200,
-            rl_stop: RlStop::CrossValidated,
-            rl_max_iters: 1000,
-            rl_acceleration: Acceleration::None,
+            rl_stop: RlStop::CrossValidated {
+                max_iters: RlStop::DEFAULT_MAX_ITERS,
+                acceleration: Acceleration::default(),
+            },
         }
     }
 }
@@ -202,17 +177,6 @@ impl MethodOptions {
         Ok(())
     }
 
-    /// When Richardson-Lucy stops, with its count.
-    pub fn rl_stopping(&self) -> Stopping {
-        match self.rl_stop {
-            RlStop::Fixed => Stopping::After(self.rl_iters),
-            RlStop::CrossValidated => Stopping::CrossValidated {
-                max_iters: self.rl_max_iters,
-                acceleration: self.rl_acceleration,
-            },
-        }
-    }
-
     /// The PnP-ADMM solver these options choose, with `denoiser` as its
     /// prior.
     pub fn pnp<'a>(&self, denoiser: &'a dyn Denoiser) -> Box<dyn Reconstructor + 'a> {
@@ -277,12 +241,8 @@ impl<'a> MethodPlan<'a> {
                 ))
             })
         };
-        let rl = RlSum {
-            stop: opts.rl_stopping(),
-        };
-        let rl_stack = RlStack {
-            stop: opts.rl_stopping(),
-        };
+        let rl = RlSum { stop: opts.rl_stop };
+        let rl_stack = RlStack { stop: opts.rl_stop };
         let (algorithm, view): (Box<dyn Reconstructor + 'a>, View) = match method {
             Method::Auto => (
                 Box::new(Auto {

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use super::data::{Data, flat_level};
 use super::em::{
-    Acceleration, DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps, half_scores,
+    Acceleration, DENOMINATOR_GUARD, RlStop, cv_search, em_multiply, fixed_steps, half_scores,
 };
 use super::error::ReconstructError;
 use super::run::{Estimate, Reconstructor, Run, WorkShape, grid_note};
@@ -26,7 +26,7 @@ use crate::time_basis::{BASIS_TOLERANCE, TimeBasis};
 
 /// Whole-stack Richardson-Lucy.
 ///
-/// With [`Stopping::CrossValidated`] it chooses its own iteration count
+/// With [`RlStop::CrossValidated`] it chooses its own iteration count
 /// without a truth: each bin's counts are thinned into two independent
 /// halves ([`thin_halves`], one seed per bin), the iteration runs on each
 /// half, and after every step each half's estimate predicts the other
@@ -37,7 +37,7 @@ use crate::time_basis::{BASIS_TOLERANCE, TimeBasis};
 #[derive(Debug, Clone, Copy)]
 pub struct RlStack {
     /// When it stops.
-    pub stop: Stopping,
+    pub stop: RlStop,
 }
 
 impl Reconstructor for RlStack {
@@ -51,8 +51,8 @@ impl Reconstructor for RlStack {
         run: &mut Run<'_>,
     ) -> Result<Estimate, ReconstructError> {
         match self.stop {
-            Stopping::After(iterations) => fixed(data, iterations, run),
-            Stopping::CrossValidated {
+            RlStop::After(iterations) => fixed(data, iterations, run),
+            RlStop::CrossValidated {
                 max_iters,
                 acceleration,
             } => cross_validated(data, max_iters, acceleration, run),

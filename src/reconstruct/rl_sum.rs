@@ -7,7 +7,7 @@ use ndarray::{Array2, Array3, Axis};
 
 use super::data::{Data, flat_level};
 use super::em::{
-    Acceleration, CvBest, DENOMINATOR_GUARD, Stopping, cv_search, em_multiply, fixed_steps,
+    Acceleration, CvBest, DENOMINATOR_GUARD, RlStop, cv_search, em_multiply, fixed_steps,
     half_scores,
 };
 use super::error::ReconstructError;
@@ -20,7 +20,7 @@ use crate::poisson::thinning::{THINNING_SEED, thin_halves};
 /// Richardson-Lucy on the sum of the data's bins (one bin: the single-bin
 /// baseline; all bins: RL on the time-summed image).
 ///
-/// With [`Stopping::CrossValidated`] it chooses its own iteration count
+/// With [`RlStop::CrossValidated`] it chooses its own iteration count
 /// without a truth, by two-fold cross-validation: the summed counts are
 /// thinned into two independent halves ([`thin_halves`]), RL runs on each
 /// from its flat object, and after every iteration each half's estimate
@@ -38,7 +38,7 @@ use crate::poisson::thinning::{THINNING_SEED, thin_halves};
 #[derive(Debug, Clone, Copy)]
 pub struct RlSum {
     /// When it stops.
-    pub stop: Stopping,
+    pub stop: RlStop,
 }
 
 impl Reconstructor for RlSum {
@@ -52,7 +52,7 @@ impl Reconstructor for RlSum {
         run: &mut Run<'_>,
     ) -> Result<Estimate, ReconstructError> {
         match self.stop {
-            Stopping::After(iterations) => {
+            RlStop::After(iterations) => {
                 let Some(image) = rl_steps(data.model, data.counts, data.bins, iterations, run)
                 else {
                     return Ok(run.no_photons(data.model.sensor_shape()));
@@ -62,7 +62,7 @@ impl Reconstructor for RlSum {
                     iteration: iterations,
                 })
             }
-            Stopping::CrossValidated {
+            RlStop::CrossValidated {
                 max_iters,
                 acceleration,
             } => cross_validated(data, max_iters, acceleration, run),

@@ -53,8 +53,8 @@ pub fn rl_fixed_label(iterations: usize) -> String {
 /// Label of Richardson-Lucy's default output under `opts`: its stop.
 pub fn rl_default_label(opts: &MethodOptions) -> String {
     match opts.rl_stop {
-        RlStop::CrossValidated => RL_CV.into(),
-        RlStop::Fixed => rl_fixed_label(opts.rl_iters),
+        RlStop::CrossValidated { .. } => RL_CV.into(),
+        RlStop::After(iterations) => rl_fixed_label(iterations),
     }
 }
 
@@ -319,10 +319,10 @@ named!(BenchMethod {
 
 /// Runs the `methods` on one case: every PnP entry, Richardson-Lucy on
 /// the time-summed stack and on the whole stack with their stop chosen by
-/// cross-validation (searched up to `opts.rl_max_iters`), `auto`; and
-/// always RL on the time-summed stack for `rl_iters` iterations (the
-/// output at `opts.rl_iters` is RL's default, the best iteration by truth
-/// its oracle). `on_trace` gets each PnP, cross-validated RL and `auto`
+/// cross-validation (as `opts.rl_stop` sets it when it is `cv`, else
+/// with its default search), `auto`; and always RL on the time-summed
+/// stack for `rl_best_iters` iterations (its output at `rl_fixed_iters`
+/// is RL's fixed-count row, the best iteration by truth its oracle). `on_trace` gets each PnP, cross-validated RL and `auto`
 /// trace (PSNR against wall time) with its label.
 #[allow(clippy::too_many_arguments)]
 pub fn run_case(
@@ -332,7 +332,8 @@ pub fn run_case(
     entries: &[PnpEntry],
     methods: &[BenchMethod],
     opts: &MethodOptions,
-    rl_iters: usize,
+    rl_best_iters: usize,
+    rl_fixed_iters: usize,
     mut on_trace: impl FnMut(&str, &Trace),
 ) -> Result<Vec<BenchRow>, ReportError> {
     let truth = case.truth.view();
@@ -390,7 +391,10 @@ pub fn run_case(
         )
     };
     let cross_validated = MethodOptions {
-        rl_stop: RlStop::CrossValidated,
+        rl_stop: match opts.rl_stop {
+            cv @ RlStop::CrossValidated { .. } => cv,
+            RlStop::After(_) => RlStop::from_name("cv").expect("a rule's name"),
+        },
         ..*opts
     };
     for (wanted, method, label) in [
@@ -423,8 +427,7 @@ pub fn run_case(
     let rl = run_rl(
         Method::RlSum,
         &MethodOptions {
-            rl_iters: rl_iters.max(opts.rl_iters),
-            rl_stop: RlStop::Fixed,
+            rl_stop: RlStop::After(rl_best_iters.max(rl_fixed_iters)),
             ..*opts
         },
     )?;
@@ -445,15 +448,15 @@ pub fn run_case(
         .trace
         .rows
         .iter()
-        .find(|r| r.iteration == opts.rl_iters)
+        .find(|r| r.iteration == rl_fixed_iters)
         .expect("RL ran at least its default iterations");
     let mut default = best.clone();
-    default.method = rl_fixed_label(opts.rl_iters);
+    default.method = rl_fixed_label(rl_fixed_iters);
     default.psnr = at_default.psnr.unwrap_or(f64::NAN);
     default.ssim = at_default.ssim.unwrap_or(f64::NAN);
     default.wall_s = at_default.wall_s;
-    default.iterations = opts.rl_iters;
-    default.output_iteration = opts.rl_iters;
+    default.iterations = rl_fixed_iters;
+    default.output_iteration = rl_fixed_iters;
     rows.push(default);
     rows.push(best);
     Ok(rows)
@@ -809,6 +812,8 @@ pub struct BenchConfig {
     pub methods: Vec<BenchMethod>,
     /// Richardson-Lucy iterations searched for its best iteration.
     pub rl_best_iters: usize,
+    /// Iterations of Richardson-Lucy's fixed-count row.
+    pub rl_fixed_iters: usize,
     /// Side of the simulated object grid; the sensor sees its centre.
     pub object_px: usize,
     /// The physics at level 1.
@@ -897,6 +902,7 @@ pub fn run_benchmark(
                 &cfg.methods,
                 &cfg.opts,
                 cfg.rl_best_iters,
+                cfg.rl_fixed_iters,
                 |label, trace| {
                     let file = traces.join(format!(
                         "{}_{level}_{}.csv",

@@ -84,7 +84,8 @@ pub struct SceneReport {
 }
 
 /// Runs every method on `scene` simulated with `setup`, writing images,
-/// traces and plots into `dir`. `slice_step` picks every n-th bin for the
+/// traces and plots into `dir`; Richardson-Lucy runs `rl_iters`
+/// iterations. `slice_step` picks every n-th bin for the
 /// single-bin methods. `comparison` adds whole-stack PnP with a second
 /// prior (labelled `pnp (NAME prior)`, never counted as a baseline).
 /// `progress` receives a line per finished method.
@@ -97,6 +98,7 @@ pub fn run_scene(
     denoiser: &dyn Denoiser,
     comparison: Option<(&str, &dyn Denoiser)>,
     opts: &MethodOptions,
+    rl_iters: usize,
     slice_step: usize,
     dir: &Path,
     mut progress: impl FnMut(&str),
@@ -122,7 +124,7 @@ pub fn run_scene(
     // The baselines are ranked by their best iteration chosen with the
     // truth, so Richardson-Lucy runs its fixed count here.
     let opts = &MethodOptions {
-        rl_stop: RlStop::Fixed,
+        rl_stop: RlStop::After(rl_iters),
         ..*opts
     };
     let run_with = |method: Method,
@@ -475,6 +477,9 @@ pub struct ReportConfig<'a> {
     pub comparison: Option<(&'a str, &'a dyn Denoiser)>,
     /// The methods' settings.
     pub opts: MethodOptions,
+    /// Richardson-Lucy's iterations: the baselines run a fixed count, to
+    /// be ranked by their best iteration chosen with the truth.
+    pub rl_iters: usize,
     /// Run the single-bin methods on every n-th bin only.
     pub slice_step: usize,
     /// With a share: also measure each scene with an instrument response
@@ -520,6 +525,7 @@ pub fn run_report(
             cfg.denoiser,
             cfg.comparison,
             &cfg.opts,
+            cfg.rl_iters,
             cfg.slice_step,
             &dir,
             &mut progress,

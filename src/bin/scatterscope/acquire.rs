@@ -242,7 +242,7 @@ fn mock_spec(args: &AcquireArgs) -> MockSpec {
 }
 
 /// The request the flags make.
-fn request(args: &AcquireArgs) -> Request {
+pub fn request(args: &AcquireArgs) -> Request {
     Request {
         duration: args.duration,
         physics: args.physics.overrides(),

@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use scatterscope::batch::{
-    LocalRun, Outcome, SlurmOptions, collect, read_manifest, run_job, run_local, submit_slurm,
-    summary,
+    LocalRun, Outcome, SlurmOptions, check_jobs, collect, read_manifest, run_job, run_local,
+    submit_slurm, summary,
 };
 
 use crate::shared_args::progress;
@@ -18,6 +18,9 @@ use crate::shared_args::progress;
 /// scatterscope command), optional `name` (its folder under --out),
 /// `input` (first argument; relative to the manifest) and `args`. Each job
 /// writes into OUT/NAME with its log (job.log) and record (batch.json).
+/// Every job's command line is checked first (its flags; an
+/// acquisition's settings for its device), and a manifest with a refused
+/// one runs nothing.
 #[derive(Debug, clap::Args)]
 pub struct BatchArgs {
     /// The manifest (TOML).
@@ -97,6 +100,8 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
     if args.collect {
         return print_summary(&collect(&jobs, &args.out), &args.out);
     }
+    // Every job's command line, checked before any job runs.
+    check_jobs(&args.manifest, &jobs, &args.out, crate::check_line)?;
     if args.slurm {
         let opts = SlurmOptions {
             partition: args.partition.clone(),

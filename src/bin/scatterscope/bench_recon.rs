@@ -114,6 +114,7 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
         time_summed: !args.no_sum,
         methods: args.methods.clone(),
         rl_best_iters: args.rl_best_iters,
+        rl_fixed_iters: args.recon.rl_iters,
         object_px: args.object_px,
         setup: args.physics.resolve()?,
         opts: args.recon.options()?,

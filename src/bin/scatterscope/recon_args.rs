@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use scatterscope::denoise::Denoiser;
 use scatterscope::denoise::prior::{PriorKind, PriorSpec};
 use scatterscope::named::Named;
-use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgsOptions, StopRule};
+use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgsOptions, PnpStop};
 use scatterscope::reconstruct::method::{Acceleration, MethodOptions, RlStop, Solver};
 use scatterscope::reconstruct::split::SplitOptions;
 
@@ -109,8 +109,8 @@ pub struct ReconArgs {
     pub max_iters: Option<usize>,
     /// admm-lbfgs stopping rule: agreement (smallest primal residual the
     /// noise allows), deviance, iterations, or auto (agreement for FFDNet).
-    #[arg(long, value_parser = choice::<StopRule>(), default_value = AdmmLbfgsOptions::default().stop.name())]
-    pub stop: StopRule,
+    #[arg(long, value_parser = choice::<PnpStop>(), default_value = AdmmLbfgsOptions::default().stop.name())]
+    pub stop: PnpStop,
     /// admm-lbfgs: iterations without a new pick [default: 10, deviance 30].
     #[arg(long)]
     pub patience: Option<usize>,
@@ -127,18 +127,18 @@ pub struct ReconArgs {
     #[arg(long, default_value_t = AdmmLbfgsOptions::default().eps)]
     pub eps: f64,
     /// Richardson-Lucy iterations (with --rl-stop fixed).
-    #[arg(long, default_value_t = MethodOptions::default().rl_iters)]
+    #[arg(long, default_value_t = RlStop::DEFAULT_ITERS)]
     pub rl_iters: usize,
     /// When Richardson-Lucy stops: fixed (--rl-iters) or cv (two-fold
     /// cross-validation on thinned halves of the counts).
     #[arg(long, value_parser = choice::<RlStop>(), default_value = MethodOptions::default().rl_stop.name())]
     pub rl_stop: RlStop,
     /// The most iterations --rl-stop cv searches.
-    #[arg(long, default_value_t = MethodOptions::default().rl_max_iters)]
+    #[arg(long, default_value_t = RlStop::DEFAULT_MAX_ITERS)]
     pub rl_max_iters: usize,
     /// How --rl-stop cv steps: none (plain EM steps) or extrapolated
     /// (vector extrapolation, the likelihood never going up).
-    #[arg(long, value_parser = choice::<Acceleration>(), default_value = MethodOptions::default().rl_acceleration.name())]
+    #[arg(long, value_parser = choice::<Acceleration>(), default_value = Acceleration::default().name())]
     pub rl_acceleration: Acceleration,
 }
 
@@ -157,9 +157,9 @@ impl ReconArgs {
             dual_tol: self.residual_tol,
             lbfgs_memory: AdmmLbfgsOptions::default().lbfgs_memory,
             lbfgs_grad_tol: self.lbfgs_tol);
-        let opts = same_fields!(self => MethodOptions { solver, rl_iters, rl_stop, rl_max_iters,
-            rl_acceleration }
-            split, admm_lbfgs);
+        let opts = same_fields!(self => MethodOptions { solver }
+            split, admm_lbfgs,
+            rl_stop: self.rl_stop.with_counts(self.rl_iters, self.rl_max_iters, self.rl_acceleration));
         opts.validate()?;
         Ok(opts)
     }

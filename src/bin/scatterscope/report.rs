@@ -58,6 +58,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         denoiser: denoiser.as_ref(),
         comparison: comparison.as_ref().map(|(n, d)| (n.as_str(), d.as_ref())),
         opts: args.recon.options()?,
+        rl_iters: args.recon.rl_iters,
         slice_step: args.slice_step,
         realistic_background: (args.instrument == "realistic").then_some(args.background_share),
         out: args.out.clone(),
