@@ -21,6 +21,14 @@ pub trait Named: Copy + Sized + Send + Sync + 'static {
     }
 }
 
+/// A command-line value parser for a [`Named`] choice: its names are the
+/// possible values.
+pub fn choice<T: Named + Clone>() -> impl clap::builder::TypedValueParser<Value = T> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(T::names())
+        .map(|name| T::from_name(&name).expect("clap checked the name"))
+}
+
 /// Implements [`Named`] for a fieldless enum from `Variant => "name"` pairs.
 macro_rules! named {
     ($t:ty { $($v:ident => $n:literal),+ $(,)? }) => {

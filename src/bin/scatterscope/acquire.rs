@@ -3,17 +3,16 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use crate::shared_args::{PhysicsArgs, choice, progress};
+use crate::shared_args::progress;
 use crate::signals::Interrupted;
 use scatterscope::acquire::Acquisition;
-use scatterscope::acquire::request::{PicoQuantRequest, Request, parse_edge, parse_scan};
+use scatterscope::acquire::request::{PicoQuantRequest, Request};
 use scatterscope::acquire::{DeviceSpec, MockSpec, StopReason, TimeZero, device};
-use scatterscope::events::Imaging;
+use scatterscope::config::PhysicsOverrides;
 use scatterscope::live::LiveView;
 use scatterscope::live::recon::FinalRun;
 use scatterscope::live::server::LiveStage;
 use scatterscope::scene::Scene;
-use scatterscope::tags::bin_file::Pixels;
 use scatterscope::tags::binning::Region;
 use scatterscope::units::{parse_duration, parse_ps};
 use scatterscope_mocks::{EmitterOptions, Faults, MockOptions};
@@ -43,7 +42,7 @@ pub struct AcquireArgs {
     #[arg(long, value_parser = parse_duration)]
     duration: Option<Duration>,
     #[command(flatten)]
-    physics: PhysicsArgs,
+    physics: PhysicsOverrides,
     /// Time zero of the instrument: micro time at which the pulse reaches
     /// the object (default unit ps).
     #[arg(long, default_value = "0", value_parser = parse_ps, conflicts_with = "t0_from")]
@@ -95,7 +94,7 @@ pub struct AcquireArgs {
     #[arg(long, default_value = "")]
     faults: Faults,
     #[command(flatten)]
-    picoquant: PicoQuantArgs,
+    picoquant: PicoQuantRequest,
     /// Serve a live view of the run (rates, decay, image, ledger, the
     /// reconstruction as it forms) on 127.0.0.1 at a free port, or on
     /// ADDRESS:PORT (any other address than loopback gets an access token,
@@ -118,105 +117,6 @@ pub struct AcquireArgs {
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/acquire")]
     out: PathBuf,
-}
-
-/// Settings of a PicoQuant device (`--device picoquant...`); unset ones
-/// take the vendor demos' values. The stack's window is --bin-width,
-/// --t-start and --bins (default: the device's micro-time unit over one
-/// sync period).
-#[derive(Debug, clap::Args)]
-#[command(next_help_heading = "PicoQuant devices")]
-struct PicoQuantArgs {
-    /// The vendor library file (default: the family's variable,
-    /// $SCATTERSCOPE_MHLIB, _HHLIB, _TH260LIB, _PH330LIB or _PHLIB, then
-    /// the installer's libmh150.so, libhh400.so, libth260.so, libph330.so
-    /// or libph300.so and /usr/local/lib64/{mh150,hh400,th260,ph330,ph300}/).
-    #[arg(long, value_name = "FILE")]
-    vendor_lib: Option<PathBuf>,
-    /// Sync divider.
-    #[arg(long, value_name = "N")]
-    sync_divider: Option<i32>,
-    /// Sync trigger level (edge-trigger boards) or CFD level (HydraHarp, TimeHarp 260 Pico, PicoHarp 300), mV.
-    #[arg(long, value_name = "MV", allow_negative_numbers = true)]
-    sync_level: Option<i32>,
-    /// Sync trigger edge (MultiHarp, TimeHarp 260 Nano, PicoHarp 330): rising or falling.
-    #[arg(long, value_name = "EDGE", value_parser = parse_edge)]
-    sync_edge: Option<bool>,
-    /// The scan markers' active edge, rising or falling [default: rising].
-    #[arg(long, value_name = "EDGE", value_parser = parse_edge, requires = "scan")]
-    marker_edge: Option<bool>,
-    /// Sync CFD zero cross (HydraHarp, TimeHarp 260 Pico, PicoHarp 300), mV.
-    #[arg(long, value_name = "MV")]
-    sync_zero_cross: Option<i32>,
-    /// Sync channel offset (default unit ps; a PicoHarp 300's sync offset).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
-    sync_offset: Option<f64>,
-    /// Input trigger level (edge-trigger boards) or CFD level (CFD boards), mV; every input.
-    #[arg(long, value_name = "MV", allow_negative_numbers = true)]
-    input_level: Option<i32>,
-    /// Input trigger edge (MultiHarp, TimeHarp 260 Nano, PicoHarp 330): rising or falling.
-    #[arg(long, value_name = "EDGE", value_parser = parse_edge)]
-    input_edge: Option<bool>,
-    /// Input CFD zero cross (HydraHarp, TimeHarp 260 Pico, PicoHarp 300), mV.
-    #[arg(long, value_name = "MV")]
-    input_zero_cross: Option<i32>,
-    /// Per-input offsets, comma-separated (default unit ps), e.g. 0,120ps
-    /// (none on a PicoHarp 300).
-    #[arg(long, value_name = "TIMES", value_delimiter = ',', value_parser = parse_ps, allow_negative_numbers = true)]
-    input_offsets: Vec<f64>,
-    /// Binning code: micro-time unit = base resolution x 2^N (0 to 7 on a
-    /// PicoHarp 300).
-    #[arg(long, value_name = "N")]
-    binning: Option<i32>,
-    /// T3 offset: a time with its unit (e.g. 10ns); the device takes whole
-    /// nanoseconds.
-    #[arg(long, value_name = "TIME", value_parser = parse_ps)]
-    t3_offset: Option<f64>,
-    /// A galvo scan of WxH points clocked by markers 1 (line start), 2
-    /// (line stop) and 3 (frame); the stack is its image.
-    #[arg(long, value_name = "WxH", value_parser = parse_scan)]
-    scan: Option<Imaging>,
-    /// Keep only photons of this input (as numbered in the records).
-    #[arg(long)]
-    channel: Option<u16>,
-    /// Pixel mapping: auto (the scan's image, else single), single, channel.
-    #[arg(long, value_parser = choice::<Pixels>(), default_value = "auto")]
-    pixels: Pixels,
-    /// Write every record to this PTU file (a PicoQuant device: default
-    /// OUT/acquisition.ptu; our own devices and the mocks: Generic T3 with
-    /// the sensor pixel as the input channel, sensors of at most 63
-    /// pixels).
-    #[arg(long, value_name = "FILE")]
-    ptu: Option<PathBuf>,
-    /// Do not write a PTU file (PicoQuant devices).
-    #[arg(long, conflicts_with = "ptu")]
-    no_ptu: bool,
-}
-
-impl PicoQuantArgs {
-    /// The PicoQuant settings as given.
-    fn request(&self) -> PicoQuantRequest {
-        PicoQuantRequest {
-            library: self.vendor_lib.clone(),
-            sync_divider: self.sync_divider,
-            sync_level_mv: self.sync_level,
-            sync_rising: self.sync_edge,
-            markers_rising: self.marker_edge,
-            sync_zero_cross_mv: self.sync_zero_cross,
-            sync_offset_ps: self.sync_offset,
-            input_level_mv: self.input_level,
-            input_rising: self.input_edge,
-            input_zero_cross_mv: self.input_zero_cross,
-            input_offsets_ps: self.input_offsets.clone(),
-            binning: self.binning,
-            t3_offset_ps: self.t3_offset,
-            scan: self.scan,
-            channel: self.channel,
-            pixels: self.pixels,
-            ptu: self.ptu.clone(),
-            no_ptu: self.no_ptu,
-        }
-    }
 }
 
 /// The mock's scene and behaviour from the mock flags.
@@ -245,7 +145,7 @@ fn mock_spec(args: &AcquireArgs) -> MockSpec {
 pub fn request(args: &AcquireArgs) -> Request {
     Request {
         duration: args.duration,
-        physics: args.physics.overrides(),
+        physics: args.physics.clone(),
         t0: match &args.t0_from {
             Some(reference) => TimeZero::FromReference(reference.clone()),
             None => TimeZero::At(args.t0),
@@ -254,7 +154,7 @@ pub fn request(args: &AcquireArgs) -> Request {
         micro_time_unit_ps: args.micro_time_unit,
         tags: args.tags.clone(),
         mock: mock_spec(args),
-        picoquant: args.picoquant.request(),
+        picoquant: args.picoquant.clone(),
         speed: args.speed,
         ome_tiff: args.ome_tiff,
         ..Request::new(args.device.clone(), args.out.clone())

@@ -9,7 +9,8 @@ use scatterscope::report::bench::{
 };
 
 use crate::recon_args::ReconArgs;
-use crate::shared_args::{PhysicsArgs, choice, given_flags};
+use crate::shared_args::{choice, given_flags, resolve};
+use scatterscope::config::PhysicsOverrides;
 
 /// Reconstruction benchmark on images the methods were not tuned on.
 ///
@@ -58,7 +59,7 @@ pub struct BenchReconArgs {
     #[arg(long, default_value_t = 384)]
     object_px: usize,
     #[command(flatten)]
-    physics: PhysicsArgs,
+    physics: PhysicsOverrides,
     #[command(flatten)]
     recon: ReconArgs,
     /// Seed of the Poisson sampler.
@@ -116,7 +117,7 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
         rl_best_iters: args.rl_best_iters,
         rl_fixed_iters: args.recon.rl_iters,
         object_px: args.object_px,
-        setup: args.physics.resolve()?,
+        setup: resolve(&args.physics)?,
         opts: args.recon.options()?,
         seed: args.seed,
         out: args.out.clone(),

@@ -7,7 +7,7 @@ use anyhow::Context;
 use scatterscope::calibrate::Free;
 use scatterscope::report::calibration::calibrate_file;
 
-use crate::shared_args::PhysicsArgs;
+use scatterscope::config::PhysicsOverrides;
 
 /// Fit mu_a, mu_s' and, optionally, time zero and the IRF width to a stack.
 ///
@@ -24,7 +24,7 @@ pub struct CalibrateArgs {
     #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s_reduced")]
     fit: Vec<String>,
     #[command(flatten)]
-    physics: PhysicsArgs,
+    physics: PhysicsOverrides,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/calibrate")]
     out: PathBuf,
@@ -33,7 +33,7 @@ pub struct CalibrateArgs {
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     crate::shared_args::note_renamed_parameters("--fit", &args.fit);
     let free = Free::from_names(&args.fit).context("--fit")?;
-    let done = calibrate_file(&args.stack, &args.physics.overrides(), free)?;
+    let done = calibrate_file(&args.stack, &args.physics.clone(), free)?;
     println!("model: {}", done.start.model_summary());
     for line in done.fit.lines() {
         println!("{line}");

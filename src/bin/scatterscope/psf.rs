@@ -7,7 +7,8 @@ use scatterscope::physics::Sampling;
 use scatterscope::physics::validity::describe_setup;
 use scatterscope::psf::PsfReport;
 
-use crate::shared_args::{PhysicsArgs, choice};
+use crate::shared_args::{choice, resolve};
+use scatterscope::config::PhysicsOverrides;
 
 /// Compute the ST-PSF for each time bin and write it with a per-bin table.
 ///
@@ -16,7 +17,7 @@ use crate::shared_args::{PhysicsArgs, choice};
 #[derive(Debug, clap::Args)]
 pub struct PsfArgs {
     #[command(flatten)]
-    physics: PhysicsArgs,
+    physics: PhysicsOverrides,
     /// Discretisation written to psf.exr: integrated (over pixel area and
     /// bin duration) or point (samples at pixel and bin centres).
     #[arg(long, default_value = "integrated", value_parser = choice::<Sampling>())]
@@ -30,7 +31,7 @@ pub struct PsfArgs {
 }
 
 pub fn run(args: &PsfArgs) -> anyhow::Result<()> {
-    let setup = args.physics.resolve()?;
+    let setup = resolve(&args.physics)?;
     let report = PsfReport::build(&setup, args.sampling)?;
     for line in describe_setup(&setup, report.chosen()) {
         eprintln!("{line}");

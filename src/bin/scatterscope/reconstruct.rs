@@ -11,7 +11,8 @@ use scatterscope::reconstruct::method::{Method, run_method};
 use scatterscope::reconstruct::problem::BackgroundChoice;
 
 use crate::recon_args::ReconArgs;
-use crate::shared_args::{PhysicsArgs, choice, progress};
+use crate::shared_args::{choice, progress};
+use scatterscope::config::PhysicsOverrides;
 
 /// Reconstruct the object from a transient stack (.exr or .npy).
 ///
@@ -44,7 +45,7 @@ pub struct ReconstructArgs {
     #[command(flatten)]
     recon: ReconArgs,
     #[command(flatten)]
-    physics: PhysicsArgs,
+    physics: PhysicsOverrides,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/reconstruct")]
     out: PathBuf,
@@ -68,7 +69,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     let input = input::load(
         &args.stack,
         &InputSpec {
-            physics: args.physics.overrides(),
+            physics: args.physics.clone(),
             fit_physics,
             boundary: args.boundary,
             background: args.background,

@@ -7,7 +7,8 @@ use scatterscope::report::{ReportConfig, run_report};
 use scatterscope::scene::Scene;
 
 use crate::recon_args::ReconArgs;
-use crate::shared_args::{PhysicsArgs, choice, progress};
+use crate::shared_args::{choice, progress, resolve};
+use scatterscope::config::PhysicsOverrides;
 
 /// Simulate scenes, run every method, and compare them with the truth.
 ///
@@ -19,7 +20,7 @@ pub struct ReportArgs {
     #[arg(long = "scene", value_name = "SCENE|FILE")]
     scenes: Vec<String>,
     #[command(flatten)]
-    physics: PhysicsArgs,
+    physics: PhysicsOverrides,
     #[command(flatten)]
     recon: ReconArgs,
     /// The sensor's edges, simulated and modelled: sensor or periodic.
@@ -52,7 +53,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             true => Scene::BUILT_IN.iter().map(|s| Scene::parse(s)).collect(),
             false => args.scenes.iter().map(|s| Scene::parse(s)).collect(),
         },
-        setup: args.physics.resolve()?,
+        setup: resolve(&args.physics)?,
         boundary: args.boundary,
         seed: args.seed,
         denoiser: denoiser.as_ref(),

@@ -9,7 +9,8 @@ use scatterscope::physics::validity::describe_setup;
 use scatterscope::scene::Scene;
 use scatterscope::simulate::simulate;
 
-use crate::shared_args::{PhysicsArgs, choice};
+use crate::shared_args::{choice, resolve};
+use scatterscope::config::PhysicsOverrides;
 
 /// Simulate a transient measurement of a scene through the scattering slab.
 ///
@@ -21,7 +22,7 @@ pub struct SimulateArgs {
     #[arg(long, default_value = "usaf", value_name = "SCENE|FILE")]
     scene: String,
     #[command(flatten)]
-    physics: PhysicsArgs,
+    physics: PhysicsOverrides,
     /// How the sensor's edges are modelled: sensor (the scene fills the
     /// sensor's field, dark outside it; light off the sensor is lost, as on
     /// a real sensor) or periodic (wrap-around, the paper's simulation).
@@ -45,7 +46,7 @@ pub struct SimulateArgs {
 }
 
 pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
-    let setup = args.physics.resolve()?;
+    let setup = resolve(&args.physics)?;
     let scene = Scene::parse(&args.scene);
     let sim = simulate(&setup, &scene, args.sampling, args.boundary, args.seed)?;
     for line in describe_setup(&setup, &sim.kernels) {
