@@ -102,69 +102,88 @@ struct FileOverrides {
 /// Overrides of a preset's physics (what a front end's flags set); every
 /// field is optional. The command line's physics flags are these fields
 /// (their docs are the flags' help).
-#[derive(Debug, Clone, Default, clap::Args)]
+#[derive(Debug, Clone, Default)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct PhysicsOverrides {
     /// Parameter set to start from (`paper`: the paper's 3 cm skin-like slab).
-    #[arg(long, value_name = "NAME", value_parser = parse_preset)]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "NAME", value_parser = parse_preset))]
     pub preset: Option<Preset>,
     /// TOML file with any of the keys below (flags override it).
-    #[arg(long, value_name = "FILE")]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "FILE"))]
     pub config: Option<PathBuf>,
     /// Absorption coefficient mu_a in 1/cm.
-    #[arg(long, value_name = "1/CM", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "1/CM", allow_negative_numbers = true)
+    )]
     pub mu_a: Option<f64>,
     /// Scattering coefficient mu_s in 1/cm.
-    #[arg(long, value_name = "1/CM", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "1/CM", allow_negative_numbers = true)
+    )]
     pub mu_s: Option<f64>,
     /// Scattering anisotropy g in [-1, 1] (0.9-0.99 for tissue).
-    #[arg(long, value_name = "G", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "G", allow_negative_numbers = true)
+    )]
     pub g: Option<f64>,
     /// Refractive index of the medium (light speed is c/n).
-    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "N", allow_negative_numbers = true)
+    )]
     pub n: Option<f64>,
     /// Slab thickness z0 between object and sensor (default unit cm; e.g. 30mm).
-    #[arg(long, value_name = "LENGTH", value_parser = parse_cm_or_bare, allow_negative_numbers = true)]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "LENGTH", value_parser = parse_cm_or_bare, allow_negative_numbers = true))]
     pub thickness: Option<f64>,
     /// The medium: infinite (the paper's Eq. 6) or slab (extrapolated
     /// boundaries, image sources; transmitted flux).
-    #[arg(long, value_name = "MODEL", value_parser = parse_medium)]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "MODEL", value_parser = parse_medium))]
     pub medium: Option<MediumModel>,
     /// Horizontal field of view (default unit cm).
-    #[arg(long, value_name = "LENGTH", value_parser = parse_cm_or_bare, allow_negative_numbers = true)]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "LENGTH", value_parser = parse_cm_or_bare, allow_negative_numbers = true))]
     pub fov: Option<f64>,
     /// Image side in pixels (square images).
-    #[arg(long, value_name = "PIXELS")]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "PIXELS"))]
     pub size: Option<usize>,
     /// Time-bin width (default unit ps; e.g. 4ps, 0.004ns).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true))]
     pub bin_width: Option<f64>,
     /// Start of the first bin after the pulse reaches the object (default unit ps).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true))]
     pub t_start: Option<f64>,
     /// Number of time bins.
-    #[arg(long, value_name = "COUNT")]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "COUNT"))]
     pub bins: Option<usize>,
     /// Light budget: expected photons in the whole ST-PSF over all bins.
-    #[arg(long, value_name = "COUNT", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "COUNT", allow_negative_numbers = true)
+    )]
     pub photons: Option<f64>,
     /// Drop bins whose ST-PSF carries fewer expected photons (0 keeps all).
-    #[arg(long, value_name = "COUNT", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "COUNT", allow_negative_numbers = true)
+    )]
     pub min_bin_photons: Option<f64>,
     /// Instrument response: FWHM of its Gaussian (default unit ps; 0: ideal).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true))]
     pub irf_fwhm: Option<f64>,
     /// Instrument response: its exponential tail (default unit ps; 0: none).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true))]
     pub irf_tail: Option<f64>,
     /// Instrument response measured without the medium (a tag file, a
     /// stack, or a MATLAB histogram with --irf-bin-width), as a table.
-    #[arg(long, value_name = "REF", conflicts_with_all = ["irf_fwhm", "irf_tail"])]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "REF", conflicts_with_all = ["irf_fwhm", "irf_tail"]))]
     pub irf_from: Option<PathBuf>,
     /// With --irf-from: fit the Gaussian-plus-exponential form instead.
-    #[arg(long, requires = "irf_from")]
+    #[cfg_attr(feature = "cli", arg(long, requires = "irf_from"))]
     pub irf_parametric: bool,
     /// Bin width of an --irf-from file that records none (default unit ps).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps, requires = "irf_from")]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "TIME", value_parser = parse_ps, requires = "irf_from"))]
     pub irf_bin_width: Option<f64>,
 }
 

@@ -23,6 +23,7 @@ pub trait Named: Copy + Sized + Send + Sync + 'static {
 
 /// A command-line value parser for a [`Named`] choice: its names are the
 /// possible values.
+#[cfg(feature = "cli")]
 pub fn choice<T: Named + Clone>() -> impl clap::builder::TypedValueParser<Value = T> {
     use clap::builder::TypedValueParser;
     clap::builder::PossibleValuesParser::new(T::names())

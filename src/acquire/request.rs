@@ -18,10 +18,8 @@ use super::pipeline::{AcquireError, StreamPlan, resolution_fs};
 use super::replay::ReplaySpec;
 use crate::config::{ConfigError, PhysicsOverrides};
 use crate::events::Imaging;
-use crate::named::choice;
 use crate::tags::bin_file::Pixels;
 use crate::tags::binning::Region;
-use crate::units::parse_ps;
 
 /// How long an acquisition runs when the request does not say (a replay
 /// runs to the end of its recording).
@@ -73,72 +71,79 @@ pub struct Request {
 /// line's PicoQuant flags are these fields (their docs are the flags'
 /// help). The stack's window is --bin-width, --t-start and --bins
 /// (default: the device's micro-time unit over one sync period).
-#[derive(Debug, Clone, Default, clap::Args)]
-#[command(next_help_heading = "PicoQuant devices")]
+#[derive(Debug, Clone, Default)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(feature = "cli", command(next_help_heading = "PicoQuant devices"))]
 pub struct PicoQuantRequest {
     /// The vendor library file (default: the family's variable,
     /// $SCATTERSCOPE_MHLIB, _HHLIB, _TH260LIB, _PH330LIB or _PHLIB, then
     /// the installer's libmh150.so, libhh400.so, libth260.so, libph330.so
     /// or libph300.so and /usr/local/lib64/{mh150,hh400,th260,ph330,ph300}/).
-    #[arg(long = "vendor-lib", value_name = "FILE")]
+    #[cfg_attr(feature = "cli", arg(long = "vendor-lib", value_name = "FILE"))]
     pub library: Option<PathBuf>,
     /// Sync divider.
-    #[arg(long, value_name = "N")]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N"))]
     pub sync_divider: Option<i32>,
     /// Sync trigger level (edge-trigger boards) or CFD level (HydraHarp, TimeHarp 260 Pico, PicoHarp 300), mV.
-    #[arg(long = "sync-level", value_name = "MV", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "sync-level", value_name = "MV", allow_negative_numbers = true)
+    )]
     pub sync_level_mv: Option<i32>,
     /// Sync trigger edge (MultiHarp, TimeHarp 260 Nano, PicoHarp 330): rising or falling.
-    #[arg(long = "sync-edge", value_name = "EDGE", value_parser = parse_edge)]
+    #[cfg_attr(feature = "cli", arg(long = "sync-edge", value_name = "EDGE", value_parser = parse_edge))]
     pub sync_rising: Option<bool>,
     /// The scan markers' active edge, rising or falling [default: rising].
-    #[arg(long = "marker-edge", value_name = "EDGE", value_parser = parse_edge, requires = "scan")]
+    #[cfg_attr(feature = "cli", arg(long = "marker-edge", value_name = "EDGE", value_parser = parse_edge, requires = "scan"))]
     pub markers_rising: Option<bool>,
     /// Sync CFD zero cross (HydraHarp, TimeHarp 260 Pico, PicoHarp 300), mV.
-    #[arg(long = "sync-zero-cross", value_name = "MV")]
+    #[cfg_attr(feature = "cli", arg(long = "sync-zero-cross", value_name = "MV"))]
     pub sync_zero_cross_mv: Option<i32>,
     /// Sync channel offset (default unit ps; a PicoHarp 300's sync offset).
-    #[arg(long = "sync-offset", value_name = "TIME", value_parser = parse_ps, allow_negative_numbers = true)]
+    #[cfg_attr(feature = "cli", arg(long = "sync-offset", value_name = "TIME", value_parser = crate::units::parse_ps, allow_negative_numbers = true))]
     pub sync_offset_ps: Option<f64>,
     /// Input trigger level (edge-trigger boards) or CFD level (CFD boards), mV; every input.
-    #[arg(long = "input-level", value_name = "MV", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "input-level", value_name = "MV", allow_negative_numbers = true)
+    )]
     pub input_level_mv: Option<i32>,
     /// Input trigger edge (MultiHarp, TimeHarp 260 Nano, PicoHarp 330): rising or falling.
-    #[arg(long = "input-edge", value_name = "EDGE", value_parser = parse_edge)]
+    #[cfg_attr(feature = "cli", arg(long = "input-edge", value_name = "EDGE", value_parser = parse_edge))]
     pub input_rising: Option<bool>,
     /// Input CFD zero cross (HydraHarp, TimeHarp 260 Pico, PicoHarp 300), mV.
-    #[arg(long = "input-zero-cross", value_name = "MV")]
+    #[cfg_attr(feature = "cli", arg(long = "input-zero-cross", value_name = "MV"))]
     pub input_zero_cross_mv: Option<i32>,
     /// Per-input offsets, comma-separated (default unit ps), e.g. 0,120ps
     /// (none on a PicoHarp 300).
-    #[arg(long = "input-offsets", value_name = "TIMES", value_delimiter = ',', value_parser = parse_ps, allow_negative_numbers = true)]
+    #[cfg_attr(feature = "cli", arg(long = "input-offsets", value_name = "TIMES", value_delimiter = ',', value_parser = crate::units::parse_ps, allow_negative_numbers = true))]
     pub input_offsets_ps: Vec<f64>,
     /// Binning code: micro-time unit = base resolution x 2^N (0 to 7 on a
     /// PicoHarp 300).
-    #[arg(long, value_name = "N")]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N"))]
     pub binning: Option<i32>,
     /// T3 offset: a time with its unit (e.g. 10ns); the device takes whole
     /// nanoseconds.
-    #[arg(long = "t3-offset", value_name = "TIME", value_parser = parse_ps)]
+    #[cfg_attr(feature = "cli", arg(long = "t3-offset", value_name = "TIME", value_parser = crate::units::parse_ps))]
     pub t3_offset_ps: Option<f64>,
     /// A galvo scan of WxH points clocked by markers 1 (line start), 2
     /// (line stop) and 3 (frame); the stack is its image.
-    #[arg(long, value_name = "WxH", value_parser = parse_scan)]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "WxH", value_parser = parse_scan))]
     pub scan: Option<Imaging>,
     /// Keep only photons of this input (as numbered in the records).
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub channel: Option<u16>,
     /// Pixel mapping: auto (the scan's image, else single), single, channel.
-    #[arg(long, value_parser = choice::<Pixels>(), default_value = "auto")]
+    #[cfg_attr(feature = "cli", arg(long, value_parser = crate::named::choice::<Pixels>(), default_value = crate::Named::name(Pixels::default())))]
     pub pixels: Pixels,
     /// Write every record to this PTU file (a PicoQuant device: default
     /// OUT/acquisition.ptu; our own devices and the mocks: Generic T3 with
     /// the sensor pixel as the input channel, sensors of at most 63
     /// pixels).
-    #[arg(long, value_name = "FILE")]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "FILE"))]
     pub ptu: Option<PathBuf>,
     /// Do not write a PTU file (PicoQuant devices).
-    #[arg(long, conflicts_with = "ptu")]
+    #[cfg_attr(feature = "cli", arg(long, conflicts_with = "ptu"))]
     pub no_ptu: bool,
 }
 

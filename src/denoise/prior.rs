@@ -26,14 +26,21 @@ named!(PriorKind {
     Identity => "identity",
 });
 
-/// A prior and its settings.
+/// A prior and its settings. The command line's prior flags are these
+/// fields (their docs are the flags' help).
 #[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct PriorSpec {
-    /// Which prior.
+    /// Prior for PnP: ffdnet (learned; weights: --weights, else
+    /// $SCATTERSCOPE_FFDNET_WEIGHTS, else imported, else embedded), tv or
+    /// identity.
+    #[cfg_attr(feature = "cli", arg(long = "denoiser", value_name = "DENOISER", value_parser = crate::named::choice::<PriorKind>(), default_value = crate::Named::name(PriorSpec::default().kind)))]
     pub kind: PriorKind,
-    /// FFDNet weight file, or `embedded` for the built-in weights.
+    /// FFDNet weights (the project's safetensors), or `embedded`.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "PATH"))]
     pub weights: Option<PathBuf>,
     /// TV weight per unit of the denoiser's noise sigma.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = PriorSpec::default().tv_gain))]
     pub tv_gain: f64,
 }
 
@@ -81,5 +88,19 @@ impl PriorSpec {
             }),
             PriorKind::Identity => Box::new(NoPrior),
         })
+    }
+
+    /// TV at this gain, to be shown beside this prior when it is not TV
+    /// itself (so the learned prior is always compared with it).
+    pub fn tv_beside(&self) -> Result<Option<Box<dyn Denoiser>>, PriorError> {
+        if self.kind == PriorKind::Tv {
+            return Ok(None);
+        }
+        let tv = Self {
+            kind: PriorKind::Tv,
+            weights: None,
+            tv_gain: self.tv_gain,
+        };
+        Ok(Some(tv.build()?))
     }
 }

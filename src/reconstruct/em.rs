@@ -329,7 +329,7 @@ pub(crate) fn cv_search<Y: Send + Sync>(
     ));
     if k == max_iters {
         run.note(format!(
-            "the cross-validated score was still falling at the cap of {max_iters} iterations: more may help (a higher cap: rl_max_iters)"
+            "the cross-validated score was still falling at the cap of {max_iters} iterations: more may help (a higher cap: --rl-max-iters)"
         ));
     }
     run.note(format!("output: iteration {k}"));

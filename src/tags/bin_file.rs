@@ -53,26 +53,35 @@ crate::named::named!(Pixels {
     Channel => "channel",
 });
 
-/// What to bin: the time window and the pixel and frame mapping.
+/// What to bin: the time window and the pixel and frame mapping. The
+/// `bin` command's flags are these fields (their docs are the flags' help).
 #[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct BinSpec {
-    /// Bin width (ps); `None`: the file's micro-time resolution.
+    /// Bin width (default unit ps; default: the file's TCSPC resolution).
+    #[cfg_attr(feature = "cli", arg(long = "bin-width", value_name = "BIN_WIDTH", value_parser = crate::units::parse_ps))]
     pub bin_width_ps: Option<f64>,
-    /// Start of the first bin after the sync (ps).
+    /// Start of the first bin after the sync (default unit ps).
+    #[cfg_attr(feature = "cli", arg(long = "t-start", value_name = "T_START", default_value = "0", value_parser = crate::units::parse_ps))]
     pub t_start_ps: f64,
-    /// Number of bins; `None`: one sync period, widened to every micro
-    /// time present.
+    /// Number of bins (default: enough to cover one sync period).
+    #[cfg_attr(feature = "cli", arg(long))]
     pub bins: Option<usize>,
-    /// Keep only photons of this input channel.
+    /// Keep only photons of this input channel (as numbered in the records).
+    #[cfg_attr(feature = "cli", arg(long))]
     pub channel: Option<u16>,
-    /// Pixel mapping.
+    /// Pixel mapping: auto (image for imaging files, else single), single, channel.
+    #[cfg_attr(feature = "cli", arg(long, value_parser = crate::named::choice::<Pixels>(), default_value = crate::Named::name(Pixels::default())))]
     pub pixels: Pixels,
-    /// Frames of imaging files.
+    /// Frames of imaging files: sum, all (one stack per frame) or a frame number.
+    #[cfg_attr(feature = "cli", arg(long, default_value = "sum"))]
     pub frames: FrameSelect,
     /// Bin the complete records of a cut file instead of failing.
+    #[cfg_attr(feature = "cli", arg(long))]
     pub allow_truncated: bool,
     /// What a Becker & Hickl `.spc` file does not record (its module and
     /// micro-time unit); refused for other files, whose headers say.
+    #[cfg_attr(feature = "cli", command(flatten))]
     pub spc: SpcOptions,
 }
 

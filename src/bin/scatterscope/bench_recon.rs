@@ -109,7 +109,7 @@ pub fn run(args: &BenchReconArgs) -> anyhow::Result<()> {
             .iter()
             .map(|&kind| PriorSpec {
                 kind,
-                ..args.recon.prior.spec()
+                ..args.recon.prior.clone()
             })
             .collect(),
         time_summed: !args.no_sum,

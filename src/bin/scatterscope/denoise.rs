@@ -9,7 +9,7 @@ use scatterscope::denoise::denoise_image;
 use scatterscope::formats::image::{read_image, write_image};
 use scatterscope::metrics::{psnr, ssim};
 
-use crate::recon_args::PriorArgs;
+use scatterscope::denoise::prior::PriorSpec;
 
 /// Denoise one image with a Plug-and-Play prior.
 ///
@@ -25,7 +25,7 @@ pub struct DenoiseArgs {
     #[arg(long, value_parser = parse_noise_sigma)]
     sigma: f64,
     #[command(flatten)]
-    prior: PriorArgs,
+    prior: PriorSpec,
     /// Treat INPUT as clean: add noise of --sigma with this seed first and
     /// report PSNR/SSIM against INPUT (data range 1).
     #[arg(long, value_name = "SEED")]
@@ -36,7 +36,7 @@ pub struct DenoiseArgs {
 }
 
 pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {
-    let denoiser = args.prior.denoiser()?;
+    let denoiser = args.prior.build()?;
     let clean = read_image(&args.input)?;
     let noisy = match args.add_noise {
         Some(seed) => add_noise(&clean, args.sigma, seed),

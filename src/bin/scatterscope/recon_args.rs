@@ -1,66 +1,18 @@
 //! Reconstruction settings shared by `reconstruct` and `report`.
 
 use crate::shared_args::{choice, same_fields};
-use std::path::PathBuf;
 
-use scatterscope::denoise::Denoiser;
-use scatterscope::denoise::prior::{PriorKind, PriorSpec};
+use scatterscope::denoise::prior::PriorSpec;
 use scatterscope::named::Named;
 use scatterscope::reconstruct::admm_lbfgs::{AdmmLbfgsOptions, PnpStop};
 use scatterscope::reconstruct::method::{Acceleration, MethodOptions, RlStop, Solver};
 use scatterscope::reconstruct::split::SplitOptions;
 
-/// The denoiser and its settings (`reconstruct`, `report`, `denoise`).
-#[derive(Debug, Clone, clap::Args)]
-pub struct PriorArgs {
-    /// Prior for PnP: ffdnet (learned; weights: --weights, else
-    /// $SCATTERSCOPE_FFDNET_WEIGHTS, else imported, else embedded), tv or
-    /// identity.
-    #[arg(long, value_parser = choice::<PriorKind>(), default_value = "ffdnet")]
-    pub denoiser: PriorKind,
-    /// FFDNet weights (the project's safetensors), or `embedded`.
-    #[arg(long, value_name = "PATH")]
-    pub weights: Option<PathBuf>,
-    /// TV weight per unit of the denoiser's noise sigma.
-    #[arg(long, default_value_t = 0.5)]
-    pub tv_gain: f64,
-}
-
-impl PriorArgs {
-    /// The prior as the library specifies it.
-    pub fn spec(&self) -> PriorSpec {
-        PriorSpec {
-            kind: self.denoiser,
-            weights: self.weights.clone(),
-            tv_gain: self.tv_gain,
-        }
-    }
-
-    /// The chosen denoiser, its settings checked.
-    pub fn denoiser(&self) -> anyhow::Result<Box<dyn Denoiser>> {
-        Ok(self.spec().build()?)
-    }
-
-    /// For `report`: TV (at `--tv-gain`) as a second prior when the chosen
-    /// one is not TV, so the learned prior is always shown beside it.
-    pub fn tv_comparison(&self) -> anyhow::Result<Option<(String, Box<dyn Denoiser>)>> {
-        if self.denoiser == PriorKind::Tv {
-            return Ok(None);
-        }
-        let tv = PriorSpec {
-            kind: PriorKind::Tv,
-            weights: None,
-            tv_gain: self.tv_gain,
-        };
-        Ok(Some(("tv".to_string(), tv.build()?)))
-    }
-}
-
 /// Flags of the reconstruction algorithms.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ReconArgs {
     #[command(flatten)]
-    pub prior: PriorArgs,
+    pub prior: PriorSpec,
     /// PnP solver: split (exact splitting, P4IP) or admm-lbfgs (Algorithm 1).
     #[arg(long, value_parser = choice::<Solver>(), default_value = MethodOptions::default().solver.name())]
     pub solver: Solver,

@@ -90,7 +90,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         None => None,
     };
     let opts = args.recon.options()?;
-    let denoiser = args.recon.prior.denoiser()?;
+    let denoiser = args.recon.prior.build()?;
     let bar = progress(None);
     let mut result = run_method(
         &input.problem,

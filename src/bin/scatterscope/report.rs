@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use scatterscope::Named;
+use scatterscope::denoise::prior::PriorKind;
 use scatterscope::forward::Boundary;
 use scatterscope::report::{ReportConfig, run_report};
 use scatterscope::scene::Scene;
@@ -45,9 +47,9 @@ pub struct ReportArgs {
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
-    let denoiser = args.recon.prior.denoiser()?;
+    let denoiser = args.recon.prior.build()?;
     // The learned prior is compared with TV on the same data.
-    let comparison = args.recon.prior.tv_comparison()?;
+    let comparison = args.recon.prior.tv_beside()?;
     let cfg = ReportConfig {
         scenes: match args.scenes.is_empty() {
             true => Scene::BUILT_IN.iter().map(|s| Scene::parse(s)).collect(),
@@ -57,7 +59,9 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         boundary: args.boundary,
         seed: args.seed,
         denoiser: denoiser.as_ref(),
-        comparison: comparison.as_ref().map(|(n, d)| (n.as_str(), d.as_ref())),
+        comparison: comparison
+            .as_ref()
+            .map(|d| (PriorKind::Tv.name(), d.as_ref())),
         opts: args.recon.options()?,
         rl_iters: args.recon.rl_iters,
         slice_step: args.slice_step,

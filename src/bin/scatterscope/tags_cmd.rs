@@ -2,37 +2,10 @@
 
 use std::path::PathBuf;
 
-use scatterscope::formats::becker_hickl::spc::{SpcModule, SpcOptions};
-use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file};
-use scatterscope::tags::binning::FrameSelect;
+use scatterscope::formats::becker_hickl::spc::SpcOptions;
+use scatterscope::tags::bin_file::{BinSpec, bin_file};
 use scatterscope::tags::convert::{ConvertError, convert_to_ptu};
 use scatterscope::tags::survey::survey;
-
-use crate::shared_args::choice;
-
-/// What a Becker & Hickl `.spc` file does not record.
-#[derive(Debug, Clone, Copy, clap::Args)]
-pub struct SpcArgs {
-    /// Layout of a Becker & Hickl .spc file's records (the file does not
-    /// record its module): spc-130 (SPC-130/140/150/160/180/830, the
-    /// default), spc-600-256 or spc-600-4096 (SPC-600/630).
-    #[arg(long, value_name = "MODULE", value_parser = choice::<SpcModule>())]
-    spc_module: Option<SpcModule>,
-    /// Micro-time unit of a .spc file (default unit ps: TAC range / TAC
-    /// gain / ADC channels); default: from the SPCM setup file beside it
-    /// (NAME.set).
-    #[arg(long, value_name = "TIME", value_parser = scatterscope::units::parse_ps)]
-    micro_unit: Option<f64>,
-}
-
-impl SpcArgs {
-    fn options(&self) -> SpcOptions {
-        SpcOptions {
-            module: self.spc_module,
-            micro_unit_ps: self.micro_unit,
-        }
-    }
-}
 
 /// Show what a recorded file (PTU, HT3, PT3, .sstags, B&H .spc and .sdt) holds.
 ///
@@ -42,7 +15,7 @@ pub struct InfoArgs {
     /// The file.
     file: PathBuf,
     #[command(flatten)]
-    spc: SpcArgs,
+    spc: SpcOptions,
 }
 
 /// Bin a T3 file into a transient stack (counts per micro-time bin and pixel).
@@ -55,29 +28,8 @@ pub struct InfoArgs {
 pub struct BinArgs {
     /// The file.
     file: PathBuf,
-    /// Bin width (default unit ps; default: the file's TCSPC resolution).
-    #[arg(long, value_parser = scatterscope::units::parse_ps)]
-    bin_width: Option<f64>,
-    /// Start of the first bin after the sync (default unit ps).
-    #[arg(long, default_value = "0", value_parser = scatterscope::units::parse_ps)]
-    t_start: f64,
-    /// Number of bins (default: enough to cover one sync period).
-    #[arg(long)]
-    bins: Option<usize>,
-    /// Keep only photons of this input channel (as numbered in the records).
-    #[arg(long)]
-    channel: Option<u16>,
-    /// Pixel mapping: auto (image for imaging files, else single), single, channel.
-    #[arg(long, value_parser = choice::<Pixels>(), default_value = "auto")]
-    pixels: Pixels,
-    /// Frames of imaging files: sum, all (one stack per frame) or a frame number.
-    #[arg(long, default_value = "sum")]
-    frames: FrameSelect,
-    /// Bin the complete records of a cut file instead of failing.
-    #[arg(long)]
-    allow_truncated: bool,
     #[command(flatten)]
-    spc: SpcArgs,
+    spec: BinSpec,
     /// Write the stacks only, without their PNG contact sheets (on a
     /// small file the sheet takes about a third of the command's time).
     #[arg(long)]
@@ -93,7 +45,7 @@ pub struct BinArgs {
 }
 
 pub fn info(args: &InfoArgs) -> anyhow::Result<()> {
-    let lines = survey(&args.file, &args.spc.options())?.lines();
+    let lines = survey(&args.file, &args.spc)?.lines();
     for line in &lines {
         println!("{line}");
     }
@@ -101,17 +53,7 @@ pub fn info(args: &InfoArgs) -> anyhow::Result<()> {
 }
 
 pub fn bin(args: &BinArgs) -> anyhow::Result<()> {
-    let spec = BinSpec {
-        bin_width_ps: args.bin_width,
-        t_start_ps: args.t_start,
-        bins: args.bins,
-        channel: args.channel,
-        pixels: args.pixels,
-        frames: args.frames,
-        allow_truncated: args.allow_truncated,
-        spc: args.spc.options(),
-    };
-    let binned = bin_file(&args.file, &spec)?;
+    let binned = bin_file(&args.file, &args.spec)?;
     binned.write(&args.out, !args.no_preview, args.ome_tiff)?;
     let mut summary = binned.summary();
     let last = summary.pop().expect("the summary ends with the stacks");
@@ -139,7 +81,7 @@ pub struct ConvertArgs {
     #[arg(long)]
     allow_truncated: bool,
     #[command(flatten)]
-    spc: SpcArgs,
+    spc: SpcOptions,
 }
 
 pub fn convert(args: &ConvertArgs) -> anyhow::Result<()> {
@@ -148,7 +90,7 @@ pub fn convert(args: &ConvertArgs) -> anyhow::Result<()> {
         &args.input,
         &args.out,
         args.allow_truncated,
-        &args.spc.options(),
+        &args.spc,
         stop,
     ) {
         Err(ConvertError::Interrupted { .. }) => {

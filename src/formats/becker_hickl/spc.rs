@@ -89,11 +89,20 @@ impl SpcModule {
 /// What a `.spc` file does not record, from its caller: the card family
 /// (default: the SPC-130 family) and the micro-time unit (default: from
 /// the setup file beside it).
+/// The command line's `.spc` flags are these fields (their docs are the
+/// flags' help).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct SpcOptions {
-    /// The layout; `None`: the SPC-130 family's, said in the output.
+    /// Layout of a Becker & Hickl .spc file's records (the file does not
+    /// record its module): spc-130 (SPC-130/140/150/160/180/830, the
+    /// default), spc-600-256 or spc-600-4096 (SPC-600/630).
+    #[cfg_attr(feature = "cli", arg(long = "spc-module", value_name = "MODULE", value_parser = crate::named::choice::<SpcModule>()))]
     pub module: Option<SpcModule>,
-    /// Micro-time unit (ps): TAC range / TAC gain / ADC channels.
+    /// Micro-time unit of a .spc file (default unit ps: TAC range / TAC
+    /// gain / ADC channels); default: from the SPCM setup file beside it
+    /// (NAME.set).
+    #[cfg_attr(feature = "cli", arg(long = "micro-unit", value_name = "TIME", value_parser = crate::units::parse_ps))]
     pub micro_unit_ps: Option<f64>,
 }
 
