@@ -211,6 +211,20 @@ fn a_killed_batch_resumes_with_only_the_missing_jobs_and_a_bad_job_fails_alone()
     assert!(out.join("summary.md").exists());
 }
 
+/// `batch` on a manifest of `body` (dir/m.toml) into dir/out.
+fn run_manifest(dir: &Path, body: &str) -> (std::process::Output, PathBuf) {
+    let path = dir.join("m.toml");
+    std::fs::write(&path, body).unwrap();
+    let out = dir.join("out");
+    let o = run(&[
+        "batch",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    (o, out)
+}
+
 #[test]
 fn a_manifest_with_mistakes_is_refused_naming_them() {
     let dir = tempfile::tempdir().unwrap();
@@ -246,15 +260,7 @@ fn a_manifest_with_mistakes_is_refused_naming_them() {
             "job `lab` (acquire): --sync-level set a PicoQuant device",
         ),
     ] {
-        let path = dir.path().join("m.toml");
-        std::fs::write(&path, body).unwrap();
-        let out = dir.path().join("out");
-        let o = run(&[
-            "batch",
-            path.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ]);
+        let (o, out) = run_manifest(dir.path(), body);
         assert!(!o.status.success());
         assert!(!out.exists(), "{words}: a job ran");
         assert!(
@@ -263,6 +269,19 @@ fn a_manifest_with_mistakes_is_refused_naming_them() {
             text(&o)
         );
     }
+}
+
+#[test]
+fn a_file_an_earlier_job_writes_is_not_looked_for_before_the_jobs_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let (o, out) = run_manifest(
+        dir.path(),
+        "[[job]]\nname = \"scan\"\ncommand = \"acquire\"\nargs = [\"--irf-from\", \"written-by-an-earlier-job.sstags\"]\n",
+    );
+    // The job ran (and failed alone: no earlier job wrote the file).
+    assert!(!o.status.success());
+    let log = std::fs::read_to_string(out.join("scan").join("job.log")).unwrap();
+    assert!(log.contains("written-by-an-earlier-job.sstags"), "{log}");
 }
 
 /// Whether a Slurm cluster answers here; else why not.

@@ -322,6 +322,44 @@ impl Request {
     /// response). Refuses by name a setting the device cannot take,
     /// before the device is touched.
     pub fn job(&self) -> Result<(Job, Vec<String>), RequestError> {
+        let (device, mut plan) = self.device_and_plan()?;
+        let mut notes = Vec::new();
+        let setup = if device.is_sensor() {
+            let (setup, resolved) = self.physics.resolve_noted(None)?;
+            notes = resolved;
+            plan.set_window(&setup.bins);
+            Some(setup)
+        } else {
+            // A vendor's device or its recording: the window given
+            // (default: one sync period); its physics are not assumed.
+            plan.bin_width_ps = self.physics.bin_width;
+            plan.t_start_ps = self.physics.t_start.unwrap_or(0.0);
+            plan.bins = self.physics.bins;
+            None
+        };
+        Ok((
+            Job {
+                device,
+                setup,
+                t0: self.t0.clone(),
+                plan,
+                out: self.out.clone(),
+                ome_tiff: self.ome_tiff,
+            },
+            notes,
+        ))
+    }
+
+    /// Every device rule [`Self::job`] applies, without reading the
+    /// physics' files (a reference recording or a configuration an earlier
+    /// job of a batch may still have to write); the device untouched.
+    pub fn check(&self) -> Result<(), RequestError> {
+        self.device_and_plan().map(|_| ())
+    }
+
+    /// The device as configured and the stream's plan before its window:
+    /// the device rules checked.
+    fn device_and_plan(&self) -> Result<(DeviceSpec, StreamPlan), RequestError> {
         let p = &self.picoquant;
         let mut plan = StreamPlan {
             region: self.region,
@@ -375,31 +413,7 @@ impl Request {
                 device: device.to_string(),
             });
         }
-        let mut notes = Vec::new();
-        let setup = if device.is_sensor() {
-            let (setup, resolved) = self.physics.resolve_noted(None)?;
-            notes = resolved;
-            plan.set_window(&setup.bins);
-            Some(setup)
-        } else {
-            // A vendor's device or its recording: the window given
-            // (default: one sync period); its physics are not assumed.
-            plan.bin_width_ps = self.physics.bin_width;
-            plan.t_start_ps = self.physics.t_start.unwrap_or(0.0);
-            plan.bins = self.physics.bins;
-            None
-        };
-        Ok((
-            Job {
-                device,
-                setup,
-                t0: self.t0.clone(),
-                plan,
-                out: self.out.clone(),
-                ome_tiff: self.ome_tiff,
-            },
-            notes,
-        ))
+        Ok((device, plan))
     }
 }
 

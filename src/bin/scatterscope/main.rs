@@ -105,17 +105,23 @@ fn demo(args: &DemoArgs) -> anyhow::Result<()> {
 
 /// Refuses a command line (a command and its arguments) this tool would
 /// refuse, without running it: parsed as `main` parses (old spellings
-/// rewritten) and, for an acquisition, its request built and checked.
+/// rewritten) and, for an acquisition, its request built and its device
+/// rules checked.
 fn check_line(line: &[std::ffi::OsString]) -> Result<(), String> {
     let program = std::iter::once("scatterscope".into());
     let (args, _) = renames::new_spellings(program.chain(line.iter().cloned()));
-    let cli = Cli::try_parse_from(args).map_err(|e| {
-        let text = e.to_string();
-        let first = text.lines().next().unwrap_or_default();
-        first.trim_start_matches("error: ").to_string()
-    })?;
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        // `--help` or `--version`: the job prints them.
+        Err(e) if !e.use_stderr() => return Ok(()),
+        Err(e) => {
+            let text = e.to_string();
+            let first = text.lines().next().unwrap_or_default();
+            return Err(first.trim_start_matches("error: ").to_string());
+        }
+    };
     if let Command::Acquire(args) = &cli.command {
-        acquire::request(args).job().map_err(|e| e.to_string())?;
+        acquire::request(args).check().map_err(|e| e.to_string())?;
     }
     Ok(())
 }
