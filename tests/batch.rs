@@ -282,6 +282,17 @@ fn a_file_an_earlier_job_writes_is_not_looked_for_before_the_jobs_run() {
     assert!(!o.status.success());
     let log = std::fs::read_to_string(out.join("scan").join("job.log")).unwrap();
     assert!(log.contains("written-by-an-earlier-job.sstags"), "{log}");
+    // A job asking for its command's help is not a refused command line.
+    let (o, out) = run_manifest(
+        dir.path(),
+        "[[job]]\nname = \"help\"\ncommand = \"psf\"\nargs = [\"--help\"]\n",
+    );
+    let log = std::fs::read_to_string(out.join("help").join("job.log")).unwrap();
+    assert!(
+        o.status.success() && log.contains("Usage:"),
+        "{}\n{log}",
+        text(&o)
+    );
 }
 
 /// Whether a Slurm cluster answers here; else why not.
