@@ -38,6 +38,13 @@ impl RlStop {
     pub const DEFAULT_ITERS: usize = 200;
     /// The most iterations the cross-validated stop searches unless set.
     pub const DEFAULT_MAX_ITERS: usize = 1000;
+    /// The fixed stop at its default count.
+    pub const FIXED: Self = Self::After(Self::DEFAULT_ITERS);
+    /// The cross-validated stop with its default search.
+    pub const CROSS_VALIDATED: Self = Self::CrossValidated {
+        max_iters: Self::DEFAULT_MAX_ITERS,
+        acceleration: Acceleration::None,
+    };
 
     /// The same rule with its counts: `iters` for a fixed stop,
     /// `max_iters` and `acceleration` for the cross-validated one (the
@@ -55,13 +62,7 @@ impl RlStop {
 
 /// The rules by name, each with its default counts.
 impl crate::named::Named for RlStop {
-    const ALL: &'static [Self] = &[
-        Self::After(Self::DEFAULT_ITERS),
-        Self::CrossValidated {
-            max_iters: Self::DEFAULT_MAX_ITERS,
-            acceleration: Acceleration::None,
-        },
-    ];
+    const ALL: &'static [Self] = &[Self::FIXED, Self::CROSS_VALIDATED];
     fn name(self) -> &'static str {
         match self {
             Self::After(_) => "fixed",

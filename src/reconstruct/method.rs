@@ -106,10 +106,7 @@ impl Default for MethodOptions {
             solver: Solver::Split,
             split: SplitOptions::default(),
             admm_lbfgs: AdmmLbfgsOptions::default(),
-            rl_stop: RlStop::CrossValidated {
-                max_iters: RlStop::DEFAULT_MAX_ITERS,
-                acceleration: Acceleration::default(),
-            },
+            rl_stop: RlStop::CROSS_VALIDATED,
         }
     }
 }

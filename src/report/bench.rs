@@ -322,8 +322,9 @@ named!(BenchMethod {
 /// cross-validation (as `opts.rl_stop` sets it when it is `cv`, else
 /// with its default search), `auto`; and always RL on the time-summed
 /// stack for `rl_best_iters` iterations (its output at `rl_fixed_iters`
-/// is RL's fixed-count row, the best iteration by truth its oracle). `on_trace` gets each PnP, cross-validated RL and `auto`
-/// trace (PSNR against wall time) with its label.
+/// is RL's fixed-count row, the best iteration by truth its oracle).
+/// `on_trace` gets each PnP, cross-validated RL and `auto` trace (PSNR
+/// against wall time) with its label.
 #[allow(clippy::too_many_arguments)]
 pub fn run_case(
     image: &BenchImage,
@@ -393,7 +394,7 @@ pub fn run_case(
     let cross_validated = MethodOptions {
         rl_stop: match opts.rl_stop {
             cv @ RlStop::CrossValidated { .. } => cv,
-            RlStop::After(_) => RlStop::from_name("cv").expect("a rule's name"),
+            RlStop::After(_) => RlStop::CROSS_VALIDATED,
         },
         ..*opts
     };

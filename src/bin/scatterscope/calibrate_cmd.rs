@@ -33,7 +33,7 @@ pub struct CalibrateArgs {
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     crate::shared_args::note_renamed_parameters("--fit", &args.fit);
     let free = Free::from_names(&args.fit).context("--fit")?;
-    let done = calibrate_file(&args.stack, &args.physics.clone(), free)?;
+    let done = calibrate_file(&args.stack, &args.physics, free)?;
     println!("model: {}", done.start.model_summary());
     for line in done.fit.lines() {
         println!("{line}");

@@ -89,6 +89,7 @@ impl SpcModule {
 /// What a `.spc` file does not record, from its caller: the card family
 /// (default: the SPC-130 family) and the micro-time unit (default: from
 /// the setup file beside it).
+///
 /// The command line's `.spc` flags are these fields (their docs are the
 /// flags' help).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
