@@ -244,14 +244,21 @@ pub struct LocalRun {
 }
 
 impl LocalRun {
-    /// Workers and threads for `cores` cores: one job per core, each with
-    /// one thread, unless `threads_per_job` asks for more.
-    pub fn for_cores(exe: PathBuf, out: PathBuf, cores: usize, threads_per_job: usize) -> Self {
+    /// Workers and threads on this machine: `workers` jobs at once
+    /// (default: its cores divided by `threads_per_job`), each with
+    /// `threads_per_job` threads (at least one).
+    pub fn on_this_machine(
+        exe: PathBuf,
+        out: PathBuf,
+        workers: Option<usize>,
+        threads_per_job: usize,
+    ) -> Self {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = threads_per_job.max(1);
         Self {
             exe,
             out,
-            workers: (cores / threads).max(1),
+            workers: workers.unwrap_or(cores / threads).max(1),
             threads_per_job: threads,
             job_timeout: None,
         }
@@ -567,6 +574,20 @@ pub fn collect(jobs: &[JobSpec], out: &Path) -> Vec<Outcome> {
             None => Outcome::Missing(job.name.clone()),
         })
         .collect()
+}
+
+/// [`summary`] written to `out/summary.md` (whole or not at all): the
+/// table, the file and whether every job succeeded.
+pub fn write_summary(
+    outcomes: &[Outcome],
+    out: &Path,
+) -> Result<(String, PathBuf, bool), BatchError> {
+    let (table, all_ok) = summary(outcomes);
+    let path = out.join("summary.md");
+    let io = |e: std::io::Error| BatchError::Io(format!("{}: {e}", path.display()));
+    std::fs::create_dir_all(out).map_err(io)?;
+    crate::files::write_atomic(&path, &table).map_err(io)?;
+    Ok((table, path, all_ok))
 }
 
 /// The summary table (Markdown) and whether every job succeeded.

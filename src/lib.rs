@@ -79,6 +79,7 @@ pub mod calibrate;
 pub mod config;
 pub mod confocal;
 pub mod denoise;
+pub mod error_text;
 pub mod events;
 pub mod fft2;
 pub mod files;
@@ -103,6 +104,7 @@ pub mod units;
 
 pub use scatterscope_physics as physics;
 
+pub use error_text::error_text;
 pub use forward::{Boundary, ForwardModel};
 pub use named::Named;
 pub use reconstruct::method::{Method, MethodOptions, run_method};

@@ -152,14 +152,15 @@ fn the_command_bins_converts_and_refuses_spc_files_by_name() {
     assert!(t.contains("run.set") && t.contains("--micro-unit"), "{t}");
     // With the unit: binned; the layout assumed is said; GAP flags make
     // a warning (exit 4).
-    let out = run(&[
-        "bin",
-        s(&path),
-        "--micro-unit",
-        "12.5ps",
-        "--out",
-        s(&dir.path().join("b")),
-    ]);
+    let bin_at_12_5ps = |file: &Path, out: &str, more: &[&str]| {
+        let out = dir.path().join(out);
+        let args = [
+            &["bin", s(file), "--micro-unit", "12.5ps", "--out", s(&out)],
+            more,
+        ];
+        run(&args.concat())
+    };
+    let out = bin_at_12_5ps(&path, "b", &[]);
     let t = text(&out);
     assert!(matches!(out.status.code(), Some(0 | 4)), "{t}");
     assert!(
@@ -187,29 +188,14 @@ fn the_command_bins_converts_and_refuses_spc_files_by_name() {
     bytes.extend([0x12, 0x34]);
     let cut = dir.path().join("cut.spc");
     std::fs::write(&cut, &bytes).unwrap();
-    let out = run(&[
-        "bin",
-        s(&cut),
-        "--micro-unit",
-        "12.5ps",
-        "--out",
-        s(&dir.path().join("c")),
-    ]);
+    let out = bin_at_12_5ps(&cut, "c", &[]);
     let t = text(&out);
     assert_eq!(out.status.code(), Some(1), "{t}");
     assert!(
         t.contains("cut.spc") && t.contains("file is cut") && t.contains("2 bytes"),
         "{t}"
     );
-    let out = run(&[
-        "bin",
-        s(&cut),
-        "--micro-unit",
-        "12.5ps",
-        "--allow-truncated",
-        "--out",
-        s(&dir.path().join("d")),
-    ]);
+    let out = bin_at_12_5ps(&cut, "d", &["--allow-truncated"]);
     let t = text(&out);
     assert_eq!(out.status.code(), Some(4), "{t}");
     assert!(t.contains("warning: file is cut"), "{t}");
@@ -225,17 +211,26 @@ fn the_command_bins_converts_and_refuses_spc_files_by_name() {
     ]);
     let t = text(&out);
     assert!(matches!(out.status.code(), Some(0 | 4)), "{t}");
-    let out = run(&[
-        "bin",
-        s(&ptu),
-        "--spc-module",
-        "spc-130",
-        "--out",
-        s(&dir.path().join("e")),
-    ]);
-    let t = text(&out);
-    assert_eq!(out.status.code(), Some(1), "{t}");
-    assert!(t.contains("apply to Becker & Hickl FIFO files"), "{t}");
+    // Every reader that takes them refuses them alike, naming the file.
+    let other = dir.path().join("y.ptu");
+    for (command, out) in [("bin", s(&dir.path().join("e"))), ("convert", s(&other))] {
+        let out = run(&[command, s(&ptu), "--spc-module", "spc-130", "--out", out]);
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(1), "{command}: {t}");
+        assert!(
+            t.contains(
+                "x.ptu: the .spc module and micro-time unit apply to Becker & Hickl FIFO files"
+            ),
+            "{command}: {t}"
+        );
+    }
+    assert!(!other.exists());
+    let out = run(&["info", s(&ptu), "--micro-unit", "12.5ps"]);
+    assert!(
+        text(&out).contains("x.ptu: the .spc module"),
+        "{}",
+        text(&out)
+    );
     // The PTU holds the same photons, routing channel as input channel.
     let (photons, markers, _) = ours(&path, SpcModule::Spc130);
     let (info, _) = scatterscope::formats::picoquant::open(&ptu).unwrap();
@@ -268,22 +263,8 @@ fn sdt_fixture() -> (Vec<u8>, Vec<Vec<f64>>) {
     let mut curves = |n: usize| (0..n).map(|_| rng.below(3000) as f64).collect::<Vec<_>>();
     let (a, b, c, fcs) = (curves(12 * 64), curves(12 * 64), curves(32), curves(40));
     let measurements = [
-        SdtMeasurement {
-            tac_r: 12.5e-9,
-            tac_g: 1,
-            adc_re: 64,
-            scan: (4, 3),
-            repeats: (1, 1),
-            module: "SPC-150",
-        },
-        SdtMeasurement {
-            tac_r: 50e-9,
-            tac_g: 2,
-            adc_re: 32,
-            scan: (1, 1),
-            repeats: (1, 1),
-            module: "SPC-150",
-        },
+        SdtMeasurement::spc150(12.5e-9, 1, 64, (4, 3)),
+        SdtMeasurement::spc150(50e-9, 2, 32, (1, 1)),
     ];
     let blocks = [
         SdtBlock {
@@ -550,12 +531,8 @@ fn sdt_sizes_whose_product_overflows_place_the_curves_in_a_row() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("huge.sdt");
     let measurements = [SdtMeasurement {
-        tac_r: 12.5e-9,
-        tac_g: 1,
-        adc_re: 16,
-        scan: (i32::MAX, i32::MAX),
         repeats: (i32::MAX, i32::MAX),
-        module: "SPC-150",
+        ..SdtMeasurement::spc150(12.5e-9, 1, 16, (i32::MAX, i32::MAX))
     }];
     let blocks = [SdtBlock {
         values: (0..48).map(f64::from).collect(),
@@ -576,14 +553,7 @@ fn sdt_sizes_whose_product_overflows_place_the_curves_in_a_row() {
 fn error_of_a_damaged_zipped_block(name: &str, damage: impl FnOnce(&mut [u8], usize)) -> String {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join(name);
-    let measurements = [SdtMeasurement {
-        tac_r: 12.5e-9,
-        tac_g: 1,
-        adc_re: 16,
-        scan: (1, 1),
-        repeats: (1, 1),
-        module: "SPC-150",
-    }];
+    let measurements = [SdtMeasurement::spc150(12.5e-9, 1, 16, (1, 1))];
     let blocks = [SdtBlock {
         values: vec![1.0; 16],
         item: 2,

@@ -69,13 +69,12 @@ fn a_plain_array_takes_its_physics_from_the_overrides_and_says_so() {
 #[test]
 fn a_mock_acquisition_writes_its_stack_and_record_and_balances() {
     let dir = tempfile::tempdir().unwrap();
-    let mut mock = MockSpec {
+    let mock = MockSpec {
         scene: Scene::parse("disks"),
-        emitter: Default::default(),
-        device: Default::default(),
+        real_time: false,
+        max_photons: 200_000,
+        ..MockSpec::default()
     };
-    mock.device.real_time = false;
-    mock.device.max_photons = 200_000;
     let setup = small(32);
     let mut plan = StreamPlan {
         tag_file: Some(dir.path().join("tags.sstags")),
@@ -230,4 +229,62 @@ fn library_errors_name_settings_not_flags() {
         let e = run_method(&problem, *method, Some(3), &tv, &opts, None, |_| {});
         assert!(e.is_err(), "{} ran with a NaN tolerance", method.name());
     }
+}
+
+/// The command line's flags are the library's settings types: given no
+/// flag, each parses to the type's own default, the one a library user and
+/// the Python package start from.
+#[test]
+fn each_settings_type_parsed_from_no_flag_is_its_default() {
+    use clap::Parser;
+    use scatterscope::acquire::request::Request;
+    use scatterscope::denoise::prior::PriorSpec;
+    use scatterscope::formats::becker_hickl::spc::SpcOptions;
+    use scatterscope::reconstruct::admm_lbfgs::AdmmLbfgsOptions;
+    use scatterscope::reconstruct::split::SplitOptions;
+    use scatterscope::report::hidden::HiddenRequest;
+
+    #[derive(clap::Parser)]
+    struct Flags {
+        #[command(flatten)]
+        request: Request,
+        #[command(flatten)]
+        split: SplitOptions,
+        #[command(flatten)]
+        admm_lbfgs: AdmmLbfgsOptions,
+        #[command(flatten)]
+        spc: SpcOptions,
+        #[command(flatten)]
+        prior: PriorSpec,
+    }
+    #[derive(clap::Parser)]
+    struct Hidden {
+        #[command(flatten)]
+        request: HiddenRequest,
+    }
+    let flags = Flags::try_parse_from(["scatterscope"]).unwrap();
+    let mock = DeviceSpec::Mock(MockSpec::default());
+    let request = Request::new(mock, "out/acquire".into());
+    assert_eq!(format!("{:?}", flags.request), format!("{request:?}"));
+    let split = format!("{:?}", SplitOptions::default());
+    assert_eq!(format!("{:?}", flags.split), split);
+    let admm_lbfgs = format!("{:?}", AdmmLbfgsOptions::default());
+    assert_eq!(format!("{:?}", flags.admm_lbfgs), admm_lbfgs);
+    assert_eq!(flags.spc, SpcOptions::default());
+    assert_eq!(flags.prior, PriorSpec::default());
+    let args = [
+        "x",
+        "s.mat",
+        "--scan-side",
+        "63.6cm",
+        "--slab-thickness",
+        "2.54cm",
+    ];
+    let hidden = Hidden::try_parse_from(args).unwrap().request;
+    let request = HiddenRequest::new("s.mat".into(), 0.636, 0.0254);
+    assert_eq!(format!("{hidden:?}"), format!("{request:?}"));
+    // A flag reaches its field.
+    let flags = Flags::try_parse_from(["scatterscope", "--unpaced", "--prior-grid", "average"]);
+    let flags = flags.unwrap();
+    assert!(!flags.request.mock.real_time && flags.split.average_prior_grid);
 }

@@ -81,6 +81,12 @@ fn settings_that_are_not_numbers_or_absurd_are_refused_with_their_flag() {
             "warm_start = 1000000000 must be at most 100000",
         ),
         ("--rho", "inf", "rho = inf must be a positive number"),
+        // A flag spelled otherwise than its setting: found by its id.
+        (
+            "--lbfgs-tol",
+            "NaN",
+            "lbfgs_grad_tol = NaN must be a number >= 0",
+        ),
     ] {
         let o = run_isolated(&[
             "reconstruct",

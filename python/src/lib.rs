@@ -48,7 +48,7 @@ pyo3::create_exception!(
 
 /// The error and its sources, as one exception.
 fn err<E: std::error::Error>(e: E) -> PyErr {
-    ScatterscopeError::new_err(err_text(&e))
+    ScatterscopeError::new_err(scatterscope::error_text(&e))
 }
 
 fn msg(text: impl Into<String>) -> PyErr {
@@ -530,7 +530,7 @@ fn reconstruct<'py>(
     let cancel = Arc::new(AtomicBool::new(false));
     let watch = cancel.clone();
     let done = interruptible(py, cancel, move || -> Result<_, String> {
-        let text = |e: &dyn std::error::Error| err_text(e);
+        let text = |e: &dyn std::error::Error| scatterscope::error_text(e);
         let input =
             prepare(data, meta, Path::new("<array from Python>"), &spec).map_err(|e| text(&e))?;
         let denoiser = prior.build().map_err(|e| text(&e))?;
@@ -556,20 +556,6 @@ fn reconstruct<'py>(
     })?;
     let (image, trace, notes) = done.map_err(msg)?;
     Ok((image.into_pyarray(py), trace, notes))
-}
-
-/// The error and its sources, as one message.
-fn err_text(e: &dyn std::error::Error) -> String {
-    let mut text = e.to_string();
-    let mut source = e.source();
-    while let Some(s) = source {
-        let more = s.to_string();
-        if !text.contains(&more) {
-            text.push_str(&format!(": {more}"));
-        }
-        source = s.source();
-    }
-    text
 }
 
 /// The request for `device` into `out`: the library's defaults (the
@@ -614,15 +600,15 @@ fn acquisition_request(
         }
         match key.as_str() {
             "scene" => m.scene = scatterscope::scene::Scene::parse(&text(&value)?),
-            "rate_hz" => m.emitter.rate_hz = value.extract()?,
-            "dark_rate_hz" => m.emitter.dark_rate_hz = value.extract()?,
-            "afterpulse" => m.emitter.afterpulse_probability = value.extract()?,
-            "seed" => m.emitter.seed = value.extract()?,
-            "mock_delay_ps" => m.emitter.t0_delay_ps = value.extract()?,
-            "max_photons" => m.device.max_photons = value.extract()?,
-            "unpaced" => m.device.real_time = !value.extract::<bool>()?,
-            "replay_batches" => m.device.replay_batches = value.extract()?,
-            "faults" => m.device.faults = text(&value)?.parse().map_err(msg)?,
+            "rate_hz" => m.rate_hz = value.extract()?,
+            "dark_rate_hz" => m.dark_rate_hz = value.extract()?,
+            "afterpulse" => m.afterpulse_probability = value.extract()?,
+            "seed" => m.seed = value.extract()?,
+            "mock_delay_ps" => m.t0_delay_ps = value.extract()?,
+            "max_photons" => m.max_photons = value.extract()?,
+            "unpaced" => m.real_time = !value.extract::<bool>()?,
+            "replay_batches" => m.replay_batches = value.extract()?,
+            "faults" => m.faults = text(&value)?.parse().map_err(msg)?,
             "t0_ps" => r.t0 = TimeZero::At(value.extract()?),
             "t0_from" => r.t0 = TimeZero::FromReference(PathBuf::from(text(&value)?)),
             "roi" => r.region = Some(text(&value)?.parse().map_err(msg)?),
@@ -674,7 +660,8 @@ fn acquire<'py>(
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     let done = interruptible(py, stop, move || {
-        job.run(&flag, |_| {}).map_err(|e| err_text(&e))
+        job.run(&flag, |_| {})
+            .map_err(|e| scatterscope::error_text(&e))
     })?
     .map_err(msg)?;
     let record = done
@@ -723,7 +710,7 @@ fn renamed_parameters(names: Vec<String>) -> Vec<(&'static str, &'static str)> {
 /// Fits a slab's mu_a and mu_s' to transmittance captures: (result JSON
 /// with the estimates, lines, material.toml text).
 #[pyfunction]
-#[pyo3(signature = (reference, captures, refractive_index, predict=Vec::new(), bin_width_ps=None, dataset="out", irf_extent="period", mu_a=0.01, mu_s_reduced=5.0, fit=vec!["mu_a".to_string(), "mu_s_reduced".to_string()], offset_cm=0.0, rising_edge_share=RISING_EDGE_CONVENTION))]
+#[pyo3(signature = (reference, captures, refractive_index, predict=Vec::new(), bin_width_ps=None, dataset="out", irf_extent="period", mu_a=SlabFitOptions::START_MU_A_PER_CM, mu_s_reduced=SlabFitOptions::START_MU_S_REDUCED_PER_CM, fit=vec!["mu_a".to_string(), "mu_s_reduced".to_string()], offset_cm=0.0, rising_edge_share=RISING_EDGE_CONVENTION))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_slab<'py>(
     py: Python<'py>,

@@ -170,6 +170,12 @@ pub fn list_devices(picoquant_library: Option<&std::path::Path>) -> DeviceList {
 }
 
 impl DeviceList {
+    /// Whether no PicoQuant vendor library loaded (each family's note
+    /// says where it looked).
+    pub fn no_picoquant_library(&self) -> bool {
+        self.notes.len() == scatterscope_drivers::picoquant::Family::ALL.len()
+    }
+
     /// As a table: how many are hardware, one line per address, then the
     /// libraries that did not load.
     pub fn table(&self) -> Vec<String> {

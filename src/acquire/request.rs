@@ -26,14 +26,23 @@ use crate::tags::binning::Region;
 pub const DEFAULT_DURATION: Duration = Duration::from_secs(2);
 
 /// One acquisition, as asked for. [`Request::new`] holds the defaults of
-/// every setting (those of `scatterscope acquire`).
+/// every setting (those of `scatterscope acquire`, whose flags are these
+/// fields: their docs are the flags' help).
 #[derive(Debug, Clone)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct Request {
-    /// The device.
+    /// The device: mock (in-process USB), mock-serial (pseudo-terminal),
+    /// serial:PATH, usb:VID:PID[:SERIAL], picoquant[:FAMILY][:SERIAL]
+    /// (FAMILY multiharp, hydraharp, timeharp260, picoharp330 or picoharp
+    /// for the PicoHarp 300, through the vendor's library), or
+    /// replay:FILE (a PTU or tag file played back at its recorded pace,
+    /// e.g. with --live to review a run); see `scatterscope devices`.
+    #[cfg_attr(feature = "cli", arg(long, default_value = "mock"))]
     pub device: DeviceSpec,
-    /// How long: `None` for the device's default ([`DEFAULT_DURATION`]; a
-    /// replay: its whole recording), zero until the device stops (or a
-    /// stop request).
+    /// How long to acquire (e.g. 10s, 500ms, 2m); 0 runs until the device
+    /// stops or is stopped (Ctrl-C). [default: 2s; a replay: the whole
+    /// recording]
+    #[cfg_attr(feature = "cli", arg(long, value_parser = crate::units::parse_duration))]
     pub duration: Option<Duration>,
     /// The sample's physics as given (preset, file, values). A device
     /// whose sensor is the image (ours, the mocks) bins into the window
@@ -41,29 +50,51 @@ pub struct Request {
     /// or a recording takes only the window given (`bin_width`, `t_start`,
     /// `bins`; by default one sync period at the device's unit), and no
     /// physics are assumed for it.
+    #[cfg_attr(feature = "cli", command(flatten))]
     pub physics: PhysicsOverrides,
-    /// Time zero.
+    /// Time zero (the command line's --t0 or --t0-from).
+    #[cfg_attr(feature = "cli", arg(skip = TimeZero::At(0.0)))]
     pub t0: TimeZero,
-    /// The region of the sensor binned (all of it when `None`).
+    /// Bin only this region of the sensor: X,Y,WIDTH,HEIGHT in pixels
+    /// (default: the whole sensor).
+    #[cfg_attr(feature = "cli", arg(long = "roi", value_name = "ROI"))]
     pub region: Option<Region>,
-    /// The micro-time unit to configure, ps (the device's own when
-    /// `None`).
+    /// Micro-time unit of our own devices to configure (default: the
+    /// device's TDC resolution; --binning sets a PicoQuant device's).
+    #[cfg_attr(feature = "cli", arg(long = "micro-time-unit", value_name = "TIME", value_parser = crate::units::parse_ps))]
     pub micro_time_unit_ps: Option<f64>,
-    /// A tag file recording every event batch, losslessly.
+    /// Also record every event batch losslessly to this tag file (.sstags).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "FILE"))]
     pub tags: Option<PathBuf>,
-    /// The mock's scene and behaviour (used by the mock devices only).
-    pub mock: MockSpec,
-    /// What only a PicoQuant device takes.
-    pub picoquant: PicoQuantRequest,
-    /// How many times faster than recorded a replay plays (1 for every
-    /// other device).
+    /// With --device replay:FILE: play the recording this many times faster
+    /// than it was recorded (1 for every other device).
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "FACTOR", default_value_t = 1.0)
+    )]
     pub speed: f64,
-    /// Also write the stack as OME-TIFF.
+    /// Also write the stack as OME-TIFF (stack.ome.tif: one page per bin,
+    /// the bins as the lifetime axis, counts as integers) for Fiji,
+    /// napari or FLIMfit.
+    #[cfg_attr(feature = "cli", arg(long))]
     pub ome_tiff: bool,
-    /// The output directory.
+    /// Output directory (created if missing).
+    #[cfg_attr(feature = "cli", arg(long, default_value = "out/acquire"))]
     pub out: PathBuf,
     /// The software named in the outputs.
+    #[cfg_attr(feature = "cli", arg(skip = software()))]
     pub software: String,
+    /// The mock's scene and behaviour (used by the mock devices only).
+    #[cfg_attr(feature = "cli", command(flatten))]
+    pub mock: MockSpec,
+    /// What only a PicoQuant device takes.
+    #[cfg_attr(feature = "cli", command(flatten))]
+    pub picoquant: PicoQuantRequest,
+}
+
+/// This build, as the outputs name it.
+fn software() -> String {
+    format!("scatterscope {}", env!("CARGO_PKG_VERSION"))
 }
 
 /// The settings only a PicoQuant device takes, in the units a user gives
@@ -308,12 +339,12 @@ impl Request {
             region: None,
             micro_time_unit_ps: None,
             tags: None,
-            mock: MockSpec::default(),
-            picoquant: PicoQuantRequest::default(),
             speed: 1.0,
             ome_tiff: false,
             out,
-            software: format!("scatterscope {}", env!("CARGO_PKG_VERSION")),
+            software: software(),
+            mock: MockSpec::default(),
+            picoquant: PicoQuantRequest::default(),
         }
     }
 

@@ -248,33 +248,51 @@ pub fn read_captures(
     Ok((captures, notes))
 }
 
-/// What the fit assumes and where it starts.
+/// What the fit assumes and where it starts. The command line's fit
+/// flags are these fields (their docs are the flags' help); `--fit`
+/// frees the parameters ([`SlabFitOptions::free_named`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct SlabFitOptions {
-    /// Refractive index of the medium (given, not fitted).
+    /// Refractive index of the medium (not fitted).
+    #[cfg_attr(feature = "cli", arg(long))]
     pub refractive_index: f64,
     /// Starting (or, when not fitted, fixed) mu_a (1/cm).
+    #[cfg_attr(feature = "cli", arg(long = "mu-a", value_name = "MU_A", default_value_t = SlabFitOptions::START_MU_A_PER_CM))]
     pub mu_a_per_cm: f64,
-    /// Starting (or fixed) mu_s' (1/cm).
+    /// Starting (or fixed) reduced scattering coefficient mu_s' (1/cm).
+    #[cfg_attr(feature = "cli", arg(long = "mu-s-reduced", value_name = "MU_S_REDUCED", default_value_t = SlabFitOptions::START_MU_S_REDUCED_PER_CM))]
     pub mu_s_reduced_per_cm: f64,
     /// Whether mu_a is fitted.
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub fit_mu_a: bool,
     /// Whether mu_s' is fitted.
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub fit_mu_s_reduced: bool,
     /// Starting (or fixed) distance of the detector from the laser's axis
     /// on the far face (cm); 0 for a detector on the axis.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "detector-offset", value_name = "CM", default_value_t = 0.0)
+    )]
     pub offset_cm: f64,
     /// Whether the offset is fitted.
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub fit_offset: bool,
-    /// Rising-edge bins left out of the likelihood: those after the
-    /// window's [`PRE_LIGHT_BINS`] and before the first bin whose excess
-    /// over the background reaches this share of the peak's; 0 keeps
-    /// every bin. [`RISING_EDGE_CONVENTION`] is time-domain diffuse
-    /// optics' usual choice.
+    /// Leave out the rising edge before the excess over the background
+    /// reaches this share of the peak's (where diffusion is least
+    /// accurate; 0 fits every bin after the window's pre-light bins). The
+    /// default is time-domain diffuse optics' usual choice.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = RISING_EDGE_CONVENTION))]
     pub rising_edge_share: f64,
 }
 
 impl SlabFitOptions {
+    /// Where mu_a starts by default (1/cm).
+    pub const START_MU_A_PER_CM: f64 = 0.01;
+    /// Where mu_s' starts by default (1/cm).
+    pub const START_MU_S_REDUCED_PER_CM: f64 = 5.0;
+
     /// Frees the parameters named in `names` (`mu_a`, `mu_s_reduced` or
     /// its old name `mu_s`, `offset`);
     /// the others stay fixed at their starting values.

@@ -55,6 +55,31 @@ pub struct BenchResult {
     pub seconds: f64,
 }
 
+impl BenchResult {
+    /// The measurement as one printed line.
+    pub fn line(&self) -> String {
+        format!(
+            "  {:<10} sigma {:>4}: {:<28} {:6.2} dB (noisy {:5.2}), {:7.1} ms",
+            self.image,
+            self.sigma_8bit,
+            self.prior,
+            self.psnr,
+            self.psnr_noisy,
+            self.seconds * 1e3
+        )
+    }
+}
+
+/// A noise level in 8-bit units, in (0, 255].
+pub fn parse_sigma_8bit(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(s) if s > 0.0 && s <= 255.0 => Ok(s),
+        _ => Err(format!(
+            "{text:?} is not a noise level in (0, 255] (8-bit units)"
+        )),
+    }
+}
+
 /// The noise seed of image `index` at `sigma_8bit`: every prior sees the
 /// same noise.
 pub fn noise_seed(seed: u64, index: usize, sigma_8bit: f64) -> u64 {
@@ -268,6 +293,19 @@ pub fn write_noisy(
         }
     }
     Ok(())
+}
+
+/// Writes `out/results.csv` and `out/summary.md` (each whole or not at
+/// all); returns the summary.
+pub fn write_results(
+    out: &Path,
+    images: &[BenchImage],
+    results: &[BenchResult],
+) -> std::io::Result<String> {
+    crate::files::write_atomic(out.join("results.csv"), results_csv(results))?;
+    let md = summary_markdown(images, results);
+    crate::files::write_atomic(out.join("summary.md"), &md)?;
+    Ok(md)
 }
 
 /// Every measurement as CSV.

@@ -76,23 +76,30 @@ pub struct Scaled {
     pub unit_sigma: Option<f64>,
 }
 
-/// Denoises `img` of any range: it is shifted and scaled to [0, 1] by its
-/// minimum and maximum, `sigma` is scaled by the same factor, and the result
 /// `d` on `img` (values on the [0, 1] scale) at noise level `sigma`, once
 /// its working memory is checked against the budget: the call a front end
-/// makes on an image of any size.
+/// makes on an image of any size. The note says when `sigma` lies above
+/// the prior's trained range and was clamped.
 pub fn denoise_image(
     d: &dyn Denoiser,
     img: ArrayView2<f64>,
     sigma: f64,
-) -> Result<Array2<f64>, crate::memory::MemoryError> {
+) -> Result<(Array2<f64>, Option<String>), crate::memory::MemoryError> {
     let (h, w) = img.dim();
     crate::memory::check(d.working_bytes(h, w), || {
         format!("{} on a {w} x {h} image", d.name())
     })?;
-    Ok(d.denoise_unit(img, sigma))
+    let note = (sigma > d.sigma_max()).then(|| {
+        format!(
+            "sigma {sigma:.5} is above the prior's trained range; clamped to {:.5}",
+            d.sigma_max()
+        )
+    });
+    Ok((d.denoise_unit(img, sigma), note))
 }
 
+/// Denoises `img` of any range: it is shifted and scaled to [0, 1] by its
+/// minimum and maximum, `sigma` is scaled by the same factor, and the result
 /// is mapped back. A constant image is returned unchanged.
 pub fn denoise_scaled(d: &dyn Denoiser, img: ArrayView2<f64>, sigma: f64) -> Scaled {
     let (lo, hi) = img

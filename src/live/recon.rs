@@ -104,6 +104,21 @@ pub enum FinalRun {
     Failed(String),
 }
 
+impl FinalRun {
+    /// How it ended, in words.
+    pub fn describe(&self) -> String {
+        match self {
+            FinalRun::Shown { run_s, method } => {
+                format!("the whole run reconstructed in {run_s:.1} s ({method})")
+            }
+            FinalRun::Failed(e) => format!("the whole run's reconstruction failed: {e}"),
+            FinalRun::Skipped => {
+                "the whole run's reconstruction skipped (Ctrl-C); every output is written".into()
+            }
+        }
+    }
+}
+
 /// Where the whole run's reconstruction is, for a progress line.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FinalProgress {

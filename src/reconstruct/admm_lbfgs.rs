@@ -87,33 +87,54 @@ named!(PnpStop {
     Iterations => "iterations",
 });
 
-/// Parameters of Algorithm 1 and of its o-update.
+/// Parameters of Algorithm 1 and of its o-update. The command line's
+/// admm-lbfgs flags are these fields (their docs are the flags' help; one
+/// `--max-iters` caps both solvers, one `--residual-tol` sets both
+/// tolerances).
 #[derive(Debug, Clone, Copy)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(
+    feature = "cli",
+    command(next_help_heading = "admm-lbfgs solver (--solver admm-lbfgs)")
+)]
 pub struct AdmmLbfgsOptions {
     /// Initial ADMM penalty lambda_0.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = AdmmLbfgsOptions::default().lambda0))]
     pub lambda0: f64,
     /// Growth factor of lambda per iteration.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = AdmmLbfgsOptions::default().lambda_step))]
     pub lambda_step: f64,
     /// Regularisation weight beta (sigma^2 = beta / lambda).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = AdmmLbfgsOptions::default().beta))]
     pub beta: f64,
     /// ADMM iteration cap.
+    #[cfg_attr(feature = "cli", arg(skip = AdmmLbfgsOptions::default().max_iters))]
     pub max_iters: usize,
     /// Stop when the primal residual ||o - v|| / sqrt(N) falls below this ...
+    #[cfg_attr(feature = "cli", arg(skip = AdmmLbfgsOptions::default().primal_tol))]
     pub primal_tol: f64,
     /// ... and the dual residual lambda ||v - v_prev|| / sqrt(N) below this.
+    #[cfg_attr(feature = "cli", arg(skip = AdmmLbfgsOptions::default().dual_tol))]
     pub dual_tol: f64,
-    /// Data-driven stopping rule.
+    /// Stopping rule: agreement (smallest primal residual the noise
+    /// allows), deviance, iterations, or auto (agreement for FFDNet).
+    #[cfg_attr(feature = "cli", arg(long, value_parser = crate::named::choice::<PnpStop>(), default_value = crate::Named::name(AdmmLbfgsOptions::default().stop)))]
     pub stop: PnpStop,
-    /// Iterations without a new pick before the stopping rule stops; `None`
-    /// takes the rule's own default (agreement 10, deviance 30).
+    /// Iterations without a new pick before the stopping rule stops
+    /// [default: the rule's own, agreement 10, deviance 30].
+    #[cfg_attr(feature = "cli", arg(long))]
     pub patience: Option<usize>,
     /// L-BFGS iteration cap per o-update.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = AdmmLbfgsOptions::default().lbfgs_iters))]
     pub lbfgs_iters: u64,
     /// L-BFGS memory (stored correction pairs).
+    #[cfg_attr(feature = "cli", arg(skip = AdmmLbfgsOptions::default().lbfgs_memory))]
     pub lbfgs_memory: usize,
     /// L-BFGS gradient-norm tolerance.
+    #[cfg_attr(feature = "cli", arg(long = "lbfgs-tol", value_name = "LBFGS_TOL", default_value_t = AdmmLbfgsOptions::default().lbfgs_grad_tol))]
     pub lbfgs_grad_tol: f64,
     /// Switch point of the surrogate logarithm (Eq. 16).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = AdmmLbfgsOptions::default().eps))]
     pub eps: f64,
 }
 

@@ -169,7 +169,7 @@ impl MethodOptions {
             )?;
         }
         if a.lbfgs_grad_tol.is_nan() || a.lbfgs_grad_tol < 0.0 {
-            bad("lbfgs_tol", a.lbfgs_grad_tol, "a number >= 0")?;
+            bad("lbfgs_grad_tol", a.lbfgs_grad_tol, "a number >= 0")?;
         }
         Ok(())
     }

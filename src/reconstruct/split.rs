@@ -94,39 +94,59 @@ use crate::fft2::Fft2;
 use crate::forward::ForwardModel;
 use crate::poisson::deviance::m_log_m;
 
-/// Parameters of the exact-splitting solver.
+/// Parameters of the exact-splitting solver. The command line's split
+/// flags are these fields (their docs are the flags' help; one
+/// `--max-iters` caps both solvers).
 #[derive(Debug, Clone, Copy)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(
+    feature = "cli",
+    command(next_help_heading = "Split solver (--solver split)")
+)]
 pub struct SplitOptions {
-    /// Data-split penalty, relative to the Poisson curvature at the flat
+    /// Data penalty rho, relative to the Poisson curvature at the flat
     /// object's counts.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SplitOptions::default().rho))]
     pub rho: f64,
-    /// Prior-split penalty, relative to the data's weight at zero frequency.
+    /// Prior penalty gamma, relative to the data's weight at frequency 0.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SplitOptions::default().gamma))]
     pub gamma: f64,
-    /// The denoiser's first sigma, relative to the flat object's level.
+    /// The prior's first sigma, relative to the flat object's level.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SplitOptions::default().sigma0))]
     pub sigma0: f64,
-    /// Factor by which sigma shrinks per iteration, down to its floor.
+    /// Sigma shrinks by this factor per iteration, down to its floor.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SplitOptions::default().sigma_decay))]
     pub sigma_decay: f64,
-    /// The denoiser's last sigma: `sigma_floor o_flat n^-sigma_power` with
+    /// The prior's last sigma: `sigma_floor o_flat n^-sigma_power` with
     /// `n = o_flat M` the photons per pixel of the flat object (M the total
     /// kernel mass), so it falls as the light grows; never above the first
     /// sigma.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SplitOptions::default().sigma_floor))]
     pub sigma_floor: f64,
     /// How fast the last sigma falls with the light (0.5: as the relative
-    /// Poisson noise).
+    /// Poisson noise); see --sigma-floor.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SplitOptions::default().sigma_power))]
     pub sigma_power: f64,
-    /// Discrepancy target: the deviance may lie this many noise standard
+    /// Deviance target: the deviance may lie this many noise standard
     /// deviations above its expectation under Poisson noise.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SplitOptions::default().target_z))]
     pub target_z: f64,
     /// Iterations at a sigma that meets the target before stopping.
+    #[cfg_attr(feature = "cli", arg(long = "split-patience", id = "split_patience", value_name = "SPLIT_PATIENCE", default_value_t = SplitOptions::default().patience))]
     pub patience: usize,
     /// Iteration cap.
+    #[cfg_attr(feature = "cli", arg(skip = SplitOptions::default().max_iters))]
     pub max_iters: usize,
     /// Richardson-Lucy iterations on the time-summed stack that give the
     /// starting object (0: the flat object).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SplitOptions::default().warm_start))]
     pub warm_start: usize,
-    /// Average a denoiser that unshuffles ([`Denoiser::unshuffles`]) over
-    /// its 2x2 grid's four positions, so that the grid leaves no pattern in
-    /// the blur's null space (4 denoiser calls per iteration instead of 1).
+    /// The learned prior on its fixed 2x2 grid, or averaged over its four
+    /// positions, so that the grid leaves no pattern in the blur's null
+    /// space (4 denoiser calls per iteration instead of 1, 3x the time;
+    /// +0.3 dB on average, BENCHMARKS.md). Applies to a denoiser that
+    /// unshuffles its input onto a grid (FFDNet).
+    #[cfg_attr(feature = "cli", arg(long = "prior-grid", value_name = "PRIOR_GRID", action = clap::ArgAction::Set, default_value = "fixed", value_parser = clap::builder::TypedValueParser::map(clap::builder::PossibleValuesParser::new(["fixed", "average"]), |grid: String| grid == "average")))]
     pub average_prior_grid: bool,
 }
 

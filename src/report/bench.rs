@@ -792,41 +792,66 @@ pub fn summary_markdown(rows: &[BenchRow], headline: &str, rl_default: &str) -> 
     md
 }
 
-/// Everything one run of the benchmark needs.
+/// Everything one run of the benchmark needs. The command line's
+/// benchmark flags are these fields (their docs are the flags' help); the
+/// physics, the methods' settings and the priors' weights and gain come
+/// from the physics and reconstruction flags.
 #[derive(Debug, Clone)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct BenchConfig {
-    /// Directory with `manifest.csv` and the images.
+    /// Directory with manifest.csv and the images.
     pub images: PathBuf,
-    /// Which images: `tuning`, `held-out` or `all`.
+    /// Which images: tuning, held-out or all.
+    #[cfg_attr(feature = "cli", arg(long, default_value = "held-out"))]
     pub split: String,
-    /// Only these images (by manifest name; all of the split when empty).
+    /// Only these images (by manifest name; default all of the split).
+    #[cfg_attr(feature = "cli", arg(long = "image", value_name = "NAME"))]
     pub only: Vec<String>,
-    /// Light levels relative to the setup's budget.
+    /// Light levels relative to the physics' budget.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_delimiter = ',', default_value = "0.1,1,10")
+    )]
     pub levels: Vec<f64>,
-    /// PnP solvers run on the whole stack.
+    /// PnP solvers to run on the whole stack.
+    #[cfg_attr(feature = "cli", arg(long, value_parser = crate::named::choice::<Solver>(), value_delimiter = ',', default_value = "split,admm-lbfgs"))]
     pub solvers: Vec<Solver>,
-    /// Priors run with each solver (the first is the headline prior).
+    /// Priors to run with each solver (the first is the headline prior).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "PRIORS", value_delimiter = ',', default_value = "ffdnet,tv", value_parser = clap::builder::TypedValueParser::map(crate::named::choice::<crate::denoise::prior::PriorKind>(), |kind| PriorSpec { kind, ..PriorSpec::default() })))]
     pub priors: Vec<PriorSpec>,
-    /// Also run PnP on the time-summed stack.
+    /// Also run PnP on the time-summed stack (`false`: the flag
+    /// `--no-sum`).
+    #[cfg_attr(feature = "cli", arg(long = "no-sum", action = clap::ArgAction::SetFalse, help = "Skip PnP on the time-summed stack"))]
     pub time_summed: bool,
-    /// The methods run besides RL's best iteration.
+    /// Methods to run (RL's best iteration, the reference, always runs).
+    #[cfg_attr(feature = "cli", arg(long, value_parser = crate::named::choice::<BenchMethod>(), value_delimiter = ',', default_value = "pnp,rl-sum,rl-stack,auto"))]
     pub methods: Vec<BenchMethod>,
     /// Richardson-Lucy iterations searched for its best iteration.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 1000))]
     pub rl_best_iters: usize,
     /// Iterations of Richardson-Lucy's fixed-count row.
+    #[cfg_attr(feature = "cli", arg(skip = RlStop::DEFAULT_ITERS))]
     pub rl_fixed_iters: usize,
-    /// Side of the simulated object grid; the sensor sees its centre.
+    /// Side of the simulated object grid (pixels); the sensor sees its
+    /// centre.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 384))]
     pub object_px: usize,
     /// The physics at level 1.
+    #[cfg_attr(feature = "cli", arg(skip = crate::physics::Preset::Paper.setup()))]
     pub setup: Setup,
     /// The methods' settings.
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub opts: MethodOptions,
     /// Seed of the Poisson sampler.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 0))]
     pub seed: u64,
-    /// Output directory: `rows.csv`, `summary.md`, `traces/`.
+    /// Output directory: rows.csv, summary.md, traces/.
+    #[cfg_attr(feature = "cli", arg(long, default_value = "out/bench-recon"))]
     pub out: PathBuf,
-    /// Keep the cases (image and level) `out/rows.csv` already holds and
-    /// run only the others (an interrupted run goes on).
+    /// Keep the cases (image and level) OUT/rows.csv already holds and run
+    /// only the others (an interrupted run goes on; the summary covers
+    /// both).
+    #[cfg_attr(feature = "cli", arg(long))]
     pub resume: bool,
 }
 

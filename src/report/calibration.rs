@@ -79,6 +79,15 @@ pub fn calibrate_file(
     })
 }
 
+impl StackCalibration {
+    /// Writes the fit ([`Calibration::write`]) into `dir`; `source` names
+    /// the calibrated stack.
+    pub fn write(&self, dir: &Path, source: &Path) -> Result<Vec<PathBuf>, CalibrateError> {
+        let width_ps = self.stack.meta.bin_width_ps;
+        self.fit.write(dir, self.start_ps, width_ps, source)
+    }
+}
+
 impl Calibration {
     /// Writes `profile.csv` and `profile.png` (the measured and fitted time
     /// profile, bins of `width_ps` from `start_ps`) and `physics.toml` (the
@@ -459,6 +468,20 @@ impl SlabCalibration {
             written.push(path);
         }
         Ok(written)
+    }
+
+    /// What [`Self::write`] wrote into `dir` (`files`), in words, and why
+    /// there is no material file when there is none.
+    pub fn describe_written(&self, dir: &Path, files: &[PathBuf]) -> Vec<String> {
+        let names: Vec<String> = files
+            .iter()
+            .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .collect();
+        let mut lines = vec![format!("wrote {}/{{{}}}", dir.display(), names.join(", "))];
+        if !files.iter().any(|f| f.ends_with("material.toml")) {
+            lines.push("material.toml not written: the fit is doubtful (see the warnings)".into());
+        }
+        lines
     }
 
     /// The fitted material as a configuration file (`mu_a`,

@@ -87,6 +87,55 @@ pub struct HiddenBenchRow {
     pub blur: Option<(f64, f64)>,
 }
 
+impl HiddenBenchRow {
+    /// The row as one printed line.
+    pub fn line(&self) -> String {
+        format!(
+            "{:<14} {:>5}% {:<26} corr {:.3}  depth {:>6}  {:.3} s{}",
+            self.scan,
+            self.fraction * 100.0,
+            self.method,
+            self.correlation,
+            self.depth_cm.map_or("-".into(), |d| format!("{d:.1}")),
+            self.wall_s,
+            self.blur
+                .map_or(String::new(), |b| format!("  blur {:.2}x{:.2}", b.0, b.1))
+        )
+    }
+}
+
+/// A blur baseline as given, `ACROSSxDEPTH` (Gaussian sigma in voxels), or
+/// `none` (no baseline).
+pub fn parse_blur(text: &str) -> Result<Option<(f64, f64)>, String> {
+    if text == "none" {
+        return Ok(None);
+    }
+    let bad = || {
+        format!("blur {text:?}: give ACROSSxDEPTH, Gaussian sigma in voxels (e.g. 1.5x3), or none")
+    };
+    let (a, d) = text.split_once('x').ok_or_else(bad)?;
+    let (a, d): (f64, f64) = (a.parse().map_err(|_| bad())?, d.parse().map_err(|_| bad())?);
+    if !(a.is_finite() && d.is_finite() && a >= 0.0 && d >= 0.0) {
+        return Err(bad());
+    }
+    Ok(Some((a, d)))
+}
+
+/// Writes `out/rows.csv` and `out/summary.md` (each whole or not at all);
+/// the files written.
+pub fn write_results(
+    out: &Path,
+    rows: &[HiddenBenchRow],
+    summary: &str,
+) -> Result<[PathBuf; 2], ReportError> {
+    let io = |path: &Path, e| ReportError::Io(path.display().to_string(), e);
+    std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
+    let files = [out.join("rows.csv"), out.join("summary.md")];
+    crate::files::write_atomic(&files[0], rows_csv(rows)).map_err(|e| io(&files[0], e))?;
+    crate::files::write_atomic(&files[1], summary).map_err(|e| io(&files[1], e))?;
+    Ok(files)
+}
+
 /// Runs `f` `repeats` times; its last result and the median time (s).
 fn timed<T>(
     repeats: usize,

@@ -397,9 +397,7 @@ pub fn bin_file_counts(
     spec: &BinSpec,
 ) -> Result<BinnedFile<CountStack>, RecordedFileError> {
     let format = Format::of_file(path);
-    if let Some(reason) = spec.spc.misapplied(format) {
-        return Err(spec_error(path, reason.into()));
-    }
+    spec.spc.check_applies(path, format)?;
     match format {
         Format::TagFile => bin_tag_file(path, spec),
         Format::BeckerHicklFifo => bin_spc(path, spec),

@@ -125,9 +125,7 @@ pub fn convert_to_ptu(
         path: input.to_owned(),
         reason: reason.into(),
     };
-    if let Some(reason) = spc.misapplied(format) {
-        return Err(unsupported(reason));
-    }
+    spc.check_applies(input, format)?;
     match format {
         Format::TagFile => from_tag_file(input, output, stop),
         Format::BeckerHicklFifo => from_spc(input, output, allow_truncated, spc, stop),

@@ -14,7 +14,7 @@ use firmware_protocol::Event;
 use crate::events::Tag;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, TtrError, open};
-use crate::tags::bin_file::{RecordedFileError, spec_error};
+use crate::tags::bin_file::RecordedFileError;
 
 /// The records of a PicoQuant file, counted by kind.
 #[derive(Debug, Default)]
@@ -190,9 +190,7 @@ pub enum Survey {
 /// file.
 pub fn survey(path: &Path, spc: &SpcOptions) -> Result<Survey, RecordedFileError> {
     let format = Format::of_file(path);
-    if let Some(reason) = spc.misapplied(format) {
-        return Err(spec_error(path, reason.into()));
-    }
+    spc.check_applies(path, format)?;
     Ok(match format {
         Format::TagFile => {
             let (summary, s) = survey_tag_file(path)?;

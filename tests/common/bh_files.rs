@@ -198,6 +198,20 @@ pub struct SdtMeasurement {
     pub module: &'static str,
 }
 
+impl SdtMeasurement {
+    /// An SPC-150 measurement of one scan repeat.
+    pub fn spc150(tac_r: f32, tac_g: i16, adc_re: i16, scan: (i32, i32)) -> Self {
+        Self {
+            tac_r,
+            tac_g,
+            adc_re,
+            scan,
+            repeats: (1, 1),
+            module: "SPC-150",
+        }
+    }
+}
+
 /// An `.sdt` file of software revision 15 (module SPC-150) with `blocks`
 /// described by `measurements`.
 pub fn sdt_file(measurements: &[SdtMeasurement], blocks: &[SdtBlock]) -> Vec<u8> {

@@ -8,6 +8,7 @@ use crate::physics::Setup;
 
 /// What a mock images: nothing in a build without the `mock` feature.
 #[derive(Debug, Clone, Default)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct MockSpec {}
 
 impl MockSpec {

@@ -3,7 +3,7 @@
 use ndarray::{Array2, Array3, s};
 use scatterscope_drivers::Link;
 use scatterscope_mocks::{Emitter, MockDevice};
-pub use scatterscope_mocks::{EmitterOptions, MockHandle, MockOptions, Truth};
+pub use scatterscope_mocks::{EmitterOptions, Faults, MockHandle, MockOptions, Truth};
 
 use super::super::ledger::Ledger;
 use super::super::link::LinkSource;
@@ -24,15 +24,50 @@ const MOCK_USB_BUFFER_PACKETS: usize = 1024;
 /// numbers).
 pub const MAX_SENSOR_PIXELS: usize = firmware_protocol::record::MAX_PIXEL as usize + 1;
 
-/// What `--device mock` images and how the emulated device behaves.
+/// What `--device mock` images and how the emulated device behaves: the
+/// settings a request gives it (the command line's mock flags are these
+/// fields, their docs the flags' help); the rest of the device keeps the
+/// mocks crate's defaults.
 #[derive(Debug, Clone)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(
+    feature = "cli",
+    command(next_help_heading = "Mock device (--device mock, mock-serial)")
+)]
 pub struct MockSpec {
-    /// The scene behind the medium.
+    /// The scene behind the medium (usaf, star, text, disks or an image).
+    #[cfg_attr(feature = "cli", arg(long, default_value = "usaf", value_name = "SCENE|FILE", value_parser = |name: &str| Ok::<_, String>(Scene::parse(name))))]
     pub scene: Scene,
-    /// Rates, delay, seed.
-    pub emitter: EmitterOptions,
-    /// Pacing, photon quota, faults.
-    pub device: MockOptions,
+    /// Detected signal photons per second.
+    #[cfg_attr(feature = "cli", arg(long = "rate", value_name = "RATE", default_value_t = EmitterOptions::default().rate_hz))]
+    pub rate_hz: f64,
+    /// Dark counts per second over the sensor.
+    #[cfg_attr(feature = "cli", arg(long = "dark-rate", value_name = "DARK_RATE", default_value_t = EmitterOptions::default().dark_rate_hz))]
+    pub dark_rate_hz: f64,
+    /// Probability of an afterpulse (mean delay 50 ns) per detection.
+    #[cfg_attr(feature = "cli", arg(long = "afterpulse", value_name = "AFTERPULSE", default_value_t = EmitterOptions::default().afterpulse_probability))]
+    pub afterpulse_probability: f64,
+    /// Random seed (same seed, same photons).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = EmitterOptions::default().seed))]
+    pub seed: u64,
+    /// Delay of the pulse after the laser sync (default unit ps).
+    #[cfg_attr(feature = "cli", arg(long = "mock-delay", value_name = "MOCK_DELAY", default_value_t = EmitterOptions::default().t0_delay_ps, value_parser = crate::units::parse_ps))]
+    pub t0_delay_ps: f64,
+    /// Stop by itself after this many detected photons (0 = never).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = MockOptions::default().max_photons))]
+    pub max_photons: u64,
+    /// Emit in real time (`false`, the flag `--unpaced`: as fast as the
+    /// link takes photons).
+    #[cfg_attr(feature = "cli", arg(long = "unpaced", action = clap::ArgAction::SetFalse, help = "Emit as fast as the link takes photons instead of in real time"))]
+    pub real_time: bool,
+    /// Draw this many batches once and replay them (load tests at hardware
+    /// rates). 0: draw every photon.
+    #[cfg_attr(feature = "cli", arg(long = "mock-replay", value_name = "N", default_value_t = MockOptions::default().replay_batches))]
+    pub replay_batches: usize,
+    /// Faults every n-th batch, e.g. corrupt=10,duplicate=7,reorder=5,
+    /// drop-bytes=9,overflow=4:1000,disconnect=50 (random=SEED: at random).
+    #[cfg_attr(feature = "cli", arg(long, default_value = ""))]
+    pub faults: Faults,
 }
 
 impl MockSpec {
@@ -43,14 +78,48 @@ impl MockSpec {
             _ => None,
         }
     }
+
+    /// The emitter's options: these settings over the mocks crate's
+    /// defaults.
+    pub fn emitter(&self) -> EmitterOptions {
+        EmitterOptions {
+            rate_hz: self.rate_hz,
+            dark_rate_hz: self.dark_rate_hz,
+            afterpulse_probability: self.afterpulse_probability,
+            t0_delay_ps: self.t0_delay_ps,
+            seed: self.seed,
+            ..EmitterOptions::default()
+        }
+    }
+
+    /// The device's options: these settings over the mocks crate's
+    /// defaults.
+    pub fn device(&self) -> MockOptions {
+        MockOptions {
+            real_time: self.real_time,
+            max_photons: self.max_photons,
+            faults: self.faults.clone(),
+            replay_batches: self.replay_batches,
+            ..MockOptions::default()
+        }
+    }
 }
 
 impl Default for MockSpec {
+    /// The mocks crate's defaults, imaging the USAF target.
     fn default() -> Self {
+        let (emitter, device) = (EmitterOptions::default(), MockOptions::default());
         Self {
             scene: Scene::parse("usaf"),
-            emitter: EmitterOptions::default(),
-            device: MockOptions::default(),
+            rate_hz: emitter.rate_hz,
+            dark_rate_hz: emitter.dark_rate_hz,
+            afterpulse_probability: emitter.afterpulse_probability,
+            seed: emitter.seed,
+            t0_delay_ps: emitter.t0_delay_ps,
+            max_photons: device.max_photons,
+            real_time: device.real_time,
+            replay_batches: device.replay_batches,
+            faults: device.faults,
         }
     }
 }
@@ -194,8 +263,8 @@ pub(crate) fn open_spec(
         MockSetup {
             scene: truth.clone(),
             kernels,
-            emitter: spec.emitter.clone(),
-            device: spec.device.clone(),
+            emitter: spec.emitter(),
+            device: spec.device(),
         },
         serial,
         setup.total_photons,

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use scatterscope::batch::{
     LocalRun, Outcome, SlurmOptions, check_jobs, collect, read_manifest, run_job, run_local,
-    submit_slurm, summary,
+    submit_slurm, write_summary,
 };
 
 use crate::shared_args::progress;
@@ -62,11 +62,8 @@ pub struct BatchArgs {
 }
 
 fn print_summary(outcomes: &[Outcome], out: &std::path::Path) -> anyhow::Result<()> {
-    let (table, all_ok) = summary(outcomes);
+    let (table, path, all_ok) = write_summary(outcomes, out)?;
     print!("{table}");
-    let path = out.join("summary.md");
-    std::fs::create_dir_all(out)?;
-    scatterscope::files::write_atomic(&path, &table)?;
     println!("wrote {}", path.display());
     anyhow::ensure!(
         all_ok,
@@ -126,11 +123,8 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
         );
         return Ok(());
     }
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let mut local = LocalRun::for_cores(exe, args.out.clone(), cores, args.threads_per_job);
-    if let Some(w) = args.workers {
-        local.workers = w.max(1);
-    }
+    let (out, workers) = (args.out.clone(), args.workers);
+    let mut local = LocalRun::on_this_machine(exe, out, workers, args.threads_per_job);
     local.job_timeout = args.job_timeout;
     let stop = crate::signals::stop_flag();
     println!(

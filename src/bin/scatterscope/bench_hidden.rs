@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use scatterscope::confocal::PoissonOptions;
 use scatterscope::report::hidden_bench::{
-    BLUR_BASELINE, HiddenBenchConfig, rows_csv, run_hidden_bench,
+    BLUR_BASELINE, HiddenBenchConfig, parse_blur, run_hidden_bench, write_results,
 };
 use scatterscope::units::parse_ps;
 
@@ -23,8 +23,8 @@ pub struct BenchHiddenArgs {
     dir: PathBuf,
     /// Bin width of the scans (default unit ps); MATLAB files do not
     /// record it.
-    #[arg(long, value_name = "TIME", value_parser = parse_ps, default_value = "16")]
-    bin_width: f64,
+    #[arg(long = "bin-width", value_name = "TIME", value_parser = parse_ps, default_value = "16")]
+    bin_width_ps: f64,
     /// Fractions of the counts kept.
     #[arg(long, value_delimiter = ',', default_value = "1,0.1,0.01")]
     fractions: Vec<f64>,
@@ -54,7 +54,7 @@ pub struct BenchHiddenArgs {
 pub fn run(args: &BenchHiddenArgs) -> anyhow::Result<()> {
     let cfg = HiddenBenchConfig {
         dir: args.dir.clone(),
-        bin_width_ps: args.bin_width,
+        bin_width_ps: args.bin_width_ps,
         fractions: args.fractions.clone(),
         seed: args.seed,
         repeats: args.repeats,
@@ -66,39 +66,9 @@ pub fn run(args: &BenchHiddenArgs) -> anyhow::Result<()> {
             b.iter().flatten().copied().collect()
         }),
     };
-    let (rows, md) = run_hidden_bench(&cfg, |r| {
-        println!(
-            "{:<14} {:>5}% {:<26} corr {:.3}  depth {:>6}  {:.3} s{}",
-            r.scan,
-            r.fraction * 100.0,
-            r.method,
-            r.correlation,
-            r.depth_cm.map_or("-".into(), |d| format!("{d:.1}")),
-            r.wall_s,
-            r.blur
-                .map_or(String::new(), |b| format!("  blur {:.2}x{:.2}", b.0, b.1))
-        )
-    })?;
-    std::fs::create_dir_all(&args.out)?;
-    scatterscope::files::write_atomic(args.out.join("rows.csv"), rows_csv(&rows))?;
-    scatterscope::files::write_atomic(args.out.join("summary.md"), &md)?;
+    let (rows, md) = run_hidden_bench(&cfg, |r| println!("{}", r.line()))?;
+    write_results(&args.out, &rows, &md)?;
     println!("{md}");
     println!("wrote {}/{{rows.csv, summary.md}}", args.out.display());
     Ok(())
-}
-
-/// `ACROSSxDEPTH` in voxels, or `none`.
-fn parse_blur(text: &str) -> Result<Option<(f64, f64)>, String> {
-    if text == "none" {
-        return Ok(None);
-    }
-    let bad = || {
-        format!("blur {text:?}: give ACROSSxDEPTH, Gaussian sigma in voxels (e.g. 1.5x3), or none")
-    };
-    let (a, d) = text.split_once('x').ok_or_else(bad)?;
-    let (a, d): (f64, f64) = (a.parse().map_err(|_| bad())?, d.parse().map_err(|_| bad())?);
-    if !(a.is_finite() && d.is_finite() && a >= 0.0 && d >= 0.0) {
-        return Err(bad());
-    }
-    Ok(Some((a, d)))
 }

@@ -38,9 +38,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     for line in done.fit.lines() {
         println!("{line}");
     }
-    let width = done.stack.meta.bin_width_ps;
-    done.fit
-        .write(&args.out, done.start_ps, width, &args.stack)?;
+    done.write(&args.out, &args.stack)?;
     println!(
         "wrote {}/{{profile.csv, profile.png, physics.toml}}",
         args.out.display()

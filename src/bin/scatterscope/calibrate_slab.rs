@@ -5,10 +5,11 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use scatterscope::calibrate::histogram::{DEFAULT_MAT_DATASET, DEFAULT_MAT_PARTS};
-use scatterscope::calibrate::transmittance::{RISING_EDGE_CONVENTION, SlabFitOptions};
+use scatterscope::calibrate::transmittance::SlabFitOptions;
 use scatterscope::report::calibration::{IrfExtent, SlabJob};
 
-use crate::shared_args::{FileBinWidthArgs, choice, note_renamed_parameters};
+use crate::shared_args::{choice, note_renamed_parameters};
+use scatterscope::units::parse_ps;
 
 /// Fit mu_s' and mu_a to transmittance captures through slabs.
 ///
@@ -31,8 +32,10 @@ pub struct CalibrateSlabArgs {
     /// peak, pedestal and tail) or the peak's run above the background.
     #[arg(long, value_parser = choice::<IrfExtent>(), default_value = "period")]
     irf_extent: IrfExtent,
-    #[command(flatten)]
-    bin_width: FileBinWidthArgs,
+    /// Bin width of MATLAB files, which do not record it (default unit ps;
+    /// e.g. 16ps).
+    #[arg(long = "bin-width", value_name = "TIME", value_parser = parse_ps)]
+    bin_width_ps: Option<f64>,
     /// Dataset holding the histogram in MATLAB files.
     #[arg(long, default_value = DEFAULT_MAT_DATASET)]
     dataset: String,
@@ -40,43 +43,19 @@ pub struct CalibrateSlabArgs {
     /// another capture dropped; the output says which), or `none`.
     #[arg(long, default_value = DEFAULT_MAT_PARTS)]
     parts: String,
-    /// Refractive index of the medium (not fitted).
-    #[arg(long)]
-    refractive_index: f64,
-    /// Starting mu_a (1/cm).
-    #[arg(long, default_value_t = 0.01)]
-    mu_a: f64,
-    /// Starting reduced scattering coefficient mu_s' (1/cm).
-    #[arg(long, default_value_t = 5.0)]
-    mu_s_reduced: f64,
-    /// Starting (or fixed) distance of the detector from the axis (cm).
-    #[arg(long, value_name = "CM", default_value_t = 0.0)]
-    detector_offset: f64,
+    #[command(flatten)]
+    options: SlabFitOptions,
     /// What to fit, comma-separated: mu_a, mu_s_reduced (`mu_s`, its old
     /// name, still works), detector_offset (`offset`, its old name).
     #[arg(long, value_delimiter = ',', default_value = "mu_a,mu_s_reduced")]
     fit: Vec<String>,
-    /// Leave out the rising edge before the excess reaches this share of
-    /// the peak's (where diffusion is least accurate; 0 fits every bin).
-    #[arg(long, default_value_t = RISING_EDGE_CONVENTION)]
-    rising_edge_share: f64,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/calibrate-slab")]
     out: PathBuf,
 }
 
 pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
-    let mut options = SlabFitOptions {
-        refractive_index: args.refractive_index,
-        mu_a_per_cm: args.mu_a,
-        mu_s_reduced_per_cm: args.mu_s_reduced,
-        fit_mu_a: false,
-        fit_mu_s_reduced: false,
-        offset_cm: args.detector_offset,
-        fit_offset: false,
-        rising_edge_share: args.rising_edge_share,
-    };
-    let bin_width_ps = args.bin_width.bin_width;
+    let mut options = args.options;
     note_renamed_parameters("--fit", &args.fit);
     options.free_named(&args.fit).context("--fit")?;
     let job = SlabJob {
@@ -86,7 +65,7 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
         predict: args.predict.clone(),
         dataset: args.dataset.clone(),
         parts: (args.parts != "none").then(|| args.parts.clone()),
-        bin_width_ps,
+        bin_width_ps: args.bin_width_ps,
         options,
     };
     let done = job.run()?;
@@ -98,13 +77,8 @@ pub fn run(args: &CalibrateSlabArgs) -> anyhow::Result<()> {
         println!("warning: {w}");
     }
     let files = done.write(&args.out)?;
-    let names: Vec<String> = files
-        .iter()
-        .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .collect();
-    println!("wrote {}/{{{}}}", args.out.display(), names.join(", "));
-    if !files.iter().any(|f| f.ends_with("material.toml")) {
-        println!("material.toml not written: the fit is doubtful (see the warnings)");
+    for line in done.describe_written(&args.out, &files) {
+        println!("{line}");
     }
     crate::signals::warned(warnings.len())
 }

@@ -43,14 +43,10 @@ pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {
         None => clean.clone(),
     };
     let t = Instant::now();
-    let out = denoise_image(denoiser.as_ref(), noisy.view(), args.sigma)?;
+    let (out, note) = denoise_image(denoiser.as_ref(), noisy.view(), args.sigma)?;
     let secs = t.elapsed().as_secs_f64();
-    if args.sigma > denoiser.sigma_max() {
-        println!(
-            "note: sigma {:.5} is above the prior's trained range; clamped to {:.5}",
-            args.sigma,
-            denoiser.sigma_max()
-        );
+    if let Some(note) = note {
+        println!("note: {note}");
     }
     let (h, w) = out.dim();
     println!(

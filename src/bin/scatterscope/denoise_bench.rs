@@ -18,7 +18,7 @@ pub struct DenoiseBenchArgs {
     #[arg(required = true)]
     images: Vec<PathBuf>,
     /// Noise levels in 8-bit units.
-    #[arg(long, value_delimiter = ',', default_value = "10,25,50")]
+    #[arg(long, value_delimiter = ',', default_value = "10,25,50", value_parser = benchmark::parse_sigma_8bit)]
     sigmas: Vec<f64>,
     /// Additional FFDNet weights to compare.
     #[arg(long, value_name = "PATH")]
@@ -36,9 +36,6 @@ pub struct DenoiseBenchArgs {
 }
 
 pub fn run(args: &DenoiseBenchArgs) -> anyhow::Result<()> {
-    for &s in &args.sigmas {
-        anyhow::ensure!(s > 0.0 && s <= 255.0, "--sigmas: {s} is not in (0, 255]");
-    }
     let images = benchmark::collect_images(&args.images)?;
     let standard = StandardPriors::with_weights(args.weights.as_deref())?;
     let priors = standard.priors();
@@ -54,22 +51,10 @@ pub fn run(args: &DenoiseBenchArgs) -> anyhow::Result<()> {
         benchmark::write_noisy(&args.out.join("noisy"), &images, &args.sigmas, args.seed)?;
     }
     let results = benchmark::run(&images, &args.sigmas, &priors, args.seed, |r| {
-        println!(
-            "  {:<10} sigma {:>4}: {:<28} {:6.2} dB (noisy {:5.2}), {:7.1} ms",
-            r.image,
-            r.sigma_8bit,
-            r.prior,
-            r.psnr,
-            r.psnr_noisy,
-            r.seconds * 1e3
-        );
+        println!("{}", r.line())
     });
-    scatterscope::files::write_atomic(
-        args.out.join("results.csv"),
-        benchmark::results_csv(&results),
-    )?;
-    let md = benchmark::summary_markdown(&images, &results);
-    scatterscope::files::write_atomic(args.out.join("summary.md"), &md)?;
+    let md = benchmark::write_results(&args.out, &images, &results)
+        .with_context(|| format!("writing into {}", args.out.display()))?;
     println!("\n{md}");
     println!("wrote {}", args.out.display());
     Ok(())

@@ -1,6 +1,8 @@
 //! The flags that change what a library error names: the library speaks of
-//! its settings, the command line of its flags. One table, consulted once
-//! in `main` for every command's error.
+//! its settings, the command line of its flags. A setting an error names
+//! is found among the command's flags by its id (the library's settings
+//! types are the flags, their fields the ids); the other errors are in one
+//! table. Consulted once in `main` for every command's error.
 
 use std::error::Error;
 
@@ -24,24 +26,67 @@ use scatterscope::reconstruct::ReconstructError;
 use scatterscope::reconstruct::input::InputError;
 use scatterscope::reconstruct::problem::ProblemError;
 use scatterscope::report::calibration::StackCalibrationError;
+use scatterscope::report::hidden::HiddenError;
 use scatterscope::simulate::SimulateError;
 use scatterscope::tags::bin_file::RecordedFileError;
 use scatterscope_drivers::picoquant::VendorError;
 
-/// The hints for the errors in `err`'s chain, one line each.
-pub fn flag_hints(err: &anyhow::Error) -> Vec<String> {
+/// The hints for the errors in `err`'s chain, one line each, with the
+/// flags of `command` (the command that failed).
+pub fn flag_hints(err: &anyhow::Error, command: &clap::Command) -> Vec<String> {
     let mut hints: Vec<String> = Vec::new();
     for cause in err.chain() {
-        if let Some(h) = hint(cause).filter(|h| !hints.contains(h)) {
+        if let Some(h) = hint(cause, command).filter(|h| !hints.contains(h)) {
             hints.push(h);
         }
     }
     hints
 }
 
+/// The flag of `command` that sets the library's setting `name`.
+fn flag_of(command: &clap::Command, name: &str) -> Option<String> {
+    // Settings whose errors name them otherwise than their fields.
+    let id = match name {
+        "tag_file" => "tags",
+        "t3_offset_ns" => "t3_offset_ps",
+        other => other,
+    };
+    let arg = command.get_arguments().find(|a| a.get_id() == id)?;
+    Some(format!("set it with --{}", arg.get_long()?))
+}
+
+/// The setting a library error names, when it names one.
+fn setting(cause: &(dyn Error + 'static)) -> Option<&'static str> {
+    if let Some(ReconstructError::Setting { name, .. }) = cause.downcast_ref::<ReconstructError>() {
+        return Some(name);
+    }
+    if let Some(ConfocalError::Setting { name, .. }) = cause.downcast_ref::<ConfocalError>() {
+        return Some(name);
+    }
+    if let Some(AcquireError::Setting { name, .. }) = cause.downcast_ref::<AcquireError>() {
+        return Some(name);
+    }
+    match cause.downcast_ref::<SourceError>() {
+        Some(SourceError::Setting { name, .. }) => Some(name),
+        _ => None,
+    }
+}
+
 /// The hint for one error; errors that only wrap another (and display it
 /// as their own) are looked through.
-fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
+fn hint(cause: &(dyn Error + 'static), command: &clap::Command) -> Option<String> {
+    let hint = |e: &(dyn Error + 'static)| hint(e, command);
+    match setting(cause) {
+        // Our own devices' unit and a PicoQuant device's are two flags.
+        Some("resolution_fs") => {
+            return Some(
+                "--micro-time-unit sets our own devices' micro-time unit; --binning a PicoQuant device's"
+                    .into(),
+            );
+        }
+        Some(name) => return flag_of(command, name),
+        None => {}
+    }
     if let Some(e) = cause.downcast_ref::<InputError>() {
         return match e {
             InputError::Config(e) => hint(e),
@@ -55,6 +100,9 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
         return hint(e);
     }
     if let Some(StackCalibrationError::Config(e)) = cause.downcast_ref::<StackCalibrationError>() {
+        return hint(e);
+    }
+    if let Some(HiddenError::Confocal(e)) = cause.downcast_ref::<HiddenError>() {
         return hint(e);
     }
     if let Some(e) = cause.downcast_ref::<ConfigError>() {
@@ -72,21 +120,6 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
             ProblemError::BinWidth { .. } => Some("set the bin width with --bin-width".into()),
             _ => None,
         };
-    }
-    if let Some(ReconstructError::Setting { name, .. }) = cause.downcast_ref::<ReconstructError>() {
-        return Some(format!("set it with --{}", name.replace('_', "-")));
-    }
-    if let Some(ConfocalError::Setting { name, .. }) = cause.downcast_ref::<ConfocalError>() {
-        let flag = match *name {
-            "snr" => "--snr",
-            "depth_m" => "--depth",
-            "side_m" => "--scan-side",
-            "bin_width_ps" => "--bin-width",
-            "thickness_m" => "--slab-thickness",
-            // Settings of the library the command line does not expose.
-            _ => return None,
-        };
-        return Some(format!("set it with {flag}"));
     }
     if let Some(JobError::Files(e)) = cause.downcast_ref::<JobError>() {
         return hint(e);
@@ -106,41 +139,8 @@ fn hint(cause: &(dyn Error + 'static)) -> Option<String> {
                 "--tags records every pixel losslessly; a PTU file takes a sensor of at most 63 pixels (e.g. --size 7)"
                     .into(),
             ),
-            AcquireError::Setting { name, .. } => {
-                let flag = match *name {
-                    "channel" => "--channel",
-                    "pixels" => "--pixels",
-                    "region" => "--roi",
-                    "tag_file" => "--tags",
-                    "resolution_fs" => "--micro-time-unit",
-                    _ => return None,
-                };
-                Some(format!("set it with {flag}"))
-            }
             _ => None,
         };
-    }
-    if let Some(SourceError::Setting { name, .. }) = cause.downcast_ref::<SourceError>() {
-        let flag = match *name {
-            "speed" => "--speed",
-            "resolution_fs" => {
-                return Some(
-                    "--micro-time-unit sets our own devices' micro-time unit; --binning a PicoQuant device's"
-                        .into(),
-                );
-            }
-            "sync_level_mv" => "--sync-level",
-            "sync_rising" => "--sync-edge",
-            "sync_zero_cross_mv" => "--sync-zero-cross",
-            "input_rising" => "--input-edge",
-            "input_zero_cross_mv" => "--input-zero-cross",
-            "sync_divider" => "--sync-divider",
-            "input_offsets_ps" => "--input-offsets",
-            "binning" => "--binning",
-            "t3_offset_ns" => "--t3-offset",
-            _ => return None,
-        };
-        return Some(format!("set it with {flag}"));
     }
     if let Some(OpenError::Replay(e) | OpenError::Setting(e)) = cause.downcast_ref::<OpenError>() {
         return hint(e);

@@ -57,7 +57,7 @@ enum Command {
     CalibrateSlab(calibrate_slab::CalibrateSlabArgs),
     Hidden(hidden::HiddenArgs),
     Report(report::ReportArgs),
-    BenchRecon(bench_recon::BenchReconArgs),
+    BenchRecon(Box<bench_recon::BenchReconArgs>),
     BenchHidden(bench_hidden::BenchHiddenArgs),
     Info(tags_cmd::InfoArgs),
     Bin(tags_cmd::BinArgs),
@@ -121,7 +121,7 @@ fn check_line(line: &[std::ffi::OsString]) -> Result<(), String> {
         }
     };
     if let Command::Acquire(args) = &cli.command {
-        acquire::request(args).check().map_err(|e| e.to_string())?;
+        args.request().check().map_err(|e| e.to_string())?;
     }
     Ok(())
 }
@@ -166,28 +166,16 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::from(4)
         }
         Err(e) => {
-            eprintln!("error: {}", error_text(&e));
-            for hint in hints::flag_hints(&e) {
+            eprintln!("error: {}", scatterscope::error_text(e.as_ref()));
+            let name = matches.subcommand_name().unwrap_or_default();
+            let command = Cli::command().find_subcommand(name).cloned();
+            let command = command.unwrap_or_else(Cli::command);
+            for hint in hints::flag_hints(&e, &command) {
                 eprintln!("hint: {hint}");
             }
             std::process::ExitCode::from(1)
         }
     }
-}
-
-/// The error and its causes, joined by ": ", each cause left out where the
-/// text so far already holds it (library errors that show their cause in
-/// their own message would otherwise print it twice).
-fn error_text(e: &anyhow::Error) -> String {
-    let mut text = e.to_string();
-    for cause in e.chain().skip(1) {
-        let cause = cause.to_string();
-        if !text.contains(&cause) {
-            text.push_str(": ");
-            text.push_str(&cause);
-        }
-    }
-    text
 }
 
 fn dispatch(command: Command) -> anyhow::Result<()> {

@@ -43,8 +43,6 @@ pub struct ReconstructArgs {
     #[arg(long, value_delimiter = ',')]
     fit_physics: Vec<String>,
     #[command(flatten)]
-    recon: ReconArgs,
-    #[command(flatten)]
     physics: PhysicsOverrides,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/reconstruct")]
@@ -53,6 +51,8 @@ pub struct ReconstructArgs {
     /// the sensor's pixel size) for Fiji or napari.
     #[arg(long)]
     ome_tiff: bool,
+    #[command(flatten)]
+    recon: ReconArgs,
 }
 
 pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
@@ -116,20 +116,15 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     let printed = input.assumed.len();
     result.trace.notes.splice(0..0, input.assumed);
     result.write(&args.out)?;
+    let mut tiff = "";
     if args.ome_tiff {
         result.write_ome_tiff(&args.out, &input.stack)?;
+        tiff = ", reconstruction.ome.tif";
     }
     for line in result.summary(printed, truth.as_ref().map(|t| t.view())) {
         println!("{line}");
     }
-    println!(
-        "wrote {}/{{reconstruction.exr, reconstruction.png{}, trace.csv, trace.json}}",
-        args.out.display(),
-        if args.ome_tiff {
-            ", reconstruction.ome.tif"
-        } else {
-            ""
-        }
-    );
+    let out = args.out.display();
+    println!("wrote {out}/{{reconstruction.exr, reconstruction.png{tiff}, trace.csv, trace.json}}");
     Ok(())
 }

@@ -4,75 +4,52 @@
 
 use std::ffi::OsString;
 
-/// One renamed flag.
-struct Renamed {
-    /// The command it belongs to (`None`: every command that has it).
-    command: Option<&'static str>,
-    old: &'static str,
-    new: &'static str,
-    /// Said after the new name in the note.
-    why: &'static str,
-}
-
-const fn any(old: &'static str, new: &'static str) -> Renamed {
-    Renamed {
-        command: None,
-        old,
-        new,
-        why: "",
-    }
-}
-
-const fn of(
-    command: &'static str,
-    old: &'static str,
-    new: &'static str,
-    why: &'static str,
-) -> Renamed {
-    Renamed {
-        command: Some(command),
-        old,
-        new,
-        why,
-    }
-}
+/// The renamed flags: the command each belongs to (`None`: every command
+/// that has it), the old name, the new one, and what the note says after
+/// the new name.
+type Renamed = (
+    Option<&'static str>,
+    &'static str,
+    &'static str,
+    &'static str,
+);
 
 const RENAMED: &[Renamed] = &[
-    any("--bin-ps", "--bin-width"),
-    any("--irf-bin-ps", "--irf-bin-width"),
-    of(
-        "hidden",
+    (None, "--bin-ps", "--bin-width", ""),
+    (None, "--irf-bin-ps", "--irf-bin-width", ""),
+    (
+        Some("hidden"),
         "--medium",
         "--material",
         " (the material file; --medium is the physics flags' diffusion model)",
     ),
-    of(
-        "calibrate-slab",
+    (
+        Some("calibrate-slab"),
         "--mu-s",
         "--mu-s-reduced",
         " (the reduced scattering coefficient mu_s')",
     ),
-    of(
-        "calibrate-slab",
+    (
+        Some("calibrate-slab"),
         "--offset-cm",
         "--detector-offset",
         " (the detector's distance from the axis, cm)",
     ),
-    of("acquire", "--raw", "--tags", ""),
-    of(
-        "acquire",
+    (Some("acquire"), "--raw", "--tags", ""),
+    (
+        Some("acquire"),
         "--offset",
         "--t3-offset",
         " (a PicoQuant device's T3 offset)",
     ),
-    of(
-        "acquire",
+    (
+        Some("acquire"),
         "--replay",
         "--mock-replay",
         " (the mock's batches drawn once and replayed; --device replay:FILE plays a recording)",
     ),
-    of(
-        "acquire",
+    (
+        Some("acquire"),
         "--resolution",
         "--micro-time-unit",
         " (our own devices' micro-time unit; --binning sets a PicoQuant device's)",
@@ -119,85 +96,22 @@ pub fn new_spellings(args: impl IntoIterator<Item = OsString>) -> (Vec<OsString>
         };
         let renamed = RENAMED
             .iter()
-            .find(|r| r.old == flag && r.command.is_none_or(|c| Some(c) == command.as_deref()));
+            .find(|(of, old, ..)| *old == flag && of.is_none_or(|c| Some(c) == command.as_deref()));
         match renamed {
-            Some(r) => {
-                let whose = r.command.map_or(String::new(), |c| format!("{c}'s "));
-                let note = format!(
-                    "note: {whose}{} is now {}{}; the old name still works",
-                    r.old, r.new, r.why
-                );
+            Some(&(of, old, new, why)) => {
+                let whose = of.map_or(String::new(), |c| format!("{c}'s "));
+                let note =
+                    format!("note: {whose}{old} is now {new}{why}; the old name still works");
                 if !notes.contains(&note) {
                     notes.push(note);
                 }
                 out.push(match value {
-                    Some(v) => format!("{}={v}", r.new).into(),
-                    None => r.new.into(),
+                    Some(v) => format!("{new}={v}").into(),
+                    None => new.into(),
                 });
             }
             None => out.push(arg),
         }
     }
     (out, notes)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn spell(args: &[&str]) -> (Vec<String>, Vec<String>) {
-        let (out, notes) = new_spellings(args.iter().map(OsString::from));
-        let out = out.into_iter().map(|a| a.into_string().unwrap()).collect();
-        (out, notes)
-    }
-
-    #[test]
-    fn old_names_of_the_command_given_are_rewritten_with_a_note() {
-        let (out, notes) = spell(&[
-            "scatterscope",
-            "--memory-limit",
-            "1GiB",
-            "acquire",
-            "--offset=10ns",
-            "--replay",
-            "3",
-            "--bin-ps",
-            "16",
-        ]);
-        assert_eq!(
-            out,
-            [
-                "scatterscope",
-                "--memory-limit",
-                "1GiB",
-                "acquire",
-                "--t3-offset=10ns",
-                "--mock-replay",
-                "3",
-                "--bin-width",
-                "16"
-            ]
-        );
-        assert_eq!(notes.len(), 3, "{notes:?}");
-        assert!(notes[0].starts_with("note: acquire's --offset is now --t3-offset"));
-        assert!(notes[2].starts_with("note: --bin-ps is now --bin-width"));
-    }
-
-    #[test]
-    fn another_commands_flag_of_that_name_and_values_are_left_alone() {
-        // --medium is the physics flags' diffusion model outside `hidden`.
-        let args = [
-            "scatterscope",
-            "simulate",
-            "--medium",
-            "slab",
-            "--out",
-            "--offset",
-        ];
-        let (out, notes) = spell(&args);
-        assert_eq!(out, args);
-        assert!(notes.is_empty());
-        let (out, _) = spell(&["scatterscope", "hidden", "--", "--medium"]);
-        assert_eq!(out.last().unwrap(), "--medium", "after --, a positional");
-    }
 }

@@ -21,10 +21,6 @@ pub struct ReportArgs {
     /// Scene(s): usaf, star, text, disks or image files (default: all built-in).
     #[arg(long = "scene", value_name = "SCENE|FILE")]
     scenes: Vec<String>,
-    #[command(flatten)]
-    physics: PhysicsOverrides,
-    #[command(flatten)]
-    recon: ReconArgs,
     /// The sensor's edges, simulated and modelled: sensor or periodic.
     #[arg(long, value_parser = choice::<Boundary>(), default_value = "sensor")]
     boundary: Boundary,
@@ -44,6 +40,10 @@ pub struct ReportArgs {
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/report")]
     out: PathBuf,
+    #[command(flatten)]
+    physics: PhysicsOverrides,
+    #[command(flatten)]
+    recon: ReconArgs,
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {

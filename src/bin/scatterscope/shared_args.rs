@@ -4,16 +4,6 @@
 use indicatif::{ProgressBar, ProgressStyle};
 use scatterscope::config::PhysicsOverrides;
 use scatterscope::physics::Setup;
-use scatterscope::units::parse_ps;
-
-/// A struct of the library's from the flags of the same names (cloned),
-/// and any further fields given after them.
-macro_rules! same_fields {
-    ($from:expr => $ty:ident { $($f:ident),* $(,)? } $($more:tt)*) => {
-        $ty { $($f: $from.$f.clone(),)* $($more)* }
-    };
-}
-pub(crate) use same_fields;
 
 pub use scatterscope::named::choice;
 
@@ -38,16 +28,6 @@ pub fn progress(millis: Option<u128>) -> ProgressBar {
         None => (ProgressBar::new_spinner(), "{spinner} {elapsed} {msg}"),
     };
     bar.with_style(ProgressStyle::with_template(template).expect("template"))
-}
-
-/// The bin width of MATLAB files, which do not record theirs (`hidden`,
-/// `calibrate-slab`).
-#[derive(Debug, Clone, Default, clap::Args)]
-pub struct FileBinWidthArgs {
-    /// Bin width of MATLAB files, which do not record it (default unit ps;
-    /// e.g. 16ps).
-    #[arg(long, value_name = "TIME", value_parser = parse_ps)]
-    pub bin_width: Option<f64>,
 }
 
 /// The flags given on the command line to `command` (as parsed: new

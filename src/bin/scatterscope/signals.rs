@@ -38,35 +38,17 @@ pub fn stop_flag() -> &'static AtomicBool {
 
 /// A command ended cleanly by a signal (exit status 3, so that a script can
 /// tell it from the planned end); the text says what was kept.
-#[derive(Debug)]
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
 pub struct Interrupted(pub &'static str);
-
-impl std::fmt::Display for Interrupted {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.0)
-    }
-}
-
-impl std::error::Error for Interrupted {}
 
 /// A command that finished and wrote its outputs, but whose result is
 /// empty or implausible, or whose input is incomplete: its `warning:` lines
 /// say what (exit status 4, so that a script does not take it for a clean
 /// result).
-#[derive(Debug)]
+#[derive(Debug, thiserror::Error)]
+#[error("finished with {0} warning(s): the outputs are written, but see the warning lines")]
 pub struct Warned(pub usize);
-
-impl std::fmt::Display for Warned {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "finished with {} warning(s): the outputs are written, but see the warning lines",
-            self.0
-        )
-    }
-}
-
-impl std::error::Error for Warned {}
 
 /// `Ok` without warnings, else [`Warned`].
 pub fn warned(count: usize) -> anyhow::Result<()> {

@@ -35,14 +35,8 @@ pub fn run(args: &WeightsArgs) -> anyhow::Result<()> {
     match &args.action {
         Action::Import { path, out } => {
             let (out, w) = source::import(path, out.as_deref())?;
-            println!(
-                "imported {} -> {} ({} layers, {} channels, sigma up to {:.4})",
-                path.display(),
-                out.display(),
-                w.arch.layers,
-                w.arch.channels,
-                w.arch.sigma_max
-            );
+            let (from, to) = (path.display(), out.display());
+            println!("imported {from} -> {to} ({})", w.arch.describe());
             Ok(())
         }
         Action::Show { path } => {

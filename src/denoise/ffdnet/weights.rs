@@ -88,6 +88,14 @@ impl Architecture {
         }
     }
 
+    /// The shape in words: layers, channels, the largest sigma.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} layers, {} channels, sigma up to {:.4}",
+            self.layers, self.channels, self.sigma_max
+        )
+    }
+
     /// Multiply-adds x 2 of one call on an `h` x `w` image.
     pub fn flops(&self, h: usize, w: usize) -> f64 {
         let pixels = h.div_ceil(2) * w.div_ceil(2);

@@ -108,14 +108,22 @@ pub struct SpcOptions {
 }
 
 impl SpcOptions {
-    /// Why these options cannot apply to a file of `format`: set for a
-    /// file that is not a `.spc`, whose header says its own layout and
-    /// resolution; `None` when they apply or are unset.
-    pub fn misapplied(&self, format: crate::formats::detect::Format) -> Option<&'static str> {
-        (format != crate::formats::detect::Format::BeckerHicklFifo && *self != Self::default())
-            .then_some(
-                "the .spc module and micro-time unit apply to Becker & Hickl FIFO files (.spc); this file's header says its own layout and resolution",
-            )
+    /// Refuses these options for `path`, a file of `format`, when they
+    /// are set and it is not a `.spc` (whose header says its own layout
+    /// and resolution); the one check of every reader that takes them.
+    pub fn check_applies(
+        &self,
+        path: &Path,
+        format: crate::formats::detect::Format,
+    ) -> Result<(), SpcFileError> {
+        match format != crate::formats::detect::Format::BeckerHicklFifo && *self != Self::default()
+        {
+            true => Err(SpcFileError {
+                path: path.to_owned(),
+                error: SpcError::Misapplied,
+            }),
+            false => Ok(()),
+        }
     }
 }
 
@@ -125,6 +133,11 @@ pub enum SpcError {
     /// Operating-system error.
     #[error(transparent)]
     Io(#[from] std::io::Error),
+    /// `.spc` options were given for another kind of file.
+    #[error(
+        "the .spc module and micro-time unit apply to Becker & Hickl FIFO files (.spc); this file's header says its own layout and resolution"
+    )]
+    Misapplied,
     /// The header record is wrong.
     #[error("header record: {0}")]
     Header(String),
