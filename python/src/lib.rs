@@ -522,9 +522,8 @@ fn reconstruct<'py>(
         solver: named::<Solver>("solver", solver)?,
         ..MethodOptions::default()
     };
-    if let Some(m) = max_iters {
-        opts.split.max_iters = m;
-        opts.admm_lbfgs.max_iters = m;
+    if let Some(cap) = max_iters {
+        opts.cap_pnp_iters(cap);
     }
     let data: Array3<f32> = data.as_array().to_owned();
     let cancel = Arc::new(AtomicBool::new(false));

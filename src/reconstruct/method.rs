@@ -116,6 +116,14 @@ impl Default for MethodOptions {
 pub const MAX_WARM_START: usize = 100_000;
 
 impl MethodOptions {
+    /// Caps both PnP solvers at `cap` iterations: the one iteration cap a
+    /// front end offers for either solver (the command line's
+    /// `--max-iters`, Python's `max_iters`).
+    pub fn cap_pnp_iters(&mut self, cap: usize) {
+        self.split.max_iters = cap;
+        self.admm_lbfgs.max_iters = cap;
+    }
+
     /// Checks every setting: penalties, noise levels and tolerances are
     /// finite and in range; the error names the setting and its value.
     pub fn validate(&self) -> Result<(), ReconstructError> {

@@ -61,7 +61,7 @@ impl ReconArgs {
             ),
         };
         if let Some(cap) = self.max_iters {
-            (opts.split.max_iters, opts.admm_lbfgs.max_iters) = (cap, cap);
+            opts.cap_pnp_iters(cap);
         }
         opts.validate()?;
         Ok(opts)
