@@ -7,12 +7,16 @@
 
 use std::time::Duration;
 
+/// Centimetres in a metre: the one factor between the physics' lengths
+/// (cm) and the scans' and volumes' ([`crate::confocal`], m).
+pub const CM_PER_M: f64 = 100.0;
+
 /// The units of a length and their size in cm.
 pub const LENGTH_UNITS: [(&str, f64); 5] = [
     ("um", 1e-4),
     ("mm", 0.1),
     ("cm", 1.0),
-    ("m", 100.0),
+    ("m", CM_PER_M),
     ("in", 2.54),
 ];
 
@@ -117,7 +121,7 @@ pub fn parse_positive_cm(text: &str) -> Result<f64, String> {
 /// [`parse_positive_cm`] in metres, the unit of the hidden-volume methods
 /// ([`crate::confocal`]).
 pub fn parse_positive_m(text: &str) -> Result<f64, String> {
-    parse_positive_cm(text).map(|cm| cm / 100.0)
+    parse_positive_cm(text).map(|cm| cm / CM_PER_M)
 }
 
 /// [`parse_cm`] with bare numbers in cm: the value parser of the physics

@@ -683,10 +683,10 @@ fn the_cli_fits_and_predicts_real_captures_and_writes_its_plots() {
     );
     let optics = scatterscope::confocal::SlabOptics::from_material_file(
         &out.path().join("material.toml"),
-        0.0254,
+        2.54,
     )
     .unwrap();
-    assert!((optics.mu_s_reduced_per_m - 100.0 * medium.mu_s_per_cm).abs() < 1e-9);
+    assert_eq!(optics.mu_s_reduced_per_cm, medium.mu_s_per_cm);
     // A bad thickness is refused by name; the old names of mu_s' (the
     // flag and the fit name) and of the bin width are read and say their
     // new ones.

@@ -281,7 +281,7 @@ fn each_settings_type_parsed_from_no_flag_is_its_default() {
         "2.54cm",
     ];
     let hidden = Hidden::try_parse_from(args).unwrap().request;
-    let request = HiddenRequest::new("s.mat".into(), 0.636, 0.0254);
+    let request = HiddenRequest::new("s.mat".into(), 0.636, 2.54);
     assert_eq!(format!("{hidden:?}"), format!("{request:?}"));
     // A flag reaches its field.
     let flags = Flags::try_parse_from(["scatterscope", "--unpaced", "--prior-grid", "average"]);

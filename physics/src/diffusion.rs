@@ -11,6 +11,17 @@ use crate::slab::{SlabTransmittance, effective_reflection};
 /// Speed of light in vacuum (cm/ns).
 pub const SPEED_OF_LIGHT_CM_PER_NS: f64 = 29.979_245_8;
 
+/// Speed of light in a medium of refractive index `n`, `c / n` (cm/ps).
+pub fn light_speed_cm_per_ps(refractive_index: f64) -> f64 {
+    SPEED_OF_LIGHT_CM_PER_NS / 1000.0 / refractive_index
+}
+
+/// Diffusion coefficient `D = 1 / (3 (mu_a + mu_s'))` (cm), Eq. 2, from
+/// the absorption and reduced scattering coefficients (1/cm).
+pub fn diffusion_coefficient_cm(mu_a_per_cm: f64, mu_s_reduced_per_cm: f64) -> f64 {
+    1.0 / (3.0 * (mu_a_per_cm + mu_s_reduced_per_cm))
+}
+
 /// Derived constants of the diffusion model for one medium.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Diffusion {
@@ -34,8 +45,8 @@ impl Diffusion {
     pub fn new(medium: &Medium) -> Result<Self, ParamError> {
         medium.validate()?;
         let mu_s_reduced = (1.0 - medium.g) * medium.mu_s_per_cm;
-        let d_cm = 1.0 / (3.0 * (medium.mu_a_per_cm + mu_s_reduced));
-        let c_cm_per_ps = SPEED_OF_LIGHT_CM_PER_NS / 1000.0 / medium.refractive_index;
+        let d_cm = diffusion_coefficient_cm(medium.mu_a_per_cm, mu_s_reduced);
+        let c_cm_per_ps = light_speed_cm_per_ps(medium.refractive_index);
         let slab = match medium.model {
             MediumModel::Infinite => None,
             MediumModel::Slab => {

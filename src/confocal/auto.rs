@@ -160,7 +160,7 @@ mod tests {
         let mut counts = Array3::<f64>::zeros((600, 4, 4));
         counts.slice_mut(ndarray::s![100..400, .., ..]).fill(1.0);
         let scan = ConfocalScan::new(counts, 16.0, 0.0, 0.5, "dark").unwrap();
-        let optics = SlabOptics::for_slab(None, 1000.0).unwrap();
+        let optics = SlabOptics::for_slab(None, 100_000.0).unwrap();
         let (volume, choice) =
             reconstruct_auto(&scan, &optics, &PublishedOptions::default()).unwrap();
         assert!(volume.data.iter().all(|v| v.is_finite()));

@@ -8,6 +8,12 @@
 //! and bin) is reconstructed into a [`volume::HiddenVolume`] (x, y, depth
 //! behind the slab), which is read as projections and a depth map.
 //!
+//! Units: the scan's and the volume's lengths are metres, as the published
+//! scans state them; the slab's optics ([`SlabOptics`]) are in the physics
+//! crate's cm and 1/cm, so nothing converts between this module and the
+//! physics crate, and the scan's metres become cm
+//! ([`crate::units::CM_PER_M`]) only where the slab kernel is sampled.
+//!
 //! - [`scan`]: the measurement and its checks (MATLAB files, project stacks).
 //! - [`slab_kernel`]: the slab's diffusion kernel for light going in and out.
 //! - [`fft3`]: three-dimensional FFTs.

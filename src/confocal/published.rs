@@ -26,6 +26,7 @@ use super::fft3::{Fft3, complex};
 use super::slab_kernel::{KernelGrid, SlabOptics, in_and_out_spectrum};
 use super::volume::HiddenVolume;
 use super::{ConfocalError, ConfocalScan, stolt};
+use crate::units::CM_PER_M;
 
 /// Speed of light as the published code rounds it (m/s), used where it
 /// sets the kernel's time axis.
@@ -201,21 +202,23 @@ pub fn reconstruct_published(
     let mut padded = Array3::<f64>::zeros(padded_dim);
     padded.slice_mut(s![..nz, ..rows, ..cols]).assign(&measured);
 
-    let speed = PUBLISHED_LIGHT_SPEED / optics.refractive_index;
     let range = 4.0 * opts.depth_m;
     let linspace = |lo: f64, hi: f64, n: usize| -> Vec<f64> {
         (0..n)
             .map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64)
             .collect()
     };
+    // The kernel in the optics' units: the scan's metres as cm, time in ps.
+    let speed_cm_per_ps = PUBLISHED_LIGHT_SPEED * CM_PER_M * 1e-12 / optics.refractive_index;
+    let side_cm = scan.side_m * CM_PER_M;
     let grid = KernelGrid {
-        times_s: linspace(0.0, range, 2 * nz)
+        times_ps: linspace(0.0, range * CM_PER_M, 2 * nz)
             .into_iter()
-            .map(|p| p / speed)
+            .map(|p| p / speed_cm_per_ps)
             .collect(),
-        rows_m: linspace(-scan.side_m, scan.side_m, 2 * rows),
-        cols_m: linspace(-scan.side_m, scan.side_m, 2 * cols),
-        speed_m_per_s: speed,
+        rows_cm: linspace(-side_cm, side_cm, 2 * rows),
+        cols_cm: linspace(-side_cm, side_cm, 2 * cols),
+        speed_cm_per_ps,
     };
     let transfer = in_and_out_spectrum(optics, &grid);
     let fft = Fft3::new(padded_dim);

@@ -43,7 +43,7 @@ impl ConfocalScan {
         format!(
             "{} ({rows} x {cols} points over {:.1} cm, {bins} bins of {} ps, {:.0} counts)",
             self.source,
-            self.side_m * 100.0,
+            self.side_m * crate::units::CM_PER_M,
             self.bin_width_ps,
             self.total()
         )

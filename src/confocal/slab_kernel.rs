@@ -6,6 +6,7 @@
 
 use ndarray::Array3;
 use ndrustfft::Complex;
+use scatterscope_physics::diffusion::diffusion_coefficient_cm;
 use scatterscope_physics::{Diffusion, Medium};
 
 use super::ConfocalError;
@@ -15,40 +16,42 @@ use super::fft3::{Fft3, complex};
 /// at the published foam's 1 inch the 20th pair's term is below 1e-300).
 pub const IMAGE_PAIRS: i32 = 20;
 
-/// The slab's optics in SI units, as the published reconstruction states
-/// them.
+/// The slab's optics in the physics crate's units (cm, 1/cm), so that
+/// the optics the physics crate derives for a medium and the
+/// transmittance it evaluates for these optics take no conversion; the
+/// scan's own lengths (m) become cm where the kernel is sampled.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SlabOptics {
-    /// Thickness (m).
-    pub thickness_m: f64,
+    /// Thickness (cm).
+    pub thickness_cm: f64,
     /// Refractive index.
     pub refractive_index: f64,
-    /// Absorption coefficient (1/m).
-    pub mu_a_per_m: f64,
-    /// Reduced scattering coefficient (1/m).
-    pub mu_s_reduced_per_m: f64,
-    /// Distance of each extrapolated boundary outside its face (m).
-    pub extrapolation_m: f64,
-    /// Depth of the equivalent isotropic source below the lit face (m).
-    pub source_depth_m: f64,
+    /// Absorption coefficient (1/cm).
+    pub mu_a_per_cm: f64,
+    /// Reduced scattering coefficient (1/cm).
+    pub mu_s_reduced_per_cm: f64,
+    /// Distance of each extrapolated boundary outside its face (cm).
+    pub extrapolation_cm: f64,
+    /// Depth of the equivalent isotropic source below the lit face (cm).
+    pub source_depth_cm: f64,
 }
 
 impl SlabOptics {
     /// The 1-inch foam of the confocal diffuse tomography scans, with the
     /// authors' fit (n 1.12, mu_a 0.53 /m, mu_s' 262 /m, z_e 3.6 mm) and
-    /// their source depth `1 / mu_s'`.
+    /// their source depth `1 / mu_s'`, written in cm.
     pub const PUBLISHED_FOAM: Self = Self {
-        thickness_m: 0.0254,
+        thickness_cm: 2.54,
         refractive_index: 1.12,
-        mu_a_per_m: 0.53,
-        mu_s_reduced_per_m: 262.0,
-        extrapolation_m: 0.0036,
-        source_depth_m: 1.0 / 262.0,
+        mu_a_per_cm: 0.0053,
+        mu_s_reduced_per_cm: 2.62,
+        extrapolation_cm: 0.36,
+        source_depth_cm: 1.0 / 2.62,
     };
 
     /// The optics of a slab medium as the physics crate models it (source
     /// one transport mean free path deep, `z_e = 2 A D` from the effective
-    /// reflection of the index mismatch): its `Diffusion`'s slab, in metres.
+    /// reflection of the index mismatch): its `Diffusion`'s slab.
     pub fn from_medium(medium: &Medium) -> Result<Self, ConfocalError> {
         let slab_medium = Medium {
             model: scatterscope_physics::MediumModel::Slab,
@@ -60,34 +63,33 @@ impl SlabOptics {
             .slab
             .expect("a slab medium's diffusion has its slab geometry");
         Ok(Self {
-            thickness_m: medium.thickness_cm / 100.0,
+            thickness_cm: medium.thickness_cm,
             refractive_index: medium.refractive_index,
-            mu_a_per_m: medium.mu_a_per_cm * 100.0,
-            mu_s_reduced_per_m: (1.0 - medium.g) * medium.mu_s_per_cm * 100.0,
-            extrapolation_m: slab.extrapolation_cm / 100.0,
-            source_depth_m: slab.source_depth_cm / 100.0,
+            mu_a_per_cm: diffusion.mu_a_per_cm,
+            mu_s_reduced_per_cm: diffusion.mu_s_reduced_per_cm,
+            extrapolation_cm: slab.extrapolation_cm,
+            source_depth_cm: slab.source_depth_cm,
         })
     }
 
     /// The optics of the material file at `path` (e.g. the
     /// `material.toml` that `calibrate-slab` writes) for a slab
-    /// `thickness_m` thick. A file that names another thickness is refused
+    /// `thickness_cm` thick. A file that names another thickness is refused
     /// with both.
     pub fn from_material_file(
         path: &std::path::Path,
-        thickness_m: f64,
+        thickness_cm: f64,
     ) -> Result<Self, ConfocalError> {
         let name = path.display().to_string();
         let file = crate::config::read_material(path)
             .map_err(|e| ConfocalError::input(&name, e.to_string()))?;
         if let Some(cm) = file.thickness_cm
-            && (cm / 100.0 - thickness_m).abs() > 1e-6 * thickness_m.max(1e-9)
+            && (cm - thickness_cm).abs() > 1e-6 * thickness_cm.max(1e-7)
         {
             return Err(ConfocalError::setting(
-                "thickness_m",
+                "thickness_cm",
                 format!(
-                    "{name}: the material file is for a slab {cm} cm thick, the scan's slab is {} cm: remove its `thickness` key to use the material at another thickness",
-                    thickness_m * 100.0
+                    "{name}: the material file is for a slab {cm} cm thick, the scan's slab is {thickness_cm} cm: remove its `thickness` key to use the material at another thickness"
                 ),
             ));
         }
@@ -96,7 +98,7 @@ impl SlabOptics {
             mu_s_per_cm: file.mu_s_per_cm,
             g: file.g,
             refractive_index: file.refractive_index,
-            thickness_cm: thickness_m * 100.0,
+            thickness_cm,
             model: scatterscope_physics::MediumModel::Slab,
         })
         .map_err(|e| match e {
@@ -105,56 +107,63 @@ impl SlabOptics {
         })
     }
 
-    /// The optics of a slab `thickness_m` thick: the material of
+    /// The optics of a slab `thickness_cm` thick: the material of
     /// `material_file` ([`Self::from_material_file`]), or the published foam's
     /// when there is none.
     pub fn for_slab(
         material_file: Option<&std::path::Path>,
-        thickness_m: f64,
+        thickness_cm: f64,
     ) -> Result<Self, ConfocalError> {
         match material_file {
-            Some(path) => Self::from_material_file(path, thickness_m),
+            Some(path) => Self::from_material_file(path, thickness_cm),
             None => Ok(Self {
-                thickness_m,
+                thickness_cm,
                 ..Self::PUBLISHED_FOAM
             }),
         }
     }
 
-    /// The slab in words: thickness, index, mu_a, mu_s', z_e.
+    /// The slab in words: thickness, index, mu_a, mu_s', z_e (the
+    /// coefficients per metre and z_e in mm, as the published fit states
+    /// them).
     pub fn describe(&self) -> String {
+        use crate::units::CM_PER_M;
         format!(
             "{:.2} cm, n {}, mu_a {:.3} /m, mu_s' {:.1} /m, z_e {:.2} mm",
-            self.thickness_m * 100.0,
+            self.thickness_cm,
             self.refractive_index,
-            self.mu_a_per_m,
-            self.mu_s_reduced_per_m,
-            self.extrapolation_m * 1000.0
+            self.mu_a_per_cm * CM_PER_M,
+            self.mu_s_reduced_per_cm * CM_PER_M,
+            self.extrapolation_cm * 10.0
         )
     }
 
-    /// Diffusion coefficient `D = 1 / (3 (mu_a + mu_s'))` (m).
-    pub fn diffusion_m(&self) -> f64 {
-        1.0 / (3.0 * (self.mu_a_per_m + self.mu_s_reduced_per_m))
+    /// Diffusion coefficient `D = 1 / (3 (mu_a + mu_s'))` (cm).
+    pub fn diffusion_cm(&self) -> f64 {
+        diffusion_coefficient_cm(self.mu_a_per_cm, self.mu_s_reduced_per_cm)
     }
 
     /// Photon flux density leaving the far face at lateral offset `rho`
-    /// (m) from the source, `t` seconds after it entered, for light speed
-    /// `v` (m/s) in the slab (unnormalised: the published form,
+    /// (cm) from the source, `t` ps after it entered, for light speed
+    /// `v` (cm/ps) in the slab (unnormalised: the published form,
     /// `(4 pi D v)^(-3/2) t^(-5/2) exp(-mu_a v t - rho^2 / (4 D v t))`
     /// times the image sum).
-    pub fn transmittance(&self, rho2_m2: f64, t_s: f64, v: f64) -> f64 {
-        self.temporal_factor(t_s, v) * self.lateral_factor(rho2_m2, t_s, v)
+    pub fn transmittance(&self, rho2_cm2: f64, t_ps: f64, v: f64) -> f64 {
+        self.temporal_factor(t_ps, v) * self.lateral_factor(rho2_cm2, t_ps, v)
     }
 
     /// The factor of [`Self::transmittance`] that depends on time only.
-    pub fn temporal_factor(&self, t_s: f64, v: f64) -> f64 {
-        if t_s.is_nan() || t_s <= 0.0 {
+    pub fn temporal_factor(&self, t_ps: f64, v: f64) -> f64 {
+        if t_ps.is_nan() || t_ps <= 0.0 {
             return 0.0;
         }
-        let d = self.diffusion_m();
-        let four_dvt = 4.0 * d * v * t_s;
-        let (s, ze, z0) = (self.thickness_m, self.extrapolation_m, self.source_depth_m);
+        let d = self.diffusion_cm();
+        let four_dvt = 4.0 * d * v * t_ps;
+        let (s, ze, z0) = (
+            self.thickness_cm,
+            self.extrapolation_cm,
+            self.source_depth_cm,
+        );
         let mut images = 0.0;
         for m in -IMAGE_PAIRS..=IMAGE_PAIRS {
             let m = f64::from(m);
@@ -164,47 +173,47 @@ impl SlabOptics {
                 - z_neg * (-z_neg * z_neg / four_dvt).exp();
         }
         (4.0 * std::f64::consts::PI * d * v).powf(-1.5)
-            * t_s.powf(-2.5)
-            * (-self.mu_a_per_m * v * t_s).exp()
+            * t_ps.powf(-2.5)
+            * (-self.mu_a_per_cm * v * t_ps).exp()
             * images
     }
 
     /// The lateral Gaussian of [`Self::transmittance`],
     /// `exp(-rho^2 / (4 D v t))` (1 at `t <= 0`, where the temporal factor
     /// is 0).
-    pub fn lateral_factor(&self, rho2_m2: f64, t_s: f64, v: f64) -> f64 {
-        if t_s.is_nan() || t_s <= 0.0 {
+    pub fn lateral_factor(&self, rho2_cm2: f64, t_ps: f64, v: f64) -> f64 {
+        if t_ps.is_nan() || t_ps <= 0.0 {
             return 1.0;
         }
-        (-rho2_m2 / (4.0 * self.diffusion_m() * v * t_s)).exp()
+        (-rho2_cm2 / (4.0 * self.diffusion_cm() * v * t_ps)).exp()
     }
 }
 
-/// The grid a kernel is sampled on: `times_s[k]` by lateral offsets
-/// `rows_m[r]`, `cols_m[c]`, origin at index (0, 0, 0) after a circular
+/// The grid a kernel is sampled on: `times_ps[k]` by lateral offsets
+/// `rows_cm[r]`, `cols_cm[c]`, origin at index (0, 0, 0) after a circular
 /// shift, as the padded volumes it convolves.
 pub struct KernelGrid {
-    /// Sample times (s).
-    pub times_s: Vec<f64>,
-    /// Lateral offsets along rows (m), before the shift.
-    pub rows_m: Vec<f64>,
-    /// Lateral offsets along columns (m), before the shift.
-    pub cols_m: Vec<f64>,
-    /// Light speed in the slab (m/s).
-    pub speed_m_per_s: f64,
+    /// Sample times (ps).
+    pub times_ps: Vec<f64>,
+    /// Lateral offsets along rows (cm), before the shift.
+    pub rows_cm: Vec<f64>,
+    /// Lateral offsets along columns (cm), before the shift.
+    pub cols_cm: Vec<f64>,
+    /// Light speed in the slab (cm/ps).
+    pub speed_cm_per_ps: f64,
 }
 
 /// The kernel `optics` gives on `grid`, normalised to sum 1, rolled so that
 /// offset index `len / 2` sits at 0, then convolved with itself circularly
 /// (in and out); returns its 3-D spectrum.
 pub fn in_and_out_spectrum(optics: &SlabOptics, grid: &KernelGrid) -> Array3<Complex<f64>> {
-    let (nt, nr, nc) = (grid.times_s.len(), grid.rows_m.len(), grid.cols_m.len());
+    let (nt, nr, nc) = (grid.times_ps.len(), grid.rows_cm.len(), grid.cols_cm.len());
     // Separable: a factor per time, and per time a Gaussian per row and
     // per column (the image sum is evaluated once per time, not per voxel).
-    let v = grid.speed_m_per_s;
+    let v = grid.speed_cm_per_ps;
     let mut once = Array3::<f64>::zeros((nt, nr, nc));
     ndarray::Zip::indexed(once.outer_iter_mut()).par_for_each(|k, mut plane| {
-        let t = grid.times_s[k];
+        let t = grid.times_ps[k];
         let temporal = optics.temporal_factor(t, v);
         let along = |offsets: &[f64], n: usize| -> Vec<f64> {
             (0..n)
@@ -214,7 +223,7 @@ pub fn in_and_out_spectrum(optics: &SlabOptics, grid: &KernelGrid) -> Array3<Com
                 })
                 .collect()
         };
-        let (gr, gc) = (along(&grid.rows_m, nr), along(&grid.cols_m, nc));
+        let (gr, gc) = (along(&grid.rows_cm, nr), along(&grid.cols_cm, nc));
         for ((r, c), value) in plane.indexed_iter_mut() {
             *value = temporal * gr[r] * gc[c];
         }
@@ -258,11 +267,11 @@ mod tests {
     fn medium_files_are_read_and_checked() {
         let ok =
             material_file("mu_a = 0.0048\nmu_s = 2.72\ng = 0.0\nn = 1.12\nmedium = \"slab\"\n");
-        let optics = SlabOptics::from_material_file(&ok, 0.0254).unwrap();
-        assert!((optics.mu_s_reduced_per_m - 272.0).abs() < 1e-9);
-        assert!((optics.thickness_m - 0.0254).abs() < 1e-12);
+        let optics = SlabOptics::from_material_file(&ok, 2.54).unwrap();
+        assert!((optics.mu_s_reduced_per_cm - 2.72).abs() < 1e-12);
+        assert_eq!(optics.thickness_cm, 2.54);
         let other = material_file("mu_a = 0.0048\nmu_s = 2.72\nn = 1.12\nthickness = 3.0\n");
-        let e = SlabOptics::from_material_file(&other, 0.0254)
+        let e = SlabOptics::from_material_file(&other, 2.54)
             .unwrap_err()
             .to_string();
         assert!(
@@ -270,7 +279,7 @@ mod tests {
             "{e}"
         );
         let missing = material_file("mu_a = 0.0048\nmu_s = 2.72\n");
-        let e = SlabOptics::from_material_file(&missing, 0.0254)
+        let e = SlabOptics::from_material_file(&missing, 2.54)
             .unwrap_err()
             .to_string();
         assert!(e.contains("key `n` is missing"), "{e}");
@@ -284,21 +293,21 @@ mod tests {
     #[test]
     fn equals_physics_slab_transmittance() {
         let o = SlabOptics::PUBLISHED_FOAM;
-        let v = 299_792_458.0 / o.refractive_index;
+        let v = scatterscope_physics::diffusion::light_speed_cm_per_ps(o.refractive_index);
         let slab = crate::confocal::forward::slab_transmittance(&o);
         // Integrated over the plane the lateral Gaussian gives 4 pi D v t.
-        let d = o.diffusion_m();
-        let ratio = |t_s: f64| {
-            let plane = o.transmittance(0.0, t_s, v) * 4.0 * std::f64::consts::PI * d * v * t_s;
-            plane / slab.log_density(t_s * 1e12).exp()
+        let d = o.diffusion_cm();
+        let ratio = |t_ps: f64| {
+            let plane = o.transmittance(0.0, t_ps, v) * 4.0 * std::f64::consts::PI * d * v * t_ps;
+            plane / slab.log_density(t_ps).exp()
         };
         // To 5 ns, where the flux has fallen to about 2e-7 of its peak;
         // later the published image sum loses digits to cancellation (its
         // terms are of order one, their sum far smaller), where the physics
         // crate has switched to its sine series.
-        let reference = ratio(1e-9);
+        let reference = ratio(1000.0);
         for t_ps in [100.0, 300.0, 1000.0, 3000.0, 5000.0] {
-            let r = ratio(t_ps * 1e-12) / reference;
+            let r = ratio(t_ps) / reference;
             assert!((r - 1.0).abs() < 1e-9, "t = {t_ps} ps: ratio {r}");
         }
     }

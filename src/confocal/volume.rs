@@ -78,7 +78,7 @@ impl HiddenVolume {
         self.object_depth().map(|d| {
             format!(
                 "object depth (median over points at half the brightest or more): {:.1} cm behind the slab",
-                d * 100.0
+                d * crate::units::CM_PER_M
             )
         })
     }

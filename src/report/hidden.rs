@@ -18,6 +18,7 @@ use crate::confocal::{
     SlabOptics, hidden_warnings,
 };
 use crate::plot::{Heatmap, heatmap};
+use crate::units::CM_PER_M;
 
 /// One hidden-object reconstruction as asked for: the scan, its geometry
 /// and the method (`scatterscope hidden`'s flags are these fields, their
@@ -32,8 +33,8 @@ pub struct HiddenRequest {
     #[cfg_attr(feature = "cli", arg(long = "scan-side", value_name = "LENGTH", value_parser = crate::units::parse_positive_m))]
     pub side_m: f64,
     /// Slab thickness with its unit (e.g. 1in, 2.54cm).
-    #[cfg_attr(feature = "cli", arg(long = "slab-thickness", value_name = "LENGTH", value_parser = crate::units::parse_positive_m))]
-    pub thickness_m: f64,
+    #[cfg_attr(feature = "cli", arg(long = "slab-thickness", value_name = "LENGTH", value_parser = crate::units::parse_positive_cm))]
+    pub thickness_cm: f64,
     /// The slab's material: a material file (e.g. calibrate-slab's
     /// OUT/material.toml: mu_a, mu_s, g, n). Without it the published foam
     /// fit is assumed (n 1.12, mu_a 0.53 /m, mu_s' 262 /m, z_e 3.6 mm).
@@ -89,13 +90,13 @@ pub enum HiddenError {
 
 impl HiddenRequest {
     /// A request for the scan at `scan`, of a square `side_m` on a side,
-    /// through a slab `thickness_m` thick, every other setting at its
+    /// through a slab `thickness_cm` thick, every other setting at its
     /// default (those of `scatterscope hidden`).
-    pub fn new(scan: PathBuf, side_m: f64, thickness_m: f64) -> Self {
+    pub fn new(scan: PathBuf, side_m: f64, thickness_cm: f64) -> Self {
         Self {
             scan,
             side_m,
-            thickness_m,
+            thickness_cm,
             material: None,
             bin_width_ps: None,
             dataset: DEFAULT_MAT_DATASET.into(),
@@ -116,7 +117,7 @@ impl HiddenRequest {
         if let Some(fraction) = self.thin.filter(|&f| f != 1.0) {
             scan = scan.thinned(fraction, self.thin_seed)?;
         }
-        let optics = SlabOptics::for_slab(self.material.as_deref(), self.thickness_m)?;
+        let optics = SlabOptics::for_slab(self.material.as_deref(), self.thickness_cm)?;
         let published = PublishedOptions {
             snr: self.snr,
             depth_m: self.depth_m,
@@ -211,9 +212,9 @@ pub fn write_hidden(
     written.push(depth_npy);
 
     let (nz, rows, cols) = volume.data.dim();
-    let half_cm = 50.0 * volume.side_m;
-    let first_cm = 100.0 * volume.first_depth_m;
-    let depth_cm = first_cm + 100.0 * volume.depth_step_m * (nz - 1) as f64;
+    let half_cm = 0.5 * CM_PER_M * volume.side_m;
+    let first_cm = CM_PER_M * volume.first_depth_m;
+    let depth_cm = first_cm + CM_PER_M * volume.depth_step_m * (nz - 1) as f64;
     let x = ("x on the slab (cm)", -half_cm, half_cm);
     let y = ("y on the slab (cm)", -half_cm, half_cm);
     let z = ("depth behind the slab (cm)", first_cm, depth_cm);
@@ -225,7 +226,7 @@ pub fn write_hidden(
     let top_peak = peak.iter().fold(0.0f64, |m, &v| m.max(v));
     let shown_depth = ndarray::Zip::from(&depth).and(&peak).map_collect(|&d, &p| {
         if p >= crate::confocal::volume::OBJECT_LEVEL * top_peak {
-            100.0 * d
+            CM_PER_M * d
         } else {
             0.0
         }

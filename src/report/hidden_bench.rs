@@ -18,6 +18,7 @@ use crate::confocal::{
     ConfocalScan, PoissonOptions, PublishedOptions, SlabOptics, VolumeReconstructor,
 };
 use crate::formats::detect::Format;
+use crate::units::CM_PER_M;
 
 /// Label of the published method.
 pub const PUBLISHED: &str = "published (Wiener + f-k)";
@@ -280,8 +281,8 @@ fn row_of(
         counts: scan.total(),
         method: method.to_string(),
         correlation: correlation(&volume.projection(Projection::Front), reference),
-        depth_cm: volume.object_depth().map(|d| d * 100.0),
-        brightest_cm: volume.brightest_depth() * 100.0,
+        depth_cm: volume.object_depth().map(|d| d * CM_PER_M),
+        brightest_cm: volume.brightest_depth() * CM_PER_M,
         wall_s,
         stop: None,
         blur: None,
