@@ -242,6 +242,7 @@ fn each_settings_type_parsed_from_no_flag_is_its_default() {
     use scatterscope::formats::becker_hickl::spc::SpcOptions;
     use scatterscope::reconstruct::admm_lbfgs::AdmmLbfgsOptions;
     use scatterscope::reconstruct::split::SplitOptions;
+    use scatterscope::report::ReportSettings;
     use scatterscope::report::hidden::HiddenRequest;
 
     #[derive(clap::Parser)]
@@ -258,6 +259,11 @@ fn each_settings_type_parsed_from_no_flag_is_its_default() {
         prior: PriorSpec,
     }
     #[derive(clap::Parser)]
+    struct Report {
+        #[command(flatten)]
+        settings: ReportSettings,
+    }
+    #[derive(clap::Parser)]
     struct Hidden {
         #[command(flatten)]
         request: HiddenRequest,
@@ -272,6 +278,8 @@ fn each_settings_type_parsed_from_no_flag_is_its_default() {
     assert_eq!(format!("{:?}", flags.admm_lbfgs), admm_lbfgs);
     assert_eq!(flags.spc, SpcOptions::default());
     assert_eq!(flags.prior, PriorSpec::default());
+    let report = Report::try_parse_from(["x"]).unwrap().settings;
+    assert_eq!(report, ReportSettings::default());
     let args = [
         "x",
         "s.mat",
@@ -287,4 +295,6 @@ fn each_settings_type_parsed_from_no_flag_is_its_default() {
     let flags = Flags::try_parse_from(["scatterscope", "--unpaced", "--prior-grid", "average"]);
     let flags = flags.unwrap();
     assert!(!flags.request.mock.real_time && flags.split.average_prior_grid);
+    let report = Report::try_parse_from(["x", "--instrument", "realistic"]).unwrap();
+    assert_eq!(report.settings.realistic_background(), Some(0.05));
 }

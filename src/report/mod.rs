@@ -15,7 +15,7 @@ pub mod hidden;
 pub mod hidden_bench;
 pub mod instrument;
 
-use crate::named::Named;
+use crate::named::{Named, named};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -461,16 +461,75 @@ pub enum ReportError {
     Input(String),
 }
 
+/// The instrument the report's scenes are measured with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Instrument {
+    /// No instrument response and no background.
+    #[default]
+    Ideal,
+    /// Also with an instrument response and a background, and what
+    /// ignoring either costs.
+    Realistic,
+}
+
+named!(Instrument {
+    Ideal => "ideal",
+    Realistic => "realistic",
+});
+
+/// The report's own settings (`scatterscope report`'s flags are these
+/// fields, their docs the flags' help).
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct ReportSettings {
+    /// The sensor's edges, simulated and modelled: sensor or periodic.
+    #[cfg_attr(feature = "cli", arg(long, value_parser = crate::named::choice::<Boundary>(), default_value = ReportSettings::default().boundary.name()))]
+    pub boundary: Boundary,
+    /// Seed of the Poisson sampler.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = ReportSettings::default().seed))]
+    pub seed: u64,
+    /// Instrument: ideal, or realistic (also with an IRF and a background,
+    /// and what ignoring either costs).
+    #[cfg_attr(feature = "cli", arg(long, value_parser = crate::named::choice::<Instrument>(), default_value = ReportSettings::default().instrument.name()))]
+    pub instrument: Instrument,
+    /// Realistic instrument: background, a share of the mean expected count.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = ReportSettings::default().background_share))]
+    pub background_share: f64,
+    /// Run the single-bin methods on every n-th bin only.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = ReportSettings::default().slice_step))]
+    pub slice_step: usize,
+}
+
+impl Default for ReportSettings {
+    /// The sensor's edges, seed 0, the ideal instrument (a realistic one
+    /// with a background of 5 % of the mean expected count), every bin.
+    fn default() -> Self {
+        Self {
+            boundary: Boundary::default(),
+            seed: 0,
+            instrument: Instrument::default(),
+            background_share: 0.05,
+            slice_step: 1,
+        }
+    }
+}
+
+impl ReportSettings {
+    /// The realistic instrument's background share, `None` for the ideal
+    /// instrument.
+    pub fn realistic_background(&self) -> Option<f64> {
+        (self.instrument == Instrument::Realistic).then_some(self.background_share)
+    }
+}
+
 /// Everything one `report` needs.
 pub struct ReportConfig<'a> {
     /// The scenes (built-in or image files).
     pub scenes: Vec<Scene>,
     /// The physics they are measured with.
     pub setup: Setup,
-    /// How the sensor's edges are simulated and modelled.
-    pub boundary: Boundary,
-    /// Seed of the Poisson sampler.
-    pub seed: u64,
+    /// Edges, seed, instrument and bin step.
+    pub settings: ReportSettings,
     /// The headline prior.
     pub denoiser: &'a dyn Denoiser,
     /// A second prior shown beside it (TV when the headline is not TV).
@@ -480,12 +539,6 @@ pub struct ReportConfig<'a> {
     /// Richardson-Lucy's iterations: the baselines run a fixed count, to
     /// be ranked by their best iteration chosen with the truth.
     pub rl_iters: usize,
-    /// Run the single-bin methods on every n-th bin only.
-    pub slice_step: usize,
-    /// With a share: also measure each scene with an instrument response
-    /// and this background (a share of the mean expected count per pixel
-    /// and bin) and report what ignoring either costs.
-    pub realistic_background: Option<f64>,
     /// Output directory: one folder per scene, `summary.{md,csv}`.
     pub out: PathBuf,
 }
@@ -520,13 +573,13 @@ pub fn run_report(
         reports.push(run_scene(
             scene,
             &cfg.setup,
-            cfg.boundary,
-            cfg.seed,
+            cfg.settings.boundary,
+            cfg.settings.seed,
             cfg.denoiser,
             cfg.comparison,
             &cfg.opts,
             cfg.rl_iters,
-            cfg.slice_step,
+            cfg.settings.slice_step,
             &dir,
             &mut progress,
         )?);
@@ -537,7 +590,7 @@ pub fn run_report(
         ));
     }
     let mut md = summary_markdown(&reports);
-    if let Some(share) = cfg.realistic_background {
+    if let Some(share) = cfg.settings.realistic_background() {
         let (mut backgrounds, mut rows) = (Vec::new(), Vec::new());
         for scene in &cfg.scenes {
             progress(&format!("{}: realistic instrument", scene.name()));
@@ -545,8 +598,8 @@ pub fn run_report(
                 scene,
                 &cfg.setup,
                 share,
-                cfg.boundary,
-                cfg.seed,
+                cfg.settings.boundary,
+                cfg.settings.seed,
                 cfg.denoiser,
                 &cfg.opts,
             )?;

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use scatterscope::Named;
 use scatterscope::calibrate::histogram::{DEFAULT_MAT_DATASET, DEFAULT_MAT_PARTS};
 use scatterscope::calibrate::transmittance::SlabFitOptions;
 use scatterscope::report::calibration::{IrfExtent, SlabJob};
@@ -30,7 +31,7 @@ pub struct CalibrateSlabArgs {
     irf_from: PathBuf,
     /// How much of the reference is the response: its whole period (the
     /// peak, pedestal and tail) or the peak's run above the background.
-    #[arg(long, value_parser = choice::<IrfExtent>(), default_value = "period")]
+    #[arg(long, value_parser = choice::<IrfExtent>(), default_value = IrfExtent::default().name())]
     irf_extent: IrfExtent,
     /// Bin width of MATLAB files, which do not record it (default unit ps;
     /// e.g. 16ps).

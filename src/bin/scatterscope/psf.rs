@@ -20,7 +20,7 @@ pub struct PsfArgs {
     physics: PhysicsOverrides,
     /// Discretisation written to psf.exr: integrated (over pixel area and
     /// bin duration) or point (samples at pixel and bin centres).
-    #[arg(long, default_value = "integrated", value_parser = choice::<Sampling>())]
+    #[arg(long, default_value = Sampling::default().name(), value_parser = choice::<Sampling>())]
     sampling: Sampling,
     /// Contact-sheet scaling.
     #[arg(long, value_parser = choice::<SheetScale>(), default_value = "per-bin")]

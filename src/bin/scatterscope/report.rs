@@ -4,12 +4,11 @@ use std::path::PathBuf;
 
 use scatterscope::Named;
 use scatterscope::denoise::prior::PriorKind;
-use scatterscope::forward::Boundary;
-use scatterscope::report::{ReportConfig, run_report};
+use scatterscope::report::{ReportConfig, ReportSettings, run_report};
 use scatterscope::scene::Scene;
 
 use crate::recon_args::ReconArgs;
-use crate::shared_args::{choice, progress, resolve};
+use crate::shared_args::{progress, resolve};
 use scatterscope::config::PhysicsOverrides;
 
 /// Simulate scenes, run every method, and compare them with the truth.
@@ -21,22 +20,8 @@ pub struct ReportArgs {
     /// Scene(s): usaf, star, text, disks or image files (default: all built-in).
     #[arg(long = "scene", value_name = "SCENE|FILE")]
     scenes: Vec<String>,
-    /// The sensor's edges, simulated and modelled: sensor or periodic.
-    #[arg(long, value_parser = choice::<Boundary>(), default_value = "sensor")]
-    boundary: Boundary,
-    /// Seed of the Poisson sampler.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Instrument: ideal, or realistic (also with an IRF and a background,
-    /// and what ignoring either costs).
-    #[arg(long, value_parser = ["ideal", "realistic"], default_value = "ideal")]
-    instrument: String,
-    /// Realistic instrument: background, a share of the mean expected count.
-    #[arg(long, default_value_t = 0.05)]
-    background_share: f64,
-    /// Run the single-bin methods on every n-th bin only.
-    #[arg(long, default_value_t = 1)]
-    slice_step: usize,
+    #[command(flatten)]
+    settings: ReportSettings,
     /// Output directory (created if missing).
     #[arg(long, default_value = "out/report")]
     out: PathBuf,
@@ -56,16 +41,13 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             false => args.scenes.iter().map(|s| Scene::parse(s)).collect(),
         },
         setup: resolve(&args.physics)?,
-        boundary: args.boundary,
-        seed: args.seed,
+        settings: args.settings.clone(),
         denoiser: denoiser.as_ref(),
         comparison: comparison
             .as_ref()
             .map(|d| (PriorKind::Tv.name(), d.as_ref())),
         opts: args.recon.options()?,
         rl_iters: args.recon.rl_iters,
-        slice_step: args.slice_step,
-        realistic_background: (args.instrument == "realistic").then_some(args.background_share),
         out: args.out.clone(),
     };
     let bar = progress(None);
