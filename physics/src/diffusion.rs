@@ -8,8 +8,13 @@ use crate::error::ParamError;
 use crate::params::{Medium, MediumModel};
 use crate::slab::{SlabTransmittance, effective_reflection};
 
-/// Speed of light in vacuum (cm/ns).
-pub const SPEED_OF_LIGHT_CM_PER_NS: f64 = 29.979_245_8;
+/// Speed of light in vacuum (m/s, exact by the SI's definition of the
+/// metre).
+pub const SPEED_OF_LIGHT_M_PER_S: f64 = 299_792_458.0;
+
+/// Speed of light in vacuum (cm/ns): [`SPEED_OF_LIGHT_M_PER_S`] in the
+/// physics' units (the quotient is 29.9792458 to the last bit).
+pub const SPEED_OF_LIGHT_CM_PER_NS: f64 = SPEED_OF_LIGHT_M_PER_S * 100.0 / 1e9;
 
 /// Speed of light in a medium of refractive index `n`, `c / n` (cm/ps).
 pub fn light_speed_cm_per_ps(refractive_index: f64) -> f64 {
@@ -165,6 +170,13 @@ pub fn gaussian_interval_fraction(x0: f64, x1: f64, s: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::params::Preset;
+
+    /// The speed in the physics' units is the decimal value to the last
+    /// bit, so deriving it from the metre's speed changed no result.
+    #[test]
+    fn light_speed_in_cm_per_ns_is_the_decimal_value() {
+        assert_eq!(SPEED_OF_LIGHT_CM_PER_NS, 29.979_245_8);
+    }
 
     #[test]
     fn paper_constants() {

@@ -32,8 +32,8 @@ use crate::units::CM_PER_M;
 /// sets the kernel's time axis.
 pub const PUBLISHED_LIGHT_SPEED: f64 = 3e8;
 
-/// Speed of light in vacuum (m/s).
-pub const LIGHT_SPEED: f64 = 299_792_458.0;
+/// Speed of light in vacuum (m/s): the physics crate's.
+pub const LIGHT_SPEED: f64 = scatterscope_physics::diffusion::SPEED_OF_LIGHT_M_PER_S;
 
 /// Settings of the published reconstruction.
 #[derive(Debug, Clone, Copy, PartialEq)]
