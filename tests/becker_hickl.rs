@@ -21,6 +21,7 @@ use command::{run, text};
 use ptu_tags::ptu_tags;
 use scatterscope::events::Tag;
 use scatterscope::formats::becker_hickl::spc::{self, SpcModule, SpcOptions};
+use scatterscope::stack::{Stack, Unstated};
 use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file_counts};
 
 const LAYOUTS: [(Layout, SpcModule); 3] = [
@@ -145,11 +146,42 @@ fn the_command_bins_converts_and_refuses_spc_files_by_name() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.spc");
     std::fs::write(&path, random_spc(Layout::Spc130, 5_000, 1, 3)).unwrap();
-    // No setup file and no unit: refused, naming both ways to give it.
+    // No setup file and no unit: binned by ADC channel with a warning
+    // (exit 4) naming both ways to give the unit, the stack marked so.
     let out = run(&["bin", s(&path), "--out", s(&dir.path().join("a"))]);
     let t = text(&out);
+    assert_eq!(out.status.code(), Some(4), "{t}");
+    assert!(
+        t.contains("warning: the micro-time unit is unknown")
+            && t.contains("run.set")
+            && t.contains("--micro-unit")
+            && t.contains("4096 x 1 x 1 (1-channel bins from channel 0; time unit unknown)"),
+        "{t}"
+    );
+    let unitless = Stack::load(&dir.path().join("a/stack.exr")).unwrap();
+    assert!(unitless.meta.is_unstated(Unstated::TimeUnit));
+    assert_eq!(unitless.meta.bin_width_ps, 1.0);
+    // A time window needs the unit; the reconstruction refuses the stack.
+    let out = run(&[
+        "bin",
+        s(&path),
+        "--bin-width",
+        "8ps",
+        "--out",
+        s(&dir.path().join("a2")),
+    ]);
+    let t = text(&out);
     assert_eq!(out.status.code(), Some(1), "{t}");
-    assert!(t.contains("run.set") && t.contains("--micro-unit"), "{t}");
+    assert!(t.contains("--bin-width and --t-start are times"), "{t}");
+    let out = run(&[
+        "reconstruct",
+        s(&dir.path().join("a/stack.exr")),
+        "--out",
+        s(&dir.path().join("a3")),
+    ]);
+    let t = text(&out);
+    assert_ne!(out.status.code(), Some(0), "{t}");
+    assert!(t.contains("unknown time unit"), "{t}");
     // With the unit: binned; the layout assumed is said; GAP flags make
     // a warning (exit 4).
     let bin_at_12_5ps = |file: &Path, out: &str, more: &[&str]| {
@@ -306,24 +338,38 @@ fn sdt_blocks_bin_as_stacks_and_what_is_left_out_is_said() {
     let (bytes, blocks) = sdt_fixture();
     std::fs::write(&path, &bytes).unwrap();
     let binned = bin_file_counts(&path, &BinSpec::default()).unwrap();
-    assert_eq!(binned.stacks.len(), 2, "the two image blocks of one size");
-    for (stack, values) in binned.stacks.iter().zip(&blocks) {
+    assert_eq!(
+        binned.stacks.len(),
+        3,
+        "the two image blocks and the curve of another size and time unit"
+    );
+    for (stack, values) in binned.stacks.iter().zip(&blocks).take(2) {
         assert_eq!(stack.counts.dim(), (64, 3, 4));
         for ((k, y, x), &v) in stack.counts.indexed_iter() {
             assert_eq!(f64::from(v), values[(y * 4 + x) * 64 + k]);
         }
     }
+    // The decay curve of another TAC setting is a stack of its own, in its
+    // own time unit (50 ns / gain 2 / 32 points).
+    let curve = &binned.stacks[2];
+    assert_eq!(curve.counts.dim(), (32, 1, 1));
+    assert_eq!(
+        curve
+            .counts
+            .iter()
+            .map(|&c| f64::from(c))
+            .collect::<Vec<_>>(),
+        blocks[2]
+    );
+    assert!((curve.meta.bin_width_ps - 50e3 / 2.0 / 32.0).abs() < 1e-6);
     assert!((binned.resolution_ps - 12.5e3 / 64.0).abs() < 1e-6);
     let acc = binned.counts;
     assert!(acc.balances());
-    assert_eq!(
-        acc.photons as f64,
-        blocks[0].iter().chain(&blocks[1]).sum::<f64>()
-    );
+    assert_eq!(acc.photons as f64, blocks.iter().flatten().sum::<f64>());
     let notes = binned.notes.join("\n");
     assert!(notes.contains("data block 1 (FCS block"), "{notes}");
     assert!(
-        notes.contains("data block 3") && notes.contains("not the size"),
+        notes.contains("differ in size or time unit") && notes.contains("32 x 1 x 1 of 781.25 ps"),
         "{notes}"
     );
     // Two points a bin from point 8: the sums of pairs.
@@ -333,6 +379,16 @@ fn sdt_blocks_bin_as_stacks_and_what_is_left_out_is_said() {
         ..BinSpec::default()
     };
     let wide = bin_file_counts(&path, &spec).unwrap();
+    // The curve of another unit has no whole number of points in such a
+    // bin: left out, by name.
+    assert_eq!(wide.stacks.len(), 2);
+    assert!(
+        wide.warnings()
+            .iter()
+            .any(|w| w.contains("data block 3") && w.contains("not a whole number")),
+        "{:?}",
+        wide.warnings()
+    );
     let s0 = &wide.stacks[0].counts;
     assert_eq!(s0.dim(), (28, 3, 4));
     assert_eq!(
@@ -373,6 +429,53 @@ fn sdt_blocks_bin_as_stacks_and_what_is_left_out_is_said() {
         "{t}"
     );
     assert!(t.contains("left out: data block 1 (FCS block"), "{t}");
+}
+
+/// An `.sdt` FLIM image as Bruker's Prairie View writes them for an
+/// SPC-150 (the module name followed by bytes outside ASCII in its 16-byte
+/// field, the date as MM:DD:YYYY), in a folder whose name is not ASCII:
+/// binned and written, its metadata readable text, the names kept.
+#[test]
+fn a_prairie_view_sdt_in_a_folder_of_any_name_bins_and_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("Messungen-\u{fc}ber-\u{5149}");
+    std::fs::create_dir(&folder).unwrap();
+    let path = folder.join("TSeries-001_Cycle00001.sdt");
+    let mut m = SdtMeasurement::spc150(12.5e-9, 1, 16, (3, 2));
+    m.module = b"SPC-150\0\xC3\xA9\x8F\xFF\x01bh";
+    m.date = b"11:05:2019";
+    let values: Vec<f64> = (0..6 * 16).map(|i| (i % 7) as f64).collect();
+    let block = SdtBlock {
+        values: values.clone(),
+        item: 2,
+        zipped: true,
+        contents: 0x60,
+        measurement: 0,
+    };
+    std::fs::write(&path, sdt_file(&[m], &[block])).unwrap();
+    let out = folder.join("b");
+    let r = run(&["bin", s(&path), "--ome-tiff", "--out", s(&out)]);
+    let t = text(&r);
+    assert_eq!(r.status.code(), Some(0), "{t}");
+    let back = Stack::load(&out.join("stack.exr")).unwrap();
+    assert!(
+        back.meta.source.contains("\u{5149}"),
+        "{}",
+        back.meta.source
+    );
+    assert!(
+        back.meta.source.contains("module SPC-150)"),
+        "{}",
+        back.meta.source
+    );
+    assert_eq!(back.total(), values.iter().sum::<f64>());
+    let r = run(&["info", s(&path)]);
+    let t = text(&r);
+    assert!(r.status.success(), "{t}");
+    assert!(
+        t.contains("module SPC-150;") && !t.contains('\u{fffd}'),
+        "{t}"
+    );
 }
 
 /// tttrlib's decoding of a `.spc` file as JSON: per event, its type (0

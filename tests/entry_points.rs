@@ -18,7 +18,7 @@ use scatterscope::reconstruct::ReconstructError;
 use scatterscope::reconstruct::input::{InputSpec, load};
 use scatterscope::reconstruct::method::{Method, MethodOptions, run_method};
 use scatterscope::scene::Scene;
-use scatterscope::tags::bin_file::{BinSpec, bin_file};
+use scatterscope::tags::bin_file::{BinOutputs, BinSpec, bin_file, bin_file_to};
 use scatterscope::tags::survey::{Survey, survey};
 use scatterscope::{Named, Stack};
 
@@ -133,9 +133,17 @@ fn a_recorded_file_is_surveyed_binned_and_written() {
     assert_eq!(info.records_present, info.records_announced);
     let binned = bin_file(&ptu, &BinSpec::default()).unwrap();
     assert_eq!(binned.counts.photons, photons);
-    let files = binned.write(&dir.path().join("bin"), true, false).unwrap();
+    let written = bin_file_to(
+        &ptu,
+        &BinSpec::default(),
+        &BinOutputs::new(dir.path().join("bin")),
+    )
+    .unwrap();
+    let files = &written.stacks[0];
     let back = Stack::load(&files[0]).unwrap();
-    assert_eq!(back.total() as u64, binned.counts.binned);
+    assert_eq!(back.data, binned.stacks[0].data);
+    assert_eq!(back.meta, binned.stacks[0].meta);
+    assert_eq!(written.counts, binned.counts);
     assert!(dir.path().join("bin/stack.png").is_file());
 }
 

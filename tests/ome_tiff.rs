@@ -12,7 +12,7 @@ use command::{SMALL_SENSOR, run, text};
 use std::path::Path;
 
 use ndarray::Array3;
-use scatterscope::stack::{Stack, StackMeta, ValueKind};
+use scatterscope::stack::{Stack, StackMeta, Unstated, ValueKind};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -91,13 +91,10 @@ fn a_binned_stack_opens_in_tifffile_as_its_exr() {
     let got: Vec<f64> = serde_json::from_value(tif["values"].clone()).unwrap();
     assert_eq!(got, values(&exr));
     assert!(got.iter().sum::<f64>() > 0.0);
-    // Physical sizes: the pitch in micrometres, the bins along T.
-    let pitch_um = exr.meta.pixel_pitch_cm * 1e4;
-    assert!(
-        (tif["size_x_um"].as_f64().unwrap() - pitch_um).abs() < 1e-9 * pitch_um,
-        "{tif}"
-    );
-    assert_eq!(tif["unit"], "µm");
+    // Physical sizes: this file states no pixel size, so the OME-TIFF
+    // carries none (not the stack's placeholder); the bins along T.
+    assert!(exr.meta.is_unstated(Unstated::PixelPitch));
+    assert!(tif["size_x_um"].is_null(), "{tif}");
     assert_eq!(tif["size_t"], k);
     let m = &tif["modulo"];
     assert_eq!(m["Type"], "lifetime", "{tif}");

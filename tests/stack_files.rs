@@ -35,6 +35,7 @@ fn sample_stack(kind: ValueKind) -> Stack {
             source: "test".into(),
             boundary: None,
             acquisition: Some(serde_json::json!({"device": "mock", "photons": 12})),
+            unstated: Vec::new(),
         },
         exact_counts: None,
     }
@@ -424,7 +425,7 @@ fn counts_above_2_to_the_24_round_trip_exactly_through_exr_and_npy() {
 fn a_bin_of_more_than_2_to_the_24_photons_sums_to_the_ledger() {
     use scatterscope::formats::picoquant::records::RecordType;
     use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
-    use scatterscope::tags::bin_file::{BinSpec, bin_file};
+    use scatterscope::tags::bin_file::{BinOutputs, BinSpec, bin_file, bin_file_to};
     let dir = tempfile::tempdir().unwrap();
     let ptu = dir.path().join("one-bin.ptu");
     let h = WriterHeader {
@@ -451,16 +452,18 @@ fn a_bin_of_more_than_2_to_the_24_photons_sums_to_the_ledger() {
         exact.iter().map(|&c| u64::from(c)).sum::<u64>(),
         u64::from(n)
     );
-    let out = dir.path().join("out");
-    let files = binned.write(&out, true, false).unwrap();
-    let back = Stack::load(&files[0]).unwrap();
-    let sum: u64 = back
-        .exact_counts
-        .unwrap()
-        .iter()
-        .map(|&c| u64::from(c))
-        .sum();
-    assert_eq!(sum, binned.counts.binned);
+    // The command's writer keeps them exactly too, in EXR and in .npy.
+    for npy in [false, true] {
+        let out = dir.path().join(format!("out{npy}"));
+        let outputs = BinOutputs {
+            npy,
+            ..BinOutputs::new(&out)
+        };
+        let written = bin_file_to(&ptu, &BinSpec::default(), &outputs).unwrap();
+        let back = Stack::load(&written.stacks[0][0]).unwrap();
+        assert_eq!(back.exact_counts.as_ref(), Some(exact), "npy {npy}");
+        assert_eq!(back.meta, stack.meta, "npy {npy}");
+    }
 }
 
 /// The OpenEXR project's own library reads the stack files we write,

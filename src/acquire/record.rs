@@ -139,7 +139,7 @@ pub fn stack_of(
         setup.bins.start_ps = window_ps.0 - t0_ps;
         setup.bins.width_ps = window_ps.1;
         setup.bins.count = bins;
-        meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
+        meta.set_pixel_pitch(setup.sensor.pixel_pitch_cm());
         meta.setup = Some(setup);
         meta.sampling = Some(Sampling::Integrated);
     }

@@ -2,7 +2,8 @@
 //!
 //! `NAME.npy` holds a C-order (K, H, W) array; `NAME.json` holds the same
 //! metadata record as the EXR `scatterscope` attribute. Counts are written as
-//! `uint32` when every value is a whole number in range, everything else as
+//! `uint32` when every value is a whole number in range (a recorded file's
+//! binned counts as `uint16` when they all fit), everything else as
 //! `float32`. Reading accepts float32, float64 and unsigned integer counts.
 
 use std::fs::File;
@@ -14,7 +15,7 @@ use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
 use crate::files::{ReadError, read_bounded};
 use crate::memory::bytes_of;
-use crate::stack::{Stack, StackError, StackFile, StackMeta, ValueKind, counts_as_f32};
+use crate::stack::{CountsView, Stack, StackError, StackFile, StackMeta, ValueKind, counts_as_f32};
 
 /// Largest sidecar read (the metadata of any stack is far smaller).
 const MAX_SIDECAR: u64 = 64 << 20;
@@ -42,8 +43,32 @@ pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
     };
     written.map_err(|e| StackError::format(path, format!("writing .npy: {e}")))?;
     crate::files::AtomicFile::commit_buffered(out).map_err(|e| StackError::io(path, e))?;
+    write_sidecar(&stack.meta, path)
+}
+
+/// Writes photon `counts` with `meta` as `.npy` plus the JSON sidecar, in
+/// the narrowest unsigned type that holds every count (16 or 32 bits):
+/// a recorded file's 16-bit histograms go out as they came in, without a
+/// wider copy.
+pub fn write_counts(counts: CountsView, meta: &StackMeta, path: &Path) -> Result<(), StackError> {
+    let file = crate::files::AtomicFile::create(path).map_err(|e| StackError::io(path, e))?;
+    let mut out = BufWriter::with_capacity(1 << 20, file);
+    let written = match counts {
+        CountsView::U16(c) => c.write_npy(&mut out),
+        CountsView::U32(c) if counts.max() <= u32::from(u16::MAX) => {
+            c.mapv(|v| v as u16).write_npy(&mut out)
+        }
+        CountsView::U32(c) => c.write_npy(&mut out),
+    };
+    written.map_err(|e| StackError::format(path, format!("writing .npy: {e}")))?;
+    crate::files::AtomicFile::commit_buffered(out).map_err(|e| StackError::io(path, e))?;
+    write_sidecar(meta, path)
+}
+
+/// Writes `meta` as the JSON sidecar of the `.npy` file `path`.
+fn write_sidecar(meta: &StackMeta, path: &Path) -> Result<(), StackError> {
     let side = sidecar_path(path);
-    let json = serde_json::to_string_pretty(&stack.meta).expect("metadata serialises");
+    let json = serde_json::to_string_pretty(meta).expect("metadata serialises");
     crate::files::write_atomic(&side, json).map_err(|e| StackError::io(&side, e))
 }
 

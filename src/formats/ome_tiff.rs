@@ -18,7 +18,7 @@ use tiff::encoder::{Compression, DeflateLevel, TiffEncoder, TiffKind, TiffValue}
 use tiff::tags::Tag;
 
 use crate::files::AtomicFile;
-use crate::stack::{Stack, StackError, ValueKind};
+use crate::stack::{CountsView, Stack, StackError, StackMeta, Unstated, ValueKind};
 
 /// The namespace of OME's modulo annotation (the 2011-09 additions).
 const MODULO_NAMESPACE: &str = "http://www.openmicroscopy.org/Schemas/Additions/2011-09";
@@ -92,13 +92,16 @@ fn samples(values: ArrayView3<f32>, exact: Option<ArrayView3<u32>>, counts: bool
 
 /// What the OME-XML says of an image.
 struct Description<'a> {
-    name: &'a str,
+    name: String,
     width: usize,
     height: usize,
     pixel_pitch_cm: Option<f64>,
     /// Start of each bin after time zero, ps, with the bin width (none for
     /// a single image).
     bins: Option<(&'a [f64], f64)>,
+    /// Whether the bins count micro-time channels of an unknown unit
+    /// instead of ps.
+    channels: bool,
 }
 
 /// `text` with XML's five special characters escaped.
@@ -110,14 +113,20 @@ fn escape(text: &str) -> String {
         .replace('\'', "&apos;")
 }
 
-/// The `ModuloAlongT` element for bins starting at `starts` (ps) of
-/// `width_ps`: start, step and end when they follow one another, else one
-/// label per bin.
-fn modulo_along_t(starts: &[f64], width_ps: f64) -> String {
+/// The `ModuloAlongT` element for bins starting at `starts` (ps, or
+/// micro-time channels of an unknown unit when `channels`) of `width_ps`:
+/// start, step and end when they follow one another, else one label per
+/// bin.
+fn modulo_along_t(starts: &[f64], width_ps: f64, channels: bool) -> String {
     let consecutive = starts
         .windows(2)
         .all(|w| ((w[1] - w[0]) - width_ps).abs() <= 1e-6 * width_ps);
-    let head = "<ModuloAlongT Type=\"lifetime\" Unit=\"ps\" TypeDescription=\"TCSPC: start of each time bin after time zero\"";
+    let head = if channels {
+        // No Unit: the recording did not say what a channel is in time.
+        "<ModuloAlongT Type=\"lifetime\" TypeDescription=\"TCSPC: micro-time channel of each bin; the recording does not state the time unit\""
+    } else {
+        "<ModuloAlongT Type=\"lifetime\" Unit=\"ps\" TypeDescription=\"TCSPC: start of each time bin after time zero\""
+    };
     match (consecutive, starts.first(), starts.last()) {
         (true, Some(first), Some(last)) => {
             format!("{head} Start=\"{first}\" Step=\"{width_ps}\" End=\"{last}\"/>")
@@ -147,7 +156,7 @@ fn ome_xml(d: &Description<'_>, planes: usize, ome_type: &str) -> String {
             "<AnnotationRef ID=\"Annotation:Modulo:0\"/>".to_string(),
             format!(
                 "<StructuredAnnotations><XMLAnnotation ID=\"Annotation:Modulo:0\" Namespace=\"openmicroscopy.org/omero/dimension/modulo\"><Value><Modulo namespace=\"{MODULO_NAMESPACE}\">{}</Modulo></Value></XMLAnnotation></StructuredAnnotations>",
-                modulo_along_t(starts, width)
+                modulo_along_t(starts, width, d.channels)
             ),
         ),
         None => (String::new(), String::new()),
@@ -169,7 +178,7 @@ fn ome_xml(d: &Description<'_>, planes: usize, ome_type: &str) -> String {
             "</Pixels></Image>{annotations}</OME>"
         ),
         version = env!("CARGO_PKG_VERSION"),
-        name = escape(d.name),
+        name = escape(&d.name),
         annotation_ref = annotation_ref,
         ome_type = ome_type,
         w = d.width,
@@ -247,6 +256,43 @@ fn all_pages<W: Write + Seek, K: TiffKind>(
     }
 }
 
+/// Writes photon `counts` with `meta` as OME-TIFF, as [`write_stack`]
+/// writes their stack (16-bit pages when every count fits, else 32-bit).
+pub fn write_counts(counts: CountsView, meta: &StackMeta, path: &Path) -> Result<(), StackError> {
+    fn pages<T: Copy, U>(c: ArrayView3<T>, f: impl Fn(T) -> U + Copy) -> Vec<Vec<U>> {
+        c.axis_iter(Axis(0))
+            .map(|p| p.iter().map(|&v| f(v)).collect())
+            .collect()
+    }
+    let samples = match counts {
+        CountsView::U16(c) => Samples::U16(pages(c, |v| v)),
+        CountsView::U32(c) if counts.max() <= u32::from(u16::MAX) => {
+            Samples::U16(pages(c, |v| v as u16))
+        }
+        CountsView::U32(c) => Samples::U32(pages(c, |v| v)),
+    };
+    let (_, h, w) = counts.dim();
+    write(&samples, &describe(meta, w, h, path), path)
+}
+
+/// What the OME-XML says of a stack with `meta` of `w` x `h` pixels
+/// written to `path`.
+fn describe<'a>(meta: &'a StackMeta, w: usize, h: usize, path: &Path) -> Description<'a> {
+    let name = path
+        .file_name()
+        .map_or("stack".into(), |n| n.to_string_lossy().into_owned());
+    Description {
+        name,
+        width: w,
+        height: h,
+        // A pitch the recording did not state is left out, not written
+        // as its placeholder.
+        pixel_pitch_cm: (!meta.is_unstated(Unstated::PixelPitch)).then_some(meta.pixel_pitch_cm),
+        bins: Some((&meta.bin_starts_ps, meta.bin_width_ps)),
+        channels: meta.is_unstated(Unstated::TimeUnit),
+    }
+}
+
 /// Writes `stack` as OME-TIFF: one page per bin, the bins' starts as the
 /// lifetime modulo of T, the pixel pitch as the physical size, counts
 /// exactly as integers.
@@ -258,17 +304,7 @@ pub fn write_stack(stack: &Stack, path: &Path) -> Result<(), StackError> {
         stack.exact_counts.as_ref().map(|c| c.view()),
         counts,
     );
-    let name = path
-        .file_name()
-        .map_or("stack".into(), |n| n.to_string_lossy().into_owned());
-    let d = Description {
-        name: &name,
-        width: w,
-        height: h,
-        pixel_pitch_cm: Some(stack.meta.pixel_pitch_cm),
-        bins: Some((&stack.meta.bin_starts_ps, stack.meta.bin_width_ps)),
-    };
-    write(&samples, &d, path)
+    write(&samples, &describe(&stack.meta, w, h, path), path)
 }
 
 /// Writes one image (a reconstruction) as a one-page float OME-TIFF, with
@@ -283,11 +319,12 @@ pub fn write_image(
         .file_name()
         .map_or("image".into(), |n| n.to_string_lossy().into_owned());
     let d = Description {
-        name: &name,
+        name,
         width: w,
         height: h,
         pixel_pitch_cm: pixel_pitch_cm.filter(|p| p.is_finite() && *p > 0.0),
         bins: None,
+        channels: false,
     };
     write(
         &Samples::F32(vec![image.iter().copied().collect()]),
@@ -302,9 +339,9 @@ mod tests {
 
     #[test]
     fn consecutive_bins_are_a_range_and_others_are_labels() {
-        let m = modulo_along_t(&[10.0, 14.0, 18.0], 4.0);
+        let m = modulo_along_t(&[10.0, 14.0, 18.0], 4.0, false);
         assert!(m.contains("Start=\"10\" Step=\"4\" End=\"18\""), "{m}");
-        let m = modulo_along_t(&[10.0, 14.0, 30.0], 4.0);
+        let m = modulo_along_t(&[10.0, 14.0, 30.0], 4.0, false);
         assert!(
             m.contains("<Label>30</Label>") && !m.contains("Start="),
             "{m}"
@@ -328,11 +365,12 @@ mod tests {
     #[test]
     fn the_name_is_escaped() {
         let d = Description {
-            name: "a<b>&\"c\"",
+            name: "a<b>&\"c\"".into(),
             width: 2,
             height: 3,
             pixel_pitch_cm: Some(0.01),
             bins: None,
+            channels: false,
         };
         let xml = ome_xml(&d, 1, "float");
         assert!(

@@ -3,11 +3,11 @@
 use std::path::Path;
 
 use image::{GrayImage, ImageEncoder, Luma};
-use ndarray::{ArrayView2, Axis};
+use ndarray::{ArrayView2, ArrayView3, Axis};
 
 use crate::font;
 use crate::named::named;
-use crate::stack::{Stack, StackError};
+use crate::stack::{CountsView, Stack, StackError, StackMeta, Unstated};
 
 /// How contact-sheet tiles are scaled to 8 bits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -70,26 +70,55 @@ pub fn write_contact_sheet(
     scale: SheetScale,
     path: &Path,
 ) -> Result<(), StackError> {
-    let (k, h, w) = stack.data.dim();
+    sheet(stack.data.view(), &stack.meta, scale, path)
+}
+
+/// [`write_contact_sheet`] of photon `counts` with `meta`, read in the
+/// width they are held in.
+pub fn write_counts_sheet(
+    counts: CountsView,
+    meta: &StackMeta,
+    scale: SheetScale,
+    path: &Path,
+) -> Result<(), StackError> {
+    match counts {
+        CountsView::U16(c) => sheet(c, meta, scale, path),
+        CountsView::U32(c) => sheet(c, meta, scale, path),
+    }
+}
+
+fn sheet<T: Copy + Into<f64>>(
+    values: ArrayView3<T>,
+    meta: &StackMeta,
+    scale: SheetScale,
+    path: &Path,
+) -> Result<(), StackError> {
+    let (k, h, w) = values.dim();
     let cols = (k as f64).sqrt().ceil().max(1.0) as u32;
     let rows = (k as u32).div_ceil(cols).max(1);
     let tile_w = w as u32 + GAP;
     let tile_h = h as u32 + LABEL_H + GAP;
     let mut sheet = GrayImage::from_pixel(cols * tile_w + GAP, rows * tile_h + GAP, Luma([40]));
-    let global = stack.data.iter().fold(0.0f32, |m, &v| m.max(v));
-    for (i, img) in stack.data.axis_iter(Axis(0)).enumerate() {
+    let top_of = |v: ArrayView3<T>| v.iter().fold(0.0f64, |m, &v| m.max(v.into()));
+    let global = top_of(values);
+    let unit = if meta.is_unstated(Unstated::TimeUnit) {
+        "CH"
+    } else {
+        "PS"
+    };
+    for (i, img) in values.axis_iter(Axis(0)).enumerate() {
         let top = match scale {
             SheetScale::Shared => global,
-            SheetScale::PerBin => img.iter().fold(0.0f32, |m, &v| m.max(v)),
+            SheetScale::PerBin => img.iter().fold(0.0f64, |m, &v| m.max(v.into())),
         };
         let (x0, y0) = (
             GAP + (i as u32 % cols) * tile_w,
             GAP + (i as u32 / cols) * tile_h,
         );
-        let label = format!("{:.0}PS", stack.meta.bin_starts_ps[i]);
+        let label = format!("{:.0}{unit}", meta.bin_starts_ps[i]);
         draw_label(&mut sheet, x0, y0 + 1, &label);
         for ((r, c), &v) in img.indexed_iter() {
-            let px = to_u8(f64::from(v), f64::from(top));
+            let px = to_u8(v.into(), top);
             sheet.put_pixel(x0 + c as u32, y0 + LABEL_H + r as u32, Luma([px]));
         }
     }

@@ -8,7 +8,23 @@ use std::path::Path;
 use ndarray::Array3;
 
 use super::detect::Format;
-use crate::stack::{Stack, StackError, StackFile, StackMeta};
+use crate::stack::{CountsView, Stack, StackError, StackFile, StackMeta};
+
+/// Writes photon `counts` with `meta` to `path` as [`Stack::save`] writes
+/// their stack, the format following the extension, without a float copy
+/// of the counts ([`super::exr::write_counts`], [`super::npy::write_counts`],
+/// [`super::ome_tiff::write_counts`]).
+pub fn save_counts(counts: CountsView, meta: &StackMeta, path: &Path) -> Result<(), StackError> {
+    match Format::of_extension(path) {
+        Format::Exr => super::exr::write_counts(counts, meta, path),
+        Format::Npy => super::npy::write_counts(counts, meta, path),
+        Format::Tiff => super::ome_tiff::write_counts(counts, meta, path),
+        _ => Err(StackError::format(
+            path,
+            "unknown stack format: use a .exr, .npy or .ome.tif file name",
+        )),
+    }
+}
 
 impl Stack {
     /// Writes the stack; the format follows the extension (`.exr` or `.npy`).

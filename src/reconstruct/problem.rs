@@ -120,6 +120,11 @@ impl Problem {
                 "the stack holds ST-PSF kernels, not counts".into(),
             ));
         }
+        if stack.meta.is_unstated(crate::stack::Unstated::TimeUnit) {
+            return Err(ProblemError::Mismatch(
+                "the stack's bins are micro-time channels of an unknown time unit (its recording did not state it): bin the recording again with its unit (--micro-unit) to reconstruct it".into(),
+            ));
+        }
         let (_, h, w) = stack.data.dim();
         if (setup.sensor.height_px, setup.sensor.width_px) != (h, w) {
             return Err(ProblemError::SensorSize {

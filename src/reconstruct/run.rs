@@ -49,10 +49,12 @@ impl Reconstruction {
     /// Writes the image as `reconstruction.ome.tif` into `dir` (a float
     /// OME-TIFF for Fiji or napari); its physical pixel size is `stack`'s
     /// pixel pitch when the image is on the stack's sensor grid (has its
-    /// size). Returns the file.
+    /// size) and the stack states it. Returns the file.
     pub fn write_ome_tiff(&self, dir: &Path, stack: &Stack) -> Result<PathBuf, StackError> {
         let (_, h, w) = stack.data.dim();
-        let pitch = (self.image.dim() == (h, w)).then_some(stack.meta.pixel_pitch_cm);
+        let pitch = (self.image.dim() == (h, w)
+            && !stack.meta.is_unstated(crate::stack::Unstated::PixelPitch))
+        .then_some(stack.meta.pixel_pitch_cm);
         let tif = dir.join("reconstruction.ome.tif");
         crate::formats::ome_tiff::write_image(self.image.mapv(|v| v as f32).view(), pitch, &tif)?;
         Ok(tif)

@@ -84,6 +84,23 @@ pub struct StackMeta {
     /// and the photon accounting of the acquisition.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub acquisition: Option<serde_json::Value>,
+    /// What the recording did not say, whose fields above hold
+    /// placeholders: a file's writers and readers leave those out
+    /// (an OME-TIFF gets no physical pixel size) and the reconstruction
+    /// refuses a stack whose time unit is unknown.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unstated: Vec<Unstated>,
+}
+
+/// A quantity a recording did not state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Unstated {
+    /// The pixel pitch: `pixel_pitch_cm` is a placeholder of 1.
+    PixelPitch,
+    /// The time unit: `bin_starts_ps` and `bin_width_ps` count micro-time
+    /// channels (ADC channels), not picoseconds.
+    TimeUnit,
 }
 
 /// A K x H x W stack of `f32` values with its metadata.
@@ -113,6 +130,49 @@ pub fn exact_copy(counts: ArrayView3<u32>) -> Option<Array3<u32>> {
         None => counts.iter().fold(0, |a, &c| a.max(c)),
     };
     (largest > F32_EXACT_COUNT).then(|| counts.to_owned())
+}
+
+/// Photon counts as binned, in the width they were read in: a recorded
+/// file's 16-bit histograms stay 16-bit on their way to a file.
+#[derive(Debug, Clone, Copy)]
+pub enum CountsView<'a> {
+    /// 16-bit counts.
+    U16(ArrayView3<'a, u16>),
+    /// 32-bit counts.
+    U32(ArrayView3<'a, u32>),
+}
+
+impl CountsView<'_> {
+    /// `(bins, rows, columns)`.
+    pub fn dim(&self) -> (usize, usize, usize) {
+        match self {
+            CountsView::U16(c) => c.dim(),
+            CountsView::U32(c) => c.dim(),
+        }
+    }
+
+    /// The largest count (0 when empty).
+    pub fn max(&self) -> u32 {
+        fn top<T: Copy + Ord + Default + Into<u32>>(c: &ArrayView3<T>) -> u32 {
+            let m = match c.as_slice_memory_order() {
+                Some(flat) => flat.iter().fold(T::default(), |a, &v| a.max(v)),
+                None => c.iter().fold(T::default(), |a, &v| a.max(v)),
+            };
+            m.into()
+        }
+        match self {
+            CountsView::U16(c) => top(c),
+            CountsView::U32(c) => top(c),
+        }
+    }
+
+    /// The counts as `u32`, owned.
+    pub fn to_u32(&self) -> Array3<u32> {
+        match self {
+            CountsView::U16(c) => c.mapv(u32::from),
+            CountsView::U32(c) => c.to_owned(),
+        }
+    }
 }
 
 /// Counts as `f32` values, with their [`exact_copy`].
@@ -335,12 +395,25 @@ impl StackMeta {
             source,
             boundary: None,
             acquisition: None,
+            unstated: Vec::new(),
         }
+    }
+
+    /// Whether the recording left `what` unstated.
+    pub fn is_unstated(&self, what: Unstated) -> bool {
+        self.unstated.contains(&what)
+    }
+
+    /// Sets the pixel pitch (cm), which is then stated.
+    pub fn set_pixel_pitch(&mut self, cm: f64) {
+        self.pixel_pitch_cm = cm;
+        self.unstated.retain(|&u| u != Unstated::PixelPitch);
     }
 
     /// Metadata of measured photon counts: `bins` bins of `width_ps` from
     /// `start_ps` after the sync, no physics (the reconstruction takes it
-    /// from the user), unit pixel pitch, and the acquisition record when
+    /// from the user), a pixel pitch unstated (a placeholder of 1 cm until
+    /// [`StackMeta::set_pixel_pitch`]), and the acquisition record when
     /// the stack comes from a live acquisition.
     pub fn measured(
         start_ps: f64,
@@ -363,6 +436,7 @@ impl StackMeta {
             source,
             boundary: None,
             acquisition,
+            unstated: vec![Unstated::PixelPitch],
         }
     }
 
@@ -381,8 +455,8 @@ impl StackMeta {
         setup.validate()?;
         let mut meta =
             StackMeta::measured(setup.bins.start_ps, setup.bins.width_ps, bins, source, None);
+        meta.set_pixel_pitch(setup.sensor.pixel_pitch_cm());
         meta.kind = kind;
-        meta.pixel_pitch_cm = setup.sensor.pixel_pitch_cm();
         meta.setup = Some(setup);
         Ok(meta)
     }

@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::formats::becker_hickl::sdt::{self, SdtError};
+use crate::formats::becker_hickl::sdt::{self, BlockCounts, SdtError};
 use crate::formats::becker_hickl::spc::{self, CardFlags, SpcFileError, SpcInfo, SpcOptions};
 use crate::formats::detect::Format;
 use crate::formats::sstags::{TagFile, TagFileError, TagFileSummary};
@@ -31,8 +31,8 @@ use super::counts::Counts;
 use super::wire::bin_batch;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, RecordReader, TtrError, open};
-use crate::formats::png::{SheetScale, write_contact_sheet};
-use crate::stack::{Stack, StackError, StackMeta};
+use crate::formats::png::{SheetScale, write_counts_sheet};
+use crate::stack::{CountsView, Stack, StackError, StackMeta, Unstated};
 
 /// How input channels and markers become pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -124,6 +124,33 @@ pub struct BinnedFile<S = Stack> {
     pub notes: Vec<String>,
     /// Why the file ended early, when a cut file was binned.
     pub truncated: Option<String>,
+    /// Whether the recording does not state the window's time unit (its
+    /// bins are then micro-time channels or curve points).
+    pub time_unstated: bool,
+}
+
+/// One binned stack lent to the caller of [`bin_file_each`]: its counts
+/// in the width the file held them, and their metadata.
+#[derive(Debug, Clone, Copy)]
+pub struct StackCounts<'a> {
+    /// Photons per bin, row and column.
+    pub counts: CountsView<'a>,
+    /// What the counts are.
+    pub meta: &'a StackMeta,
+    /// Its place among the file's stacks (from 0).
+    pub index: usize,
+    /// How many stacks the file gives.
+    pub of: usize,
+}
+
+impl StackCounts<'_> {
+    /// An owned copy, counts as `u32`.
+    pub fn to_owned(&self) -> CountStack {
+        CountStack {
+            counts: self.counts.to_u32(),
+            meta: self.meta.clone(),
+        }
+    }
 }
 
 /// One kept frame's photon counts as binned, with their metadata: a
@@ -177,6 +204,10 @@ pub enum Recording {
         id: String,
         /// Blocks not binned, in words.
         left_out: Vec<String>,
+        /// Blocks binned by curve point, their time unit unstated, and why.
+        unstated: Vec<String>,
+        /// Decay blocks the asked window does not fit, left out, and why.
+        misfits: Vec<String>,
     },
     /// A tag file (`.sstags`): its header and frames, and the records'
     /// own counts.
@@ -190,12 +221,22 @@ impl BinnedFile<CountStack> {
     /// The stacks as float32 [`Stack`]s, each frame's counts dropped once
     /// converted.
     pub fn into_stacks(self) -> BinnedFile<Stack> {
-        BinnedFile {
-            stacks: self
-                .stacks
-                .into_iter()
-                .map(|s| Stack::from_owned_counts(s.counts, s.meta))
-                .collect(),
+        self.try_map_stacks(|s| {
+            Ok::<_, std::convert::Infallible>(Stack::from_owned_counts(s.counts, s.meta))
+        })
+        .unwrap_or_else(|e| match e {})
+    }
+}
+
+impl<A> BinnedFile<A> {
+    /// The same file with each stack through `f`, in order, each dropped
+    /// once mapped; the first error ends it.
+    pub fn try_map_stacks<B, E>(
+        self,
+        f: impl FnMut(A) -> Result<B, E>,
+    ) -> Result<BinnedFile<B>, E> {
+        Ok(BinnedFile {
+            stacks: self.stacks.into_iter().map(f).collect::<Result<_, _>>()?,
             recording: self.recording,
             shape: self.shape,
             counts: self.counts,
@@ -204,54 +245,114 @@ impl BinnedFile<CountStack> {
             records_per_s: self.records_per_s,
             notes: self.notes,
             truncated: self.truncated,
-        }
+            time_unstated: self.time_unstated,
+        })
     }
 }
 
-impl BinnedFile<Stack> {
-    /// Writes every stack as EXR into `dir` (created if missing), each
-    /// with a PNG contact sheet when `previews` and as OME-TIFF beside it
-    /// when `ome_tiff`: `stack.exr` (`stack.ome.tif`), or `stack_f000.exr`,
-    /// ... when frames are kept apart. Returns the stack files.
-    pub fn write(
-        &self,
-        dir: &Path,
-        previews: bool,
-        ome_tiff: bool,
-    ) -> Result<Vec<PathBuf>, StackError> {
-        std::fs::create_dir_all(dir).map_err(|e| StackError::io(dir, e))?;
-        let many = self.stacks.len() > 1;
-        let mut files = Vec::new();
-        for (f, stack) in self.stacks.iter().enumerate() {
-            let stem = if many {
-                format!("stack_f{f:03}")
-            } else {
-                "stack".into()
-            };
-            let exr = dir.join(format!("{stem}.exr"));
-            // The stack and its sheet at once, on two threads.
-            let (saved, sheet) = rayon::join(
-                || stack.save(&exr),
-                || {
-                    previews
-                        .then(|| {
-                            let png = dir.join(format!("{stem}.png"));
-                            write_contact_sheet(stack, SheetScale::Shared, &png)
-                        })
-                        .transpose()
-                },
-            );
-            saved?;
-            sheet?;
-            files.push(exr);
-            if ome_tiff {
-                let tif = dir.join(format!("{stem}.ome.tif"));
-                stack.save(&tif)?;
-                files.push(tif);
-            }
+/// Which files [`bin_file_to`] writes of each stack, into `dir`:
+/// `stack.exr` (or `stack.npy` with its JSON sidecar), with `stack.png`
+/// and `stack.ome.tif` when asked; `stack_f000.exr`, ... when a file
+/// gives several stacks (frames kept apart, `.sdt` blocks).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BinOutputs {
+    /// The folder (created if missing).
+    pub dir: PathBuf,
+    /// `.npy` (16- or 32-bit counts) with its JSON sidecar instead of EXR.
+    pub npy: bool,
+    /// A PNG contact sheet of each stack.
+    pub previews: bool,
+    /// Each stack also as OME-TIFF (Fiji, napari, FLIMfit).
+    pub ome_tiff: bool,
+}
+
+impl BinOutputs {
+    /// EXR stacks with their contact sheets into `dir` (the `bin`
+    /// command's default).
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        Self {
+            dir: dir.into(),
+            npy: false,
+            previews: true,
+            ome_tiff: false,
+        }
+    }
+
+    /// The files of stack `s` (one of `of`), refused where one would be
+    /// a file `input` reads (the input or its setup sidecar).
+    fn paths(&self, s: &StackCounts<'_>, input: &Path) -> Result<Vec<PathBuf>, StackError> {
+        let stem = if s.of > 1 {
+            format!("stack_f{:03}", s.index)
+        } else {
+            "stack".into()
+        };
+        let main = self
+            .dir
+            .join(format!("{stem}.{}", if self.npy { "npy" } else { "exr" }));
+        let mut files = vec![main.clone()];
+        if self.npy {
+            files.push(crate::formats::npy::sidecar_path(&main));
+        }
+        if self.previews {
+            files.push(self.dir.join(format!("{stem}.png")));
+        }
+        if self.ome_tiff {
+            files.push(self.dir.join(format!("{stem}.ome.tif")));
+        }
+        let read = [input.to_owned(), input.with_extension("set")];
+        if let Some(f) = files
+            .iter()
+            .find(|f| read.iter().any(|r| crate::files::input::same_file(f, r)))
+        {
+            return Err(StackError::format(
+                f,
+                format!(
+                    "is a file {} reads: writing it would destroy the recording; choose another --out",
+                    input.display()
+                ),
+            ));
         }
         Ok(files)
     }
+
+    /// Writes stack `s` of the file `input`; returns the files written
+    /// (the stack's first).
+    fn write(&self, s: StackCounts<'_>, input: &Path) -> Result<Vec<PathBuf>, StackError> {
+        std::fs::create_dir_all(&self.dir).map_err(|e| StackError::io(&self.dir, e))?;
+        let files = self.paths(&s, input)?;
+        let stack = &files[0];
+        // The stack and its sheet at once, on two threads.
+        let (saved, sheet) = rayon::join(
+            || crate::formats::stack_file::save_counts(s.counts, s.meta, stack),
+            || {
+                self.previews
+                    .then(|| {
+                        let png = stack.with_extension("png");
+                        write_counts_sheet(s.counts, s.meta, SheetScale::Shared, &png)
+                    })
+                    .transpose()
+            },
+        );
+        saved?;
+        sheet?;
+        if self.ome_tiff {
+            let tif = files.last().expect("the OME-TIFF is listed last");
+            crate::formats::stack_file::save_counts(s.counts, s.meta, tif)?;
+        }
+        Ok(files)
+    }
+}
+
+/// Bins the recorded file `path` as `spec` says ([`bin_file_each`]) and
+/// writes each stack as `outputs` says as soon as it is binned: what the
+/// `bin` command runs. No output may be a file the binning reads. The
+/// result's stacks are the files written for each.
+pub fn bin_file_to(
+    path: &Path,
+    spec: &BinSpec,
+    outputs: &BinOutputs,
+) -> Result<BinnedFile<Vec<PathBuf>>, RecordedFileError> {
+    bin_file_each(path, spec, |s| Ok(outputs.write(s, path)?))
 }
 
 impl<S> BinnedFile<S> {
@@ -266,12 +367,29 @@ impl<S> BinnedFile<S> {
                 "the run that wrote it was interrupted before its planned end (its end frame says so)"
                     .into(),
             ),
-            Recording::TagFile { .. } | Recording::BeckerHicklHistogram { .. } => {}
+            Recording::BeckerHicklHistogram {
+                unstated, misfits, ..
+            } => {
+                w.extend(unstated.iter().map(|u| {
+                    format!("{u}: the block's time unit is unknown, so its stack's bins are curve points, marked so in every output")
+                }));
+                w.extend(misfits.iter().map(|m| format!("left out {m}")));
+            }
+            Recording::TagFile { .. } => {}
             Recording::BeckerHicklFifo { flags, .. } if flags.gaps > 0 => w.push(format!(
                 "{} record(s) carry the GAP flag: the card's FIFO was full and photons before each were lost in the card, so the stack holds fewer than were detected",
                 flags.gaps
             )),
             Recording::BeckerHicklFifo { .. } => {}
+        }
+        if let Recording::BeckerHicklFifo { info, .. } = &self.recording
+            && info.micro_unit_s.is_none()
+        {
+            w.push(format!(
+                "the micro-time unit is unknown ({}): the stacks' bins are ADC channels, marked so in every output (give --micro-unit, ps: TAC range / TAC gain / {} ADC channels, to bin by time)",
+                info.micro_unit_from,
+                info.module.adc_channels()
+            ));
         }
         w.extend(self.truncated.iter().cloned());
         let acc = self.counts;
@@ -344,11 +462,17 @@ impl<S> BinnedFile<S> {
         lines.extend(self.notes.iter().map(|n| format!("note: {n}")));
         lines.extend(self.warnings().iter().map(|w| format!("warning: {w}")));
         let (k, h, w) = self.shape;
-        lines.push(format!(
-            "{} stack(s) of {k} x {h} x {w} ({} ps bins from {} ps)",
-            self.stacks.len(),
+        let (width, start) = (
             self.window.width_ps(self.resolution_ps),
             self.window.start_ps(self.resolution_ps),
+        );
+        let bins = match self.time_unstated {
+            true => format!("{width}-channel bins from channel {start}; time unit unknown"),
+            false => format!("{width} ps bins from {start} ps"),
+        };
+        lines.push(format!(
+            "{} stack(s) of {k} x {h} x {w} ({bins})",
+            self.stacks.len()
         ));
         lines
     }
@@ -372,6 +496,9 @@ pub enum RecordedFileError {
     /// More memory than the budget.
     #[error(transparent)]
     Memory(#[from] crate::memory::MemoryError),
+    /// A stack could not be written.
+    #[error(transparent)]
+    Output(#[from] StackError),
     /// The request (its window, pixels, channel or `.spc` reading) does
     /// not fit the file.
     #[error("{path}: {reason}")]
@@ -401,9 +528,41 @@ pub fn bin_file_counts(
     match format {
         Format::TagFile => bin_tag_file(path, spec),
         Format::BeckerHicklFifo => bin_spc(path, spec),
-        Format::BeckerHicklHistogram => bin_sdt(path, spec),
+        Format::BeckerHicklHistogram => bin_sdt(path, spec, &mut |s| Ok(s.to_owned())),
         _ => bin_picoquant(path, spec),
     }
+}
+
+/// Bins a recorded file as [`bin_file_counts`] does, handing each stack to
+/// `each` as soon as it is binned: for a histogram file (`.sdt`) before
+/// the next block is read, so that a file of many large blocks needs the
+/// memory of one, and in the width the file stored (16-bit histograms
+/// stay 16-bit). What `each` returns (the files it wrote, say) are the
+/// result's stacks.
+pub fn bin_file_each<S>(
+    path: &Path,
+    spec: &BinSpec,
+    mut each: impl FnMut(StackCounts<'_>) -> Result<S, RecordedFileError>,
+) -> Result<BinnedFile<S>, RecordedFileError> {
+    let format = Format::of_file(path);
+    spec.spc.check_applies(path, format)?;
+    let binned = match format {
+        Format::BeckerHicklHistogram => return bin_sdt(path, spec, &mut each),
+        Format::TagFile => bin_tag_file(path, spec)?,
+        Format::BeckerHicklFifo => bin_spc(path, spec)?,
+        _ => bin_picoquant(path, spec)?,
+    };
+    let of = binned.stacks.len();
+    let mut index = 0;
+    binned.try_map_stacks(|s| {
+        index += 1;
+        each(StackCounts {
+            counts: CountsView::U32(s.counts.view()),
+            meta: &s.meta,
+            index: index - 1,
+            of,
+        })
+    })
 }
 
 /// Checks one stack of `window` over `map` (its counts and their float32
@@ -508,6 +667,7 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
     let res_ps = info.resolution_s * 1e12;
     let period_ps = info.macro_unit_s * 1e12;
     let imaging = info.imaging;
+    let pixel_cm = info.pixel_size_cm();
     let notes = info.unread_note().into_iter().collect();
     let source = format!(
         "{} ({}, {})",
@@ -515,7 +675,7 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
         info.device,
         info.record_type.name()
     );
-    bin_t3(
+    let mut binned = bin_t3(
         path,
         spec,
         T3File::PicoQuant(info),
@@ -523,19 +683,46 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
         imaging,
         source,
         notes,
-    )
+    )?;
+    // The image's pixel size, when the stacks are the scanned image.
+    let scanned = imaging.is_some_and(|img| {
+        let (_, h, w) = binned.shape;
+        (h, w) == (img.pixels_y, img.pixels_x) && spec.pixels == Pixels::Auto
+    });
+    if let (Some(cm), true) = (pixel_cm, scanned) {
+        for s in &mut binned.stacks {
+            s.meta.set_pixel_pitch(cm);
+        }
+    }
+    Ok(binned)
 }
 
 /// A Becker & Hickl FIFO file: its micro times cover the ADC's channels.
 fn bin_spc(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, RecordedFileError> {
     let info = spc::open(path, &spec.spc)?;
     info.check_whole(spec.allow_truncated)?;
-    let res_ps = info.micro_unit()? * 1e12;
+    // Without its unit the file bins by ADC channel: one bin per channel
+    // (a "ps" below is then a channel), every stack marked so.
+    let channels = info.micro_unit_s.is_none();
+    if channels && (spec.bin_width_ps.is_some() || spec.t_start_ps != 0.0) {
+        return Err(spec_error(
+            path,
+            format!(
+                "--bin-width and --t-start are times, and this file's micro-time unit is unknown ({}): give it with --micro-unit (ps: TAC range / TAC gain / {} ADC channels), or bin by ADC channel without them",
+                info.micro_unit_from,
+                info.module.adc_channels()
+            ),
+        ));
+    }
+    let res_ps = info.micro_unit_s.map_or(1.0, |s| s * 1e12);
     let period_ps = f64::from(info.module.adc_channels()) * res_ps;
-    let mut notes = vec![format!(
-        "micro-time unit {res_ps:.6} ps ({})",
-        info.micro_unit_from
-    )];
+    let mut notes = vec![match channels {
+        false => format!("micro-time unit {res_ps:.6} ps ({})", info.micro_unit_from),
+        true => format!(
+            "binned by ADC channel, one bin per channel: the micro-time unit is unknown ({})",
+            info.micro_unit_from
+        ),
+    }];
     if info.module_assumed {
         notes.push(format!(
             "records read as {}: a .spc file does not record its module (an SPC-600/630 file needs --spc-module)",
@@ -547,7 +734,7 @@ fn bin_spc(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, Record
         path.display(),
         info.module.cards()
     );
-    bin_t3(
+    let mut binned = bin_t3(
         path,
         spec,
         T3File::Spc(info),
@@ -555,7 +742,13 @@ fn bin_spc(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, Record
         None,
         source,
         notes,
-    )
+    )?;
+    if channels {
+        for s in &mut binned.stacks {
+            s.meta.unstated.push(Unstated::TimeUnit);
+        }
+    }
+    Ok(binned)
 }
 
 /// Bins a part of a `.spc` file's records (see [`T3File::bin_part`]).
@@ -726,9 +919,12 @@ fn bin_t3(
             ),
         })
         .collect();
-    let recording = match file {
-        T3File::PicoQuant(info) => Recording::PicoQuant(info),
-        T3File::Spc(info) => Recording::BeckerHicklFifo { info, flags },
+    let (recording, time_unstated) = match file {
+        T3File::PicoQuant(info) => (Recording::PicoQuant(info), false),
+        T3File::Spc(info) => {
+            let unstated = info.micro_unit_s.is_none();
+            (Recording::BeckerHicklFifo { info, flags }, unstated)
+        }
     };
     Ok(BinnedFile {
         recording,
@@ -740,6 +936,7 @@ fn bin_t3(
         records_per_s,
         notes,
         truncated,
+        time_unstated,
     })
 }
 
@@ -943,6 +1140,7 @@ fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, R
         records_per_s: tally.records as f64 / seconds.max(1e-9),
         notes: Vec::new(),
         truncated,
+        time_unstated: false,
     })
 }
 
@@ -955,10 +1153,17 @@ pub struct TagFileRecord {
     pub totals_in_file: bool,
 }
 
-/// A Becker & Hickl histogram file: each decay block of the first block's
-/// size and time unit becomes a stack, its curve points summed into the
-/// window's bins (whole points only); other blocks are left out, by name.
-fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, RecordedFileError> {
+/// A Becker & Hickl histogram file: each decay block becomes a stack in
+/// its own size and time unit, its curve points summed into the window's
+/// bins (whole points only), and is handed to `each` before the next block
+/// is read (one block in memory, its memory reused for the next); blocks
+/// that are not decay curves are left out, by name. A block whose
+/// measurement states no time unit is binned by curve point, marked so.
+fn bin_sdt<S>(
+    path: &Path,
+    spec: &BinSpec,
+    each: &mut dyn FnMut(StackCounts<'_>) -> Result<S, RecordedFileError>,
+) -> Result<BinnedFile<S>, RecordedFileError> {
     let spec_err = |reason: &str| spec_error(path, reason.to_string());
     if spec.channel.is_some() {
         return Err(spec_err(
@@ -976,131 +1181,103 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, Record
         ));
     }
     let start = Instant::now();
-    let file = sdt::read(path)?;
-    let mut left_out = file.left_out;
-    let mut blocks = file.blocks.into_iter();
-    let first = blocks.next().ok_or_else(|| {
-        spec_err(&format!(
+    let mut reader = sdt::open(path)?;
+    let mut tally = Counts::default();
+    let mut stacks = Vec::new();
+    // The first block's window and unit stand for the file's; every
+    // block's shape and bins, to say when they differ.
+    struct First {
+        window: TimeWindow,
+        unit_ps: f64,
+        time_unstated: bool,
+        shape: (usize, usize, usize),
+    }
+    let mut first: Option<First> = None;
+    let mut shapes = Vec::new();
+    let mut unstated = Vec::new();
+    let mut spare = None;
+    let mut misfits = Vec::new();
+    while let Some(b) = reader.next_block(spare.take())? {
+        // A window that is no whole number of this block's points leaves
+        // the block out, by name (a file of two TAC settings may fit one).
+        let (window, unit_ps) = match sdt_window(path, spec, &b)? {
+            Ok(w) => w,
+            Err(reason) => {
+                misfits.push(reason);
+                spare = Some(b.counts);
+                continue;
+            }
+        };
+        if let Err(why) = &b.micro_unit_s {
+            unstated.push(format!("data block {}: {why}", b.index));
+        }
+        let (binned, meta) = sdt_stack(path, spec, &b, window, unit_ps, &mut tally)?;
+        let counts = match (&binned, &b.counts) {
+            (Some(c), _) => CountsView::U32(c.view()),
+            (None, BlockCounts::U16(c)) => CountsView::U16(c.view()),
+            (None, BlockCounts::U32(c)) => CountsView::U32(c.view()),
+        };
+        first.get_or_insert(First {
+            window,
+            unit_ps,
+            time_unstated: b.micro_unit_s.is_err(),
+            shape: counts.dim(),
+        });
+        shapes.push(format!(
+            "{} x {} x {} of {} {} bins",
+            counts.dim().0,
+            counts.dim().1,
+            counts.dim().2,
+            meta.bin_width_ps,
+            if b.micro_unit_s.is_ok() {
+                "ps"
+            } else {
+                "point"
+            }
+        ));
+        stacks.push(each(StackCounts {
+            counts,
+            meta: &meta,
+            index: stacks.len(),
+            of: reader.decay_blocks,
+        })?);
+        spare = Some(b.counts);
+    }
+    let left_out = std::mem::take(&mut reader.left_out);
+    let Some(First {
+        window,
+        unit_ps,
+        time_unstated,
+        shape,
+    }) = first
+    else {
+        let why: Vec<_> = left_out.iter().chain(&misfits).cloned().collect();
+        return Err(spec_err(&format!(
             "no block of decay curves to bin ({})",
-            if left_out.is_empty() {
+            if why.is_empty() {
                 "the file holds no data blocks".to_string()
             } else {
-                left_out.join("; ")
+                why.join("; ")
             }
-        ))
-    })?;
-    let unit_ps = first.micro_unit_s * 1e12;
-    let points = first.counts.dim().0;
-    let mut kept = vec![first];
-    for b in blocks {
-        let (d, d0) = (b.counts.dim(), kept[0].counts.dim());
-        if d != d0 || (b.micro_unit_s - kept[0].micro_unit_s).abs() > 1e-9 * kept[0].micro_unit_s {
-            left_out.push(format!(
-                "data block {} ({} points x {} x {} pixels, {:.6} ps per point): not the size and time unit of block {} ({} x {} x {}, {unit_ps:.6} ps), so not one of its stacks",
-                b.index, d.0, d.1, d.2, b.micro_unit_s * 1e12, kept[0].index, d0.0, d0.1, d0.2
-            ));
-        } else {
-            kept.push(b);
-        }
-    }
-    // The window in whole curve points.
-    let whole = |ps: f64, what: &str| -> Result<usize, RecordedFileError> {
-        let n = (ps / unit_ps).round();
-        if (n * unit_ps - ps).abs() > 1e-6 * unit_ps.max(ps.abs()) || n < 0.0 {
-            return Err(spec_err(&format!(
-                "{what} {ps} ps is not a whole number of the file's curve points ({unit_ps:.6} ps each): histograms are binned in whole points"
-            )));
-        }
-        Ok(n as usize)
+        )));
     };
-    let width = match spec.bin_width_ps {
-        Some(w) => whole(w, "the bin width")?.max(1),
-        None => 1,
-    };
-    let offset = whole(spec.t_start_ps, "the window start")?;
-    let bins = spec
-        .bins
-        .unwrap_or_else(|| points.saturating_sub(offset).div_ceil(width).max(1));
-    if bins == 0 || bins > MAX_BINS {
-        return Err(spec_err(&format!("{bins} bins: give 1 to {MAX_BINS}")));
-    }
-    let window = TimeWindow {
-        start: offset as f64,
-        width: width as f64,
-        bins,
-    };
-    let mut tally = Counts::default();
-    let mut stacks = Vec::with_capacity(kept.len());
-    for b in kept {
-        let (_, h, w) = b.counts.dim();
-        if offset == 0 && width == 1 && bins == points && spec.pixels != Pixels::Single {
-            // The default window is the block itself: moved, not copied.
-            let sum: u64 = match b.counts.as_slice_memory_order() {
-                Some(flat) => flat.iter().map(|&c| u64::from(c)).sum(),
-                None => b.counts.iter().map(|&c| u64::from(c)).sum(),
-            };
-            tally.records += b.counts.len() as u64;
-            tally.photons += sum;
-            tally.binned += sum;
-            let source = sdt_source(path, &b);
-            stacks.push(CountStack {
-                meta: StackMeta::measured(0.0, unit_ps, bins, source, None),
-                counts: b.counts,
-            });
-            continue;
-        }
-        let (h, w) = if spec.pixels == Pixels::Single {
-            (1, 1)
-        } else {
-            (h, w)
-        };
-        check_stack_memory(path, &window, &PixelMap::Channel { width: h * w })?;
-        let mut counts = Array3::<u32>::zeros((bins, h, w));
-        for (point, plane) in b.counts.outer_iter().enumerate() {
-            let sum: u64 = plane.iter().map(|&c| u64::from(c)).sum();
-            tally.records += (plane.len()) as u64;
-            tally.photons += sum;
-            let bin = point
-                .checked_sub(offset)
-                .map(|p| p / width)
-                .filter(|&j| j < bins);
-            let Some(bin) = bin else {
-                tally.outside_window += sum;
-                continue;
-            };
-            tally.binned += sum;
-            let mut target = counts.index_axis_mut(ndarray::Axis(0), bin);
-            if spec.pixels == Pixels::Single {
-                // Counts of a bin past u32 saturate; an .sdt point holds
-                // at most 2^32 - 1 and a stack bin sums `width` planes.
-                target[[0, 0]] =
-                    target[[0, 0]].saturating_add(u32::try_from(sum).unwrap_or(u32::MAX));
-            } else {
-                target.zip_mut_with(&plane, |t, &c| *t = t.saturating_add(c));
-            }
-        }
-        let source = sdt_source(path, &b);
-        stacks.push(CountStack {
-            counts,
-            meta: StackMeta::measured(
-                window.start_ps(unit_ps),
-                window.width_ps(unit_ps),
-                bins,
-                source,
-                None,
-            ),
-        });
-    }
-    let shape = stacks[0].counts.dim();
     let seconds = start.elapsed().as_secs_f64();
     let mut notes: Vec<String> = left_out.iter().map(|l| format!("left out: {l}")).collect();
-    if spec.pixels == Pixels::Single && shape != (bins, 1, 1) {
+    if spec.pixels == Pixels::Single {
         notes.push("every curve of a block summed into one pixel (--pixels single)".into());
+    }
+    if shapes.iter().any(|s| *s != shapes[0]) {
+        notes.push(format!(
+            "the blocks differ in size or time unit, each its own stack: {}",
+            shapes.join(", ")
+        ));
     }
     Ok(BinnedFile {
         recording: Recording::BeckerHicklHistogram {
-            id: format!("{}, module {}", file.id, file.module),
+            id: format!("{}, module {}", reader.id, reader.module),
             left_out,
+            unstated,
+            misfits,
         },
         stacks,
         shape,
@@ -1110,7 +1287,149 @@ fn bin_sdt(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, Record
         records_per_s: tally.records as f64 / seconds.max(1e-9),
         notes,
         truncated: None,
+        time_unstated,
     })
+}
+
+/// The window `spec` asks of block `b`, in whole curve points of its own
+/// time unit, and that unit (ps; 1 when the block states none, whose
+/// window must then be the default); `Ok(Err(why))` when the window does
+/// not fit this block (its points or its unknown unit), which is then
+/// left out.
+fn sdt_window(
+    path: &Path,
+    spec: &BinSpec,
+    b: &sdt::SdtBlock,
+) -> Result<Result<(TimeWindow, f64), String>, RecordedFileError> {
+    let points = b.counts.dim().0;
+    let unit_ps = match &b.micro_unit_s {
+        Ok(s) => s * 1e12,
+        Err(why) if spec.bin_width_ps.is_some() || spec.t_start_ps != 0.0 => {
+            return Ok(Err(format!(
+                "data block {}: --bin-width and --t-start are times, and its time unit is unknown ({why}): bin it by curve point without them",
+                b.index
+            )));
+        }
+        Err(_) => 1.0,
+    };
+    let whole = |ps: f64, what: &str| -> Result<usize, String> {
+        let n = (ps / unit_ps).round();
+        if (n * unit_ps - ps).abs() > 1e-6 * unit_ps.max(ps.abs()) || n < 0.0 {
+            return Err(format!(
+                "data block {}: {what} {ps} ps is not a whole number of its curve points ({unit_ps:.6} ps each): histograms are binned in whole points",
+                b.index
+            ));
+        }
+        Ok(n as usize)
+    };
+    let width = match spec
+        .bin_width_ps
+        .map(|w| whole(w, "the bin width"))
+        .transpose()
+    {
+        Ok(width) => width.unwrap_or(1).max(1),
+        Err(why) => return Ok(Err(why)),
+    };
+    let offset = match whole(spec.t_start_ps, "the window start") {
+        Ok(offset) => offset,
+        Err(why) => return Ok(Err(why)),
+    };
+    let bins = spec
+        .bins
+        .unwrap_or_else(|| points.saturating_sub(offset).div_ceil(width).max(1));
+    if bins == 0 || bins > MAX_BINS {
+        return Err(spec_error(
+            path,
+            format!("{bins} bins: give 1 to {MAX_BINS}"),
+        ));
+    }
+    Ok(Ok((
+        TimeWindow {
+            start: offset as f64,
+            width: width as f64,
+            bins,
+        },
+        unit_ps,
+    )))
+}
+
+/// Block `b`'s curve points summed into `window`'s bins (whole points) of
+/// `unit_ps` points, counted into `tally`: `None` when the window is the
+/// block itself (its counts are the stack's), and the stack's metadata.
+fn sdt_stack(
+    path: &Path,
+    spec: &BinSpec,
+    b: &sdt::SdtBlock,
+    window: TimeWindow,
+    unit_ps: f64,
+    tally: &mut Counts,
+) -> Result<(Option<Array3<u32>>, StackMeta), RecordedFileError> {
+    let (points, h, w) = b.counts.dim();
+    let (offset, width, bins) = (window.start as usize, window.width as usize, window.bins);
+    let mut meta = StackMeta::measured(
+        window.start_ps(unit_ps),
+        window.width_ps(unit_ps),
+        bins,
+        sdt_source(path, b),
+        None,
+    );
+    if b.micro_unit_s.is_err() {
+        meta.unstated.push(Unstated::TimeUnit);
+    }
+    if offset == 0 && width == 1 && bins == points && spec.pixels != Pixels::Single {
+        let sum = b.counts.total();
+        tally.records += (points * h * w) as u64;
+        tally.photons += sum;
+        tally.binned += sum;
+        return Ok((None, meta));
+    }
+    let (h, w) = if spec.pixels == Pixels::Single {
+        (1, 1)
+    } else {
+        (h, w)
+    };
+    check_stack_memory(path, &window, &PixelMap::Channel { width: h * w })?;
+    let mut counts = Array3::<u32>::zeros((bins, h, w));
+    match &b.counts {
+        BlockCounts::U16(c) => rebin(c, &mut counts, (offset, width), spec.pixels, tally),
+        BlockCounts::U32(c) => rebin(c, &mut counts, (offset, width), spec.pixels, tally),
+    }
+    Ok((Some(counts), meta))
+}
+
+/// Sums the points of `block` from `offset` in groups of `width` into
+/// `counts`' bins (every curve into one pixel for [`Pixels::Single`]),
+/// counting where each point's photons went.
+fn rebin<T: Copy + Into<u32>>(
+    block: &Array3<T>,
+    counts: &mut Array3<u32>,
+    (offset, width): (usize, usize),
+    pixels: Pixels,
+    tally: &mut Counts,
+) {
+    let bins = counts.dim().0;
+    for (point, plane) in block.outer_iter().enumerate() {
+        let sum: u64 = plane.iter().map(|&c| u64::from(c.into())).sum();
+        tally.records += plane.len() as u64;
+        tally.photons += sum;
+        let bin = point
+            .checked_sub(offset)
+            .map(|p| p / width)
+            .filter(|&j| j < bins);
+        let Some(bin) = bin else {
+            tally.outside_window += sum;
+            continue;
+        };
+        tally.binned += sum;
+        let mut target = counts.index_axis_mut(ndarray::Axis(0), bin);
+        if pixels == Pixels::Single {
+            // Counts of a bin past u32 saturate; an .sdt point holds
+            // at most 2^32 - 1 and a stack bin sums `width` planes.
+            target[[0, 0]] = target[[0, 0]].saturating_add(u32::try_from(sum).unwrap_or(u32::MAX));
+        } else {
+            target.zip_mut_with(&plane, |t, &c| *t = t.saturating_add(c.into()));
+        }
+    }
 }
 
 /// Where a stack binned from an `.sdt` block came from, in words.

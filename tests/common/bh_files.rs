@@ -195,7 +195,11 @@ pub struct SdtMeasurement {
     pub scan: (i32, i32),
     /// Scan repeats (`scan_rx`, `scan_ry`; 1 x 1 but in mosaics).
     pub repeats: (i32, i32),
-    pub module: &'static str,
+    /// `mod_type`'s 16 bytes as a writer left them.
+    pub module: &'static [u8],
+    /// `date` (11 bytes; SPCM writes `YYYY-MM-DD`, Prairie View
+    /// `MM:DD:YYYY`).
+    pub date: &'static [u8],
 }
 
 impl SdtMeasurement {
@@ -207,7 +211,8 @@ impl SdtMeasurement {
             adc_re,
             scan,
             repeats: (1, 1),
-            module: "SPC-150",
+            module: b"SPC-150",
+            date: b"2019-11-05",
         }
     }
 }
@@ -253,7 +258,8 @@ pub fn sdt_file(measurements: &[SdtMeasurement], blocks: &[SdtBlock]) -> Vec<u8>
         mi[64..68].copy_from_slice(&m.tac_r.to_le_bytes());
         mi[68..70].copy_from_slice(&m.tac_g.to_le_bytes());
         mi[82..84].copy_from_slice(&m.adc_re.to_le_bytes());
-        mi[117..117 + m.module.len()].copy_from_slice(m.module.as_bytes());
+        mi[9..9 + m.date.len()].copy_from_slice(m.date);
+        mi[117..117 + m.module.len()].copy_from_slice(m.module);
         mi[173..177].copy_from_slice(&m.scan.0.to_le_bytes());
         mi[177..181].copy_from_slice(&m.scan.1.to_le_bytes());
         mi[181..185].copy_from_slice(&m.repeats.0.to_le_bytes());

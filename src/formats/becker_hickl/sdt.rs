@@ -77,15 +77,92 @@ pub struct SdtBlock {
     pub stored_as: &'static str,
     /// Whether the block was zip-compressed.
     pub zipped: bool,
-    /// Micro-time unit (s): `tac_r / (tac_g * adc_re)`.
-    pub micro_unit_s: f64,
+    /// Micro-time unit (s), `tac_r / (tac_g * adc_re)`, or why the
+    /// measurement states none (then the points are bins of unknown width).
+    pub micro_unit_s: Result<f64, String>,
     /// The module that measured it (`mod_type`).
     pub module: String,
     /// Counts per curve point, row and column: `(adc_re, rows, columns)`.
-    pub counts: Array3<u32>,
+    pub counts: BlockCounts,
 }
 
-/// An `.sdt` file's decay-curve blocks and what was left out.
+/// A block's counts in the width the file stores them: 16-bit blocks stay
+/// 16-bit (half the memory of a 32-bit copy; on a 512 x 512 x 256 FLIM
+/// image the fresh pages of a wider copy were most of the read's time).
+#[derive(Debug)]
+pub enum BlockCounts {
+    /// Stored as `u16`.
+    U16(Array3<u16>),
+    /// Stored as `u32`, or as whole `f64` counts.
+    U32(Array3<u32>),
+}
+
+impl BlockCounts {
+    /// `(points, rows, columns)`.
+    pub fn dim(&self) -> (usize, usize, usize) {
+        match self {
+            BlockCounts::U16(c) => c.dim(),
+            BlockCounts::U32(c) => c.dim(),
+        }
+    }
+
+    /// The photons of every curve point.
+    pub fn total(&self) -> u64 {
+        fn sum<T: Copy + Into<u64>>(c: &Array3<T>) -> u64 {
+            match c.as_slice_memory_order() {
+                Some(flat) => flat.iter().map(|&v| v.into()).sum(),
+                None => c.iter().map(|&v| v.into()).sum(),
+            }
+        }
+        match self {
+            BlockCounts::U16(c) => sum(c),
+            BlockCounts::U32(c) => sum(c),
+        }
+    }
+}
+
+/// What a decay block held, without its counts (what `info` keeps).
+#[derive(Debug, Clone)]
+pub struct SdtBlockSummary {
+    /// Position among the file's data blocks (from 0).
+    pub index: usize,
+    /// The block's own number.
+    pub number: u32,
+    /// Block contents (DECAY, PAGE, IMG).
+    pub contents: &'static str,
+    /// Stored value type.
+    pub stored_as: &'static str,
+    /// Whether the block was zip-compressed.
+    pub zipped: bool,
+    /// Micro-time unit (s), or why the measurement states none.
+    pub micro_unit_s: Result<f64, String>,
+    /// The module that measured it.
+    pub module: String,
+    /// `(points, rows, columns)`.
+    pub shape: (usize, usize, usize),
+    /// Photons in the block.
+    pub photons: u64,
+}
+
+impl SdtBlock {
+    /// The block without its counts.
+    pub fn summary(&self) -> SdtBlockSummary {
+        SdtBlockSummary {
+            index: self.index,
+            number: self.number,
+            contents: self.contents,
+            stored_as: self.stored_as,
+            zipped: self.zipped,
+            micro_unit_s: self.micro_unit_s.clone(),
+            module: self.module.clone(),
+            shape: self.counts.dim(),
+            photons: self.counts.total(),
+        }
+    }
+}
+
+/// An `.sdt` file's decay-curve blocks, each summed as it was read (one
+/// block in memory at a time), and what was left out.
 #[derive(Debug)]
 pub struct SdtFile {
     /// The file.
@@ -97,7 +174,7 @@ pub struct SdtFile {
     /// Module type of the file header (`revision` bits 4-11), by name.
     pub module: String,
     /// The decay-curve blocks.
-    pub blocks: Vec<SdtBlock>,
+    pub blocks: Vec<SdtBlockSummary>,
     /// Blocks left out (not decay curves), in words.
     pub left_out: Vec<String>,
 }
@@ -113,17 +190,20 @@ impl SdtFile {
             ),
         ];
         for b in &self.blocks {
-            let (k, h, w) = b.counts.dim();
+            let (k, h, w) = b.shape;
+            let unit = match &b.micro_unit_s {
+                Ok(s) => format!("{:.6} ps per point", s * 1e12),
+                Err(why) => format!("time per point unknown ({why})"),
+            };
             lines.push(format!(
-                "block {} (number {}): {} curves of {k} points as {h} x {w} pixels, {}{}, {:.6} ps per point, module {}; {} photons",
+                "block {} (number {}): {} curves of {k} points as {h} x {w} pixels, {}{}, {unit}, module {}; {} photons",
                 b.index,
                 b.number,
                 b.contents,
                 b.stored_as,
                 if b.zipped { " zipped" } else { "" },
-                b.micro_unit_s * 1e12,
                 b.module,
-                b.counts.iter().map(|&c| u64::from(c)).sum::<u64>()
+                b.photons
             ));
         }
         lines.extend(self.left_out.iter().map(|l| format!("left out: {l}")));
@@ -206,16 +286,7 @@ impl Measurement {
             let d = |i: usize| usize::try_from(f.i32_or_0(at + 4 * i)).unwrap_or(0);
             (d(0), d(1), d(2), d(3))
         };
-        let module = f
-            .bytes
-            .get(117..133)
-            .map(|b| {
-                String::from_utf8_lossy(b)
-                    .trim_end_matches('\0')
-                    .trim()
-                    .to_string()
-            })
-            .unwrap_or_default();
+        let module = f.bytes.get(117..133).map(c_text).unwrap_or_default();
         Ok(Self {
             module,
             tac_r: f.f32(64, "tac_r")?,
@@ -224,6 +295,28 @@ impl Measurement {
             scan: dims(173),
             image: dims(309),
         })
+    }
+
+    /// Time per curve point (s), `tac_r / (tac_g * adc_re)`; `None` with
+    /// the reason when the measurement does not state a usable one (a TAC
+    /// gain of 0, as sdtfile then gives the points unscaled), an error for
+    /// a unit no time tagger has.
+    fn micro_unit_s(&self) -> Result<Result<f64, String>, String> {
+        if self.tac_g <= 0 || !(self.tac_r.is_finite() && self.tac_r > 0.0) {
+            return Ok(Err(format!(
+                "tac_r {} s with tac_g {}: no positive time per curve point",
+                self.tac_r, self.tac_g
+            )));
+        }
+        // tac_r is a float32 (12.5 ns arrives as 12.4999996 ns): keep the
+        // 7 significant digits it carries, so bin widths come out round.
+        let tac_r: f64 = format!("{:.6e}", self.tac_r).parse().unwrap_or(f64::NAN);
+        let ps = tac_r / (f64::from(self.tac_g) * self.adc_re as f64) * 1e12;
+        let from = format!(
+            "tac_r {tac_r} s / tac_g {} / adc_re {}",
+            self.tac_g, self.adc_re
+        );
+        super::setup::check_micro_unit_ps(ps, &from).map(|ps| Ok(ps * 1e-12))
     }
 
     /// Rows and columns of `curves` curves, as sdtfile shapes them: the
@@ -247,14 +340,45 @@ impl Measurement {
     }
 }
 
-/// The file being read, each read checked against its size.
-struct Source<'p> {
-    file: std::fs::File,
-    size: u64,
-    path: &'p Path,
+/// A fixed-size text field: its bytes up to the first NUL (a C string;
+/// some writers, Bruker's Prairie View among them, leave other bytes after
+/// it), printable ASCII kept, any other byte as `\xNN`, trimmed.
+fn c_text(bytes: &[u8]) -> String {
+    let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
+    bytes[..end]
+        .iter()
+        .map(|&b| match b {
+            0x20..=0x7E => char::from(b).to_string(),
+            _ => format!("\\x{b:02X}"),
+        })
+        .collect::<String>()
+        .trim()
+        .to_string()
 }
 
-impl Source<'_> {
+/// The file being read, each read checked against its size.
+struct Source {
+    file: std::fs::File,
+    size: u64,
+    path: PathBuf,
+}
+
+impl Source {
+    fn io(&self, source: std::io::Error) -> SdtError {
+        SdtError::Io {
+            path: self.path.clone(),
+            source,
+        }
+    }
+
+    fn field(&self, field: &str, reason: String) -> SdtError {
+        SdtError::Field {
+            path: self.path.clone(),
+            field: field.into(),
+            reason,
+        }
+    }
+
     /// The file positioned at `offset`, where `len` bytes (`what`) must lie
     /// within it.
     fn seek_to(
@@ -264,54 +388,72 @@ impl Source<'_> {
         what: &str,
     ) -> Result<&mut std::fs::File, SdtError> {
         if offset.saturating_add(len as u64) > self.size {
-            return Err(SdtError::Field {
-                path: self.path.to_owned(),
-                field: what.into(),
-                reason: format!(
+            return Err(self.field(
+                what,
+                format!(
                     "{len} bytes at byte {offset} reach past the file's end ({} bytes): the file is cut",
                     self.size
                 ),
-            });
+            ));
         }
-        self.file
-            .seek(SeekFrom::Start(offset))
-            .map_err(|source| SdtError::Io {
-                path: self.path.to_owned(),
-                source,
-            })?;
+        if let Err(e) = self.file.seek(SeekFrom::Start(offset)) {
+            return Err(self.io(e));
+        }
         Ok(&mut self.file)
     }
 
     /// The `len` bytes (`what`) at `offset`.
     fn read_at(&mut self, offset: u64, len: usize, what: &str) -> Result<Vec<u8>, SdtError> {
-        let path = self.path;
         // Checked against the file's size before the buffer is made: a
         // length from a damaged header must not allocate first (found by
         // fuzzing, RELIABILITY.md).
         let file = self.seek_to(offset, len, what)?;
         let mut buf = vec![0; len];
-        file.read_exact(&mut buf).map_err(|source| SdtError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        Ok(buf)
+        match file.read_exact(&mut buf) {
+            Ok(()) => Ok(buf),
+            Err(e) => Err(self.io(e)),
+        }
     }
 }
 
-/// Reads every decay-curve block of the `.sdt` file at `path`.
-pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
+/// An `.sdt` file opened for its decay blocks, read one at a time
+/// ([`SdtReader::next_block`]), so that a file of many large blocks needs
+/// the memory of one.
+pub struct SdtReader {
+    source: Source,
+    /// The file's identification (`ID` of its info text).
+    pub id: String,
+    /// Software revision (`revision` bits 0-3).
+    pub revision: u16,
+    /// Module type of the file header (`revision` bits 4-11), by name.
+    pub module: String,
+    /// Blocks passed over so far (not decay curves), in words.
+    pub left_out: Vec<String>,
+    /// Decay-curve blocks the chain of block headers names (what
+    /// [`SdtReader::next_block`] will give, unless a block turns out bad).
+    pub decay_blocks: usize,
+    measurements: Vec<Measurement>,
+    new_headers: bool,
+    next: u64,
+    index: usize,
+    blocks: usize,
+}
+
+/// Opens the `.sdt` file at `path`: its header, info and measurement
+/// descriptions, checked; the blocks follow with
+/// [`SdtReader::next_block`].
+pub fn open(path: &Path) -> Result<SdtReader, SdtError> {
     let io = |source| SdtError::Io {
         path: path.to_owned(),
         source,
     };
     let (file, meta) = crate::files::open_regular(path, "histogram file").map_err(io)?;
     let size = meta.len();
-    let field = |field: &str, reason: String| SdtError::Field {
+    let mut source = Source {
+        file,
+        size,
         path: path.to_owned(),
-        field: field.into(),
-        reason,
     };
-    let mut source = Source { file, size, path };
     let head = source.read_at(0, HEADER_BYTES, "bhfile_header")?;
     let h = Fields {
         path,
@@ -321,7 +463,7 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
     let (valid, chksum) = (h.u16(32, "header_valid")?, h.u16(40, "chksum")?);
     // sdtfile's rule: either mark of a valid header will do.
     if valid != 0x5555 && chksum != 0x55AA {
-        return Err(field(
+        return Err(source.field(
             "bhfile_header.header_valid",
             format!(
                 "0x{valid:04X} and chksum 0x{chksum:04X}: not a valid .sdt header (0x5555 or 0x55AA)"
@@ -330,29 +472,32 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
     }
     let revision = h.u16(0, "revision")?;
     let offset = |v: i32, name: &str| {
-        u64::try_from(v).map_err(|_| field(&format!("bhfile_header.{name}"), format!("{v}")))
+        u64::try_from(v).map_err(|_| SdtError::Field {
+            path: path.to_owned(),
+            field: format!("bhfile_header.{name}"),
+            reason: format!("{v}"),
+        })
     };
     let info_offs = offset(h.i32(2, "info_offs")?, "info_offs")?;
     let info_len = h.i16(6, "info_length")?.max(0) as usize;
     let info = source.read_at(info_offs, info_len, "info")?;
-    let info = String::from_utf8_lossy(&info);
+    // One character per byte (Latin-1), so that each value's bytes are
+    // at hand for `c_text`.
+    let info: String = info.iter().map(|&b| char::from(b)).collect();
     let id = info
         .lines()
         .find_map(|l| {
             let (k, v) = l.split_once(':')?;
-            (k.trim() == "ID").then(|| v.trim().to_string())
+            (k.trim() == "ID").then(|| c_text(&v.chars().map(|c| c as u8).collect::<Vec<_>>()))
         })
         .ok_or_else(|| {
-            field(
+            source.field(
                 "info.ID",
                 "missing: the info text has no ID line (*IDENTIFICATION ... ID : ...)".into(),
             )
         })?;
     if id.contains("Setup Script") {
-        return Err(field(
-            "info.ID",
-            format!("{id:?}: a setup file holds no data"),
-        ));
+        return Err(source.field("info.ID", format!("{id:?}: a setup file holds no data")));
     }
     let mut blocks_n = i64::from(h.i16(18, "no_of_data_blocks")?);
     if blocks_n == 0x7FFF {
@@ -361,7 +506,7 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
     // Each block has a 22-byte header in the file: a count past what the
     // file holds is refused before any block is read.
     if blocks_n < 0 || blocks_n as u64 > size / BLOCK_HEADER_BYTES as u64 {
-        return Err(field(
+        return Err(source.field(
             "bhfile_header.no_of_data_blocks",
             format!(
                 "{blocks_n}: a {size}-byte file holds at most {} block headers",
@@ -385,19 +530,100 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
             bytes: &bytes,
         })?);
     }
+    let next = offset(h.i32(14, "data_block_offs")?, "data_block_offs")?;
     let new_headers = revision & 0xF >= 15;
-    let mut next = offset(h.i32(14, "data_block_offs")?, "data_block_offs")?;
+    let decay_blocks = count_decay_blocks(&mut source, next, blocks_n as usize, new_headers);
+    Ok(SdtReader {
+        source,
+        id,
+        revision: revision & 0xF,
+        module: module_name((revision >> 4) & 0xFF),
+        left_out: Vec::new(),
+        decay_blocks,
+        measurements,
+        new_headers,
+        next,
+        index: 0,
+        blocks: blocks_n as usize,
+    })
+}
+
+/// The decay-curve blocks among the first `blocks` of the chain of block
+/// headers from `first`, read header by header (22 bytes each) until one
+/// does not read or the chain turns back; the blocks themselves are
+/// checked when read.
+fn count_decay_blocks(source: &mut Source, first: u64, blocks: usize, new_headers: bool) -> usize {
+    let (mut at, mut decay) = (first, 0);
+    for i in 0..blocks {
+        let Ok(bh) = source.read_at(at, BLOCK_HEADER_BYTES, "data block header") else {
+            break;
+        };
+        let block_type = u16::from_le_bytes([bh[10], bh[11]]);
+        decay += usize::from(DECAY_CONTENTS.iter().any(|(c, _)| *c == block_type & 0xF0));
+        let ext = if new_headers {
+            u64::from(bh[1]) << 32
+        } else {
+            0
+        };
+        let next = u64::from(u32::from_le_bytes([bh[6], bh[7], bh[8], bh[9]])) | ext;
+        if i + 1 < blocks && next <= at {
+            break;
+        }
+        at = next;
+    }
+    decay
+}
+
+/// Reads every decay-curve block of the `.sdt` file at `path`, keeping
+/// what each held but not its counts.
+pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
+    let mut reader = open(path)?;
     let mut blocks = Vec::new();
-    let mut left_out = Vec::new();
-    for index in 0..blocks_n as usize {
+    let mut spare = None;
+    while let Some(b) = reader.next_block(spare.take())? {
+        blocks.push(b.summary());
+        spare = Some(b.counts);
+    }
+    Ok(SdtFile {
+        path: path.to_owned(),
+        id: reader.id,
+        revision: reader.revision,
+        module: reader.module,
+        blocks,
+        left_out: reader.left_out,
+    })
+}
+
+impl SdtReader {
+    /// The next block of decay curves (blocks of other kinds are passed
+    /// over and named in [`SdtReader::left_out`]), `None` after the last.
+    /// `spare`, the counts of a block the caller no longer needs, lends its
+    /// memory to this one when of the same width.
+    pub fn next_block(&mut self, spare: Option<BlockCounts>) -> Result<Option<SdtBlock>, SdtError> {
+        while self.index < self.blocks {
+            let index = self.index;
+            self.index += 1;
+            if let Some(b) = self.block(index)? {
+                return self.decode(b, spare).map(Some);
+            }
+        }
+        Ok(None)
+    }
+
+    /// Block `index`'s header, checked; `None` (and a note) for a block
+    /// that is not decay curves.
+    fn block(&mut self, index: usize) -> Result<Option<BlockHead>, SdtError> {
         let what = format!("data block {index}");
-        let bh = source.read_at(next, BLOCK_HEADER_BYTES, &format!("{what} header"))?;
+        let at = self.next;
+        let bh = self
+            .source
+            .read_at(at, BLOCK_HEADER_BYTES, &format!("{what} header"))?;
         let b = Fields {
-            path,
+            path: &self.source.path,
             what: format!("{what} header"),
             bytes: &bh,
         };
-        let (ext_data, ext_next) = if new_headers {
+        let (ext_data, ext_next) = if self.new_headers {
             (u64::from(bh[0]) << 32, u64::from(bh[1]) << 32)
         } else {
             (0, 0)
@@ -410,35 +636,36 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
         let length = b.u32(18, "block_length")? as usize;
         // The chain of headers runs forward through the file: a pointer
         // back (or to itself) would read the same blocks forever.
-        if index + 1 < blocks_n as usize && next_offs <= next {
-            return Err(field(
+        if index + 1 < self.blocks && next_offs <= at {
+            return Err(self.source.field(
                 &format!("{what} header.next_block_offs"),
                 format!(
-                    "{next_offs} does not lie past this header (byte {next}): the chain of blocks loops"
+                    "{next_offs} does not lie past this header (byte {at}): the chain of blocks loops"
                 ),
             ));
         }
-        next = next_offs;
+        self.next = next_offs;
         let contents = block_type & 0xF0;
         let Some(&(_, name)) = DECAY_CONTENTS.iter().find(|(c, _)| *c == contents) else {
             let name = OTHER_CONTENTS
                 .iter()
                 .find(|(c, _)| *c == contents)
                 .map_or("unknown", |(_, n)| n);
-            left_out.push(format!(
+            self.left_out.push(format!(
                 "{what} ({name} block, type 0x{block_type:04X}): not decay curves"
             ));
-            continue;
+            return Ok(None);
         };
         let m = usize::try_from(meas_no)
             .ok()
-            .and_then(|i| measurements.get(i))
+            .and_then(|i| self.measurements.get(i))
+            .cloned()
             .ok_or_else(|| {
-                field(
+                self.source.field(
                     &format!("{what}.meas_desc_block_no"),
                     format!(
                         "{meas_no}, but the file has {} measurement description blocks",
-                        measurements.len()
+                        self.measurements.len()
                     ),
                 )
             })?;
@@ -447,7 +674,7 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
             0x100 => ("u32", 4),
             0x200 => ("f64", 8),
             other => {
-                return Err(field(
+                return Err(self.source.field(
                     &format!("{what}.block_type"),
                     format!(
                         "0x{block_type:04X}: data type bits 0x{other:03X} are not u16, u32 or f64"
@@ -455,10 +682,9 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
                 ));
             }
         };
-        let zipped = block_type & 0x1000 != 0;
         let curve_bytes = m.adc_re * item;
         if length == 0 || !length.is_multiple_of(curve_bytes) {
-            return Err(field(
+            return Err(self.source.field(
                 &format!("{what}.block_length"),
                 format!(
                     "{length} bytes is not a whole number of curves of {} {stored_as} points",
@@ -467,111 +693,145 @@ pub fn read(path: &Path) -> Result<SdtFile, SdtError> {
             ));
         }
         let curves = length / curve_bytes;
-        let (rows, cols) = m
-            .layout(curves)
-            .map_err(|reason| field(&format!("{what} (measurement {meas_no})"), reason))?;
-        crate::memory::check(
-            crate::memory::bytes_of([m.adc_re, rows, cols], 8 + item as u64),
-            || {
-                format!(
-                    "{what} of {} ({curves} curves of {} points)",
-                    path.display(),
-                    m.adc_re
-                )
-            },
-        )?;
-        let points = if zipped {
-            let end = if next_offs > data_offs {
-                next_offs
-            } else {
-                size
-            };
-            // Offsets from the file: one past its end reads nothing and
-            // fails in `read_at`, naming the block.
-            let packed =
-                source.read_at(data_offs, end.saturating_sub(data_offs) as usize, &what)?;
-            let data = unzip_first(&packed, length).map_err(|reason| field(&what, reason))?;
-            if data.len() != length {
-                return Err(field(
-                    &what,
-                    format!(
-                        "its zip member decompresses to {} bytes, the block header says {length}",
-                        data.len()
-                    ),
-                ));
-            }
-            let mut rest = &data[..];
-            decode_points(item, m.adc_re, curves, |buf| rest.read_exact(buf))
-        } else {
-            // Straight from the file, a few curves at a time: no copy of
-            // the block (32 MB for a 256 x 256 x 256 u16 image) whose
-            // fresh pages the kernel would zero.
-            let file = source.seek_to(data_offs, length, &what)?;
-            decode_points(item, m.adc_re, curves, |buf| file.read_exact(buf))
-        }
-        .map_err(|e| match e {
-            PointsError::Value(reason) => field(&what, reason),
-            PointsError::Read(e) => io(e),
+        let (rows, cols) = m.layout(curves).map_err(|reason| {
+            self.source
+                .field(&format!("{what} (measurement {meas_no})"), reason)
         })?;
-        let counts = Array3::from_shape_vec((m.adc_re, rows, cols), points)
-            .expect("whole curves of the layout's size");
-        let tac_g = if m.tac_g == 0 {
-            1.0
-        } else {
-            f64::from(m.tac_g)
-        };
-        // tac_r is a float32 (12.5 ns arrives as 12.4999996 ns): keep the
-        // 7 significant digits it carries, so bin widths come out round.
-        let tac_r: f64 = format!("{:.6e}", m.tac_r).parse().unwrap_or(f64::NAN);
-        let unit = tac_r / (tac_g * m.adc_re as f64);
-        if !(unit.is_finite() && unit > 0.0) {
-            return Err(field(
+        let unit = m.micro_unit_s().map_err(|reason| {
+            self.source.field(
                 &format!("measurement description block {meas_no}.tac_r"),
-                format!(
-                    "{} s with tac_g {}: no positive time per curve point",
-                    m.tac_r, m.tac_g
-                ),
-            ));
-        }
-        blocks.push(SdtBlock {
+                reason,
+            )
+        })?;
+        Ok(Some(BlockHead {
             index,
             number,
             contents: name,
             stored_as,
-            zipped,
-            micro_unit_s: unit,
-            module: m.module.clone(),
-            counts,
-        });
+            item,
+            zipped: block_type & 0x1000 != 0,
+            data_offs,
+            next_offs,
+            length,
+            points: m.adc_re,
+            rows,
+            cols,
+            unit,
+            module: m.module,
+        }))
     }
-    Ok(SdtFile {
-        path: path.to_owned(),
-        id,
-        revision: revision & 0xF,
-        module: module_name((revision >> 4) & 0xFF),
-        blocks,
-        left_out,
-    })
+
+    /// Reads and decodes the block `b` describes, into `spare`'s memory
+    /// when it fits.
+    fn decode(&mut self, b: BlockHead, spare: Option<BlockCounts>) -> Result<SdtBlock, SdtError> {
+        let what = format!("data block {}", b.index);
+        let path = self.source.path.clone();
+        // The decoded block (its width) and, for a zipped block, its
+        // packed bytes: nothing else of its size is held.
+        let out_item: u64 = if b.item == 2 { 2 } else { 4 };
+        crate::memory::check(
+            crate::memory::bytes_of([b.points, b.rows, b.cols], out_item),
+            || {
+                format!(
+                    "{what} of {} ({} curves of {} points)",
+                    path.display(),
+                    b.rows * b.cols,
+                    b.points
+                )
+            },
+        )?;
+        let curves = b.rows * b.cols;
+        let shape = (b.points, b.rows, b.cols);
+        let decoded = if b.zipped {
+            let end = if b.next_offs > b.data_offs {
+                b.next_offs
+            } else {
+                self.source.size
+            };
+            // Offsets from the file: one past its end reads nothing and
+            // fails in `read_at`, naming the block.
+            let packed = self.source.read_at(
+                b.data_offs,
+                end.saturating_sub(b.data_offs) as usize,
+                &what,
+            )?;
+            let mut archive =
+                zip::ZipArchive::new(std::io::Cursor::new(&packed[..])).map_err(|e| {
+                    self.source
+                        .field(&what, format!("its zip-compressed data do not open: {e}"))
+                })?;
+            let mut member = archive.by_index(0).map_err(|e| {
+                self.source.field(
+                    &what,
+                    format!("its zip archive has no readable first member: {e}"),
+                )
+            })?;
+            if member.size() != b.length as u64 {
+                return Err(self.source.field(
+                    &what,
+                    format!(
+                        "its zip member holds {} bytes, the block header says {}",
+                        member.size(),
+                        b.length
+                    ),
+                ));
+            }
+            // Inflated a few curves at a time, straight into the block's
+            // points: no copy of the whole inflated block.
+            let decoded = decode_points(b.item, b.points, curves, shape, spare, |buf| {
+                member.read_exact(buf)
+            });
+            match decoded {
+                Err(PointsError::Read(e)) => {
+                    return Err(self.source.field(
+                        &what,
+                        format!("its zip-compressed data do not decompress to the {} bytes the header says: {e}", b.length),
+                    ));
+                }
+                other => other,
+            }
+        } else {
+            // Straight from the file, a few curves at a time: no copy of
+            // the block (32 MB for a 256 x 256 x 256 u16 image) whose
+            // fresh pages the kernel would zero.
+            let file = self.source.seek_to(b.data_offs, b.length, &what)?;
+            decode_points(b.item, b.points, curves, shape, spare, |buf| {
+                file.read_exact(buf)
+            })
+        };
+        let counts = decoded.map_err(|e| match e {
+            PointsError::Value(reason) => self.source.field(&what, reason),
+            PointsError::Read(e) => self.source.io(e),
+        })?;
+        Ok(SdtBlock {
+            index: b.index,
+            number: b.number,
+            contents: b.contents,
+            stored_as: b.stored_as,
+            zipped: b.zipped,
+            micro_unit_s: b.unit,
+            module: b.module,
+            counts,
+        })
+    }
 }
 
-/// The first member of a zip archive, which must hold `length` bytes.
-fn unzip_first(packed: &[u8], length: usize) -> Result<Vec<u8>, String> {
-    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(packed))
-        .map_err(|e| format!("its zip-compressed data do not open: {e}"))?;
-    let mut member = archive
-        .by_index(0)
-        .map_err(|e| format!("its zip archive has no readable first member: {e}"))?;
-    if member.size() != length as u64 {
-        return Err(format!(
-            "its zip member holds {} bytes, the block header says {length}",
-            member.size()
-        ));
-    }
-    let mut out = Vec::with_capacity(length);
-    member
-        .read_to_end(&mut out)
-        .map_err(|e| format!("its zip-compressed data do not decompress: {e}"))?;
-    Ok(out)
+/// A decay block's header and measurement, checked, before its data.
+struct BlockHead {
+    index: usize,
+    number: u32,
+    contents: &'static str,
+    stored_as: &'static str,
+    item: usize,
+    zipped: bool,
+    data_offs: u64,
+    next_offs: u64,
+    length: usize,
+    points: usize,
+    rows: usize,
+    cols: usize,
+    unit: Result<f64, String>,
+    module: String,
 }
 
 /// Why a block's points could not be decoded.
@@ -582,37 +842,96 @@ enum PointsError {
     Read(std::io::Error),
 }
 
-/// Counts in (point, curve) order from `curves` curves of `points`
-/// little-endian values of `item` bytes (u16, u32, f64) stored curve after
-/// curve, which `fill` delivers in order, a few curves to a call (it fills
-/// the buffer it is given); an `f64` must be a whole count of at most
-/// `u32::MAX`.
+/// Counts in (point, row, column) order, `shape`, from `curves` curves of
+/// `points` little-endian values of `item` bytes (u16, u32, f64) stored
+/// curve after curve, which `fill` delivers in order, a few curves to a
+/// call (it fills the buffer it is given); an `f64` must be a whole count
+/// of at most `u32::MAX`. `spare`'s memory is used when of the width.
 fn decode_points(
     item: usize,
     points: usize,
     curves: usize,
+    shape: (usize, usize, usize),
+    spare: Option<BlockCounts>,
     fill: impl FnMut(&mut [u8]) -> std::io::Result<()>,
-) -> Result<Vec<u32>, PointsError> {
+) -> Result<BlockCounts, PointsError> {
+    fn shaped<T>(shape: (usize, usize, usize), v: Vec<T>) -> Array3<T> {
+        Array3::from_shape_vec(shape, v).expect("whole curves of the layout's size")
+    }
     match item {
-        2 => transpose::<2>(points, curves, fill),
-        4 => transpose::<4>(points, curves, fill),
-        _ => transpose::<8>(points, curves, fill),
+        2 => {
+            let out = match spare {
+                Some(BlockCounts::U16(a)) => a.into_raw_vec_and_offset().0,
+                _ => Vec::new(),
+            };
+            let v = transpose::<2, u16>(out, points, curves, fill)?;
+            Ok(BlockCounts::U16(shaped(shape, v)))
+        }
+        _ => {
+            let out = match spare {
+                Some(BlockCounts::U32(a)) => a.into_raw_vec_and_offset().0,
+                _ => Vec::new(),
+            };
+            let v = if item == 4 {
+                transpose::<4, u32>(out, points, curves, fill)
+            } else {
+                transpose::<8, u32>(out, points, curves, fill)
+            }?;
+            Ok(BlockCounts::U32(shaped(shape, v)))
+        }
     }
 }
 
-/// [`decode_points`] for values of `ITEM` bytes: the curves read
-/// [`CURVES_PER_READ`] at a time (a buffer that stays in cache), each
-/// point's values of those curves written side by side. One loop per
-/// value width, so that the width is no branch in the inner loop: `info`
-/// of a 256 x 256 x 256 u16 block took 0.19 s with ndarray's transposing
-/// copy (a point-major walk over the whole file), 0.11-0.13 s with a
-/// width-generic tiled loop, and 0.04 s so (BENCHMARKS.md).
-fn transpose<const ITEM: usize>(
+/// A stored value of `ITEM` bytes as a count of type `T`.
+trait StoredCount<const ITEM: usize>: Copy + Default {
+    fn from_stored(b: [u8; ITEM], at: usize) -> Result<Self, PointsError>;
+}
+
+impl StoredCount<2> for u16 {
+    #[inline(always)]
+    fn from_stored(b: [u8; 2], _: usize) -> Result<Self, PointsError> {
+        Ok(u16::from_le_bytes(b))
+    }
+}
+
+impl StoredCount<4> for u32 {
+    #[inline(always)]
+    fn from_stored(b: [u8; 4], _: usize) -> Result<Self, PointsError> {
+        Ok(u32::from_le_bytes(b))
+    }
+}
+
+impl StoredCount<8> for u32 {
+    #[inline(always)]
+    fn from_stored(b: [u8; 8], at: usize) -> Result<Self, PointsError> {
+        let v = f64::from_le_bytes(b);
+        if !(v.is_finite() && v >= 0.0 && v.fract() == 0.0 && v <= f64::from(u32::MAX)) {
+            return Err(PointsError::Value(format!(
+                "value {at} is {v}: a histogram point must be a whole count from 0 to 2^32 - 1"
+            )));
+        }
+        Ok(v as u32)
+    }
+}
+
+/// [`decode_points`] for values of `ITEM` bytes into `out` (its memory
+/// reused): the curves read [`CURVES_PER_READ`] at a time (a buffer that
+/// stays in cache), each point's values of those curves written side by
+/// side. One loop per value width, so that the width is no branch in the
+/// inner loop: `info` of a 256 x 256 x 256 u16 block took 0.19 s with
+/// ndarray's transposing copy (a point-major walk over the whole file),
+/// 0.11-0.13 s with a width-generic tiled loop, and 0.04 s so
+/// (BENCHMARKS.md).
+fn transpose<const ITEM: usize, T: StoredCount<ITEM>>(
+    mut out: Vec<T>,
     points: usize,
     curves: usize,
     mut fill: impl FnMut(&mut [u8]) -> std::io::Result<()>,
-) -> Result<Vec<u32>, PointsError> {
-    let mut out = vec![0u32; curves * points];
+) -> Result<Vec<T>, PointsError> {
+    // Every element is written below: a reused buffer keeps its pages,
+    // and a fresh one is zeroed once by the allocator.
+    out.clear();
+    out.resize(curves * points, T::default());
     let mut data = vec![0u8; CURVES_PER_READ * points * ITEM];
     for c0 in (0..curves).step_by(CURVES_PER_READ) {
         let n = CURVES_PER_READ.min(curves - c0);
@@ -623,24 +942,7 @@ fn transpose<const ITEM: usize>(
             for (c, slot) in row.iter_mut().enumerate() {
                 let at = (c * points + k) * ITEM;
                 let b: [u8; ITEM] = data[at..at + ITEM].try_into().expect("ITEM bytes");
-                *slot = match ITEM {
-                    2 => u32::from(u16::from_le_bytes([b[0], b[1]])),
-                    4 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
-                    _ => {
-                        let v = f64::from_le_bytes(b[..8].try_into().expect("8 bytes"));
-                        if !(v.is_finite()
-                            && v >= 0.0
-                            && v.fract() == 0.0
-                            && v <= f64::from(u32::MAX))
-                        {
-                            return Err(PointsError::Value(format!(
-                                "value {} is {v}: a histogram point must be a whole count from 0 to 2^32 - 1",
-                                (c0 + c) * points + k
-                            )));
-                        }
-                        v as u32
-                    }
-                };
+                *slot = T::from_stored(b, (c0 + c) * points + k)?;
             }
         }
     }

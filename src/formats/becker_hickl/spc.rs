@@ -29,7 +29,7 @@ use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 
-use super::setup::SetupText;
+use super::setup::{SetupText, check_micro_unit_ps};
 use crate::events::{ChunkDecoder, Tag, TagSink};
 
 /// Which card family wrote the records: their layout.
@@ -344,12 +344,21 @@ fn open_inner(path: &Path, options: &SpcOptions) -> Result<SpcInfo, SpcError> {
                     "0x{r:08X} is not a header record (its INVALID bit 31 is clear)"
                 )));
             }
-            if r & (1 << 26) != 0 {
+            // Byte 3 of the SPC-130 family's header: bit 2 (26) marks a
+            // raw-data file, bit 1 (25) a file with markers. In the
+            // SPC-600/630 256-channel layout the header's text calls bits
+            // 0-2 of byte 3 reserved (its R_FILE6_32 mask says otherwise,
+            // but the sample file SPCM wrote for an SPC-630,
+            // `bh_spc630_256.spc`, sets bit 26 over 294,884 valid photons),
+            // so neither is read there.
+            let raw = module == SpcModule::Spc130 && r & (1 << 26) != 0;
+            if raw {
                 return Err(SpcError::Header(format!(
-                    "0x{r:08X} marks a raw-data file (bit 26: SPCM's diagnostic mode), whose records carry no photons"
+                    "0x{r:08X} marks a raw-data file in the SPC-130 family's layout (bit 26: SPCM's diagnostic mode), whose records carry no photons; an SPC-600/630 file in 256-channel mode, where that bit is reserved, needs --spc-module spc-600-256"
                 )));
             }
-            (r & 0x00FF_FFFF, ((r >> 27) & 0xF) as u8, r & (1 << 25) != 0)
+            let markers = module == SpcModule::Spc130 && r & (1 << 25) != 0;
+            (r & 0x00FF_FFFF, ((r >> 27) & 0xF) as u8, markers)
         }
     };
     if clock == 0 {
@@ -379,25 +388,24 @@ fn micro_unit(
     options: &SpcOptions,
 ) -> Result<(Option<f64>, String), SpcError> {
     if let Some(ps) = options.micro_unit_ps {
-        if !(ps.is_finite() && ps > 0.0 && ps < 1e9) {
-            return Err(SpcError::MicroUnit(format!(
-                "micro-time unit {ps} ps: give a positive unit under 1 ms"
-            )));
-        }
+        let ps = check_micro_unit_ps(ps, "--micro-unit").map_err(SpcError::MicroUnit)?;
         return Ok((Some(ps * 1e-12), "given".into()));
     }
     let set = path.with_extension("set");
     if !set.is_file() {
         return Ok((None, format!("no setup file {}", set.display())));
     }
-    let text = SetupText::read(&set)?;
-    Ok(match text.micro_unit_s(module.adc_channels()) {
-        Some((unit, words)) => (Some(unit), format!("{}: {words}", set.display())),
-        None => (
-            None,
-            format!("{} holds no positive SP_TAC_R and SP_TAC_G", set.display()),
-        ),
-    })
+    let in_set = |e: String| SpcError::MicroUnit(format!("setup file {}: {e}", set.display()));
+    let text = SetupText::read(&set).map_err(|e| in_set(e.to_string()))?;
+    Ok(
+        match text.micro_unit_s(module.adc_channels()).map_err(in_set)? {
+            Some((unit, words)) => (Some(unit), format!("{}: {words}", set.display())),
+            None => (
+                None,
+                format!("{} holds no positive SP_TAC_R and SP_TAC_G", set.display()),
+            ),
+        },
+    )
 }
 
 fn read_up_to(file: &mut File, buf: &mut [u8]) -> std::io::Result<usize> {

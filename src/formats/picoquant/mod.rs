@@ -127,6 +127,15 @@ pub struct FileInfo {
 }
 
 impl FileInfo {
+    /// The side of a scanned image's pixel (cm), from `ImgHdr_PixResol`
+    /// (PicoQuant's PTU tag, in micrometres), when the file is an image
+    /// and states a positive, finite size.
+    pub fn pixel_size_cm(&self) -> Option<f64> {
+        self.imaging?;
+        let um = self.tags.float("ImgHdr_PixResol")?;
+        (um.is_finite() && um > 0.0).then_some(um * 1e-4)
+    }
+
     /// The header in words, one line each (what `info` prints first).
     pub fn describe(&self) -> Vec<String> {
         let container = match &self.container {
