@@ -36,6 +36,15 @@ pub enum Tag {
 }
 
 impl Tag {
+    /// The tag's overflow-corrected macro time.
+    pub fn macro_time(&self) -> u64 {
+        match *self {
+            Tag::Photon { macro_time, .. }
+            | Tag::Marker { macro_time, .. }
+            | Tag::Sync { macro_time } => macro_time,
+        }
+    }
+
     /// A wire event of our devices as a tag: a photon (its sensor pixel
     /// as the channel) or a marker; `None` for a loss, which the ledger
     /// counts and no tag carries. The one conversion from the wire to

@@ -701,3 +701,140 @@ fn a_zipped_block_reaching_a_terabyte_past_the_end_is_refused_before_reading() {
         "{e}"
     );
 }
+
+/// A `.spc` of `entries` overflow-count records (each the most a record
+/// counts, 2^28 - 1 overflows of 4096 clocks) and then one photon.
+fn overflow_spc(entries: usize) -> Vec<u8> {
+    let mut bytes = bh_files::header(Layout::Spc130, 500, 0, false);
+    for _ in 0..entries {
+        bytes.extend(bh_files::overflows(0x0FFF_FFFF));
+    }
+    bytes.extend(bh_files::photon(
+        Layout::Spc130,
+        0,
+        100,
+        7,
+        false,
+        false,
+        false,
+    ));
+    bytes
+}
+
+/// Files in `dir` other than `keep` (a leftover temporary output).
+fn others(dir: &Path, keep: &[&Path]) -> Vec<std::path::PathBuf> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| !keep.contains(&p.as_path()))
+        .collect()
+}
+
+#[test]
+fn a_conversion_that_would_outgrow_the_disk_is_refused_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let spc = dir.path().join("gaps.spc");
+    // A million entries of 2^40 clocks: a PTU of petabytes.
+    std::fs::write(&spc, overflow_spc(1_000_000)).unwrap();
+    let ptu = dir.path().join("gaps.ptu");
+    let started = std::time::Instant::now();
+    let r = run(&["convert", s(&spc), "--micro-unit", "10ps", "--out", s(&ptu)]);
+    let t = text(&r);
+    assert_eq!(r.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("gaps.spc") && t.contains("refused before writing") && t.contains("overflows"),
+        "{t}"
+    );
+    assert!(started.elapsed().as_secs() < 20, "{:?}", started.elapsed());
+    assert_eq!(
+        others(dir.path(), &[&spc]),
+        Vec::<std::path::PathBuf>::new()
+    );
+    // `bin` of the same file: its one photon, at once.
+    let r = run(&[
+        "bin",
+        s(&spc),
+        "--micro-unit",
+        "10ps",
+        "--out",
+        s(&dir.path().join("b")),
+    ]);
+    assert!(text(&r).contains("1 photons, 1 binned"), "{}", text(&r));
+}
+
+#[test]
+fn convert_stops_on_ctrl_c_and_sigterm_and_leaves_nothing() {
+    for signal in [
+        nix::sys::signal::Signal::SIGINT,
+        nix::sys::signal::Signal::SIGTERM,
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let spc = dir.path().join("long.spc");
+        // 2,000 entries: about a million overflow records each, 8 GB of
+        // PTU in all, more than the signal leaves time to write.
+        std::fs::write(&spc, overflow_spc(2_000)).unwrap();
+        let ptu = dir.path().join("long.ptu");
+        let child = command::scatterscope()
+            .args(["convert", s(&spc), "--micro-unit", "10ps", "--out", s(&ptu)])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(700));
+        let signalled = std::time::Instant::now();
+        nix::sys::signal::kill(nix::unistd::Pid::from_raw(child.id() as i32), signal).unwrap();
+        let o = child.wait_with_output().unwrap();
+        let t = format!(
+            "{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert_eq!(o.status.code(), Some(3), "{signal}: {t}");
+        assert!(
+            t.contains("interrupted") && t.contains("nothing was written"),
+            "{t}"
+        );
+        assert!(
+            signalled.elapsed().as_secs() < 5,
+            "{:?}",
+            signalled.elapsed()
+        );
+        assert_eq!(
+            others(dir.path(), &[&spc]),
+            Vec::<std::path::PathBuf>::new()
+        );
+    }
+}
+
+#[test]
+fn no_command_writes_over_the_setup_file_it_reads_and_a_huge_one_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let spc = dir.path().join("run.spc");
+    std::fs::write(&spc, random_spc(Layout::Spc130, 2_000, 1, 5)).unwrap();
+    write_set(&spc);
+    let set = spc.with_extension("set");
+    let before = std::fs::read(&set).unwrap();
+    let r = run(&["convert", s(&spc), "--out", s(&set)]);
+    let t = text(&r);
+    assert_eq!(r.status.code(), Some(1), "{t}");
+    assert!(t.contains("run.set"), "{t}");
+    assert_eq!(
+        std::fs::read(&set).unwrap(),
+        before,
+        "the setup file is intact"
+    );
+    // A 20 GiB "setup file" (sparse): refused by its size, not read.
+    let big = dir.path().join("big.spc");
+    std::fs::copy(&spc, &big).unwrap();
+    let f = std::fs::File::create(big.with_extension("set")).unwrap();
+    f.set_len(20 << 30).unwrap();
+    let started = std::time::Instant::now();
+    let r = run(&["bin", s(&big), "--out", s(&dir.path().join("b"))]);
+    let t = text(&r);
+    assert_eq!(r.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("big.set") && t.contains("setup file of 21474836480 bytes"),
+        "{t}"
+    );
+    assert!(started.elapsed().as_secs() < 5, "{:?}", started.elapsed());
+}

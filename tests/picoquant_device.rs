@@ -631,7 +631,8 @@ fn the_t3_offset_reaches_the_library_in_nanoseconds() {
         );
         assert!(!o.status.success());
         assert!(text(&o).contains("whole nanoseconds"), "{}", text(&o));
-        // Past the library's range: its own error code and text.
+        // Past the library's range: its own error code and text, or for
+        // a HydraHarp, whose header bounds it lower, refused by name.
         let (_, o) = acquire(
             dir.path(),
             &format!("picoquant:{family}"),
@@ -639,11 +640,11 @@ fn the_t3_offset_reaches_the_library_in_nanoseconds() {
             &["--t3-offset", "200000000ns"],
         );
         assert!(!o.status.success());
-        assert!(
-            text(&o).contains("SetOffset returned error -17 (ERROR_INVALID_ARGUMENT)"),
-            "{}",
-            text(&o)
-        );
+        let words = match family {
+            "hydraharp" => "0 to 500 000 (hhdefin.h OFFSETMAX)",
+            _ => "SetOffset returned error -17 (ERROR_INVALID_ARGUMENT)",
+        };
+        assert!(text(&o).contains(words), "{}", text(&o));
     }
 }
 
@@ -822,6 +823,55 @@ fn a_picoharp_330_refuses_what_it_cannot_take_by_name_before_the_device() {
         &["--sync-divider", "16"],
     );
     assert!(o.status.success(), "{}", text(&o));
+    // A PicoHarp 330 whose features lack FEATURE_INPT_MODE (ph330defin.h):
+    // its inputs' trigger mode is not set (the stand-in refuses the call
+    // there, as such a device would), and the run goes through.
+    let (_, o) = acquire(
+        dir.path(),
+        "picoquant:picoharp330",
+        "ph330_input_modes=no",
+        &[],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+}
+
+/// Settings past the vendor's headers are refused by name before the
+/// device: a TimeHarp 260's binning code past `MAXBINSTEPS` 22 less one
+/// (th260defin.h), a HydraHarp's T3 offset past `OFFSETMAX` 500000
+/// (hhdefin.h).
+#[test]
+fn settings_past_the_vendors_headers_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("no-such-library.so");
+    let out = dir.path().join("acq");
+    let cases: [(&str, &[&str], &str); 2] = [
+        ("picoquant:timeharp260", &["--binning", "22"], "0 to 21"),
+        (
+            "picoquant:hydraharp",
+            &["--t3-offset", "600000ns"],
+            "0 to 500 000 (hhdefin.h OFFSETMAX)",
+        ),
+    ];
+    for (device, extra, words) in cases {
+        let mut args = vec![
+            "acquire",
+            "--device",
+            device,
+            "--vendor-lib",
+            missing.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = scatterscope_pq(&args, "");
+        let t = text(&o);
+        assert!(!o.status.success(), "{extra:?}: {t}");
+        assert!(t.contains(words), "{extra:?}: {t}");
+        assert!(
+            !t.contains("no-such-library"),
+            "refused before the library: {t}"
+        );
+    }
 }
 
 /// A TimeHarp 260's library serves the Pico (CFDs) and the Nano (edge
@@ -951,8 +1001,10 @@ fn a_picoharp_300_is_driven_as_phlib_says() {
     assert_eq!(json(&out.join("acquisition.json"))["stop"], "fifo_overrun");
 
     let missing = dir.path().join("no-such-library.so");
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 9] = [
         (&["--input-offsets", "0,120ps"], "a PicoHarp 300 has none"),
+        (&["--sync-divider", "2"], "before or after the divider"),
+        (&["--duration", "597h"], "at most 100 h (ACQTMAX"),
         (&["--sync-edge", "rising"], "PicoHarp 300 input has a CFD"),
         (&["--input-level", "900"], "levels 0 to 800 mV"),
         (&["--sync-zero-cross", "30"], "zero crosses 0 to 20 mV"),

@@ -55,6 +55,15 @@ pub const FLAG_CNTS_DROPPED: i32 = 0x0040;
 /// (`FLAG_EVTS_DROPPED`, th260defin.h), where the others say the
 /// reference clock was lost.
 pub const FLAG_EVTS_DROPPED_TH260: i32 = 0x0008;
+/// `TH260_GetFlags` (th260defin.h `FLAG_SOFTERROR`): a software error,
+/// "must contact support".
+pub const FLAG_SOFT_ERROR_TH260: i32 = 0x0020;
+/// `PH330_GetFlags` (ph330defin.h of PH330Lib 2.0, `FLAG_SOFTERROR`; its
+/// 0x0020 is `FLAG_ACTIVE`).
+pub const FLAG_SOFT_ERROR_PH330: i32 = 0x0080;
+/// `GetFeatures` (ph330defin.h `FEATURE_INPT_MODE`): the PicoHarp 330's
+/// inputs' trigger mode can be set.
+pub const FEATURE_INPT_MODE: i32 = 0x0200;
 /// The libraries' "no device at this index" error.
 const ERROR_DEVICE_OPEN_FAIL: c_int = -1;
 
@@ -170,11 +179,13 @@ impl Family {
     }
 
     /// The largest binning code, where the family's header bounds it
-    /// below what a micro-time unit needs (`BINSTEPSMAX` 8 in phdefin.h:
-    /// codes 0 to 7); `None`: the library's own check.
+    /// (`BINSTEPSMAX` 8 in phdefin.h: codes 0 to 7; `MAXBINSTEPS` 22 in
+    /// th260defin.h: 0 to 21); `None`: the library's own check.
     pub fn binning_max(self) -> Option<i32> {
         match self {
             Family::PicoHarp300 => Some(7),
+            // th260defin.h MAXBINSTEPS 22: codes 0 to 21.
+            Family::TimeHarp260 => Some(21),
             _ => None,
         }
     }
@@ -185,6 +196,12 @@ impl Family {
     /// an offset it cannot take is refused by name.
     pub fn offset_arg(self, t3_offset_ns: i32) -> Result<c_int, VendorError> {
         match self {
+            // hhdefin.h: OFFSETMIN 0, OFFSETMAX 500000.
+            Family::HydraHarp if !(0..=500_000).contains(&t3_offset_ns) => {
+                Err(VendorError::Setting(format!(
+                    "T3 offset {t3_offset_ns} ns: a HydraHarp takes 0 to 500 000 (hhdefin.h OFFSETMAX)"
+                )))
+            }
             Family::PicoHarp300 => t3_offset_ns
                 .checked_mul(1000)
                 .filter(|ps| (0..=1_000_000_000).contains(ps))
@@ -287,9 +304,11 @@ struct Functions {
     set_offset: DevIntFn,
     set_marker_enable: unsafe extern "C" fn(c_int, c_int, c_int, c_int, c_int) -> c_int,
     set_marker_edges: unsafe extern "C" fn(c_int, c_int, c_int, c_int, c_int) -> c_int,
-    /// `SetSyncTrgMode(devidx, mode)` and `SetInputTrgMode(devidx,
-    /// channel, mode)`: the PicoHarp 330's choice of edge trigger or CFD.
-    set_trigger_modes: Option<(DevIntFn, DevIntIntFn)>,
+    /// `SetSyncTrgMode(devidx, mode)`, `SetInputTrgMode(devidx, channel,
+    /// mode)` and `GetFeatures(devidx, &features)`: the PicoHarp 330's
+    /// choice of edge trigger or CFD, the inputs' only where the features
+    /// say so.
+    set_trigger_modes: Option<(DevIntFn, DevIntIntFn, DevOutFn)>,
     get_resolution: DevDoubleFn,
     get_count_rate: unsafe extern "C" fn(c_int, c_int, *mut c_int) -> c_int,
     get_flags: DevOutFn,
@@ -460,7 +479,11 @@ impl VendorLib {
             _ => Initialize::WithReference(sym!("Initialize")),
         };
         let set_trigger_modes = match family {
-            Family::PicoHarp330 => Some((sym!("SetSyncTrgMode"), sym!("SetInputTrgMode"))),
+            Family::PicoHarp330 => Some((
+                sym!("SetSyncTrgMode"),
+                sym!("SetInputTrgMode"),
+                sym!("GetFeatures"),
+            )),
             _ => None,
         };
         let functions = Functions {
@@ -744,7 +767,7 @@ impl Settings {
             return Err((
                 "binning",
                 VendorError::Setting(format!(
-                    "binning code {}: a {} takes 0 to {max} (BINSTEPSMAX {} in its header)",
+                    "binning code {}: a {} takes 0 to {max} (BINSTEPSMAX or MAXBINSTEPS {} in its header)",
                     self.binning,
                     family.name(),
                     max + 1
@@ -759,11 +782,20 @@ impl Settings {
 
     /// The vendor demos' settings for `family`'s `inputs`.
     pub fn default_for(family: Family, inputs: Inputs) -> Self {
+        let input_trigger = match family {
+            // PHLib 3.0's C demos (tttrmode.c): `CFDLevel0=50` for the
+            // sync, `CFDLevel1=150` for the input, zero cross 10 mV.
+            Family::PicoHarp300 => Trigger::Cfd {
+                level_mv: 150,
+                zero_cross_mv: 10,
+            },
+            _ => Trigger::default_for(family, inputs),
+        };
         Self {
             sync_divider: 1,
             sync_trigger: Trigger::default_for(family, inputs),
             sync_offset_ps: 0,
-            input_trigger: Trigger::default_for(family, inputs),
+            input_trigger,
             input_offsets_ps: Vec::new(),
             binning: 0,
             t3_offset_ns: 0,
@@ -841,6 +873,13 @@ impl Flags {
             Family::PicoHarp300 => (0, 0, FLAG_SYS_ERROR_PH300),
             _ => (FLAG_SYNC_LOST, FLAG_REF_LOST, FLAG_SYS_ERROR),
         };
+        // The software-error flags the TimeHarp 260's and PicoHarp 330's
+        // headers define (the other families' headers at hand have none).
+        let soft_error = match self.1 {
+            Family::TimeHarp260 => FLAG_SOFT_ERROR_TH260,
+            Family::PicoHarp330 => FLAG_SOFT_ERROR_PH330,
+            _ => 0,
+        };
         [
             (
                 self.dropped_bit(),
@@ -851,6 +890,10 @@ impl Flags {
             (
                 sys_error,
                 "hardware error (the vendor asks to contact support)",
+            ),
+            (
+                soft_error,
+                "software error in the device (the vendor asks to contact support)",
             ),
         ]
         .into_iter()
@@ -1018,10 +1061,19 @@ impl Device {
                             family.name()
                         ))
                     })?;
-                    if let Some((sync_mode, _)) = f.set_trigger_modes {
+                    // The inputs' trigger mode is set only on a device
+                    // whose features have FEATURE_INPT_MODE (0x0200 in
+                    // ph330defin.h); without it they stay edge triggers.
+                    let mut input_modes = None;
+                    if let Some((sync_mode, input_mode, get_features)) = f.set_trigger_modes {
                         // TRGMODE_ETR 0 (ph330defin.h): edge triggers, then
                         // their level and edge below.
                         lib.check("SetSyncTrgMode", sync_mode(i, 0))?;
+                        let mut features: c_int = 0;
+                        lib.check("GetFeatures", get_features(i, &mut features))?;
+                        if features & FEATURE_INPT_MODE != 0 {
+                            input_modes = Some(input_mode);
+                        }
                     }
                     lib.check(sync_call, set_sync_trigger(i, sync_a, sync_b))?;
                     lib.check(
@@ -1033,7 +1085,7 @@ impl Device {
                         // (`SetInputChannelEnable(devidx, channel, enable)`
                         // in the vendor's hhlib.h and mhlib.h).
                         lib.check("SetInputChannelEnable", set_input_channel_enable(i, ch, 1))?;
-                        if let Some((_, input_mode)) = f.set_trigger_modes {
+                        if let Some(input_mode) = input_modes {
                             lib.check("SetInputTrgMode", input_mode(i, ch, 0))?;
                         }
                         lib.check(input_call, set_input_trigger(i, ch, in_a, in_b))?;
@@ -1182,5 +1234,28 @@ impl Drop for Device {
             (self.lib.functions.stop_meas)(self.info.index);
             (self.lib.functions.close_device)(self.info.index);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The software-error bits mean what each header says: 0x0020 is
+    /// `FLAG_SOFTERROR` in th260defin.h but `FLAG_ACTIVE` (running) in
+    /// hhdefin.h; PH330Lib's is 0x0080.
+    #[test]
+    fn software_errors_are_read_in_each_familys_own_bits() {
+        let soft = |bits, family| {
+            Flags(bits, family)
+                .problems()
+                .iter()
+                .any(|p| p.contains("software error"))
+        };
+        assert!(soft(0x0020, Family::TimeHarp260));
+        assert!(!soft(0x0020, Family::HydraHarp));
+        assert!(!soft(0x0020, Family::PicoHarp330));
+        assert!(soft(0x0080, Family::PicoHarp330));
+        assert!(!soft(0x0080, Family::MultiHarp));
     }
 }

@@ -28,9 +28,10 @@ use crate::formats::picoquant::writer::HeaderEntry;
 /// FIFO reads that may wait for the writer and binner before the reader
 /// stops reading (the device's own FIFO then buffers).
 const QUEUE_DEPTH: usize = 8;
-/// The longest measurement the libraries accept (100 h), for runs that end
-/// on Ctrl-C.
-const MAX_MEASUREMENT_MS: i32 = 360_000_000;
+/// The longest measurement the libraries accept (100 h: `ACQTMAX`
+/// 360000000 ms in phdefin.h and th260defin.h, as in the other families'
+/// headers), for runs that end on Ctrl-C.
+pub const MAX_MEASUREMENT_MS: i32 = 360_000_000;
 
 /// Which PicoQuant device: `--device picoquant[:FAMILY][:SERIAL]`.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
@@ -236,6 +237,18 @@ impl SettingsRequest {
                     family.name()
                 ),
             )),
+            // The sync period is taken from PH_GetCountRate(0), and no
+            // PHLib text (phdefin.h, phlib.h, the v3.0 demos, which set
+            // `SyncDivider = 1` "READ MANUAL!") says whether that rate is
+            // counted before or after the divider; if after, every macro
+            // time and the one-period window would be off by the divider.
+            // Refused until a vendor source settles it.
+            Some(d) if d > 1 && family == Family::PicoHarp300 => Err(SourceError::setting(
+                "sync_divider",
+                format!(
+                    "sync divider {d}: on a PicoHarp 300 the sync period comes from PH_GetCountRate(0), and no PHLib text says whether that rate is counted before or after the divider, so the macro times could be off by {d}; use 1"
+                ),
+            )),
             _ => Ok(()),
         }
     }
@@ -255,7 +268,18 @@ impl PicoQuantDevice {
                 .settings
                 .resolve(family, inputs, self.scan.is_some())
                 .map(|_| ()),
-            None => self.settings.check_divider(family),
+            // The board's kind of input is the device's to say; what the
+            // family's header bounds whatever the board is checked now.
+            None => {
+                self.settings.check_divider(family)?;
+                let r = &self.settings;
+                let mut s = Settings::default_for(family, Inputs::Edge);
+                s.binning = r.binning.unwrap_or(s.binning);
+                s.t3_offset_ns = r.t3_offset_ns.unwrap_or(s.t3_offset_ns);
+                s.input_offsets_ps = r.input_offsets_ps.clone();
+                s.check_family(family, i32::MAX)
+                    .map_err(|(field, e)| SourceError::setting(field, e.to_string()))
+            }
         }
     }
 }
@@ -454,7 +478,7 @@ impl Source for PicoQuantSource {
         // The libraries report valid rates 100-150 ms after a set-up.
         std::thread::sleep(Duration::from_millis(150));
         let (sync_rate, count_rates) = device.rates().map_err(vendor)?;
-        let warnings: Vec<String> = device
+        let mut warnings: Vec<String> = device
             .warnings()
             .map_err(vendor)?
             .lines()
@@ -462,6 +486,18 @@ impl Source for PicoQuantSource {
             .filter(|l| !l.is_empty())
             .map(String::from)
             .collect();
+        let info = device.info();
+        if family == Family::TimeHarp260
+            && device.inputs() == Inputs::Edge
+            && info.library_version.trim().starts_with("3.1")
+        {
+            // TH260Lib 3.2's release notes: 3.1 inverted the Nano's input
+            // edge setting.
+            warnings.push(format!(
+                "TH260Lib {} drives a TimeHarp 260 Nano's input edges inverted (TH260Lib 3.2's release notes); install 3.2 or newer, or give the opposite --input-edge",
+                info.library_version.trim()
+            ));
+        }
         if sync_rate <= 0 {
             return Err(SourceError::setting(
                 "sync_level_mv",
@@ -501,8 +537,12 @@ impl Source for PicoQuantSource {
     fn stream(&mut self, until: Until<'_>, sink: &mut dyn FnMut(Delivery<'_>)) -> SourceEnd {
         let Until { duration, stop } = until;
         let mut device = self.device.take().expect("streamed once");
+        // Longer durations are refused with the request (ACQTMAX); the
+        // conversion saturates instead of wrapping all the same.
         let duration_ms = duration.map_or(MAX_MEASUREMENT_MS, |d| {
-            (d.as_millis() as i32).clamp(1, MAX_MEASUREMENT_MS)
+            i32::try_from(d.as_millis())
+                .unwrap_or(i32::MAX)
+                .clamp(1, MAX_MEASUREMENT_MS)
         });
         let (full_tx, full_rx) = mpsc::sync_channel::<FromReader>(QUEUE_DEPTH);
         let (empty_tx, empty_rx) = mpsc::channel::<Vec<u32>>();

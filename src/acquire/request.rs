@@ -319,6 +319,14 @@ pub enum RequestError {
         /// The device asked for.
         device: String,
     },
+    /// A duration past what the vendor's library measures.
+    #[error(
+        "--duration {hours:.1} h: a PicoQuant measurement lasts at most 100 h (ACQTMAX 360000000 ms in the vendor's headers); give at most 100h, or 0 to run until stopped"
+    )]
+    DurationTooLong {
+        /// The duration asked, hours.
+        hours: f64,
+    },
     /// The physics given do not resolve.
     #[error(transparent)]
     Physics(#[from] ConfigError),
@@ -409,6 +417,12 @@ impl Request {
         };
         let device = match &self.device {
             DeviceSpec::PicoQuant(d) => {
+                let longest = super::picoquant::MAX_MEASUREMENT_MS as u128;
+                if let Some(d) = plan.duration.filter(|d| d.as_millis() > longest) {
+                    return Err(RequestError::DurationTooLong {
+                        hours: d.as_secs_f64() / 3600.0,
+                    });
+                }
                 // The vendor's device: its settings and a PTU by default.
                 if !p.no_ptu && plan.ptu.is_none() {
                     plan.ptu = Some(self.out.join("acquisition.ptu"));

@@ -164,7 +164,32 @@ fn from_spc(
         )],
     };
     let record_type = RecordType::GenericT3;
+    // One pass over the records first (fast, nothing written): an input
+    // of overflow counts can span more time than any disk holds overflow
+    // records for, and is refused before the output grows.
+    let mut last = 0u64;
+    spc::decode_each(&info, info.records_part(0, 1)?, |tag| {
+        if let Some(t) = tag {
+            last = last.max(t.macro_time());
+        }
+        Ok::<(), ConvertError>(())
+    })?;
+    let needed = info
+        .records_present
+        .saturating_add(PtuWriter::overflow_records_for(record_type, last));
+    let room = disk_records(output);
+    if needed > room {
+        return Err(ConvertError::Unsupported {
+            path: input.to_owned(),
+            reason: format!(
+                "its records span {:.3e} s of macro time (the last event at clock {last}), which a PTU holds as {needed} records ({} bytes) of overflows and events; the output's disk has room for {room}: refused before writing",
+                last as f64 * info.macro_clock_s,
+                needed.saturating_mul(4)
+            ),
+        });
+    }
     let mut w = PtuWriter::create(output, record_type, &header).map_err(out_err(output))?;
+    w.limit_records(room);
     let mut c = Conversion {
         record_type: record_type.name().into(),
         ..Conversion::default()
@@ -177,7 +202,9 @@ fn from_spc(
     }
     let reader = info.records_part(0, 1)?;
     let flags = spc::decode_each(&info, reader, |tag| {
-        if c.records_in.is_multiple_of(1 << 20) && stop.load(Ordering::Relaxed) {
+        // Every record: one overflow count can stand for a million
+        // output records.
+        if stop.load(Ordering::Relaxed) {
             return Err(ConvertError::Interrupted {
                 path: output.to_owned(),
             });
@@ -185,7 +212,7 @@ fn from_spc(
         c.records_in += 1;
         if let Some(tag) = tag {
             count(&mut c, &tag);
-            w.write_tag(tag)
+            w.write_tag_until(tag, stop)
                 .map_err(|e| write_error(input, output, format!("record {}", c.records_in), e))?;
         }
         Ok(())
@@ -220,15 +247,27 @@ fn close(
     Ok(c)
 }
 
+/// Records (4 bytes each) the disk of `output` has room for; no limit
+/// where the system does not say.
+fn disk_records(output: &Path) -> u64 {
+    crate::files::free_bytes(output).map_or(u64::MAX, |b| b / 4)
+}
+
 /// A writer's error on a tag from the input: the input's fault when the
-/// tag cannot be written (`InvalidInput`: out of order, out of range),
-/// else the output's.
+/// tag cannot be written (`InvalidInput`: out of order, out of range;
+/// `StorageFull`: a time jump whose overflow records the disk cannot
+/// hold), else the output's.
 fn write_error(input: &Path, output: &Path, at: String, e: std::io::Error) -> ConvertError {
     match e.kind() {
-        std::io::ErrorKind::InvalidInput => ConvertError::Unsupported {
-            path: input.to_owned(),
-            reason: format!("{at}: {e}"),
+        std::io::ErrorKind::Interrupted => ConvertError::Interrupted {
+            path: output.to_owned(),
         },
+        std::io::ErrorKind::InvalidInput | std::io::ErrorKind::StorageFull => {
+            ConvertError::Unsupported {
+                path: input.to_owned(),
+                reason: format!("{at}: {e}"),
+            }
+        }
         _ => out_err(output)(e),
     }
 }
@@ -309,7 +348,7 @@ fn from_picoquant(
             c.records_in += 1;
             if let Some(tag) = decoder.decode(rec) {
                 count(&mut c, &tag);
-                w.write_tag(tag).map_err(|e| {
+                w.write_tag_until(tag, stop).map_err(|e| {
                     write_error(
                         input,
                         output,
@@ -367,6 +406,7 @@ fn from_tag_file(
     };
     let record_type = RecordType::GenericT3;
     let mut w = PtuWriter::create(output, record_type, &header).map_err(out_err(output))?;
+    w.limit_records(disk_records(output));
     let mut c = Conversion {
         record_type: record_type.name().into(),
         ..Conversion::default()
@@ -411,7 +451,7 @@ fn from_tag_file(
                 }
             };
             count(&mut c, &tag);
-            if let Err(e) = w.write_tag(tag) {
+            if let Err(e) = w.write_tag_until(tag, stop) {
                 let at = format!(
                     "batch {} (out of order in the recording?)",
                     batch.header.seq

@@ -18,6 +18,8 @@
 //! - `seed=S`: photon sampling seed (default 0).
 //! - `truth=PATH`: on StopMeas, write what was delivered (records, photons,
 //!   markers, overflows, per-pixel photons of a scan) to PATH as JSON.
+//! - `ph330_input_modes=no`: a PicoHarp 330 whose `PH330_GetFeatures` lacks
+//!   `FEATURE_INPT_MODE` (its inputs' trigger mode cannot be set).
 
 use std::path::PathBuf;
 
@@ -64,6 +66,8 @@ pub struct MockConfig {
     /// The TimeHarp 260 board: a Nano (edge triggers) rather than a Pico
     /// (CFDs).
     pub th260_nano: bool,
+    /// Whether a PicoHarp 330 has `FEATURE_INPT_MODE`.
+    pub ph330_input_modes: bool,
 }
 
 impl Default for MockConfig {
@@ -80,6 +84,7 @@ impl Default for MockConfig {
             seed: 0,
             truth: None,
             th260_nano: false,
+            ph330_input_modes: true,
         }
     }
 }
@@ -111,6 +116,13 @@ impl MockConfig {
                 "seed" => c.seed = value.parse().map_err(|_| bad())?,
                 "drift" => c.drift = value.parse().map_err(|_| bad())?,
                 "truth" => c.truth = Some(PathBuf::from(value)),
+                "ph330_input_modes" => {
+                    c.ph330_input_modes = match value {
+                        "yes" => true,
+                        "no" => false,
+                        _ => return Err(bad()),
+                    }
+                }
                 "th260" => {
                     c.th260_nano = match value {
                         "pico" => false,

@@ -27,12 +27,17 @@ const MAX_DEVICES: usize = 8;
 const FLAG_FIFO_FULL: c_int = 0x0002;
 /// PHLib's `FLAG_FIFOFULL` (phdefin.h): two bits where the others have one.
 const FLAG_FIFO_FULL_PH300: c_int = 0x0003;
+/// `FLAG_ACTIVE` ("measurement is running", hhdefin.h); th260defin.h has
+/// no such flag (its 0x0020 is `FLAG_SOFTERROR`), phdefin.h neither.
 const FLAG_ACTIVE: c_int = 0x0020;
 /// MHLib's "counts were dropped" flag (mhdefin.h).
 const FLAG_CNTS_DROPPED: c_int = 0x0040;
 /// TH260Lib's dropped-events flag (th260defin.h `FLAG_EVTS_DROPPED`).
 const FLAG_EVTS_DROPPED_TH260: c_int = 0x0008;
-const WARNING_INPUT_RATE_HIGH: c_int = 0x0040;
+/// `WARNING_INPT_RATE_RATIO` (hhdefin.h, th260defin.h): an input rate
+/// above 5 % of the sync rate, the pile-up criterion (0x0040 is
+/// `WARNING_INPT_RATE_TOO_HIGH`).
+const WARNING_INPUT_RATE_RATIO: c_int = 0x0100;
 
 /// Error codes: the vendor's numbers (errorcodes.h of MHLib 2.0 and HHLib
 /// 3.0 agree on these), except [`code::CONFIG`], which is the stand-in's.
@@ -111,30 +116,34 @@ impl Family {
         }
     }
 
-    /// The flag bits `GetFlags` reports: phdefin.h defines no "active"
-    /// flag.
+    /// The flag bits `GetFlags` reports: phdefin.h and th260defin.h
+    /// define no "active" flag.
     fn reported_flags(self, flags: c_int) -> c_int {
         match self {
-            Family::PicoHarp300 => flags & !FLAG_ACTIVE,
+            Family::PicoHarp300 | Family::TimeHarp260 => flags & !FLAG_ACTIVE,
             _ => flags,
         }
     }
 
     /// Binning steps (`GetBaseResolution`'s `binsteps`): `BINSTEPSMAX` 8
-    /// in phdefin.h; 24 for the others here.
+    /// in phdefin.h, `MAXBINSTEPS` 22 in th260defin.h; 24 for the others
+    /// here.
     fn binning_steps(self) -> c_int {
         match self {
             Family::PicoHarp300 => 8,
+            Family::TimeHarp260 => 22,
             _ => 24,
         }
     }
 
     /// `SetOffset`'s unit (ps) and range in it: picoseconds, 0 to
     /// 1 000 000 000, in phdefin.h (`OFFSETMIN`/`OFFSETMAX`); nanoseconds,
-    /// 0 to 100 000 000, in mhdefin.h (the others here alike).
+    /// 0 to 100 000 000, in mhdefin.h and th260defin.h (the PicoHarp 330
+    /// here alike); 0 to 500 000 in hhdefin.h (`OFFSETMAX`).
     fn offset_unit_and_range(self) -> (i64, c_int) {
         match self {
             Family::PicoHarp300 => (1, 1_000_000_000),
+            Family::HydraHarp => (1000, 500_000),
             _ => (1000, 100_000_000),
         }
     }
@@ -680,7 +689,7 @@ macro_rules! library {
         pub unsafe extern "C" fn $GetWarnings(index: c_int, warnings: *mut c_int) -> c_int {
             with_ready(index, |_, c| {
                 let w = if !c.unpaced && c.rate_hz + c.dark_hz > 0.05 * c.sync_hz {
-                    WARNING_INPUT_RATE_HIGH
+                    WARNING_INPUT_RATE_RATIO
                 } else {
                     0
                 };
@@ -696,7 +705,7 @@ macro_rules! library {
             warnings: c_int,
         ) -> c_int {
             with_ready(index, |_, _| {
-                let t = if warnings & WARNING_INPUT_RATE_HIGH != 0 {
+                let t = if warnings & WARNING_INPUT_RATE_RATIO != 0 {
                     "WARNING: the input count rate exceeds 5 % of the sync rate: pile-up distorts the histogram\n"
                 } else {
                     ""
@@ -803,7 +812,7 @@ macro_rules! channel_functions {
         #[unsafe(no_mangle)]
         pub extern "C" fn $SetInputChannelOffset(index: c_int, ch: c_int, ps: c_int) -> c_int {
             with_ready(index, |_, _| {
-                if !(0..4).contains(&ch) {
+                if !(0..$family.inputs()).contains(&ch) {
                     return code::INVALID_ARGUMENT;
                 }
                 in_range(ps, -99_999, 99_999)
@@ -816,7 +825,7 @@ macro_rules! channel_functions {
         #[unsafe(no_mangle)]
         pub extern "C" fn $SetInputChannelEnable(index: c_int, ch: c_int, enable: c_int) -> c_int {
             with_ready(index, |d, _| {
-                if !(0..4).contains(&ch) || !(0..=1).contains(&enable) {
+                if !(0..$family.inputs()).contains(&ch) || !(0..=1).contains(&enable) {
                     return code::INVALID_ARGUMENT;
                 }
                 d.inputs_enabled[ch as usize] = Some(enable == 1);
@@ -1068,6 +1077,26 @@ pub extern "C" fn MH_SetInputEdgeTrg(index: c_int, ch: c_int, level: c_int, edge
     })
 }
 
+/// `FEATURE_INPT_MODE` (ph330defin.h of PH330Lib 2.0): the inputs' trigger
+/// mode can be set.
+const FEATURE_INPT_MODE: c_int = 0x0200;
+
+/// PicoHarp 330 features: `FEATURE_DLL | FEATURE_TTTR | FEATURE_MARKERS`
+/// (1, 2, 4, as in every family's header) and, unless configured away,
+/// `FEATURE_INPT_MODE`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn PH330_GetFeatures(index: c_int, features: *mut c_int) -> c_int {
+    with_ready(index, |_, c| {
+        let f = 0x0007
+            | if c.ph330_input_modes {
+                FEATURE_INPT_MODE
+            } else {
+                0
+            };
+        unsafe { put(features, f) }
+    })
+}
+
 /// PicoHarp 330 trigger mode of the sync input: `TRGMODE_ETR` 0 or
 /// `TRGMODE_CFD` 1 (ph330defin.h).
 #[unsafe(no_mangle)]
@@ -1075,10 +1104,14 @@ pub extern "C" fn PH330_SetSyncTrgMode(index: c_int, mode: c_int) -> c_int {
     with_ready(index, |_, _| in_range(mode, 0, 1))
 }
 
-/// PicoHarp 330 trigger mode of an input (as the sync's).
+/// PicoHarp 330 trigger mode of an input (as the sync's); refused on a
+/// device without `FEATURE_INPT_MODE`.
 #[unsafe(no_mangle)]
 pub extern "C" fn PH330_SetInputTrgMode(index: c_int, ch: c_int, mode: c_int) -> c_int {
-    with_ready(index, |_, _| {
+    with_ready(index, |_, c| {
+        if !c.ph330_input_modes {
+            return code::UNSUPPORTED_FUNCTION;
+        }
         if !(0..4).contains(&ch) {
             return code::INVALID_ARGUMENT;
         }

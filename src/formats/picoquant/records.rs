@@ -13,10 +13,12 @@
 //! - HydraHarp, TimeHarp 260, MultiHarp, PicoHarp 330 T3: sync 10 bits,
 //!   dtime 15, channel 6, special 1. Special with channel 63 is an overflow
 //!   of 1024 syncs: always one in HydraHarp v1, otherwise the sync field
-//!   counts them (0 meaning 1). Special channels 1-15 are markers.
+//!   counts them (0 meaning 1). Special channels 1-15 are markers; 0 and
+//!   16-62 carry nothing (the vendor's PTU demo readers skip them).
 //! - The same families in T2: time 25 bits, channel 6, special 1. Channel
 //!   63 overflows by 33,552,000 (HydraHarp v1, always one) or by 2^25 times
-//!   the count (0 meaning 1); special channel 0 is a sync; 1-15 markers.
+//!   the count (0 meaning 1); special channel 0 is a sync; 1-15 markers;
+//!   16-62 carry nothing.
 
 use crate::events::{ChunkDecoder, Tag, TagSink};
 
@@ -234,8 +236,11 @@ impl Decoder {
                         self.base = self.base.saturating_add(WIDE_T3_WRAP * n);
                         return None;
                     }
-                    return Some(Tag::Marker {
-                        bits: channel & 0xF,
+                    // Special channels 1-15 are markers; 0 and 16-62 are
+                    // nothing the vendor's readers (the PTU demos'
+                    // ReadHT3) report, so nothing here either.
+                    return (1..=15).contains(&channel).then(|| Tag::Marker {
+                        bits: channel,
                         macro_time: self.base.saturating_add(nsync),
                     });
                 }
@@ -258,14 +263,16 @@ impl Decoder {
                         return None;
                     }
                     let macro_time = self.base.saturating_add(time);
-                    return Some(if channel == 0 {
-                        Tag::Sync { macro_time }
-                    } else {
-                        Tag::Marker {
-                            bits: channel & 0xF,
+                    // Special channel 0 is a sync, 1-15 markers; 16-62 are
+                    // nothing the vendor's readers (ReadHT2) report.
+                    return match channel {
+                        0 => Some(Tag::Sync { macro_time }),
+                        1..=15 => Some(Tag::Marker {
+                            bits: channel,
                             macro_time,
-                        }
-                    });
+                        }),
+                        _ => None,
+                    };
                 }
                 Some(Tag::Photon {
                     channel: u16::from(channel),

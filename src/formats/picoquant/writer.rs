@@ -15,6 +15,7 @@
 
 use std::io::{self, BufWriter, Seek, SeekFrom, Write};
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::ptu::{self, ty};
 use super::records::{
@@ -73,6 +74,7 @@ pub struct PtuWriter {
     records: u64,
     count_offset: u64,
     incomplete_offset: u64,
+    max_records: u64,
 }
 
 /// `text` NUL-terminated and padded with NULs to a multiple of 8 bytes, as
@@ -307,7 +309,28 @@ impl PtuWriter {
             records: 0,
             count_offset,
             incomplete_offset,
+            max_records: u64::MAX,
         })
+    }
+
+    /// Refuses, before writing them, records past `max` in all (a time
+    /// jump whose overflow records would fill the disk is then an error,
+    /// not a file that grows until the disk is full).
+    pub fn limit_records(&mut self, max: u64) {
+        self.max_records = max;
+    }
+
+    /// Overflow records this record type needs to advance its time base
+    /// by `delta` (at most; the time tags' own bits take the rest).
+    pub fn overflow_records_for(record_type: RecordType, delta: u64) -> u64 {
+        match record_type {
+            RecordType::PicoHarpT3 => delta / PICOHARP_T3_WRAP,
+            RecordType::PicoHarpT2 => delta / PICOHARP_T2_WRAP,
+            RecordType::HydraHarpV1T3 => delta / WIDE_T3_WRAP,
+            RecordType::HydraHarpV1T2 => delta / HYDRAHARP_V1_T2_WRAP,
+            t if t.is_t3() => (delta / WIDE_T3_WRAP).div_ceil(1023),
+            _ => (delta / WIDE_T2_WRAP).div_ceil((1 << 25) - 1),
+        }
     }
 
     /// Writes one raw record (for malformed-file tests).
@@ -336,15 +359,37 @@ impl PtuWriter {
         self.records
     }
 
-    fn advance_to(&mut self, time: u64) -> io::Result<u64> {
+    fn advance_to(&mut self, time: u64, stop: &AtomicBool) -> io::Result<u64> {
         if time < self.base {
             return Err(invalid(format!(
                 "time {time} is before the previous record's time base {}",
                 self.base
             )));
         }
+        let needed = Self::overflow_records_for(self.record_type, time - self.base);
+        if self.records.saturating_add(needed) >= self.max_records {
+            return Err(io::Error::new(
+                io::ErrorKind::StorageFull,
+                format!(
+                    "a jump of {} time units would need {needed} overflow records after the {} written, past the {} the output's disk holds",
+                    time - self.base,
+                    self.records,
+                    self.max_records
+                ),
+            ));
+        }
         let special = |ch: u32| (1u32 << 31) | (ch << 25);
+        let mut written = 0u64;
         loop {
+            // One jump may take millions of overflow records: `stop` is
+            // heeded between them.
+            written += 1;
+            if written.is_multiple_of(1 << 20) && stop.load(Ordering::Relaxed) {
+                return Err(io::Error::new(
+                    io::ErrorKind::Interrupted,
+                    "stopped while writing overflow records",
+                ));
+            }
             let delta = time - self.base;
             match self.record_type {
                 RecordType::PicoHarpT3 if delta >= PICOHARP_T3_WRAP => {
@@ -386,6 +431,14 @@ impl PtuWriter {
 
     /// Writes one tag; tags must come in non-decreasing macro time.
     pub fn write_tag(&mut self, tag: Tag) -> io::Result<()> {
+        static NEVER: AtomicBool = AtomicBool::new(false);
+        self.write_tag_until(tag, &NEVER)
+    }
+
+    /// [`Self::write_tag`] that ends with an `Interrupted` error once
+    /// `stop` is set while it writes the overflow records before the tag
+    /// (a jump in time can take millions).
+    pub fn write_tag_until(&mut self, tag: Tag, stop: &AtomicBool) -> io::Result<()> {
         let rt = self.record_type;
         let pico = matches!(rt, RecordType::PicoHarpT3 | RecordType::PicoHarpT2);
         let rec = match tag {
@@ -418,7 +471,7 @@ impl PtuWriter {
                         rt.name()
                     )));
                 }
-                let d = self.advance_to(macro_time)? as u32;
+                let d = self.advance_to(macro_time, stop)? as u32;
                 let ch = u32::from(channel);
                 match rt {
                     RecordType::PicoHarpT3 => ((ch + 1) << 28) | (micro_time << 16) | d,
@@ -434,16 +487,16 @@ impl PtuWriter {
                 let b = u32::from(bits);
                 match rt {
                     RecordType::PicoHarpT3 => {
-                        let d = self.advance_to(macro_time)? as u32;
+                        let d = self.advance_to(macro_time, stop)? as u32;
                         (15 << 28) | (b << 16) | d
                     }
                     RecordType::PicoHarpT2 => {
                         // The low 4 time bits carry the markers.
-                        let d = self.advance_to(macro_time)? as u32;
+                        let d = self.advance_to(macro_time, stop)? as u32;
                         (15 << 28) | (d & !0xF) | b
                     }
                     _ => {
-                        let d = self.advance_to(macro_time)? as u32;
+                        let d = self.advance_to(macro_time, stop)? as u32;
                         (1 << 31) | (b << 25) | d
                     }
                 }
@@ -455,7 +508,7 @@ impl PtuWriter {
                         rt.name()
                     )));
                 }
-                let d = self.advance_to(macro_time)? as u32;
+                let d = self.advance_to(macro_time, stop)? as u32;
                 1 << 31 | d
             }
         };
