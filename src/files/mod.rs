@@ -33,7 +33,11 @@ pub fn free_bytes(path: &std::path::Path) -> Option<u64> {
         // SAFETY: `c` is a NUL-terminated path and `st` a valid buffer for
         // the call to fill.
         let rc = unsafe { libc::statvfs(c.as_ptr(), &mut st) };
-        (rc == 0).then(|| u64::from(st.f_bavail).saturating_mul(u64::from(st.f_frsize)))
+        // fsblkcnt_t and c_ulong are 64 bits on 64-bit Linux, narrower on
+        // some other unixes: widened where they are not.
+        #[allow(clippy::useless_conversion)]
+        let (blocks, size) = (u64::from(st.f_bavail), u64::from(st.f_frsize));
+        (rc == 0).then(|| blocks.saturating_mul(size))
     }
     #[cfg(not(unix))]
     {
