@@ -76,6 +76,7 @@
 pub mod acquire;
 pub mod batch;
 pub mod calibrate;
+pub mod cnn;
 pub mod config;
 pub mod confocal;
 pub mod denoise;

@@ -449,6 +449,54 @@ fn simulated(
     )
 }
 
+/// One case of the learned reconstruction's training, simulated as the
+/// benchmark simulates (`image`, a square object grid larger than the
+/// sensor of `sensor_px`, which sees its centre at the physics' pitch;
+/// plus `background_share` times the mean expected count per pixel and
+/// bin): (the network's inputs (channels, rows, columns), the truth on the
+/// sensor, a dict of the inputs' scale, photons per pixel, blur width
+/// and background share). The inputs are computed by the function
+/// `reconstruct --method learned` runs.
+#[pyfunction]
+#[pyo3(signature = (image, sensor_px, seed=0, background_share=0.0, **physics))]
+#[allow(clippy::type_complexity)]
+fn learned_case<'py>(
+    py: Python<'py>,
+    image: PyReadonlyArray2<'py, f64>,
+    sensor_px: usize,
+    seed: u64,
+    background_share: f64,
+    physics: Option<&Bound<'py, PyDict>>,
+) -> PyResult<(
+    Bound<'py, PyArray3<f32>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyDict>,
+)> {
+    let mut o = overrides(physics)?;
+    o.size = Some(sensor_px);
+    let setup = o.resolve().map_err(err)?;
+    let object: Array2<f64> = image.as_array().to_owned();
+    let done = py
+        .detach(|| -> Result<_, String> {
+            let case = scatterscope::report::bench::simulate_object(object, &setup, seed, background_share)
+                .map_err(|e| scatterscope::error_text(&e))?;
+            let bins = case.problem.all_bins();
+            let data = scatterscope::reconstruct::Data::new(&case.problem.model, &case.problem.counts, &bins)
+                .map_err(|e| scatterscope::error_text(&e))?;
+            let inputs = scatterscope::reconstruct::learned::inputs::learned_inputs(&data)
+                .ok_or_else(|| "no photons in the simulated stack".to_string())?;
+            Ok((inputs, case.truth))
+        })
+        .map_err(msg)?;
+    let (inputs, truth) = done;
+    let facts = PyDict::new(py);
+    facts.set_item("scale", inputs.scale)?;
+    facts.set_item("photons_per_pixel", inputs.photons_per_pixel)?;
+    facts.set_item("kernel_width_px", inputs.kernel_width_px)?;
+    facts.set_item("background_share", inputs.background_share)?;
+    Ok((inputs.features.into_pyarray(py), truth.into_pyarray(py), facts))
+}
+
 /// Simulates a built-in scene or an image file (as `scatterscope
 /// simulate --scene`): (counts, expected counts, metadata JSON, truth).
 #[pyfunction]
@@ -795,6 +843,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(psf_kernels, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(simulate_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(learned_case, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(acquire, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_slab, m)?)?;

@@ -7,6 +7,7 @@ use super::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions};
 use super::auto::Auto;
 use super::data::Data;
 pub use super::em::{Acceleration, RlStop};
+use super::learned::Learned;
 use super::problem::Problem;
 use super::rl_stack::RlStack;
 use super::rl_sum::RlSum;
@@ -39,6 +40,9 @@ pub enum Method {
     /// Counts divided by kernel mass, no deblurring (one bin, or the sum
     /// of all bins when none is chosen).
     ScaledCounts,
+    /// Richardson-Lucy's iterates on the time-summed stack corrected by
+    /// the embedded network trained here ([`super::learned`]).
+    Learned,
 }
 
 named!(Method {
@@ -50,6 +54,7 @@ named!(Method {
     RlSum => "rl-sum",
     RlStack => "rl-stack",
     ScaledCounts => "scaled-counts",
+    Learned => "learned",
 });
 
 impl Method {
@@ -263,6 +268,12 @@ impl<'a> MethodPlan<'a> {
             Method::RlSum => (Box::new(rl), View::Whole),
             Method::RlStack => (Box::new(rl_stack), View::Whole),
             Method::ScaledCounts => (Box::new(ScaledCounts), bin.map_or(View::Whole, View::Bin)),
+            Method::Learned => (
+                Box::new(Learned {
+                    net: super::learned::embedded(),
+                }),
+                View::Whole,
+            ),
         };
         Ok(Self {
             algorithm,

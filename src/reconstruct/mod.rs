@@ -19,6 +19,9 @@
 //!   own kernel.
 //! - [`scaled_counts`]: counts divided by kernel mass (no deblurring),
 //!   for reference.
+//! - [`learned`]: Richardson-Lucy's iterates on the time-summed stack
+//!   corrected by a small CNN trained here on the project's own
+//!   simulations.
 //!
 //! What they share sits beside them: [`em`] (the Richardson-Lucy step and
 //! its stopping), [`likelihood`], [`discrepancy`] and [`operator`]; what
@@ -33,6 +36,7 @@ pub mod discrepancy;
 pub mod em;
 pub mod error;
 pub mod input;
+pub mod learned;
 pub mod likelihood;
 pub mod method;
 pub mod operator;

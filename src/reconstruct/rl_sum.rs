@@ -243,12 +243,22 @@ impl RlOperator {
         }
     }
 
+    /// `H o` on the sensor window for `o` on the model's grid.
+    pub(crate) fn apply(&self, o: &[f64]) -> Vec<f64> {
+        self.op.apply(o)
+    }
+
+    /// Object pixels (the model's grid).
+    pub(crate) fn len(&self) -> usize {
+        self.sensitivity.len()
+    }
+
     /// One RL step of `o` for counts `m` given `y = H o`: `o <- o H^T(m /
     /// (y + bg)) / H^T 1`, the denominator guarded at `guard`. Object pixels
     /// the sensor does not see keep their value. Returns the negative
     /// log-likelihood at `o` before the step when `with_nll` (else 0: its
     /// logarithm per pixel is the largest cost outside the transforms).
-    fn update(
+    pub(crate) fn update(
         &self,
         o: &mut [f64],
         y: &[f64],

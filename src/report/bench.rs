@@ -181,6 +181,38 @@ pub fn simulate_case(
             full
         }
     };
+    simulate_object(object, setup, seed, 0.0)
+}
+
+/// Simulates `object`, a square grid at least as large as `setup`'s
+/// sensor, which sees its centre, as the benchmark does: the kernels of
+/// the grid at the sensor's pitch (periodic there, the object reaching
+/// past the kernels' support), the sensor's window, plus `background_share`
+/// times its mean expected count per pixel and bin, Poisson-sampled with
+/// `seed`; the problem is the sensor-edged model `reconstruct` builds,
+/// with that background. Also what the learned reconstruction's trainer
+/// simulates.
+pub fn simulate_object(
+    object: Array2<f64>,
+    setup: &Setup,
+    seed: u64,
+    background_share: f64,
+) -> Result<BenchCase, ReportError> {
+    let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
+    let object_px = object.nrows();
+    if object.ncols() != object_px || object_px < h.max(w) {
+        return Err(ReportError::Input(format!(
+            "the object is {} x {}: it must be a square grid at least the {w} x {h} sensor",
+            object.nrows(),
+            object.ncols()
+        )));
+    }
+    if !(background_share.is_finite() && background_share >= 0.0) {
+        return Err(ReportError::Input(format!(
+            "background share {background_share}: give a finite number >= 0"
+        )));
+    }
+    let (oy, ox) = ((object_px - h) / 2, (object_px - w) / 2);
     let mut wide = setup.clone();
     wide.sensor.height_px = object_px;
     wide.sensor.width_px = object_px;
@@ -202,10 +234,11 @@ pub fn simulate_case(
     let sim = ForwardModel::new(&sim_kernels, Boundary::Periodic);
     let expected = sim.expected(object.view()).counts;
     let window = expected.slice(s![.., oy..oy + h, ox..ox + w]).to_owned();
-    let counts = poisson_counts(&window, seed);
+    let background = background_share * window.mean().unwrap_or(0.0);
+    let counts = poisson_counts(&window.mapv(|v| v + background), seed);
     let kernels = KernelStack::build(setup, Sampling::Integrated)?;
     let problem = Problem {
-        model: ForwardModel::new(&kernels, Boundary::Sensor),
+        model: ForwardModel::new(&kernels, Boundary::Sensor).with_background(background),
         counts,
         bin_starts_ps: kernels.kept_bins().map(|b| b.start_ps).collect(),
         setup: setup.clone(),

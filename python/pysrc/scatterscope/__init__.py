@@ -8,7 +8,9 @@ The same library as the ``scatterscope`` command, numpy in and out:
 - stacks: :func:`load_stack` and :func:`save_stack` (EXR, or npy with its
   JSON sidecar), their metadata as a dict;
 - physics: :func:`psf_kernels` (the ST-PSF kernels) and :func:`simulate`
-  (an image through the medium, with Poisson counts);
+  (an image through the medium, with Poisson counts); :func:`learned_case`
+  (one training case of the learned reconstruction, simulated as the
+  benchmark simulates, with the network's inputs);
 - reconstruction: :func:`reconstruct` (every method of ``scatterscope
   reconstruct`` by name), returning the image, the trace and the notes;
 - calibration: :func:`calibrate_slab` (a slab's mu_a and mu_s' from
@@ -46,6 +48,7 @@ __all__ = [
     "measured_meta",
     "psf_kernels",
     "simulate",
+    "learned_case",
     "reconstruct",
     "acquire",
     "acquire_mock",
@@ -212,6 +215,25 @@ def simulate(
         raise ScatterscopeError(f"an image is (rows, cols); this array has shape {array.shape}")
     counts, expected, meta = _native.simulate(array, int(seed), boundary, **physics)
     return {"counts": counts, "expected": expected, "meta": json.loads(meta), "truth": array}
+
+
+def learned_case(
+    image: np.ndarray, sensor_px: int, seed: int = 0, background_share: float = 0.0, **physics: Any
+) -> Dict[str, Any]:
+    """One training case of ``--method learned``: ``image`` (a square
+    object grid larger than the sensor of ``sensor_px`` pixels, which sees
+    its centre at the physics' pixel pitch) simulated as the benchmark
+    simulates it, plus ``background_share`` times the mean expected count
+    per pixel and bin. Returns ``inputs`` (the network's float32
+    ``(channels, rows, cols)``, computed by the function the reconstruction
+    runs), ``truth`` (the object on the sensor) and ``scale``,
+    ``photons_per_pixel``, ``kernel_width_px``, ``background_share``.
+    """
+    array = np.ascontiguousarray(image, dtype=np.float64)
+    if array.ndim != 2:
+        raise ScatterscopeError(f"an image is (rows, cols); this array has shape {array.shape}")
+    inputs, truth, facts = _native.learned_case(array, int(sensor_px), int(seed), float(background_share), **physics)
+    return {"inputs": inputs, "truth": truth, **facts}
 
 
 def _trace(trace: Dict[str, Any]) -> Dict[str, Any]:

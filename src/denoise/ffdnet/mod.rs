@@ -9,17 +9,15 @@
 //! subtract the pixel-shuffled output (the predicted noise) from the padded
 //! input. f32 throughout.
 
-pub mod conv;
 pub mod pth;
 pub mod source;
 pub mod weights;
-pub mod winograd;
 
 use ndarray::{Array2, ArrayView2};
 
-use self::conv::{FeatureMap, conv3x3};
+use crate::cnn::conv::{FeatureMap, conv3x3};
 use self::weights::FfdnetWeights;
-use self::winograd::{WinogradWeights, conv3x3_winograd, transform_weights};
+use crate::cnn::winograd::{WinogradWeights, conv3x3_winograd, transform_weights};
 use super::Denoiser;
 
 /// FFDNet with loaded weights.

@@ -8,6 +8,7 @@
 //! architecture; see [`Architecture`]. Nothing else is accepted: a missing,
 //! extra or misshapen tensor is an error that names it.
 
+use crate::cnn::FoldedConv;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
@@ -227,21 +228,6 @@ impl Architecture {
     }
 }
 
-/// One 3x3 convolution with BatchNorm folded in, ready for the engine.
-#[derive(Debug, Clone)]
-pub struct FoldedConv {
-    /// Input channels.
-    pub cin: usize,
-    /// Output channels.
-    pub cout: usize,
-    /// GEMM right-hand side, `[(ky * 3 + kx) * cin + ci][co]`, row-major.
-    pub matrix: Vec<f32>,
-    /// Per-output-channel bias (the folded BatchNorm shift), if any.
-    pub bias: Option<Vec<f32>>,
-    /// Whether a ReLU follows.
-    pub relu: bool,
-}
-
 /// Validated FFDNet weights: the architecture, the folded layers, and the
 /// file's metadata (kept to name the prior in traces).
 #[derive(Debug, Clone)]
@@ -313,25 +299,7 @@ fn read_f32(
     shape: &[usize],
     err: impl Fn(String) -> WeightsError,
 ) -> Result<Vec<f32>, WeightsError> {
-    if view.dtype() != Dtype::F32 {
-        return Err(err(format!("has dtype {:?}, expected F32", view.dtype())));
-    }
-    if view.shape() != shape {
-        return Err(err(format!(
-            "has shape {:?}, expected {:?}",
-            view.shape(),
-            shape
-        )));
-    }
-    let v: Vec<f32> = view
-        .data()
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
-    if let Some((i, x)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
-        return Err(err(format!("element {i} is {x}; weights must be finite")));
-    }
-    Ok(v)
+    crate::cnn::read_f32(view, shape).map_err(err)
 }
 
 /// Folds each inner layer's BatchNorm (inference mode) into its convolution:
@@ -359,22 +327,7 @@ fn fold(arch: &Architecture, t: &HashMap<String, Vec<f32>>) -> Vec<FoldedConv> {
             } else {
                 (vec![1.0; cout], None)
             };
-            let mut matrix = vec![0f32; 9 * cin * cout];
-            for co in 0..cout {
-                for ci in 0..cin {
-                    for k in 0..9 {
-                        let src = f64::from(w[(co * cin + ci) * 9 + k]);
-                        matrix[(k * cin + ci) * cout + co] = (src * scale[co]) as f32;
-                    }
-                }
-            }
-            FoldedConv {
-                cin,
-                cout,
-                matrix,
-                bias: shift,
-                relu: i + 1 < arch.layers,
-            }
+            FoldedConv::from_torch((cin, cout), w, &scale, shift, i + 1 < arch.layers)
         })
         .collect()
 }

@@ -12,7 +12,7 @@
 use rayon::prelude::*;
 
 use super::conv::{FeatureMap, matmul, store_activated};
-use super::weights::FoldedConv;
+use super::FoldedConv;
 
 /// G (6x3): weight transform.
 const G: [[f64; 3]; 6] = [
@@ -286,8 +286,8 @@ fn split_row(v: &mut [f32], i: usize, k: usize, nt: usize, c: usize) -> [&mut [f
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::denoise::ffdnet::conv::conv3x3;
-    use crate::denoise::ffdnet::conv::tests::random_case;
+    use crate::cnn::conv::conv3x3;
+    use crate::cnn::conv::tests::random_case;
 
     #[test]
     fn winograd_matches_im2col_on_sizes_that_leave_partial_tiles() {

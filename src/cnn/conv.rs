@@ -10,7 +10,7 @@
 
 use rayon::prelude::*;
 
-use super::weights::FoldedConv;
+use super::FoldedConv;
 
 /// A feature map: `h x w` pixels of `c` channels, stored NHWC with a
 /// one-pixel zero border, so the 3x3 "same" convolution reads the border
@@ -115,7 +115,7 @@ fn band_conv(
 /// into `dst` with the bias added and, for a ReLU layer, clamped at zero:
 /// the last step of both convolution engines.
 #[inline]
-pub(super) fn store_activated(layer: &FoldedConv, dst: &mut [f32], src: &[f32]) {
+pub(crate) fn store_activated(layer: &FoldedConv, dst: &mut [f32], src: &[f32]) {
     let cout = layer.cout;
     for (o, s) in dst.chunks_exact_mut(cout).zip(src.chunks_exact(cout)) {
         match &layer.bias {
@@ -135,7 +135,7 @@ pub(super) fn store_activated(layer: &FoldedConv, dst: &mut [f32], src: &[f32]) 
 /// `dst = lhs rhs` for row-major `lhs` (m x k), `rhs` (k x n) and `dst`
 /// (m x n) at the slices' starts, on the calling thread (the layers run
 /// their tiles on rayon's threads themselves).
-pub(super) fn matmul(dst: &mut [f32], lhs: &[f32], rhs: &[f32], (m, n, k): (usize, usize, usize)) {
+pub(crate) fn matmul(dst: &mut [f32], lhs: &[f32], rhs: &[f32], (m, n, k): (usize, usize, usize)) {
     assert!(dst.len() >= m * n && lhs.len() >= m * k && rhs.len() >= k * n);
     // SAFETY: the assert: the pointers cover the three row-major matrices.
     unsafe {

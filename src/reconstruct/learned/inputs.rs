@@ -1,0 +1,143 @@
+//! What the learned reconstruction's network sees of a stack: Richardson-
+//! Lucy on the time-summed counts with the time-summed kernel (the model
+//! `reconstruct` uses: the sensor's edges, the IRF in the kernels, the
+//! background in the denominator), its iterates at [`CHECKPOINTS`], the
+//! summed counts over the kernel mass, and two constant maps that say how
+//! much light there is and how wide the blur is. Every image channel is
+//! divided by one scale (the last iterate's mean), so the network works on
+//! images of mean 1 whatever the stack's brightness. The trainer computes
+//! its inputs with this same function (through the Python package).
+
+use ndarray::{Array2, Array3, Axis};
+
+use crate::forward::ForwardModel;
+use crate::reconstruct::data::{Data, flat_level};
+use crate::reconstruct::em::DENOMINATOR_GUARD;
+use crate::reconstruct::rl_sum::RlOperator;
+
+/// Richardson-Lucy iterations whose iterates are inputs; the last is the
+/// base the network corrects.
+pub const CHECKPOINTS: [usize; 3] = [10, 40, 150];
+
+/// Input channels: the iterates, the scaled counts, the light level and
+/// the blur width.
+pub const CHANNELS: usize = CHECKPOINTS.len() + 3;
+
+/// The channel of the last iterate, which the network's output corrects.
+pub const BASE_CHANNEL: usize = CHECKPOINTS.len() - 1;
+
+/// A stack as the network sees it.
+#[derive(Debug, Clone)]
+pub struct LearnedInputs {
+    /// `CHANNELS x H x W`, each image channel divided by `scale`.
+    pub features: Array3<f32>,
+    /// The last iterate's mean: the network's output times it is the
+    /// object.
+    pub scale: f64,
+    /// Mean summed counts per sensor pixel.
+    pub photons_per_pixel: f64,
+    /// RMS radius of the time-summed kernel, pixels.
+    pub kernel_width_px: f64,
+    /// Background over mean counts (0 without a background).
+    pub background_share: f64,
+    /// The last iterate on the model's grid (the object beyond the sensor
+    /// window, for the output's deviance).
+    pub base_grid: Vec<f64>,
+}
+
+/// The light-level channel: `log10` of the mean counts per pixel, over
+/// 3 (about -0.3 to 1 over the trained range).
+pub fn level_feature(photons_per_pixel: f64) -> f32 {
+    (photons_per_pixel.max(1e-3).log10() / 3.0) as f32
+}
+
+/// The blur channel: the kernel's RMS radius over 20 pixels.
+pub fn width_feature(kernel_width_px: f64) -> f32 {
+    (kernel_width_px / 20.0) as f32
+}
+
+/// The inputs of `data`; `None` without photons or kernel mass.
+pub fn learned_inputs(data: &Data<'_>) -> Option<LearnedInputs> {
+    let model = data.model;
+    let rl = RlOperator::new(model, data.bins);
+    let summed = data.counts.sum_axis(Axis(0));
+    let (h, w) = summed.dim();
+    let m: Vec<f64> = summed.iter().copied().collect();
+    let total: f64 = m.iter().sum();
+    if total <= 0.0 || rl.mass <= 0.0 {
+        return None;
+    }
+    let bg = model.background() * data.bins.len() as f64;
+    let mut o = vec![flat_level(total, bg, 1, rl.mass, h * w); rl.len()];
+    let guard = DENOMINATOR_GUARD * total / (h * w) as f64;
+    let last = *CHECKPOINTS.last().expect("checkpoints");
+    let mut iterates = Vec::with_capacity(CHECKPOINTS.len());
+    for it in 1..=last {
+        let y = rl.apply(&o);
+        rl.update(&mut o, &y, &m, bg, guard, false);
+        if CHECKPOINTS.contains(&it) {
+            iterates.push(model.crop_vec(&o));
+        }
+    }
+    let base = iterates.last().expect("the last checkpoint");
+    let scale = (base.iter().sum::<f64>() / (h * w) as f64).max(f64::MIN_POSITIVE);
+    let photons_per_pixel = total / (h * w) as f64;
+    let kernel_width_px = kernel_rms_radius(&model.summed(data.bins));
+    let mut features = Array3::<f32>::zeros((CHANNELS, h, w));
+    for (c, it) in iterates.iter().enumerate() {
+        fill(&mut features, c, it, 1.0 / scale);
+    }
+    fill(&mut features, CHECKPOINTS.len(), &m, 1.0 / (rl.mass * scale));
+    features
+        .index_axis_mut(Axis(0), CHECKPOINTS.len() + 1)
+        .fill(level_feature(photons_per_pixel));
+    features
+        .index_axis_mut(Axis(0), CHECKPOINTS.len() + 2)
+        .fill(width_feature(kernel_width_px));
+    Some(LearnedInputs {
+        features,
+        scale,
+        photons_per_pixel,
+        kernel_width_px,
+        background_share: bg / photons_per_pixel,
+        base_grid: o,
+    })
+}
+
+/// Channel `c` of `features` from the row-major `values` times `factor`.
+fn fill(features: &mut Array3<f32>, c: usize, values: &[f64], factor: f64) {
+    features
+        .index_axis_mut(Axis(0), c)
+        .iter_mut()
+        .zip(values)
+        .for_each(|(f, &v)| *f = (v * factor) as f32);
+}
+
+/// RMS distance from its centre of the one kernel of `model` (a summed
+/// model), in pixels: its second moment over its mass, the grid's
+/// distances taken across the wrap (kernels are stored origin-centred).
+pub fn kernel_rms_radius(model: &ForwardModel) -> f64 {
+    let (gh, gw) = model.grid_shape();
+    let kernel = model.fft().inverse(model.spectrum(0).to_vec());
+    let wrap = |i: usize, n: usize| {
+        let d = i.min(n - i) as f64;
+        d * d
+    };
+    let (mut mass, mut second) = (0.0, 0.0);
+    for (i, &v) in kernel.iter().enumerate() {
+        let (r, c) = (i / gw, i % gw);
+        mass += v;
+        second += v * (wrap(r, gh) + wrap(c, gw));
+    }
+    if mass > 0.0 {
+        (second / mass).max(0.0).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// The object the network's `output` (normalised, `H x W`) stands for:
+/// times the inputs' scale, clamped at 0.
+pub fn denormalise(output: &Array2<f32>, inputs: &LearnedInputs) -> Array2<f64> {
+    output.mapv(|v| (f64::from(v) * inputs.scale).max(0.0))
+}
