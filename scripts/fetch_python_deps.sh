@@ -10,14 +10,15 @@
 #   OME-XML;
 # - tttrlib and sdtfile, decoding Becker & Hickl .spc and .sdt files
 #   independently of our readers;
+# - phasorpy, the phasor and lifetime reference the decay maps are held to;
 # - playwright, which drives the system's Chromium (Debian's package; its
 #   own browser download is never used) in the live view's browser test.
 # Nothing is installed system-wide; the tests set PYTHONPATH to that folder.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dest=target/pydeps
-packages=(numpy h5py ptufile OpenEXR tifffile ome-types tttrlib sdtfile playwright)
-modules="numpy, h5py, ptufile, OpenEXR, tifffile, ome_types, tttrlib, sdtfile, playwright"
+packages=(numpy h5py ptufile OpenEXR tifffile ome-types tttrlib sdtfile phasorpy playwright)
+modules="numpy, h5py, ptufile, OpenEXR, tifffile, ome_types, tttrlib, sdtfile, phasorpy, playwright"
 if PYTHONPATH="$dest" python3 -c "import $modules" 2>/dev/null; then
     echo "already present under $dest: ${packages[*]}"
     exit 0

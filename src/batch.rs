@@ -60,15 +60,26 @@ pub struct JobSpec {
     pub timeout: Option<String>,
 }
 
+/// Commands whose `--out` names a file, not a folder, and the file a
+/// batch job of theirs writes in its folder.
+const FILE_OUTPUTS: [(&str, &str); 2] = [("convert", "converted.ptu"), ("denoise", "denoised.exr")];
+
 impl JobSpec {
     /// The job's command line after the program's name: its command, its
-    /// input, its arguments and `--out` with its folder under `out`.
+    /// input, its arguments and `--out` with its folder under `out` (a
+    /// file in that folder for the commands that write one file).
     pub fn command_line(&self, out: &Path) -> Vec<OsString> {
         let mut line = vec![OsString::from(&self.command)];
         line.extend(self.input.iter().map(OsString::from));
         line.extend(self.args.iter().map(OsString::from));
         line.push("--out".into());
-        line.push(out.join(&self.name).into_os_string());
+        let folder = out.join(&self.name);
+        line.push(
+            match FILE_OUTPUTS.iter().find(|(c, _)| *c == self.command) {
+                Some((_, file)) => folder.join(file).into_os_string(),
+                None => folder.into_os_string(),
+            },
+        );
         line
     }
 }

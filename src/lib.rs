@@ -79,6 +79,7 @@ pub mod calibrate;
 pub mod cnn;
 pub mod config;
 pub mod confocal;
+pub mod decay;
 pub mod denoise;
 pub mod error_text;
 pub mod events;

@@ -226,3 +226,228 @@ pub fn heatmap(path: &Path, map: &Heatmap) -> Result<(), String> {
     drop(root);
     save_rgb(&pixels, width, height, path)
 }
+
+/// An image whose hue says one quantity and whose brightness another: a
+/// lifetime image coloured by lifetime, weighted by intensity.
+pub struct ColouredMap<'a> {
+    /// The quantity coloured (NaN cells are black).
+    pub values: ndarray::ArrayView2<'a, f64>,
+    /// Brightness of each cell, 0 (black) to 1 (full colour).
+    pub brightness: ndarray::ArrayView2<'a, f64>,
+    /// The values at the colour bar's ends (viridis from the first to the
+    /// second; values outside take the end's colour).
+    pub range: (f64, f64),
+    /// Title above the image.
+    pub title: &'a str,
+    /// The colour bar's label (the quantity and its unit).
+    pub bar_label: &'a str,
+}
+
+/// Draws `map` as a PNG: the image, its cells square, with a viridis
+/// colour bar on its right.
+pub fn coloured_map(path: &Path, map: &ColouredMap) -> Result<(), String> {
+    use plotters::style::colors::colormaps::{ColorMap, ViridisRGB};
+    register_font();
+    let (rows, cols) = map.values.dim();
+    let (lo, hi) = map.range;
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let colour = |v: f64, b: f64| -> RGBColor {
+        if !v.is_finite() || !b.is_finite() {
+            return BLACK;
+        }
+        let t = ((v - lo) / span).clamp(0.0, 1.0);
+        let RGBColor(r, g, bl) = ViridisRGB.get_color(t);
+        let k = b.clamp(0.0, 1.0);
+        let f = |c: u8| (f64::from(c) * k).round() as u8;
+        RGBColor(f(r), f(g), f(bl))
+    };
+    // The image 512 px on its longer side, the bar 110 px to its right.
+    let cell = (512.0 / rows.max(cols).max(1) as f64).max(1.0);
+    let (iw, ih) = ((cols as f64 * cell) as u32, (rows as f64 * cell) as u32);
+    let (width, height) = (iw + 150, ih + 60);
+    let mut pixels = vec![0u8; (width * height * 3) as usize];
+    // Everything drawing on the buffer lives in this block.
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, (width, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let titled = root
+            .titled(map.title, ("sans-serif", 18))
+            .map_err(|e| e.to_string())?;
+        let (image, bar) = titled.split_horizontally(iw + 20);
+        let image = image.margin(10, 10, 10, 10);
+        image
+            .draw(&Rectangle::new(
+                [(0, 0), (iw as i32, ih as i32)],
+                BLACK.filled(),
+            ))
+            .map_err(|e| e.to_string())?;
+        for ((r, c), &v) in map.values.indexed_iter() {
+            let b = map.brightness[[r, c]];
+            let (x0, y0) = ((c as f64 * cell) as i32, (r as f64 * cell) as i32);
+            let (x1, y1) = (
+                ((c + 1) as f64 * cell) as i32,
+                ((r + 1) as f64 * cell) as i32,
+            );
+            image
+                .draw(&Rectangle::new([(x0, y0), (x1, y1)], colour(v, b).filled()))
+                .map_err(|e| e.to_string())?;
+        }
+        let mut chart = ChartBuilder::on(&bar)
+            .margin_top(10)
+            .margin_bottom(10)
+            .margin_right(50)
+            .y_label_area_size(0)
+            .right_y_label_area_size(45)
+            .build_cartesian_2d(0.0..1.0, lo..lo + span)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .disable_x_axis()
+            .y_desc(map.bar_label)
+            .label_style(("sans-serif", 12))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let steps = 128;
+        chart
+            .draw_series((0..steps).map(|i| {
+                let (a, b) = (
+                    lo + span * i as f64 / steps as f64,
+                    lo + span * (i + 1) as f64 / steps as f64,
+                );
+                Rectangle::new([(0.0, a), (1.0, b)], colour(0.5 * (a + b), 1.0).filled())
+            }))
+            .map_err(|e| e.to_string())?;
+        drop(chart);
+        root.present().map_err(|e| e.to_string())?;
+    }
+    save_rgb(&pixels, width, height, path)
+}
+
+/// Points `(g, s)` of a phasor plot as a 2-D histogram.
+pub struct PhasorHistogram<'a> {
+    /// Each point's `g` and `s` (NaN points are left out).
+    pub points: &'a [(f64, f64)],
+    /// Title above the plot.
+    pub title: &'a str,
+    /// Lifetimes (ps) marked on the universal semicircle, with the
+    /// angular frequency (rad/ps) that places them; none when the phasors
+    /// are not calibrated.
+    pub marks: Option<(&'a [f64], f64)>,
+}
+
+/// Draws `plot` as a PNG: counts per cell of a 2-D histogram on a
+/// logarithmic grey-to-viridis scale, with the universal semicircle
+/// (every single exponential) and its lifetime marks.
+pub fn phasor_histogram(path: &Path, plot: &PhasorHistogram) -> Result<(), String> {
+    use plotters::style::colors::colormaps::{ColorMap, ViridisRGB};
+    register_font();
+    // The semicircle's box, widened to hold 99.5 % of the points (within
+    // the unit circle, where every phasor of counts lies).
+    let inside: Vec<(f64, f64)> = plot
+        .points
+        .iter()
+        .copied()
+        .filter(|(g, s)| g.is_finite() && s.is_finite())
+        .collect();
+    let quantile = |mut v: Vec<f64>, q: f64| -> Option<f64> {
+        v.sort_by(f64::total_cmp);
+        (!v.is_empty()).then(|| v[((v.len() - 1) as f64 * q).round() as usize])
+    };
+    let gs: Vec<f64> = inside.iter().map(|p| p.0).collect();
+    let ss: Vec<f64> = inside.iter().map(|p| p.1).collect();
+    let (g0, g1) = (
+        quantile(gs.clone(), 0.0025)
+            .map_or(0.0, |q| q.min(0.0))
+            .max(-1.0),
+        quantile(gs, 0.9975).map_or(1.0, |q| q.max(1.0)).min(1.0),
+    );
+    let (s0, s1) = (
+        quantile(ss.clone(), 0.0025)
+            .map_or(0.0, |q| q.min(0.0))
+            .max(-1.0),
+        quantile(ss, 0.9975).map_or(0.6, |q| q.max(0.6)).min(1.0),
+    );
+    let (g0, g1, s0, s1) = (g0 - 0.05, g1 + 0.05, s0 - 0.05, s1 + 0.05);
+    let cells = 160usize;
+    let step = (g1 - g0).max(s1 - s0) / cells as f64;
+    let (nx, ny) = (
+        ((g1 - g0) / step).ceil() as usize,
+        ((s1 - s0) / step).ceil() as usize,
+    );
+    let mut counts = vec![0u32; nx * ny];
+    for &(g, s) in &inside {
+        let (i, j) = (((g - g0) / step).floor(), ((s - s0) / step).floor());
+        if i >= 0.0 && j >= 0.0 && (i as usize) < nx && (j as usize) < ny {
+            counts[j as usize * nx + i as usize] += 1;
+        }
+    }
+    let top = f64::from(counts.iter().copied().max().unwrap_or(0).max(1));
+    let width = 720u32;
+    let height = ((f64::from(width - 80) * (s1 - s0) / (g1 - g0)) as u32 + 100).clamp(240, 900);
+    let mut pixels = vec![0u8; (width * height * 3) as usize];
+    let root = BitMapBackend::with_buffer(&mut pixels, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(plot.title, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(g0..g1, s0..s1)
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("g")
+        .y_desc("s")
+        .label_style(("sans-serif", 13))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    chart
+        .draw_series(
+            counts
+                .iter()
+                .enumerate()
+                .filter(|(_, n)| **n > 0)
+                .map(|(k, &n)| {
+                    let (i, j) = (k % nx, k / nx);
+                    let (x, y) = (g0 + i as f64 * step, s0 + j as f64 * step);
+                    let t = (f64::from(n).ln_1p() / top.ln_1p()).clamp(0.0, 1.0);
+                    Rectangle::new(
+                        [(x, y), (x + step, y + step)],
+                        ViridisRGB.get_color(t).filled(),
+                    )
+                }),
+        )
+        .map_err(|e| e.to_string())?;
+    chart
+        .draw_series(LineSeries::new(
+            (0..=180).map(|k| {
+                let a = std::f64::consts::PI * f64::from(k) / 180.0;
+                (0.5 + 0.5 * a.cos(), 0.5 * a.sin())
+            }),
+            BLACK.stroke_width(1),
+        ))
+        .map_err(|e| e.to_string())?;
+    if let Some((lifetimes, omega)) = plot.marks {
+        for &tau in lifetimes {
+            let wt = omega * tau;
+            let (g, s) = (1.0 / (1.0 + wt * wt), wt / (1.0 + wt * wt));
+            chart
+                .draw_series([
+                    Circle::new((g, s), 3, BLACK.filled()).into_dyn(),
+                    Text::new(
+                        format!("{:.1} ns", tau / 1000.0),
+                        (g, s + 0.02),
+                        ("sans-serif", 12),
+                    )
+                    .into_dyn(),
+                ])
+                .map_err(|e| e.to_string())?;
+        }
+    }
+    drop(chart);
+    root.present().map_err(|e| e.to_string())?;
+    drop(root);
+    save_rgb(&pixels, width, height, path)
+}

@@ -600,7 +600,7 @@ fn a_batch_bins_becker_hickl_files_as_the_command_does() {
     let manifest = dir.path().join("jobs.toml");
     std::fs::write(
         &manifest,
-        "[[job]]\nname = \"fifo\"\ncommand = \"bin\"\ninput = \"run.spc\"\nargs = [\"--spc-module\", \"spc-600-4096\", \"--no-preview\"]\n\n[[job]]\nname = \"histograms\"\ncommand = \"bin\"\ninput = \"scan.sdt\"\nargs = [\"--no-preview\"]\n",
+        "[[job]]\nname = \"fifo\"\ncommand = \"bin\"\ninput = \"run.spc\"\nargs = [\"--spc-module\", \"spc-600-4096\", \"--no-preview\"]\n\n[[job]]\nname = \"histograms\"\ncommand = \"bin\"\ninput = \"scan.sdt\"\nargs = [\"--no-preview\"]\n\n[[job]]\nname = \"ptu\"\ncommand = \"convert\"\ninput = \"run.spc\"\nargs = [\"--spc-module\", \"spc-600-4096\"]\n",
     )
     .unwrap();
     let out = dir.path().join("out");
@@ -621,9 +621,13 @@ fn a_batch_bins_becker_hickl_files_as_the_command_does() {
     .unwrap();
     let counts = direct.stacks[0].counts.mapv(|c| c as f32);
     assert_eq!(fifo.data, counts);
-    for f in ["stack_f000.exr", "stack_f001.exr"] {
+    for f in ["stack_f000.exr", "stack_f001.exr", "stack_f002.exr"] {
         assert!(out.join("histograms").join(f).is_file(), "{f}: {t}");
     }
+    // A conversion writes one file: the batch names it in the job's folder.
+    let ptu = out.join("ptu/converted.ptu");
+    let (info, _) = scatterscope::formats::picoquant::open(&ptu).unwrap();
+    assert_eq!(info.records_present, info.records_announced, "{t}");
 }
 
 /// Found by fuzzing (fuzz/fuzz_targets/becker_hickl.rs): scan and image
@@ -837,4 +841,42 @@ fn no_command_writes_over_the_setup_file_it_reads_and_a_huge_one_is_refused() {
         "{t}"
     );
     assert!(started.elapsed().as_secs() < 5, "{:?}", started.elapsed());
+}
+
+/// Overflow counts that add up past 2^64 macro-time ticks: `info` says the
+/// duration is unknown (a warning), not a wrapped or saturated number.
+#[test]
+fn info_says_when_overflows_pass_two_to_the_64_ticks() {
+    let dir = tempfile::tempdir().unwrap();
+    let spc = dir.path().join("far.spc");
+    // The 256-channel layout's overflows are 2^17 ticks: 2^28 - 1 of them
+    // per count entry, so 2^19 entries pass 2^64 (a 2 MB file).
+    let mut bytes = bh_files::header(Layout::Spc600_256, 500, 0, false);
+    for _ in 0..(1 << 19) + 16 {
+        bytes.extend(bh_files::overflows(0x0FFF_FFFF));
+    }
+    bytes.extend(bh_files::photon(
+        Layout::Spc600_256,
+        0,
+        100,
+        7,
+        false,
+        false,
+        false,
+    ));
+    std::fs::write(&spc, bytes).unwrap();
+    let r = run(&[
+        "info",
+        s(&spc),
+        "--spc-module",
+        "spc-600-256",
+        "--micro-unit",
+        "10ps",
+    ]);
+    let t = text(&r);
+    assert_eq!(r.status.code(), Some(4), "{t}");
+    assert!(
+        t.contains("measured duration unknown") && !t.contains("measured duration: "),
+        "{t}"
+    );
 }

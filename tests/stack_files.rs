@@ -1,5 +1,7 @@
 //! Stack file round trips and error messages.
 
+#[path = "common/command.rs"]
+mod command;
 #[path = "common/npy.rs"]
 mod npy;
 #[path = "common/pydeps.rs"]
@@ -36,6 +38,7 @@ fn sample_stack(kind: ValueKind) -> Stack {
             boundary: None,
             acquisition: Some(serde_json::json!({"device": "mock", "photons": 12})),
             unstated: Vec::new(),
+            laser_frequency_hz: Some(80e6),
         },
         exact_counts: None,
     }
@@ -501,4 +504,45 @@ with OpenEXR.File(sys.argv[1]) as f:
     assert_eq!(theirs.mapv(f32::to_bits), floats.data.mapv(f32::to_bits));
     let theirs = Array3::<u32>::read_npy(read_back(&exact, "counts")).unwrap();
     assert_eq!(theirs, counts);
+}
+
+/// OpenEXR's own library opens a stack of 32767 bins and not one of 32768:
+/// the writer refuses the latter by name (pointing to .npy), and `bin`
+/// refuses such a window before reading the file.
+#[test]
+#[ignore = "needs OpenEXR under target/pydeps (scripts/fetch_python_deps.sh)"]
+fn stacks_of_more_bins_than_openexr_opens_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let stack = |k: usize| {
+        Stack::new(
+            Array3::ones((k, 1, 1)),
+            StackMeta::measured(0.0, 1.0, k, "test".into(), None),
+        )
+    };
+    let ok = dir.path().join("most.exr");
+    stack(32_767).save(&ok).unwrap();
+    let opened = pydeps::python(
+        "import sys, OpenEXR\nwith OpenEXR.File(sys.argv[1]) as f: print(len(f.channels()))",
+        &[ok.to_str().unwrap()],
+    );
+    assert_eq!(opened.trim(), "32767");
+    let e = stack(32_768)
+        .save(&dir.path().join("too_many.exr"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("32768 slices") && e.contains(".npy"), "{e}");
+    assert!(!dir.path().join("too_many.exr").exists());
+    let ptu = dir.path().join("t3.ptu");
+    scatterscope::formats::picoquant::writer::write_synthetic_t3(&ptu, 1_000).unwrap();
+    let r = command::run(&[
+        "bin",
+        ptu.to_str().unwrap(),
+        "--bins",
+        "40000",
+        "--out",
+        dir.path().join("b").to_str().unwrap(),
+    ]);
+    let t = command::text(&r);
+    assert_eq!(r.status.code(), Some(1), "{t}");
+    assert!(t.contains("40000 bins") && t.contains("--npy"), "{t}");
 }

@@ -478,11 +478,20 @@ fn learned_case<'py>(
     let object: Array2<f64> = image.as_array().to_owned();
     let done = py
         .detach(|| -> Result<_, String> {
-            let case = scatterscope::report::bench::simulate_object(object, &setup, seed, background_share)
-                .map_err(|e| scatterscope::error_text(&e))?;
+            let case = scatterscope::report::bench::simulate_object(
+                object,
+                &setup,
+                seed,
+                background_share,
+            )
+            .map_err(|e| scatterscope::error_text(&e))?;
             let bins = case.problem.all_bins();
-            let data = scatterscope::reconstruct::Data::new(&case.problem.model, &case.problem.counts, &bins)
-                .map_err(|e| scatterscope::error_text(&e))?;
+            let data = scatterscope::reconstruct::Data::new(
+                &case.problem.model,
+                &case.problem.counts,
+                &bins,
+            )
+            .map_err(|e| scatterscope::error_text(&e))?;
             let inputs = scatterscope::reconstruct::learned::inputs::learned_inputs(&data)
                 .ok_or_else(|| "no photons in the simulated stack".to_string())?;
             Ok((inputs, case.truth))
@@ -494,7 +503,112 @@ fn learned_case<'py>(
     facts.set_item("photons_per_pixel", inputs.photons_per_pixel)?;
     facts.set_item("kernel_width_px", inputs.kernel_width_px)?;
     facts.set_item("background_share", inputs.background_share)?;
-    Ok((inputs.features.into_pyarray(py), truth.into_pyarray(py), facts))
+    Ok((
+        inputs.features.into_pyarray(py),
+        truth.into_pyarray(py),
+        facts,
+    ))
+}
+
+/// Per-pixel decay maps of a stack of counts (bins, rows, columns) whose
+/// bins start at `bin_starts_ps`: a dict of float64 maps (NaN where
+/// masked), the mask, onset, frequency and notes, as `scatterscope
+/// lifetime` writes them.
+#[pyfunction]
+#[pyo3(signature = (counts, bin_starts_ps, bin_width_ps, frequency_hz, harmonics=vec![1, 2], min_photons=20.0, onset_ps=None, reference_phasors=None, reference_lifetime_ps=0.0))]
+#[allow(clippy::too_many_arguments)]
+fn decay_maps<'py>(
+    py: Python<'py>,
+    counts: Bound<'py, PyAny>,
+    bin_starts_ps: Vec<f64>,
+    bin_width_ps: f64,
+    frequency_hz: f64,
+    harmonics: Vec<u32>,
+    min_photons: f64,
+    onset_ps: Option<f64>,
+    reference_phasors: Option<Vec<(f64, f64)>>,
+    reference_lifetime_ps: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    use scatterscope::decay::{DecayOptions, Onset, Reference};
+    if let Some(r) = &reference_phasors
+        && r.len() != harmonics.len()
+    {
+        return Err(msg(format!(
+            "decay_maps: {} reference phasors for {} harmonics: give one (g, s) per harmonic",
+            r.len(),
+            harmonics.len()
+        )));
+    }
+    let options = DecayOptions {
+        harmonics,
+        min_photons,
+        onset: onset_ps.map_or(Onset::HalfMaximum, Onset::At),
+        reference: reference_phasors.map(|phasors| Reference {
+            phasors,
+            lifetime_ps: reference_lifetime_ps,
+            what: "the given reference phasors".into(),
+        }),
+    };
+    let maps = if let Ok(a) = counts.extract::<PyReadonlyArray3<'py, u16>>() {
+        let v = a.as_array();
+        py.detach(|| {
+            scatterscope::decay::decay_maps(
+                scatterscope::stack::CountsView::U16(v),
+                &bin_starts_ps,
+                bin_width_ps,
+                frequency_hz,
+                &options,
+            )
+        })
+    } else if let Ok(a) = counts.extract::<PyReadonlyArray3<'py, u32>>() {
+        let v = a.as_array();
+        py.detach(|| {
+            scatterscope::decay::decay_maps(
+                scatterscope::stack::CountsView::U32(v),
+                &bin_starts_ps,
+                bin_width_ps,
+                frequency_hz,
+                &options,
+            )
+        })
+    } else if let Ok(a) = counts.extract::<PyReadonlyArray3<'py, f32>>() {
+        let v = a.as_array();
+        py.detach(|| {
+            scatterscope::decay::decay_maps_f32(v, &bin_starts_ps, bin_width_ps, frequency_hz, &options)
+        })
+    } else {
+        return Err(msg(
+            "decay_maps: counts must be a 3-D numpy array (bins, rows, columns) of uint16, uint32 or float32",
+        ));
+    }
+    .map_err(|e| msg(format!("decay_maps: {e}")))?;
+    let d = PyDict::new(py);
+    d.set_item("photons", maps.intensity.into_pyarray(py))?;
+    d.set_item("mean_time_ps", maps.mean_time_ps.into_pyarray(py))?;
+    d.set_item("variance_ps2", maps.variance_ps2.into_pyarray(py))?;
+    d.set_item("fast_lifetime_ps", maps.fast_lifetime_ps.into_pyarray(py))?;
+    for p in maps.phasors {
+        let h = p.harmonic;
+        d.set_item(format!("g{h}"), p.g.into_pyarray(py))?;
+        d.set_item(format!("s{h}"), p.s.into_pyarray(py))?;
+        if let Some(c) = p.calibrated {
+            d.set_item(format!("g{h}_calibrated"), c.g.into_pyarray(py))?;
+            d.set_item(format!("s{h}_calibrated"), c.s.into_pyarray(py))?;
+            d.set_item(
+                format!("phase_lifetime{h}_ps"),
+                c.tau_phase_ps.into_pyarray(py),
+            )?;
+            d.set_item(
+                format!("modulation_lifetime{h}_ps"),
+                c.tau_modulation_ps.into_pyarray(py),
+            )?;
+        }
+    }
+    d.set_item("mask", maps.mask.into_pyarray(py))?;
+    d.set_item("onset_ps", maps.onset_ps)?;
+    d.set_item("frequency_hz", maps.frequency_hz)?;
+    d.set_item("notes", maps.notes)?;
+    Ok(d)
 }
 
 /// Simulates a built-in scene or an image file (as `scatterscope
@@ -844,6 +958,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(simulate_scene, m)?)?;
     m.add_function(wrap_pyfunction!(learned_case, m)?)?;
+    m.add_function(wrap_pyfunction!(decay_maps, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(acquire, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_slab, m)?)?;

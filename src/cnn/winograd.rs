@@ -11,8 +11,8 @@
 
 use rayon::prelude::*;
 
-use super::conv::{FeatureMap, matmul, store_activated};
 use super::FoldedConv;
+use super::conv::{FeatureMap, matmul, store_activated};
 
 /// G (6x3): weight transform.
 const G: [[f64; 3]; 6] = [

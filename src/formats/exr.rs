@@ -31,6 +31,10 @@ use crate::stack::{
     CountsView, F32_EXACT_COUNT, Stack, StackError, StackFile, StackMeta, Unstated,
 };
 
+/// Most channels (bins) of a file written: OpenEXR's library (3.5) does
+/// not open a file of 32768 channels (measured: 32767 opens).
+pub const MAX_CHANNELS: usize = 32_767;
+
 /// Name of the attribute holding the JSON metadata.
 pub const META_ATTRIBUTE: &str = "scatterscope";
 
@@ -320,6 +324,14 @@ fn write_slices<S: AsSample<T>, T: ChannelSample + bytemuck::Pod>(
         return Err(StackError::format(
             path,
             format!("cannot write an empty {k} x {h} x {w} {what}"),
+        ));
+    }
+    if k > MAX_CHANNELS {
+        return Err(StackError::format(
+            path,
+            format!(
+                "a {what} of {k} slices: an OpenEXR file of more than {MAX_CHANNELS} channels is one OpenEXR's own library (3.5) will not open; write it as .npy or OME-TIFF (bin --npy), or with fewer bins"
+            ),
         ));
     }
     let layer = Layer::new(

@@ -102,6 +102,8 @@ struct Description<'a> {
     /// Whether the bins count micro-time channels of an unknown unit
     /// instead of ps.
     channels: bool,
+    /// Named channels, one page each (maps), instead of one channel.
+    named: &'a [String],
 }
 
 /// `text` with XML's five special characters escaped.
@@ -161,6 +163,28 @@ fn ome_xml(d: &Description<'_>, planes: usize, ome_type: &str) -> String {
         ),
         None => (String::new(), String::new()),
     };
+    // Named channels are the pages (one time point); else one channel
+    // whose pages are the time points.
+    let (channels, size_c, size_t) = if d.named.is_empty() {
+        (
+            "<Channel ID=\"Channel:0:0\" SamplesPerPixel=\"1\"/>".to_string(),
+            1,
+            planes,
+        )
+    } else {
+        let list = d
+            .named
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                format!(
+                    "<Channel ID=\"Channel:0:{i}\" Name=\"{}\" SamplesPerPixel=\"1\"/>",
+                    escape(n)
+                )
+            })
+            .collect();
+        (list, d.named.len(), 1)
+    };
     format!(
         concat!(
             "<?xml version=\"1.0\" encoding=\"UTF-8\"?>",
@@ -171,9 +195,9 @@ fn ome_xml(d: &Description<'_>, planes: usize, ome_type: &str) -> String {
             "Creator=\"scatterscope {version}\">",
             "<Image ID=\"Image:0\" Name=\"{name}\">{annotation_ref}",
             "<Pixels ID=\"Pixels:0\" DimensionOrder=\"XYZCT\" Type=\"{ome_type}\" ",
-            "SizeX=\"{w}\" SizeY=\"{h}\" SizeZ=\"1\" SizeC=\"1\" SizeT=\"{t}\"{size} ",
+            "SizeX=\"{w}\" SizeY=\"{h}\" SizeZ=\"1\" SizeC=\"{c}\" SizeT=\"{st}\"{size} ",
             "BigEndian=\"false\" Interleaved=\"false\">",
-            "<Channel ID=\"Channel:0:0\" SamplesPerPixel=\"1\"/>",
+            "{channels}",
             "<TiffData IFD=\"0\" PlaneCount=\"{t}\"/>",
             "</Pixels></Image>{annotations}</OME>"
         ),
@@ -184,6 +208,9 @@ fn ome_xml(d: &Description<'_>, planes: usize, ome_type: &str) -> String {
         w = d.width,
         h = d.height,
         t = planes,
+        c = size_c,
+        st = size_t,
+        channels = channels,
         size = size,
         annotations = annotations,
     )
@@ -290,6 +317,7 @@ fn describe<'a>(meta: &'a StackMeta, w: usize, h: usize, path: &Path) -> Descrip
         pixel_pitch_cm: (!meta.is_unstated(Unstated::PixelPitch)).then_some(meta.pixel_pitch_cm),
         bins: Some((&meta.bin_starts_ps, meta.bin_width_ps)),
         channels: meta.is_unstated(Unstated::TimeUnit),
+        named: &[],
     }
 }
 
@@ -325,12 +353,50 @@ pub fn write_image(
         pixel_pitch_cm: pixel_pitch_cm.filter(|p| p.is_finite() && *p > 0.0),
         bins: None,
         channels: false,
+        named: &[],
     };
     write(
         &Samples::F32(vec![image.iter().copied().collect()]),
         &d,
         path,
     )
+}
+
+/// Writes named images of one size (maps: each name says the quantity and
+/// its unit) as a float32 OME-TIFF of one channel per image, each channel
+/// named, with the pixel pitch when known.
+pub fn write_named_images(
+    images: &[(String, ArrayView2<f32>)],
+    pixel_pitch_cm: Option<f64>,
+    path: &Path,
+) -> Result<(), StackError> {
+    let (h, w) = images
+        .first()
+        .map(|(_, i)| i.dim())
+        .ok_or_else(|| StackError::format(path, "no image to write"))?;
+    if let Some((n, i)) = images.iter().find(|(_, i)| i.dim() != (h, w)) {
+        return Err(StackError::format(
+            path,
+            format!("image `{n}` is {:?}, the first {:?}", i.dim(), (h, w)),
+        ));
+    }
+    let named: Vec<String> = images.iter().map(|(n, _)| n.clone()).collect();
+    let d = Description {
+        name: path
+            .file_name()
+            .map_or("maps".into(), |n| n.to_string_lossy().into_owned()),
+        width: w,
+        height: h,
+        pixel_pitch_cm: pixel_pitch_cm.filter(|p| p.is_finite() && *p > 0.0),
+        bins: None,
+        channels: false,
+        named: &named,
+    };
+    let planes = images
+        .iter()
+        .map(|(_, i)| i.iter().copied().collect())
+        .collect();
+    write(&Samples::F32(planes), &d, path)
 }
 
 #[cfg(test)]
@@ -371,6 +437,7 @@ mod tests {
             pixel_pitch_cm: Some(0.01),
             bins: None,
             channels: false,
+            named: &[],
         };
         let xml = ome_xml(&d, 1, "float");
         assert!(

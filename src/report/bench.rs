@@ -44,6 +44,8 @@ pub const RL_CV: &str = "rl-sum (cross-validated stop)";
 pub const RL_STACK_CV: &str = "rl-stack (cross-validated stop)";
 /// Label of the default method's rows.
 pub const AUTO: &str = "auto (the default)";
+/// The learned reconstruction's label.
+pub const LEARNED: &str = "learned";
 
 /// Label of Richardson-Lucy's output after a fixed count of `iterations`.
 pub fn rl_fixed_label(iterations: usize) -> String {
@@ -341,6 +343,8 @@ pub enum BenchMethod {
     RlStack,
     /// The default, `auto`, with the headline prior.
     Auto,
+    /// The learned reconstruction (its embedded network).
+    Learned,
 }
 
 named!(BenchMethod {
@@ -348,6 +352,7 @@ named!(BenchMethod {
     RlSum => "rl-sum",
     RlStack => "rl-stack",
     Auto => "auto",
+    Learned => "learned",
 });
 
 /// Runs the `methods` on one case: every PnP entry, Richardson-Lucy on
@@ -441,6 +446,11 @@ pub fn run_case(
         let r = run_rl(method, &cross_validated)?;
         on_trace(label, &r.trace);
         rows.push(row(label.into(), r.image.view(), &r.trace));
+    }
+    if runs(BenchMethod::Learned) {
+        let r = run_rl(Method::Learned, &cross_validated)?;
+        on_trace(LEARNED, &r.trace);
+        rows.push(row(LEARNED.into(), r.image.view(), &r.trace));
     }
     // The default, with the headline prior.
     if let Some(e) = entries.first().filter(|_| runs(BenchMethod::Auto)) {

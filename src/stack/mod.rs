@@ -90,6 +90,11 @@ pub struct StackMeta {
     /// refuses a stack whose time unit is unknown.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub unstated: Vec<Unstated>,
+    /// The laser's repetition rate (Hz), where the recording states it
+    /// (a PTU's sync rate, an `.sdt` block's sync rate): the phasors'
+    /// fundamental frequency.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub laser_frequency_hz: Option<f64>,
 }
 
 /// A quantity a recording did not state.
@@ -396,6 +401,7 @@ impl StackMeta {
             boundary: None,
             acquisition: None,
             unstated: Vec::new(),
+            laser_frequency_hz: None,
         }
     }
 
@@ -437,6 +443,7 @@ impl StackMeta {
             boundary: None,
             acquisition,
             unstated: vec![Unstated::PixelPitch],
+            laser_frequency_hz: None,
         }
     }
 

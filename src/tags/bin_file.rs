@@ -352,6 +352,19 @@ pub fn bin_file_to(
     spec: &BinSpec,
     outputs: &BinOutputs,
 ) -> Result<BinnedFile<Vec<PathBuf>>, RecordedFileError> {
+    // Bins an EXR cannot hold are refused before the file is read.
+    if let Some(bins) = spec
+        .bins
+        .filter(|&b| !outputs.npy && b > crate::formats::exr::MAX_CHANNELS)
+    {
+        return Err(spec_error(
+            path,
+            format!(
+                "{bins} bins: an OpenEXR stack holds at most {} (OpenEXR's library opens no more); write .npy (--npy) or bin fewer",
+                crate::formats::exr::MAX_CHANNELS
+            ),
+        ));
+    }
     bin_file_each(path, spec, |s| Ok(outputs.write(s, path)?))
 }
 
@@ -668,6 +681,12 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
     let period_ps = info.macro_unit_s * 1e12;
     let imaging = info.imaging;
     let pixel_cm = info.pixel_size_cm();
+    // The laser's rate: the file's measured sync rate, else the T3 sync
+    // period's.
+    let laser_hz = info
+        .sync_rate_hz
+        .filter(|r| r.is_finite() && *r > 0.0)
+        .unwrap_or(1.0 / info.macro_unit_s);
     let notes = info.unread_note().into_iter().collect();
     let source = format!(
         "{} ({}, {})",
@@ -689,10 +708,11 @@ fn bin_picoquant(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, 
         let (_, h, w) = binned.shape;
         (h, w) == (img.pixels_y, img.pixels_x) && spec.pixels == Pixels::Auto
     });
-    if let (Some(cm), true) = (pixel_cm, scanned) {
-        for s in &mut binned.stacks {
+    for s in &mut binned.stacks {
+        if let (Some(cm), true) = (pixel_cm, scanned) {
             s.meta.set_pixel_pitch(cm);
         }
+        s.meta.laser_frequency_hz = Some(laser_hz).filter(|r| r.is_finite() && *r > 0.0);
     }
     Ok(binned)
 }
@@ -1116,15 +1136,19 @@ fn bin_tag_file(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, R
         totals_in_file: summary.totals.is_some(),
     };
     let shape = counts_binned.dim();
+    // The device's sync is the laser's pulse train.
+    let laser_hz = 1e15 / record.tag_file_header.sync_period_fs as f64;
+    let mut meta = StackMeta::measured(
+        window.start_ps(res_ps),
+        window.width_ps(res_ps),
+        window.bins,
+        source,
+        Some(serde_json::to_value(&record).expect("the record serialises")),
+    );
+    meta.laser_frequency_hz = Some(laser_hz).filter(|r| r.is_finite() && *r > 0.0);
     let stack = CountStack {
         counts: counts_binned,
-        meta: StackMeta::measured(
-            window.start_ps(res_ps),
-            window.width_ps(res_ps),
-            window.bins,
-            source,
-            Some(serde_json::to_value(&record).expect("the record serialises")),
-        ),
+        meta,
     };
     let truncated = summary
         .totals
@@ -1376,6 +1400,7 @@ fn sdt_stack(
     if b.micro_unit_s.is_err() {
         meta.unstated.push(Unstated::TimeUnit);
     }
+    meta.laser_frequency_hz = b.sync_rate_hz;
     if offset == 0 && width == 1 && bins == points && spec.pixels != Pixels::Single {
         let sum = b.counts.total();
         tally.records += (points * h * w) as u64;

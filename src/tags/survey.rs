@@ -27,7 +27,7 @@ pub struct PicoQuantSurvey {
     pub syncs: u64,
     /// Overflow records (they only advance the time base).
     pub overflows: u64,
-    /// Time of the last event, seconds.
+    /// Time of the last event, seconds (infinite past 2^64 ticks).
     pub last_event_s: f64,
     /// Why the pass ended before the announced record count (a cut file).
     pub cut: Option<TtrError>,
@@ -67,6 +67,26 @@ impl Tally {
     }
 }
 
+/// The last event's time (s) of a macro time `last` in units of `unit_s`:
+/// infinite when the decoder saturated it (the overflow records add up past
+/// 2^64 ticks, which no recording lasts).
+fn last_event_s(last: u64, unit_s: f64) -> f64 {
+    if last == u64::MAX {
+        f64::INFINITY
+    } else {
+        last as f64 * unit_s
+    }
+}
+
+/// The `info` line of a recording whose last event came at `s` seconds.
+fn duration_line(s: f64) -> String {
+    if s.is_finite() {
+        format!("measured duration: {s:.6} s (last event)")
+    } else {
+        "warning: measured duration unknown: the overflow records add up past 2^64 macro-time ticks, which no recording lasts".into()
+    }
+}
+
 /// Counts the records of a PicoQuant file (PTU, HT3, PT3; T2 or T3). A cut
 /// file is counted up to the cut, which is reported, not an error.
 pub fn survey_picoquant(path: &Path) -> Result<(FileInfo, PicoQuantSurvey), FileError> {
@@ -94,7 +114,7 @@ pub fn survey_picoquant(path: &Path) -> Result<(FileInfo, PicoQuantSurvey), File
     s.photons_per_channel = tally.photons_per_channel;
     s.markers = tally.markers;
     s.syncs = tally.syncs;
-    s.last_event_s = tally.last_macro as f64 * info.macro_unit_s;
+    s.last_event_s = last_event_s(tally.last_macro, info.macro_unit_s);
     Ok((info, s))
 }
 
@@ -146,7 +166,7 @@ pub struct SpcSurvey {
     pub markers: u64,
     /// What the records flagged (GAP, INVALID, overflows).
     pub flags: CardFlags,
-    /// Time of the last event, seconds.
+    /// Time of the last event, seconds (infinite past 2^64 ticks).
     pub last_event_s: f64,
 }
 
@@ -166,7 +186,7 @@ pub fn survey_spc(path: &Path, options: &SpcOptions) -> Result<(SpcInfo, SpcSurv
         photons_per_channel: tally.photons_per_channel,
         markers: tally.markers,
         flags,
-        last_event_s: tally.last_macro as f64 * info.macro_clock_s,
+        last_event_s: last_event_s(tally.last_macro, info.macro_clock_s),
     };
     Ok((info, s))
 }
@@ -223,10 +243,7 @@ impl Survey {
                     "markers: {}; INVALID records (dropped): {}; overflow count records: {} ({} macro-time overflows in all)",
                     s.markers, f.invalid, f.overflow_entries, f.overflows
                 ));
-                lines.push(format!(
-                    "measured duration: {:.6} s (last event)",
-                    s.last_event_s
-                ));
+                lines.push(duration_line(s.last_event_s));
                 if f.gaps > 0 {
                     lines.push(format!(
                         "warning: {} record(s) carry the GAP flag: the card's FIFO was full and photons before each were lost in the card",
@@ -259,10 +276,7 @@ impl Survey {
                     "markers: {}, syncs: {}, overflow records: {}",
                     s.markers, s.syncs, s.overflows
                 ));
-                lines.push(format!(
-                    "measured duration: {:.6} s (last event)",
-                    s.last_event_s
-                ));
+                lines.push(duration_line(s.last_event_s));
                 if let Some(e) = &s.cut {
                     lines.push(format!("warning: {e}"));
                 }
@@ -285,7 +299,7 @@ impl Survey {
                         "batches: {}; photons: {}; markers: {}; lost in the device: {}; invalid records: {}",
                         summary.batches, s.photons, s.markers, s.lost_in_device, s.invalid_records
                     ),
-                    format!("measured duration: {:.6} s (last event)", s.last_event_s),
+                    duration_line(s.last_event_s),
                 ];
                 lines.push(match summary.totals {
                     Some(t) => format!(

@@ -11,6 +11,8 @@ The same library as the ``scatterscope`` command, numpy in and out:
   (an image through the medium, with Poisson counts); :func:`learned_case`
   (one training case of the learned reconstruction, simulated as the
   benchmark simulates, with the network's inputs);
+- decay maps: :func:`decay_maps` (photons, mean arrival time, fast
+  lifetime, phasors and calibrated lifetimes per pixel);
 - reconstruction: :func:`reconstruct` (every method of ``scatterscope
   reconstruct`` by name), returning the image, the trace and the notes;
 - calibration: :func:`calibrate_slab` (a slab's mu_a and mu_s' from
@@ -49,6 +51,7 @@ __all__ = [
     "psf_kernels",
     "simulate",
     "learned_case",
+    "decay_maps",
     "reconstruct",
     "acquire",
     "acquire_mock",
@@ -234,6 +237,47 @@ def learned_case(
         raise ScatterscopeError(f"an image is (rows, cols); this array has shape {array.shape}")
     inputs, truth, facts = _native.learned_case(array, int(sensor_px), int(seed), float(background_share), **physics)
     return {"inputs": inputs, "truth": truth, **facts}
+
+
+def decay_maps(
+    counts: np.ndarray,
+    meta: Dict[str, Any],
+    frequency_hz: Optional[float] = None,
+    harmonics: Tuple[int, ...] = (1, 2),
+    min_photons: float = 20.0,
+    onset_ps: Optional[float] = None,
+    reference_phasors: Optional[List[Tuple[float, float]]] = None,
+    reference_lifetime_ps: float = 0.0,
+) -> Dict[str, Any]:
+    """Per-pixel decay maps of a stack of counts ``(bins, rows, cols)``
+    (uint16, uint32 or float32, as :func:`bin_file` returns) with its
+    metadata ``meta``, as ``scatterscope lifetime`` computes them:
+    ``photons``, ``mean_time_ps`` and ``variance_ps2`` (after the onset),
+    ``fast_lifetime_ps``, ``g1``, ``s1``, ... per harmonic and, with
+    ``reference_phasors`` (one ``(g, s)`` per harmonic, of a reference of
+    ``reference_lifetime_ps``), ``g1_calibrated``, ``s1_calibrated``,
+    ``phase_lifetime1_ps``, ``modulation_lifetime1_ps``; ``mask`` (True
+    where fewer than ``min_photons``: NaN in the maps), ``onset_ps``,
+    ``frequency_hz`` and ``notes``. The frequency defaults to the
+    recording's (``meta["laser_frequency_hz"]``).
+    """
+    f = frequency_hz if frequency_hz is not None else meta.get("laser_frequency_hz")
+    if f is None:
+        raise ScatterscopeError(
+            "decay_maps: the stack's metadata states no laser frequency: give frequency_hz"
+        )
+    array = counts if counts.dtype in (np.uint16, np.uint32, np.float32) else counts.astype(np.float32)
+    return _native.decay_maps(
+        array,
+        [float(t) for t in meta["bin_starts_ps"]],
+        float(meta["bin_width_ps"]),
+        float(f),
+        [int(h) for h in harmonics],
+        float(min_photons),
+        onset_ps,
+        reference_phasors,
+        float(reference_lifetime_ps),
+    )
 
 
 def _trace(trace: Dict[str, Any]) -> Dict[str, Any]:

@@ -31,6 +31,17 @@ def simulate_scene(scene: str, seed: int = ..., boundary: str = ..., **physics: 
 def learned_case(
     image: np.ndarray, sensor_px: int, seed: int = ..., background_share: float = ..., **physics: Any
 ) -> Tuple[np.ndarray, np.ndarray, Dict[str, float]]: ...
+def decay_maps(
+    counts: np.ndarray,
+    bin_starts_ps: List[float],
+    bin_width_ps: float,
+    frequency_hz: float,
+    harmonics: List[int] = ...,
+    min_photons: float = ...,
+    onset_ps: Optional[float] = ...,
+    reference_phasors: Optional[List[Tuple[float, float]]] = ...,
+    reference_lifetime_ps: float = ...,
+) -> Dict[str, Any]: ...
 def reconstruct(
     data: np.ndarray,
     meta_json: Optional[str] = ...,

@@ -10,6 +10,7 @@ mod denoise;
 mod denoise_bench;
 mod hidden;
 mod hints;
+mod lifetime;
 mod psf;
 mod recon_args;
 mod reconstruct;
@@ -62,6 +63,7 @@ enum Command {
     Info(tags_cmd::InfoArgs),
     Bin(tags_cmd::BinArgs),
     Convert(tags_cmd::ConvertArgs),
+    Lifetime(lifetime::LifetimeArgs),
     Acquire(Box<acquire::AcquireArgs>),
     Devices(acquire::DevicesArgs),
     Batch(batch::BatchArgs),
@@ -193,6 +195,7 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Bin(args) => tags_cmd::bin(&args),
         Command::Batch(args) => batch::run(&args),
         Command::Convert(args) => tags_cmd::convert(&args),
+        Command::Lifetime(args) => lifetime::run(&args),
         Command::Acquire(args) => acquire::run(&args),
         Command::Devices(args) => acquire::devices(&args),
         Command::Denoise(args) => denoise::run(&args),

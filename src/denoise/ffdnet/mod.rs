@@ -15,10 +15,10 @@ pub mod weights;
 
 use ndarray::{Array2, ArrayView2};
 
-use crate::cnn::conv::{FeatureMap, conv3x3};
 use self::weights::FfdnetWeights;
-use crate::cnn::winograd::{WinogradWeights, conv3x3_winograd, transform_weights};
 use super::Denoiser;
+use crate::cnn::conv::{FeatureMap, conv3x3};
+use crate::cnn::winograd::{WinogradWeights, conv3x3_winograd, transform_weights};
 
 /// FFDNet with loaded weights.
 #[derive(Debug, Clone)]

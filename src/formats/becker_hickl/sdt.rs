@@ -82,6 +82,9 @@ pub struct SdtBlock {
     pub micro_unit_s: Result<f64, String>,
     /// The module that measured it (`mod_type`).
     pub module: String,
+    /// The sync rate the card measured (Hz; `StopInfo.max_sync_rate`),
+    /// when the file states a positive one.
+    pub sync_rate_hz: Option<f64>,
     /// Counts per curve point, row and column: `(adc_re, rows, columns)`.
     pub counts: BlockCounts,
 }
@@ -261,6 +264,7 @@ impl Fields<'_> {
 #[derive(Debug, Clone)]
 struct Measurement {
     module: String,
+    sync_rate_hz: Option<f64>,
     tac_r: f32,
     tac_g: i16,
     adc_re: usize,
@@ -287,8 +291,17 @@ impl Measurement {
             (d(0), d(1), d(2), d(3))
         };
         let module = f.bytes.get(117..133).map(c_text).unwrap_or_default();
+        // StopInfo (a MeasStopInfo at byte 211) holds the sync rates the
+        // card measured: max_sync_rate at its byte 36; older files end
+        // before it.
+        let sync_rate_hz = f
+            .bytes
+            .get(247..251)
+            .map(|b| f64::from(f32::from_le_bytes(b.try_into().expect("4 bytes"))))
+            .filter(|r| r.is_finite() && *r > 0.0);
         Ok(Self {
             module,
+            sync_rate_hz,
             tac_r: f.f32(64, "tac_r")?,
             tac_g: f.i16(68, "tac_g")?,
             adc_re,
@@ -717,6 +730,7 @@ impl SdtReader {
             rows,
             cols,
             unit,
+            sync_rate_hz: m.sync_rate_hz,
             module: m.module,
         }))
     }
@@ -811,6 +825,7 @@ impl SdtReader {
             zipped: b.zipped,
             micro_unit_s: b.unit,
             module: b.module,
+            sync_rate_hz: b.sync_rate_hz,
             counts,
         })
     }
@@ -832,6 +847,7 @@ struct BlockHead {
     cols: usize,
     unit: Result<f64, String>,
     module: String,
+    sync_rate_hz: Option<f64>,
 }
 
 /// Why a block's points could not be decoded.

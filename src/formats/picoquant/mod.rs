@@ -416,6 +416,8 @@ fn from_ptu(path: &Path, r: &mut impl Read) -> Result<FileInfo, TtrError> {
     // PicoQuant software stores the resolution from a 32-bit float
     // (64 ps arrives as 6.3999999744e-11 s): keep the 7 significant digits
     // a float carries, so bin widths and starts come out as round numbers.
+    // A resolution stored as a double (9.696969697e-11 s) is kept whole:
+    // rounded, the phase of a 130th bin would move by 4e-4 ps.
     let resolution_s = float32_digits(positive("MeasDesc_Resolution")?);
     let sync_rate = tags.float("TTResult_SyncRate").filter(|v| *v > 0.0);
     let macro_unit_s = if record_type.is_t3() {
@@ -508,8 +510,12 @@ fn from_ptu(path: &Path, r: &mut impl Read) -> Result<FileInfo, TtrError> {
     })
 }
 
-/// `v` rounded to 7 significant digits.
+/// `v` rounded to 7 significant digits when it is a 32-bit float's value
+/// (the digits the float carries), else `v`.
 fn float32_digits(v: f64) -> f64 {
+    if f64::from(v as f32) != v {
+        return v;
+    }
     format!("{v:.6e}").parse().unwrap_or(v)
 }
 

@@ -87,7 +87,12 @@ pub fn learned_inputs(data: &Data<'_>) -> Option<LearnedInputs> {
     for (c, it) in iterates.iter().enumerate() {
         fill(&mut features, c, it, 1.0 / scale);
     }
-    fill(&mut features, CHECKPOINTS.len(), &m, 1.0 / (rl.mass * scale));
+    fill(
+        &mut features,
+        CHECKPOINTS.len(),
+        &m,
+        1.0 / (rl.mass * scale),
+    );
     features
         .index_axis_mut(Axis(0), CHECKPOINTS.len() + 1)
         .fill(level_feature(photons_per_pixel));

@@ -98,8 +98,7 @@ impl Reconstructor for Learned<'_> {
             grid[(oy + r) * gw + ox + c] = v;
         }
         let grid = Array2::from_shape_vec((gh, gw), grid).expect("the model's grid");
-        let check =
-            ExpectedDeviance::shared().check(model, data.counts, data.bins, grid.view());
+        let check = ExpectedDeviance::shared().check(model, data.counts, data.bins, grid.view());
         let mut row = run.row(last);
         row.deviance = Some(check.deviance);
         row.expected_deviance = Some(check.expected);

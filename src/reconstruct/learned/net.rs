@@ -122,7 +122,11 @@ impl LearnedNet {
         let [c0, c1, c2] = <[usize; 3]>::try_from(channels.as_slice())
             .ok()
             .filter(|c| c.iter().all(|&n| (1..=512).contains(&n)))
-            .ok_or_else(|| fail(format!("metadata field `channels` is {channels:?}: three counts from 1 to 512")))?;
+            .ok_or_else(|| {
+                fail(format!(
+                    "metadata field `channels` is {channels:?}: three counts from 1 to 512"
+                ))
+            })?;
         let ranges: TrainedRanges = serde_json::from_str(&field("ranges")?)
             .map_err(|e| fail(format!("metadata field `ranges`: {e}")))?;
         let tensors = SafeTensors::deserialize(bytes)

@@ -1,0 +1,475 @@
+//! Decay maps of a recorded file (PTU, `.spc`, `.sdt`, tag file), written
+//! as a lab opens them: what `scatterscope lifetime` runs.
+//!
+//! Each stack the file gives (one per kept frame, one per `.sdt` block) is
+//! binned ([`bin_file_each`], one block in memory at a time), mapped
+//! ([`decay_maps`]) and written before the next is read:
+//! - `maps.ome.tif`: float32, one named channel per map (the name says the
+//!   quantity and unit), the pixel size when the file states it;
+//! - `maps.npy` (float32, channels x rows x columns) with `maps.json`
+//!   (the channels' names, the notes, onset, frequency, the stack's
+//!   metadata);
+//! - `lifetime.png` (the lifetime coloured, weighted by intensity, with its
+//!   colour bar) and `phasor.png` (the first harmonic's phasor histogram on
+//!   the universal semicircle), unless left out.
+//!
+//! Several stacks are written `maps_f000.*`, `lifetime_f000.png`, ...
+
+use std::path::{Path, PathBuf};
+
+use ndarray::{Array2, Array3, Axis};
+use serde::Serialize;
+
+use super::{DecayMaps, DecayOptions, Onset, Reference, decay_maps, decay_phasors};
+use crate::files::input::same_file;
+use crate::stack::{StackError, StackMeta, Unstated};
+use crate::tags::bin_file::{
+    BinSpec, BinnedFile, RecordedFileError, StackCounts, bin_file_each, spec_error,
+};
+
+/// A file whose decay calibrates the phasors.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ReferenceFile {
+    /// A dye (or any sample) of known single-exponential lifetime (ps).
+    Dye {
+        /// The recording.
+        path: PathBuf,
+        /// Its lifetime (ps).
+        lifetime_ps: f64,
+    },
+    /// A measured instrument response (lifetime 0): it also gives the
+    /// onset (its barycentre), the fast lifetime's time zero.
+    Irf(PathBuf),
+}
+
+impl ReferenceFile {
+    fn path(&self) -> &Path {
+        match self {
+            ReferenceFile::Dye { path, .. } | ReferenceFile::Irf(path) => path,
+        }
+    }
+}
+
+/// What `lifetime` is asked beyond the binning.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LifetimeRequest {
+    /// Harmonics, mask threshold and onset (an IRF reference sets the
+    /// onset to its barycentre).
+    pub options: DecayOptions,
+    /// The laser frequency (Hz), when the file does not state it or is to
+    /// be overridden.
+    pub frequency_hz: Option<f64>,
+    /// The reference the phasors are calibrated against.
+    pub reference: Option<ReferenceFile>,
+    /// The folder written.
+    pub out: PathBuf,
+    /// Whether to draw `lifetime.png` and `phasor.png`.
+    pub figures: bool,
+}
+
+/// What was written of one stack.
+#[derive(Debug, Clone)]
+pub struct MapsWritten {
+    /// The files, the OME-TIFF first.
+    pub files: Vec<PathBuf>,
+    /// Pixels, masked pixels, photons, and the median lifetime shown.
+    pub pixels: usize,
+    /// See `pixels`.
+    pub masked: usize,
+    /// See `pixels`.
+    pub photons: f64,
+    /// The median over unmasked pixels of the lifetime the figure shows
+    /// (ps), and its name.
+    pub median_lifetime: (f64, &'static str),
+    /// What was assumed and left out.
+    pub notes: Vec<String>,
+}
+
+/// The channels of a map file, in order, each with its name (quantity and
+/// unit) and values.
+fn channels(maps: &DecayMaps) -> Vec<(String, Array2<f64>)> {
+    let mut c = vec![
+        ("photons".to_string(), maps.intensity.clone()),
+        (
+            "mean arrival time after onset (ps)".into(),
+            maps.mean_time_ps.clone(),
+        ),
+        (
+            "arrival time variance after onset (ps^2)".into(),
+            maps.variance_ps2.clone(),
+        ),
+        ("fast lifetime (ps)".into(), maps.fast_lifetime_ps.clone()),
+    ];
+    for p in &maps.phasors {
+        let h = p.harmonic;
+        c.push((format!("g harmonic {h}"), p.g.clone()));
+        c.push((format!("s harmonic {h}"), p.s.clone()));
+        if let Some(k) = &p.calibrated {
+            c.push((format!("g calibrated harmonic {h}"), k.g.clone()));
+            c.push((format!("s calibrated harmonic {h}"), k.s.clone()));
+            c.push((
+                format!("phase lifetime harmonic {h} (ps)"),
+                k.tau_phase_ps.clone(),
+            ));
+            c.push((
+                format!("modulation lifetime harmonic {h} (ps)"),
+                k.tau_modulation_ps.clone(),
+            ));
+        }
+    }
+    c.push((
+        "mask (1: fewer photons than the threshold)".into(),
+        maps.mask.mapv(|m| f64::from(u8::from(m))),
+    ));
+    c
+}
+
+/// The `maps.json` sidecar.
+#[derive(Serialize)]
+struct Sidecar<'a> {
+    channels: Vec<&'a str>,
+    onset_ps: f64,
+    laser_frequency_hz: f64,
+    harmonics: &'a [u32],
+    min_photons: f64,
+    notes: &'a [String],
+    stack: &'a StackMeta,
+}
+
+/// A reference's decay: photons per bin, the bins' centres (ps), and the
+/// laser frequency (Hz) when the recording states it.
+type Decay = (Vec<f64>, Vec<f64>, Option<f64>);
+
+/// The summed decay of every stack of `reference`.
+fn reference_decay(reference: &Path, spec: &BinSpec) -> Result<Decay, RecordedFileError> {
+    let mut decay: Option<Decay> = None;
+    bin_file_each(reference, spec, |s| {
+        if s.meta.is_unstated(Unstated::TimeUnit) {
+            return Err(spec_error(
+                reference,
+                "its time unit is unknown (bins are micro-time channels): a reference needs times in ps".into(),
+            ));
+        }
+        let summed: Vec<f64> = match s.counts {
+            crate::stack::CountsView::U16(c) => c
+                .axis_iter(Axis(0))
+                .map(|p| p.iter().map(|&v| f64::from(v)).sum())
+                .collect(),
+            crate::stack::CountsView::U32(c) => c
+                .axis_iter(Axis(0))
+                .map(|p| p.iter().map(|&v| f64::from(v)).sum())
+                .collect(),
+        };
+        let centres: Vec<f64> = s
+            .meta
+            .bin_starts_ps
+            .iter()
+            .map(|t| t + s.meta.bin_width_ps / 2.0)
+            .collect();
+        match &mut decay {
+            None => decay = Some((summed, centres, s.meta.laser_frequency_hz)),
+            Some((d, c, _)) if *c == centres => {
+                d.iter_mut().zip(&summed).for_each(|(a, b)| *a += b);
+            }
+            Some(_) => {
+                return Err(spec_error(
+                    reference,
+                    "its stacks have different time bins: give a reference of one decay".into(),
+                ));
+            }
+        }
+        Ok(())
+    })?;
+    let (d, c, f) = decay.ok_or_else(|| spec_error(reference, "it gives no stack".into()))?;
+    if d.iter().sum::<f64>() <= 0.0 {
+        return Err(spec_error(
+            reference,
+            "it holds no photon in the time window: no decay to calibrate against".into(),
+        ));
+    }
+    Ok((d, c, f))
+}
+
+/// The laser frequency of a stack: the request's, else the recording's.
+fn frequency_of(
+    path: &Path,
+    meta: &StackMeta,
+    asked: Option<f64>,
+) -> Result<f64, RecordedFileError> {
+    match (asked, meta.laser_frequency_hz) {
+        (Some(f), _) if f.is_finite() && f > 0.0 => Ok(f),
+        (Some(f), _) => Err(spec_error(
+            path,
+            format!("laser frequency {f} Hz: give a positive frequency"),
+        )),
+        (None, Some(f)) if f.is_finite() && f > 0.0 => Ok(f),
+        (None, stated) => Err(spec_error(
+            path,
+            format!(
+                "the recording states no laser frequency (sync rate{}): give it with --frequency (Hz), or the phasors have no fundamental",
+                stated.map_or(String::new(), |f| format!(" {f} Hz"))
+            ),
+        )),
+    }
+}
+
+/// Maps every stack of the recorded file `path` as `request` says and
+/// writes them: what `scatterscope lifetime` runs. The result's stacks are
+/// what was written of each.
+pub fn lifetime_file(
+    path: &Path,
+    spec: &BinSpec,
+    request: &LifetimeRequest,
+) -> Result<BinnedFile<MapsWritten>, RecordedFileError> {
+    let mut options = request.options.clone();
+    let reference = match &request.reference {
+        None => None,
+        Some(r) => {
+            if same_file(r.path(), path) {
+                return Err(spec_error(
+                    r.path(),
+                    "is the sample itself: a reference is another recording".into(),
+                ));
+            }
+            Some((r, reference_decay(r.path(), spec)?))
+        }
+    };
+    std::fs::create_dir_all(&request.out)
+        .map_err(|e| RecordedFileError::Output(StackError::io(&request.out, e)))?;
+    bin_file_each(path, spec, |s| {
+        let meta = s.meta;
+        if meta.is_unstated(Unstated::TimeUnit) {
+            return Err(spec_error(
+                path,
+                "its time unit is unknown (the bins are micro-time channels): the maps need times in ps (for a .spc file give --micro-unit)".into(),
+            ));
+        }
+        let frequency = frequency_of(path, meta, request.frequency_hz)?;
+        if let Some((r, (decay, centres, f_ref))) = &reference {
+            if let Some(f) = f_ref.filter(|f| (f - frequency).abs() > 1e-3 * frequency) {
+                return Err(spec_error(
+                    r.path(),
+                    format!(
+                        "its laser frequency {:.6} MHz is not the sample's {:.6} MHz: a reference is measured at the sample's",
+                        f * 1e-6,
+                        frequency * 1e-6
+                    ),
+                ));
+            }
+            let (lifetime_ps, what) = match r {
+                ReferenceFile::Dye { lifetime_ps, .. } => (*lifetime_ps, "reference"),
+                ReferenceFile::Irf(_) => {
+                    let n: f64 = decay.iter().sum();
+                    let bary = decay.iter().zip(centres).map(|(d, t)| d * t).sum::<f64>() / n;
+                    options.onset = Onset::IrfBarycentre(bary);
+                    (0.0, "IRF")
+                }
+            };
+            options.reference = Some(Reference {
+                phasors: decay_phasors(decay, centres, frequency, &options.harmonics),
+                lifetime_ps,
+                what: format!("the {what} {}", r.path().display()),
+            });
+        }
+        let maps = decay_maps(
+            s.counts,
+            &meta.bin_starts_ps,
+            meta.bin_width_ps,
+            frequency,
+            &options,
+        )
+        .map_err(|e| spec_error(path, e.to_string()))?;
+        write_maps(&maps, &s, &options, path, request).map_err(RecordedFileError::Output)
+    })
+}
+
+/// Writes `maps` of stack `s` into the request's folder.
+fn write_maps(
+    maps: &DecayMaps,
+    s: &StackCounts<'_>,
+    options: &DecayOptions,
+    input: &Path,
+    request: &LifetimeRequest,
+) -> Result<MapsWritten, StackError> {
+    let tail = if s.of > 1 {
+        format!("_f{:03}", s.index)
+    } else {
+        String::new()
+    };
+    let dir = &request.out;
+    let tif = dir.join(format!("maps{tail}.ome.tif"));
+    let npy = dir.join(format!("maps{tail}.npy"));
+    let json = crate::formats::npy::sidecar_path(&npy);
+    let lifetime_png = dir.join(format!("lifetime{tail}.png"));
+    let phasor_png = dir.join(format!("phasor{tail}.png"));
+    let mut files = vec![tif.clone(), npy.clone(), json.clone()];
+    if request.figures {
+        files.extend([lifetime_png.clone(), phasor_png.clone()]);
+    }
+    let reads = [
+        input.to_owned(),
+        input.with_extension("set"),
+        request
+            .reference
+            .as_ref()
+            .map_or_else(PathBuf::new, |r| r.path().to_owned()),
+    ];
+    if let Some(f) = files.iter().find(|f| reads.iter().any(|r| same_file(f, r))) {
+        return Err(StackError::format(
+            f,
+            "is a file the command reads: writing it would destroy it; choose another --out",
+        ));
+    }
+    let chans = channels(maps);
+    let (h, w) = maps.intensity.dim();
+    let mut stacked = Array3::<f32>::zeros((chans.len(), h, w));
+    for (mut plane, (_, m)) in stacked.axis_iter_mut(Axis(0)).zip(&chans) {
+        plane.assign(&m.mapv(|v| v as f32));
+    }
+    let pitch = (!s.meta.is_unstated(Unstated::PixelPitch)).then_some(s.meta.pixel_pitch_cm);
+    let named: Vec<(String, ndarray::ArrayView2<f32>)> = chans
+        .iter()
+        .zip(stacked.axis_iter(Axis(0)))
+        .map(|((n, _), p)| (n.clone(), p))
+        .collect();
+    crate::formats::ome_tiff::write_named_images(&named, pitch, &tif)?;
+    {
+        use ndarray_npy::WriteNpyExt;
+        let file = crate::files::AtomicFile::create(&npy).map_err(|e| StackError::io(&npy, e))?;
+        let mut out = std::io::BufWriter::new(file);
+        stacked
+            .write_npy(&mut out)
+            .map_err(|e| StackError::format(&npy, format!("writing .npy: {e}")))?;
+        crate::files::AtomicFile::commit_buffered(out).map_err(|e| StackError::io(&npy, e))?;
+    }
+    let sidecar = Sidecar {
+        channels: chans.iter().map(|(n, _)| n.as_str()).collect(),
+        onset_ps: maps.onset_ps,
+        laser_frequency_hz: maps.frequency_hz,
+        harmonics: &options.harmonics,
+        min_photons: options.min_photons,
+        notes: &maps.notes,
+        stack: s.meta,
+    };
+    let text = serde_json::to_string_pretty(&sidecar).expect("the sidecar serialises");
+    crate::files::write_atomic(&json, text).map_err(|e| StackError::io(&json, e))?;
+    let shown = shown_lifetime(maps);
+    if request.figures {
+        figures(maps, &shown, &lifetime_png, &phasor_png)?;
+    }
+    let mut unmasked: Vec<f64> = shown
+        .1
+        .iter()
+        .zip(&maps.mask)
+        .filter(|(v, m)| !**m && v.is_finite())
+        .map(|(v, _)| *v)
+        .collect();
+    unmasked.sort_by(f64::total_cmp);
+    let median = unmasked
+        .get(unmasked.len() / 2)
+        .copied()
+        .unwrap_or(f64::NAN);
+    let mut notes = maps.notes.clone();
+    if !request.figures {
+        notes.push("figures left out (asked)".into());
+    }
+    Ok(MapsWritten {
+        files,
+        pixels: h * w,
+        masked: maps.mask.iter().filter(|&&m| m).count(),
+        photons: maps.intensity.sum(),
+        median_lifetime: (median, shown.0),
+        notes,
+    })
+}
+
+/// The lifetime the figure shows: the first harmonic's calibrated phase
+/// lifetime with a reference, else the fast lifetime.
+fn shown_lifetime(maps: &DecayMaps) -> (&'static str, &Array2<f64>) {
+    match maps.phasors.first().and_then(|p| p.calibrated.as_ref()) {
+        Some(c) => ("phase lifetime", &c.tau_phase_ps),
+        None => ("fast lifetime", &maps.fast_lifetime_ps),
+    }
+}
+
+/// Draws the lifetime image and the first harmonic's phasor plot.
+fn figures(
+    maps: &DecayMaps,
+    (name, lifetime): &(&'static str, &Array2<f64>),
+    lifetime_png: &Path,
+    phasor_png: &Path,
+) -> Result<(), StackError> {
+    let quantile = |mut v: Vec<f64>, q: f64| -> Option<f64> {
+        v.sort_by(f64::total_cmp);
+        (!v.is_empty()).then(|| v[((v.len() - 1) as f64 * q).round() as usize])
+    };
+    let kept: Vec<f64> = lifetime
+        .iter()
+        .zip(&maps.mask)
+        .filter(|(v, m)| !**m && v.is_finite())
+        .map(|(v, _)| *v)
+        .collect();
+    // The colours span the 2nd to 98th percentile of the unmasked pixels;
+    // the brightness, intensity up to its 99th percentile.
+    let range = match (quantile(kept.clone(), 0.02), quantile(kept, 0.98)) {
+        (Some(a), Some(b)) if b > a => (a, b),
+        (Some(a), _) => (a - 1.0, a + 1.0),
+        _ => (0.0, 1.0),
+    };
+    let top = quantile(maps.intensity.iter().copied().collect(), 0.99)
+        .filter(|t| *t > 0.0)
+        .unwrap_or(1.0);
+    let brightness = maps.intensity.mapv(|n| (n / top).min(1.0));
+    let shown = ndarray::Zip::from(*lifetime)
+        .and(&maps.mask)
+        .map_collect(|&v, &m| if m { f64::NAN } else { v });
+    let title = format!(
+        "{name}, weighted by photons (masked black; {:.0} MHz)",
+        maps.frequency_hz * 1e-6
+    );
+    let bar = format!("{name} (ps)");
+    crate::plot::coloured_map(
+        lifetime_png,
+        &crate::plot::ColouredMap {
+            values: shown.view(),
+            brightness: brightness.view(),
+            range,
+            title: &title,
+            bar_label: &bar,
+        },
+    )
+    .map_err(|e| StackError::format(lifetime_png, format!("drawing: {e}")))?;
+    let first = maps.phasors.first().expect("at least one harmonic");
+    let (g, s, calibrated) = match &first.calibrated {
+        Some(c) => (&c.g, &c.s, true),
+        None => (&first.g, &first.s, false),
+    };
+    let points: Vec<(f64, f64)> = g
+        .iter()
+        .zip(s)
+        .zip(&maps.mask)
+        .filter(|(_, m)| !**m)
+        .map(|((&g, &s), _)| (g, s))
+        .collect();
+    let omega = 2.0 * std::f64::consts::PI * f64::from(first.harmonic) * maps.frequency_hz * 1e-12;
+    let marks = [500.0, 1000.0, 2000.0, 4000.0, 8000.0];
+    let title = format!(
+        "phasors, harmonic {} of {:.3} MHz ({})",
+        first.harmonic,
+        maps.frequency_hz * 1e-6,
+        if calibrated {
+            "calibrated"
+        } else {
+            "not calibrated: the semicircle's marks are left out"
+        }
+    );
+    crate::plot::phasor_histogram(
+        phasor_png,
+        &crate::plot::PhasorHistogram {
+            points: &points,
+            title: &title,
+            marks: calibrated.then_some((&marks[..], omega)),
+        },
+    )
+    .map_err(|e| StackError::format(phasor_png, format!("drawing: {e}")))
+}
