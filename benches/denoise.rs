@@ -13,10 +13,10 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use ndarray::Array2;
-use scatterscope::denoise::Denoiser;
 use scatterscope::cnn::conv::{FeatureMap, conv3x3};
-use scatterscope::denoise::ffdnet::weights::{Architecture, FfdnetWeights, to_safetensors};
 use scatterscope::cnn::winograd::{conv3x3_winograd, transform_weights};
+use scatterscope::denoise::Denoiser;
+use scatterscope::denoise::ffdnet::weights::{Architecture, FfdnetWeights, to_safetensors};
 use scatterscope::denoise::ffdnet::{Ffdnet, source};
 use scatterscope::denoise::tv::TotalVariation;
 

@@ -3,7 +3,7 @@ learned`) on this machine's CPU, from stacks the project's own forward
 model simulates.
 
     python train_learned.py --out ../weights/learned-unet2.safetensors \\
-        [--cases 3600] [--steps 6000] [--threads 2] [--tuning IMAGES_DIR]
+        [--cases 3600] [--steps 12000] [--threads 2] [--tuning IMAGES_DIR]
 
 Data (nothing downloaded; no benchmark image is ever read but the tuning
 images of `--tuning`, which are only scored):
@@ -343,7 +343,7 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--cases", type=int, default=3600)
     ap.add_argument("--validation", type=int, default=96)
-    ap.add_argument("--steps", type=int, default=6000)
+    ap.add_argument("--steps", type=int, default=12000)
     ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--lr", type=float, default=5e-4)
     ap.add_argument("--channels", default="16,32,48")

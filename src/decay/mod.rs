@@ -250,7 +250,7 @@ pub fn decay_maps_f32(
     maps_of(values, starts_ps, width_ps, frequency_hz, options)
 }
 
-fn maps_of<T: Copy + Into<f64>>(
+fn maps_of<T: Copy + Into<f64> + Sync>(
     counts: ArrayView3<'_, T>,
     starts_ps: &[f64],
     width_ps: f64,
@@ -337,51 +337,29 @@ fn maps_of<T: Copy + Into<f64>>(
                 .collect()
         })
         .collect();
+    let sums = accumulate(counts, &centres, onset, first, &trig);
     let nan = || Array2::from_elem((h, w), f64::NAN);
-    let mut intensity = Array2::zeros((h, w));
+    let intensity = Array2::from_shape_vec((h, w), sums.plane(Sum::Photons).to_vec())
+        .expect("one sum per pixel");
+    let mask = intensity.mapv(|n| n < options.min_photons);
     let (mut mean, mut var, mut fast) = (nan(), nan(), nan());
     let mut gs: Vec<(Array2<f64>, Array2<f64>)> = omegas.iter().map(|_| (nan(), nan())).collect();
-    let mut mask = Array2::from_elem((h, w), true);
-    let mut decay = vec![0.0; bins];
-    for r in 0..h {
-        for c in 0..w {
-            decay
-                .iter_mut()
-                .zip(counts.slice(ndarray::s![.., r, c]))
-                .for_each(|(d, &v)| *d = v.into());
-            let n: f64 = decay.iter().sum();
-            intensity[[r, c]] = n;
-            if n < options.min_photons {
-                continue;
-            }
-            mask[[r, c]] = false;
-            let bary = decay.iter().zip(&centres).map(|(d, t)| d * t).sum::<f64>() / n;
-            fast[[r, c]] = bary - zero;
-            let after: f64 = decay[first..].iter().sum();
-            if after > 0.0 {
-                let m = decay[first..]
-                    .iter()
-                    .zip(&centres[first..])
-                    .map(|(d, t)| d * (t - onset))
-                    .sum::<f64>()
-                    / after;
-                let v = decay[first..]
-                    .iter()
-                    .zip(&centres[first..])
-                    .map(|(d, t)| d * (t - onset - m).powi(2))
-                    .sum::<f64>()
-                    / after;
-                mean[[r, c]] = m;
-                var[[r, c]] = v;
-            }
-            for ((g, s), tr) in gs.iter_mut().zip(&trig) {
-                let (a, b) = decay
-                    .iter()
-                    .zip(tr)
-                    .fold((0.0, 0.0), |(a, b), (d, (co, si))| (a + d * co, b + d * si));
-                g[[r, c]] = a / n;
-                s[[r, c]] = b / n;
-            }
+    for (p, (&m, &n)) in mask.iter().zip(&intensity).enumerate() {
+        if m {
+            continue;
+        }
+        let (r, c) = (p / w, p % w);
+        fast[[r, c]] = sums.at(Sum::Timed, p) / n - zero;
+        let after = sums.at(Sum::After, p);
+        if after > 0.0 {
+            let m1 = sums.at(Sum::AfterDelay, p) / after;
+            mean[[r, c]] = m1;
+            // Non-negative however the sums round.
+            var[[r, c]] = (sums.at(Sum::AfterDelaySquared, p) / after - m1 * m1).max(0.0);
+        }
+        for (i, (g, s)) in gs.iter_mut().enumerate() {
+            g[[r, c]] = sums.at(Sum::Cos(i), p) / n;
+            s[[r, c]] = sums.at(Sum::Sin(i), p) / n;
         }
     }
     let masked = mask.iter().filter(|&&m| m).count();
@@ -436,6 +414,126 @@ fn maps_of<T: Copy + Into<f64>>(
         frequency_hz,
         notes,
     })
+}
+
+/// One per-pixel sum of [`accumulate`].
+#[derive(Debug, Clone, Copy)]
+enum Sum {
+    /// `sum n_k`.
+    Photons,
+    /// `sum n_k t_k`.
+    Timed,
+    /// `sum n_k` over the bins at or after the onset.
+    After,
+    /// `sum n_k (t_k - t0)` over them.
+    AfterDelay,
+    /// `sum n_k (t_k - t0)^2` over them.
+    AfterDelaySquared,
+    /// `sum n_k cos(w_h t_k)` for harmonic index `h`.
+    Cos(usize),
+    /// `sum n_k sin(w_h t_k)`.
+    Sin(usize),
+}
+
+/// Every pixel's sums, one plane of `pixels` values per [`Sum`].
+struct Sums {
+    values: Vec<f64>,
+    pixels: usize,
+}
+
+impl Sum {
+    fn index(self) -> usize {
+        match self {
+            Sum::Photons => 0,
+            Sum::Timed => 1,
+            Sum::After => 2,
+            Sum::AfterDelay => 3,
+            Sum::AfterDelaySquared => 4,
+            Sum::Cos(h) => 5 + 2 * h,
+            Sum::Sin(h) => 6 + 2 * h,
+        }
+    }
+}
+
+impl Sums {
+    fn plane(&self, s: Sum) -> &[f64] {
+        &self.values[s.index() * self.pixels..(s.index() + 1) * self.pixels]
+    }
+
+    fn at(&self, s: Sum, pixel: usize) -> f64 {
+        self.values[s.index() * self.pixels + pixel]
+    }
+}
+
+/// Rows per band of [`accumulate`]: the band's sums (11 planes of 8
+/// rows of 512 pixels, 360 kB) stay in the core's cache while every bin
+/// passes over them.
+const BAND_ROWS: usize = 8;
+
+/// Every pixel's [`Sum`]s over the bins of `counts` (centres `centres`,
+/// onset `onset`, the first bin at or after it `first`; `trig` the cosine
+/// and sine of each harmonic at each centre). Bins outer and pixels
+/// inner, band by band of rows on every core: a pixel's decay is strided
+/// in a bins-first stack, so walking it pixel by pixel read a cache line
+/// per count (measured: 2.5 s for the shared 2 x 512 x 512 x 256 `.sdt`
+/// image, against phasorpy's 2.4 s whole process).
+fn accumulate<T: Copy + Into<f64> + Sync>(
+    counts: ArrayView3<'_, T>,
+    centres: &[f64],
+    onset: f64,
+    first: usize,
+    trig: &[Vec<(f64, f64)>],
+) -> Sums {
+    use rayon::prelude::*;
+    let (bins, h, w) = counts.dim();
+    let hw = h * w;
+    let planes = 5 + 2 * trig.len();
+    let standard = counts.as_standard_layout();
+    let flat = standard
+        .as_slice()
+        .expect("a standard-layout array is one slice");
+    let bands: Vec<Vec<f64>> = (0..h.div_ceil(BAND_ROWS))
+        .into_par_iter()
+        .map(|b| {
+            let (p0, p1) = (b * BAND_ROWS * w, ((b + 1) * BAND_ROWS).min(h) * w);
+            let n = p1 - p0;
+            let mut acc = vec![0.0; planes * n];
+            for k in 0..bins {
+                let t = centres[k];
+                let d = t - onset;
+                let after = k >= first;
+                for (i, &v) in flat[k * hw + p0..k * hw + p1].iter().enumerate() {
+                    let v: f64 = v.into();
+                    // FLIM images are mostly empty bins.
+                    if v == 0.0 {
+                        continue;
+                    }
+                    acc[i] += v;
+                    acc[n + i] += v * t;
+                    if after {
+                        acc[2 * n + i] += v;
+                        acc[3 * n + i] += v * d;
+                        acc[4 * n + i] += v * d * d;
+                    }
+                    for (j, tr) in trig.iter().enumerate() {
+                        let (co, si) = tr[k];
+                        acc[(5 + 2 * j) * n + i] += v * co;
+                        acc[(6 + 2 * j) * n + i] += v * si;
+                    }
+                }
+            }
+            acc
+        })
+        .collect();
+    let mut values = vec![0.0; planes * hw];
+    for (b, acc) in bands.iter().enumerate() {
+        let p0 = b * BAND_ROWS * w;
+        let n = acc.len() / planes;
+        for q in 0..planes {
+            values[q * hw + p0..q * hw + p0 + n].copy_from_slice(&acc[q * n..(q + 1) * n]);
+        }
+    }
+    Sums { values, pixels: hw }
 }
 
 /// `g`, `s` calibrated with the reference phasor `(gr, sr)` of lifetime

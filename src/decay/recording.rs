@@ -87,39 +87,43 @@ pub struct MapsWritten {
 
 /// The channels of a map file, in order, each with its name (quantity and
 /// unit) and values.
-fn channels(maps: &DecayMaps) -> Vec<(String, Array2<f64>)> {
+fn channels(maps: &DecayMaps) -> Vec<(String, std::borrow::Cow<'_, Array2<f64>>)> {
+    use std::borrow::Cow::{Borrowed, Owned};
     let mut c = vec![
-        ("photons".to_string(), maps.intensity.clone()),
+        ("photons".to_string(), Borrowed(&maps.intensity)),
         (
             "mean arrival time after onset (ps)".into(),
-            maps.mean_time_ps.clone(),
+            Borrowed(&maps.mean_time_ps),
         ),
         (
             "arrival time variance after onset (ps^2)".into(),
-            maps.variance_ps2.clone(),
+            Borrowed(&maps.variance_ps2),
         ),
-        ("fast lifetime (ps)".into(), maps.fast_lifetime_ps.clone()),
+        (
+            "fast lifetime (ps)".into(),
+            Borrowed(&maps.fast_lifetime_ps),
+        ),
     ];
     for p in &maps.phasors {
         let h = p.harmonic;
-        c.push((format!("g harmonic {h}"), p.g.clone()));
-        c.push((format!("s harmonic {h}"), p.s.clone()));
+        c.push((format!("g harmonic {h}"), Borrowed(&p.g)));
+        c.push((format!("s harmonic {h}"), Borrowed(&p.s)));
         if let Some(k) = &p.calibrated {
-            c.push((format!("g calibrated harmonic {h}"), k.g.clone()));
-            c.push((format!("s calibrated harmonic {h}"), k.s.clone()));
+            c.push((format!("g calibrated harmonic {h}"), Borrowed(&k.g)));
+            c.push((format!("s calibrated harmonic {h}"), Borrowed(&k.s)));
             c.push((
                 format!("phase lifetime harmonic {h} (ps)"),
-                k.tau_phase_ps.clone(),
+                Borrowed(&k.tau_phase_ps),
             ));
             c.push((
                 format!("modulation lifetime harmonic {h} (ps)"),
-                k.tau_modulation_ps.clone(),
+                Borrowed(&k.tau_modulation_ps),
             ));
         }
     }
     c.push((
         "mask (1: fewer photons than the threshold)".into(),
-        maps.mask.mapv(|m| f64::from(u8::from(m))),
+        Owned(maps.mask.mapv(|m| f64::from(u8::from(m)))),
     ));
     c
 }
@@ -324,7 +328,7 @@ fn write_maps(
     let (h, w) = maps.intensity.dim();
     let mut stacked = Array3::<f32>::zeros((chans.len(), h, w));
     for (mut plane, (_, m)) in stacked.axis_iter_mut(Axis(0)).zip(&chans) {
-        plane.assign(&m.mapv(|v| v as f32));
+        plane.zip_mut_with(m.as_ref(), |p, &v| *p = v as f32);
     }
     let pitch = (!s.meta.is_unstated(Unstated::PixelPitch)).then_some(s.meta.pixel_pitch_cm);
     let named: Vec<(String, ndarray::ArrayView2<f32>)> = chans

@@ -1,0 +1,98 @@
+#!/usr/bin/env python3
+"""`scatterscope lifetime` against the independent readers and PhasorPy,
+whole process against whole process.
+
+For each FLIM image in ../shared/data/flim-samples (the PicoHarp PTU and
+the SPC-150 `.sdt`), runs, alternating:
+- `scatterscope lifetime FILE --no-figures --min-photons 1` (maps as
+  OME-TIFF and .npy with its sidecar), and the same with the figures;
+- a Python process that decodes FILE with ptufile (`decode_image`) or
+  sdtfile, computes PhasorPy's `phasor_from_signal` at harmonics 1 and 2
+  with the bins' phases, and saves the mean, g and s with numpy.save.
+
+Each process is timed from start to exit, its peak memory read from
+`/usr/bin/time -v`; prints the median of RUNS runs of each. Equality of
+the maps is checked by tests/lifetime.rs; this script times only.
+
+Usage: PYTHONPATH=target/pydeps python3 scripts/compare_lifetime_whole.py [--runs N]
+"""
+
+import argparse
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+SHARED = os.path.join(ROOT, "..", "shared", "data", "flim-samples")
+FILES = [
+    ("ptu", os.path.join(SHARED, "picoquant", "hazelnut_flim_z1.ptu")),
+    ("sdt", os.path.join(SHARED, "becker-hickl", "SDT_c01.sdt")),
+]
+
+PYTHON = """
+import sys, numpy
+from phasorpy.phasor import phasor_from_signal
+kind, path, out = sys.argv[1:4]
+if kind == "ptu":
+    import ptufile
+    with ptufile.PtuFile(path) as f:
+        stacks = [f.decode_image(dtype="uint32").sum(axis=0)[:, :, 0, :]]
+        res = f.tags["MeasDesc_Resolution"]
+        freq = f.tags["TTResult_SyncRate"]
+    times = numpy.arange(stacks[0].shape[-1]) * res
+else:
+    import sdtfile
+    f = sdtfile.SdtFile(path)
+    stacks = f.data
+    times = f.times[0]
+    freq = float(numpy.ravel(f.measure_info[0]["StopInfo"]["max_sync_rate"])[0])
+centres = times + (times[1] - times[0]) / 2
+for i, s in enumerate(stacks):
+    maps = []
+    for h in (1, 2):
+        mean, g, s_ = phasor_from_signal(s, axis=-1, sample_phase=2 * numpy.pi * h * freq * centres)
+        maps += [g, s_]
+    numpy.save(f"{out}/maps_{i}.npy", numpy.stack([mean] + maps).astype(numpy.float32))
+"""
+
+
+def timed(cmd, env=None):
+    """(wall seconds, peak resident MB) of `cmd` under /usr/bin/time -v."""
+    t = time.perf_counter()
+    r = subprocess.run(["/usr/bin/time", "-v"] + cmd, capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t
+    if r.returncode != 0:
+        sys.exit(f"{cmd} failed:\n{r.stdout}\n{r.stderr}")
+    peak = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", r.stderr).group(1))
+    return wall, peak / 1024
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--program", default=os.path.join(ROOT, "target", "release", "scatterscope"))
+    args = ap.parse_args()
+    for kind, path in FILES:
+        results = {"ours (maps)": [], "ours (maps and figures)": [], "ptufile/sdtfile + PhasorPy + numpy.save": []}
+        with tempfile.TemporaryDirectory() as tmp:
+            for _ in range(args.runs):
+                results["ours (maps)"].append(
+                    timed([args.program, "lifetime", path, "--no-figures", "--min-photons", "1", "--out", f"{tmp}/a"])
+                )
+                results["ours (maps and figures)"].append(
+                    timed([args.program, "lifetime", path, "--min-photons", "1", "--out", f"{tmp}/b"])
+                )
+                results["ptufile/sdtfile + PhasorPy + numpy.save"].append(
+                    timed([sys.executable, "-c", PYTHON, kind, path, tmp], env=dict(os.environ))
+                )
+        for name, runs in results.items():
+            wall = statistics.median(w for w, _ in runs)
+            peak = statistics.median(p for _, p in runs)
+            print(f"{os.path.basename(path)}: {name}: median {wall:.3f} s, peak {peak:.0f} MB ({args.runs} runs)")
+
+
+main()
