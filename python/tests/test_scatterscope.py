@@ -413,3 +413,34 @@ def test_counts_above_2_to_the_24_round_trip_exactly(tmp_path, ext):
     assert back.dtype == np.uint32
     np.testing.assert_array_equal(back, counts)
     assert int(back.astype(np.uint64).sum()) == int(counts.astype(np.uint64).sum())
+
+
+def test_decay_maps_equal_the_command_lifetime(tmp_path):
+    tags = tmp_path / "run.sstags"
+    cli("acquire", "--device", "mock", "--size", "16", "--fov", "3cm", "--tags", str(tags), "--out", str(tmp_path / "acq"))
+    cli("lifetime", str(tags), "--min-photons", "5", "--no-figures", "--out", str(tmp_path / "lt"))
+    binned = scatterscope.bin_file(tags, dtype="uint32")
+    maps = scatterscope.decay_maps(binned["stacks"][0], binned["meta"][0], min_photons=5)
+    side = json.loads((tmp_path / "lt" / "maps.json").read_text())
+    ours = np.load(tmp_path / "lt" / "maps.npy")
+    by_name = dict(zip(side["channels"], ours))
+    assert maps["frequency_hz"] == side["laser_frequency_hz"]
+    assert maps["onset_ps"] == side["onset_ps"]
+    np.testing.assert_array_equal(by_name["photons"], maps["photons"].astype(np.float32))
+    np.testing.assert_array_equal(by_name["g harmonic 1"], maps["g1"].astype(np.float32))
+    np.testing.assert_array_equal(by_name["fast lifetime (ps)"], maps["fast_lifetime_ps"].astype(np.float32))
+
+
+def test_decay_maps_mask_and_refuse_with_the_librarys_words():
+    counts = np.zeros((4, 2, 2), np.uint16)
+    counts[1, 0, 0], counts[2, 0, 0] = 50, 30
+    meta = {"bin_starts_ps": [0.0, 10.0, 20.0, 30.0], "bin_width_ps": 10.0, "laser_frequency_hz": 80e6}
+    maps = scatterscope.decay_maps(counts, meta)
+    assert maps["mask"].sum() == 3 and np.isnan(maps["mean_time_ps"][maps["mask"]]).all()
+    assert any("3 of 4 pixels masked" in n for n in maps["notes"])
+    with pytest.raises(ScatterscopeError, match="states no laser frequency"):
+        scatterscope.decay_maps(counts, {"bin_starts_ps": meta["bin_starts_ps"], "bin_width_ps": 10.0})
+    bad = counts.astype(np.float32)
+    bad[0, 1, 1] = np.nan
+    with pytest.raises(ScatterscopeError, match="bin 0, row 1, column 1 holds NaN"):
+        scatterscope.decay_maps(bad, meta)
