@@ -782,15 +782,16 @@ fn count_rates_are_read_during_the_run_at_5_hz_or_more() {
 /// here does not exist): a zero cross (this driver sets its inputs to
 /// edge triggers, ph330lib.h's `PH330_SetInputTrgMode`), a trigger level
 /// past ph330defin.h's 1500 mV, a sync divider past its `SYNCDIVMAX` 8
-/// (which a MultiHarp takes: 16 in mhdefin.h).
+/// (which a MultiHarp takes: 16 in mhdefin.h) or not a power of two.
 #[test]
 fn a_picoharp_330_refuses_what_it_cannot_take_by_name_before_the_device() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("no-such-library.so");
-    let cases: [(&[&str], &str); 3] = [
+    let cases: [(&[&str], &str); 4] = [
         (&["--sync-zero-cross", "10"], "sync_zero_cross_mv"),
         (&["--input-level", "-1600"], "-1500 to 1500 mV"),
         (&["--sync-divider", "16"], "divides the sync by 1 to 8"),
+        (&["--sync-divider", "3"], "divides the sync by 1, 2, 4 or 8"),
     ];
     let out = dir.path().join("acq");
     for (extra, words) in cases {

@@ -168,6 +168,17 @@ impl Family {
         }
     }
 
+    /// Whether the family takes only powers of two as its sync divider:
+    /// the TimeHarp 260, PicoHarp 330 and PicoHarp 300 manuals list 1, 2,
+    /// 4 and 8 (their headers bound it 1 to 8, and the library refuses
+    /// the others when it is called).
+    pub fn sync_divider_powers_of_two(self) -> bool {
+        matches!(
+            self,
+            Family::TimeHarp260 | Family::PicoHarp330 | Family::PicoHarp300
+        )
+    }
+
     /// Records one `ReadFiFo` may return (`TTREADMAX`).
     pub fn fifo_read_max(self) -> usize {
         match self {

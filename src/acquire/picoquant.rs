@@ -237,6 +237,15 @@ impl SettingsRequest {
                     family.name()
                 ),
             )),
+            Some(d) if family.sync_divider_powers_of_two() && !(d as u32).is_power_of_two() => {
+                Err(SourceError::setting(
+                    "sync_divider",
+                    format!(
+                        "sync divider {d}: a {} divides the sync by 1, 2, 4 or 8 (its manual's values)",
+                        family.name()
+                    ),
+                ))
+            }
             // The sync period is taken from PH_GetCountRate(0), and no
             // PHLib text (phdefin.h, phlib.h, the v3.0 demos, which set
             // `SyncDivider = 1` "READ MANUAL!") says whether that rate is

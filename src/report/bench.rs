@@ -721,9 +721,17 @@ pub fn write_time_figure(rows: &[BenchRow], path: &Path) -> Result<(), ReportErr
     for (s, (_, l)) in series.iter_mut().zip(&labels) {
         s.label = format!("{}: {}", s.label, l.join(", "));
     }
+    // The split the rows are from (the benchmark runs one at a time).
+    let mut splits: Vec<&str> = rows.iter().map(|r| r.split.as_str()).collect();
+    splits.sort_unstable();
+    splits.dedup();
+    let title = format!(
+        "{}: mean PSNR margin against median run time, one point per light level",
+        splits.join(" and ")
+    );
     chart(
         path,
-        "held-out: mean PSNR margin against median run time, one point per light level",
+        &title,
         "median wall time (s)",
         "mean PSNR minus RL's best iteration chosen with the truth (dB)",
         &series,

@@ -185,6 +185,15 @@ impl Family {
             _ => 16,
         }
     }
+
+    /// Whether only powers of two divide the sync (the TimeHarp 260,
+    /// PicoHarp 330 and PicoHarp 300 manuals list 1, 2, 4 and 8).
+    fn sync_divider_powers_of_two(self) -> bool {
+        matches!(
+            self,
+            Family::TimeHarp260 | Family::PicoHarp330 | Family::PicoHarp300
+        )
+    }
 }
 
 /// A running measurement.
@@ -578,11 +587,14 @@ macro_rules! library {
             })
         }
 
-        /// Sync divider 1 to the family's `SYNCDIVMAX`.
+        /// Sync divider 1 to the family's `SYNCDIVMAX`, a power of two
+        /// where the family's manual lists only those.
         #[unsafe(no_mangle)]
         pub extern "C" fn $SetSyncDiv(index: c_int, div: c_int) -> c_int {
             with_ready(index, |d, _| {
-                if !(1..=$family.sync_divider_max()).contains(&div) {
+                if !(1..=$family.sync_divider_max()).contains(&div)
+                    || ($family.sync_divider_powers_of_two() && !(div as u32).is_power_of_two())
+                {
                     return code::INVALID_ARGUMENT;
                 }
                 d.sync_divider = div;
