@@ -184,7 +184,20 @@ impl Job {
             format!("{} acquire --device {device}", plan.software),
         );
         stack.meta.seed = report.seed;
-        let stack_path = self.out.join(STACK_EXR);
+        // OpenEXR's library opens no file of more channels than this: a
+        // longer stack goes out as .npy (with its sidecar), said so.
+        let stack_path = if stack.bins() > crate::formats::exr::MAX_CHANNELS {
+            let npy = self.out.join(STACK_EXR).with_extension("npy");
+            notes.push(format!(
+                "the stack's {} bins are more than an OpenEXR file opens ({}): written as {} with its JSON sidecar instead of {STACK_EXR}",
+                stack.bins(),
+                crate::formats::exr::MAX_CHANNELS,
+                npy.display()
+            ));
+            npy
+        } else {
+            self.out.join(STACK_EXR)
+        };
         stack.save(&stack_path)?;
         files.push(stack_path);
         if self.ome_tiff {
