@@ -227,6 +227,13 @@ pub fn heatmap(path: &Path, map: &Heatmap) -> Result<(), String> {
     save_rgb(&pixels, width, height, path)
 }
 
+/// The value at fraction `q` (0 to 1) of `values` sorted, the nearest
+/// rank; `None` when empty.
+pub fn quantile(mut values: Vec<f64>, q: f64) -> Option<f64> {
+    values.sort_by(f64::total_cmp);
+    (!values.is_empty()).then(|| values[((values.len() - 1) as f64 * q).round() as usize])
+}
+
 /// An image whose hue says one quantity and whose brightness another: a
 /// lifetime image coloured by lifetime, weighted by intensity.
 pub struct ColouredMap<'a> {
@@ -350,10 +357,6 @@ pub fn phasor_histogram(path: &Path, plot: &PhasorHistogram) -> Result<(), Strin
         .copied()
         .filter(|(g, s)| g.is_finite() && s.is_finite())
         .collect();
-    let quantile = |mut v: Vec<f64>, q: f64| -> Option<f64> {
-        v.sort_by(f64::total_cmp);
-        (!v.is_empty()).then(|| v[((v.len() - 1) as f64 * q).round() as usize])
-    };
     let gs: Vec<f64> = inside.iter().map(|p| p.0).collect();
     let ss: Vec<f64> = inside.iter().map(|p| p.1).collect();
     let (g0, g1) = (

@@ -22,6 +22,7 @@ use serde::Serialize;
 
 use super::{DecayMaps, DecayOptions, Onset, Reference, decay_maps, decay_phasors};
 use crate::files::input::same_file;
+use crate::plot::quantile;
 use crate::stack::{StackError, StackMeta, Unstated};
 use crate::tags::bin_file::{
     BinSpec, BinnedFile, RecordedFileError, StackCounts, bin_file_each, spec_error,
@@ -361,18 +362,14 @@ fn write_maps(
     if request.figures {
         figures(maps, &shown, &lifetime_png, &phasor_png)?;
     }
-    let mut unmasked: Vec<f64> = shown
+    let unmasked: Vec<f64> = shown
         .1
         .iter()
         .zip(&maps.mask)
         .filter(|(v, m)| !**m && v.is_finite())
         .map(|(v, _)| *v)
         .collect();
-    unmasked.sort_by(f64::total_cmp);
-    let median = unmasked
-        .get(unmasked.len() / 2)
-        .copied()
-        .unwrap_or(f64::NAN);
+    let median = quantile(unmasked, 0.5).unwrap_or(f64::NAN);
     let mut notes = maps.notes.clone();
     if !request.figures {
         notes.push("figures left out (asked)".into());
@@ -403,10 +400,6 @@ fn figures(
     lifetime_png: &Path,
     phasor_png: &Path,
 ) -> Result<(), StackError> {
-    let quantile = |mut v: Vec<f64>, q: f64| -> Option<f64> {
-        v.sort_by(f64::total_cmp);
-        (!v.is_empty()).then(|| v[((v.len() - 1) as f64 * q).round() as usize])
-    };
     let kept: Vec<f64> = lifetime
         .iter()
         .zip(&maps.mask)
