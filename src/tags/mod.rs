@@ -9,8 +9,9 @@
 //!   project's tag files) -> the binner.
 //! - [`binning`]: tags -> K x H x W transient stack (single pixel, pixel
 //!   per channel, scanned images from line/frame markers, or a sensor).
-//! - [`bin_file`]: a recorded file (PicoQuant or `.sstags`) -> stacks, in one
-//!   call.
+//! - [`bin_file`]: a recorded file -> stacks, in one call.
+//! - [`recorded`]: each recorded format's source (PicoQuant, Becker &
+//!   Hickl `.spc` and `.sdt`, `.sstags`) behind one interface.
 //! - [`survey`]: what a recorded file holds, counted by kind.
 //! - [`counts`]: where the records and photons of a stream went.
 //! - [`convert`]: a recorded file -> PTU, photon for photon.
@@ -20,6 +21,7 @@ pub mod bin_file;
 pub mod binning;
 pub mod convert;
 pub mod counts;
+pub mod recorded;
 pub mod survey;
 pub mod table;
 pub mod wire;

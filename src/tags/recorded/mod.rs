@@ -1,0 +1,113 @@
+//! Every recorded file the project reads, one format per file behind one
+//! interface: a [`RecordedSource`] bins a file into stacks and hands each
+//! on as soon as it is binned. [`source_of`] is the one table from a
+//! detected [`Format`] to its source, so a new format is a new file here,
+//! its line in [`Format::of_file`] and its line below.
+//!
+//! - [`picoquant`]: PicoQuant T3 files (PTU, PT3, HT3).
+//! - [`spc`]: Becker & Hickl FIFO files (`.spc`).
+//! - `t3`: the passes over T3 records those two share (window, margin,
+//!   widening, parts on the cores).
+//! - [`sdt`]: Becker & Hickl histogram files (`.sdt`), block by block.
+//! - [`tag_file`]: the project's tag files (`.sstags`).
+
+use std::path::Path;
+
+use crate::formats::detect::Format;
+use crate::stack::CountsView;
+use crate::tags::bin_file::{BinSpec, BinnedFile, CountStack, RecordedFileError, StackCounts};
+
+pub mod picoquant;
+pub mod sdt;
+pub mod spc;
+mod t3;
+pub mod tag_file;
+
+/// A recorded-file format, binned into stacks.
+pub trait RecordedSource: Sync {
+    /// Bins the file at `path` as `spec` asks, handing each stack to
+    /// `each` in order as soon as it is binned; the result's stacks are
+    /// `()`, one per stack handed.
+    fn bin(
+        &self,
+        path: &Path,
+        spec: &BinSpec,
+        each: &mut dyn FnMut(Handed<'_>) -> Result<(), RecordedFileError>,
+    ) -> Result<BinnedFile<()>, RecordedFileError>;
+}
+
+/// The source of a file of `format` (anything not recognised otherwise is
+/// read as PicoQuant, whose reader names what it found).
+pub fn source_of(format: Format) -> &'static dyn RecordedSource {
+    match format {
+        Format::TagFile => &tag_file::TagFiles,
+        Format::BeckerHicklFifo => &spc::SpcFiles,
+        Format::BeckerHicklHistogram => &sdt::SdtFiles,
+        _ => &picoquant::PicoQuantFiles,
+    }
+}
+
+/// A binned stack handed on by a source.
+#[derive(Debug)]
+pub enum Handed<'a> {
+    /// Counts read in place, in the width the file holds them (a
+    /// histogram block, whose memory the next block reuses).
+    Lent(StackCounts<'a>),
+    /// Counts binned in memory, given away.
+    Given {
+        /// The counts and their metadata (boxed: the metadata is large
+        /// beside a lent view).
+        stack: Box<CountStack>,
+        /// Its place among the file's stacks (from 0).
+        index: usize,
+        /// How many stacks the file gives.
+        of: usize,
+    },
+}
+
+impl Handed<'_> {
+    /// The stack, borrowed.
+    pub fn view(&self) -> StackCounts<'_> {
+        match self {
+            // Views are invariant in their lifetime: reborrowed to `&self`'s.
+            Handed::Lent(s) => StackCounts {
+                counts: match &s.counts {
+                    CountsView::U16(c) => CountsView::U16(c.view()),
+                    CountsView::U32(c) => CountsView::U32(c.view()),
+                },
+                ..*s
+            },
+            Handed::Given { stack, index, of } => StackCounts {
+                counts: CountsView::U32(stack.counts.view()),
+                meta: &stack.meta,
+                index: *index,
+                of: *of,
+            },
+        }
+    }
+
+    /// The stack, owned (copied only when lent).
+    pub fn into_owned(self) -> CountStack {
+        match self {
+            Handed::Lent(s) => s.to_owned(),
+            Handed::Given { stack, .. } => *stack,
+        }
+    }
+}
+
+/// Hands every stack of a file binned in memory to `each`, in order.
+fn hand_each(
+    binned: BinnedFile<CountStack>,
+    each: &mut dyn FnMut(Handed<'_>) -> Result<(), RecordedFileError>,
+) -> Result<BinnedFile<()>, RecordedFileError> {
+    let of = binned.stacks.len();
+    let mut index = 0;
+    binned.try_map_stacks(|stack| {
+        index += 1;
+        each(Handed::Given {
+            stack: Box::new(stack),
+            index: index - 1,
+            of,
+        })
+    })
+}
