@@ -14,7 +14,12 @@ Each process is timed from start to exit, its peak memory read from
 `/usr/bin/time -v`; prints the median of RUNS runs of each. Equality of
 the maps is checked by tests/lifetime.rs; this script times only.
 
-Usage: PYTHONPATH=target/pydeps python3 scripts/compare_lifetime_whole.py [--runs N]
+With `--repeat 1,16,256`, instead: peak memory against file size. The
+shared PTU's records are written K times over into one file (its frames
+repeated, `TTResult_NumberOfRecords` set to K times its count; the
+maps' image stays the same), and both sides run on each.
+
+Usage: PYTHONPATH=target/pydeps python3 scripts/compare_lifetime_whole.py [--runs N] [--repeat K,K,...]
 """
 
 import argparse
@@ -71,11 +76,58 @@ def timed(cmd, env=None):
     return wall, peak / 1024
 
 
+def repeated_ptu(src, k, dst):
+    """`src`'s records written `k` times over into `dst` (T3 records carry
+    sync counts relative to overflow records, so the copies follow one
+    another in time)."""
+    import struct
+    data = open(src, "rb").read()
+    off, count_at = 16, None
+    while True:  # PTU tags: 32-byte name, index, type, 8-byte value
+        ident = data[off:off + 32].split(b"\0")[0]
+        kind = struct.unpack("<I", data[off + 36:off + 40])[0]
+        value = struct.unpack("<q", data[off + 40:off + 48])[0]
+        if ident == b"TTResult_NumberOfRecords":
+            count_at = off + 40
+        off += 48
+        if kind in (0x4001FFFF, 0x4002FFFF, 0xFFFFFFFF):  # strings and blobs follow their tag
+            off += value
+        if ident == b"Header_End":
+            break
+    header = bytearray(data[:off])
+    records = data[off:]
+    header[count_at:count_at + 8] = struct.pack("<q", k * (len(records) // 4))
+    with open(dst, "wb") as f:
+        f.write(header)
+        for _ in range(k):
+            f.write(records)
+
+
+def memory_against_size(args, repeats):
+    src = FILES[0][1]
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in repeats:
+            path = f"{tmp}/x{k}.ptu"
+            repeated_ptu(src, k, path)
+            mb = os.path.getsize(path) / 1e6
+            ours = [timed([args.program, "lifetime", path, "--no-figures", "--min-photons", "1", "--out", f"{tmp}/o{k}"])
+                    for _ in range(args.runs)]
+            theirs = [timed([sys.executable, "-c", PYTHON, "ptu", path, tmp], env=dict(os.environ))
+                      for _ in range(args.runs)]
+            for name, runs in (("ours", ours), ("ptufile + PhasorPy + numpy.save", theirs)):
+                print(f"x{k} ({mb:.1f} MB): {name}: median {statistics.median(w for w, _ in runs):.3f} s, "
+                      f"peak {statistics.median(p for _, p in runs):.0f} MB ({args.runs} runs)")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--program", default=os.path.join(ROOT, "target", "release", "scatterscope"))
+    ap.add_argument("--repeat", help="K,K,...: peak memory against file size instead")
     args = ap.parse_args()
+    if args.repeat:
+        memory_against_size(args, [int(k) for k in args.repeat.split(",")])
+        return
     for kind, path in FILES:
         results = {"ours (maps)": [], "ours (maps and figures)": [], "ptufile/sdtfile + PhasorPy + numpy.save": []}
         with tempfile.TemporaryDirectory() as tmp:
