@@ -7,7 +7,7 @@ use super::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions};
 use super::auto::Auto;
 use super::data::Data;
 pub use super::em::{Acceleration, RlStop};
-use super::learned::Learned;
+use super::learned::{Learned, RL_SUM_CV};
 use super::problem::Problem;
 use super::rl_stack::RlStack;
 use super::rl_sum::RlSum;
@@ -21,8 +21,8 @@ use crate::named::{Named, named};
 /// A reconstruction method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Method {
-    /// The default: whole-stack Richardson-Lucy or PnP, chosen per stack
-    /// without the truth ([`super::auto`]).
+    /// The default: the learned reconstruction inside its trained ranges,
+    /// whole-stack Richardson-Lucy outside them ([`super::auto`]).
     Auto,
     /// Poisson PnP-ADMM on the whole stack (the paper's method).
     Pnp,
@@ -256,8 +256,10 @@ impl<'a> MethodPlan<'a> {
         let (algorithm, view): (Box<dyn Reconstructor + 'a>, View) = match method {
             Method::Auto => (
                 Box::new(Auto {
-                    pnp: opts.pnp(denoiser),
-                    rl: rl_stack,
+                    learned: Learned {
+                        net: super::learned::embedded(),
+                        outside: Box::new(rl_stack),
+                    },
                 }),
                 View::Whole,
             ),
@@ -271,6 +273,7 @@ impl<'a> MethodPlan<'a> {
             Method::Learned => (
                 Box::new(Learned {
                     net: super::learned::embedded(),
+                    outside: Box::new(RL_SUM_CV),
                 }),
                 View::Whole,
             ),

@@ -5,8 +5,8 @@
 //! was trained here, on a 2-core CPU, on stacks the project's own forward
 //! model simulated (`training/train_learned.py`); its weights are
 //! embedded. A stack outside the ranges it was trained on is reconstructed
-//! by Richardson-Lucy with its cross-validated stop instead, and the notes
-//! say why. Like PnP, the output's Poisson deviance under the forward model
+//! by the method it is given for them (Richardson-Lucy with its
+//! cross-validated stop), and the notes say why. Like PnP, the output's Poisson deviance under the forward model
 //! is in the trace.
 
 pub mod inputs;
@@ -38,30 +38,43 @@ pub fn embedded() -> &'static LearnedNet {
     })
 }
 
-/// The learned reconstruction with `net`.
+/// The learned reconstruction with `net`, and `outside` for stacks outside
+/// its trained ranges.
 pub struct Learned<'a> {
     /// The network.
     pub net: &'a LearnedNet,
+    /// What reconstructs a stack outside the trained ranges.
+    pub outside: Box<dyn Reconstructor + 'a>,
 }
 
-/// The stop of the Richardson-Lucy that stands in outside the trained
-/// ranges.
-const FALLBACK: RlSum = RlSum {
+/// Richardson-Lucy on the time-summed stack with its cross-validated
+/// stop: `--method learned`'s stand-in outside the trained ranges, and
+/// the memory of the iterations that make the network's inputs.
+pub const RL_SUM_CV: RlSum = RlSum {
     stop: RlStop::CROSS_VALIDATED,
 };
 
-impl Reconstructor for Learned<'_> {
-    fn name(&self, _bins: usize) -> &'static str {
-        "learned"
-    }
+/// Which method a [`Learned`] run used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Used {
+    /// The network.
+    Network,
+    /// Its stand-in, the stack lying outside the trained ranges.
+    Outside,
+    /// Neither: the stack holds no photon (the output is 0).
+    Neither,
+}
 
-    fn reconstruct(
+impl Learned<'_> {
+    /// Reconstructs with the network, or with `outside` when the stack
+    /// lies outside the trained ranges (a note says why); which one ran.
+    pub fn reconstruct_which(
         &self,
         data: &Data<'_>,
         run: &mut Run<'_>,
-    ) -> Result<Estimate, ReconstructError> {
+    ) -> Result<(Estimate, Used), ReconstructError> {
         let Some(inputs) = learned_inputs(data) else {
-            return Ok(run.no_photons(data.model.sensor_shape()));
+            return Ok((run.no_photons(data.model.sensor_shape()), Used::Neither));
         };
         if let Some(why) = self.net.outside(
             inputs.photons_per_pixel,
@@ -69,9 +82,10 @@ impl Reconstructor for Learned<'_> {
             inputs.background_share,
         ) {
             run.note(format!(
-                "learned: the stack lies outside what the network was trained on: {why}; reconstructed by rl-sum with its cross-validated stop instead"
+                "learned: the stack lies outside what the network was trained on: {why}; reconstructed by {} with its stop instead",
+                self.outside.name(data.bins.len())
             ));
-            return FALLBACK.reconstruct(data, run);
+            return Ok((self.outside.reconstruct(data, run)?, Used::Outside));
         }
         let last = *CHECKPOINTS.last().expect("checkpoints");
         run.note(format!(
@@ -112,20 +126,44 @@ impl Reconstructor for Learned<'_> {
             check.sd,
             (check.deviance - check.expected) / check.sd.max(f64::MIN_POSITIVE)
         ));
-        Ok(Estimate {
-            image,
-            iteration: last,
-        })
+        Ok((
+            Estimate {
+                image,
+                iteration: last,
+            },
+            Used::Network,
+        ))
     }
 
-    /// Richardson-Lucy's (or its fallback's) memory, the inputs and the
-    /// network's maps: at full resolution the padded input, two encoder
+    /// The larger of the stand-in's memory and the network's: the
+    /// Richardson-Lucy iterations of its inputs, the inputs and the
+    /// network's maps (at full resolution the padded input, two encoder
     /// and two decoder maps of `c0` channels and a concatenation of
     /// `c0 + c1`, about 100 floats per sensor pixel with the channels of
-    /// the embedded network, counted as 160 (4 bytes each) for wider ones.
-    fn working_bytes(&self, shape: &WorkShape) -> u64 {
-        FALLBACK
+    /// the embedded network, counted as 160 (4 bytes each) for wider ones).
+    pub fn working_bytes(&self, shape: &WorkShape) -> u64 {
+        let network = RL_SUM_CV
             .working_bytes(shape)
-            .saturating_add(shape.bytes([0; 3], [4 * 160, 8, 0]))
+            .saturating_add(shape.bytes([0; 3], [4 * 160, 8, 0]));
+        network.max(self.outside.working_bytes(shape))
+    }
+}
+
+impl Reconstructor for Learned<'_> {
+    fn name(&self, _bins: usize) -> &'static str {
+        "learned"
+    }
+
+    fn reconstruct(
+        &self,
+        data: &Data<'_>,
+        run: &mut Run<'_>,
+    ) -> Result<Estimate, ReconstructError> {
+        self.reconstruct_which(data, run)
+            .map(|(estimate, _)| estimate)
+    }
+
+    fn working_bytes(&self, shape: &WorkShape) -> u64 {
+        Learned::working_bytes(self, shape)
     }
 }
