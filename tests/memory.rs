@@ -197,8 +197,10 @@ proptest! {
 /// Every method's plan declares its working memory: at two sensor sizes
 /// the bytes a run holds beyond its problem stay within the declaration,
 /// and the declaration within 2.5x of them (it sizes the budget check, so
-/// it must not refuse jobs that fit by a wide margin); the problem's own
-/// bytes stay within [`memory::PROBLEM_BYTES`] per pixel and bin.
+/// it must not refuse jobs that fit by a wide margin; `auto`, which runs
+/// `learned` or `rl-stack` as the stack asks, within 2.5x of the larger
+/// of theirs); the problem's own bytes stay within
+/// [`memory::PROBLEM_BYTES`] per pixel and bin.
 #[test]
 fn each_method_declares_the_working_memory_it_uses() {
     use scatterscope::denoise::tv::TotalVariation;
@@ -228,8 +230,22 @@ fn each_method_declares_the_working_memory_it_uses() {
         let declared = memory::bytes_of([k, size, size], memory::PROBLEM_BYTES);
         assert!(peak <= declared, "problem at {size}: {peak} > {declared}");
         let prior = TotalVariation::default();
+        // What a process builds once and keeps is not a run's working
+        // memory: the embedded network, the deviance's expectation table
+        // and the GEMM's per-thread packing buffers (a first run of the
+        // network at 32 px took 4.3 MB, every later one 1.2 MB).
+        run_method(
+            &problem,
+            Method::Learned,
+            None,
+            &prior,
+            &MethodOptions::default(),
+            None,
+            |_| {},
+        )
+        .unwrap();
+        let mut peaks = std::collections::HashMap::new();
         for (method, solver, bin) in [
-            (Method::Auto, Solver::Split, None),
             (Method::Pnp, Solver::Split, None),
             (Method::Pnp, Solver::AdmmLbfgs, None),
             (Method::PnpSlice, Solver::Split, Some(3)),
@@ -238,6 +254,8 @@ fn each_method_declares_the_working_memory_it_uses() {
             (Method::RlSum, Solver::Split, None),
             (Method::RlStack, Solver::Split, None),
             (Method::ScaledCounts, Solver::Split, None),
+            (Method::Learned, Solver::Split, None),
+            (Method::Auto, Solver::Split, None),
         ] {
             let mut opts = MethodOptions {
                 solver,
@@ -260,10 +278,17 @@ fn each_method_declares_the_working_memory_it_uses() {
                 peak <= declared,
                 "{what}: used {peak} > declared {declared}"
             );
+            let reference = match method {
+                Method::Auto => peak
+                    .max(peaks[Method::Learned.name()])
+                    .max(peaks[Method::RlStack.name()]),
+                _ => peak,
+            };
             assert!(
-                declared as f64 <= 2.5 * peak as f64,
-                "{what}: declared {declared} > 2.5 x used {peak}"
+                declared as f64 <= 2.5 * reference as f64,
+                "{what}: declared {declared} > 2.5 x used {reference}"
             );
+            peaks.insert(method.name(), peak);
         }
     }
 }

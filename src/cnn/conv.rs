@@ -49,6 +49,15 @@ impl FeatureMap {
 /// (256 x 576 f32 = 576 KiB) plus the 144 KiB weight matrix fit in L2.
 const BAND_PIXELS: usize = 256;
 
+/// The bytes one thread's band of [`conv3x3`] holds on a map `width`
+/// pixels wide, for a layer of `cin` -> `cout` channels: its im2col matrix
+/// and product (the GEMM's packing buffers are kept by each thread from
+/// its first call, not counted).
+pub fn band_bytes(cin: usize, cout: usize, width: usize) -> u64 {
+    let pixels = BAND_PIXELS.max(width) as u64;
+    pixels * (9 * cin + cout) as u64 * 4
+}
+
 /// Applies `layer` to `input`, writing `output` (whose border stays zero).
 pub fn conv3x3(layer: &FoldedConv, input: &FeatureMap, output: &mut FeatureMap) {
     assert_eq!(input.c, layer.cin);

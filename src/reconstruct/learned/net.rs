@@ -221,6 +221,20 @@ impl LearnedNet {
         })
     }
 
+    /// The convolutions' scratch on a map `width` pixels wide: one band
+    /// of the widest layer per thread ([`crate::cnn::conv::band_bytes`]).
+    pub fn scratch_bytes(&self, width: usize) -> u64 {
+        let widest = self
+            .blocks
+            .iter()
+            .flatten()
+            .chain([&self.out])
+            .map(|l| crate::cnn::conv::band_bytes(l.cin, l.cout, width))
+            .max()
+            .unwrap_or(0);
+        widest.saturating_mul(rayon::current_num_threads() as u64)
+    }
+
     /// The file's metadata entry `name`, if any.
     pub fn meta(&self, name: &str) -> Option<&str> {
         self.metadata.get(name).map(String::as_str)
