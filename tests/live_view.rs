@@ -754,3 +754,91 @@ fn under_cpu_hogs_the_page_says_why_and_the_command_keeps_talking() {
         "silent for {longest:?}: {all:#?}"
     );
 }
+
+/// A FLIM scan's live view shows its mean-arrival-time image beside the
+/// accumulated one: once the run ends, the whole run's, equal to the
+/// library's decay maps (`lifetime`'s) of the stack the run saved. The
+/// scan: the shared PicoHarp PTU image, replayed.
+#[test]
+#[ignore = "needs ../shared/data/flim-samples"]
+fn a_flim_scan_shows_its_mean_arrival_time_image() {
+    use scatterscope::decay::{DecayOptions, decay_maps_f32};
+    let ptu = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/flim-samples/picoquant/hazelnut_flim_z1.ptu");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("replayed");
+    let device = format!("replay:{}", ptu.display());
+    let (child, url) = start(
+        &[
+            "--device",
+            &device,
+            "--live",
+            "--linger",
+            "60s",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[],
+    );
+    let addr = url.trim_start_matches("http://").trim_end_matches('/');
+    let started = Instant::now();
+    let last = loop {
+        let r = http_get(addr, "/state");
+        let body = r.split_once("\r\n\r\n").map_or("", |(_, b)| b);
+        let s: serde_json::Value = serde_json::from_str(body).unwrap();
+        if s["done"] == true {
+            break s;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the replay did not end"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert!(stop(child).success());
+    assert!(
+        last["mean_time_error"].is_null(),
+        "{}",
+        last["mean_time_error"]
+    );
+    let shown = &last["mean_time"];
+    let image = &shown["image"];
+    let stack = scatterscope::Stack::load(&out.join("stack.exr")).unwrap();
+    let expected = decay_maps_f32(
+        stack.data.view(),
+        &stack.meta.bin_starts_ps,
+        stack.meta.bin_width_ps,
+        // The mean times do not depend on the frequency (the phasors do).
+        stack.meta.laser_frequency_hz.unwrap_or(1e7),
+        &DecayOptions {
+            harmonics: vec![1],
+            ..DecayOptions::default()
+        },
+    )
+    .unwrap();
+    let (h, w) = expected.mean_time_ps.dim();
+    assert_eq!(
+        (image["height"].as_u64(), image["width"].as_u64()),
+        (Some(h as u64), Some(w as u64))
+    );
+    let values = image["values"].as_array().unwrap();
+    let mut mapped = 0;
+    for (v, (&e, &masked)) in values
+        .iter()
+        .zip(expected.mean_time_ps.iter().zip(&expected.mask))
+    {
+        if masked {
+            assert!(v.is_null(), "a masked pixel shows {v}");
+        } else {
+            let v = v.as_f64().unwrap();
+            assert!((v - e).abs() <= 1e-3 * e.abs().max(1.0), "{v} against {e}");
+            mapped += 1;
+        }
+    }
+    assert!(mapped > 100, "only {mapped} pixels mapped");
+    assert!(
+        shown["notes"].to_string().contains("onset"),
+        "{}",
+        shown["notes"]
+    );
+}

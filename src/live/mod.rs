@@ -1,6 +1,6 @@
 //! A live view of a running acquisition, served as a local web page:
 //! count rates over the last minute, the decay histogram, the accumulated
-//! image, the ledger so far, and every few seconds the reconstruction of
+//! image (and a FLIM scan's mean-arrival-time image), the ledger so far, and every few seconds the reconstruction of
 //! the stack accumulated so far (the default method, on a snapshot, on a
 //! thread of its own) with its error against run time when the truth is
 //! known.

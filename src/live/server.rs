@@ -180,12 +180,21 @@ impl LiveView {
                 .then(|| Reconstructor::start(self.shared.state.clone(), truth)),
             setup,
             last_offer: None,
+            last_mean_time: None,
         }
     }
 
-    /// Shows the finished acquisition: its final ledger and why it ended.
+    /// Shows the finished acquisition: its final ledger and why it ended,
+    /// and for a FLIM scan the whole run's mean-arrival-time image.
     pub fn finish(&self, done: &Acquisition) {
         let mut s = self.shared.state.lock().unwrap_or_else(|e| e.into_inner());
+        if is_flim_scan(&done.outcome.facts) {
+            s.final_mean_time(
+                &done.stack,
+                done.outcome.facts.sync_period_ps,
+                done.outcome.end.elapsed.as_secs_f64(),
+            );
+        }
         s.done = true;
         s.ended = Some(done.outcome.end.stop.describe());
         s.ledger = Some(done.outcome.ledger.clone());
@@ -224,6 +233,15 @@ impl Drop for LiveView {
     }
 }
 
+/// Whether a source is a FLIM scan: a point detector clocked by a
+/// scanner's markers.
+fn is_flim_scan(facts: &crate::acquire::SourceFacts) -> bool {
+    matches!(
+        facts.layout,
+        crate::acquire::source::Layout::Inputs { scan: Some(_), .. }
+    )
+}
+
 /// The live view's stage of the pipeline.
 pub struct LiveStage {
     state: Arc<Mutex<LiveState>>,
@@ -232,6 +250,7 @@ pub struct LiveStage {
     reconstructor: Option<Reconstructor>,
     setup: Option<Setup>,
     last_offer: Option<Instant>,
+    last_mean_time: Option<Instant>,
 }
 
 impl LiveStage {
@@ -241,6 +260,15 @@ impl LiveStage {
         // acquisition's priority and may be preempted holding it; when it is held, this snapshot
         // is shown with the next one.
         self.acquired.update(s);
+        if is_flim_scan(s.facts)
+            && s.progress.counts.binned > 0
+            && self
+                .last_mean_time
+                .is_none_or(|t| t.elapsed() >= super::state::MEAN_TIME_EVERY)
+        {
+            self.acquired.update_mean_time(s);
+            self.last_mean_time = Some(Instant::now());
+        }
         match self.state.try_lock() {
             Ok(mut shown) => shown.show_acquisition(&self.acquired),
             Err(std::sync::TryLockError::Poisoned(e)) => {
