@@ -24,9 +24,8 @@ use super::{DecayMaps, DecayOptions, Onset, Reference, decay_maps, decay_phasors
 use crate::files::input::same_file;
 use crate::plot::quantile;
 use crate::stack::{StackError, StackMeta, Unstated};
-use crate::tags::bin_file::{
-    BinSpec, BinnedFile, RecordedFileError, StackCounts, bin_file_each, spec_error,
-};
+use crate::tags::bin_file::bin_file_each;
+use crate::tags::binned::{BinSpec, BinnedFile, RecordedFileError, StackCounts, spec_error};
 
 /// A file whose decay calibrates the phasors.
 #[derive(Debug, Clone, PartialEq)]

@@ -9,6 +9,7 @@
 //!   project's tag files) -> the binner.
 //! - [`binning`]: tags -> K x H x W transient stack (single pixel, pixel
 //!   per channel, scanned images from line/frame markers, or a sensor).
+//! - [`binned`]: what binning a recorded file is asked and gives.
 //! - [`bin_file`]: a recorded file -> stacks, in one call.
 //! - [`recorded`]: each recorded format's source (PicoQuant, Becker &
 //!   Hickl `.spc` and `.sdt`, `.sstags`) behind one interface.
@@ -18,6 +19,7 @@
 //! - [`table`]: a recorded file's tags as columns (array front ends).
 
 pub mod bin_file;
+pub mod binned;
 pub mod binning;
 pub mod convert;
 pub mod counts;

@@ -14,7 +14,7 @@ use firmware_protocol::Event;
 use crate::events::Tag;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, TtrError, open};
-use crate::tags::bin_file::RecordedFileError;
+use crate::tags::binned::RecordedFileError;
 
 /// The records of a PicoQuant file, counted by kind.
 #[derive(Debug, Default)]

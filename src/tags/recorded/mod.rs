@@ -15,7 +15,7 @@ use std::path::Path;
 
 use crate::formats::detect::Format;
 use crate::stack::CountsView;
-use crate::tags::bin_file::{BinSpec, BinnedFile, CountStack, RecordedFileError, StackCounts};
+use crate::tags::binned::{BinSpec, BinnedFile, CountStack, RecordedFileError, StackCounts};
 
 pub mod picoquant;
 pub mod sdt;

@@ -9,7 +9,7 @@ use super::{Handed, RecordedSource, hand_each};
 use crate::formats::becker_hickl::spc::CardFlags;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, RecordReader, TtrError, open};
-use crate::tags::bin_file::{
+use crate::tags::binned::{
     BinSpec, BinnedFile, CountStack, Pixels, RecordedFileError, Recording, spec_error,
 };
 use crate::tags::binning::Binner;

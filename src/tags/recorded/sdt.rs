@@ -9,7 +9,7 @@ use ndarray::Array3;
 use super::{Handed, RecordedSource};
 use crate::formats::becker_hickl::sdt::{self, BlockCounts};
 use crate::stack::{CountsView, StackMeta, Unstated};
-use crate::tags::bin_file::{
+use crate::tags::binned::{
     BinSpec, BinnedFile, Pixels, RecordedFileError, Recording, StackCounts, check_stack_memory,
     spec_error,
 };

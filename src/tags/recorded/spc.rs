@@ -8,7 +8,7 @@ use super::t3::{self, T3Records};
 use super::{Handed, RecordedSource, hand_each};
 use crate::formats::becker_hickl::spc::{self, CardFlags, SpcFileError, SpcInfo};
 use crate::stack::Unstated;
-use crate::tags::bin_file::{
+use crate::tags::binned::{
     BinSpec, BinnedFile, CountStack, RecordedFileError, Recording, spec_error,
 };
 use crate::tags::binning::Binner;

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use crate::formats::becker_hickl::spc::CardFlags;
 use crate::stack::StackMeta;
-use crate::tags::bin_file::{
+use crate::tags::binned::{
     BinSpec, BinnedFile, CountStack, RecordedFileError, Recording, check_stack_memory, spec_error,
     window_and_map,
 };

@@ -8,7 +8,7 @@ use std::time::Instant;
 use super::{Handed, RecordedSource, hand_each};
 use crate::formats::sstags::TagFile;
 use crate::stack::StackMeta;
-use crate::tags::bin_file::{
+use crate::tags::binned::{
     BinSpec, BinnedFile, CountStack, Pixels, RecordedFileError, Recording, check_stack_memory,
     spec_error,
 };
