@@ -549,28 +549,16 @@ fn decay_maps<'py>(
             what: "the given reference phasors".into(),
         }),
     };
+    use scatterscope::stack::CountsView;
+    let counted = |v: CountsView<'_>| {
+        scatterscope::decay::decay_maps(v, &bin_starts_ps, bin_width_ps, frequency_hz, &options)
+    };
     let maps = if let Ok(a) = counts.extract::<PyReadonlyArray3<'py, u16>>() {
         let v = a.as_array();
-        py.detach(|| {
-            scatterscope::decay::decay_maps(
-                scatterscope::stack::CountsView::U16(v),
-                &bin_starts_ps,
-                bin_width_ps,
-                frequency_hz,
-                &options,
-            )
-        })
+        py.detach(|| counted(CountsView::U16(v)))
     } else if let Ok(a) = counts.extract::<PyReadonlyArray3<'py, u32>>() {
         let v = a.as_array();
-        py.detach(|| {
-            scatterscope::decay::decay_maps(
-                scatterscope::stack::CountsView::U32(v),
-                &bin_starts_ps,
-                bin_width_ps,
-                frequency_hz,
-                &options,
-            )
-        })
+        py.detach(|| counted(CountsView::U32(v)))
     } else if let Ok(a) = counts.extract::<PyReadonlyArray3<'py, f32>>() {
         let v = a.as_array();
         py.detach(|| {

@@ -154,16 +154,7 @@ fn reference_decay(reference: &Path, spec: &BinSpec) -> Result<Decay, RecordedFi
                 "its time unit is unknown (bins are micro-time channels): a reference needs times in ps".into(),
             ));
         }
-        let summed: Vec<f64> = match s.counts {
-            crate::stack::CountsView::U16(c) => c
-                .axis_iter(Axis(0))
-                .map(|p| p.iter().map(|&v| f64::from(v)).sum())
-                .collect(),
-            crate::stack::CountsView::U32(c) => c
-                .axis_iter(Axis(0))
-                .map(|p| p.iter().map(|&v| f64::from(v)).sum())
-                .collect(),
-        };
+        let summed = s.counts.bin_totals();
         let centres: Vec<f64> = s
             .meta
             .bin_starts_ps

@@ -171,6 +171,19 @@ impl CountsView<'_> {
         }
     }
 
+    /// Photons per bin, every pixel summed.
+    pub fn bin_totals(&self) -> Vec<f64> {
+        fn totals<T: Copy + Into<f64>>(c: &ArrayView3<T>) -> Vec<f64> {
+            c.outer_iter()
+                .map(|plane| plane.iter().map(|&v| v.into()).sum())
+                .collect()
+        }
+        match self {
+            CountsView::U16(c) => totals(c),
+            CountsView::U32(c) => totals(c),
+        }
+    }
+
     /// The counts as `u32`, owned.
     pub fn to_u32(&self) -> Array3<u32> {
         match self {
