@@ -70,8 +70,9 @@ def write_spc(path, records):
         rec.astype("<u4").tofile(f)
 
 
-def write_sdt(path, side=256, points=256):
-    """One IMG block of side x side curves of `points` u16 counts."""
+def write_sdt(path, side=256, points=256, blocks=1):
+    """`blocks` IMG blocks of side x side curves of `points` u16 counts
+    (the same counts in each, chained by their headers)."""
     rng = numpy.random.default_rng(6)
     data = rng.poisson(20 * numpy.exp(-numpy.arange(points) / 40.0), (side * side, points)).astype("<u2")
     info = b"*IDENTIFICATION\r\n  ID        : SPC Setup & Data File\r\n*END\r\n"
@@ -84,13 +85,17 @@ def write_sdt(path, side=256, points=256):
     block_offs = meas_offs + 512
     header = struct.pack(
         "<hihihihIihhHIHH",
-        (0x28 << 4) | 15, info_offs, len(info), 0, 0, block_offs, 1, data.nbytes,
+        (0x28 << 4) | 15, info_offs, len(info), 0, 0, block_offs, blocks, data.nbytes,
         meas_offs, 1, 512, 0x5555, 1, 0, 0x55AA,
     )
-    block = struct.pack("<BBIIHhII", 0, 0, block_offs + 22, block_offs + 22 + data.nbytes, 0x61, 0, 1, data.nbytes)
+    step = 22 + data.nbytes
     with open(path, "wb") as f:
-        f.write(header + info + bytes(meas) + block)
-        data.tofile(f)
+        f.write(header + info + bytes(meas))
+        for k in range(blocks):
+            at = block_offs + k * step
+            # The first two bytes extend the offsets past 4 GB (0 here).
+            f.write(struct.pack("<BBIIHhII", 0, 0, at + 22, at + step, 0x61, 0, k + 1, data.nbytes))
+            data.tofile(f)
 
 
 def wall(cmd):

@@ -17,7 +17,10 @@ the maps is checked by tests/lifetime.rs; this script times only.
 With `--repeat 1,16,256`, instead: peak memory against file size. The
 shared PTU's records are written K times over into one file (its frames
 repeated, `TTResult_NumberOfRecords` set to K times its count; the
-maps' image stays the same), and both sides run on each.
+maps' image stays the same), and both sides run on each; with
+`--sdt-blocks 1,4,16`, `.sdt` files of that many 256 x 256 x 256 blocks
+(compare_bh_whole.py's writer; ours given `--frequency 80e6`, which
+they do not record).
 
 Usage: PYTHONPATH=target/pydeps python3 scripts/compare_lifetime_whole.py [--runs N] [--repeat K,K,...]
 """
@@ -119,12 +122,33 @@ def memory_against_size(args, repeats):
                       f"peak {statistics.median(p for _, p in runs):.0f} MB ({args.runs} runs)")
 
 
+def memory_against_blocks(args, counts):
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from compare_bh_whole import write_sdt
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in counts:
+            path = f"{tmp}/b{k}.sdt"
+            write_sdt(path, blocks=k)
+            mb = os.path.getsize(path) / 1e6
+            ours = [timed([args.program, "lifetime", path, "--no-figures", "--min-photons", "1",
+                           "--frequency", "80e6", "--out", f"{tmp}/o{k}"]) for _ in range(args.runs)]
+            theirs = [timed([sys.executable, "-c", PYTHON, "sdt", path, tmp], env=dict(os.environ))
+                      for _ in range(args.runs)]
+            for name, runs in (("ours", ours), ("sdtfile + PhasorPy + numpy.save", theirs)):
+                print(f"{k} blocks ({mb:.0f} MB): {name}: median {statistics.median(w for w, _ in runs):.3f} s, "
+                      f"peak {statistics.median(p for _, p in runs):.0f} MB ({args.runs} runs)")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--program", default=os.path.join(ROOT, "target", "release", "scatterscope"))
     ap.add_argument("--repeat", help="K,K,...: peak memory against file size instead")
+    ap.add_argument("--sdt-blocks", help="K,K,...: peak memory against .sdt blocks instead")
     args = ap.parse_args()
+    if args.sdt_blocks:
+        memory_against_blocks(args, [int(k) for k in args.sdt_blocks.split(",")])
+        return
     if args.repeat:
         memory_against_size(args, [int(k) for k in args.repeat.split(",")])
         return

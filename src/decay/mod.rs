@@ -499,27 +499,18 @@ fn accumulate<T: Copy + Into<f64> + Sync>(
             let n = p1 - p0;
             let mut acc = vec![0.0; planes * n];
             for k in 0..bins {
-                let t = centres[k];
-                let d = t - onset;
-                let after = k >= first;
-                for (i, &v) in flat[k * hw + p0..k * hw + p1].iter().enumerate() {
-                    let v: f64 = v.into();
-                    // FLIM images are mostly empty bins.
-                    if v == 0.0 {
-                        continue;
-                    }
-                    acc[i] += v;
-                    acc[n + i] += v * t;
-                    if after {
-                        acc[2 * n + i] += v;
-                        acc[3 * n + i] += v * d;
-                        acc[4 * n + i] += v * d * d;
-                    }
-                    for (j, tr) in trig.iter().enumerate() {
-                        let (co, si) = tr[k];
-                        acc[(5 + 2 * j) * n + i] += v * co;
-                        acc[(6 + 2 * j) * n + i] += v * si;
-                    }
+                let src = &flat[k * hw + p0..k * hw + p1];
+                let (t, after) = (centres[k], k >= first);
+                // A bin of mostly counted pixels (bright, dense decays)
+                // sums plane by plane, loops the compiler vectorises; a
+                // mostly empty one (most FLIM bins) visits its counts
+                // only. Dense 256 x 256 x 256 blocks took 0.30 s each
+                // visiting every count, against PhasorPy's 0.08 s.
+                let counted = src.iter().filter(|&&v| v.into() != 0.0).count();
+                if counted * 4 >= n {
+                    dense_bin(&mut acc, src, t, t - onset, after, trig, k);
+                } else {
+                    sparse_bin(&mut acc, src, t, t - onset, after, trig, k);
                 }
             }
             acc
@@ -534,6 +525,74 @@ fn accumulate<T: Copy + Into<f64> + Sync>(
         }
     }
     Sums { values, pixels: hw }
+}
+
+/// Adds bin `k`'s counts `src` (one band, `n` pixels) at centre `t`,
+/// `d` after the onset, to the band's planes `acc` (`n` each: photons,
+/// timed, after, after delay, after delay squared, then cos and sin per
+/// harmonic), plane by plane.
+fn dense_bin<T: Copy + Into<f64>>(
+    acc: &mut [f64],
+    src: &[T],
+    t: f64,
+    d: f64,
+    after: bool,
+    trig: &[Vec<(f64, f64)>],
+    k: usize,
+) {
+    let n = src.len();
+    let fixed = [
+        Some(1.0),
+        Some(t),
+        after.then_some(1.0),
+        after.then_some(d),
+        after.then_some(d * d),
+    ];
+    let harmonics = trig.iter().flat_map(|tr| {
+        let (co, si) = tr[k];
+        [Some(co), Some(si)]
+    });
+    for (plane, weight) in acc
+        .chunks_exact_mut(n)
+        .zip(fixed.into_iter().chain(harmonics))
+    {
+        if let Some(weight) = weight {
+            for (a, &v) in plane.iter_mut().zip(src) {
+                *a += v.into() * weight;
+            }
+        }
+    }
+}
+
+/// [`dense_bin`] visiting only the counted pixels.
+fn sparse_bin<T: Copy + Into<f64>>(
+    acc: &mut [f64],
+    src: &[T],
+    t: f64,
+    d: f64,
+    after: bool,
+    trig: &[Vec<(f64, f64)>],
+    k: usize,
+) {
+    let n = src.len();
+    for (i, &v) in src.iter().enumerate() {
+        let v: f64 = v.into();
+        if v == 0.0 {
+            continue;
+        }
+        acc[i] += v;
+        acc[n + i] += v * t;
+        if after {
+            acc[2 * n + i] += v;
+            acc[3 * n + i] += v * d;
+            acc[4 * n + i] += v * d * d;
+        }
+        for (j, tr) in trig.iter().enumerate() {
+            let (co, si) = tr[k];
+            acc[(5 + 2 * j) * n + i] += v * co;
+            acc[(6 + 2 * j) * n + i] += v * si;
+        }
+    }
 }
 
 /// `g`, `s` calibrated with the reference phasor `(gr, sr)` of lifetime
@@ -640,6 +699,86 @@ mod tests {
         let m = maps.mean_time_ps[[0, 1]];
         assert!((m - tau).abs() < 0.05 * tau, "{m}");
         assert!(maps.mask.iter().all(|&m| !m));
+    }
+
+    /// Bins of every density (all pixels counted, a few, none) sum to
+    /// what the definitions give pixel by pixel, whichever way a bin is
+    /// visited.
+    #[test]
+    fn dense_and_sparse_bins_give_the_definitions() {
+        let (bins, h, w, width) = (40, 9, 11, 50.0);
+        let starts: Vec<f64> = (0..bins).map(|k| 100.0 + k as f64 * width).collect();
+        let mut seed = 7u64;
+        let counts = Array3::from_shape_fn((bins, h, w), |(k, _, _)| {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let r = (seed >> 33) % 100;
+            // Bins 0-9 sparse (1 in 10 counted), 10-29 dense, 30- empty.
+            match k {
+                0..10 if r < 10 => 1 + (r % 3) as u16,
+                10..30 => (r % 7) as u16,
+                _ => 0,
+            }
+        });
+        let f = 80e6;
+        let onset = 720.0;
+        let opts = DecayOptions {
+            harmonics: vec![1, 3],
+            min_photons: 1.0,
+            onset: Onset::At(onset),
+            reference: None,
+        };
+        let maps = decay_maps(CountsView::U16(counts.view()), &starts, width, f, &opts).unwrap();
+        let centres: Vec<f64> = starts.iter().map(|s| s + width / 2.0).collect();
+        for r in 0..h {
+            for c in 0..w {
+                let n: Vec<f64> = (0..bins).map(|k| f64::from(counts[[k, r, c]])).collect();
+                let total: f64 = n.iter().sum();
+                if total == 0.0 {
+                    assert!(maps.mask[[r, c]]);
+                    continue;
+                }
+                let after: Vec<(f64, f64)> = centres
+                    .iter()
+                    .zip(&n)
+                    .filter(|(t, _)| **t >= onset)
+                    .map(|(t, v)| (t - onset, *v))
+                    .collect();
+                let na: f64 = after.iter().map(|a| a.1).sum();
+                let mean = after.iter().map(|(d, v)| d * v).sum::<f64>() / na;
+                let var = after
+                    .iter()
+                    .map(|(d, v)| (d - mean).powi(2) * v)
+                    .sum::<f64>()
+                    / na;
+                let fast = centres.iter().zip(&n).map(|(t, v)| t * v).sum::<f64>() / total - onset;
+                let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs().max(1.0);
+                assert!(close(maps.mean_time_ps[[r, c]], mean), "mean at {r},{c}");
+                assert!(close(maps.variance_ps2[[r, c]], var), "variance at {r},{c}");
+                assert!(
+                    close(maps.fast_lifetime_ps[[r, c]], fast),
+                    "fast lifetime at {r},{c}"
+                );
+                for (i, &hm) in [1.0, 3.0].iter().enumerate() {
+                    let o = 2.0 * std::f64::consts::PI * hm * f * 1e-12;
+                    let g = centres
+                        .iter()
+                        .zip(&n)
+                        .map(|(t, v)| v * (o * t).cos())
+                        .sum::<f64>()
+                        / total;
+                    let s = centres
+                        .iter()
+                        .zip(&n)
+                        .map(|(t, v)| v * (o * t).sin())
+                        .sum::<f64>()
+                        / total;
+                    assert!(close(maps.phasors[i].g[[r, c]], g), "g at {r},{c}");
+                    assert!(close(maps.phasors[i].s[[r, c]], s), "s at {r},{c}");
+                }
+            }
+        }
     }
 
     #[test]
