@@ -172,6 +172,9 @@ impl CountStack {
 /// The file a [`BinnedFile`] came from.
 #[derive(Debug)]
 pub enum Recording {
+    /// A file of a format without a variant of its own, as its source
+    /// describes it: a new format's source needs no change here.
+    Described(Box<dyn DescribedRecording>),
     /// A PicoQuant file and its header.
     PicoQuant(FileInfo),
     /// A Becker & Hickl FIFO file (`.spc`): its header, and what its
@@ -199,6 +202,17 @@ pub enum Recording {
         /// What the file holds.
         summary: TagFileSummary,
     },
+}
+
+/// What the source of a format without its own [`Recording`] variant
+/// says of a file it binned.
+pub trait DescribedRecording: std::fmt::Debug + Send + Sync {
+    /// The summary's first line: the file, and where its records went
+    /// (`counts`, decoded at `records_per_s`).
+    fn summary(&self, counts: &Counts, records_per_s: f64) -> String;
+
+    /// What makes its stacks less than a whole recording's, in words.
+    fn warnings(&self) -> Vec<String>;
 }
 
 impl BinnedFile<CountStack> {
@@ -250,6 +264,7 @@ impl<S> BinnedFile<S> {
     pub fn warnings(&self) -> Vec<String> {
         let mut w = Vec::new();
         match &self.recording {
+            Recording::Described(d) => w.extend(d.warnings()),
             Recording::PicoQuant(info) => w.extend(info.completeness_note()),
             Recording::TagFile { summary, .. } if summary.interrupted => w.push(
                 "the run that wrote it was interrupted before its planned end (its end frame says so)"
@@ -301,6 +316,7 @@ impl<S> BinnedFile<S> {
     pub fn summary(&self) -> Vec<String> {
         let acc = self.counts;
         let mut lines = vec![match &self.recording {
+            Recording::Described(d) => d.summary(&acc, self.records_per_s),
             Recording::PicoQuant(_) => format!(
                 "{} records ({:.0} M records/s): {} photons, {} binned, {} outside the time window, {} on other channels, {} outside the image; {} markers, {} frames",
                 acc.records,
