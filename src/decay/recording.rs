@@ -349,9 +349,8 @@ fn write_maps(
     let text = serde_json::to_string_pretty(&sidecar).expect("the sidecar serialises");
     crate::files::write_atomic(&json, text).map_err(|e| StackError::io(&json, e))?;
     let shown = shown_lifetime(maps);
-    if request.figures {
-        figures(maps, &shown, &lifetime_png, &phasor_png)?;
-    }
+    // The shown lifetime's unmasked, finite values: the figure's colour
+    // range and the printed median.
     let unmasked: Vec<f64> = shown
         .1
         .iter()
@@ -359,6 +358,9 @@ fn write_maps(
         .filter(|(v, m)| !**m && v.is_finite())
         .map(|(v, _)| *v)
         .collect();
+    if request.figures {
+        figures(maps, &shown, &unmasked, &lifetime_png, &phasor_png)?;
+    }
     let median = quantile(unmasked, 0.5).unwrap_or(f64::NAN);
     let mut notes = maps.notes.clone();
     if !request.figures {
@@ -383,22 +385,21 @@ fn shown_lifetime(maps: &DecayMaps) -> (&'static str, &Array2<f64>) {
     }
 }
 
-/// Draws the lifetime image and the first harmonic's phasor plot.
+/// Draws the lifetime image (`unmasked`: its unmasked, finite values)
+/// and the first harmonic's phasor plot.
 fn figures(
     maps: &DecayMaps,
     (name, lifetime): &(&'static str, &Array2<f64>),
+    unmasked: &[f64],
     lifetime_png: &Path,
     phasor_png: &Path,
 ) -> Result<(), StackError> {
-    let kept: Vec<f64> = lifetime
-        .iter()
-        .zip(&maps.mask)
-        .filter(|(v, m)| !**m && v.is_finite())
-        .map(|(v, _)| *v)
-        .collect();
     // The colours span the 2nd to 98th percentile of the unmasked pixels;
     // the brightness, intensity up to its 99th percentile.
-    let range = match (quantile(kept.clone(), 0.02), quantile(kept, 0.98)) {
+    let range = match (
+        quantile(unmasked.to_vec(), 0.02),
+        quantile(unmasked.to_vec(), 0.98),
+    ) {
         (Some(a), Some(b)) if b > a => (a, b),
         (Some(a), _) => (a - 1.0, a + 1.0),
         _ => (0.0, 1.0),
