@@ -1,6 +1,7 @@
 //! Every recorded file the project reads, one format per file behind one
 //! interface: a [`RecordedSource`] bins a file into stacks and hands each
-//! on as soon as it is binned. [`source_of`] is the one table from a
+//! on as soon as it is binned (a format binned whole in memory is one by
+//! implementing [`BinsInMemory`]). [`source_of`] is the one table from a
 //! detected [`Format`] to its source, so a new format is a new file here,
 //! its line in [`Format::of_file`] and its line below.
 //!
@@ -92,6 +93,28 @@ impl Handed<'_> {
             Handed::Lent(s) => s.to_owned(),
             Handed::Given { stack, .. } => *stack,
         }
+    }
+}
+
+/// A format binned whole in memory, its stacks then given away in order:
+/// a [`RecordedSource`] by that alone.
+pub trait BinsInMemory: Sync {
+    /// Bins the file at `path` as `spec` asks.
+    fn bin_in_memory(
+        &self,
+        path: &Path,
+        spec: &BinSpec,
+    ) -> Result<BinnedFile<CountStack>, RecordedFileError>;
+}
+
+impl<T: BinsInMemory> RecordedSource for T {
+    fn bin(
+        &self,
+        path: &Path,
+        spec: &BinSpec,
+        each: &mut dyn FnMut(Handed<'_>) -> Result<(), RecordedFileError>,
+    ) -> Result<BinnedFile<()>, RecordedFileError> {
+        hand_each(self.bin_in_memory(path, spec)?, each)
     }
 }
 

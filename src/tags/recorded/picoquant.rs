@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
+use super::BinsInMemory;
 use super::t3::{self, T3Records};
-use super::{Handed, RecordedSource, hand_each};
 use crate::formats::becker_hickl::spc::CardFlags;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, RecordReader, TtrError, open};
@@ -17,68 +17,63 @@ use crate::tags::binning::Binner;
 /// PicoQuant's T3 files.
 pub struct PicoQuantFiles;
 
-impl RecordedSource for PicoQuantFiles {
-    fn bin(
+impl BinsInMemory for PicoQuantFiles {
+    /// Bins a PicoQuant T3 file in memory.
+    fn bin_in_memory(
         &self,
         path: &Path,
         spec: &BinSpec,
-        each: &mut dyn FnMut(Handed<'_>) -> Result<(), RecordedFileError>,
-    ) -> Result<BinnedFile<()>, RecordedFileError> {
-        hand_each(bin(path, spec)?, each)
-    }
-}
-
-/// Bins a PicoQuant T3 file in memory.
-fn bin(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, RecordedFileError> {
-    let (info, _) = open(path)?;
-    info.check_finished(spec.allow_truncated)?;
-    if !info.record_type.is_t3() {
-        return Err(spec_error(
-            path,
-            format!(
-                "{} records carry no micro time; binning needs a T3 file",
-                info.record_type.name()
-            ),
-        ));
-    }
-    let res_ps = info.resolution_s * 1e12;
-    let period_ps = info.macro_unit_s * 1e12;
-    let imaging = info.imaging;
-    let pixel_cm = info.pixel_size_cm();
-    // The laser's rate: the file's measured sync rate, else the T3 sync
-    // period's.
-    let laser_hz = info
-        .sync_rate_hz
-        .filter(|r| r.is_finite() && *r > 0.0)
-        .unwrap_or(1.0 / info.macro_unit_s);
-    let notes = info.unread_note().into_iter().collect();
-    let source = format!(
-        "{} ({}, {})",
-        path.display(),
-        info.device,
-        info.record_type.name()
-    );
-    let mut binned = t3::bin(
-        path,
-        spec,
-        info,
-        (res_ps, period_ps),
-        imaging,
-        source,
-        notes,
-    )?;
-    // The image's pixel size, when the stacks are the scanned image.
-    let scanned = imaging.is_some_and(|img| {
-        let (_, h, w) = binned.shape;
-        (h, w) == (img.pixels_y, img.pixels_x) && spec.pixels == Pixels::Auto
-    });
-    for s in &mut binned.stacks {
-        if let (Some(cm), true) = (pixel_cm, scanned) {
-            s.meta.set_pixel_pitch(cm);
+    ) -> Result<BinnedFile<CountStack>, RecordedFileError> {
+        let (info, _) = open(path)?;
+        info.check_finished(spec.allow_truncated)?;
+        if !info.record_type.is_t3() {
+            return Err(spec_error(
+                path,
+                format!(
+                    "{} records carry no micro time; binning needs a T3 file",
+                    info.record_type.name()
+                ),
+            ));
         }
-        s.meta.laser_frequency_hz = Some(laser_hz).filter(|r| r.is_finite() && *r > 0.0);
+        let res_ps = info.resolution_s * 1e12;
+        let period_ps = info.macro_unit_s * 1e12;
+        let imaging = info.imaging;
+        let pixel_cm = info.pixel_size_cm();
+        // The laser's rate: the file's measured sync rate, else the T3 sync
+        // period's.
+        let laser_hz = info
+            .sync_rate_hz
+            .filter(|r| r.is_finite() && *r > 0.0)
+            .unwrap_or(1.0 / info.macro_unit_s);
+        let notes = info.unread_note().into_iter().collect();
+        let source = format!(
+            "{} ({}, {})",
+            path.display(),
+            info.device,
+            info.record_type.name()
+        );
+        let mut binned = t3::bin(
+            path,
+            spec,
+            info,
+            (res_ps, period_ps),
+            imaging,
+            source,
+            notes,
+        )?;
+        // The image's pixel size, when the stacks are the scanned image.
+        let scanned = imaging.is_some_and(|img| {
+            let (_, h, w) = binned.shape;
+            (h, w) == (img.pixels_y, img.pixels_x) && spec.pixels == Pixels::Auto
+        });
+        for s in &mut binned.stacks {
+            if let (Some(cm), true) = (pixel_cm, scanned) {
+                s.meta.set_pixel_pitch(cm);
+            }
+            s.meta.laser_frequency_hz = Some(laser_hz).filter(|r| r.is_finite() && *r > 0.0);
+        }
+        Ok(binned)
     }
-    Ok(binned)
 }
 
 /// Reads, decodes and bins `reader`'s records with `binner`; the text of

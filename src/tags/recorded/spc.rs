@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
+use super::BinsInMemory;
 use super::t3::{self, T3Records};
-use super::{Handed, RecordedSource, hand_each};
 use crate::formats::becker_hickl::spc::{self, CardFlags, SpcFileError, SpcInfo};
 use crate::stack::Unstated;
 use crate::tags::binned::{
@@ -16,61 +16,56 @@ use crate::tags::binning::Binner;
 /// Becker & Hickl's FIFO files.
 pub struct SpcFiles;
 
-impl RecordedSource for SpcFiles {
-    fn bin(
+impl BinsInMemory for SpcFiles {
+    /// Bins a Becker & Hickl FIFO file in memory.
+    fn bin_in_memory(
         &self,
         path: &Path,
         spec: &BinSpec,
-        each: &mut dyn FnMut(Handed<'_>) -> Result<(), RecordedFileError>,
-    ) -> Result<BinnedFile<()>, RecordedFileError> {
-        hand_each(bin(path, spec)?, each)
-    }
-}
-
-/// Bins a Becker & Hickl FIFO file in memory.
-fn bin(path: &Path, spec: &BinSpec) -> Result<BinnedFile<CountStack>, RecordedFileError> {
-    let info = spc::open(path, &spec.spc)?;
-    info.check_whole(spec.allow_truncated)?;
-    // Without its unit the file bins by ADC channel: one bin per channel
-    // (a "ps" below is then a channel), every stack marked so.
-    let channels = info.micro_unit_s.is_none();
-    if channels && (spec.bin_width_ps.is_some() || spec.t_start_ps != 0.0) {
-        return Err(spec_error(
-            path,
-            format!(
-                "--bin-width and --t-start are times, and this file's micro-time unit is unknown ({}): give it with --micro-unit (ps: TAC range / TAC gain / {} ADC channels), or bin by ADC channel without them",
-                info.micro_unit_from,
-                info.module.adc_channels()
+    ) -> Result<BinnedFile<CountStack>, RecordedFileError> {
+        let info = spc::open(path, &spec.spc)?;
+        info.check_whole(spec.allow_truncated)?;
+        // Without its unit the file bins by ADC channel: one bin per channel
+        // (a "ps" below is then a channel), every stack marked so.
+        let channels = info.micro_unit_s.is_none();
+        if channels && (spec.bin_width_ps.is_some() || spec.t_start_ps != 0.0) {
+            return Err(spec_error(
+                path,
+                format!(
+                    "--bin-width and --t-start are times, and this file's micro-time unit is unknown ({}): give it with --micro-unit (ps: TAC range / TAC gain / {} ADC channels), or bin by ADC channel without them",
+                    info.micro_unit_from,
+                    info.module.adc_channels()
+                ),
+            ));
+        }
+        let res_ps = info.micro_unit_s.map_or(1.0, |s| s * 1e12);
+        let period_ps = f64::from(info.module.adc_channels()) * res_ps;
+        let mut notes = vec![match channels {
+            false => format!("micro-time unit {res_ps:.6} ps ({})", info.micro_unit_from),
+            true => format!(
+                "binned by ADC channel, one bin per channel: the micro-time unit is unknown ({})",
+                info.micro_unit_from
             ),
-        ));
-    }
-    let res_ps = info.micro_unit_s.map_or(1.0, |s| s * 1e12);
-    let period_ps = f64::from(info.module.adc_channels()) * res_ps;
-    let mut notes = vec![match channels {
-        false => format!("micro-time unit {res_ps:.6} ps ({})", info.micro_unit_from),
-        true => format!(
-            "binned by ADC channel, one bin per channel: the micro-time unit is unknown ({})",
-            info.micro_unit_from
-        ),
-    }];
-    if info.module_assumed {
-        notes.push(format!(
+        }];
+        if info.module_assumed {
+            notes.push(format!(
             "records read as {}: a .spc file does not record its module (an SPC-600/630 file needs --spc-module)",
             info.module.cards()
         ));
-    }
-    let source = format!(
-        "{} (Becker & Hickl {})",
-        path.display(),
-        info.module.cards()
-    );
-    let mut binned = t3::bin(path, spec, info, (res_ps, period_ps), None, source, notes)?;
-    if channels {
-        for s in &mut binned.stacks {
-            s.meta.unstated.push(Unstated::TimeUnit);
         }
+        let source = format!(
+            "{} (Becker & Hickl {})",
+            path.display(),
+            info.module.cards()
+        );
+        let mut binned = t3::bin(path, spec, info, (res_ps, period_ps), None, source, notes)?;
+        if channels {
+            for s in &mut binned.stacks {
+                s.meta.unstated.push(Unstated::TimeUnit);
+            }
+        }
+        Ok(binned)
     }
-    Ok(binned)
 }
 
 /// Bins a part of a `.spc` file's records (see [`T3Records::bin_part`]).
