@@ -135,22 +135,6 @@ impl Learned<'_> {
             Used::Network,
         ))
     }
-
-    /// The larger of the stand-in's memory and the network's: the
-    /// Richardson-Lucy iterations of its inputs, the inputs and the
-    /// network's maps (at full resolution the padded input, two encoder
-    /// and two decoder maps of `c0` channels and a concatenation of
-    /// `c0 + c1`, about 100 floats per sensor pixel with the channels of
-    /// the embedded network, counted as 160 (4 bytes each) for wider ones),
-    /// and the convolutions' scratch per thread (which at 32 x 32 pixels
-    /// outweighs the maps: 1.2-2.3 MB measured there, declared 2.8 MB).
-    pub fn working_bytes(&self, shape: &WorkShape) -> u64 {
-        let network = RL_SUM_CV
-            .working_bytes(shape)
-            .saturating_add(shape.bytes([0; 3], [4 * 160, 8, 0]))
-            .saturating_add(self.net.scratch_bytes(shape.grid.1));
-        network.max(self.outside.working_bytes(shape))
-    }
 }
 
 impl Reconstructor for Learned<'_> {
@@ -167,7 +151,19 @@ impl Reconstructor for Learned<'_> {
             .map(|(estimate, _)| estimate)
     }
 
+    /// The larger of the stand-in's memory and the network's: the
+    /// Richardson-Lucy iterations of its inputs, the inputs and the
+    /// network's maps (at full resolution the padded input, two encoder
+    /// and two decoder maps of `c0` channels and a concatenation of
+    /// `c0 + c1`, about 100 floats per sensor pixel with the channels of
+    /// the embedded network, counted as 160 (4 bytes each) for wider ones),
+    /// and the convolutions' scratch per thread (which at 32 x 32 pixels
+    /// outweighs the maps: 1.2-2.3 MB measured there, declared 2.8 MB).
     fn working_bytes(&self, shape: &WorkShape) -> u64 {
-        Learned::working_bytes(self, shape)
+        let network = RL_SUM_CV
+            .working_bytes(shape)
+            .saturating_add(shape.bytes([0; 3], [4 * 160, 8, 0]))
+            .saturating_add(self.net.scratch_bytes(shape.grid.1));
+        network.max(self.outside.working_bytes(shape))
     }
 }
