@@ -71,6 +71,29 @@ fn http_get(addr: &str, path: &str) -> String {
     r
 }
 
+/// The state the view at `addr` serves (`/state`), parsed.
+fn state(addr: &str) -> serde_json::Value {
+    let r = http_get(addr, "/state");
+    let body = r.split_once("\r\n\r\n").map_or("", |(_, b)| b);
+    serde_json::from_str(body).unwrap()
+}
+
+/// The state of the view at `addr` once its run has ended (within 60 s).
+fn final_state(addr: &str) -> serde_json::Value {
+    let started = Instant::now();
+    loop {
+        let s = state(addr);
+        if s["done"] == true {
+            return s;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the run did not end"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
 /// Runs the browser check on `url` (`mode`: watch to the end, or close
 /// mid-run); the page's report.
 fn browse(
@@ -604,23 +627,7 @@ fn a_replay_shows_in_the_live_view() {
         &[],
     );
     let addr = url.trim_start_matches("http://").trim_end_matches('/');
-    let state = || {
-        let r = http_get(addr, "/state");
-        let body = r.split_once("\r\n\r\n").map_or("", |(_, b)| b).to_string();
-        serde_json::from_str::<serde_json::Value>(&body).unwrap()
-    };
-    let started = Instant::now();
-    let last = loop {
-        let s = state();
-        if s["done"] == true {
-            break s;
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "the replay did not end"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    };
+    let last = final_state(addr);
     assert!(stop(child).success());
     let original = json(&dir.path().join("original/acquisition.json"));
     assert_eq!(last["ledger"]["photons"], original["ledger"]["photons"]);
@@ -698,9 +705,7 @@ fn under_cpu_hogs_the_page_says_why_and_the_command_keeps_talking() {
     let started = Instant::now();
     let mut light_at = None;
     loop {
-        let r = http_get(addr, "/state");
-        let body = r.split_once("\r\n\r\n").map_or("", |(_, b)| b);
-        let s: serde_json::Value = serde_json::from_str(body).unwrap();
+        let s = state(addr);
         if s["counters"]["photons"].as_u64().unwrap_or(0) > 0 && s["reconstruction"].is_null() {
             // Photons in, no reconstruction shown: within the watcher's
             // first looks the page says why, and from then on always.
@@ -781,20 +786,7 @@ fn a_flim_scan_shows_its_mean_arrival_time_image() {
         &[],
     );
     let addr = url.trim_start_matches("http://").trim_end_matches('/');
-    let started = Instant::now();
-    let last = loop {
-        let r = http_get(addr, "/state");
-        let body = r.split_once("\r\n\r\n").map_or("", |(_, b)| b);
-        let s: serde_json::Value = serde_json::from_str(body).unwrap();
-        if s["done"] == true {
-            break s;
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "the replay did not end"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    };
+    let last = final_state(addr);
     assert!(stop(child).success());
     assert!(
         last["mean_time_error"].is_null(),
