@@ -16,7 +16,6 @@ split is read. Used to measure the ceiling of a larger network
 """
 
 import csv
-import math
 import os
 import sys
 
@@ -28,9 +27,9 @@ from safetensors.torch import load_file
 
 import learned_model as lm
 import scatterscope
+from train_learned import PAPER_PHOTONS, psnr
 
 LEVELS = (0.1, 1.0, 10.0)
-PAPER_PHOTONS = 450.0
 GRID, SENSOR = 384, 256
 
 
@@ -54,10 +53,6 @@ def objects(folder):
             m = (GRID - SENSOR) // 2
             img[m:m + SENSOR, m:m + SENSOR] = truth
         yield r["name"], img
-
-
-def psnr(a, b):
-    return -10 * math.log10(max(float(np.mean((a - b) ** 2)), 1e-12))
 
 
 def main():
