@@ -453,56 +453,96 @@ fn simulated(
 /// benchmark simulates (`image`, a square object grid larger than the
 /// sensor of `sensor_px`, which sees its centre at the physics' pitch;
 /// plus `background_share` times the mean expected count per pixel and
-/// bin): (the network's inputs (channels, rows, columns), the truth on the
-/// sensor, a dict of the inputs' scale, photons per pixel, blur width
-/// and background share). The inputs are computed by the function
-/// `reconstruct --method learned` runs.
+/// bin), the kernels discretised as `discretisation` says (`integrated`,
+/// `point` or `half-pitch` with `offset`) and the light crossing
+/// `true_physics`' medium when given (else the physics'): (the network's
+/// inputs (channels, rows, columns), the truth on the sensor, a dict of the
+/// inputs' scale, photons per pixel, blur width and background share, and
+/// the data steps' operator: the time-summed counts, the time-summed kernel
+/// on the model's grid (origin-centred), the sensor's offset on that grid,
+/// the summed background per pixel and the last Richardson-Lucy iterate on
+/// the grid). The inputs are computed by the function `reconstruct
+/// --method learned` runs.
 #[pyfunction]
-#[pyo3(signature = (image, sensor_px, seed=0, background_share=0.0, **physics))]
-#[allow(clippy::type_complexity)]
+#[pyo3(signature = (image, sensor_px, seed=0, background_share=0.0, discretisation="integrated", offset=(0, 0), true_physics=None, **physics))]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn learned_case<'py>(
     py: Python<'py>,
     image: PyReadonlyArray2<'py, f64>,
     sensor_px: usize,
     seed: u64,
     background_share: f64,
+    discretisation: &str,
+    offset: (usize, usize),
+    true_physics: Option<&Bound<'py, PyDict>>,
     physics: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<(
     Bound<'py, PyArray3<f32>>,
     Bound<'py, PyArray2<f64>>,
     Bound<'py, PyDict>,
 )> {
+    use scatterscope::report::bench::{CaseSimulation, Discretisation};
     let mut o = overrides(physics)?;
     o.size = Some(sensor_px);
     let setup = o.resolve().map_err(err)?;
+    let true_medium = match true_physics {
+        Some(t) => {
+            let mut o = overrides(Some(t))?;
+            o.size = Some(sensor_px);
+            Some(o.resolve().map_err(err)?.medium)
+        }
+        None => None,
+    };
+    let discretisation = match discretisation {
+        "integrated" => Discretisation::Integrated,
+        "point" => Discretisation::Point,
+        "half-pitch" => Discretisation::HalfPitch { offset },
+        other => {
+            return Err(msg(format!(
+                "discretisation `{other}`: use integrated, point or half-pitch"
+            )));
+        }
+    };
+    let how = CaseSimulation {
+        background_share,
+        discretisation,
+        true_medium,
+    };
     let object: Array2<f64> = image.as_array().to_owned();
     let done = py
         .detach(|| -> Result<_, String> {
-            let case = scatterscope::report::bench::simulate_object(
-                object,
-                &setup,
-                seed,
-                background_share,
-            )
-            .map_err(|e| scatterscope::error_text(&e))?;
+            let case = scatterscope::report::bench::simulate_object(object, &setup, seed, &how)
+                .map_err(|e| scatterscope::error_text(&e))?;
             let bins = case.problem.all_bins();
-            let data = scatterscope::reconstruct::Data::new(
-                &case.problem.model,
-                &case.problem.counts,
-                &bins,
-            )
-            .map_err(|e| scatterscope::error_text(&e))?;
+            let model = &case.problem.model;
+            let data = scatterscope::reconstruct::Data::new(model, &case.problem.counts, &bins)
+                .map_err(|e| scatterscope::error_text(&e))?;
             let inputs = scatterscope::reconstruct::learned::inputs::learned_inputs(&data)
                 .ok_or_else(|| "no photons in the simulated stack".to_string())?;
-            Ok((inputs, case.truth))
+            let summed = model.summed(&bins);
+            let kernel = summed.fft().inverse(summed.spectrum(0).to_vec());
+            let grid = model.grid_shape();
+            let operator = (
+                Array2::from_shape_vec(grid, kernel).expect("the model's grid"),
+                model.sensor_offset(),
+                model.background() * bins.len() as f64,
+                case.problem.counts.sum_axis(ndarray::Axis(0)),
+            );
+            Ok((inputs, case.truth, operator))
         })
         .map_err(msg)?;
-    let (inputs, truth) = done;
+    let (inputs, truth, (kernel, sensor_offset, background, counts)) = done;
     let facts = PyDict::new(py);
     facts.set_item("scale", inputs.scale)?;
     facts.set_item("photons_per_pixel", inputs.photons_per_pixel)?;
     facts.set_item("kernel_width_px", inputs.kernel_width_px)?;
     facts.set_item("background_share", inputs.background_share)?;
+    facts.set_item("counts", counts.into_pyarray(py))?;
+    let base = Array2::from_shape_vec(kernel.dim(), inputs.base_grid).expect("the model's grid");
+    facts.set_item("kernel", kernel.into_pyarray(py))?;
+    facts.set_item("sensor_offset", sensor_offset)?;
+    facts.set_item("background", background)?;
+    facts.set_item("base_grid", base.into_pyarray(py))?;
     Ok((
         inputs.features.into_pyarray(py),
         truth.into_pyarray(py),

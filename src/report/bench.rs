@@ -17,7 +17,7 @@ use crate::named::{Named, named};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use ndarray::{Array2, ArrayView2, s};
+use ndarray::{Array2, Array3, ArrayView2, s};
 use serde::Serialize;
 
 use crate::denoise::Denoiser;
@@ -183,22 +183,58 @@ pub fn simulate_case(
             full
         }
     };
-    simulate_object(object, setup, seed, 0.0)
+    simulate_object(object, setup, seed, &CaseSimulation::default())
+}
+
+/// How a simulated case discretises the ST-PSF. The benchmark simulates
+/// with [`Discretisation::Integrated`], the reconstruction's own model; the
+/// learned reconstruction's trainer varies it, so that its network learns
+/// the physics rather than one discretisation of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Discretisation {
+    /// Kernels integrated over pixel area and bin duration.
+    #[default]
+    Integrated,
+    /// Kernels evaluated at pixel and bin centres.
+    Point,
+    /// The object on a grid of half the pitch (each object pixel split
+    /// into 2 x 2), kernels at that grid's points and bin centres, each
+    /// sensor pixel the sum of 2 x 2 fine pixels whose blocks start
+    /// `offset` fine pixels (each 0 or 1) from the object's: the sensor's
+    /// grid half a pixel off the object's.
+    HalfPitch {
+        /// Rows and columns, 0 or 1.
+        offset: (usize, usize),
+    },
+}
+
+/// What a simulated case adds to the reconstruction's model.
+#[derive(Debug, Clone, Default)]
+pub struct CaseSimulation {
+    /// Background over the mean expected count per pixel and bin.
+    pub background_share: f64,
+    /// How the simulation discretises the ST-PSF.
+    pub discretisation: Discretisation,
+    /// The medium the light really crossed, when it differs from the
+    /// setup's (a slab whose parameters the reconstruction knows only
+    /// roughly); `None`: the setup's.
+    pub true_medium: Option<crate::physics::Medium>,
 }
 
 /// Simulates `object`, a square grid at least as large as `setup`'s
 /// sensor, which sees its centre, as the benchmark does: the kernels of
 /// the grid at the sensor's pitch (periodic there, the object reaching
-/// past the kernels' support), the sensor's window, plus `background_share`
-/// times its mean expected count per pixel and bin, Poisson-sampled with
-/// `seed`; the problem is the sensor-edged model `reconstruct` builds,
-/// with that background. Also what the learned reconstruction's trainer
-/// simulates.
+/// past the kernels' support), the sensor's window, plus
+/// `how.background_share` times its mean expected count per pixel and bin,
+/// Poisson-sampled with `seed`; the problem is the sensor-edged model
+/// `reconstruct` builds from `setup`, with that background. Also what the
+/// learned reconstruction's trainer simulates, with other discretisations
+/// and media (`how`).
 pub fn simulate_object(
     object: Array2<f64>,
     setup: &Setup,
     seed: u64,
-    background_share: f64,
+    how: &CaseSimulation,
 ) -> Result<BenchCase, ReportError> {
     let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
     let object_px = object.nrows();
@@ -209,36 +245,16 @@ pub fn simulate_object(
             object.ncols()
         )));
     }
+    let background_share = how.background_share;
     if !(background_share.is_finite() && background_share >= 0.0) {
         return Err(ReportError::Input(format!(
             "background share {background_share}: give a finite number >= 0"
         )));
     }
-    let (oy, ox) = ((object_px - h) / 2, (object_px - w) / 2);
-    let mut wide = setup.clone();
-    wide.sensor.height_px = object_px;
-    wide.sensor.width_px = object_px;
-    wide.sensor.fov_cm = setup.sensor.fov_cm * object_px as f64 / w as f64;
-    crate::memory::check_setup(&wide, crate::memory::SIMULATE_BYTES, "a benchmark case")
-        .map_err(|e| ReportError::Input(e.to_string()))?;
-    let sim_kernels = KernelStack::build(&wide, Sampling::Integrated)?;
-    let reach = sim_kernels
-        .kept_bins()
-        .map(|b| b.support_radius_px)
-        .max()
-        .unwrap_or(0);
-    if reach > oy.min(ox) {
-        return Err(ReportError::Input(format!(
-            "object grid {object_px} px leaves {} px around the sensor, less than the kernels' support {reach} px",
-            oy.min(ox)
-        )));
-    }
-    let sim = ForwardModel::new(&sim_kernels, Boundary::Periodic);
-    let expected = sim.expected(object.view()).counts;
-    let window = expected.slice(s![.., oy..oy + h, ox..ox + w]).to_owned();
+    let kernels = KernelStack::build(setup, Sampling::Integrated)?;
+    let (window, truth) = expected_window(object, setup, &kernels, how)?;
     let background = background_share * window.mean().unwrap_or(0.0);
     let counts = poisson_counts(&window.mapv(|v| v + background), seed);
-    let kernels = KernelStack::build(setup, Sampling::Integrated)?;
     let problem = Problem {
         model: ForwardModel::new(&kernels, Boundary::Sensor).with_background(background),
         counts,
@@ -246,10 +262,99 @@ pub fn simulate_object(
         setup: setup.clone(),
         left_out: Vec::new(),
     };
-    Ok(BenchCase {
-        truth: object.slice(s![oy..oy + h, ox..ox + w]).to_owned(),
-        problem,
-    })
+    Ok(BenchCase { truth, problem })
+}
+
+/// The expected counts of `object` on the sensor's window in the bins the
+/// model `kernels` keeps, simulated as `how` says, and the truth there (the
+/// object over each sensor pixel's area).
+fn expected_window(
+    object: Array2<f64>,
+    setup: &Setup,
+    kernels: &KernelStack,
+    how: &CaseSimulation,
+) -> Result<(Array3<f64>, Array2<f64>), ReportError> {
+    let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
+    let object_px = object.nrows();
+    let (oy, ox) = ((object_px - h) / 2, (object_px - w) / 2);
+    let (factor, sampling, offset) = match how.discretisation {
+        Discretisation::Integrated => (1, Sampling::Integrated, (0, 0)),
+        Discretisation::Point => (1, Sampling::Point, (0, 0)),
+        Discretisation::HalfPitch { offset } => {
+            if offset.0 > 1 || offset.1 > 1 {
+                return Err(ReportError::Input(format!(
+                    "half-pitch offset {offset:?}: each must be 0 or 1"
+                )));
+            }
+            (2, Sampling::Point, offset)
+        }
+    };
+    // The simulation's grid: the object's, `factor` times finer, every bin
+    // kept (the model's are picked from them by index).
+    let side = object_px * factor;
+    let mut wide = setup.clone();
+    if let Some(medium) = &how.true_medium {
+        wide.medium = medium.clone();
+    }
+    wide.sensor.height_px = side;
+    wide.sensor.width_px = side;
+    wide.sensor.fov_cm = setup.sensor.fov_cm * object_px as f64 / w as f64;
+    wide.total_photons = setup.total_photons / (factor * factor) as f64;
+    wide.min_bin_photons = 0.0;
+    crate::memory::check_setup(&wide, crate::memory::SIMULATE_BYTES, "a benchmark case")
+        .map_err(|e| ReportError::Input(e.to_string()))?;
+    let sim_kernels = KernelStack::build(&wide, sampling)?;
+    let bins: Vec<usize> = kernels
+        .kept_bins()
+        .map(|b| {
+            sim_kernels.position_of_bin(b.index).ok_or_else(|| {
+                ReportError::Input(format!(
+                    "bin {} carries no light in the simulation's medium",
+                    b.index
+                ))
+            })
+        })
+        .collect::<Result<_, _>>()?;
+    let reach = bins
+        .iter()
+        .map(|&k| sim_kernels.kept_bins().nth(k))
+        .map(|b| b.map_or(0, |b| b.support_radius_px))
+        .max()
+        .unwrap_or(0);
+    let room = (oy.min(ox) * factor).saturating_sub(offset.0.max(offset.1));
+    if reach > room {
+        return Err(ReportError::Input(format!(
+            "object grid {object_px} px leaves {} px around the sensor, less than the kernels' support {} px",
+            oy.min(ox),
+            reach.div_ceil(factor)
+        )));
+    }
+    let fine = if factor == 1 {
+        object
+    } else {
+        Array2::from_shape_fn((side, side), |(r, c)| object[(r / factor, c / factor)])
+    };
+    let sim = ForwardModel::with_bins(&sim_kernels, &bins, Boundary::Periodic);
+    let expected = sim.expected(fine.view()).counts;
+    // Each sensor pixel sums its factor x factor block of the fine grid.
+    let (fy, fx) = (oy * factor + offset.0, ox * factor + offset.1);
+    let block = |r: usize, c: usize, k: Option<usize>| -> f64 {
+        let mut sum = 0.0;
+        for dy in 0..factor {
+            for dx in 0..factor {
+                let (y, x) = (fy + r * factor + dy, fx + c * factor + dx);
+                sum += match k {
+                    Some(k) => expected[(k, y, x)],
+                    None => fine[(y, x)],
+                };
+            }
+        }
+        sum
+    };
+    let window = Array3::from_shape_fn((bins.len(), h, w), |(k, r, c)| block(r, c, Some(k)));
+    let cells = (factor * factor) as f64;
+    let truth = Array2::from_shape_fn((h, w), |(r, c)| block(r, c, None) / cells);
+    Ok((window, truth))
 }
 
 /// One method's result on one case.

@@ -221,7 +221,14 @@ def simulate(
 
 
 def learned_case(
-    image: np.ndarray, sensor_px: int, seed: int = 0, background_share: float = 0.0, **physics: Any
+    image: np.ndarray,
+    sensor_px: int,
+    seed: int = 0,
+    background_share: float = 0.0,
+    discretisation: str = "integrated",
+    offset: Tuple[int, int] = (0, 0),
+    true_physics: Optional[Dict[str, Any]] = None,
+    **physics: Any,
 ) -> Dict[str, Any]:
     """One training case of ``--method learned``: ``image`` (a square
     object grid larger than the sensor of ``sensor_px`` pixels, which sees
@@ -230,12 +237,33 @@ def learned_case(
     per pixel and bin. Returns ``inputs`` (the network's float32
     ``(channels, rows, cols)``, computed by the function the reconstruction
     runs), ``truth`` (the object on the sensor) and ``scale``,
-    ``photons_per_pixel``, ``kernel_width_px``, ``background_share``.
+    ``photons_per_pixel``, ``kernel_width_px``, ``background_share``, and
+    the operator of the reconstruction's data steps: ``counts`` (summed
+    over bins), ``kernel`` (the time-summed kernel on the model's grid,
+    origin-centred), ``sensor_offset`` (the sensor's first row and column
+    on that grid), ``background`` (summed over bins, per pixel) and
+    ``base_grid`` (the last Richardson-Lucy iterate on the grid).
+
+    ``discretisation`` is how the simulation discretises the ST-PSF:
+    ``integrated`` (the reconstruction's own model), ``point`` (pixel and
+    bin centres) or ``half-pitch`` (a grid of half the pitch, its 2 x 2
+    blocks summed from ``offset`` fine pixels); ``true_physics`` (physics
+    keywords) is the medium the light really crossed when the stated
+    ``physics`` are only roughly right.
     """
     array = np.ascontiguousarray(image, dtype=np.float64)
     if array.ndim != 2:
         raise ScatterscopeError(f"an image is (rows, cols); this array has shape {array.shape}")
-    inputs, truth, facts = _native.learned_case(array, int(sensor_px), int(seed), float(background_share), **physics)
+    inputs, truth, facts = _native.learned_case(
+        array,
+        int(sensor_px),
+        int(seed),
+        float(background_share),
+        discretisation,
+        (int(offset[0]), int(offset[1])),
+        true_physics,
+        **physics,
+    )
     return {"inputs": inputs, "truth": truth, **facts}
 
 
