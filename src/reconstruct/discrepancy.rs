@@ -42,6 +42,14 @@ pub struct DevianceCheck {
     pub sd: f64,
 }
 
+impl DevianceCheck {
+    /// How many standard deviations of Poisson noise the deviance lies
+    /// above its expectation.
+    pub fn z(&self) -> f64 {
+        (self.deviance - self.expected) / self.sd.max(f64::MIN_POSITIVE)
+    }
+}
+
 const TABLE_LO: f64 = 1e-8;
 const TABLE_HI: f64 = 400.0;
 const TABLE_N: usize = 4000;

@@ -12,6 +12,7 @@ use ndarray::{Array2, Array3};
 use super::problem::{BackgroundChoice, Problem, ProblemError};
 use crate::calibrate::{CalibrateError, Free, fit_stack_physics};
 use crate::config::{ConfigError, PhysicsOverrides};
+use crate::formats::detect::Format;
 use crate::formats::image::read_image;
 use crate::formats::stack_file::missing_meta;
 use crate::forward::Boundary;
@@ -227,11 +228,19 @@ pub fn prepare(
 }
 
 impl Input {
-    /// The truth image at `path` on the stack's sensor, to score against,
-    /// and a warning when it had to be resampled to the sensor's size.
+    /// The truth image at `path` on the stack's sensor, to score against
+    /// (a `.npy` of the sensor's size with its own values, any other image
+    /// as a scene), and a warning when it had to be resampled to the
+    /// sensor's size.
     pub fn truth(&self, path: &Path) -> Result<(Array2<f64>, Option<String>), ImageError> {
         let (_, h, w) = self.stack.data.dim();
-        let (nh, nw) = read_image(path)?.dim();
+        let image = read_image(path)?;
+        let (nh, nw) = image.dim();
+        // A .npy truth holds the object's own values: kept as they are
+        // when it is the sensor's size.
+        if (nh, nw) == (h, w) && Format::of_file(path) == Format::Npy {
+            return Ok((image, None));
+        }
         let note = ((nh, nw) != (h, w)).then(|| {
             format!(
                 "the truth {} is {nw} x {nh} pixels; resampled to the {w} x {h} sensor (Lanczos), so its PSNR and SSIM are against an approximation",

@@ -260,6 +260,13 @@ impl<'a> MethodPlan<'a> {
                         net: super::learned::embedded(),
                         outside: Box::new(rl_stack),
                     },
+                    search: match opts.rl_stop {
+                        RlStop::CrossValidated {
+                            max_iters,
+                            acceleration,
+                        } => (max_iters, acceleration),
+                        RlStop::After(_) => (RlStop::DEFAULT_MAX_ITERS, Acceleration::None),
+                    },
                 }),
                 View::Whole,
             ),

@@ -35,6 +35,7 @@ pub mod data;
 pub mod discrepancy;
 pub mod em;
 pub mod error;
+pub mod guard;
 pub mod input;
 pub mod learned;
 pub mod likelihood;

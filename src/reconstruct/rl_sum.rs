@@ -253,6 +253,33 @@ impl RlOperator {
         self.sensitivity.len()
     }
 
+    /// The EM factor of `o` for counts `m`, `H^T(m / (H o + bg)) / H^T 1`
+    /// on the grid, the denominator guarded at `guard`; 1 at pixels whose
+    /// sensitivity is at most `unseen` times the kernel mass (an EM step
+    /// leaves them).
+    pub(crate) fn em_ratio(
+        &self,
+        o: &[f64],
+        m: &[f64],
+        bg: f64,
+        guard: f64,
+        unseen: f64,
+    ) -> Vec<f64> {
+        let y = self.op.apply(o);
+        let ratio: Vec<f64> = y
+            .iter()
+            .zip(m)
+            .map(|(&yj, &mj)| mj / (yj + bg).max(guard))
+            .collect();
+        let seen = unseen * self.mass;
+        self.op
+            .adjoint(&ratio)
+            .into_iter()
+            .zip(&self.sensitivity)
+            .map(|(b, &s)| if s > seen { b / s } else { 1.0 })
+            .collect()
+    }
+
     /// One RL step of `o` for counts `m` given `y = H o`: `o <- o H^T(m /
     /// (y + bg)) / H^T 1`, the denominator guarded at `guard`. Object pixels
     /// the sensor does not see keep their value. Returns the negative

@@ -1,5 +1,5 @@
-//! What the learned reconstruction's network sees of a stack: Richardson-
-//! Lucy on the time-summed counts with the time-summed kernel (the model
+//! What the learned reconstruction's network starts from: Richardson-Lucy
+//! on the time-summed counts with the time-summed kernel (the model
 //! `reconstruct` uses: the sensor's edges, the IRF in the kernels, the
 //! background in the denominator), its iterates at [`CHECKPOINTS`], the
 //! summed counts over the kernel mass, and two constant maps that say how
@@ -23,7 +23,7 @@ pub const CHECKPOINTS: [usize; 3] = [10, 40, 150];
 /// the blur width.
 pub const CHANNELS: usize = CHECKPOINTS.len() + 3;
 
-/// The channel of the last iterate, which the network's output corrects.
+/// The channel of the last iterate, where the stages start.
 pub const BASE_CHANNEL: usize = CHECKPOINTS.len() - 1;
 
 /// A stack as the network sees it.
@@ -40,9 +40,14 @@ pub struct LearnedInputs {
     pub kernel_width_px: f64,
     /// Background over mean counts (0 without a background).
     pub background_share: f64,
-    /// The last iterate on the model's grid (the object beyond the sensor
-    /// window, for the output's deviance).
+    /// The last iterate on the model's grid: where the stages start.
     pub base_grid: Vec<f64>,
+    /// The time-summed counts on the sensor, row-major.
+    pub counts: Vec<f64>,
+    /// The background of the summed counts, per pixel.
+    pub background: f64,
+    /// The EM steps' denominator guard.
+    pub guard: f64,
 }
 
 /// The light-level channel: `log10` of the mean counts per pixel, over
@@ -58,16 +63,29 @@ pub fn width_feature(kernel_width_px: f64) -> f32 {
 
 /// The inputs of `data`; `None` without photons or kernel mass.
 pub fn learned_inputs(data: &Data<'_>) -> Option<LearnedInputs> {
-    let model = data.model;
-    let rl = RlOperator::new(model, data.bins);
+    let rl = RlOperator::new(data.model, data.bins);
     let summed = data.counts.sum_axis(Axis(0));
+    let bg = data.model.background() * data.bins.len() as f64;
+    let width = kernel_rms_radius(&data.model.summed(data.bins));
+    summed_inputs(data.model, &rl, &summed, bg, width)
+}
+
+/// The inputs of counts summed over the bins of `rl` (`summed`, with
+/// `background` per pixel, of a blur `kernel_width_px` wide): a stack's,
+/// or one of its thinned halves'. `None` without photons or kernel mass.
+pub(crate) fn summed_inputs(
+    model: &ForwardModel,
+    rl: &RlOperator,
+    summed: &Array2<f64>,
+    bg: f64,
+    kernel_width_px: f64,
+) -> Option<LearnedInputs> {
     let (h, w) = summed.dim();
     let m: Vec<f64> = summed.iter().copied().collect();
     let total: f64 = m.iter().sum();
     if total <= 0.0 || rl.mass <= 0.0 {
         return None;
     }
-    let bg = model.background() * data.bins.len() as f64;
     let mut o = vec![flat_level(total, bg, 1, rl.mass, h * w); rl.len()];
     let guard = DENOMINATOR_GUARD * total / (h * w) as f64;
     let last = *CHECKPOINTS.last().expect("checkpoints");
@@ -82,7 +100,6 @@ pub fn learned_inputs(data: &Data<'_>) -> Option<LearnedInputs> {
     let base = iterates.last().expect("the last checkpoint");
     let scale = (base.iter().sum::<f64>() / (h * w) as f64).max(f64::MIN_POSITIVE);
     let photons_per_pixel = total / (h * w) as f64;
-    let kernel_width_px = kernel_rms_radius(&model.summed(data.bins));
     let mut features = Array3::<f32>::zeros((CHANNELS, h, w));
     for (c, it) in iterates.iter().enumerate() {
         fill(&mut features, c, it, 1.0 / scale);
@@ -106,6 +123,9 @@ pub fn learned_inputs(data: &Data<'_>) -> Option<LearnedInputs> {
         kernel_width_px,
         background_share: bg / photons_per_pixel,
         base_grid: o,
+        counts: m,
+        background: bg,
+        guard,
     })
 }
 
@@ -139,10 +159,4 @@ pub fn kernel_rms_radius(model: &ForwardModel) -> f64 {
     } else {
         0.0
     }
-}
-
-/// The object the network's `output` (normalised, `H x W`) stands for:
-/// times the inputs' scale, clamped at 0.
-pub fn denormalise(output: &Array2<f32>, inputs: &LearnedInputs) -> Array2<f64> {
-    output.mapv(|v| (f64::from(v) * inputs.scale).max(0.0))
 }

@@ -1,20 +1,22 @@
 //! The learned reconstruction's network and its weight file.
 //!
-//! A small U-Net of two scales (`training/learned_model.py` defines it in
-//! PyTorch; this is the same network on the project's convolution engine,
-//! [`crate::cnn`]): two 3x3 convolutions with ReLU at each of three
+//! Design (b), the counts in every stage (`training/unrolled_model.py`
+//! defines it in PyTorch; [`super::stages`] runs it): a small U-Net of
+//! two scales, shared by the stages, on the project's convolution engine
+//! ([`crate::cnn`]): two 3x3 convolutions with ReLU at each of three
 //! resolutions (channels `c0`, `c1`, `c2`), 2 x 2 average pooling down,
 //! nearest-neighbour upsampling and concatenation with the encoder's maps
-//! up, and a last 3x3 convolution whose output corrects the input's base
-//! channel (the last Richardson-Lucy iterate). Inputs are padded at the
-//! bottom and right by repeating their last row and column to a multiple
-//! of 4, as the PyTorch module does, and the output cropped back.
+//! up, and a last 3x3 convolution whose output is a stage's correction.
+//! Inputs are padded at the bottom and right by repeating their last row
+//! and column to a multiple of 4, as the PyTorch module does, and the
+//! output cropped back.
 //!
 //! A weight file is safetensors: `{block}.{0,2}.weight` (`[cout, cin, 3,
 //! 3]`) and `.bias` for the blocks `enc0`, `enc1`, `mid`, `dec1`, `dec0`,
-//! and `out.weight`, `out.bias`; its metadata names the format, the
-//! architecture, the inputs' checkpoints and the ranges it was trained on
-//! (JSON), and how it was trained.
+//! `out.weight`, `out.bias`, and `stage_weights` (one per stage); its
+//! metadata names the format, the architecture, the stages and EM steps,
+//! the inputs' checkpoints and the ranges it was trained on (JSON), and how
+//! it was trained.
 
 use std::collections::BTreeMap;
 
@@ -22,7 +24,7 @@ use ndarray::{Array2, Array3};
 use safetensors::SafeTensors;
 use serde::{Deserialize, Serialize};
 
-use super::inputs::{BASE_CHANNEL, CHANNELS, CHECKPOINTS};
+use super::inputs::CHECKPOINTS;
 use crate::cnn::FoldedConv;
 use crate::cnn::conv::{FeatureMap, conv3x3};
 use crate::cnn::layers::{avg_pool2, concat, upsample2};
@@ -30,9 +32,15 @@ use crate::cnn::layers::{avg_pool2, concat, upsample2};
 /// The `format` value of the learned reconstruction's weight files.
 pub const FORMAT: &str = "scatterscope-learned";
 /// The `format_version` this build reads.
-pub const FORMAT_VERSION: &str = "1";
+pub const FORMAT_VERSION: &str = "2";
 /// The architecture this build runs.
-pub const ARCHITECTURE: &str = "unet2";
+pub const ARCHITECTURE: &str = "unrolled-em";
+/// A stage's input channels: the estimate, the log of its EM ratio, the
+/// 10th and 40th Richardson-Lucy iterates, the scaled counts, the light
+/// level and the blur width.
+pub const STAGE_INPUTS: usize = 7;
+/// Most stages, and most EM steps a stage, a weight file may ask for.
+const MOST_STEPS: usize = 16;
 
 /// Why a weight file cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -61,6 +69,12 @@ pub struct TrainedRanges {
 pub struct LearnedNet {
     /// Channels at the three scales.
     pub channels: [usize; 3],
+    /// Stages: each a correction by the shared U-Net, then EM steps.
+    pub stages: usize,
+    /// Exact EM steps after each stage's correction.
+    pub em_steps: usize,
+    /// Each stage's weight on the U-Net's correction.
+    pub stage_weights: Vec<f32>,
     blocks: [[FoldedConv; 2]; 5],
     out: FoldedConv,
     /// The ranges it was trained on.
@@ -127,18 +141,39 @@ impl LearnedNet {
                     "metadata field `channels` is {channels:?}: three counts from 1 to 512"
                 ))
             })?;
+        let count = |name: &str, least: usize| {
+            field(name)?
+                .trim()
+                .parse::<usize>()
+                .ok()
+                .filter(|n| (least..=MOST_STEPS).contains(n))
+                .ok_or_else(|| {
+                    fail(format!(
+                        "metadata field `{name}`: a count from {least} to {MOST_STEPS}"
+                    ))
+                })
+        };
+        let stages = count("stages", 1)?;
+        let em_steps = count("em_steps", 0)?;
         let ranges: TrainedRanges = serde_json::from_str(&field("ranges")?)
             .map_err(|e| fail(format!("metadata field `ranges`: {e}")))?;
         let tensors = SafeTensors::deserialize(bytes)
             .map_err(|e| fail(format!("not a safetensors file: {e}")))?;
+        let stage_weights = tensors
+            .tensor("stage_weights")
+            .map_err(|_| fail("tensor `stage_weights` is missing".into()))
+            .and_then(|t| {
+                crate::cnn::read_f32(&t, &[stages])
+                    .map_err(|p| fail(format!("tensor `stage_weights` {p}")))
+            })?;
         let shapes = [
-            (CHANNELS, c0),
+            (STAGE_INPUTS, c0),
             (c0, c1),
             (c1, c2),
             (c2 + c1, c1),
             (c1 + c0, c0),
         ];
-        let mut expected: Vec<String> = Vec::new();
+        let mut expected: Vec<String> = vec!["stage_weights".into()];
         let mut conv = |name: String, (cin, cout): (usize, usize), relu: bool| {
             let weight = tensors
                 .tensor(&format!("{name}.weight"))
@@ -178,6 +213,9 @@ impl LearnedNet {
         }
         Ok(Self {
             channels: [c0, c1, c2],
+            stages,
+            em_steps,
+            stage_weights,
             blocks: blocks.try_into().expect("five blocks"),
             out,
             ranges,
@@ -185,11 +223,11 @@ impl LearnedNet {
         })
     }
 
-    /// The network's output for `features` (`CHANNELS x H x W`): the base
-    /// channel corrected, `H x W`.
-    pub fn forward(&self, features: &Array3<f32>) -> Array2<f32> {
+    /// The shared U-Net's correction for a stage's `features`
+    /// (`STAGE_INPUTS x H x W`), `H x W`.
+    pub fn correction(&self, features: &Array3<f32>) -> Array2<f32> {
         let (c, h, w) = features.dim();
-        assert_eq!(c, CHANNELS, "the inputs' channels");
+        assert_eq!(c, STAGE_INPUTS, "a stage's input channels");
         // Replicate-padded to a multiple of 4 at the bottom and right.
         let (ph, pw) = (h.div_ceil(4) * 4, w.div_ceil(4) * 4);
         let mut x = FeatureMap::zeros(ph, pw, c);
@@ -216,9 +254,7 @@ impl LearnedNet {
         let d0 = block(dec0, &concat(&upsample2(&d1, e0.h, e0.w), &e0));
         let mut out = FeatureMap::zeros(ph, pw, 1);
         conv3x3(&self.out, &d0, &mut out);
-        Array2::from_shape_fn((h, w), |(y, xx)| {
-            out.data[out.at(y, xx)] + features[[BASE_CHANNEL, y, xx]]
-        })
+        Array2::from_shape_fn((h, w), |(y, xx)| out.data[out.at(y, xx)])
     }
 
     /// The convolutions' scratch on a map `width` pixels wide: one band
