@@ -39,6 +39,7 @@ fn sample_stack(kind: ValueKind) -> Stack {
             acquisition: Some(serde_json::json!({"device": "mock", "photons": 12})),
             unstated: Vec::new(),
             laser_frequency_hz: Some(80e6),
+            laser_notes: Vec::new(),
         },
         exact_counts: None,
     }

@@ -570,15 +570,6 @@ fn decay_maps<'py>(
     reference_lifetime_ps: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     use scatterscope::decay::{DecayOptions, Onset, Reference};
-    if let Some(r) = &reference_phasors
-        && r.len() != harmonics.len()
-    {
-        return Err(msg(format!(
-            "decay_maps: {} reference phasors for {} harmonics: give one (g, s) per harmonic",
-            r.len(),
-            harmonics.len()
-        )));
-    }
     let options = DecayOptions {
         harmonics,
         min_photons,
@@ -615,6 +606,10 @@ fn decay_maps<'py>(
     d.set_item("mean_time_ps", maps.mean_time_ps.into_pyarray(py))?;
     d.set_item("variance_ps2", maps.variance_ps2.into_pyarray(py))?;
     d.set_item("fast_lifetime_ps", maps.fast_lifetime_ps.into_pyarray(py))?;
+    d.set_item(
+        "fast_lifetime_centred_ps",
+        maps.fast_lifetime_centred_ps.into_pyarray(py),
+    )?;
     for p in maps.phasors {
         let h = p.harmonic;
         d.set_item(format!("g{h}"), p.g.into_pyarray(py))?;

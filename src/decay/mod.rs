@@ -19,7 +19,13 @@
 //!   out, and counted).
 //! - **fast lifetime** as PicoQuant's wiki defines SymPhoTime's FastLT: the
 //!   barycentre of the pixel's whole decay minus the time zero (the IRF's
-//!   barycentre, else the onset).
+//!   barycentre, else the entrance of the FWHM interval), in SymPhoTime's
+//!   conventions: a photon of bin `k` arrives at the bin's start
+//!   (TCSPC channel times resolution), and without an IRF the time zero is
+//!   the start of the first bin of the image's summed decay at or above
+//!   half its maximum (no interpolation). The **centred fast lifetime**
+//!   keeps this module's own conventions (bins' centres, the interpolated
+//!   onset): the two differ by a constant per image, less than a bin.
 //! - **phasor** at harmonic `h` of the laser frequency `f`:
 //!   `g = sum n_k cos(2 pi h f t_k) / N`, `s = sum n_k sin(2 pi h f t_k) / N`,
 //!   `N = sum n_k` over every bin: PhasorPy's `phasor_from_signal` with the
@@ -144,8 +150,12 @@ pub struct DecayMaps {
     /// Variance of the arrival times after the onset (ps^2; NaN where
     /// masked).
     pub variance_ps2: Array2<f64>,
-    /// PicoQuant's fast lifetime (ps; NaN where masked).
+    /// PicoQuant's fast lifetime in SymPhoTime's conventions (ps; NaN
+    /// where masked).
     pub fast_lifetime_ps: Array2<f64>,
+    /// The fast lifetime from the bins' centres and the interpolated
+    /// onset (ps; NaN where masked).
+    pub fast_lifetime_centred_ps: Array2<f64>,
     /// The phasors, harmonic by harmonic.
     pub phasors: Vec<PhasorMaps>,
     /// True where a pixel is masked.
@@ -188,6 +198,18 @@ pub fn half_maximum_onset(decay: &[f64], centres_ps: &[f64]) -> Option<f64> {
             Some(centres_ps[k] + t * (centres_ps[k + 1] - centres_ps[k]))
         }
     }
+}
+
+/// The first bin of `decay` at or above half its maximum: the entrance of
+/// its FWHM interval without interpolation; `None` for an empty decay.
+pub fn half_maximum_bin(decay: &[f64]) -> Option<usize> {
+    let top = decay.iter().copied().fold(0.0, f64::max);
+    (top > 0.0).then(|| {
+        decay
+            .iter()
+            .position(|&v| v >= top / 2.0)
+            .expect("the maximum")
+    })
 }
 
 /// The phasor of a whole decay (`counts` per bin at `centres_ps`) at each
@@ -250,6 +272,80 @@ pub fn decay_maps_f32(
     maps_of(values, starts_ps, width_ps, frequency_hz, options)
 }
 
+/// Harmonics phasors can be made at from `bins` samples of a period:
+/// each from 1 to half the samples (past it a harmonic aliases onto a
+/// lower one, as PhasorPy refuses), none twice.
+fn check_harmonics(harmonics: &[u32], bins: usize) -> Result<(), DecayError> {
+    let most = bins / 2;
+    if harmonics.is_empty() {
+        return Err(DecayError::Input(
+            "no harmonics: give at least one, from 1".into(),
+        ));
+    }
+    if let Some(h) = harmonics.iter().find(|&&h| h == 0 || h as usize > most) {
+        return Err(DecayError::Input(format!(
+            "harmonic {h}: give harmonics from 1 to {most} (half the {bins} bins; a higher one aliases onto a lower)"
+        )));
+    }
+    if let Some((i, h)) = harmonics
+        .iter()
+        .enumerate()
+        .find(|(i, h)| harmonics[..*i].contains(h))
+    {
+        return Err(DecayError::Input(format!(
+            "harmonic {h} given twice (at places {} and {}): give each once",
+            harmonics.iter().position(|x| x == h).expect("found") + 1,
+            i + 1
+        )));
+    }
+    Ok(())
+}
+
+/// A reference phasors can be calibrated against: one finite phasor per
+/// harmonic, each of modulation at least [`REFERENCE_MODULATION`] (a flat
+/// decay's phasor sits at the origin and would scale every pixel's by a
+/// huge factor), a finite lifetime from 0 up to a hundred laser periods.
+fn check_reference(r: &Reference, harmonics: &[u32], frequency_hz: f64) -> Result<(), DecayError> {
+    let bad = |s: String| Err(DecayError::Input(format!("{}: {s}", r.what)));
+    if r.phasors.len() != harmonics.len() {
+        return bad(format!(
+            "{} phasors for {} harmonics: give one (g, s) per harmonic",
+            r.phasors.len(),
+            harmonics.len()
+        ));
+    }
+    let period_ps = 1e12 / frequency_hz;
+    if !(r.lifetime_ps.is_finite() && r.lifetime_ps >= 0.0 && r.lifetime_ps <= 100.0 * period_ps) {
+        return bad(format!(
+            "lifetime {} ps: give a finite lifetime from 0 (an IRF) to a hundred laser periods ({:.0} ps)",
+            number_text(r.lifetime_ps),
+            100.0 * period_ps
+        ));
+    }
+    for (&(g, s), h) in r.phasors.iter().zip(harmonics) {
+        let m = g.hypot(s);
+        if !(m.is_finite() && m >= REFERENCE_MODULATION) {
+            return bad(format!(
+                "its phasor at harmonic {h} is ({g}, {s}), of modulation {m:.2e}: a reference needs a decay (at least {REFERENCE_MODULATION}; a flat one sits at the origin)"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A number as a user wrote it: plain when short, in exponent form when
+/// huge or tiny.
+fn number_text(v: f64) -> String {
+    if v == 0.0 || (1e-6..1e9).contains(&v.abs()) {
+        v.to_string()
+    } else {
+        format!("{v:e}")
+    }
+}
+
+/// The least modulation a reference's phasor may have.
+pub const REFERENCE_MODULATION: f64 = 1e-2;
+
 fn maps_of<T: Copy + Into<f64> + Sync>(
     counts: ArrayView3<'_, T>,
     starts_ps: &[f64],
@@ -270,50 +366,76 @@ fn maps_of<T: Copy + Into<f64> + Sync>(
             starts_ps.len()
         ));
     }
-    if !(frequency_hz.is_finite() && frequency_hz > 0.0) {
-        return bad(format!(
-            "laser frequency {frequency_hz} Hz: the phasors need a positive frequency"
-        ));
-    }
-    if options.harmonics.is_empty() || options.harmonics.contains(&0) {
-        return bad(format!(
-            "harmonics {:?}: give harmonics from 1",
-            options.harmonics
-        ));
-    }
+    crate::tags::laser::given(frequency_hz).map_err(DecayError::Input)?;
+    check_harmonics(&options.harmonics, bins)?;
     if !(options.min_photons.is_finite() && options.min_photons >= 1.0) {
         return bad(format!(
             "a threshold of {} photons: give at least 1",
             options.min_photons
         ));
     }
+    let span = (starts_ps[0], starts_ps[bins - 1] + width_ps);
+    match options.onset {
+        Onset::At(t) | Onset::IrfBarycentre(t)
+            if !(t.is_finite() && t >= span.0 - (span.1 - span.0) && t < span.1) =>
+        {
+            return bad(format!(
+                "onset {} ps: it must lie in the stack's time window ({:.1} to {:.1} ps) or at most one window before it",
+                number_text(t),
+                span.0,
+                span.1
+            ));
+        }
+        _ => {}
+    }
+    if let Some(r) = &options.reference {
+        check_reference(r, &options.harmonics, frequency_hz)?;
+    }
+    // The maps' memory: the per-pixel sums and each band's copy of them,
+    // four time maps and the mask, two phasor maps per harmonic and four
+    // more calibrated.
+    let planes = 5 + 2 * options.harmonics.len();
+    let per_harmonic = if options.reference.is_some() { 6 } else { 2 };
+    let per_pixel = 8 * (2 * planes + 5 + per_harmonic * options.harmonics.len()) as u64;
+    crate::memory::check(crate::memory::bytes_of([h, w], per_pixel), || {
+        format!(
+            "the decay maps of {h} x {w} pixels at {} harmonics",
+            options.harmonics.len()
+        )
+    })
+    .map_err(|e| DecayError::Input(e.to_string()))?;
     let centres: Vec<f64> = starts_ps.iter().map(|s| s + width_ps / 2.0).collect();
     let summed: Vec<f64> = counts
         .axis_iter(Axis(0))
         .map(|p| p.iter().map(|&v| v.into()).sum())
         .collect();
     let mut notes = Vec::new();
-    let (onset, zero) = match options.onset {
+    // The onset (the centred conventions' time zero) and SymPhoTime's
+    // time zero (photons at their bins' starts).
+    let (onset, zero_start) = match options.onset {
         Onset::HalfMaximum => {
             let t = half_maximum_onset(&summed, &centres).ok_or_else(|| {
                 DecayError::Input("the stack holds no photon: no decay to find an onset in".into())
             })?;
+            let k = half_maximum_bin(&summed).expect("a decay with photons");
             notes.push(format!(
-                "onset {t:.1} ps: where the image's summed decay first reaches half its maximum on its rising edge (PicoQuant's 'entrance of the FWHM interval'); the fast lifetime's time zero"
+                "onset {t:.1} ps: where the image's summed decay first reaches half its maximum on its rising edge, between bins' centres (PicoQuant's 'entrance of the FWHM interval'); the fast lifetime's time zero {:.1} ps: the start of the first bin at or above half the maximum, photons at their bins' starts (SymPhoTime's conventions); the centred fast lifetime's: the onset, photons at their bins' centres",
+                starts_ps[k]
             ));
-            (t, t)
+            (t, starts_ps[k])
         }
         Onset::At(t) => {
             notes.push(format!(
-                "onset {t:.1} ps, as given; the fast lifetime's time zero"
+                "onset {t:.1} ps, as given; the fast lifetime's time zero (photons at their bins' starts; the centred fast lifetime's, photons at their centres)"
             ));
             (t, t)
         }
         Onset::IrfBarycentre(t) => {
             notes.push(format!(
-                "onset and fast lifetime's time zero {t:.1} ps: the IRF's barycentre"
+                "onset and fast lifetime's time zero {t:.1} ps: the IRF's barycentre (its photons and the decay's at their bins' centres; {:.1} ps with both at their bins' starts)",
+                t - width_ps / 2.0
             ));
-            (t, t)
+            (t, t - width_ps / 2.0)
         }
     };
     let first = centres.iter().position(|&t| t >= onset).unwrap_or(bins);
@@ -341,40 +463,54 @@ fn maps_of<T: Copy + Into<f64> + Sync>(
     let nan = || Array2::from_elem((h, w), f64::NAN);
     let intensity = Array2::from_shape_vec((h, w), sums.plane(Sum::Photons).to_vec())
         .expect("one sum per pixel");
-    let mask = intensity.mapv(|n| n < options.min_photons);
-    let (mut mean, mut var, mut fast) = (nan(), nan(), nan());
+    let mut mask = intensity.mapv(|n| n < options.min_photons);
+    let dim = mask.iter().filter(|&&m| m).count();
+    // A pixel with photons, none of them at or after the onset, has no
+    // mean arrival time: masked, and counted.
+    let mut before_onset = 0;
+    for (p, m) in mask.iter_mut().enumerate() {
+        if !*m && sums.at(Sum::After, p) <= 0.0 {
+            *m = true;
+            before_onset += 1;
+        }
+    }
+    let (mut mean, mut var, mut fast, mut fast_centred) = (nan(), nan(), nan(), nan());
     let mut gs: Vec<(Array2<f64>, Array2<f64>)> = omegas.iter().map(|_| (nan(), nan())).collect();
     for (p, (&m, &n)) in mask.iter().zip(&intensity).enumerate() {
         if m {
             continue;
         }
         let (r, c) = (p / w, p % w);
-        fast[[r, c]] = sums.at(Sum::Timed, p) / n - zero;
+        let barycentre = sums.at(Sum::Timed, p) / n;
+        fast[[r, c]] = barycentre - width_ps / 2.0 - zero_start;
+        fast_centred[[r, c]] = barycentre - onset;
         let after = sums.at(Sum::After, p);
-        if after > 0.0 {
-            let m1 = sums.at(Sum::AfterDelay, p) / after;
-            mean[[r, c]] = m1;
-            // Non-negative however the sums round.
-            var[[r, c]] = (sums.at(Sum::AfterDelaySquared, p) / after - m1 * m1).max(0.0);
-        }
+        let m1 = sums.at(Sum::AfterDelay, p) / after;
+        mean[[r, c]] = m1;
+        // Non-negative however the sums round.
+        var[[r, c]] = (sums.at(Sum::AfterDelaySquared, p) / after - m1 * m1).max(0.0);
         for (i, (g, s)) in gs.iter_mut().enumerate() {
             g[[r, c]] = sums.at(Sum::Cos(i), p) / n;
             s[[r, c]] = sums.at(Sum::Sin(i), p) / n;
         }
     }
-    let masked = mask.iter().filter(|&&m| m).count();
     let empty = intensity.iter().filter(|&&n| n == 0.0).count();
     notes.push(format!(
-        "{masked} of {} pixels masked (fewer than {} photons; {empty} of them empty): NaN in the time, lifetime and phasor maps, true in the mask",
+        "{dim} of {} pixels masked (fewer than {} photons; {empty} of them empty): NaN in the time, lifetime and phasor maps, true in the mask",
         h * w,
         options.min_photons
     ));
+    if before_onset > 0 {
+        notes.push(format!(
+            "{before_onset} more pixels masked: enough photons, none at or after the onset (no mean arrival time)"
+        ));
+    }
     notes.push(format!(
-        "phasors at harmonics {:?} of {:.6} MHz, from the bins' centres",
+        "phasors at harmonics {:?} of {}, from the bins' centres",
         options.harmonics,
-        frequency_hz * 1e-6
+        crate::tags::laser::hz_text(frequency_hz)
     ));
-    let phasors = options
+    let mut phasors: Vec<PhasorMaps> = options
         .harmonics
         .iter()
         .zip(gs)
@@ -398,6 +534,51 @@ fn maps_of<T: Copy + Into<f64> + Sync>(
             "phasors calibrated against {} of lifetime {:.1} ps (PhasorPy's phasor_calibrate: its whole decay's phasor rotated and scaled onto a single exponential's)",
             r.what, r.lifetime_ps
         ));
+        // A calibrated phasor at or past 90 degrees, or at the origin, has
+        // no finite apparent lifetime: its pixel is masked, and counted.
+        let mut beyond = 0;
+        for p in 0..h * w {
+            let at = [p / w, p % w];
+            let finite = phasors.iter().all(|m| {
+                m.calibrated.as_ref().is_none_or(|c| {
+                    c.tau_phase_ps[at].is_finite() && c.tau_modulation_ps[at].is_finite()
+                })
+            });
+            if !mask[at] && !finite {
+                mask[at] = true;
+                beyond += 1;
+            }
+        }
+        if beyond > 0 {
+            notes.push(format!(
+                "{beyond} more pixels masked: a calibrated phasor with no finite apparent lifetime (at or past 90 degrees, or at the origin)"
+            ));
+            for m in [&mut mean, &mut var, &mut fast, &mut fast_centred] {
+                m.zip_mut_with(&mask, |v, &masked| {
+                    if masked {
+                        *v = f64::NAN;
+                    }
+                });
+            }
+            for pm in &mut phasors {
+                let mut maps = vec![&mut pm.g, &mut pm.s];
+                if let Some(c) = pm.calibrated.as_mut() {
+                    maps.extend([
+                        &mut c.g,
+                        &mut c.s,
+                        &mut c.tau_phase_ps,
+                        &mut c.tau_modulation_ps,
+                    ]);
+                }
+                for m in maps {
+                    m.zip_mut_with(&mask, |v, &masked| {
+                        if masked {
+                            *v = f64::NAN;
+                        }
+                    });
+                }
+            }
+        }
     } else {
         notes.push(
             "phasors not calibrated (no reference given): apparent lifetimes left out".into(),
@@ -408,6 +589,7 @@ fn maps_of<T: Copy + Into<f64> + Sync>(
         mean_time_ps: mean,
         variance_ps2: var,
         fast_lifetime_ps: fast,
+        fast_lifetime_centred_ps: fast_centred,
         phasors,
         mask,
         onset_ps: onset,
@@ -746,16 +928,30 @@ mod tests {
                     .map(|(t, v)| (t - onset, *v))
                     .collect();
                 let na: f64 = after.iter().map(|a| a.1).sum();
+                if na == 0.0 {
+                    // Photons, none at or after the onset: no mean time.
+                    assert!(maps.mask[[r, c]], "{r},{c}");
+                    assert!(maps.fast_lifetime_ps[[r, c]].is_nan());
+                    continue;
+                }
                 let mean = after.iter().map(|(d, v)| d * v).sum::<f64>() / na;
                 let var = after
                     .iter()
                     .map(|(d, v)| (d - mean).powi(2) * v)
                     .sum::<f64>()
                     / na;
-                let fast = centres.iter().zip(&n).map(|(t, v)| t * v).sum::<f64>() / total - onset;
+                let centred =
+                    centres.iter().zip(&n).map(|(t, v)| t * v).sum::<f64>() / total - onset;
+                // SymPhoTime's: photons at their bins' starts, the given
+                // onset the time zero.
+                let fast = starts.iter().zip(&n).map(|(t, v)| t * v).sum::<f64>() / total - onset;
                 let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs().max(1.0);
                 assert!(close(maps.mean_time_ps[[r, c]], mean), "mean at {r},{c}");
                 assert!(close(maps.variance_ps2[[r, c]], var), "variance at {r},{c}");
+                assert!(
+                    close(maps.fast_lifetime_centred_ps[[r, c]], centred),
+                    "centred fast lifetime at {r},{c}"
+                );
                 assert!(
                     close(maps.fast_lifetime_ps[[r, c]], fast),
                     "fast lifetime at {r},{c}"
@@ -816,6 +1012,110 @@ mod tests {
         counts[[0, 1, 1]] = 0.0;
         let e = decay_maps_f32(counts.view(), &starts, 10.0, 0.0, &DecayOptions::default())
             .unwrap_err();
-        assert!(e.to_string().contains("positive frequency"), "{e}");
+        assert!(
+            e.to_string().contains("outside the repetition rates"),
+            "{e}"
+        );
+    }
+
+    /// Without an IRF the fast lifetime's time zero is the start of the
+    /// first bin at or above half the image decay's maximum, photons at
+    /// their bins' starts (SymPhoTime); the centred one's the interpolated
+    /// onset, photons at their centres.
+    #[test]
+    fn the_fast_lifetime_takes_symphotimes_conventions() {
+        let decay = [2.0, 3.0, 40.0, 100.0, 70.0, 50.0, 30.0, 20.0];
+        let starts: Vec<f64> = (0..8).map(|k| 100.0 + 97.0 * k as f64).collect();
+        let counts = Array3::from_shape_fn((8, 1, 1), |(k, _, _)| decay[k] as u32);
+        let maps = decay_maps(
+            CountsView::U32(counts.view()),
+            &starts,
+            97.0,
+            80e6,
+            &DecayOptions::default(),
+        )
+        .unwrap();
+        let n: f64 = decay.iter().sum();
+        let bary_start = starts.iter().zip(&decay).map(|(t, v)| t * v).sum::<f64>() / n;
+        // Bin 3 (100) is the first at or above 50.
+        let want = bary_start - starts[3];
+        assert!(
+            (maps.fast_lifetime_ps[[0, 0]] - want).abs() < 1e-9,
+            "{}",
+            maps.fast_lifetime_ps[[0, 0]]
+        );
+        // The interpolated onset: between the centres of bins 2 and 3.
+        let onset = starts[2] + 48.5 + (50.0 - 40.0) / (100.0 - 40.0) * 97.0;
+        assert!((maps.onset_ps - onset).abs() < 1e-9);
+        let centred = bary_start + 48.5 - onset;
+        assert!((maps.fast_lifetime_centred_ps[[0, 0]] - centred).abs() < 1e-9);
+    }
+
+    /// A pixel with photons none of which arrive at or after the onset is
+    /// masked and counted; a flat reference, a reference lifetime out of
+    /// range, aliased or repeated harmonics and an onset outside the
+    /// window are refused by value.
+    #[test]
+    fn maps_never_hold_a_nan_the_mask_does_not_say() {
+        let mut counts = Array3::<u32>::zeros((8, 1, 2));
+        for k in 0..8 {
+            counts[[k, 0, 0]] = [0, 0, 50, 100, 70, 50, 30, 20][k];
+        }
+        counts[[0, 0, 1]] = 40;
+        let starts: Vec<f64> = (0..8).map(|k| 100.0 * k as f64).collect();
+        let maps = decay_maps(
+            CountsView::U32(counts.view()),
+            &starts,
+            100.0,
+            80e6,
+            &DecayOptions::default(),
+        )
+        .unwrap();
+        assert!(maps.mask[[0, 1]] && !maps.mask[[0, 0]]);
+        assert!(
+            maps.notes
+                .iter()
+                .any(|n| n
+                    .contains("1 more pixels masked: enough photons, none at or after the onset")),
+            "{:?}",
+            maps.notes
+        );
+        let refused = |options: DecayOptions| {
+            decay_maps(
+                CountsView::U32(counts.view()),
+                &starts,
+                100.0,
+                80e6,
+                &options,
+            )
+            .unwrap_err()
+            .to_string()
+        };
+        let reference = |phasor: (f64, f64), lifetime_ps: f64| DecayOptions {
+            harmonics: vec![1],
+            reference: Some(Reference {
+                phasors: vec![phasor],
+                lifetime_ps,
+                what: "the reference".into(),
+            }),
+            ..DecayOptions::default()
+        };
+        assert!(refused(reference((1e-4, 0.0), 1000.0)).contains("modulation 1.00e-4"));
+        assert!(refused(reference((f64::NAN, 0.0), 1000.0)).contains("modulation NaN"));
+        assert!(refused(reference((0.5, 0.3), f64::NAN)).contains("lifetime NaN ps"));
+        assert!(refused(reference((0.5, 0.3), -1.0)).contains("lifetime -1 ps"));
+        let harmonics = |h: Vec<u32>| DecayOptions {
+            harmonics: h,
+            ..DecayOptions::default()
+        };
+        assert!(refused(harmonics(vec![5])).contains("harmonic 5: give harmonics from 1 to 4"));
+        assert!(refused(harmonics(vec![1, 2, 1])).contains("harmonic 1 given twice"));
+        let onset = |t: f64| DecayOptions {
+            onset: Onset::At(t),
+            ..DecayOptions::default()
+        };
+        assert!(refused(onset(f64::NAN)).contains("onset NaN ps"));
+        assert!(refused(onset(800.0)).contains("onset 800 ps"));
+        assert!(refused(onset(-1e300)).contains("onset -1e300 ps"));
     }
 }

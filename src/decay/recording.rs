@@ -103,6 +103,10 @@ fn channels(maps: &DecayMaps) -> Vec<(String, std::borrow::Cow<'_, Array2<f64>>)
             "fast lifetime (ps)".into(),
             Borrowed(&maps.fast_lifetime_ps),
         ),
+        (
+            "fast lifetime centred (ps)".into(),
+            Borrowed(&maps.fast_lifetime_centred_ps),
+        ),
     ];
     for p in &maps.phasors {
         let h = p.harmonic;
@@ -176,33 +180,43 @@ fn reference_decay(reference: &Path, spec: &BinSpec) -> Result<Decay, RecordedFi
         Ok(())
     })?;
     let (d, c, f) = decay.ok_or_else(|| spec_error(reference, "it gives no stack".into()))?;
-    if d.iter().sum::<f64>() <= 0.0 {
+    let photons = d.iter().sum::<f64>();
+    if photons < REFERENCE_PHOTONS {
         return Err(spec_error(
             reference,
-            "it holds no photon in the time window: no decay to calibrate against".into(),
+            format!(
+                "it holds {photons} photons in the time window: a reference needs at least {REFERENCE_PHOTONS} (its phasor and barycentre scatter too much with fewer)"
+            ),
         ));
     }
     Ok((d, c, f))
 }
 
-/// The laser frequency of a stack: the request's, else the recording's.
+/// The fewest photons a reference decay may hold: its phasor scatters by
+/// about `1 / sqrt(2 N)`, 0.07 at 100.
+pub const REFERENCE_PHOTONS: f64 = 100.0;
+
+/// The laser frequency of a stack: the request's, else the recording's,
+/// each checked ([`crate::tags::laser`]).
 fn frequency_of(
     path: &Path,
     meta: &StackMeta,
     asked: Option<f64>,
 ) -> Result<f64, RecordedFileError> {
     match (asked, meta.laser_frequency_hz) {
-        (Some(f), _) if f.is_finite() && f > 0.0 => Ok(f),
-        (Some(f), _) => Err(spec_error(
-            path,
-            format!("laser frequency {f} Hz: give a positive frequency"),
-        )),
-        (None, Some(f)) if f.is_finite() && f > 0.0 => Ok(f),
-        (None, stated) => Err(spec_error(
+        (Some(f), _) => {
+            crate::tags::laser::given(f).map_err(|e| spec_error(path, format!("--frequency: {e}")))
+        }
+        (None, Some(f)) => Ok(f),
+        (None, None) => Err(spec_error(
             path,
             format!(
-                "the recording states no laser frequency (sync rate{}): give it with --frequency (Hz), or the phasors have no fundamental",
-                stated.map_or(String::new(), |f| format!(" {f} Hz"))
+                "the recording states no laser frequency that can be used{}: give it with --frequency (Hz), or the phasors have no fundamental",
+                if meta.laser_notes.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", meta.laser_notes.join("; "))
+                }
             ),
         )),
     }
@@ -266,7 +280,7 @@ pub fn lifetime_file(
                 what: format!("the {what} {}", r.path().display()),
             });
         }
-        let maps = decay_maps(
+        let mut maps = decay_maps(
             s.counts,
             &meta.bin_starts_ps,
             meta.bin_width_ps,
@@ -274,6 +288,9 @@ pub fn lifetime_file(
             &options,
         )
         .map_err(|e| spec_error(path, e.to_string()))?;
+        if request.frequency_hz.is_none() {
+            maps.notes.splice(0..0, meta.laser_notes.iter().cloned());
+        }
         write_maps(&maps, &s, &options, path, request).map_err(RecordedFileError::Output)
     })
 }

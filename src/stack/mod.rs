@@ -95,6 +95,10 @@ pub struct StackMeta {
     /// fundamental frequency.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub laser_frequency_hz: Option<f64>,
+    /// What the recording's statements of the laser's rate were found to
+    /// be, where one was left out or overruled ([`crate::tags::laser`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub laser_notes: Vec<String>,
 }
 
 /// A quantity a recording did not state.
@@ -415,6 +419,7 @@ impl StackMeta {
             acquisition: None,
             unstated: Vec::new(),
             laser_frequency_hz: None,
+            laser_notes: Vec::new(),
         }
     }
 
@@ -457,6 +462,7 @@ impl StackMeta {
             acquisition,
             unstated: vec![Unstated::PixelPitch],
             laser_frequency_hz: None,
+            laser_notes: Vec::new(),
         }
     }
 

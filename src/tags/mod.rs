@@ -23,6 +23,7 @@ pub mod binned;
 pub mod binning;
 pub mod convert;
 pub mod counts;
+pub mod laser;
 pub mod recorded;
 pub mod survey;
 pub mod table;

@@ -200,6 +200,9 @@ pub struct SdtMeasurement {
     /// `date` (11 bytes; SPCM writes `YYYY-MM-DD`, Prairie View
     /// `MM:DD:YYYY`).
     pub date: &'static [u8],
+    /// `StopInfo.min_sync_rate` and `max_sync_rate` (Hz; SPCM writes the
+    /// rates the card measured).
+    pub sync_rates: (f32, f32),
 }
 
 impl SdtMeasurement {
@@ -213,13 +216,23 @@ impl SdtMeasurement {
             repeats: (1, 1),
             module: b"SPC-150",
             date: b"2019-11-05",
+            sync_rates: (80e6, 80e6),
         }
     }
 }
 
 /// An `.sdt` file of software revision 15 (module SPC-150) with `blocks`
-/// described by `measurements`.
+/// described by `measurements`, zipped blocks deflated.
 pub fn sdt_file(measurements: &[SdtMeasurement], blocks: &[SdtBlock]) -> Vec<u8> {
+    sdt_file_zipped(measurements, blocks, zip::CompressionMethod::Deflated)
+}
+
+/// [`sdt_file`] with zipped blocks' members compressed by `method`.
+pub fn sdt_file_zipped(
+    measurements: &[SdtMeasurement],
+    blocks: &[SdtBlock],
+    method: zip::CompressionMethod,
+) -> Vec<u8> {
     const MEAS_LEN: usize = 512;
     let info = b"*IDENTIFICATION\r\n  ID        : SPC Setup & Data File\r\n  Title     : forged\r\n*END\r\n\r\n";
     let setup =
@@ -264,6 +277,10 @@ pub fn sdt_file(measurements: &[SdtMeasurement], blocks: &[SdtBlock]) -> Vec<u8>
         mi[177..181].copy_from_slice(&m.scan.1.to_le_bytes());
         mi[181..185].copy_from_slice(&m.repeats.0.to_le_bytes());
         mi[185..189].copy_from_slice(&m.repeats.1.to_le_bytes());
+        // StopInfo (a MeasStopInfo at byte 211): min_sync_rate at its
+        // byte 20, max_sync_rate at 36.
+        mi[231..235].copy_from_slice(&m.sync_rates.0.to_le_bytes());
+        mi[247..251].copy_from_slice(&m.sync_rates.1.to_le_bytes());
         out.extend(mi);
     }
     for (i, b) in blocks.iter().enumerate() {
@@ -277,7 +294,7 @@ pub fn sdt_file(measurements: &[SdtMeasurement], blocks: &[SdtBlock]) -> Vec<u8>
             })
             .collect();
         let stored = if b.zipped {
-            zip_member(&raw)
+            zip_member(&raw, method)
         } else {
             raw.clone()
         };
@@ -302,11 +319,10 @@ pub fn sdt_file(measurements: &[SdtMeasurement], blocks: &[SdtBlock]) -> Vec<u8>
     out
 }
 
-/// `data` as the one deflated member of a zip archive.
-fn zip_member(data: &[u8]) -> Vec<u8> {
+/// `data` as the one member of a zip archive, compressed by `method`.
+fn zip_member(data: &[u8], method: zip::CompressionMethod) -> Vec<u8> {
     let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
-    let options = zip::write::SimpleFileOptions::default()
-        .compression_method(zip::CompressionMethod::Deflated);
+    let options = zip::write::SimpleFileOptions::default().compression_method(method);
     w.start_file("data_block", options).unwrap();
     w.write_all(data).unwrap();
     w.finish().unwrap().into_inner()

@@ -281,7 +281,10 @@ def decay_maps(
     (uint16, uint32 or float32, as :func:`bin_file` returns) with its
     metadata ``meta``, as ``scatterscope lifetime`` computes them:
     ``photons``, ``mean_time_ps`` and ``variance_ps2`` (after the onset),
-    ``fast_lifetime_ps``, ``g1``, ``s1``, ... per harmonic and, with
+    ``fast_lifetime_ps`` (SymPhoTime's conventions: photons at their
+    bins' starts, time zero the first bin at half the maximum),
+    ``fast_lifetime_centred_ps`` (bins' centres, the interpolated onset),
+    ``g1``, ``s1``, ... per harmonic and, with
     ``reference_phasors`` (one ``(g, s)`` per harmonic, of a reference of
     ``reference_lifetime_ps``), ``g1_calibrated``, ``s1_calibrated``,
     ``phase_lifetime1_ps``, ``modulation_lifetime1_ps``; ``mask`` (True

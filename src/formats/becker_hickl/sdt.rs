@@ -82,9 +82,10 @@ pub struct SdtBlock {
     pub micro_unit_s: Result<f64, String>,
     /// The module that measured it (`mod_type`).
     pub module: String,
-    /// The sync rate the card measured (Hz; `StopInfo.max_sync_rate`),
-    /// when the file states a positive one.
-    pub sync_rate_hz: Option<f64>,
+    /// The sync rates the card measured (Hz; `StopInfo.min_sync_rate`
+    /// and `max_sync_rate`), as the file holds them (unchecked: some
+    /// instruments write nonsense there; [`crate::tags::laser`] checks).
+    pub sync_rates_hz: SyncRates,
     /// Counts per curve point, row and column: `(adc_re, rows, columns)`.
     pub counts: BlockCounts,
 }
@@ -259,12 +260,22 @@ impl Fields<'_> {
     }
 }
 
+/// The lowest and highest sync rates a card measured during a block's
+/// measurement (Hz), as the file holds them; `None` where it ends before.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SyncRates {
+    /// `StopInfo.min_sync_rate`.
+    pub min: Option<f64>,
+    /// `StopInfo.max_sync_rate`.
+    pub max: Option<f64>,
+}
+
 /// The fields of a measurement description block (`MeasureInfo`) that
 /// shape and time a block's curves; byte offsets in the packed structure.
 #[derive(Debug, Clone)]
 struct Measurement {
     module: String,
-    sync_rate_hz: Option<f64>,
+    sync_rates_hz: SyncRates,
     tac_r: f32,
     tac_g: i16,
     adc_re: usize,
@@ -292,16 +303,20 @@ impl Measurement {
         };
         let module = f.bytes.get(117..133).map(c_text).unwrap_or_default();
         // StopInfo (a MeasStopInfo at byte 211) holds the sync rates the
-        // card measured: max_sync_rate at its byte 36; older files end
-        // before it.
-        let sync_rate_hz = f
-            .bytes
-            .get(247..251)
-            .map(|b| f64::from(f32::from_le_bytes(b.try_into().expect("4 bytes"))))
-            .filter(|r| r.is_finite() && *r > 0.0);
+        // card measured: min_sync_rate at its byte 20, max_sync_rate at
+        // its byte 36; older files end before them.
+        let rate = |at: usize| {
+            f.bytes
+                .get(at..at + 4)
+                .map(|b| f64::from(f32::from_le_bytes(b.try_into().expect("4 bytes"))))
+        };
+        let sync_rates_hz = SyncRates {
+            min: rate(231),
+            max: rate(247),
+        };
         Ok(Self {
             module,
-            sync_rate_hz,
+            sync_rates_hz,
             tac_r: f.f32(64, "tac_r")?,
             tac_g: f.i16(68, "tac_g")?,
             adc_re,
@@ -730,7 +745,7 @@ impl SdtReader {
             rows,
             cols,
             unit,
-            sync_rate_hz: m.sync_rate_hz,
+            sync_rates_hz: m.sync_rates_hz,
             module: m.module,
         }))
     }
@@ -802,6 +817,29 @@ impl SdtReader {
                         format!("its zip-compressed data do not decompress to the {} bytes the header says: {e}", b.length),
                     ));
                 }
+                Ok(counts) => {
+                    // The member's CRC-32 is checked when a read meets its
+                    // end: the points were read exactly, so one more read.
+                    let mut tail = [0u8; 1];
+                    match member.read(&mut tail) {
+                        Ok(0) => Ok(counts),
+                        Ok(_) => {
+                            return Err(self.source.field(
+                                &what,
+                                format!(
+                                    "its zip member holds more than the {} bytes the header says",
+                                    b.length
+                                ),
+                            ));
+                        }
+                        Err(e) => {
+                            return Err(self.source.field(
+                                &what,
+                                format!("its zip member fails its CRC-32 check ({e}): the file is damaged"),
+                            ));
+                        }
+                    }
+                }
                 other => other,
             }
         } else {
@@ -825,7 +863,7 @@ impl SdtReader {
             zipped: b.zipped,
             micro_unit_s: b.unit,
             module: b.module,
-            sync_rate_hz: b.sync_rate_hz,
+            sync_rates_hz: b.sync_rates_hz,
             counts,
         })
     }
@@ -847,7 +885,7 @@ struct BlockHead {
     cols: usize,
     unit: Result<f64, String>,
     module: String,
-    sync_rate_hz: Option<f64>,
+    sync_rates_hz: SyncRates,
 }
 
 /// Why a block's points could not be decoded.

@@ -7,6 +7,7 @@ use std::path::Path;
 use super::BinsInMemory;
 use super::t3::{self, T3Records};
 use crate::formats::becker_hickl::spc::CardFlags;
+use crate::formats::picoquant::ptu::TagLookup;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, RecordReader, TtrError, open};
 use crate::tags::binned::{
@@ -39,12 +40,21 @@ impl BinsInMemory for PicoQuantFiles {
         let period_ps = info.macro_unit_s * 1e12;
         let imaging = info.imaging;
         let pixel_cm = info.pixel_size_cm();
-        // The laser's rate: the file's measured sync rate, else the T3 sync
-        // period's.
-        let laser_hz = info
-            .sync_rate_hz
-            .filter(|r| r.is_finite() && *r > 0.0)
-            .unwrap_or(1.0 / info.macro_unit_s);
+        // The laser's rate: the period that times the T3 records (its
+        // sync divider times the rate of the sync counter), checked
+        // against the rate meter's reading.
+        let divider = info
+            .tags
+            .int("HWSync_Divider")
+            .filter(|&d| d > 0)
+            .unwrap_or(1);
+        let laser = crate::tags::laser::stated(&[
+            (
+                "T3 sync period (MeasDesc_GlobalResolution, HWSync_Divider)",
+                Some(divider as f64 / info.macro_unit_s),
+            ),
+            ("TTResult_SyncRate", info.sync_rate_hz),
+        ]);
         let notes = info.unread_note().into_iter().collect();
         let source = format!(
             "{} ({}, {})",
@@ -70,7 +80,8 @@ impl BinsInMemory for PicoQuantFiles {
             if let (Some(cm), true) = (pixel_cm, scanned) {
                 s.meta.set_pixel_pitch(cm);
             }
-            s.meta.laser_frequency_hz = Some(laser_hz).filter(|r| r.is_finite() && *r > 0.0);
+            s.meta.laser_frequency_hz = laser.hz;
+            s.meta.laser_notes.clone_from(&laser.notes);
         }
         Ok(binned)
     }

@@ -245,7 +245,12 @@ fn sdt_stack(
     if b.micro_unit_s.is_err() {
         meta.unstated.push(Unstated::TimeUnit);
     }
-    meta.laser_frequency_hz = b.sync_rate_hz;
+    let laser = crate::tags::laser::stated(&[
+        ("MEASURE_INFO.StopInfo.max_sync_rate", b.sync_rates_hz.max),
+        ("MEASURE_INFO.StopInfo.min_sync_rate", b.sync_rates_hz.min),
+    ]);
+    meta.laser_frequency_hz = laser.hz;
+    meta.laser_notes = laser.notes;
     if offset == 0 && width == 1 && bins == points && spec.pixels != Pixels::Single {
         let sum = b.counts.total();
         tally.records += (points * h * w) as u64;

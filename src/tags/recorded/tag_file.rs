@@ -85,7 +85,9 @@ impl BinsInMemory for TagFiles {
             source,
             Some(serde_json::to_value(&record).expect("the record serialises")),
         );
-        meta.laser_frequency_hz = Some(laser_hz).filter(|r| r.is_finite() && *r > 0.0);
+        let laser = crate::tags::laser::stated(&[("sync period", Some(laser_hz))]);
+        meta.laser_frequency_hz = laser.hz;
+        meta.laser_notes = laser.notes;
         let stack = CountStack {
             counts: counts_binned,
             meta,
