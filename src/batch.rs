@@ -197,6 +197,23 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Vec<JobSpec>, BatchErro
             let p = base.join(input);
             job.input = Some(std::path::absolute(&p).unwrap_or(p).display().to_string());
         }
+        // A relative path among the arguments (a reference, an IRF, a
+        // truth) is the manifest's, as its input is: made absolute when
+        // the manifest's folder holds it.
+        for arg in &mut job.args {
+            let (flag, value) = match arg.split_once('=') {
+                Some((f, v)) if f.starts_with("--") => (Some(f.to_string()), v.to_string()),
+                _ => (None, arg.clone()),
+            };
+            if value.starts_with('-') || Path::new(&value).is_absolute() {
+                continue;
+            }
+            let p = base.join(&value);
+            if !value.is_empty() && p.exists() {
+                let p = std::path::absolute(&p).unwrap_or(p).display().to_string();
+                *arg = flag.map_or(p.clone(), |f| format!("{f}={p}"));
+            }
+        }
     }
     Ok(jobs)
 }
@@ -213,12 +230,18 @@ pub fn write_manifest(path: &Path, jobs: &[JobSpec]) -> Result<(), BatchError> {
         .map_err(|e| BatchError::Io(format!("{}: {e}", path.display())))
 }
 
+/// The exit status of a command that wrote its outputs with warnings.
+pub const WARNED_EXIT: i32 = 4;
+/// The status of a job that exited with [`WARNED_EXIT`].
+const WARNED: &str = "ok with warnings";
+
 /// How a job ended.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct JobRecord {
     /// The job's name.
     pub name: String,
-    /// `ok`, `failed`, `timeout` (ended at its time limit) or
+    /// `ok`, `ok with warnings` (exit 4: its outputs written, with
+    /// warnings), `failed`, `timeout` (ended at its time limit) or
     /// `interrupted` (ended by Ctrl-C or SIGTERM to the batch).
     pub status: String,
     /// The exit status (None: killed by a signal).
@@ -233,9 +256,10 @@ pub struct JobRecord {
 }
 
 impl JobRecord {
-    /// Whether the job succeeded.
+    /// Whether the job succeeded (its outputs written, with or without
+    /// warnings).
     pub fn ok(&self) -> bool {
-        self.status == "ok"
+        self.status == "ok" || self.status == WARNED
     }
 }
 
@@ -464,6 +488,11 @@ pub fn run_job(
     };
     let (status, exit, result) = match ending {
         Ending::Exited(s) if s.success() => ("ok", s, key_result(&dir, &stdout)),
+        Ending::Exited(s) if s.code() == Some(WARNED_EXIT) => (
+            WARNED,
+            s,
+            format!("{}; warned: {}", key_result(&dir, &stdout), last_error()),
+        ),
         Ending::Exited(s) => ("failed", s, last_error()),
         Ending::Timeout(s) => (
             "timeout",

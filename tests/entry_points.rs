@@ -19,7 +19,8 @@ use scatterscope::reconstruct::input::{InputSpec, load};
 use scatterscope::reconstruct::method::{Method, MethodOptions, run_method};
 use scatterscope::scene::Scene;
 use scatterscope::tags::bin_file::{BinOutputs, BinSpec, bin_file, bin_file_to};
-use scatterscope::tags::survey::{Survey, survey};
+use scatterscope::tags::recorded::survey;
+use scatterscope::tags::survey::Survey;
 use scatterscope::{Named, Stack};
 
 /// The paper's physics on a small sensor.

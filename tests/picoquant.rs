@@ -21,7 +21,8 @@ use scatterscope::formats::picoquant::writer::{PtuWriter, WriterHeader};
 use scatterscope::formats::picoquant::{self, TtrError};
 use scatterscope::tags::bin_file::{BinSpec, Pixels, bin_file};
 use scatterscope::tags::binning::{Binner, FrameSelect, PixelMap, TimeWindow};
-use scatterscope::tags::survey::{Survey, survey};
+use scatterscope::tags::recorded::survey;
+use scatterscope::tags::survey::Survey;
 
 /// A PicoQuant sample file (`../shared/data/picoquant-sample-data/REL`).
 fn sample(rel: &str) -> PathBuf {

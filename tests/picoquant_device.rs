@@ -467,7 +467,7 @@ fn the_shared_picoquant_samples_convert_to_ptu_photon_for_photon() {
     ] {
         let input = shared_data::shared_data(&format!("picoquant-sample-data/{rel}"));
         let out = dir.path().join(format!("{}.ptu", rel.replace('/', "_")));
-        let c = scatterscope::tags::convert::convert_to_ptu(
+        let c = scatterscope::tags::recorded::convert_to_ptu(
             &input,
             &out,
             false,
@@ -631,8 +631,9 @@ fn the_t3_offset_reaches_the_library_in_nanoseconds() {
         );
         assert!(!o.status.success());
         assert!(text(&o).contains("whole nanoseconds"), "{}", text(&o));
-        // Past the library's range: its own error code and text, or for
-        // a HydraHarp, whose header bounds it lower, refused by name.
+        // Past the library's range: refused by name with the library's
+        // error code and text, or for a HydraHarp, whose header bounds it
+        // lower, before the library is asked.
         let (_, o) = acquire(
             dir.path(),
             &format!("picoquant:{family}"),
@@ -642,9 +643,33 @@ fn the_t3_offset_reaches_the_library_in_nanoseconds() {
         assert!(!o.status.success());
         let words = match family {
             "hydraharp" => "0 to 500 000 (hhdefin.h OFFSETMAX)",
-            _ => "SetOffset returned error -17 (ERROR_INVALID_ARGUMENT)",
+            _ => "T3 offset 200000000 ns: the",
         };
         assert!(text(&o).contains(words), "{}", text(&o));
+        if family != "hydraharp" {
+            assert!(
+                text(&o).contains("library refused it") && text(&o).contains("error -17"),
+                "{}",
+                text(&o)
+            );
+        }
+        if family == "picoharp330" {
+            // Its header bounds no binning code either: the library's
+            // refusal, by name.
+            let (_, o) = acquire(
+                dir.path(),
+                &format!("picoquant:{family}"),
+                &mock,
+                &["--binning", "40"],
+            );
+            assert!(!o.status.success());
+            assert!(
+                text(&o).contains("binning code 40 (bins of 2^40 base steps): the")
+                    && text(&o).contains("refused it"),
+                "{}",
+                text(&o)
+            );
+        }
     }
 }
 

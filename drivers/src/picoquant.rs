@@ -1118,8 +1118,29 @@ impl Device {
                     lib.check("SetInputCFD", set_input_cfd(i, 1, in_a, in_b))?;
                 }
             }
-            lib.check("SetBinning", (f.set_binning)(i, s.binning))?;
-            lib.check("SetOffset", (f.set_offset)(i, offset))?;
+            // A setting the library refuses is named with its value (the
+            // PicoHarp 330's header bounds neither; its library checks).
+            let refused = |what: String, code: c_int| {
+                VendorError::Setting(format!(
+                    "{what}: the {} library refused it ({}, error {code})",
+                    lib.family.name(),
+                    lib.error_text(code)
+                ))
+            };
+            let code = (f.set_binning)(i, s.binning);
+            if code < 0 {
+                return Err(refused(
+                    format!(
+                        "binning code {} (bins of 2^{} base steps)",
+                        s.binning, s.binning
+                    ),
+                    code,
+                ));
+            }
+            let code = (f.set_offset)(i, offset);
+            if code < 0 {
+                return Err(refused(format!("T3 offset {} ns", s.t3_offset_ns), code));
+            }
             let m = c_int::from(s.markers);
             if s.markers {
                 // `SetMarkerEdges(devidx, me1, me2, me3, me4)`, each

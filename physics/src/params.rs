@@ -186,7 +186,29 @@ impl Medium {
             ));
         }
         positive("refractive_index", self.refractive_index)?;
+        if self.refractive_index < 1.0 {
+            return Err(ParamError::new(
+                "refractive_index",
+                self.refractive_index,
+                "a refractive index below 1 makes light travel faster than in vacuum (tissue and foam are 1.3-1.5)",
+            ));
+        }
         non_negative("thickness_cm", self.thickness_cm)?;
+        if self.mu_s_per_cm * (1.0 - self.g) <= 0.0 {
+            let (field, value) = if self.mu_s_per_cm == 0.0 {
+                ("mu_s_per_cm", self.mu_s_per_cm)
+            } else {
+                ("g", self.g)
+            };
+            return Err(ParamError::new(
+                field,
+                value,
+                format!(
+                    "the reduced scattering (1 - g) mu_s = {} /cm: a medium that does not scatter has no diffusion; the model describes scattering media",
+                    self.mu_s_per_cm * (1.0 - self.g)
+                ),
+            ));
+        }
         let attenuation = self.mu_a_per_cm + (1.0 - self.g) * self.mu_s_per_cm;
         if attenuation <= 0.0 || !attenuation.is_finite() {
             let (field, value) = if self.mu_a_per_cm == 0.0 && self.g >= 1.0 {

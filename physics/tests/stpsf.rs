@@ -318,6 +318,12 @@ fn invalid_parameters_name_the_field() {
             "refractive_index",
         ),
         (
+            Box::new(|s| s.medium.refractive_index = 0.5),
+            "refractive_index",
+        ),
+        (Box::new(|s| s.medium.mu_s_per_cm = 0.0), "mu_s_per_cm"),
+        (Box::new(|s| s.medium.g = 1.0), "g"),
+        (
             Box::new(|s| s.medium.thickness_cm = f64::INFINITY),
             "thickness_cm",
         ),

@@ -26,7 +26,7 @@ use std::time::{Duration, Instant};
 
 use ndarray::Array2;
 
-use super::cpu::{OtherProcesses, VIEW_THREAD_PREFIX, describe, threads_cpu_s};
+use super::cpu::{Busy, OtherProcesses, VIEW_THREAD_PREFIX, describe, threads_cpu_s};
 use super::state::{Image, LiveReconstruction, LiveState, TracePoint};
 use super::{lower_priority, view_priority};
 use crate::reconstruct::em::RlStop;
@@ -323,37 +323,45 @@ fn watch_cpu(shared: Arc<Shared>) {
             "the snapshot of {} photons ({:.1} s of acquisition)",
             r.photons, r.acquired_s
         );
-        let status = match had {
-            Some(had)
-                if elapsed >= STARVED_AFTER.as_secs_f64()
-                    && had < STARVED_BELOW_CORES * elapsed =>
-            {
-                let taken: f64 = busy.iter().map(|b| b.cores).sum();
-                let mut by = Vec::new();
-                if let Some(own) = own {
-                    by.push(format!(
-                        "the acquisition keeps {own:.1} of {cores} cores busy"
-                    ));
-                }
-                if !busy.is_empty() {
-                    by.push(format!(
-                        "other processes {taken:.1}: {}",
-                        describe(&busy, 3)
-                    ));
-                }
-                format!(
-                    "starved of CPU: {what} has had {had:.2} s of CPU in {elapsed:.0} s; {}. It runs only on a core nothing else wants, so the acquisition keeps its pace; the whole run is reconstructed when it ends",
-                    if by.is_empty() {
-                        "no other busy process can be seen".to_string()
-                    } else {
-                        by.join(", ")
-                    }
-                )
-            }
-            _ => format!("reconstructing {what}: {elapsed:.0} s so far"),
-        };
+        let status = had
+            .and_then(|had| starved(&what, had, elapsed, (own, cores), &busy))
+            .unwrap_or_else(|| format!("reconstructing {what}: {elapsed:.0} s so far"));
         set_status(&shared, Some(status));
     }
+}
+
+/// The page's word when `what` (a snapshot) has had `had` s of CPU in
+/// `elapsed` s: starved, and by whom (the acquisition's `own` busy cores
+/// of `cores`, the `busy` other processes), when it has had less than
+/// [`STARVED_BELOW_CORES`] of a core since [`STARVED_AFTER`]; else `None`.
+fn starved(
+    what: &str,
+    had: f64,
+    elapsed: f64,
+    (own, cores): (Option<f64>, usize),
+    busy: &[Busy],
+) -> Option<String> {
+    if elapsed < STARVED_AFTER.as_secs_f64() || had >= STARVED_BELOW_CORES * elapsed {
+        return None;
+    }
+    let taken: f64 = busy.iter().map(|b| b.cores).sum();
+    let mut by = Vec::new();
+    if let Some(own) = own {
+        by.push(format!(
+            "the acquisition keeps {own:.1} of {cores} cores busy"
+        ));
+    }
+    if !busy.is_empty() {
+        by.push(format!("other processes {taken:.1}: {}", describe(busy, 3)));
+    }
+    Some(format!(
+        "starved of CPU: {what} has had {had:.2} s of CPU in {elapsed:.0} s; {}. It runs only on a core nothing else wants, so the acquisition keeps its pace; the whole run is reconstructed when it ends",
+        if by.is_empty() {
+            "no other busy process can be seen".to_string()
+        } else {
+            by.join(", ")
+        }
+    ))
 }
 
 /// The watcher's word on the page, unless the acquisition has ended (the
@@ -626,5 +634,42 @@ impl Drop for Reconstructor {
     /// not waited for.
     fn drop(&mut self) {
         self.shared.ended.store(true, Ordering::Relaxed);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The page says a snapshot is starved, and by whom, exactly when it
+    /// has had less than a tenth of a core since three seconds.
+    #[test]
+    fn a_snapshot_without_cpu_is_called_starved_and_its_takers_named() {
+        let busy = [Busy {
+            pid: 42,
+            name: "sh".into(),
+            cores: 1.9,
+        }];
+        let said = starved("the snapshot", 0.2, 5.0, (Some(0.3), 2), &busy).unwrap();
+        assert!(
+            said.starts_with("starved of CPU: the snapshot has had 0.20 s of CPU in 5 s"),
+            "{said}"
+        );
+        assert!(
+            said.contains("the acquisition keeps 0.3 of 2 cores busy"),
+            "{said}"
+        );
+        assert!(
+            said.contains("other processes 1.9: sh (pid 42) 1.9 core"),
+            "{said}"
+        );
+        // Enough CPU, or too early to tell: not starved.
+        assert_eq!(starved("s", 0.6, 5.0, (None, 2), &busy), None);
+        assert_eq!(starved("s", 0.0, 2.0, (None, 2), &busy), None);
+        let alone = starved("s", 0.0, 4.0, (None, 2), &[]).unwrap();
+        assert!(
+            alone.contains("no other busy process can be seen"),
+            "{alone}"
+        );
     }
 }

@@ -209,6 +209,13 @@ pub fn prepare(
                 source,
             })?;
     assumed.push(format!("model: {}", setup.model_summary()));
+    if let Ok(diffusion) = crate::physics::Diffusion::new(&setup.medium) {
+        assumed.extend(
+            crate::physics::validity::diagnose(&setup, &diffusion)
+                .into_iter()
+                .map(|d| format!("model: {} ({})", d.message, d.code)),
+        );
+    }
     assumed.push(format!("background: {background}"));
     if let (Some(first), Some(last)) = (problem.left_out.first(), problem.left_out.last()) {
         let counts: f64 = problem.left_out.iter().map(|(_, c)| c).sum();

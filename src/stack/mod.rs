@@ -326,6 +326,21 @@ impl Stack {
                 ),
             ));
         }
+        // A stack's setup states the pitch a second time: the two must be
+        // one (the reconstruction reads the setup, the writers the pitch).
+        if let Some(setup) = &self.meta.setup {
+            let from_setup = setup.sensor.fov_cm / setup.sensor.width_px as f64;
+            let pitch = self.meta.pixel_pitch_cm;
+            if (from_setup - pitch).abs() > 1e-6 * pitch {
+                return Err(StackError::format(
+                    path,
+                    format!(
+                        "pixel_pitch_cm = {pitch} contradicts setup.sensor (fov_cm {} over width_px {} = {from_setup} cm): correct one of them",
+                        setup.sensor.fov_cm, setup.sensor.width_px
+                    ),
+                ));
+            }
+        }
         for (b, img) in self.data.axis_iter(Axis(0)).enumerate() {
             for ((r, c), &v) in img.indexed_iter() {
                 check_count(f64::from(v), || format!("bin {b}, row {r}, column {c}"))

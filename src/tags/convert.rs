@@ -14,7 +14,6 @@ use firmware_protocol::Event;
 use crate::events::Tag;
 use crate::files::Completion;
 use crate::formats::becker_hickl::spc::{self, SpcFileError, SpcOptions};
-use crate::formats::detect::Format;
 use crate::formats::picoquant::records::{Decoder, RecordType};
 use crate::formats::picoquant::writer::{HeaderEntry, PtuWriter, WriterHeader};
 use crate::formats::picoquant::{FileError, TtrError, open};
@@ -97,20 +96,9 @@ fn out_err(path: &Path) -> impl Fn(std::io::Error) -> ConvertError + '_ {
     }
 }
 
-/// Converts `input` (a PicoQuant file, a tag file or a Becker & Hickl
-/// `.spc` file read as `spc` says) into the PTU file `output`, written
-/// whole or not at all; with `allow_truncated`, a cut file's complete
-/// records (or those of a file whose writer never finished) are
-/// converted, and the conversion says so, instead of failing. `stop`
-/// (Ctrl-C) ends it with nothing written. The output is never the input,
-/// however it is spelled ([`crate::files`]).
-pub fn convert_to_ptu(
-    input: &Path,
-    output: &Path,
-    allow_truncated: bool,
-    spc: &SpcOptions,
-    stop: &AtomicBool,
-) -> Result<Conversion, ConvertError> {
+/// Refuses a conversion that would write over its own input (however
+/// it is spelled: [`crate::files`]).
+pub fn check_output(input: &Path, output: &Path) -> Result<(), ConvertError> {
     if crate::files::input::same_file(input, output) {
         return Err(ConvertError::Unsupported {
             path: input.to_owned(),
@@ -120,26 +108,13 @@ pub fn convert_to_ptu(
             ),
         });
     }
-    let format = Format::of_file(input);
-    let unsupported = |reason: &str| ConvertError::Unsupported {
-        path: input.to_owned(),
-        reason: reason.into(),
-    };
-    spc.check_applies(input, format)?;
-    match format {
-        Format::TagFile => from_tag_file(input, output, stop),
-        Format::BeckerHicklFifo => from_spc(input, output, allow_truncated, spc, stop),
-        Format::BeckerHicklHistogram => Err(unsupported(
-            "a Becker & Hickl histogram file (.sdt) holds histograms, not photon records: bin it instead",
-        )),
-        _ => from_picoquant(input, output, allow_truncated, stop),
-    }
+    Ok(())
 }
 
 /// A Becker & Hickl FIFO file as Generic T3: the routing channel is the
 /// input channel and the macro-time clock the sync; GAP flags (photons
 /// lost in the card) make the output incomplete, said in its warnings.
-fn from_spc(
+pub fn from_spc(
     input: &Path,
     output: &Path,
     allow_truncated: bool,
@@ -280,7 +255,9 @@ fn count(c: &mut Conversion, tag: &Tag) {
     }
 }
 
-fn from_picoquant(
+/// A PicoQuant file (PTU, PT3, HT3; T2 or T3) as a PTU of its own record
+/// type, photon for photon (see the module's doc).
+pub fn from_picoquant(
     input: &Path,
     output: &Path,
     allow_truncated: bool,
@@ -365,7 +342,9 @@ fn from_picoquant(
     close(c, w, output, |_| true)
 }
 
-fn from_tag_file(
+/// A tag file (`.sstags`) as Generic T3, the sensor pixel the input
+/// channel (see the module's doc).
+pub fn from_tag_file(
     input: &Path,
     output: &Path,
     stop: &AtomicBool,

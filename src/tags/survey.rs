@@ -5,16 +5,14 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::formats::becker_hickl::sdt::{self, SdtFile};
+use crate::formats::becker_hickl::sdt::SdtFile;
 use crate::formats::becker_hickl::spc::{self, CardFlags, SpcFileError, SpcInfo, SpcOptions};
-use crate::formats::detect::Format;
 use crate::formats::sstags::{TagFileError, TagFileSummary, read_tag_file};
 use firmware_protocol::Event;
 
 use crate::events::Tag;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, TtrError, open};
-use crate::tags::binned::RecordedFileError;
 
 /// The records of a PicoQuant file, counted by kind.
 #[derive(Debug, Default)]
@@ -203,29 +201,6 @@ pub enum Survey {
     BeckerHicklFifo(Box<SpcInfo>, SpcSurvey),
     /// A Becker & Hickl histogram file.
     BeckerHicklHistogram(Box<SdtFile>),
-}
-
-/// Surveys a recorded file: a tag file (recognised by its magic), a
-/// Becker & Hickl file (`.spc` read as `spc` says, `.sdt`) or a PicoQuant
-/// file.
-pub fn survey(path: &Path, spc: &SpcOptions) -> Result<Survey, RecordedFileError> {
-    let format = Format::of_file(path);
-    spc.check_applies(path, format)?;
-    Ok(match format {
-        Format::TagFile => {
-            let (summary, s) = survey_tag_file(path)?;
-            Survey::TagFile(Box::new(summary), s)
-        }
-        Format::BeckerHicklFifo => {
-            let (info, s) = survey_spc(path, spc)?;
-            Survey::BeckerHicklFifo(Box::new(info), s)
-        }
-        Format::BeckerHicklHistogram => Survey::BeckerHicklHistogram(Box::new(sdt::read(path)?)),
-        _ => {
-            let (info, s) = survey_picoquant(path)?;
-            Survey::PicoQuant(Box::new(info), s)
-        }
-    })
 }
 
 impl Survey {

@@ -339,8 +339,11 @@ def reconstruct(
     ``data`` is ``(bins, rows, cols)`` photon counts and ``meta`` their
     metadata (from :func:`simulate`, :func:`bin_file` or
     :func:`load_stack`); without it the physics keywords describe the
-    counts. ``method`` is one of ``auto`` (the default: ``rl-stack`` or PnP,
-    chosen by PnP's output deviance), ``pnp``, ``pnp-sum``, ``pnp-slice``,
+    counts. ``method`` is one of ``auto`` (the default: the learned
+    reconstruction inside its trained ranges, kept only where it explains
+    held-back counts as well as ``rl-sum`` with its cross-validated stop,
+    else that ``rl-sum``; ``rl-stack`` outside the ranges; the notes say
+    which and why), ``learned``, ``pnp``, ``pnp-sum``, ``pnp-slice``,
     ``rl``, ``rl-sum``, ``rl-stack``, ``scaled-counts`` (the single-bin
     methods need ``bin``). ``denoiser`` (``ffdnet``, ``tv``, ``identity``),
     ``weights``, ``tv_gain`` and ``solver`` (``split``, ``admm-lbfgs``) are

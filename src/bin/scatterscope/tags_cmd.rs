@@ -4,8 +4,9 @@ use std::path::PathBuf;
 
 use scatterscope::formats::becker_hickl::spc::SpcOptions;
 use scatterscope::tags::bin_file::{BinOutputs, BinSpec, bin_file_to};
-use scatterscope::tags::convert::{ConvertError, convert_to_ptu};
-use scatterscope::tags::survey::survey;
+use scatterscope::tags::convert::ConvertError;
+use scatterscope::tags::recorded::convert_to_ptu;
+use scatterscope::tags::recorded::survey;
 
 /// Show what a recorded file (PTU, HT3, PT3, .sstags, B&H .spc and .sdt) holds.
 ///

@@ -126,14 +126,30 @@ pub struct FileInfo {
     pub tags: Vec<HeaderTag>,
 }
 
+/// Sides a scanned image's pixel can have (um): a tenth of a nanometre to
+/// ten centimetres.
+pub const PIXEL_UM: (f64, f64) = (1e-4, 1e5);
+
 impl FileInfo {
     /// The side of a scanned image's pixel (cm), from `ImgHdr_PixResol`
     /// (PicoQuant's PTU tag, in micrometres), when the file is an image
-    /// and states a positive, finite size.
+    /// and states a size a scanned pixel can have ([`PIXEL_UM`]).
     pub fn pixel_size_cm(&self) -> Option<f64> {
         self.imaging?;
         let um = self.tags.float("ImgHdr_PixResol")?;
-        (um.is_finite() && um > 0.0).then_some(um * 1e-4)
+        (PIXEL_UM.0..=PIXEL_UM.1).contains(&um).then_some(um * 1e-4)
+    }
+
+    /// Why the image's stated pixel size was left out, when it was.
+    pub fn pixel_size_left_out(&self) -> Option<String> {
+        self.imaging?;
+        let um = self.tags.float("ImgHdr_PixResol")?;
+        self.pixel_size_cm().is_none().then(|| {
+            format!(
+                "ImgHdr_PixResol {um:e} um is no scanned pixel's size ({:e} to {:e} um): left out, the pixel size unstated",
+                PIXEL_UM.0, PIXEL_UM.1
+            )
+        })
     }
 
     /// The header in words, one line each (what `info` prints first).

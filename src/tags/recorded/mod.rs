@@ -1,7 +1,8 @@
 //! Every recorded file the project reads, one format per file behind one
 //! interface: a [`RecordedSource`] bins a file into stacks and hands each
 //! on as soon as it is binned (a format binned whole in memory is one by
-//! implementing [`BinsInMemory`]). [`source_of`] is the one table from a
+//! implementing [`BinsInMemory`]), surveys it for `info` and converts it
+//! to PTU ([`RecordedFormat`]). [`source_of`] is the one table from a
 //! detected [`Format`] to its source, so a new format is a new file here,
 //! its line in [`Format::of_file`] and its line below.
 //!
@@ -13,10 +14,14 @@
 //! - [`tag_file`]: the project's tag files (`.sstags`).
 
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
 
+use crate::formats::becker_hickl::spc::SpcOptions;
 use crate::formats::detect::Format;
 use crate::stack::CountsView;
 use crate::tags::binned::{BinSpec, BinnedFile, CountStack, RecordedFileError, StackCounts};
+use crate::tags::convert::{Conversion, ConvertError, check_output};
+use crate::tags::survey::Survey;
 
 pub mod picoquant;
 pub mod sdt;
@@ -37,15 +42,65 @@ pub trait RecordedSource: Sync {
     ) -> Result<BinnedFile<()>, RecordedFileError>;
 }
 
+/// What else the commands that read recorded files ask of a format:
+/// `info`'s survey and `convert`'s PTU.
+pub trait RecordedFormat: RecordedSource {
+    /// Surveys the file at `path` (a `.spc` read as `spc` says): its
+    /// header and its records counted by kind.
+    fn survey(&self, path: &Path, spc: &SpcOptions) -> Result<Survey, RecordedFileError>;
+
+    /// Converts the file at `input` into the PTU file `output`, photon for
+    /// photon, written whole or not at all; with `allow_truncated` a cut
+    /// file's complete records; `stop` (Ctrl-C) ends it with nothing
+    /// written.
+    fn convert_to_ptu(
+        &self,
+        input: &Path,
+        output: &Path,
+        allow_truncated: bool,
+        spc: &SpcOptions,
+        stop: &AtomicBool,
+    ) -> Result<Conversion, ConvertError>;
+}
+
 /// The source of a file of `format` (anything not recognised otherwise is
 /// read as PicoQuant, whose reader names what it found).
-pub fn source_of(format: Format) -> &'static dyn RecordedSource {
+pub fn source_of(format: Format) -> &'static dyn RecordedFormat {
     match format {
         Format::TagFile => &tag_file::TagFiles,
         Format::BeckerHicklFifo => &spc::SpcFiles,
         Format::BeckerHicklHistogram => &sdt::SdtFiles,
         _ => &picoquant::PicoQuantFiles,
     }
+}
+
+/// Surveys a recorded file through its format's source ([`source_of`]):
+/// a tag file (recognised by its magic), a Becker & Hickl file (`.spc`
+/// read as `spc` says, `.sdt`) or a PicoQuant file.
+pub fn survey(path: &Path, spc: &SpcOptions) -> Result<Survey, RecordedFileError> {
+    let format = Format::of_file(path);
+    spc.check_applies(path, format)?;
+    source_of(format).survey(path, spc)
+}
+
+/// Converts `input` (a PicoQuant file, a tag file or a Becker & Hickl
+/// `.spc` file read as `spc` says) into the PTU file `output` through its
+/// format's source ([`source_of`]), written whole or not at all; with
+/// `allow_truncated`, a cut file's complete records (or those of a file
+/// whose writer never finished) are converted, and the conversion says so,
+/// instead of failing. `stop` (Ctrl-C) ends it with nothing written. The
+/// output is never the input, however it is spelled ([`crate::files`]).
+pub fn convert_to_ptu(
+    input: &Path,
+    output: &Path,
+    allow_truncated: bool,
+    spc: &SpcOptions,
+    stop: &AtomicBool,
+) -> Result<Conversion, ConvertError> {
+    check_output(input, output)?;
+    let format = Format::of_file(input);
+    spc.check_applies(input, format)?;
+    source_of(format).convert_to_ptu(input, output, allow_truncated, spc, stop)
 }
 
 /// A binned stack handed on by a source.

@@ -5,8 +5,10 @@
 use std::path::Path;
 
 use super::BinsInMemory;
+use super::RecordedFormat;
 use super::t3::{self, T3Records};
 use crate::formats::becker_hickl::spc::CardFlags;
+use crate::formats::becker_hickl::spc::SpcOptions;
 use crate::formats::picoquant::ptu::TagLookup;
 use crate::formats::picoquant::records::Decoder;
 use crate::formats::picoquant::{FileError, FileInfo, RecordReader, TtrError, open};
@@ -14,6 +16,9 @@ use crate::tags::binned::{
     BinSpec, BinnedFile, CountStack, Pixels, RecordedFileError, Recording, spec_error,
 };
 use crate::tags::binning::Binner;
+use crate::tags::convert::{Conversion, ConvertError, from_picoquant};
+use crate::tags::survey::{Survey, survey_picoquant};
+use std::sync::atomic::AtomicBool;
 
 /// PicoQuant's T3 files.
 pub struct PicoQuantFiles;
@@ -55,7 +60,11 @@ impl BinsInMemory for PicoQuantFiles {
             ),
             ("TTResult_SyncRate", info.sync_rate_hz),
         ]);
-        let notes = info.unread_note().into_iter().collect();
+        let notes = info
+            .unread_note()
+            .into_iter()
+            .chain(info.pixel_size_left_out())
+            .collect();
         let source = format!(
             "{} ({}, {})",
             path.display(),
@@ -84,6 +93,24 @@ impl BinsInMemory for PicoQuantFiles {
             s.meta.laser_notes.clone_from(&laser.notes);
         }
         Ok(binned)
+    }
+}
+
+impl RecordedFormat for PicoQuantFiles {
+    fn survey(&self, path: &Path, _spc: &SpcOptions) -> Result<Survey, RecordedFileError> {
+        let (info, s) = survey_picoquant(path)?;
+        Ok(Survey::PicoQuant(Box::new(info), s))
+    }
+
+    fn convert_to_ptu(
+        &self,
+        input: &Path,
+        output: &Path,
+        allow_truncated: bool,
+        _spc: &SpcOptions,
+        stop: &AtomicBool,
+    ) -> Result<Conversion, ConvertError> {
+        from_picoquant(input, output, allow_truncated, stop)
     }
 }
 

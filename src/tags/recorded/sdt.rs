@@ -6,15 +6,20 @@ use std::time::Instant;
 
 use ndarray::Array3;
 
+use super::RecordedFormat;
 use super::{Handed, RecordedSource};
 use crate::formats::becker_hickl::sdt::{self, BlockCounts};
+use crate::formats::becker_hickl::spc::SpcOptions;
 use crate::stack::{CountsView, StackMeta, Unstated};
 use crate::tags::binned::{
     BinSpec, BinnedFile, Pixels, RecordedFileError, Recording, StackCounts, check_stack_memory,
     spec_error,
 };
 use crate::tags::binning::{FrameSelect, MAX_BINS, PixelMap, TimeWindow};
+use crate::tags::convert::{Conversion, ConvertError};
 use crate::tags::counts::Counts;
+use crate::tags::survey::Survey;
+use std::sync::atomic::AtomicBool;
 
 /// Becker & Hickl's histogram files: each decay block becomes a stack in
 /// its own size and time unit, its curve points summed into the window's
@@ -156,6 +161,28 @@ impl RecordedSource for SdtFiles {
             notes,
             truncated: None,
             time_unstated,
+        })
+    }
+}
+
+impl RecordedFormat for SdtFiles {
+    fn survey(&self, path: &Path, _spc: &SpcOptions) -> Result<Survey, RecordedFileError> {
+        Ok(Survey::BeckerHicklHistogram(Box::new(
+            crate::formats::becker_hickl::sdt::read(path)?,
+        )))
+    }
+
+    fn convert_to_ptu(
+        &self,
+        input: &Path,
+        _output: &Path,
+        _allow_truncated: bool,
+        _spc: &SpcOptions,
+        _stop: &AtomicBool,
+    ) -> Result<Conversion, ConvertError> {
+        Err(ConvertError::Unsupported {
+            path: input.to_owned(),
+            reason: "a Becker & Hickl histogram file (.sdt) holds histograms, not photon records: bin it instead".into(),
         })
     }
 }

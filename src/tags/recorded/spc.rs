@@ -5,13 +5,18 @@
 use std::path::Path;
 
 use super::BinsInMemory;
+use super::RecordedFormat;
 use super::t3::{self, T3Records};
+use crate::formats::becker_hickl::spc::SpcOptions;
 use crate::formats::becker_hickl::spc::{self, CardFlags, SpcFileError, SpcInfo};
 use crate::stack::Unstated;
 use crate::tags::binned::{
     BinSpec, BinnedFile, CountStack, RecordedFileError, Recording, spec_error,
 };
 use crate::tags::binning::Binner;
+use crate::tags::convert::{Conversion, ConvertError, from_spc};
+use crate::tags::survey::{Survey, survey_spc};
+use std::sync::atomic::AtomicBool;
 
 /// Becker & Hickl's FIFO files.
 pub struct SpcFiles;
@@ -65,6 +70,24 @@ impl BinsInMemory for SpcFiles {
             }
         }
         Ok(binned)
+    }
+}
+
+impl RecordedFormat for SpcFiles {
+    fn survey(&self, path: &Path, spc: &SpcOptions) -> Result<Survey, RecordedFileError> {
+        let (info, s) = survey_spc(path, spc)?;
+        Ok(Survey::BeckerHicklFifo(Box::new(info), s))
+    }
+
+    fn convert_to_ptu(
+        &self,
+        input: &Path,
+        output: &Path,
+        allow_truncated: bool,
+        spc: &SpcOptions,
+        stop: &AtomicBool,
+    ) -> Result<Conversion, ConvertError> {
+        from_spc(input, output, allow_truncated, spc, stop)
     }
 }
 

@@ -131,6 +131,20 @@ pub(super) fn bin<F: T3Records>(
         flags,
         ..
     } = pass;
+    if let (crate::tags::binning::FrameSelect::One(n), Some(_)) = (spec.frames, imaging)
+        && n as u64 >= tally.frames
+    {
+        return Err(spec_error(
+            path,
+            match tally.frames {
+                0 => format!("--frames {n}: the file holds no complete frame"),
+                f => format!(
+                    "--frames {n}: the file holds {f} frames, numbered 0 to {}",
+                    f - 1
+                ),
+            },
+        ));
+    }
     if tally.over_budget > 0 {
         notes.push(format!(
             "{} photon(s) of frames past the first {} were not kept: the memory budget holds {} stacks of {} bins of {} x {} pixels (bin the frames summed, or one at a time)",

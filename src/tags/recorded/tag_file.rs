@@ -6,6 +6,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use super::BinsInMemory;
+use super::RecordedFormat;
+use crate::formats::becker_hickl::spc::SpcOptions;
 use crate::formats::sstags::TagFile;
 use crate::stack::StackMeta;
 use crate::tags::binned::{
@@ -13,7 +15,10 @@ use crate::tags::binned::{
     spec_error,
 };
 use crate::tags::binning::{Binner, FrameSelect, MAX_BINS, PixelMap, Region, TimeWindow};
+use crate::tags::convert::{Conversion, ConvertError, from_tag_file};
+use crate::tags::survey::{Survey, survey_tag_file};
 use crate::tags::wire::bin_batch;
+use std::sync::atomic::AtomicBool;
 
 /// The project's tag files.
 pub struct TagFiles;
@@ -108,6 +113,24 @@ impl BinsInMemory for TagFiles {
             truncated,
             time_unstated: false,
         })
+    }
+}
+
+impl RecordedFormat for TagFiles {
+    fn survey(&self, path: &Path, _spc: &SpcOptions) -> Result<Survey, RecordedFileError> {
+        let (summary, s) = survey_tag_file(path)?;
+        Ok(Survey::TagFile(Box::new(summary), s))
+    }
+
+    fn convert_to_ptu(
+        &self,
+        input: &Path,
+        output: &Path,
+        _allow_truncated: bool,
+        _spc: &SpcOptions,
+        stop: &AtomicBool,
+    ) -> Result<Conversion, ConvertError> {
+        from_tag_file(input, output, stop)
     }
 }
 
