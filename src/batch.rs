@@ -794,6 +794,60 @@ mod tests {
         assert!(s.starts_with("#!/bin/bash\n"));
     }
 
+    /// A path among a job's arguments is the manifest's, as its input is,
+    /// wherever the batch is started from; other arguments are left.
+    #[test]
+    fn argument_paths_are_the_manifests() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("study");
+        std::fs::create_dir(&dir).unwrap();
+        std::fs::write(dir.join("irf.ptu"), b"x").unwrap();
+        let manifest = dir.join("jobs.toml");
+        let jobs = parse_manifest(
+            &manifest,
+            "[[job]]\ncommand = \"lifetime\"\ninput = \"a.ptu\"\nargs = [\"--irf\", \"irf.ptu\", \"--harmonics\", \"1,2\", \"--reference=irf.ptu\", \"--truth\", \"missing.png\"]\n",
+        )
+        .unwrap();
+        let irf = std::path::absolute(dir.join("irf.ptu"))
+            .unwrap()
+            .display()
+            .to_string();
+        assert_eq!(
+            jobs[0].args,
+            [
+                "--irf",
+                irf.as_str(),
+                "--harmonics",
+                "1,2",
+                &format!("--reference={irf}"),
+                "--truth",
+                "missing.png"
+            ]
+        );
+    }
+
+    /// Exit 4 (outputs written, with warnings) is a job done: the next run
+    /// skips it.
+    #[test]
+    fn a_job_that_warned_counts_as_done() {
+        let record = JobRecord {
+            name: "j".into(),
+            status: WARNED.into(),
+            exit_code: Some(WARNED_EXIT),
+            started_unix_s: 0.0,
+            seconds: 1.0,
+            result: "warned".into(),
+        };
+        assert!(record.ok());
+        assert!(
+            !JobRecord {
+                status: "failed".into(),
+                ..record
+            }
+            .ok()
+        );
+    }
+
     #[test]
     fn manifests_round_trip_and_inputs_become_absolute() {
         let tmp = tempfile::tempdir().unwrap();

@@ -291,3 +291,98 @@ fn the_phasor_maps_are_inside_the_memory_budget() {
     ]);
     assert!(r.status.success(), "{}", text(&r));
 }
+
+#[test]
+fn a_stack_whose_pitch_contradicts_its_setup_is_refused_by_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    let r = run(&[
+        "simulate",
+        "--preset",
+        "paper",
+        "--size",
+        "32",
+        "--fov",
+        "6.25cm",
+        "--npy",
+        "--out",
+        s(&sim),
+    ]);
+    assert!(r.status.success(), "{}", text(&r));
+    let json = sim.join("counts.json");
+    let meta = std::fs::read_to_string(&json).unwrap();
+    let bad = meta.replace("\"pixel_pitch_cm\": 0.1953125", "\"pixel_pitch_cm\": 0.5");
+    assert_ne!(meta, bad, "{meta}");
+    std::fs::write(&json, bad).unwrap();
+    let r = run(&[
+        "reconstruct",
+        s(&sim.join("counts.npy")),
+        "--out",
+        s(&dir.path().join("rec")),
+    ]);
+    let t = text(&r);
+    assert!(!r.status.success(), "{t}");
+    assert!(
+        t.contains("pixel_pitch_cm = 0.5 contradicts setup.sensor"),
+        "{t}"
+    );
+}
+
+#[test]
+fn a_medium_no_light_crosses_as_modelled_is_refused_by_field() {
+    let dir = tempfile::tempdir().unwrap();
+    for (flag, value, words) in [
+        ("--n", "0.5", "refractive_index = 0.5"),
+        ("--mu-s", "0", "mu_s_per_cm = 0"),
+        ("--g", "1", "g = 1"),
+    ] {
+        let r = run(&[
+            "simulate",
+            "--preset",
+            "paper",
+            "--size",
+            "16",
+            flag,
+            value,
+            "--out",
+            s(&dir.path().join("x")),
+        ]);
+        let t = text(&r);
+        assert!(!r.status.success(), "{flag} {value}: {t}");
+        assert!(t.contains(words), "{flag} {value}: {t}");
+    }
+    // No slab at all is a model the diffusion approximation does not hold
+    // for: reconstructed, and said.
+    let sim = dir.path().join("thin");
+    let r = run(&[
+        "simulate",
+        "--preset",
+        "paper",
+        "--size",
+        "16",
+        "--fov",
+        "3cm",
+        "--thickness",
+        "0",
+        "--t-start",
+        "1ps",
+        "--bin-width",
+        "1ps",
+        "--bins",
+        "8",
+        "--npy",
+        "--out",
+        s(&sim),
+    ]);
+    assert!(r.status.success(), "{}", text(&r));
+    let r = run(&[
+        "reconstruct",
+        s(&sim.join("counts.npy")),
+        "--method",
+        "rl-sum",
+        "--out",
+        s(&dir.path().join("rec")),
+    ]);
+    let t = text(&r);
+    assert!(t.contains("(thin-slab)"), "{t}");
+}
