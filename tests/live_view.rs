@@ -248,7 +248,7 @@ fn a_20_s_run_shows_a_reconstruction_every_few_seconds() {
         psnr.last().unwrap() > psnr.first().unwrap(),
         "PSNR against acquisition time: {psnr:?}"
     );
-    assert_eq!(page["reconstruction"]["method"], "rl-sum", "{page}");
+    assert_eq!(page["reconstruction"]["method"], "auto", "{page}");
 }
 
 #[test]

@@ -4,8 +4,7 @@ engine runs it (src/reconstruct/learned/), and its safetensors export.
 Design (b): the counts in every stage. From the last Richardson-Lucy
 iterate of the time-summed stack (on the model's whole grid), each of
 `stages` stages
-  1. gives a small U-Net (`learned_model.LearnedNet`'s layers, shared by
-     the stages) the current estimate, the log of its EM ratio (where the
+  1. gives a small two-scale U-Net (shared by the stages) the current estimate, the log of its EM ratio (where the
      counts ask for more or less light), the 10th and 40th iterates, the
      scaled counts, the light level and the blur width, and adds its
      output times the stage's own learned weight to the estimate on the
@@ -25,7 +24,6 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from learned_model import block
 
 FORMAT = "scatterscope-learned"
 FORMAT_VERSION = "2"
@@ -38,6 +36,16 @@ STAGE_INPUTS = 7
 FLOOR = 1e-3
 # The EM ratio's logarithm is clamped to +-LOG_RATIO_CLAMP.
 LOG_RATIO_CLAMP = 5.0
+
+
+def block(cin, cout):
+    """Two 3x3 convolutions with ReLUs (the U-Net's unit)."""
+    return nn.Sequential(
+        nn.Conv2d(cin, cout, 3, padding=1),
+        nn.ReLU(),
+        nn.Conv2d(cout, cout, 3, padding=1),
+        nn.ReLU(),
+    )
 # The EM denominator's guard, times the mean count (as the library's
 # DENOMINATOR_GUARD).
 DENOMINATOR_GUARD = 1e-6

@@ -25,6 +25,7 @@
 //!   other processes).
 
 pub mod cpu;
+pub mod mean_time;
 pub mod recon;
 pub mod server;
 pub mod state;

@@ -1,9 +1,7 @@
 //! The reconstruction of snapshots of a running acquisition, on a thread
-//! of its own: Richardson-Lucy on the time-summed stack accumulated so
-//! far, stopped by cross-validation, each snapshot continuing the last
-//! one's search ([`Series`]: seconds where the default method takes tens
-//! of them); a snapshot offered while one runs is dropped (the next one is
-//! newer), so the acquisition never waits for it. Its
+//! of its own, with the default method (`auto`, as `reconstruct` runs it
+//! on the saved stack); a snapshot offered while one runs is dropped (the
+//! next one is newer), so the acquisition never waits for it. Its
 //! threads run at the lowest scheduling priority, on all cores but one,
 //! and the acquisition comes first: a snapshot is skipped while the
 //! acquisition's own threads keep every core but half of one busy (even
@@ -13,15 +11,14 @@
 //! thread (at nice 10) watches the CPU the reconstruction gets: when other
 //! processes take every core and it gets none, the page says so and names
 //! them. The whole run's stack is reconstructed once the acquisition ends
-//! ([`Reconstructor::finish`]), the series continued once more, at normal
-//! priority, with its progress and an estimate of the time left, and a
-//! stop request (Ctrl-C) skips it. The default method's reconstruction of
-//! the saved stack is `reconstruct`'s.
+//! ([`Reconstructor::finish`]), at normal priority, with its progress and
+//! an estimate of the time left (from the last snapshot's iterations),
+//! and a stop request (Ctrl-C) skips it.
 
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc::{RecvTimeoutError, SyncSender, TrySendError, sync_channel};
-use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use ndarray::Array2;
@@ -29,10 +26,10 @@ use ndarray::Array2;
 use super::cpu::{Busy, OtherProcesses, VIEW_THREAD_PREFIX, describe, threads_cpu_s};
 use super::state::{Image, LiveReconstruction, LiveState, TracePoint};
 use super::{lower_priority, view_priority};
-use crate::reconstruct::em::RlStop;
+use crate::denoise::tv::TotalVariation;
 use crate::reconstruct::input::{InputSpec, prepare};
+use crate::reconstruct::method::{Method, MethodOptions, run_method};
 use crate::reconstruct::run::Reconstruction;
-use crate::reconstruct::series::Series;
 use crate::stack::Stack;
 
 /// A snapshot to reconstruct.
@@ -70,8 +67,9 @@ struct Shared {
     /// Set once the whole run's reconstruction is shown: a snapshot that
     /// ends later only adds its point to the curve.
     final_shown: AtomicBool,
-    /// The snapshots' searches, continued by each (held while one runs).
-    series: Mutex<Series>,
+    /// Iterations the last snapshot's reconstruction took (the whole
+    /// run's takes about as many).
+    last_iterations: Mutex<Option<usize>>,
 }
 
 impl Shared {
@@ -83,8 +81,10 @@ impl Shared {
         self.running.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    fn series(&self) -> MutexGuard<'_, Series> {
-        self.series.lock().unwrap_or_else(|e| e.into_inner())
+    fn last_iterations(&self) -> MutexGuard<'_, Option<usize>> {
+        self.last_iterations
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
     }
 }
 
@@ -126,13 +126,9 @@ pub struct FinalProgress {
     pub elapsed_s: f64,
     /// Iterations done so far.
     pub iterations: usize,
-    /// Iterations it will need: as many as the last snapshot's search ran
-    /// when that stopped by itself, else the cap (`None` before it is
-    /// known).
+    /// Iterations it will need, about: as many as the last snapshot's
+    /// reconstruction took (`None` without one).
     pub expected_iterations: Option<usize>,
-    /// Whether `expected_iterations` is the cap (at most) rather than the
-    /// last snapshot's count (about).
-    pub expected_is_cap: bool,
 }
 
 impl FinalProgress {
@@ -149,29 +145,19 @@ impl FinalProgress {
     pub fn describe(&self) -> String {
         let (elapsed, done) = (self.elapsed_s, self.iterations);
         match (self.expected_iterations, self.left_s()) {
-            (Some(expected), Some(left)) => {
-                let about = if self.expected_is_cap {
-                    "at most"
-                } else {
-                    "about"
-                };
-                format!(
-                    "{elapsed:.0} s, {done} of {about} {expected} iterations, {about} {left:.0} s left"
-                )
-            }
+            (Some(expected), Some(left)) => format!(
+                "{elapsed:.0} s, {done} of about {expected} iterations, about {left:.0} s left"
+            ),
             _ => format!("{elapsed:.0} s, {done} iterations"),
         }
     }
 }
 
-/// A snapshot's reconstruction: `series` continued on `stack` for at most
-/// `max_iters` iterations, its rows counted in `iterations`; the
-/// reconstruction, the bins it kept (indices into the stack's bins) and
-/// what was assumed.
+/// A snapshot's reconstruction by the default method, its rows counted
+/// in `iterations`; the reconstruction, the bins it kept (indices into the
+/// stack's bins) and what was assumed.
 fn reconstruct(
     stack: &Stack,
-    series: &mut Series,
-    max_iters: usize,
     iterations: &AtomicUsize,
 ) -> Result<(Reconstruction, Vec<usize>, Vec<String>), String> {
     let input = prepare(
@@ -190,11 +176,19 @@ fn reconstruct(
             m.bin_starts_ps.iter().position(|&s| (s - t).abs() < 1e-6)
         })
         .collect();
-    let rec = series
-        .reconstruct(&input.problem, max_iters, None, |_| {
+    // `auto` runs no prior; the denoiser is the planner's formality.
+    let rec = run_method(
+        &input.problem,
+        Method::Auto,
+        None,
+        &TotalVariation::default(),
+        &MethodOptions::default(),
+        None,
+        |_| {
             iterations.fetch_add(1, Ordering::Relaxed);
-        })
-        .map_err(|e| e.to_string())?;
+        },
+    )
+    .map_err(|e| e.to_string())?;
     Ok((rec, kept, input.assumed))
 }
 
@@ -261,25 +255,6 @@ fn show(
         shared.final_shown.store(true, Ordering::Relaxed);
     }
     s.version += 1;
-}
-
-/// Seconds of iterations a snapshot's search may take, at the pace of the
-/// last snapshot (the page gains a point every few seconds; the next
-/// snapshot continues the search).
-const SNAPSHOT_SEARCH_S: f64 = 1.5;
-/// The fewest iterations a snapshot's search may take (twice the
-/// cross-validated stop's patience).
-const SNAPSHOT_MIN_ITERATIONS: usize = 2 * crate::reconstruct::em::CV_PATIENCE;
-
-/// The iterations a snapshot's search may take: [`SNAPSHOT_SEARCH_S`] at
-/// `per_iteration_s` (the last snapshot's pace; the first snapshot's
-/// search is the default's), within [`SNAPSHOT_MIN_ITERATIONS`] and the
-/// default cap.
-fn snapshot_iterations(per_iteration_s: Option<f64>) -> usize {
-    let cap = RlStop::DEFAULT_MAX_ITERS;
-    per_iteration_s.filter(|t| *t > 0.0).map_or(cap, |t| {
-        ((SNAPSHOT_SEARCH_S / t) as usize).clamp(SNAPSHOT_MIN_ITERATIONS, cap)
-    })
 }
 
 /// Seconds a snapshot runs before the watcher judges its CPU.
@@ -419,7 +394,7 @@ impl Reconstructor {
             running: Mutex::new(None),
             ended: AtomicBool::new(false),
             final_shown: AtomicBool::new(false),
-            series: Mutex::new(Series::new()),
+            last_iterations: Mutex::new(None),
         });
         let worker = shared.clone();
         let spawned = std::thread::Builder::new()
@@ -434,7 +409,6 @@ impl Reconstructor {
                     .start_handler(|_| lower_priority())
                     .build();
                 let mut load = Load::new();
-                let mut per_iteration_s = None;
                 for snap in rx {
                     if worker.ended.load(Ordering::Relaxed) {
                         break;
@@ -452,20 +426,16 @@ impl Reconstructor {
                     }
                     let started = Instant::now();
                     let iterations = AtomicUsize::new(0);
-                    let max_iters = snapshot_iterations(per_iteration_s);
                     let result = {
-                        let mut guard = worker.series();
-                        let series: &mut Series = &mut guard;
-                        let mut run = || reconstruct(&snap.stack, series, max_iters, &iterations);
+                        let run = || reconstruct(&snap.stack, &iterations);
                         match &pool {
                             Ok(pool) => pool.install(run),
                             Err(_) => run(),
                         }
                     };
                     let run_s = started.elapsed().as_secs_f64();
-                    let done = iterations.load(Ordering::Relaxed);
-                    if result.is_ok() && done > 0 {
-                        per_iteration_s = Some(run_s / done as f64);
+                    if result.is_ok() {
+                        *worker.last_iterations() = Some(iterations.load(Ordering::Relaxed));
                     }
                     show(&worker, result, (snap.acquired_s, snap.photons), run_s, false);
                     *worker.running() = None;
@@ -548,28 +518,15 @@ impl Reconstructor {
             return skipped(&shared);
         }
         let iterations = Arc::new(AtomicUsize::new(0));
-        // The iterations it expects, and whether that is the cap: set once
-        // the series is free (see the thread).
-        let expected: Arc<OnceLock<(usize, bool)>> = Arc::default();
+        // The iterations it expects: about the last snapshot's.
+        let expected = *shared.last_iterations();
         let (tx, rx) = sync_channel(1);
-        let (counted, expecting, series) = (iterations.clone(), expected.clone(), shared.clone());
+        let counted = iterations.clone();
         let started = Instant::now();
         let spawned = std::thread::Builder::new()
             .name("final-reconstruction".into())
             .spawn(move || {
-                // A snapshot still at work ends first (the cores are free
-                // now), and this one continues its search.
-                let mut series = series.series();
-                let max_iters = RlStop::DEFAULT_MAX_ITERS;
-                // The last snapshot's search, if it stopped by itself: the
-                // whole run's needs about as many; else at most the cap
-                // (and the start).
-                let _ = expecting.set(
-                    series
-                        .stopped_after()
-                        .map_or((max_iters + 1, true), |n| (n, false)),
-                );
-                let _ = tx.send(reconstruct(&stack, &mut series, max_iters, &counted));
+                let _ = tx.send(reconstruct(&stack, &counted));
             });
         if let Err(e) = spawned {
             let e = format!("no thread for the whole run's reconstruction: {e}");
@@ -597,8 +554,7 @@ impl Reconstructor {
                     let p = FinalProgress {
                         elapsed_s: started.elapsed().as_secs_f64(),
                         iterations: iterations.load(Ordering::Relaxed),
-                        expected_iterations: expected.get().map(|e| e.0),
-                        expected_is_cap: expected.get().is_some_and(|e| e.1),
+                        expected_iterations: expected,
                     };
                     {
                         let mut s = shared.state();

@@ -23,6 +23,7 @@ use axum::response::sse::{Event, Sse};
 use axum::response::{IntoResponse, Response};
 use ndarray::Array2;
 
+use super::mean_time::MeanTimeMaps;
 use super::recon::{FinalProgress, FinalRun, Reconstructor};
 use super::state::LiveState;
 use crate::acquire::{Acquisition, Snapshot};
@@ -180,6 +181,7 @@ impl LiveView {
                 .then(|| Reconstructor::start(self.shared.state.clone(), truth)),
             setup,
             last_offer: None,
+            mean_time: MeanTimeMaps::start(self.shared.state.clone()),
             last_mean_time: None,
         }
     }
@@ -250,6 +252,8 @@ pub struct LiveStage {
     reconstructor: Option<Reconstructor>,
     setup: Option<Setup>,
     last_offer: Option<Instant>,
+    /// The FLIM scan's mean-arrival-time images, on their own thread.
+    mean_time: MeanTimeMaps,
     last_mean_time: Option<Instant>,
 }
 
@@ -265,8 +269,8 @@ impl LiveStage {
             && self
                 .last_mean_time
                 .is_none_or(|t| t.elapsed() >= super::state::MEAN_TIME_EVERY)
+            && self.mean_time.offer(s)
         {
-            self.acquired.update_mean_time(s);
             self.last_mean_time = Some(Instant::now());
         }
         match self.state.try_lock() {

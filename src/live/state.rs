@@ -197,20 +197,25 @@ impl LiveState {
         self.version += 1;
     }
 
-    /// Remakes the mean-arrival-time image from a snapshot of a FLIM scan.
-    pub fn update_mean_time(&mut self, s: &Snapshot<'_>) {
-        let k = s.counts.dim().0;
-        let start = s.window_ps.0 - s.t0_ps;
-        let starts: Vec<f64> = (0..k).map(|b| start + b as f64 * s.window_ps.1).collect();
+    /// Shows the mean-arrival-time image of a FLIM scan's counts so far
+    /// (`counts`, bins starting at `starts_ps`, `width_ps` wide, a laser
+    /// of `frequency_hz`), `acquired_s` into the run.
+    pub fn show_counts_mean_time(
+        &mut self,
+        counts: ndarray::ArrayView3<'_, u32>,
+        (starts_ps, width_ps): (&[f64], f64),
+        frequency_hz: f64,
+        acquired_s: f64,
+    ) {
         let options = mean_time_options();
         let maps = crate::decay::decay_maps(
-            crate::stack::CountsView::U32(s.counts),
-            &starts,
-            s.window_ps.1,
-            1e12 / s.facts.sync_period_ps,
+            crate::stack::CountsView::U32(counts),
+            starts_ps,
+            width_ps,
+            frequency_hz,
             &options,
         );
-        self.show_mean_time(maps, s.progress.elapsed.as_secs_f64(), &options);
+        self.show_mean_time(maps, acquired_s, &options);
     }
 
     /// Remakes the mean-arrival-time image from the whole run's stack of
@@ -268,8 +273,6 @@ impl LiveState {
         self.decay.width_ps = acquired.decay.width_ps;
         self.decay.counts.clone_from(&acquired.decay.counts);
         self.image.clone_from(&acquired.image);
-        self.mean_time.clone_from(&acquired.mean_time);
-        self.mean_time_error.clone_from(&acquired.mean_time_error);
         self.version += 1;
     }
 }

@@ -124,8 +124,11 @@ impl Reconstructor for Auto<'_> {
 fn warn_unexplained(check: &DevianceCheck, run: &mut Run<'_>) {
     let z = check.z();
     if z > Z_WARN {
+        let why = check.profile_departure().unwrap_or_else(|| {
+            "the time profile matches the model's: the scene or the sensor may hold what the model leaves out".into()
+        });
         run.note(format!(
-            "warning: the output explains the counts far worse than Poisson noise allows (deviance z = {z:.0}, above {Z_WARN}): the slab, its index, time zero or a background may differ from what the metadata say"
+            "warning: the output explains the counts far worse than Poisson noise allows (deviance z = {z:.0}, above {Z_WARN}): the slab, its index, time zero or a background may differ from what the metadata say; {why}"
         ));
     }
 }

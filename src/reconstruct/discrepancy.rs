@@ -32,7 +32,7 @@ pub struct ExpectedDeviance {
 
 /// One estimate's deviance against the counts, with what Poisson noise alone
 /// would give around the same means.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct DevianceCheck {
     /// Deviance `D` of the estimate.
     pub deviance: f64,
@@ -40,6 +40,9 @@ pub struct DevianceCheck {
     pub expected: f64,
     /// Its standard deviation under Poisson noise.
     pub sd: f64,
+    /// Per checked bin (its index in the stack's bins, photons counted,
+    /// photons the estimate predicts with the background).
+    pub per_bin: Vec<(usize, f64, f64)>,
 }
 
 impl DevianceCheck {
@@ -48,7 +51,49 @@ impl DevianceCheck {
     pub fn z(&self) -> f64 {
         (self.deviance - self.expected) / self.sd.max(f64::MIN_POSITIVE)
     }
+
+    /// Where the counts' time profile departs from the prediction's, in
+    /// words (`None` when it does not, within [`SHIFT_BINS`] of a bin in
+    /// mean arrival and [`EXCESS`] in the least lit bin): counts later
+    /// than predicted point to a slab thicker, more scattering or of a
+    /// higher index than stated, or a later time zero; earlier ones to the
+    /// opposite; an excess where the prediction is faintest to an
+    /// unmodelled background.
+    pub fn profile_departure(&self) -> Option<String> {
+        let total = |f: fn(&(usize, f64, f64)) -> f64| self.per_bin.iter().map(f).sum::<f64>();
+        let (observed, predicted) = (total(|b| b.1), total(|b| b.2));
+        if observed <= 0.0 || predicted <= 0.0 {
+            return None;
+        }
+        let mean = |f: fn(&(usize, f64, f64)) -> f64, sum: f64| {
+            self.per_bin.iter().map(|b| b.0 as f64 * f(b)).sum::<f64>() / sum
+        };
+        let shift = mean(|b| b.1, observed) - mean(|b| b.2, predicted);
+        let mut said = Vec::new();
+        if shift > SHIFT_BINS {
+            said.push(format!("the counts arrive {shift:.2} bins later on average than the model predicts (a slab thicker, more scattering or of a higher index than stated, or a later time zero)"));
+        } else if shift < -SHIFT_BINS {
+            said.push(format!("the counts arrive {:.2} bins earlier on average than the model predicts (a slab thinner, less scattering or of a lower index than stated, or an earlier time zero)", -shift));
+        }
+        let faintest = self
+            .per_bin
+            .iter()
+            .filter(|b| b.2 > 0.0)
+            .min_by(|a, b| (a.2 / predicted).total_cmp(&(b.2 / predicted)));
+        if let Some(&(k, n, mu)) = faintest {
+            let ratio = (n / observed) / (mu / predicted);
+            if ratio > 1.0 + EXCESS {
+                said.push(format!("bin {k}, where the model predicts least light, holds {ratio:.1} times its share (an unmodelled background)"));
+            }
+        }
+        (!said.is_empty()).then(|| said.join("; "))
+    }
 }
+
+/// Mean-arrival shift (bins) [`DevianceCheck::profile_departure`] names.
+pub const SHIFT_BINS: f64 = 0.1;
+/// Relative excess in the least lit bin it names.
+pub const EXCESS: f64 = 0.5;
 
 const TABLE_LO: f64 = 1e-8;
 const TABLE_HI: f64 = 400.0;
@@ -161,26 +206,29 @@ impl ExpectedDeviance {
         let x: Vec<f64> = estimate.iter().copied().collect();
         let spec = model.fft().forward(&x);
         let bg = model.background();
-        let (deviance, expected, variance) = counts
+        let per: Vec<(f64, f64, f64, f64, f64)> = counts
             .axis_iter(Axis(0))
             .into_par_iter()
             .zip(bins.par_iter())
             .map(|(m, &k)| {
                 let y = model.apply_spectrum(k, &spec);
-                let (mut d, mut e, mut var) = (0.0, 0.0, 0.0);
+                let (mut d, mut e, mut var, mut n, mut mu) = (0.0, 0.0, 0.0, 0.0, 0.0);
                 for (&mj, &yj) in m.iter().zip(&y) {
                     let (dj, f, g) = self.point(mj, yj + bg);
                     d += dj;
                     e += f;
                     var += g;
+                    n += mj;
+                    mu += yj + bg;
                 }
-                (d, e, var)
+                (d, e, var, n, mu)
             })
-            .reduce(|| (0.0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+            .collect();
         DevianceCheck {
-            deviance,
-            expected,
-            sd: variance.sqrt(),
+            deviance: per.iter().map(|p| p.0).sum(),
+            expected: per.iter().map(|p| p.1).sum(),
+            sd: per.iter().map(|p| p.2).sum::<f64>().sqrt(),
+            per_bin: bins.iter().zip(&per).map(|(&k, p)| (k, p.3, p.4)).collect(),
         }
     }
 }
@@ -188,6 +236,31 @@ impl ExpectedDeviance {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn with_bins(per_bin: Vec<(usize, f64, f64)>) -> DevianceCheck {
+        DevianceCheck {
+            deviance: 0.0,
+            expected: 0.0,
+            sd: 1.0,
+            per_bin,
+        }
+    }
+
+    #[test]
+    fn a_profile_departure_names_its_direction() {
+        // Same totals: mean arrival 1.333 bins observed against 1.0.
+        let later = with_bins(vec![(0, 10.0, 20.0), (1, 20.0, 20.0), (2, 30.0, 20.0)]);
+        let said = later.profile_departure().unwrap();
+        assert!(said.contains("0.33 bins later"), "{said}");
+        let earlier = with_bins(vec![(0, 30.0, 20.0), (1, 20.0, 20.0), (2, 10.0, 20.0)]);
+        assert!(earlier.profile_departure().unwrap().contains("earlier"));
+        let matched = with_bins(vec![(0, 20.0, 20.0), (1, 20.0, 20.0), (2, 20.0, 20.0)]);
+        assert_eq!(matched.profile_departure(), None);
+        // A flat excess: the faintest bin holds 3x its share.
+        let background = with_bins(vec![(0, 6.0, 2.0), (1, 100.0, 100.0), (2, 6.0, 2.0)]);
+        let said = background.profile_departure().unwrap();
+        assert!(said.contains("background"), "{said}");
+    }
 
     #[test]
     fn expected_deviance_limits_and_monte_carlo() {

@@ -238,16 +238,16 @@ impl Walker {
 /// negative log-likelihood on its own. The search stops [`CV_PATIENCE`]
 /// iterations (or a quarter of the best count, if more) past the best
 /// summed score, or at `max_iters`. Returns the best iteration and the sum
-/// of the halves' estimates there on the sensor window (with `keep_points`
-/// each half's estimate there on the grid too), with the stop's notes in
-/// `run`.
+/// of the halves' estimates there on the sensor window (and what `keep`
+/// asks for: each half's estimate there on the grid, its iterates at given
+/// iterations), with the stop's notes in `run`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn cv_search<Y: Send + Sync>(
     model: &ForwardModel,
     o: Vec<Vec<f64>>,
     max_iters: usize,
     acceleration: Acceleration,
-    keep_points: bool,
+    keep: Keep<'_>,
     run: &mut Run<'_>,
     forward: impl Fn(&[f64]) -> Y + Sync,
     evaluate: impl Fn(&Y, usize) -> (f64, f64) + Sync,
@@ -255,7 +255,8 @@ pub(crate) fn cv_search<Y: Send + Sync>(
 ) -> CvBest {
     let (h, w) = model.sensor_shape();
     let accelerate = acceleration == Acceleration::Extrapolated;
-    let mut best_points = if keep_points { o.clone() } else { Vec::new() };
+    let mut best_points = if keep.points { o.clone() } else { Vec::new() };
+    let mut iterates: Vec<Vec<Vec<f64>>> = vec![Vec::new(); o.len()];
     let mut walkers: Vec<Walker> = o.into_iter().map(|o| Walker::new(o, accelerate)).collect();
     let crop_sum = |walkers: &[Walker]| {
         let sum: Vec<f64> = walkers[0]
@@ -286,6 +287,11 @@ pub(crate) fn cv_search<Y: Send + Sync>(
                 (y, held_out)
             })
             .collect();
+        if keep.iterates.contains(&it) {
+            for (kept, walker) in iterates.iter_mut().zip(&walkers) {
+                kept.push(walker.point.clone());
+            }
+        }
         let score_cv = scored[0].1 + scored[1].1;
         let improved = score_cv < best.0;
         let mut row = run.row(it);
@@ -338,7 +344,33 @@ pub(crate) fn cv_search<Y: Send + Sync>(
         iteration: k,
         image,
         points: best_points,
+        searched,
+        iterates,
+        last: if keep.iterates.is_empty() {
+            Vec::new()
+        } else {
+            walkers.into_iter().map(|w| w.point).collect()
+        },
     }
+}
+
+/// What a cross-validated search keeps beyond its best estimate.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Keep<'a> {
+    /// Each half's estimate at the best iteration, on the grid.
+    pub points: bool,
+    /// Iterations whose estimates each half keeps (plain steps: these
+    /// are the iterates of Richardson-Lucy from the flat object), and its
+    /// last estimate.
+    pub iterates: &'a [usize],
+}
+
+impl Keep<'_> {
+    /// Nothing beyond the best estimate.
+    pub(crate) const NOTHING: Keep<'static> = Keep {
+        points: false,
+        iterates: &[],
+    };
 }
 
 /// What the cross-validated search found.
@@ -350,6 +382,14 @@ pub(crate) struct CvBest {
     /// Each half's estimate there, on the model's grid (empty unless
     /// asked for).
     pub points: Vec<Vec<f64>>,
+    /// The last iteration searched.
+    pub searched: usize,
+    /// Per half, its estimates at the iterations asked for that the
+    /// search reached, in order.
+    pub iterates: Vec<Vec<Vec<f64>>>,
+    /// Per half, its estimate at the last iteration searched (empty unless
+    /// iterates were asked for).
+    pub last: Vec<Vec<f64>>,
 }
 
 /// The two scores of one half's prediction `y + bg` (guarded below by
@@ -475,7 +515,7 @@ pub(crate) mod tests {
                 start,
                 2000,
                 acceleration,
-                false,
+                Keep::NOTHING,
                 &mut run,
                 |x| op.apply(x),
                 |y, half| {

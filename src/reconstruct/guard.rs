@@ -19,10 +19,10 @@
 
 use ndarray::{Array2, Axis};
 
-use super::data::Data;
-use super::em::{Acceleration, DENOMINATOR_GUARD};
+use super::data::{Data, flat_level};
+use super::em::{Acceleration, DENOMINATOR_GUARD, Keep};
 use super::error::ReconstructError;
-use super::learned::inputs::{kernel_rms_radius, summed_inputs};
+use super::learned::inputs::{CHECKPOINTS, Iterated, assemble, kernel_rms_radius};
 use super::learned::net::LearnedNet;
 use super::learned::stages::run_stages;
 use super::rl_sum::{RlOperator, search_halves, thinned_halves};
@@ -61,7 +61,9 @@ impl Verdict {
 }
 
 /// Runs the check of `net` on `data`, which holds photons (`None` when a
-/// half holds none: nothing to check against), `rl-sum`'s search up to
+/// half holds none: nothing to check against); the network on each half
+/// starts from the search's own iterates where its steps are plain.
+/// `rl-sum`'s search up to
 /// `max_iters` steps of `acceleration` writing its rows and notes to
 /// `run`.
 pub fn check(
@@ -77,6 +79,9 @@ pub fn check(
     if halves.iter().any(|h| h.sum() <= 0.0) || rl.mass <= 0.0 {
         return Ok(None);
     }
+    // Plain steps from the flat object are the network's own Richardson-
+    // Lucy: the search keeps its iterates at the checkpoints for it.
+    let plain = acceleration == Acceleration::None;
     let best = search_halves(
         data,
         &rl,
@@ -84,21 +89,33 @@ pub fn check(
         None,
         &how,
         (max_iters, acceleration),
-        true,
+        Keep {
+            points: true,
+            iterates: if plain { &CHECKPOINTS } else { &[] },
+        },
         run,
     );
-    let bg = model.background() * data.bins.len() as f64 / 2.0;
-    let width = kernel_rms_radius(&model.summed(data.bins));
-    let network_on = |half: &Array2<f64>| {
-        summed_inputs(model, &rl, half, bg, width)
-            .map(|inputs| run_stages(net, model, &rl, &inputs))
-    };
-    let (first, second) = rayon::join(|| network_on(&halves[0]), || network_on(&halves[1]));
-    let (Some(first), Some(second)) = (first, second) else {
-        return Ok(None);
-    };
     let (h, w) = model.sensor_shape();
+    let bg = model.background() * data.bins.len() as f64 / 2.0;
     let guard = DENOMINATOR_GUARD * summed.sum() / 2.0 / (h * w) as f64;
+    let width = kernel_rms_radius(&model.summed(data.bins));
+    let network_on = |half: usize| {
+        let m: Vec<f64> = halves[half].iter().copied().collect();
+        let start = if plain {
+            Iterated::from(
+                best.last[half].clone(),
+                best.searched,
+                best.iterates[half].clone(),
+            )
+        } else {
+            let flat = flat_level(m.iter().sum(), bg, 1, rl.mass, h * w);
+            Iterated::from(vec![flat; rl.len()], 0, Vec::new())
+        };
+        let (iterates, base) = start.continued(&rl, &m, bg, guard);
+        let inputs = assemble(model, &rl, m, (bg, guard), &iterates, base, width);
+        run_stages(net, model, &rl, &inputs)
+    };
+    let (first, second) = rayon::join(|| network_on(0), || network_on(1));
     let (mut network, mut richardson_lucy, mut variance) = (0.0, 0.0, 0.0);
     for (fold, net_estimate) in [first, second].iter().enumerate() {
         let other: Vec<f64> = halves[1 - fold].iter().copied().collect();

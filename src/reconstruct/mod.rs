@@ -46,7 +46,6 @@ pub mod rl_stack;
 pub mod rl_sum;
 pub mod run;
 pub mod scaled_counts;
-pub mod series;
 pub mod split;
 pub mod trace;
 

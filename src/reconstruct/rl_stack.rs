@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use super::data::{Data, flat_level};
 use super::em::{
-    Acceleration, DENOMINATOR_GUARD, RlStop, cv_search, em_multiply, fixed_steps, half_scores,
+    Acceleration, DENOMINATOR_GUARD, Keep, RlStop, cv_search, em_multiply, fixed_steps, half_scores,
 };
 use super::error::ReconstructError;
 use super::run::{Estimate, Reconstructor, Run, WorkShape, grid_note};
@@ -153,7 +153,7 @@ fn cross_validated(
         o,
         max_iters,
         acceleration,
-        false,
+        Keep::NOTHING,
         run,
         |x| em.forward(x),
         |y, half| {

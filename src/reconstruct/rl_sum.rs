@@ -7,7 +7,7 @@ use ndarray::{Array2, Array3, Axis};
 
 use super::data::{Data, flat_level};
 use super::em::{
-    Acceleration, CvBest, DENOMINATOR_GUARD, RlStop, cv_search, em_multiply, fixed_steps,
+    Acceleration, CvBest, DENOMINATOR_GUARD, Keep, RlStop, cv_search, em_multiply, fixed_steps,
     half_scores,
 };
 use super::error::ReconstructError;
@@ -133,7 +133,7 @@ fn cross_validated(
         None,
         &how,
         (max_iters, acceleration),
-        false,
+        Keep::NOTHING,
         run,
     );
     Ok(Estimate {
@@ -160,7 +160,7 @@ pub(crate) fn thinned_halves(
 /// saying how they were made: RL on each from `start` (each half's
 /// estimate on the model's grid; the flat object when `None`), each scored
 /// on the other's counts, up to `max_iters` steps of `acceleration`; with
-/// `keep_points` each half's estimate at the best iteration comes back.
+/// what `keep` asks for comes back too.
 /// The halves hold photons ([`RlOperator::mass`] > 0 and some counts).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn search_halves(
@@ -170,7 +170,7 @@ pub(crate) fn search_halves(
     start: Option<Vec<Vec<f64>>>,
     how: &str,
     (max_iters, acceleration): (usize, Acceleration),
-    keep_points: bool,
+    keep: Keep<'_>,
     run: &mut Run<'_>,
 ) -> CvBest {
     let model = data.model;
@@ -199,7 +199,7 @@ pub(crate) fn search_halves(
         o,
         max_iters,
         acceleration,
-        keep_points,
+        keep,
         run,
         |x| rl.op.apply(x),
         |y, half| {

@@ -294,7 +294,7 @@ fn expected_window(
     let side = object_px * factor;
     let mut wide = setup.clone();
     if let Some(medium) = &how.true_medium {
-        wide.medium = medium.clone();
+        wide.medium = *medium;
     }
     wide.sensor.height_px = side;
     wide.sensor.width_px = side;

@@ -71,8 +71,8 @@ pub fn learned_inputs(data: &Data<'_>) -> Option<LearnedInputs> {
 }
 
 /// The inputs of counts summed over the bins of `rl` (`summed`, with
-/// `background` per pixel, of a blur `kernel_width_px` wide): a stack's,
-/// or one of its thinned halves'. `None` without photons or kernel mass.
+/// `background` per pixel, of a blur `kernel_width_px` wide): a stack's.
+/// `None` without photons or kernel mass.
 pub(crate) fn summed_inputs(
     model: &ForwardModel,
     rl: &RlOperator,
@@ -86,22 +86,83 @@ pub(crate) fn summed_inputs(
     if total <= 0.0 || rl.mass <= 0.0 {
         return None;
     }
-    let mut o = vec![flat_level(total, bg, 1, rl.mass, h * w); rl.len()];
+    let start = vec![flat_level(total, bg, 1, rl.mass, h * w); rl.len()];
     let guard = DENOMINATOR_GUARD * total / (h * w) as f64;
-    let last = *CHECKPOINTS.last().expect("checkpoints");
-    let mut iterates = Vec::with_capacity(CHECKPOINTS.len());
-    for it in 1..=last {
-        let y = rl.apply(&o);
-        rl.update(&mut o, &y, &m, bg, guard, false);
-        if CHECKPOINTS.contains(&it) {
-            iterates.push(model.crop_vec(&o));
+    let run = Iterated::from(start, 0, Vec::new());
+    let (iterates, last) = run.continued(rl, &m, bg, guard);
+    Some(assemble(
+        model,
+        rl,
+        m,
+        (bg, guard),
+        &iterates,
+        last,
+        kernel_width_px,
+    ))
+}
+
+/// Richardson-Lucy from the flat object so far: its estimates at the
+/// [`CHECKPOINTS`] reached and its estimate after `steps` steps.
+pub(crate) struct Iterated {
+    point: Vec<f64>,
+    steps: usize,
+    iterates: Vec<Vec<f64>>,
+}
+
+impl Iterated {
+    /// A run at `point` after `steps` steps, `iterates` the estimates (on
+    /// the grid) of the checkpoints it passed.
+    pub(crate) fn from(point: Vec<f64>, steps: usize, iterates: Vec<Vec<f64>>) -> Self {
+        Self {
+            point,
+            steps,
+            iterates,
         }
     }
-    let base = iterates.last().expect("the last checkpoint");
-    let scale = (base.iter().sum::<f64>() / (h * w) as f64).max(f64::MIN_POSITIVE);
+
+    /// The run continued to the last checkpoint, for counts `m` with
+    /// background `bg` and denominator guard `guard`: the checkpoints'
+    /// estimates (on the grid) and the last one's.
+    pub(crate) fn continued(
+        mut self,
+        rl: &RlOperator,
+        m: &[f64],
+        bg: f64,
+        guard: f64,
+    ) -> (Vec<Vec<f64>>, Vec<f64>) {
+        let last = *CHECKPOINTS.last().expect("checkpoints");
+        for it in self.steps + 1..=last {
+            let y = rl.apply(&self.point);
+            rl.update(&mut self.point, &y, m, bg, guard, false);
+            if CHECKPOINTS.contains(&it) {
+                self.iterates.push(self.point.clone());
+            }
+        }
+        let base = self.iterates.last().expect("the last checkpoint").clone();
+        (self.iterates, base)
+    }
+}
+
+/// The inputs from Richardson-Lucy's estimates at the [`CHECKPOINTS`]
+/// (`iterates`, on the grid; the last of them `base`) of the summed counts
+/// `m` with background and denominator guard `(bg, guard)`.
+pub(crate) fn assemble(
+    model: &ForwardModel,
+    rl: &RlOperator,
+    m: Vec<f64>,
+    (bg, guard): (f64, f64),
+    iterates: &[Vec<f64>],
+    base: Vec<f64>,
+    kernel_width_px: f64,
+) -> LearnedInputs {
+    let (h, w) = model.sensor_shape();
+    let total: f64 = m.iter().sum();
+    let cropped: Vec<Vec<f64>> = iterates.iter().map(|g| model.crop_vec(g)).collect();
+    let last = cropped.last().expect("the last checkpoint");
+    let scale = (last.iter().sum::<f64>() / (h * w) as f64).max(f64::MIN_POSITIVE);
     let photons_per_pixel = total / (h * w) as f64;
     let mut features = Array3::<f32>::zeros((CHANNELS, h, w));
-    for (c, it) in iterates.iter().enumerate() {
+    for (c, it) in cropped.iter().enumerate() {
         fill(&mut features, c, it, 1.0 / scale);
     }
     fill(
@@ -116,17 +177,17 @@ pub(crate) fn summed_inputs(
     features
         .index_axis_mut(Axis(0), CHECKPOINTS.len() + 2)
         .fill(width_feature(kernel_width_px));
-    Some(LearnedInputs {
+    LearnedInputs {
         features,
         scale,
         photons_per_pixel,
         kernel_width_px,
         background_share: bg / photons_per_pixel,
-        base_grid: o,
+        base_grid: base,
         counts: m,
         background: bg,
         guard,
-    })
+    }
 }
 
 /// Channel `c` of `features` from the row-major `values` times `factor`.
