@@ -35,7 +35,7 @@ def run(cli, folder, args):
         text = p.stdout + p.stderr
         m = PSNR.search(text)
         trace = json.load(open(os.path.join(out, "trace.json")))
-        notes = [line.strip() for line in text.splitlines() if line.strip().startswith(("auto:", "learned:", "guard"))]
+        notes = [line.strip() for line in text.splitlines() if line.strip().startswith(("auto:", "learned:", "rl-sum:", "warning:"))]
         chosen = next((n.removeprefix("auto: chose ") for n in notes if n.startswith("auto: chose ")), "")
         return float(m.group(1)), float(m.group(3)), float(trace.get("wall_s", float("nan"))), chosen, notes
 

@@ -86,7 +86,10 @@ fn a_network_that_explains_the_counts_badly_is_not_kept() {
     use scatterscope::reconstruct::method::{Acceleration, RlStop};
     use scatterscope::reconstruct::rl_stack::RlStack;
     // Random weights (the engine's fixture), trained on 1-10 photons per
-    // pixel: a twentieth of the paper's light lies in that range.
+    // pixel: 0.15x the paper's light (about 9 per pixel) lies in that
+    // range. Its exact EM steps keep it near Richardson-Lucy: at 0.05x
+    // the check cannot tell them apart (z about +4); with three times the
+    // photons it can.
     let random = LearnedNet::from_bytes(
         &std::fs::read(concat!(
             env!("CARGO_MANIFEST_DIR"),
@@ -96,7 +99,7 @@ fn a_network_that_explains_the_counts_badly_is_not_kept() {
         "small.safetensors",
     )
     .unwrap();
-    let problem = case("text", 0.05, 1.0);
+    let problem = case("text", 0.15, 1.0);
     let auto = Auto {
         learned: Learned {
             net: &random,

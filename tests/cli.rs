@@ -126,7 +126,7 @@ fn bad_input_is_a_clear_error() {
     );
     fails_with(
         &["simulate", "--g", "1", "--mu-a", "0", "--out", out],
-        &["invalid g = 1", "D = 1/(3"],
+        &["invalid g = 1", "a medium that does not scatter"],
     );
     fails_with(
         &["psf", "--bin-width", "4parsecs", "--out", out],

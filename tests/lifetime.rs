@@ -149,7 +149,7 @@ fn the_maps_say_what_was_assumed_and_refuse_what_cannot_be_mapped() {
     let side: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("maps.json")).unwrap()).unwrap();
     let channels = side["channels"].as_array().unwrap();
-    assert_eq!(channels.len(), 9, "{channels:?}");
+    assert_eq!(channels.len(), 10, "{channels:?}");
     assert!(
         channels
             .last()
@@ -159,7 +159,7 @@ fn the_maps_say_what_was_assumed_and_refuse_what_cannot_be_mapped() {
             .starts_with("mask")
     );
     let maps: ndarray::Array3<f32> = ndarray_npy::read_npy(out.join("maps.npy")).unwrap();
-    assert_eq!(maps.dim(), (9, 16, 16));
+    assert_eq!(maps.dim(), (10, 16, 16));
     // Photons per pixel sum to what the stack holds, every other map
     // finite where nothing is masked.
     assert!(maps.iter().all(|v| v.is_finite()));

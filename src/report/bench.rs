@@ -1001,7 +1001,8 @@ pub struct BenchConfig {
     /// Seed of the Poisson sampler.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 0))]
     pub seed: u64,
-    /// Output directory: rows.csv, summary.md, traces/.
+    /// Output directory: rows.csv, summary.md, traces/ (CSV and JSON, the
+    /// notes in the JSON).
     #[cfg_attr(feature = "cli", arg(long, default_value = "out/bench-recon"))]
     pub out: PathBuf,
     /// Keep the cases (image and level) OUT/rows.csv already holds and run
@@ -1086,12 +1087,9 @@ pub fn run_benchmark(
                 cfg.rl_best_iters,
                 cfg.rl_fixed_iters,
                 |label, trace| {
-                    let file = traces.join(format!(
-                        "{}_{level}_{}.csv",
-                        image.name,
-                        label.replace(' ', "_")
-                    ));
-                    if let Err(e) = crate::files::write_atomic(&file, trace.to_csv()) {
+                    let stem = format!("{}_{level}_{}", image.name, label.replace(' ', "_"));
+                    if let Err(e) = trace.write(&traces, &stem) {
+                        let file = traces.join(format!("{stem}.{{csv,json}}"));
                         trace_error.get_or_insert(ReportError::Io(file.display().to_string(), e));
                     }
                 },

@@ -16,7 +16,7 @@ const AGREE: f64 = 0.01;
 /// A rate in words: Hz, kHz, MHz or GHz as fits.
 pub fn hz_text(hz: f64) -> String {
     let a = hz.abs();
-    if !hz.is_finite() || !(1.0..1e12).contains(&a) {
+    if !hz.is_finite() || (a != 0.0 && !(1.0..1e12).contains(&a)) {
         format!("{hz:e} Hz")
     } else if a >= 1e9 {
         format!("{:.6} GHz", hz * 1e-9)
