@@ -1607,3 +1607,45 @@ fn old_flag_names_of_the_command_given_are_rewritten_with_a_note() {
         assert!(!stderr.contains("is now"), "{args:?}: {stderr}");
     }
 }
+
+/// Rule R82c's warning: the paper's 3 cm slab reconstructed as 3.5 cm is
+/// explained far worse than Poisson noise allows, and the warning says the
+/// counts come earlier than the model predicts (a thinner slab); the
+/// stated slab draws no warning.
+#[test]
+fn a_slab_other_than_stated_is_warned_of_with_its_direction() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    let o = run_isolated(&[
+        "simulate",
+        "--preset",
+        "paper",
+        "--scene",
+        "usaf",
+        "--seed",
+        "1",
+        "--out",
+        sim.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", streams(&o).1);
+    let counts = sim.join("counts.exr");
+    let reconstruct = |extra: &[&str], out: &str| {
+        let mut args = vec!["reconstruct", counts.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let out = dir.path().join(out);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let o = run_isolated(&args);
+        let (stdout, stderr) = streams(&o);
+        assert!(o.status.success(), "{stderr}");
+        format!("{stdout}{stderr}")
+    };
+    let stated = reconstruct(&[], "stated");
+    assert!(stated.contains("auto: chose"), "{stated}");
+    assert!(!stated.contains("far worse than Poisson noise"), "{stated}");
+    let thicker = reconstruct(&["--thickness", "3.5cm"], "thicker");
+    assert!(
+        thicker.contains("far worse than Poisson noise allows")
+            && thicker.contains("bins earlier on average than the model predicts"),
+        "{thicker}"
+    );
+}
