@@ -553,15 +553,9 @@ fn maps_of<T: Copy + Into<f64> + Sync>(
             notes.push(format!(
                 "{beyond} more pixels masked: a calibrated phasor with no finite apparent lifetime (at or past 90 degrees, or at the origin)"
             ));
-            for m in [&mut mean, &mut var, &mut fast, &mut fast_centred] {
-                m.zip_mut_with(&mask, |v, &masked| {
-                    if masked {
-                        *v = f64::NAN;
-                    }
-                });
-            }
+            let mut maps = vec![&mut mean, &mut var, &mut fast, &mut fast_centred];
             for pm in &mut phasors {
-                let mut maps = vec![&mut pm.g, &mut pm.s];
+                maps.extend([&mut pm.g, &mut pm.s]);
                 if let Some(c) = pm.calibrated.as_mut() {
                     maps.extend([
                         &mut c.g,
@@ -570,13 +564,13 @@ fn maps_of<T: Copy + Into<f64> + Sync>(
                         &mut c.tau_modulation_ps,
                     ]);
                 }
-                for m in maps {
-                    m.zip_mut_with(&mask, |v, &masked| {
-                        if masked {
-                            *v = f64::NAN;
-                        }
-                    });
-                }
+            }
+            for m in maps {
+                m.zip_mut_with(&mask, |v, &masked| {
+                    if masked {
+                        *v = f64::NAN;
+                    }
+                });
             }
         }
     } else {

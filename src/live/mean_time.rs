@@ -12,7 +12,7 @@ use ndarray::Array3;
 
 use super::cpu::VIEW_THREAD_PREFIX;
 use super::lower_priority;
-use super::state::LiveState;
+use super::state::{LiveState, counts_mean_time};
 use crate::acquire::pipeline::Snapshot;
 
 /// One copy of the counts to map.
@@ -41,8 +41,7 @@ impl MeanTimeMaps {
             .spawn(move || {
                 lower_priority();
                 for job in rx {
-                    let mut fresh = LiveState::default();
-                    fresh.show_counts_mean_time(
+                    let mean_time = counts_mean_time(
                         job.counts.view(),
                         (&job.starts_ps, job.width_ps),
                         job.frequency_hz,
@@ -52,9 +51,7 @@ impl MeanTimeMaps {
                         // The whole run's image, once shown, stays.
                         let mut s = state.lock().unwrap_or_else(|e| e.into_inner());
                         if !s.done {
-                            s.mean_time = fresh.mean_time;
-                            s.mean_time_error = fresh.mean_time_error;
-                            s.version += 1;
+                            s.show_mean_time(mean_time);
                         }
                     }
                     done.store(false, Ordering::Release);

@@ -197,27 +197,6 @@ impl LiveState {
         self.version += 1;
     }
 
-    /// Shows the mean-arrival-time image of a FLIM scan's counts so far
-    /// (`counts`, bins starting at `starts_ps`, `width_ps` wide, a laser
-    /// of `frequency_hz`), `acquired_s` into the run.
-    pub fn show_counts_mean_time(
-        &mut self,
-        counts: ndarray::ArrayView3<'_, u32>,
-        (starts_ps, width_ps): (&[f64], f64),
-        frequency_hz: f64,
-        acquired_s: f64,
-    ) {
-        let options = mean_time_options();
-        let maps = crate::decay::decay_maps(
-            crate::stack::CountsView::U32(counts),
-            starts_ps,
-            width_ps,
-            frequency_hz,
-            &options,
-        );
-        self.show_mean_time(maps, acquired_s, &options);
-    }
-
     /// Remakes the mean-arrival-time image from the whole run's stack of
     /// a FLIM scan (at `sync_period_ps`), `acquired_s` long.
     pub fn final_mean_time(&mut self, stack: &crate::Stack, sync_period_ps: f64, acquired_s: f64) {
@@ -229,35 +208,17 @@ impl LiveState {
             1e12 / sync_period_ps,
             &options,
         );
-        self.show_mean_time(maps, acquired_s, &options);
+        self.show_mean_time(mean_time_of(maps, acquired_s, &options));
     }
 
-    fn show_mean_time(
-        &mut self,
-        maps: Result<crate::decay::DecayMaps, crate::decay::DecayError>,
-        acquired_s: f64,
-        options: &crate::decay::DecayOptions,
-    ) {
-        match maps {
-            Ok(maps) => {
-                let (h, w) = maps.mean_time_ps.dim();
-                self.mean_time = Some(MeanTime {
-                    image: Image {
-                        width: w,
-                        height: h,
-                        values: maps.mean_time_ps.iter().map(|&v| v as f32).collect(),
-                    },
-                    acquired_s,
-                    min_photons: options.min_photons,
-                    notes: maps
-                        .notes
-                        .into_iter()
-                        .filter(|n| !n.starts_with("phasors"))
-                        .collect(),
-                });
+    /// Shows a mean-arrival-time image, or why there is none.
+    pub fn show_mean_time(&mut self, mean_time: Result<MeanTime, String>) {
+        match mean_time {
+            Ok(m) => {
+                self.mean_time = Some(m);
                 self.mean_time_error = None;
             }
-            Err(e) => self.mean_time_error = Some(e.to_string()),
+            Err(e) => self.mean_time_error = Some(e),
         }
         self.version += 1;
     }
@@ -275,6 +236,51 @@ impl LiveState {
         self.image.clone_from(&acquired.image);
         self.version += 1;
     }
+}
+
+/// The mean-arrival-time image of a FLIM scan's counts so far (`counts`,
+/// bins starting at `starts_ps`, `width_ps` wide, a laser of
+/// `frequency_hz`), `acquired_s` into the run, or why there is none.
+pub fn counts_mean_time(
+    counts: ndarray::ArrayView3<'_, u32>,
+    (starts_ps, width_ps): (&[f64], f64),
+    frequency_hz: f64,
+    acquired_s: f64,
+) -> Result<MeanTime, String> {
+    let options = mean_time_options();
+    let maps = crate::decay::decay_maps(
+        crate::stack::CountsView::U32(counts),
+        starts_ps,
+        width_ps,
+        frequency_hz,
+        &options,
+    );
+    mean_time_of(maps, acquired_s, &options)
+}
+
+/// The image of `maps`' mean arrival times, made with `options`,
+/// `acquired_s` into the run; their error in words.
+fn mean_time_of(
+    maps: Result<crate::decay::DecayMaps, crate::decay::DecayError>,
+    acquired_s: f64,
+    options: &crate::decay::DecayOptions,
+) -> Result<MeanTime, String> {
+    let maps = maps.map_err(|e| e.to_string())?;
+    let (h, w) = maps.mean_time_ps.dim();
+    Ok(MeanTime {
+        image: Image {
+            width: w,
+            height: h,
+            values: maps.mean_time_ps.iter().map(|&v| v as f32).collect(),
+        },
+        acquired_s,
+        min_photons: options.min_photons,
+        notes: maps
+            .notes
+            .into_iter()
+            .filter(|n| !n.starts_with("phasors"))
+            .collect(),
+    })
 }
 
 /// The live view's mean-time maps: `lifetime`'s defaults (the half-maximum

@@ -79,7 +79,7 @@ impl DevianceCheck {
             .per_bin
             .iter()
             .filter(|b| b.2 > 0.0)
-            .min_by(|a, b| (a.2 / predicted).total_cmp(&(b.2 / predicted)));
+            .min_by(|a, b| a.2.total_cmp(&b.2));
         if let Some(&(k, n, mu)) = faintest {
             let ratio = (n / observed) / (mu / predicted);
             if ratio > 1.0 + EXCESS {

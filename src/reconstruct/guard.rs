@@ -19,7 +19,7 @@
 
 use ndarray::{Array2, Axis};
 
-use super::data::{Data, flat_level};
+use super::data::Data;
 use super::em::{Acceleration, DENOMINATOR_GUARD, Keep};
 use super::error::ReconstructError;
 use super::learned::inputs::{CHECKPOINTS, Iterated, assemble, kernel_rms_radius};
@@ -112,11 +112,10 @@ pub fn check(
                 best.iterates[half].clone(),
             )
         } else {
-            let flat = flat_level(m.iter().sum(), bg, 1, rl.mass, h * w);
-            Iterated::from(vec![flat; rl.len()], 0, Vec::new())
+            Iterated::flat(&rl, &m, bg)
         };
-        let (iterates, base) = start.continued(&rl, &m, bg, guard);
-        let inputs = assemble(model, &rl, m, (bg, guard), &iterates, base, width);
+        let iterates = start.continued(&rl, &m, bg, guard);
+        let inputs = assemble(model, &rl, m, (bg, guard), iterates, width);
         run_stages(net, model, &rl, &inputs)
     };
     let (first, second) = rayon::join(|| network_on(0), || network_on(1));

@@ -86,17 +86,14 @@ pub(crate) fn summed_inputs(
     if total <= 0.0 || rl.mass <= 0.0 {
         return None;
     }
-    let start = vec![flat_level(total, bg, 1, rl.mass, h * w); rl.len()];
     let guard = DENOMINATOR_GUARD * total / (h * w) as f64;
-    let run = Iterated::from(start, 0, Vec::new());
-    let (iterates, last) = run.continued(rl, &m, bg, guard);
+    let iterates = Iterated::flat(rl, &m, bg).continued(rl, &m, bg, guard);
     Some(assemble(
         model,
         rl,
         m,
         (bg, guard),
-        &iterates,
-        last,
+        iterates,
         kernel_width_px,
     ))
 }
@@ -120,16 +117,23 @@ impl Iterated {
         }
     }
 
+    /// A run not started: the flat object that predicts the photons of
+    /// counts `m` (background `bg` per pixel) through `rl`.
+    pub(crate) fn flat(rl: &RlOperator, m: &[f64], bg: f64) -> Self {
+        let level = flat_level(m.iter().sum(), bg, 1, rl.mass, m.len());
+        Self::from(vec![level; rl.len()], 0, Vec::new())
+    }
+
     /// The run continued to the last checkpoint, for counts `m` with
     /// background `bg` and denominator guard `guard`: the checkpoints'
-    /// estimates (on the grid) and the last one's.
+    /// estimates (on the grid).
     pub(crate) fn continued(
         mut self,
         rl: &RlOperator,
         m: &[f64],
         bg: f64,
         guard: f64,
-    ) -> (Vec<Vec<f64>>, Vec<f64>) {
+    ) -> Vec<Vec<f64>> {
         let last = *CHECKPOINTS.last().expect("checkpoints");
         for it in self.steps + 1..=last {
             let y = rl.apply(&self.point);
@@ -138,21 +142,19 @@ impl Iterated {
                 self.iterates.push(self.point.clone());
             }
         }
-        let base = self.iterates.last().expect("the last checkpoint").clone();
-        (self.iterates, base)
+        self.iterates
     }
 }
 
 /// The inputs from Richardson-Lucy's estimates at the [`CHECKPOINTS`]
-/// (`iterates`, on the grid; the last of them `base`) of the summed counts
-/// `m` with background and denominator guard `(bg, guard)`.
+/// (`iterates`, on the grid; the network starts from the last) of the
+/// summed counts `m` with background and denominator guard `(bg, guard)`.
 pub(crate) fn assemble(
     model: &ForwardModel,
     rl: &RlOperator,
     m: Vec<f64>,
     (bg, guard): (f64, f64),
-    iterates: &[Vec<f64>],
-    base: Vec<f64>,
+    mut iterates: Vec<Vec<f64>>,
     kernel_width_px: f64,
 ) -> LearnedInputs {
     let (h, w) = model.sensor_shape();
@@ -183,7 +185,7 @@ pub(crate) fn assemble(
         photons_per_pixel,
         kernel_width_px,
         background_share: bg / photons_per_pixel,
-        base_grid: base,
+        base_grid: iterates.pop().expect("the last checkpoint"),
         counts: m,
         background: bg,
         guard,
