@@ -108,6 +108,7 @@ fn a_network_that_explains_the_counts_badly_is_not_kept() {
             }),
         },
         search: (RlStop::DEFAULT_MAX_ITERS, Acceleration::None),
+        carried: None,
     };
     let bins = problem.all_bins();
     let data =
@@ -157,4 +158,83 @@ fn auto_runs_whole_stack_richardson_lucy_outside_the_trained_ranges() {
         "{:?}",
         learned.trace.notes
     );
+}
+
+/// The photons of the two halves a carried search's note names: the new
+/// halves, and the last snapshot's when it grew them.
+fn halves_in(notes: &str) -> (Vec<f64>, Option<Vec<f64>>) {
+    let numbers = |s: &str| -> Vec<f64> {
+        s.split(' ')
+            .filter_map(|w| w.trim_matches(|c| c == '(' || c == ')').parse().ok())
+            .collect()
+    };
+    let line = notes
+        .lines()
+        .find(|l| l.contains("two halves of"))
+        .unwrap_or_else(|| panic!("{notes}"));
+    let after = line.split("two halves of ").nth(1).unwrap();
+    let new = numbers(after.split(" photons").next().unwrap());
+    let old = after
+        .split("grown from the last snapshot's ")
+        .nth(1)
+        .map(|s| numbers(s.split(" by thinning").next().unwrap()));
+    (new, old)
+}
+
+#[test]
+fn a_growing_acquisitions_check_keeps_each_photon_in_its_half_and_carries_its_search_on() {
+    use scatterscope::reconstruct::guard::CarriedSearch;
+    use scatterscope::reconstruct::method::MethodPlan;
+    let image = BenchImage {
+        name: "text".into(),
+        file: None,
+        source: "test".into(),
+        category: "test".into(),
+        split: "tuning".into(),
+    };
+    let setup = level_setup(&Preset::Paper.setup(), 0.5).unwrap();
+    let first = simulate_case(&image, &setup, 384, 0).unwrap();
+    let later = simulate_case(&image, &setup, 384, 1).unwrap();
+    let mut grown = simulate_case(&image, &setup, 384, 0).unwrap().problem;
+    grown.counts += &later.problem.counts;
+    let carried = CarriedSearch::new(CarriedSearch::LIVE_STEPS);
+    let opts = MethodOptions::default();
+    let plan = MethodPlan::auto_carrying(&opts, &carried);
+    let notes = |p: &Problem| {
+        let r = plan.run_within_budget(p, None, &mut |_| {}).unwrap();
+        assert!(r.image.iter().all(|v| v.is_finite()));
+        r.trace.notes.join("\n")
+    };
+    // The first snapshot: thinned afresh, its search from the flat object
+    // capped at the carried steps.
+    let one = notes(&first.problem);
+    let (halves, old) = halves_in(&one);
+    assert_eq!(old, None, "{one}");
+    assert_eq!(
+        halves.iter().sum::<f64>(),
+        first.problem.counts.sum(),
+        "{one}"
+    );
+    assert!(one.contains("of at most 100)"), "{one}");
+    // The next: the same halves and the photons since thinned between
+    // them; every photon in one half, each half at least as full.
+    let two = notes(&grown);
+    let (halves, old) = halves_in(&two);
+    let old = old.unwrap_or_else(|| panic!("{two}"));
+    assert_eq!(halves.iter().sum::<f64>(), grown.counts.sum(), "{two}");
+    assert_eq!(old.iter().sum::<f64>(), first.problem.counts.sum(), "{two}");
+    assert!(halves[0] >= old[0] && halves[1] >= old[1], "{two}");
+    let since = later.problem.counts.sum();
+    for (new, old) in halves.iter().zip(&old) {
+        // Binomial thinning of the photons since: within 6 sd of half.
+        assert!(
+            (new - old - since / 2.0).abs() < 6.0 * (since / 4.0).sqrt(),
+            "{two}"
+        );
+    }
+    assert!(two.contains("steps from the flat object"), "{two}");
+    // Counts that are not the last snapshot's and more (a new run): thinned
+    // afresh.
+    let three = notes(&later.problem);
+    assert_eq!(halves_in(&three).1, None, "{three}");
 }

@@ -238,11 +238,14 @@ fn a_20_s_run_shows_a_reconstruction_every_few_seconds() {
     let status = stop(child);
     assert!(status.success(), "{status:?}");
     let shown = page["shown_during_run"].as_array().unwrap();
-    // The default (`auto`: the network and its check, whose
-    // cross-validated Richardson-Lucy search dominates) took 2 snapshots
-    // in 20 s on a quiet 2-core machine (forty-first session); issue 83
-    // asked for 10, which it does not reach (BENCHMARKS.md).
-    assert!(!shown.is_empty(), "{shown:?}");
+    // Issue 83: the default (`auto`, its check's search carried from
+    // snapshot to snapshot) on a new snapshot whenever the last is done.
+    // How many fit in 20 s depends on the machine's speed and load
+    // (BENCHMARKS.md counts them): this asserts what does not, that none
+    // waits for a snapshot longer than the offer interval (1 s) and the
+    // pipeline's 250 ms tick allow, with margin for a loaded machine.
+    eprintln!("{} reconstructions shown during the run", shown.len());
+    assert!(shown.len() >= 2, "{shown:?}");
     let trace = page["trace"].as_array().unwrap();
     let psnr: Vec<f64> = trace
         .iter()
@@ -252,6 +255,24 @@ fn a_20_s_run_shows_a_reconstruction_every_few_seconds() {
         psnr.last().unwrap() > psnr.first().unwrap(),
         "PSNR against acquisition time: {psnr:?}"
     );
+    let during: Vec<(f64, f64)> = trace
+        .iter()
+        .map(|p| {
+            (
+                p["acquired_s"].as_f64().unwrap(),
+                p["run_s"].as_f64().unwrap(),
+            )
+        })
+        .filter(|(at, _)| shown.iter().any(|s| s.as_f64() == Some(*at)))
+        .collect();
+    for pair in during.windows(2) {
+        let ((at, run), (next, _)) = (pair[0], pair[1]);
+        assert!(
+            next - (at + run) < 2.0,
+            "a snapshot waited {:.1} s after the reconstruction of the one at {at:.1} s ended: {during:?}",
+            next - (at + run)
+        );
+    }
     assert_eq!(page["reconstruction"]["method"], "auto", "{page}");
 }
 

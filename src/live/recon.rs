@@ -1,8 +1,10 @@
 //! The reconstruction of snapshots of a running acquisition, on a thread
 //! of its own, with the default method (`auto`, as `reconstruct` runs it
-//! on the saved stack); a snapshot offered while one runs is dropped (the
-//! next one is newer), so the acquisition never waits for it. Its
-//! threads run at the lowest scheduling priority, on all cores but one,
+//! on the saved stack, its check's search carried from one snapshot to
+//! the next: [`crate::reconstruct::guard::CarriedSearch`]); a snapshot is
+//! offered only when the last one is done, so the acquisition never waits
+//! for it. Its threads run at the lowest scheduling priority, on every
+//! core (they take only what the acquisition and other processes leave),
 //! and the acquisition comes first: a snapshot is skipped while the
 //! acquisition's own threads keep every core but half of one busy (even
 //! in the idle class, a reconstruction at work beside an unpaced 2-core
@@ -11,9 +13,9 @@
 //! thread (at nice 10) watches the CPU the reconstruction gets: when other
 //! processes take every core and it gets none, the page says so and names
 //! them. The whole run's stack is reconstructed once the acquisition ends
-//! ([`Reconstructor::finish`]), at normal priority, with its progress and
-//! an estimate of the time left (from the last snapshot's iterations),
-//! and a stop request (Ctrl-C) skips it.
+//! ([`Reconstructor::finish`]), at normal priority, by `auto` afresh, with
+//! its progress and an estimate of the time left (from the last
+//! snapshot's iterations), and a stop request (Ctrl-C) skips it.
 
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -27,9 +29,11 @@ use super::cpu::{Busy, OtherProcesses, VIEW_THREAD_PREFIX, describe, threads_cpu
 use super::state::{Image, LiveReconstruction, LiveState, TracePoint};
 use super::{lower_priority, view_priority};
 use crate::denoise::tv::TotalVariation;
+use crate::reconstruct::guard::CarriedSearch;
 use crate::reconstruct::input::{InputSpec, prepare};
-use crate::reconstruct::method::{Method, MethodOptions, run_method};
+use crate::reconstruct::method::{Method, MethodOptions, MethodPlan, run_method};
 use crate::reconstruct::run::Reconstruction;
+use crate::reconstruct::trace::TraceRow;
 use crate::stack::Stack;
 
 /// A snapshot to reconstruct.
@@ -67,8 +71,9 @@ struct Shared {
     /// Set once the whole run's reconstruction is shown: a snapshot that
     /// ends later only adds its point to the curve.
     final_shown: AtomicBool,
-    /// Iterations the last snapshot's reconstruction took (the whole
-    /// run's takes about as many).
+    /// Iterations the whole run's reconstruction will take, about: the
+    /// steps the carried search has taken from the flat object, or the last
+    /// snapshot's rows.
     last_iterations: Mutex<Option<usize>>,
 }
 
@@ -126,8 +131,8 @@ pub struct FinalProgress {
     pub elapsed_s: f64,
     /// Iterations done so far.
     pub iterations: usize,
-    /// Iterations it will need, about: as many as the last snapshot's
-    /// reconstruction took (`None` without one).
+    /// Iterations it will need, about: as many as the snapshots' carried
+    /// search has taken (`None` without a snapshot).
     pub expected_iterations: Option<usize>,
 }
 
@@ -158,6 +163,7 @@ impl FinalProgress {
 /// stack's bins) and what was assumed.
 fn reconstruct(
     stack: &Stack,
+    carried: Option<&CarriedSearch>,
     iterations: &AtomicUsize,
 ) -> Result<(Reconstruction, Vec<usize>, Vec<String>), String> {
     let input = prepare(
@@ -176,18 +182,25 @@ fn reconstruct(
             m.bin_starts_ps.iter().position(|&s| (s - t).abs() < 1e-6)
         })
         .collect();
-    // `auto` runs no prior; the denoiser is the planner's formality.
-    let rec = run_method(
-        &input.problem,
-        Method::Auto,
-        None,
-        &TotalVariation::default(),
-        &MethodOptions::default(),
-        None,
-        |_| {
-            iterations.fetch_add(1, Ordering::Relaxed);
-        },
-    )
+    let count = &mut |_: &TraceRow| {
+        iterations.fetch_add(1, Ordering::Relaxed);
+    };
+    let opts = MethodOptions::default();
+    let rec = match carried {
+        Some(c) => {
+            MethodPlan::auto_carrying(&opts, c).run_within_budget(&input.problem, None, count)
+        }
+        // `auto` runs no prior; the denoiser is the planner's formality.
+        None => run_method(
+            &input.problem,
+            Method::Auto,
+            None,
+            &TotalVariation::default(),
+            &opts,
+            None,
+            count,
+        ),
+    }
     .map_err(|e| e.to_string())?;
     Ok((rec, kept, input.assumed))
 }
@@ -401,14 +414,14 @@ impl Reconstructor {
             .name(format!("{VIEW_THREAD_PREFIX}recon"))
             .spawn(move || {
                 lower_priority();
-                let threads = std::thread::available_parallelism()
-                    .map_or(1, |n| n.get().saturating_sub(1).max(1));
+                let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
                 let pool = rayon::ThreadPoolBuilder::new()
                     .num_threads(threads)
                     .thread_name(|i| format!("{VIEW_THREAD_PREFIX}recon-{i}"))
                     .start_handler(|_| lower_priority())
                     .build();
                 let mut load = Load::new();
+                let carried = CarriedSearch::new(CarriedSearch::LIVE_STEPS);
                 for snap in rx {
                     if worker.ended.load(Ordering::Relaxed) {
                         break;
@@ -427,7 +440,7 @@ impl Reconstructor {
                     let started = Instant::now();
                     let iterations = AtomicUsize::new(0);
                     let result = {
-                        let run = || reconstruct(&snap.stack, &iterations);
+                        let run = || reconstruct(&snap.stack, Some(&carried), &iterations);
                         match &pool {
                             Ok(pool) => pool.install(run),
                             Err(_) => run(),
@@ -435,7 +448,10 @@ impl Reconstructor {
                     };
                     let run_s = started.elapsed().as_secs_f64();
                     if result.is_ok() {
-                        *worker.last_iterations() = Some(iterations.load(Ordering::Relaxed));
+                        // The whole run's search starts afresh: it goes
+                        // about as far as the carried one has come.
+                        let rows = iterations.load(Ordering::Relaxed);
+                        *worker.last_iterations() = Some(carried.steps_taken().map_or(rows, |s| s.max(rows)));
                     }
                     show(&worker, result, (snap.acquired_s, snap.photons), run_s, false);
                     *worker.running() = None;
@@ -453,6 +469,17 @@ impl Reconstructor {
             tx: spawned.is_ok().then_some(tx),
             shared,
         }
+    }
+
+    /// Whether no snapshot is being reconstructed (a held lock reads as
+    /// busy: this never waits).
+    pub fn idle(&self) -> bool {
+        self.tx.is_some()
+            && match self.shared.running.try_lock() {
+                Ok(running) => running.is_none(),
+                Err(std::sync::TryLockError::Poisoned(e)) => e.into_inner().is_none(),
+                Err(std::sync::TryLockError::WouldBlock) => false,
+            }
     }
 
     /// Offers a snapshot; `false` when one is still being reconstructed
@@ -526,7 +553,7 @@ impl Reconstructor {
         let spawned = std::thread::Builder::new()
             .name("final-reconstruction".into())
             .spawn(move || {
-                let _ = tx.send(reconstruct(&stack, &counted));
+                let _ = tx.send(reconstruct(&stack, None, &counted));
             });
         if let Err(e) = spawned {
             let e = format!("no thread for the whole run's reconstruction: {e}");

@@ -33,8 +33,9 @@ use crate::physics::Setup;
 const PAGE: &str = include_str!("page.html");
 /// Shortest time between two events to one browser.
 const EVENT_EVERY: Duration = Duration::from_millis(250);
-/// How often a snapshot is offered to the reconstruction.
-const RECONSTRUCT_EVERY: Duration = Duration::from_millis(2500);
+/// The shortest time between two snapshots offered to the reconstruction
+/// (one is offered only when the last is done).
+const RECONSTRUCT_EVERY: Duration = Duration::from_millis(1000);
 /// Browsers served events at once; more are refused (503).
 const MAX_CLIENTS: usize = 16;
 
@@ -162,8 +163,8 @@ impl LiveView {
     }
 
     /// The watching stage for [`crate::acquire::Job::run_watched`]: copies
-    /// each snapshot into the state and offers one every 2.5 s to the
-    /// reconstruction (`setup`: the sample's physics, without which there is
+    /// each snapshot into the state and offers one to the reconstruction
+    /// whenever it is idle, at most once a second (`setup`: the sample's physics, without which there is
     /// none; `truth`: the scene, for the error against run time).
     pub fn stage(&self, setup: Option<Setup>, truth: Option<Array2<f64>>) -> LiveStage {
         if setup.is_none() {
@@ -285,6 +286,7 @@ impl LiveStage {
                 .last_offer
                 .is_none_or(|t| t.elapsed() >= RECONSTRUCT_EVERY)
             && s.progress.counts.binned > 0
+            && r.idle()
         {
             let stack = crate::acquire::record::stack_of(
                 s.counts,

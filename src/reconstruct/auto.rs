@@ -13,10 +13,11 @@
 
 use super::data::Data;
 use super::discrepancy::{DevianceCheck, ExpectedDeviance};
-use super::em::Acceleration;
+use super::em::{Acceleration, RlStop};
 use super::error::ReconstructError;
-use super::guard::{self, GUARD_TAU};
+use super::guard::{self, CarriedSearch, GUARD_TAU};
 use super::learned::Learned;
+use super::rl_stack::RlStack;
 use super::run::{Estimate, Reconstructor, Run, WorkShape};
 use super::trace::Trace;
 
@@ -29,6 +30,32 @@ pub struct Auto<'a> {
     /// The check's Richardson-Lucy search: most iterations and their
     /// acceleration (`rl-sum`'s cross-validated stop).
     pub search: (usize, Acceleration),
+    /// The search carried between snapshots of a growing acquisition, if
+    /// any.
+    pub carried: Option<&'a CarriedSearch>,
+}
+
+impl<'a> Auto<'a> {
+    /// The default with the embedded network, its check searching as the
+    /// cross-validated `stop` does (`rl-sum`'s default search when `stop`
+    /// is a fixed count), `rl-stack` with `stop` outside the trained
+    /// ranges; `carried` carries the search between snapshots.
+    pub fn new(stop: RlStop, carried: Option<&'a CarriedSearch>) -> Self {
+        Self {
+            learned: Learned {
+                net: super::learned::embedded(),
+                outside: Box::new(RlStack { stop }),
+            },
+            search: match stop {
+                RlStop::CrossValidated {
+                    max_iters,
+                    acceleration,
+                } => (max_iters, acceleration),
+                RlStop::After(_) => (RlStop::DEFAULT_MAX_ITERS, Acceleration::None),
+            },
+            carried,
+        }
+    }
 }
 
 /// The start of the note that names the chosen candidate.
@@ -67,7 +94,8 @@ impl Reconstructor for Auto<'_> {
             run.note(format!("{CHOSE}{}", self.learned.outside.name(bins)));
             return Ok(out);
         }
-        let Some(verdict) = guard::check(self.learned.net, data, self.search, run)? else {
+        let Some(verdict) = guard::check(self.learned.net, data, self.search, self.carried, run)?
+        else {
             run.note("auto: a thinned half of the counts holds no photon: nothing to check the network against; Richardson-Lucy with its cross-validated stop instead");
             let out = self.learned.outside.reconstruct(data, run)?;
             run.note(format!("{CHOSE}{}", self.learned.outside.name(bins)));

@@ -7,6 +7,7 @@ use super::admm_lbfgs::{AdmmLbfgs, AdmmLbfgsOptions};
 use super::auto::Auto;
 use super::data::Data;
 pub use super::em::{Acceleration, RlStop};
+use super::guard::CarriedSearch;
 use super::learned::{Learned, RL_SUM_CV};
 use super::problem::Problem;
 use super::rl_stack::RlStack;
@@ -254,22 +255,7 @@ impl<'a> MethodPlan<'a> {
         let rl = RlSum { stop: opts.rl_stop };
         let rl_stack = RlStack { stop: opts.rl_stop };
         let (algorithm, view): (Box<dyn Reconstructor + 'a>, View) = match method {
-            Method::Auto => (
-                Box::new(Auto {
-                    learned: Learned {
-                        net: super::learned::embedded(),
-                        outside: Box::new(rl_stack),
-                    },
-                    search: match opts.rl_stop {
-                        RlStop::CrossValidated {
-                            max_iters,
-                            acceleration,
-                        } => (max_iters, acceleration),
-                        RlStop::After(_) => (RlStop::DEFAULT_MAX_ITERS, Acceleration::None),
-                    },
-                }),
-                View::Whole,
-            ),
+            Method::Auto => (Box::new(Auto::new(opts.rl_stop, None)), View::Whole),
             Method::Pnp => (opts.pnp(denoiser), View::Whole),
             Method::PnpSlice => (opts.pnp(denoiser), one_bin()?),
             Method::PnpSum => (opts.pnp(denoiser), View::Summed),
@@ -290,6 +276,33 @@ impl<'a> MethodPlan<'a> {
             view,
             method,
         })
+    }
+
+    /// The default method (`auto`) with its check's search carried
+    /// between the snapshots of one growing acquisition by `carried` (the
+    /// live view's).
+    pub fn auto_carrying(opts: &MethodOptions, carried: &'a CarriedSearch) -> Self {
+        Self {
+            algorithm: Box::new(Auto::new(opts.rl_stop, Some(carried))),
+            view: View::Whole,
+            method: Method::Auto,
+        }
+    }
+
+    /// Checks the plan's working memory against the budget and runs it
+    /// ([`MethodPlan::run`]).
+    pub fn run_within_budget(
+        &self,
+        problem: &Problem,
+        truth: Option<ArrayView2<f64>>,
+        on_iter: &mut dyn FnMut(&TraceRow),
+    ) -> Result<Reconstruction, ReconstructError> {
+        let k = problem.counts.shape()[0];
+        let (gh, gw) = problem.model.grid_shape();
+        crate::memory::check(self.working_bytes(problem), || {
+            format!("{} on {k} bins of a {gw} x {gh} grid", self.method.name())
+        })?;
+        self.run(problem, truth, on_iter)
     }
 
     /// The bytes the run holds beyond the problem: the view's own copies
@@ -351,11 +364,6 @@ pub fn run_method(
     truth: Option<ArrayView2<f64>>,
     mut on_iter: impl FnMut(&TraceRow),
 ) -> Result<Reconstruction, ReconstructError> {
-    let k = problem.counts.shape()[0];
-    let plan = MethodPlan::new(method, bin, k, denoiser, opts)?;
-    let (gh, gw) = problem.model.grid_shape();
-    crate::memory::check(plan.working_bytes(problem), || {
-        format!("{} on {k} bins of a {gw} x {gh} grid", method.name())
-    })?;
-    plan.run(problem, truth, &mut on_iter)
+    let plan = MethodPlan::new(method, bin, problem.counts.shape()[0], denoiser, opts)?;
+    plan.run_within_budget(problem, truth, &mut on_iter)
 }
