@@ -43,6 +43,7 @@
 //! lifetimes and phasors are NaN in the maps, the mask says which, and the
 //! notes count them.
 
+pub mod fit;
 pub mod recording;
 
 use ndarray::{Array2, ArrayView3, Axis};

@@ -1,0 +1,774 @@
+//! Lifetimes fitted as FLIM labs fit them (SPCImage, SymPhoTime, FLIMfit,
+//! FLIMJ): each pixel's decay, after optional binning of its neighbours,
+//! by one to three exponential components and a constant background,
+//! reconvolved with the instrument response ([`model`]), by Poisson
+//! maximum likelihood or weighted least squares ([`optimise`]); or the
+//! whole image at once, lifetimes shared and amplitudes per pixel
+//! ([`global`]).
+//!
+//! The steps, each said in the notes:
+//! 1. The window: every bin with an IRF; a tail fit from the second bin
+//!    after the summed decay's peak (or the bins asked for).
+//! 2. The IRF: measured (a decay on the same bins), a Gaussian of fitted
+//!    centre and width, or estimated from the rising edge of the summed
+//!    decay (its rise, mirrored about its steepest point); none for a
+//!    tail fit.
+//! 3. The summed decay of every pixel above the photon threshold is fitted
+//!    first, from guesses made of its moments, its IRF parameters (shift,
+//!    or centre and width) with it; pixels then start from its lifetimes,
+//!    with its IRF parameters held (as SPCImage holds the shift).
+//! 4. Each pixel (or the global fit): lifetimes, amplitudes, fractions,
+//!    the amplitude- and intensity-weighted mean lifetimes, background,
+//!    reduced chi-squared, Poisson deviance, and each lifetime's standard
+//!    error from the curvature (the Cramer-Rao bound at the fit for
+//!    maximum likelihood). Pixels below the threshold, and fits that do
+//!    not converge or end at a lifetime bound, are masked (NaN in every
+//!    map but photons) and counted.
+//!
+//! Amplitudes are photons per bin at the decay's time zero (`N_k w /
+//! tau_k` for a component of `N_k` photons in bins of width `w`);
+//! fractions are of photons (intensity) and of amplitudes.
+
+pub mod global;
+pub mod model;
+pub mod optimise;
+
+use ndarray::{Array2, ArrayView3};
+use rayon::prelude::*;
+
+use self::model::{DecayModel, IrfShape};
+use self::optimise::{Fitted, Objective, fit};
+use super::DecayError;
+use crate::stack::CountsView;
+
+/// Where the instrument response comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum IrfSource {
+    /// A measured response: photons per bin on the stack's bins.
+    Measured {
+        /// The decay.
+        decay: Vec<f64>,
+        /// What it is, in words (its file).
+        what: String,
+    },
+    /// A Gaussian whose centre and width are fitted.
+    Gaussian,
+    /// Estimated from the rising edge of the summed decay.
+    RisingEdge,
+    /// None: a tail fit.
+    Tail,
+}
+
+/// How decays are fitted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitOptions {
+    /// Exponential components, 1 to 3.
+    pub components: usize,
+    /// The instrument response.
+    pub irf: IrfSource,
+    /// What the fit minimises.
+    pub objective: Objective,
+    /// Neighbours binned into each pixel's decay: a square of side `2 b +
+    /// 1` about it (SPCImage's binning `b`), clipped at the edges.
+    pub binning: usize,
+    /// Pixels with fewer photons in the window (after binning) are masked.
+    pub min_photons: f64,
+    /// Lifetimes shared by every unmasked pixel.
+    pub global: bool,
+    /// The fitted window, bins `[first, end)`; `None`: as the module says.
+    pub window: Option<(usize, usize)>,
+    /// Model the light of earlier pulses (when the laser period is known).
+    pub incomplete_decay: bool,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self {
+            components: 1,
+            irf: IrfSource::RisingEdge,
+            objective: Objective::Poisson,
+            binning: 0,
+            min_photons: 100.0,
+            global: false,
+            window: None,
+            incomplete_decay: true,
+        }
+    }
+}
+
+/// The summed decay's fit, for a figure and the notes.
+#[derive(Debug, Clone)]
+pub struct SummedFit {
+    /// The window's bins, `[first, end)` of the stack's.
+    pub window: (usize, usize),
+    /// The bins' starts, ps (the window's).
+    pub starts_ps: Vec<f64>,
+    /// Photons per bin, every unmasked pixel summed.
+    pub decay: Vec<f64>,
+    /// The fit.
+    pub fit: Vec<f64>,
+    /// The IRF on the bins, scaled to the decay's peak for a figure (empty
+    /// for a tail fit).
+    pub irf: Vec<f64>,
+    /// The fitted parameters (the model's layout).
+    pub params: Vec<f64>,
+    /// Its reduced chi-squared.
+    pub reduced_chi2: f64,
+}
+
+/// Every map of a fit, each rows x columns.
+#[derive(Debug, Clone)]
+pub struct FitMaps {
+    /// Photons in the window (after binning).
+    pub photons: Array2<f64>,
+    /// Each component's lifetime, ps.
+    pub lifetimes_ps: Vec<Array2<f64>>,
+    /// Each lifetime's standard error, ps.
+    pub lifetime_errors_ps: Vec<Array2<f64>>,
+    /// Each component's amplitude, photons per bin at time zero.
+    pub amplitudes: Vec<Array2<f64>>,
+    /// Each component's share of the photons.
+    pub intensity_fractions: Vec<Array2<f64>>,
+    /// Each component's share of the amplitudes.
+    pub amplitude_fractions: Vec<Array2<f64>>,
+    /// Amplitude-weighted mean lifetime, ps.
+    pub tau_amplitude_ps: Array2<f64>,
+    /// Intensity-weighted mean lifetime, ps.
+    pub tau_intensity_ps: Array2<f64>,
+    /// Background, photons per bin.
+    pub background: Array2<f64>,
+    /// Reduced chi-squared.
+    pub reduced_chi2: Array2<f64>,
+    /// Poisson deviance.
+    pub deviance: Array2<f64>,
+    /// Masked pixels (below the threshold, or not fitted).
+    pub mask: Array2<bool>,
+    /// The summed decay's fit.
+    pub summed: SummedFit,
+    /// What was assumed, left out and masked.
+    pub notes: Vec<String>,
+}
+
+/// Fits the decays of `counts` (bins x rows x columns; bins start at
+/// `starts_ps`, `width_ps` wide; the laser at `frequency_hz` when known).
+pub fn fit_maps(
+    counts: CountsView<'_>,
+    starts_ps: &[f64],
+    width_ps: f64,
+    frequency_hz: Option<f64>,
+    options: &FitOptions,
+) -> Result<FitMaps, DecayError> {
+    match counts {
+        CountsView::U16(c) => fit_counts(c, starts_ps, width_ps, frequency_hz, options),
+        CountsView::U32(c) => fit_counts(c, starts_ps, width_ps, frequency_hz, options),
+    }
+}
+
+/// Decays (pixels x window bins), binned and cut to the window.
+struct Decays {
+    values: Vec<f64>,
+    bins: usize,
+}
+
+impl Decays {
+    fn pixel(&self, p: usize) -> &[f64] {
+        &self.values[p * self.bins..(p + 1) * self.bins]
+    }
+}
+
+fn input_error(what: impl Into<String>) -> DecayError {
+    DecayError::Input(what.into())
+}
+
+fn check_options(
+    options: &FitOptions,
+    bins: usize,
+    width_ps: f64,
+    starts_ps: &[f64],
+) -> Result<(), DecayError> {
+    if !(1..=3).contains(&options.components) {
+        return Err(input_error(format!(
+            "components {}: a fit has 1, 2 or 3 exponential components",
+            options.components
+        )));
+    }
+    if !(width_ps.is_finite() && width_ps > 0.0) {
+        return Err(input_error(format!(
+            "bin width {width_ps} ps: a fit needs bins of a positive, finite width"
+        )));
+    }
+    if starts_ps.len() != bins {
+        return Err(input_error(format!(
+            "{} bin starts for {bins} bins",
+            starts_ps.len()
+        )));
+    }
+    if !(options.min_photons.is_finite() && options.min_photons >= 0.0) {
+        return Err(input_error(format!(
+            "min_photons {}: give a finite number >= 0",
+            options.min_photons
+        )));
+    }
+    if let Some((a, b)) = options.window
+        && !(a < b && b <= bins)
+    {
+        return Err(input_error(format!(
+            "window bins {a} to {b}: give first < end <= {bins} (the stack's bins)"
+        )));
+    }
+    if let IrfSource::Measured { decay, what } = &options.irf {
+        if decay.len() != bins {
+            return Err(input_error(format!(
+                "the IRF {what} has {} bins where the decays have {bins}: record it with the same bins (width {width_ps} ps)",
+                decay.len()
+            )));
+        }
+        if let Some(v) = decay.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+            return Err(input_error(format!(
+                "the IRF {what} holds {v}: an IRF holds finite counts >= 0"
+            )));
+        }
+        if decay.iter().sum::<f64>() <= 0.0 {
+            return Err(input_error(format!(
+                "the IRF {what} holds no photon: nothing to reconvolve with"
+            )));
+        }
+    }
+    Ok(())
+}
+
+fn fit_counts<T: Copy + Into<f64> + Sync>(
+    counts: ArrayView3<'_, T>,
+    starts_ps: &[f64],
+    width_ps: f64,
+    frequency_hz: Option<f64>,
+    options: &FitOptions,
+) -> Result<FitMaps, DecayError> {
+    let (bins, h, w) = counts.dim();
+    check_options(options, bins, width_ps, starts_ps)?;
+    let k = options.components;
+    let mut notes = Vec::new();
+    // Per-pixel decays over every bin, binned.
+    let raw: Vec<f64> = {
+        let mut v = vec![0.0; h * w * bins];
+        for (b, plane) in counts.outer_iter().enumerate() {
+            for ((r, c), &x) in plane.indexed_iter() {
+                v[(r * w + c) * bins + b] = x.into();
+            }
+        }
+        v
+    };
+    let binned = bin_neighbours(&raw, (h, w, bins), options.binning);
+    if options.binning > 0 {
+        let side = 2 * options.binning + 1;
+        notes.push(format!(
+            "each pixel's decay is the sum of the {side} x {side} pixels about it (binning {}), clipped at the edges",
+            options.binning
+        ));
+    }
+    let total: Vec<f64> = (0..bins)
+        .map(|b| (0..h * w).map(|p| raw[p * bins + b]).sum())
+        .collect();
+    if total.iter().sum::<f64>() <= 0.0 {
+        return Err(input_error("the stack holds no photon: nothing to fit"));
+    }
+    if bins < 2 * k + 2 {
+        return Err(input_error(format!(
+            "{bins} bins: a fit of {k} component(s) needs at least {}",
+            2 * k + 2
+        )));
+    }
+    let peak = argmax(&total);
+    let (first, end) = options.window.unwrap_or(match options.irf {
+        IrfSource::Tail => ((peak + 2).min(bins - 1), bins),
+        _ => (0, bins),
+    });
+    let n = end - first;
+    if n < 2 * k + 2 {
+        return Err(input_error(format!(
+            "the window holds {n} bins: a fit of {k} component(s) needs at least {}",
+            2 * k + 2
+        )));
+    }
+    notes.push(format!(
+        "window: bins {first} to {} ({:.0} to {:.0} ps){}",
+        end - 1,
+        starts_ps[first],
+        starts_ps[end - 1] + width_ps,
+        if options.window.is_some() {
+            " (asked)"
+        } else if matches!(options.irf, IrfSource::Tail) {
+            " (a tail fit from the second bin after the summed decay's peak)"
+        } else {
+            ""
+        }
+    ));
+    let decays = Decays {
+        values: binned
+            .chunks_exact(bins)
+            .flat_map(|d| d[first..end].iter().copied())
+            .collect(),
+        bins: n,
+    };
+    let window_total: Vec<f64> = total[first..end].to_vec();
+    let (irf, irf_note) = irf_shape(&options.irf, &total, first, end);
+    notes.push(irf_note);
+    let period_bins = match (frequency_hz, options.incomplete_decay) {
+        (Some(f), true) if f > 0.0 && f.is_finite() => {
+            let period = 1e12 / f / width_ps;
+            notes.push(format!(
+                "incomplete decay modelled: the light of earlier pulses at {:.3} MHz ({:.1} bins a period)",
+                f * 1e-6,
+                period
+            ));
+            Some(period.max(n as f64))
+        }
+        (None, true) => {
+            notes.push("incomplete decay left out: the laser frequency is not known".into());
+            None
+        }
+        _ => {
+            notes.push("incomplete decay left out (asked)".into());
+            None
+        }
+    };
+    let model = DecayModel {
+        bins: n,
+        width_ps,
+        components: k,
+        irf,
+        period_bins,
+    };
+    let np = model.parameters();
+    let bounds = bounds(&model);
+    // Which pixels are fitted, and the summed decay of those.
+    let photons: Vec<f64> = (0..h * w).map(|p| decays.pixel(p).iter().sum()).collect();
+    let below = photons.iter().filter(|&&n| n < options.min_photons).count();
+    let summed: Vec<f64> = (0..n)
+        .map(|b| {
+            (0..h * w)
+                .filter(|&p| photons[p] >= options.min_photons)
+                .map(|p| raw[p * bins + first + b])
+                .sum()
+        })
+        .collect();
+    let summed = if summed.iter().sum::<f64>() > 0.0 {
+        summed
+    } else {
+        window_total.clone()
+    };
+    let summed_fit = fit_summed(&model, &summed, &bounds, options.objective);
+    let mut free = vec![true; np];
+    for f in free.iter_mut().skip(model.background() + 1) {
+        *f = false;
+    }
+    let start_for = |y: &[f64]| -> Vec<f64> {
+        let scale = y.iter().sum::<f64>() / summed.iter().sum::<f64>().max(1.0);
+        let mut s = summed_fit.params.clone();
+        for c in 0..k {
+            s[2 * c] *= scale;
+        }
+        s[model.background()] *= scale;
+        s
+    };
+    let fits: Vec<Option<Fitted>> = if options.global {
+        let g = global::fit_global(
+            &model,
+            &decays.values,
+            &photons,
+            options.min_photons,
+            &summed_fit.params,
+            &bounds,
+            options.objective,
+        );
+        notes.push(g.note);
+        g.fits
+    } else {
+        (0..h * w)
+            .into_par_iter()
+            .map(|p| {
+                (photons[p] >= options.min_photons).then(|| {
+                    let y = decays.pixel(p);
+                    fit(&model, y, &start_for(y), &free, &bounds, options.objective)
+                })
+            })
+            .collect()
+    };
+    let maps = assemble(
+        &model,
+        &fits,
+        &photons,
+        (h, w),
+        &bounds,
+        options,
+        below,
+        &mut notes,
+    );
+    let mut fitted_sum = vec![0.0; n];
+    model.evaluate(&summed_fit.params, &mut fitted_sum, None);
+    let irf_shown = match &model.irf {
+        IrfShape::Tail => Vec::new(),
+        _ => {
+            let mut unit = summed_fit.params.clone();
+            for c in 0..k {
+                unit[2 * c] = 0.0;
+            }
+            unit[model.background()] = 0.0;
+            // The IRF alone: a component of lifetime near zero.
+            unit[0] = 1.0;
+            unit[1] = 1e-3 * width_ps;
+            let mut v = vec![0.0; n];
+            model.evaluate(&unit, &mut v, None);
+            let top = v.iter().cloned().fold(0.0, f64::max).max(1e-300);
+            let peak_y = summed.iter().cloned().fold(0.0, f64::max);
+            v.iter().map(|x| x / top * peak_y).collect()
+        }
+    };
+    notes.push(format!(
+        "summed decay: {}, reduced chi-squared {:.3}",
+        describe_params(&model, &summed_fit.params),
+        summed_fit.reduced_chi2
+    ));
+    Ok(FitMaps {
+        summed: SummedFit {
+            window: (first, end),
+            starts_ps: starts_ps[first..end].to_vec(),
+            decay: summed,
+            fit: fitted_sum,
+            irf: irf_shown,
+            params: summed_fit.params.clone(),
+            reduced_chi2: summed_fit.reduced_chi2,
+        },
+        notes,
+        ..maps
+    })
+}
+
+/// The parameters in words.
+pub fn describe_params(model: &DecayModel, p: &[f64]) -> String {
+    let mut parts: Vec<String> = (0..model.components)
+        .map(|c| {
+            format!(
+                "tau{} {:.1} ps ({:.0} photons)",
+                c + 1,
+                p[2 * c + 1],
+                p[2 * c]
+            )
+        })
+        .collect();
+    parts.push(format!("background {:.3} per bin", p[model.background()]));
+    let q = model.background() + 1;
+    match model.irf {
+        IrfShape::Tail => {}
+        IrfShape::Measured(_) => parts.push(format!("IRF shift {:.1} ps", p[q] * model.width_ps)),
+        IrfShape::Gaussian => parts.push(format!(
+            "IRF centre {:.1} ps, FWHM {:.1} ps (into the window)",
+            p[q] * model.width_ps,
+            p[q + 1] * model.width_ps * 2.354_820_045
+        )),
+    }
+    parts.join(", ")
+}
+
+/// The bounds of each parameter: photons and background >= 0, lifetimes
+/// from a twentieth of a bin to 50 windows, the IRF's within the window.
+fn bounds(model: &DecayModel) -> Vec<(f64, f64)> {
+    let n = model.bins as f64;
+    let mut b = Vec::new();
+    for _ in 0..model.components {
+        b.push((0.0, f64::INFINITY));
+        b.push((0.05 * model.width_ps, 50.0 * n * model.width_ps));
+    }
+    b.push((0.0, f64::INFINITY));
+    match model.irf {
+        IrfShape::Tail => {}
+        IrfShape::Measured(_) => b.push((-n / 4.0, n / 4.0)),
+        IrfShape::Gaussian => {
+            b.push((-n / 4.0, n));
+            b.push((0.2, n / 4.0));
+        }
+    }
+    b
+}
+
+/// The summed decay's fit from guesses made of its moments: the best of a
+/// few starts (lifetimes spread about the mean time) by the objective.
+fn fit_summed(
+    model: &DecayModel,
+    y: &[f64],
+    bounds: &[(f64, f64)],
+    objective: Objective,
+) -> Fitted {
+    let n = model.bins;
+    let k = model.components;
+    let w = model.width_ps;
+    // Background: the mean of the quietest fifth of the bins before the
+    // peak (none before it: the window's last fifth's minimum).
+    let peak = argmax(y);
+    let before: Vec<f64> = y[..peak.saturating_sub(2)].to_vec();
+    let bg = if before.len() >= 3 {
+        before.iter().sum::<f64>() / before.len() as f64
+    } else {
+        y[n - n / 5..]
+            .iter()
+            .cloned()
+            .fold(f64::INFINITY, f64::min)
+            .max(0.0)
+    };
+    let signal: Vec<f64> = y.iter().map(|v| (v - bg).max(0.0)).collect();
+    let photons = signal.iter().sum::<f64>().max(1.0);
+    let mean_bin = signal
+        .iter()
+        .enumerate()
+        .map(|(i, v)| i as f64 * v)
+        .sum::<f64>()
+        / photons;
+    let (irf_start, origin) = match &model.irf {
+        IrfShape::Tail => (Vec::new(), 0.0),
+        IrfShape::Measured(irf) => {
+            let s: f64 = irf.iter().sum();
+            let bary = irf
+                .iter()
+                .enumerate()
+                .map(|(i, v)| i as f64 * v)
+                .sum::<f64>()
+                / s;
+            (vec![0.0], bary)
+        }
+        IrfShape::Gaussian => {
+            // The rising edge's half maximum as the centre, a bin wide.
+            let half = y[peak] / 2.0;
+            let c = (0..=peak).find(|&i| y[i] >= half).unwrap_or(peak) as f64;
+            (vec![c, 1.0], c)
+        }
+    };
+    let tau_mean = ((mean_bin - origin).max(0.5) * w).clamp(bounds[1].0, bounds[1].1);
+    let spreads: &[&[f64]] = match k {
+        1 => &[&[1.0], &[0.5], &[2.0]],
+        2 => &[&[0.3, 1.5], &[0.5, 2.0], &[0.15, 1.2]],
+        _ => &[&[0.15, 0.6, 2.0], &[0.3, 1.0, 3.0]],
+    };
+    let free = vec![true; model.parameters()];
+    spreads
+        .iter()
+        .map(|spread| {
+            let mut p = Vec::new();
+            for s in spread.iter() {
+                p.push(photons / k as f64);
+                p.push(tau_mean * s);
+            }
+            p.push(bg);
+            p.extend(&irf_start);
+            fit(model, y, &p, &free, bounds, objective)
+        })
+        .min_by(|a, b| a.objective.total_cmp(&b.objective))
+        .expect("at least one start")
+}
+
+/// The IRF's shape on the window `[first, end)` and the note that says
+/// where it came from.
+fn irf_shape(source: &IrfSource, total: &[f64], first: usize, end: usize) -> (IrfShape, String) {
+    let normalised = |v: &[f64]| {
+        let s: f64 = v.iter().sum();
+        v.iter().map(|x| x / s).collect::<Vec<f64>>()
+    };
+    match source {
+        IrfSource::Tail => (
+            IrfShape::Tail,
+            "IRF: none (a tail fit: the window's first bin is time zero)".into(),
+        ),
+        IrfSource::Gaussian => (
+            IrfShape::Gaussian,
+            "IRF: a Gaussian, its centre and width fitted on the summed decay".into(),
+        ),
+        IrfSource::Measured { decay, what } => (
+            IrfShape::Measured(normalised(&decay[first..end])),
+            format!(
+                "IRF: measured, {what} ({} photons), its shift fitted on the summed decay",
+                decay.iter().sum::<f64>()
+            ),
+        ),
+        IrfSource::RisingEdge => {
+            let y = &total[first..end];
+            let peak = argmax(y);
+            let rise: Vec<f64> = (0..y.len())
+                .map(|i| {
+                    if i == 0 || i > peak {
+                        0.0
+                    } else {
+                        (y[i] - y[i - 1]).max(0.0)
+                    }
+                })
+                .collect();
+            let top = argmax(&rise);
+            let mut irf = vec![0.0; y.len()];
+            for (i, v) in irf.iter_mut().enumerate() {
+                let mirrored = if i <= top {
+                    i
+                } else {
+                    2 * top - i.min(2 * top)
+                };
+                *v = if i > 2 * top { 0.0 } else { rise[mirrored] };
+            }
+            if irf.iter().sum::<f64>() <= 0.0 {
+                irf[peak] = 1.0;
+            }
+            (
+                IrfShape::Measured(normalised(&irf)),
+                "IRF: estimated from the rising edge of the summed decay (its rise, mirrored about the steepest point), its shift fitted on the summed decay".into(),
+            )
+        }
+    }
+}
+
+fn argmax(v: &[f64]) -> usize {
+    v.iter()
+        .enumerate()
+        .fold((0, f64::NEG_INFINITY), |(bi, bv), (i, &x)| {
+            if x > bv { (i, x) } else { (bi, bv) }
+        })
+        .0
+}
+
+/// Each pixel's decay summed with its neighbours within `b` (a square,
+/// clipped at the edges); `values` is pixels x bins.
+fn bin_neighbours(values: &[f64], (h, w, bins): (usize, usize, usize), b: usize) -> Vec<f64> {
+    if b == 0 {
+        return values.to_vec();
+    }
+    let mut out = vec![0.0; values.len()];
+    out.par_chunks_mut(bins).enumerate().for_each(|(p, dst)| {
+        let (r, c) = (p / w, p % w);
+        for rr in r.saturating_sub(b)..(r + b + 1).min(h) {
+            for cc in c.saturating_sub(b)..(c + b + 1).min(w) {
+                let src = &values[(rr * w + cc) * bins..(rr * w + cc + 1) * bins];
+                dst.iter_mut().zip(src).for_each(|(d, s)| *d += s);
+            }
+        }
+    });
+    out
+}
+
+/// The maps from the pixels' fits, masks counted in the notes.
+#[allow(clippy::too_many_arguments)]
+fn assemble(
+    model: &DecayModel,
+    fits: &[Option<Fitted>],
+    photons: &[f64],
+    (h, w): (usize, usize),
+    bounds: &[(f64, f64)],
+    options: &FitOptions,
+    below: usize,
+    notes: &mut Vec<String>,
+) -> FitMaps {
+    let k = model.components;
+    let nan = || Array2::from_elem((h, w), f64::NAN);
+    let mut m = FitMaps {
+        photons: Array2::from_shape_vec((h, w), photons.to_vec()).expect("pixels"),
+        lifetimes_ps: (0..k).map(|_| nan()).collect(),
+        lifetime_errors_ps: (0..k).map(|_| nan()).collect(),
+        amplitudes: (0..k).map(|_| nan()).collect(),
+        intensity_fractions: (0..k).map(|_| nan()).collect(),
+        amplitude_fractions: (0..k).map(|_| nan()).collect(),
+        tau_amplitude_ps: nan(),
+        tau_intensity_ps: nan(),
+        background: nan(),
+        reduced_chi2: nan(),
+        deviance: nan(),
+        mask: Array2::from_elem((h, w), true),
+        summed: SummedFit {
+            window: (0, 0),
+            starts_ps: Vec::new(),
+            decay: Vec::new(),
+            fit: Vec::new(),
+            irf: Vec::new(),
+            params: Vec::new(),
+            reduced_chi2: f64::NAN,
+        },
+        notes: Vec::new(),
+    };
+    let (mut unconverged, mut at_bound) = (0, 0);
+    for (p, f) in fits.iter().enumerate() {
+        let Some(f) = f else { continue };
+        let (r, c) = (p / w, p % w);
+        let finite = f.params.iter().all(|v| v.is_finite()) && f.deviance.is_finite();
+        if !(f.converged && finite) {
+            unconverged += 1;
+            continue;
+        }
+        // A lifetime at its bound did not find a minimum inside them;
+        // one whose component holds no photon is not measured.
+        let bounded = (0..k).any(|c| {
+            let (lo, hi) = bounds[2 * c + 1];
+            let t = f.params[2 * c + 1];
+            f.params[2 * c] > 0.0 && (t <= lo * 1.0001 || t >= hi * 0.9999)
+        });
+        if bounded {
+            at_bound += 1;
+            continue;
+        }
+        let wps = model.width_ps;
+        let photons_k: Vec<f64> = (0..k).map(|c| f.params[2 * c]).collect();
+        let taus: Vec<f64> = (0..k).map(|c| f.params[2 * c + 1]).collect();
+        let amps: Vec<f64> = (0..k).map(|c| photons_k[c] * wps / taus[c]).collect();
+        let (sn, sa): (f64, f64) = (photons_k.iter().sum(), amps.iter().sum());
+        for ci in 0..k {
+            m.lifetimes_ps[ci][(r, c)] = taus[ci];
+            m.lifetime_errors_ps[ci][(r, c)] = f.errors[2 * ci + 1];
+            m.amplitudes[ci][(r, c)] = amps[ci];
+            m.intensity_fractions[ci][(r, c)] = if sn > 0.0 { photons_k[ci] / sn } else { 0.0 };
+            m.amplitude_fractions[ci][(r, c)] = if sa > 0.0 { amps[ci] / sa } else { 0.0 };
+        }
+        m.tau_amplitude_ps[(r, c)] = if sa > 0.0 {
+            amps.iter().zip(&taus).map(|(a, t)| a * t).sum::<f64>() / sa
+        } else {
+            f64::NAN
+        };
+        m.tau_intensity_ps[(r, c)] = if sn > 0.0 {
+            photons_k.iter().zip(&taus).map(|(n, t)| n * t).sum::<f64>() / sn
+        } else {
+            f64::NAN
+        };
+        m.background[(r, c)] = f.params[model.background()];
+        m.reduced_chi2[(r, c)] = f.reduced_chi2;
+        m.deviance[(r, c)] = f.deviance;
+        let any_nan = m.tau_amplitude_ps[(r, c)].is_nan() || m.tau_intensity_ps[(r, c)].is_nan();
+        if any_nan {
+            unconverged += 1;
+            continue;
+        }
+        m.mask[(r, c)] = false;
+    }
+    // Masked pixels hold NaN in every map but photons.
+    let mask = m.mask.clone();
+    for map in m
+        .lifetimes_ps
+        .iter_mut()
+        .chain(m.lifetime_errors_ps.iter_mut())
+        .chain(m.amplitudes.iter_mut())
+        .chain(m.intensity_fractions.iter_mut())
+        .chain(m.amplitude_fractions.iter_mut())
+        .chain([
+            &mut m.tau_amplitude_ps,
+            &mut m.tau_intensity_ps,
+            &mut m.background,
+            &mut m.reduced_chi2,
+            &mut m.deviance,
+        ])
+    {
+        map.zip_mut_with(&mask, |v, &masked| {
+            if masked {
+                *v = f64::NAN;
+            }
+        });
+    }
+    notes.push(format!(
+        "masked: {below} pixels below {} photons, {unconverged} whose fit did not converge, {at_bound} whose lifetime ended at a bound ({:.0} to {:.0} ps); {} of {} fitted",
+        options.min_photons,
+        bounds[1].0,
+        bounds[1].1,
+        h * w - below - unconverged - at_bound,
+        h * w
+    ));
+    m
+}
