@@ -11,14 +11,17 @@
 # - tttrlib and sdtfile, decoding Becker & Hickl .spc and .sdt files
 #   independently of our readers;
 # - phasorpy, the phasor and lifetime reference the decay maps are held to;
+# - flimlib (GPL-3), the lifetime-fitting reference `scatterscope fit` is
+#   held to (scripts/fit_reference.py): installed here for tests only,
+#   never linked, copied or shipped;
 # - playwright, which drives the system's Chromium (Debian's package; its
 #   own browser download is never used) in the live view's browser test.
 # Nothing is installed system-wide; the tests set PYTHONPATH to that folder.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dest=target/pydeps
-packages=(numpy h5py ptufile OpenEXR tifffile ome-types tttrlib sdtfile phasorpy playwright)
-modules="numpy, h5py, ptufile, OpenEXR, tifffile, ome_types, tttrlib, sdtfile, phasorpy, playwright"
+packages=(numpy h5py ptufile OpenEXR tifffile ome-types tttrlib sdtfile phasorpy flimlib playwright)
+modules="numpy, h5py, ptufile, OpenEXR, tifffile, ome_types, tttrlib, sdtfile, phasorpy, flimlib, playwright"
 if PYTHONPATH="$dest" python3 -c "import $modules" 2>/dev/null; then
     echo "already present under $dest: ${packages[*]}"
     exit 0

@@ -190,4 +190,5 @@ def main():
         raise SystemExit("\n".join(failures))
 
 
-main()
+if __name__ == "__main__":
+    main()

@@ -454,3 +454,121 @@ pub fn phasor_histogram(path: &Path, plot: &PhasorHistogram) -> Result<(), Strin
     drop(root);
     save_rgb(&pixels, width, height, path)
 }
+
+/// A decay with its fit: the counts, the fit and the IRF on a log scale
+/// above, the weighted residuals below.
+pub struct DecayFitPlot<'a> {
+    /// The title.
+    pub title: &'a str,
+    /// Bin times, ns.
+    pub times_ns: &'a [f64],
+    /// Counts per bin.
+    pub decay: &'a [f64],
+    /// The fit per bin.
+    pub fit: &'a [f64],
+    /// The IRF per bin (empty: none).
+    pub irf: &'a [f64],
+}
+
+/// Draws a [`DecayFitPlot`].
+pub fn decay_fit(path: &Path, plot: &DecayFitPlot) -> Result<(), String> {
+    register_font();
+    let (width, height) = (960u32, 720u32);
+    let mut pixels = vec![0u8; (width * height * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, (width, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let (upper, lower) = root.split_vertically(500);
+        let t = plot.times_ns;
+        let (t0, t1) = (
+            t.first().copied().unwrap_or(0.0),
+            t.last().copied().unwrap_or(1.0),
+        );
+        let top = plot
+            .decay
+            .iter()
+            .chain(plot.fit)
+            .cloned()
+            .fold(1.0f64, f64::max);
+        let mut chart = ChartBuilder::on(&upper)
+            .caption(plot.title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(30)
+            .y_label_area_size(64)
+            .build_cartesian_2d(t0..t1.max(t0 + 1e-9), (0.5f64..top * 2.0).log_scale())
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .y_desc("photons per bin")
+            .label_style(("sans-serif", 14))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let points = |v: &[f64]| -> Vec<(f64, f64)> {
+            t.iter()
+                .zip(v)
+                .filter(|(_, y)| **y > 0.5)
+                .map(|(x, y)| (*x, *y))
+                .collect()
+        };
+        let c = COLORS[0];
+        chart
+            .draw_series(
+                points(plot.decay)
+                    .into_iter()
+                    .map(|p| Circle::new(p, 2, c.filled())),
+            )
+            .map_err(|e| e.to_string())?
+            .label("summed decay")
+            .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
+        for (i, (name, v)) in [("fit", plot.fit), ("IRF (scaled)", plot.irf)]
+            .into_iter()
+            .enumerate()
+        {
+            if v.is_empty() {
+                continue;
+            }
+            let c = COLORS[i + 1];
+            chart
+                .draw_series(LineSeries::new(points(v), c.stroke_width(2)))
+                .map_err(|e| e.to_string())?
+                .label(name)
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .label_font(("sans-serif", 14))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let residuals: Vec<(f64, f64)> = t
+            .iter()
+            .zip(plot.decay.iter().zip(plot.fit))
+            .map(|(x, (y, m))| (*x, (y - m) / m.max(1.0).sqrt()))
+            .collect();
+        let r = residuals
+            .iter()
+            .map(|p| p.1.abs())
+            .filter(|v| v.is_finite())
+            .fold(1.0f64, f64::max);
+        let mut res = ChartBuilder::on(&lower)
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(64)
+            .build_cartesian_2d(t0..t1.max(t0 + 1e-9), -r..r)
+            .map_err(|e| e.to_string())?;
+        res.configure_mesh()
+            .x_desc("time (ns)")
+            .y_desc("weighted residual")
+            .label_style(("sans-serif", 14))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        res.draw_series(LineSeries::new(residuals, COLORS[3].stroke_width(1)))
+            .map_err(|e| e.to_string())?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    save_rgb(&pixels, width, height, path)
+}

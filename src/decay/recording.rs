@@ -146,10 +146,13 @@ struct Sidecar<'a> {
 
 /// A reference's decay: photons per bin, the bins' centres (ps), and the
 /// laser frequency (Hz) when the recording states it.
-type Decay = (Vec<f64>, Vec<f64>, Option<f64>);
+pub(crate) type Decay = (Vec<f64>, Vec<f64>, Option<f64>);
 
 /// The summed decay of every stack of `reference`.
-fn reference_decay(reference: &Path, spec: &BinSpec) -> Result<Decay, RecordedFileError> {
+pub(crate) fn reference_decay(
+    reference: &Path,
+    spec: &BinSpec,
+) -> Result<Decay, RecordedFileError> {
     let mut decay: Option<Decay> = None;
     bin_file_each(reference, spec, |s| {
         if s.meta.is_unstated(Unstated::TimeUnit) {
@@ -198,7 +201,7 @@ pub const REFERENCE_PHOTONS: f64 = 100.0;
 
 /// The laser frequency of a stack: the request's, else the recording's,
 /// each checked ([`crate::tags::laser`]).
-fn frequency_of(
+pub(crate) fn frequency_of(
     path: &Path,
     meta: &StackMeta,
     asked: Option<f64>,

@@ -8,6 +8,7 @@ mod calibrate_cmd;
 mod calibrate_slab;
 mod denoise;
 mod denoise_bench;
+mod fit;
 mod hidden;
 mod hints;
 mod lifetime;
@@ -64,6 +65,7 @@ enum Command {
     Bin(tags_cmd::BinArgs),
     Convert(tags_cmd::ConvertArgs),
     Lifetime(lifetime::LifetimeArgs),
+    Fit(fit::FitArgs),
     Acquire(Box<acquire::AcquireArgs>),
     Devices(acquire::DevicesArgs),
     Batch(batch::BatchArgs),
@@ -196,6 +198,7 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Batch(args) => batch::run(&args),
         Command::Convert(args) => tags_cmd::convert(&args),
         Command::Lifetime(args) => lifetime::run(&args),
+        Command::Fit(args) => fit::run(&args),
         Command::Acquire(args) => acquire::run(&args),
         Command::Devices(args) => acquire::devices(&args),
         Command::Denoise(args) => denoise::run(&args),

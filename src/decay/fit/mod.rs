@@ -29,6 +29,7 @@
 //! tau_k` for a component of `N_k` photons in bins of width `w`);
 //! fractions are of photons (intensity) and of amplitudes.
 
+pub mod file;
 pub mod global;
 pub mod model;
 pub mod optimise;
@@ -79,6 +80,8 @@ pub struct FitOptions {
     pub window: Option<(usize, usize)>,
     /// Model the light of earlier pulses (when the laser period is known).
     pub incomplete_decay: bool,
+    /// Fit a measured IRF's shift on the summed decay (else hold it at 0).
+    pub fit_irf_shift: bool,
 }
 
 impl Default for FitOptions {
@@ -92,6 +95,7 @@ impl Default for FitOptions {
             global: false,
             window: None,
             incomplete_decay: true,
+            fit_irf_shift: true,
         }
     }
 }
@@ -357,7 +361,11 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
     } else {
         window_total.clone()
     };
-    let summed_fit = fit_summed(&model, &summed, &bounds, options.objective);
+    let hold_shift = matches!(model.irf, IrfShape::Measured(_)) && !options.fit_irf_shift;
+    if hold_shift {
+        notes.push("the IRF's shift held at 0 (asked)".into());
+    }
+    let summed_fit = fit_summed(&model, &summed, &bounds, options.objective, hold_shift);
     let mut free = vec![true; np];
     for f in free.iter_mut().skip(model.background() + 1) {
         *f = false;
@@ -492,12 +500,14 @@ fn bounds(model: &DecayModel) -> Vec<(f64, f64)> {
 }
 
 /// The summed decay's fit from guesses made of its moments: the best of a
-/// few starts (lifetimes spread about the mean time) by the objective.
+/// few starts (lifetimes spread about the mean time) by the objective; a
+/// measured IRF's shift held at 0 when `hold_shift`.
 fn fit_summed(
     model: &DecayModel,
     y: &[f64],
     bounds: &[(f64, f64)],
     objective: Objective,
+    hold_shift: bool,
 ) -> Fitted {
     let n = model.bins;
     let k = model.components;
@@ -548,7 +558,10 @@ fn fit_summed(
         2 => &[&[0.3, 1.5], &[0.5, 2.0], &[0.15, 1.2]],
         _ => &[&[0.15, 0.6, 2.0], &[0.3, 1.0, 3.0]],
     };
-    let free = vec![true; model.parameters()];
+    let mut free = vec![true; model.parameters()];
+    if hold_shift {
+        free[model.background() + 1] = false;
+    }
     spreads
         .iter()
         .map(|spread| {
@@ -687,7 +700,7 @@ fn assemble(
         },
         notes: Vec::new(),
     };
-    let (mut unconverged, mut at_bound) = (0, 0);
+    let (mut unconverged, mut at_bound, mut undetermined) = (0, 0, 0);
     for (p, f) in fits.iter().enumerate() {
         let Some(f) = f else { continue };
         let (r, c) = (p / w, p % w);
@@ -705,6 +718,12 @@ fn assemble(
         });
         if bounded {
             at_bound += 1;
+            continue;
+        }
+        // A component without photons, or lifetimes the decay cannot tell
+        // apart, leave the curvature singular: no error, no lifetime.
+        if (0..k).any(|c| !f.errors[2 * c + 1].is_finite()) {
+            undetermined += 1;
             continue;
         }
         let wps = model.width_ps;
@@ -763,11 +782,11 @@ fn assemble(
         });
     }
     notes.push(format!(
-        "masked: {below} pixels below {} photons, {unconverged} whose fit did not converge, {at_bound} whose lifetime ended at a bound ({:.0} to {:.0} ps); {} of {} fitted",
+        "masked: {below} pixels below {} photons, {unconverged} whose fit did not converge, {at_bound} whose lifetime ended at a bound ({:.0} to {:.0} ps), {undetermined} whose lifetimes the decay does not determine (a component without photons: singular curvature); {} of {} fitted",
         options.min_photons,
         bounds[1].0,
         bounds[1].1,
-        h * w - below - unconverged - at_bound,
+        h * w - below - unconverged - at_bound - undetermined,
         h * w
     ));
     m
