@@ -634,6 +634,110 @@ fn decay_maps<'py>(
     Ok(d)
 }
 
+/// Lifetimes fitted pixel by pixel (or globally) in a stack of counts
+/// (bins, rows, columns) whose bins start at `bin_starts_ps`, as
+/// `scatterscope fit` fits them: a dict of float64 maps (NaN where
+/// masked), the mask, the summed decay's fit and the notes.
+#[pyfunction]
+#[pyo3(signature = (counts, bin_starts_ps, bin_width_ps, frequency_hz=None, components=1, irf="edge", irf_decay=None, least_squares=false, binning=0, min_photons=100.0, global_fit=false, window=None, incomplete_decay=true, fit_irf_shift=true))]
+#[allow(clippy::too_many_arguments)]
+fn fit_lifetimes<'py>(
+    py: Python<'py>,
+    counts: Bound<'py, PyAny>,
+    bin_starts_ps: Vec<f64>,
+    bin_width_ps: f64,
+    frequency_hz: Option<f64>,
+    components: usize,
+    irf: &str,
+    irf_decay: Option<Vec<f64>>,
+    least_squares: bool,
+    binning: usize,
+    min_photons: f64,
+    global_fit: bool,
+    window: Option<(usize, usize)>,
+    incomplete_decay: bool,
+    fit_irf_shift: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    use scatterscope::decay::fit::optimise::Objective;
+    use scatterscope::decay::fit::{FitOptions, IrfSource, fit_maps};
+    use scatterscope::stack::CountsView;
+    let irf = match (irf, irf_decay) {
+        ("measured", Some(decay)) => IrfSource::Measured {
+            decay,
+            what: "the given IRF".into(),
+        },
+        ("gaussian", None) => IrfSource::Gaussian,
+        ("edge", None) => IrfSource::RisingEdge,
+        ("none", None) => IrfSource::Tail,
+        (other, d) => {
+            return Err(msg(format!(
+                "fit_lifetimes: irf `{other}`{}: give an IRF array (irf=\"measured\"), or \"gaussian\", \"edge\" or \"none\" without one",
+                if d.is_some() { " with an IRF array" } else { "" }
+            )));
+        }
+    };
+    if let Some(f) = frequency_hz {
+        scatterscope::tags::laser::given(f).map_err(|e| msg(format!("fit_lifetimes: frequency_hz: {e}")))?;
+    }
+    let options = FitOptions {
+        components,
+        irf,
+        objective: if least_squares {
+            Objective::LeastSquares
+        } else {
+            Objective::Poisson
+        },
+        binning,
+        min_photons,
+        global: global_fit,
+        window,
+        incomplete_decay,
+        fit_irf_shift,
+    };
+    let fitted = |v: CountsView<'_>| fit_maps(v, &bin_starts_ps, bin_width_ps, frequency_hz, &options);
+    let maps = if let Ok(a) = counts.extract::<PyReadonlyArray3<'py, u16>>() {
+        let v = a.as_array();
+        py.detach(|| fitted(CountsView::U16(v)))
+    } else if let Ok(a) = counts.extract::<PyReadonlyArray3<'py, u32>>() {
+        let v = a.as_array();
+        py.detach(|| fitted(CountsView::U32(v)))
+    } else {
+        return Err(msg(
+            "fit_lifetimes: counts must be a 3-D numpy array (bins, rows, columns) of uint16 or uint32",
+        ));
+    }
+    .map_err(|e| msg(format!("fit_lifetimes: {e}")))?;
+    let d = PyDict::new(py);
+    d.set_item("photons", maps.photons.into_pyarray(py))?;
+    for (k, t) in maps.lifetimes_ps.into_iter().enumerate() {
+        d.set_item(format!("tau{}_ps", k + 1), t.into_pyarray(py))?;
+    }
+    for (k, t) in maps.lifetime_errors_ps.into_iter().enumerate() {
+        d.set_item(format!("tau{}_error_ps", k + 1), t.into_pyarray(py))?;
+    }
+    for (k, t) in maps.amplitudes.into_iter().enumerate() {
+        d.set_item(format!("a{}", k + 1), t.into_pyarray(py))?;
+    }
+    for (k, t) in maps.amplitude_fractions.into_iter().enumerate() {
+        d.set_item(format!("a{}_fraction", k + 1), t.into_pyarray(py))?;
+    }
+    for (k, t) in maps.intensity_fractions.into_iter().enumerate() {
+        d.set_item(format!("intensity_fraction{}", k + 1), t.into_pyarray(py))?;
+    }
+    d.set_item("tau_amplitude_ps", maps.tau_amplitude_ps.into_pyarray(py))?;
+    d.set_item("tau_intensity_ps", maps.tau_intensity_ps.into_pyarray(py))?;
+    d.set_item("background", maps.background.into_pyarray(py))?;
+    d.set_item("reduced_chi2", maps.reduced_chi2.into_pyarray(py))?;
+    d.set_item("deviance", maps.deviance.into_pyarray(py))?;
+    d.set_item("mask", maps.mask.into_pyarray(py))?;
+    d.set_item("summed_decay", maps.summed.decay)?;
+    d.set_item("summed_fit", maps.summed.fit)?;
+    d.set_item("summed_params", maps.summed.params)?;
+    d.set_item("window", maps.summed.window)?;
+    d.set_item("notes", maps.notes)?;
+    Ok(d)
+}
+
 /// Simulates a built-in scene or an image file (as `scatterscope
 /// simulate --scene`): (counts, expected counts, metadata JSON, truth).
 #[pyfunction]
@@ -982,6 +1086,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate_scene, m)?)?;
     m.add_function(wrap_pyfunction!(learned_case, m)?)?;
     m.add_function(wrap_pyfunction!(decay_maps, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_lifetimes, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(acquire, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_slab, m)?)?;

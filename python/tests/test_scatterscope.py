@@ -444,3 +444,23 @@ def test_decay_maps_mask_and_refuse_with_the_librarys_words():
     bad[0, 1, 1] = np.nan
     with pytest.raises(ScatterscopeError, match="bin 0, row 1, column 1 holds NaN"):
         scatterscope.decay_maps(bad, meta)
+
+
+def test_fit_lifetimes_equal_the_command_fit(tmp_path):
+    tags = tmp_path / "run.sstags"
+    cli("acquire", "--device", "mock", "--size", "16", "--fov", "3cm", "--tags", str(tags), "--out", str(tmp_path / "acq"))
+    cli("fit", str(tags), "--bin-width", "100ps", "--bins", "125", "--irf", "gaussian", "--min-photons", "20",
+        "--no-figures", "--out", str(tmp_path / "fit"))
+    binned = scatterscope.bin_file(tags, bin_width_ps=100.0, bins=125, dtype="uint32")
+    maps = scatterscope.fit_lifetimes(binned["stacks"][0], binned["meta"][0], irf="gaussian", min_photons=20)
+    side = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    ours = np.load(tmp_path / "fit" / "fit.npy")
+    by_name = dict(zip(side["channels"], ours))
+    np.testing.assert_array_equal(by_name["tau1 (ps)"], maps["tau1_ps"].astype(np.float32))
+    np.testing.assert_array_equal(by_name["mask"] > 0.5, maps["mask"])
+    assert not np.isnan(maps["tau1_ps"][~maps["mask"]]).any()
+    assert np.isnan(maps["tau1_ps"][maps["mask"]]).all()
+    with pytest.raises(ScatterscopeError, match="components 4"):
+        scatterscope.fit_lifetimes(binned["stacks"][0], binned["meta"][0], components=4)
+    with pytest.raises(ScatterscopeError, match="holds no photon"):
+        scatterscope.fit_lifetimes(binned["stacks"][0], binned["meta"][0], irf=np.zeros(125))

@@ -52,6 +52,7 @@ __all__ = [
     "simulate",
     "learned_case",
     "decay_maps",
+    "fit_lifetimes",
     "reconstruct",
     "acquire",
     "acquire_mock",
@@ -308,6 +309,59 @@ def decay_maps(
         onset_ps,
         reference_phasors,
         float(reference_lifetime_ps),
+    )
+
+
+def fit_lifetimes(
+    counts: np.ndarray,
+    meta: Dict[str, Any],
+    components: int = 1,
+    irf: "str | np.ndarray" = "edge",
+    least_squares: bool = False,
+    binning: int = 0,
+    min_photons: float = 100.0,
+    global_fit: bool = False,
+    window: Optional[Tuple[int, int]] = None,
+    incomplete_decay: bool = True,
+    fit_irf_shift: bool = True,
+    frequency_hz: Optional[float] = None,
+) -> Dict[str, Any]:
+    """Lifetimes of a stack of counts ``(bins, rows, cols)`` (uint16 or
+    uint32, as :func:`bin_file` returns) with its metadata ``meta``, fitted
+    as ``scatterscope fit`` fits them: 1 to 3 exponentials and a
+    background reconvolved with the IRF (``irf``: an array of photons per
+    bin, ``"gaussian"``, ``"edge"`` or ``"none"`` for a tail fit), by
+    Poisson maximum likelihood (or weighted least squares), per pixel after
+    ``binning``, or with the lifetimes shared (``global_fit``). Returns
+    float64 maps ``tau1_ps``, ``tau1_error_ps``, ``a1``, ``a1_fraction``,
+    ``intensity_fraction1``, ... ``tau_amplitude_ps``,
+    ``tau_intensity_ps``, ``background``, ``reduced_chi2``, ``deviance``
+    (NaN where ``mask``), ``photons``, the summed decay's fit and ``notes``.
+    The frequency (for the earlier pulses' light) defaults to the
+    recording's.
+    """
+    f = frequency_hz if frequency_hz is not None else meta.get("laser_frequency_hz")
+    if counts.dtype not in (np.uint16, np.uint32):
+        raise ScatterscopeError("fit_lifetimes: counts must be uint16 or uint32 (bin_file's dtype)")
+    if isinstance(irf, str):
+        kind, decay = irf, None
+    else:
+        kind, decay = "measured", [float(v) for v in np.asarray(irf, np.float64).ravel()]
+    return _native.fit_lifetimes(
+        counts,
+        [float(t) for t in meta["bin_starts_ps"]],
+        float(meta["bin_width_ps"]),
+        None if f is None else float(f),
+        int(components),
+        kind,
+        decay,
+        bool(least_squares),
+        int(binning),
+        float(min_photons),
+        bool(global_fit),
+        None if window is None else (int(window[0]), int(window[1])),
+        bool(incomplete_decay),
+        bool(fit_irf_shift),
     )
 
 
