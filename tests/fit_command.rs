@@ -9,6 +9,8 @@ mod command;
 mod pydeps;
 #[path = "common/shared_data.rs"]
 mod shared_data;
+#[path = "common/standin.rs"]
+mod standin;
 
 use std::path::Path;
 
@@ -217,4 +219,105 @@ fn batch_runs_fits_and_records_them() {
     }
     let log = std::fs::read_to_string(out.join("two").join("job.log")).unwrap();
     assert!(log.contains("global fit: lifetimes shared"), "{log}");
+}
+
+/// The stand-in's FLIM scan told its objects' lifetimes (the bar 2.5 ns;
+/// the disc 0.4 and 2.5 ns, half the photons each; IRF 200 ps FWHM): the
+/// fit of the PTU the acquisition wrote finds them.
+#[test]
+fn a_mock_flim_scan_of_known_lifetimes_fits_to_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let acq = dir.path().join("acq");
+    let lib = standin::standin_library();
+    let o = standin::scatterscope_pq(
+        &[
+            "acquire",
+            "--device",
+            "picoquant:multiharp",
+            "--vendor-lib",
+            s(&lib),
+            "--scan",
+            "16x12",
+            "--duration",
+            "500ms",
+            "--out",
+            s(&acq),
+        ],
+        "scan=16x12,rate=2e7,lifetimes=2500/400+2500@0.5/1000,irf=200",
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let ptu = acq.join("acquisition.ptu");
+    let maps_of = |components: &str, out: &str| {
+        let out = dir.path().join(out);
+        let r = run(&[
+            "fit",
+            s(&ptu),
+            "--bin-width",
+            "50ps",
+            "--components",
+            components,
+            "--irf",
+            "gaussian",
+            "--min-photons",
+            "1000",
+            "--no-figures",
+            "--out",
+            s(&out),
+        ]);
+        assert!(r.status.success(), "{}", text(&r));
+        let meta: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("fit.json")).unwrap()).unwrap();
+        let names: Vec<String> = meta["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_str().unwrap().to_string())
+            .collect();
+        let bytes = std::fs::read(out.join("fit.npy")).unwrap();
+        let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+        let values: Vec<f32> = bytes[10 + header_len..]
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect();
+        (names, values, text(&r))
+    };
+    // The scene's objects on the 16 x 12 grid (the stand-in's layout).
+    let object = |x: usize, y: usize| {
+        let (fx, fy) = (x as f64 / 16.0, y as f64 / 12.0);
+        if (0.2..0.35).contains(&fx) && (0.15..0.85).contains(&fy) {
+            0
+        } else if (fx - 0.65).powi(2) + (fy - 0.5).powi(2) < 0.04 {
+            1
+        } else {
+            2
+        }
+    };
+    let median_of =
+        |(names, values, said): &(Vec<String>, Vec<f32>, String), map: &str, o: usize| {
+            let plane = values.len() / names.len();
+            let c = names.iter().position(|n| n == map).unwrap();
+            let m = names.iter().position(|n| n == "mask").unwrap();
+            let mut v: Vec<f64> = (0..plane)
+                .filter(|&p| object(p % 16, p / 16) == o && values[m * plane + p] == 0.0)
+                .map(|p| f64::from(values[c * plane + p]))
+                .collect();
+            assert!(
+                v.len() >= 5,
+                "{map} of object {o}: {} pixels fitted\n{said}",
+                v.len()
+            );
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+    let one = maps_of("1", "one");
+    let bar = median_of(&one, "tau1 (ps)", 0);
+    assert!((bar - 2500.0).abs() < 0.02 * 2500.0, "bar {bar}\n{}", one.2);
+    let two = maps_of("2", "two");
+    let disc = median_of(&two, "intensity-weighted mean lifetime (ps)", 1);
+    eprintln!("bar {bar:.1} ps (2500), disc {disc:.1} ps (1450)");
+    assert!(
+        (disc - 1450.0).abs() < 0.03 * 1450.0,
+        "disc {disc}\n{}",
+        two.2
+    );
 }

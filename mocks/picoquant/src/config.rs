@@ -18,6 +18,14 @@
 //! - `seed=S`: photon sampling seed (default 0).
 //! - `truth=PATH`: on StopMeas, write what was delivered (records, photons,
 //!   markers, overflows, per-pixel photons of a scan) to PATH as JSON.
+//! - `lifetimes=BAR/DISC/BACKGROUND`: a FLIM scan whose objects (the
+//!   scene's bar, disc and background) decay with known lifetimes instead
+//!   of the slab's time profile: each `T` (ps, one exponential) or
+//!   `T1+T2@F` (two, the first holding the share F of the photons); each
+//!   photon arrives at the pulse plus a Gaussian IRF of `irf=FWHM` ps
+//!   (default 150) plus its exponential delay, wrapped into the sync
+//!   period (so earlier pulses' light arrives too). The truth a test
+//!   checks a fit against.
 //! - `ph330_input_modes=no`: a PicoHarp 330 whose `PH330_GetFeatures` lacks
 //!   `FEATURE_INPT_MODE` (its inputs' trigger mode cannot be set).
 
@@ -68,6 +76,30 @@ pub struct MockConfig {
     pub th260_nano: bool,
     /// Whether a PicoHarp 330 has `FEATURE_INPT_MODE`.
     pub ph330_input_modes: bool,
+    /// The decays of the bar, disc and background, when told.
+    pub lifetimes: Option<[Decay; 3]>,
+    /// The IRF's FWHM (ps) with `lifetimes`.
+    pub irf_fwhm_ps: f64,
+}
+
+/// A decay an object is told to have: components (lifetime ps, share of
+/// the photons).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decay(pub Vec<(f64, f64)>);
+
+impl Decay {
+    /// `T` or `T1+T2@F`.
+    fn parse(s: &str) -> Option<Self> {
+        let positive = |v: &str| v.parse::<f64>().ok().filter(|x| x.is_finite() && *x > 0.0);
+        match s.split_once('+') {
+            None => Some(Self(vec![(positive(s)?, 1.0)])),
+            Some((a, rest)) => {
+                let (b, f) = rest.split_once('@')?;
+                let f = f.parse::<f64>().ok().filter(|f| (0.0..=1.0).contains(f))?;
+                Some(Self(vec![(positive(a)?, f), (positive(b)?, 1.0 - f)]))
+            }
+        }
+    }
 }
 
 impl Default for MockConfig {
@@ -85,6 +117,8 @@ impl Default for MockConfig {
             truth: None,
             th260_nano: false,
             ph330_input_modes: true,
+            lifetimes: None,
+            irf_fwhm_ps: 150.0,
         }
     }
 }
@@ -116,6 +150,15 @@ impl MockConfig {
                 "seed" => c.seed = value.parse().map_err(|_| bad())?,
                 "drift" => c.drift = value.parse().map_err(|_| bad())?,
                 "truth" => c.truth = Some(PathBuf::from(value)),
+                "lifetimes" => {
+                    let parts: Vec<Decay> = value
+                        .split('/')
+                        .map(Decay::parse)
+                        .collect::<Option<_>>()
+                        .ok_or_else(bad)?;
+                    c.lifetimes = Some(<[Decay; 3]>::try_from(parts).map_err(|_| bad())?);
+                }
+                "irf" => c.irf_fwhm_ps = number(value).filter(|v| *v > 0.0).ok_or_else(bad)?,
                 "ph330_input_modes" => {
                     c.ph330_input_modes = match value {
                         "yes" => true,

@@ -144,22 +144,65 @@ impl Event {
 /// The built-in scene on a `w` x `h` grid: a bright bar, a dimmer disc
 /// and a faint background, so that scanned images have structure.
 pub fn scene(w: usize, h: usize) -> Vec<f64> {
-    let mut s = vec![0.02; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let (fx, fy) = (x as f64 / w as f64, y as f64 / h as f64);
-            let bar = (0.2..0.35).contains(&fx) && (0.15..0.85).contains(&fy);
-            let disc = (fx - 0.65).powi(2) + (fy - 0.5).powi(2) < 0.04;
-            s[y * w + x] += if bar {
-                1.0
-            } else if disc {
-                0.5
-            } else {
-                0.0
-            };
-        }
+    (0..w * h)
+        .map(|p| 0.02 + [1.0, 0.5, 0.0][object(w, h, p % w, p / w)])
+        .collect()
+}
+
+/// Which object of the built-in scene point `(x, y)` of a `w` x `h` grid
+/// shows: 0 the bar, 1 the disc, 2 the background.
+pub fn object(w: usize, h: usize, x: usize, y: usize) -> usize {
+    let (fx, fy) = (x as f64 / w as f64, y as f64 / h as f64);
+    if (0.2..0.35).contains(&fx) && (0.15..0.85).contains(&fy) {
+        0
+    } else if (fx - 0.65).powi(2) + (fy - 0.5).powi(2) < 0.04 {
+        1
+    } else {
+        2
     }
-    s
+}
+
+/// Delays of a FLIM scan told its objects' lifetimes: the pulse, a
+/// Gaussian IRF and the object's exponential, wrapped into the period.
+struct Lifetimes {
+    rng: rand_chacha::ChaCha8Rng,
+    irf: rand_distr::Normal<f64>,
+    decays: [crate::config::Decay; 3],
+    period_ps: f64,
+}
+
+impl Lifetimes {
+    fn new(cfg: &MockConfig, period_ps: f64) -> Option<Self> {
+        use rand::SeedableRng;
+        let decays = cfg.lifetimes.clone()?;
+        Some(Self {
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x11fe_7173),
+            irf: rand_distr::Normal::new(PULSE_DELAY_PS, cfg.irf_fwhm_ps / 2.354_820_045)
+                .expect("a positive width"),
+            decays,
+            period_ps,
+        })
+    }
+
+    /// A photon's delay after the sync from object `o`.
+    fn delay(&mut self, o: usize) -> f64 {
+        use rand::RngExt;
+        use rand_distr::Distribution;
+        let mut u: f64 = self.rng.random();
+        let comps = &self.decays[o].0;
+        let mut tau = comps[comps.len() - 1].0;
+        for &(t, share) in comps {
+            if u < share {
+                tau = t;
+                break;
+            }
+            u -= share;
+        }
+        let e: f64 = rand_distr::Exp::new(1.0 / tau)
+            .expect("a positive lifetime")
+            .sample(&mut self.rng);
+        (self.irf.sample(&mut self.rng) + e).rem_euclid(self.period_ps)
+    }
 }
 
 fn emitter(cfg: &MockConfig, w: usize, h: usize, period_ps: f64) -> Result<Emitter, String> {
@@ -208,6 +251,7 @@ pub fn build(
         }
         Some((w, h)) => {
             let mut e = emitter(cfg, w, h, period_ps)?;
+            let mut told = Lifetimes::new(cfg, period_ps);
             let line = w as u64 * DWELL_SYNCS + RETRACE_SYNCS;
             let frame_syncs = h as u64 * line;
             let frame_span = frame_syncs.div_ceil(wrap) * wrap;
@@ -252,7 +296,13 @@ pub fn build(
                         + 1
                         + x * DWELL_SYNCS
                         + d.sync % DWELL_SYNCS,
-                    micro: micro(d.delay_ps),
+                    micro: micro(match told.as_mut() {
+                        Some(t) => {
+                            let p = d.pixel as usize;
+                            t.delay(object(w, h, p % w, p / w))
+                        }
+                        None => d.delay_ps,
+                    }),
                     pixel: (y * w as u64 + x) as u32,
                 });
             }
