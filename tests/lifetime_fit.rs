@@ -95,6 +95,7 @@ fn cramer_rao(truth: &Truth, photons: f64, c: usize) -> f64 {
         components: k,
         irf: IrfShape::Gaussian,
         period_bins: Some(BINS as f64),
+        kernel: Default::default(),
     };
     let np = model.parameters();
     let mut p = Vec::new();

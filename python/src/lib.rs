@@ -693,6 +693,7 @@ fn fit_lifetimes<'py>(
         window,
         incomplete_decay,
         fit_irf_shift,
+        kernel: Default::default(),
     };
     let fitted = |v: CountsView<'_>| fit_maps(v, &bin_starts_ps, bin_width_ps, frequency_hz, &options);
     let maps = if let Ok(a) = counts.extract::<PyReadonlyArray3<'py, u16>>() {

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use scatterscope::decay::fit::FitOptions;
 use scatterscope::decay::fit::file::{FitRequest, IrfRequest, fit_file};
+use scatterscope::decay::fit::model::Kernel;
 use scatterscope::decay::fit::optimise::Objective;
 use scatterscope::tags::bin_file::BinSpec;
 
@@ -48,6 +49,11 @@ pub struct FitArgs {
     /// The fitted bins, FIRST:END (END excluded).
     #[arg(long, value_parser = parse_window)]
     window: Option<(usize, usize)>,
+    /// Sample each exponential at the bins' starts after its IRF sample
+    /// (flimlib's discrete convolution) instead of integrating it over the
+    /// bins.
+    #[arg(long)]
+    sampled_kernel: bool,
     /// Hold a measured IRF's shift at 0 instead of fitting it.
     #[arg(long)]
     irf_shift_fixed: bool,
@@ -99,6 +105,11 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             window: args.window,
             incomplete_decay: !args.no_incomplete_decay,
             fit_irf_shift: !args.irf_shift_fixed,
+            kernel: if args.sampled_kernel {
+                Kernel::Sampled
+            } else {
+                Kernel::Integrated
+            },
             ..FitOptions::default()
         },
         irf,

@@ -37,7 +37,7 @@ pub mod optimise;
 use ndarray::{Array2, ArrayView3};
 use rayon::prelude::*;
 
-use self::model::{DecayModel, IrfShape};
+use self::model::{DecayModel, IrfShape, Kernel};
 use self::optimise::{Fitted, Objective, fit};
 use super::DecayError;
 use crate::stack::CountsView;
@@ -82,6 +82,8 @@ pub struct FitOptions {
     pub incomplete_decay: bool,
     /// Fit a measured IRF's shift on the summed decay (else hold it at 0).
     pub fit_irf_shift: bool,
+    /// How the IRF's exponentials are binned.
+    pub kernel: Kernel,
 }
 
 impl Default for FitOptions {
@@ -96,6 +98,7 @@ impl Default for FitOptions {
             window: None,
             incomplete_decay: true,
             fit_irf_shift: true,
+            kernel: Kernel::Integrated,
         }
     }
 }
@@ -342,7 +345,11 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
         components: k,
         irf,
         period_bins,
+        kernel: options.kernel,
     };
+    if options.kernel == Kernel::Sampled && !matches!(model.irf, IrfShape::Tail) {
+        notes.push("the exponentials sampled at the bins' starts after each IRF sample (flimlib's discrete convolution), not integrated over the bins (asked)".into());
+    }
     let np = model.parameters();
     let bounds = bounds(&model);
     // Which pixels are fitted, and the summed decay of those.

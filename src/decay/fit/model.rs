@@ -30,6 +30,18 @@ pub enum IrfShape {
     Gaussian,
 }
 
+/// How an exponential after an IRF sample is put into bins.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Kernel {
+    /// The exact integral over each bin of a photon leaving anywhere in
+    /// its IRF bin (what a TCSPC histogram holds).
+    #[default]
+    Integrated,
+    /// The exponential sampled at the bins' starts from the IRF sample's
+    /// (flimlib's discrete convolution): about half a bin later.
+    Sampled,
+}
+
 /// The fixed part of a model: the window's bins, the components, the IRF
 /// and the laser period.
 #[derive(Debug, Clone)]
@@ -44,6 +56,8 @@ pub struct DecayModel {
     pub irf: IrfShape,
     /// The laser period in bins, when the incomplete decay is modelled.
     pub period_bins: Option<f64>,
+    /// How the IRF's exponentials are binned.
+    pub kernel: Kernel,
 }
 
 /// Where each parameter sits in a parameter vector: `N_1, tau_1, ...,
@@ -215,14 +229,21 @@ impl DecayModel {
         let n = self.bins;
         let r = (-1.0 / tau).exp();
         let dr = r / (tau * tau);
-        // A photon leaves anywhere in its IRF bin, uniformly: it stays in
-        // that bin with probability e0 = 1 - tau (1 - r), and reaches bin
-        // m + j (j >= 1) with c1 r^(j-1), c1 = tau (1 - r)^2.
-        let (e0, de0) = (1.0 - tau * (1.0 - r), -(1.0 - r) + tau * dr);
-        let (c1, dc1) = (
-            tau * (1.0 - r) * (1.0 - r),
-            (1.0 - r) * (1.0 - r) - 2.0 * tau * (1.0 - r) * dr,
-        );
+        let ((e0, de0), (c1, dc1)) = match self.kernel {
+            // A photon leaves anywhere in its IRF bin, uniformly: it stays
+            // in that bin with probability e0 = 1 - tau (1 - r), and
+            // reaches bin m + j (j >= 1) with c1 r^(j-1), c1 = tau (1 -
+            // r)^2.
+            Kernel::Integrated => (
+                (1.0 - tau * (1.0 - r), -(1.0 - r) + tau * dr),
+                (
+                    tau * (1.0 - r) * (1.0 - r),
+                    (1.0 - r) * (1.0 - r) - 2.0 * tau * (1.0 - r) * dr,
+                ),
+            ),
+            // Sampled at the bins' starts, normalised: (1 - r) r^j.
+            Kernel::Sampled => ((1.0 - r, -dr), (r * (1.0 - r), dr * (1.0 - 2.0 * r))),
+        };
         // G[i] = sum_{m < i} irf[m] c1 r^(i-1-m): the recursion
         // G[i] = r G[i-1] + c1 irf[i-1].
         let (mut g, mut dg) = (0.0, 0.0);
@@ -286,6 +307,7 @@ mod tests {
             components: 2,
             irf,
             period_bins: period,
+            kernel: Kernel::Integrated,
         }
     }
 
@@ -309,8 +331,15 @@ mod tests {
                 vec![1000.0, 300.0, 500.0, 1800.0, 2.0, 9.2, 1.7],
             ),
         ] {
-            for period in [None, Some(80.0)] {
-                let m = model(irf.clone(), period);
+            for (period, kernel) in [
+                (None, Kernel::Integrated),
+                (Some(80.0), Kernel::Integrated),
+                (Some(80.0), Kernel::Sampled),
+            ] {
+                let m = DecayModel {
+                    kernel,
+                    ..model(irf.clone(), period)
+                };
                 let np = m.parameters();
                 let mut mu = vec![0.0; 64];
                 let mut jac = vec![0.0; 64 * np];
@@ -350,6 +379,7 @@ mod tests {
             components: 1,
             irf: IrfShape::Measured(irf.iter().map(|v| v / irf.iter().sum::<f64>()).collect()),
             period_bins: None,
+            kernel: Kernel::Integrated,
         };
         let mut mu = vec![0.0; 400];
         long.evaluate(&[1000.0, 1000.0, 0.0, 0.0], &mut mu, None);
@@ -371,6 +401,7 @@ mod tests {
                 g.iter().map(|v| v / s).collect()
             }),
             period_bins: Some(64.0),
+            kernel: Kernel::Integrated,
         };
         let mut mu = vec![0.0; 64];
         short.evaluate(&[1000.0, 9600.0, 0.0, 0.0], &mut mu, None);
