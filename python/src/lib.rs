@@ -672,12 +672,17 @@ fn fit_lifetimes<'py>(
         (other, d) => {
             return Err(msg(format!(
                 "fit_lifetimes: irf `{other}`{}: give an IRF array (irf=\"measured\"), or \"gaussian\", \"edge\" or \"none\" without one",
-                if d.is_some() { " with an IRF array" } else { "" }
+                if d.is_some() {
+                    " with an IRF array"
+                } else {
+                    ""
+                }
             )));
         }
     };
     if let Some(f) = frequency_hz {
-        scatterscope::tags::laser::given(f).map_err(|e| msg(format!("fit_lifetimes: frequency_hz: {e}")))?;
+        scatterscope::tags::laser::given(f)
+            .map_err(|e| msg(format!("fit_lifetimes: frequency_hz: {e}")))?;
     }
     let options = FitOptions {
         components,
@@ -695,7 +700,8 @@ fn fit_lifetimes<'py>(
         fit_irf_shift,
         kernel: Default::default(),
     };
-    let fitted = |v: CountsView<'_>| fit_maps(v, &bin_starts_ps, bin_width_ps, frequency_hz, &options);
+    let fitted =
+        |v: CountsView<'_>| fit_maps(v, &bin_starts_ps, bin_width_ps, frequency_hz, &options);
     let maps = if let Ok(a) = counts.extract::<PyReadonlyArray3<'py, u16>>() {
         let v = a.as_array();
         py.detach(|| fitted(CountsView::U16(v)))
