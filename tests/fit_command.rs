@@ -14,49 +14,38 @@ mod standin;
 
 use std::path::Path;
 
-use command::{SMALL_SENSOR, run, text};
+use command::{mock_tags, run, text};
 use shared_data::shared_data;
+
+/// The bins every fit of the mock's tags here uses: 125 of 100 ps (one
+/// 80 MHz period).
+const BINS: [&str; 4] = ["--bin-width", "100ps", "--bins", "125"];
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// A mock acquisition's tag file (the ST-PSF's decays through the slab).
-fn mock_recording(dir: &Path) -> std::path::PathBuf {
-    let tags = dir.join("run.sstags");
-    let acq = dir.join("acq");
-    let args = [
-        &["acquire", "--device", "mock", "--tags", s(&tags)][..],
-        &SMALL_SENSOR,
-        &["--out", s(&acq)],
-    ]
-    .concat();
-    let r = run(&args);
-    assert!(r.status.success(), "{}", text(&r));
-    tags
-}
-
 #[test]
 fn a_fit_writes_its_maps_and_figures_and_counts_what_it_masked() {
     let dir = tempfile::tempdir().unwrap();
-    let tags = mock_recording(dir.path());
+    let tags = mock_tags(dir.path());
     let out = dir.path().join("fit");
-    let r = run(&[
-        "fit",
-        s(&tags),
-        "--bin-width",
-        "100ps",
-        "--bins",
-        "125",
-        "--components",
-        "2",
-        "--irf",
-        "gaussian",
-        "--min-photons",
-        "50",
-        "--out",
-        s(&out),
-    ]);
+    let args = [
+        &["fit", s(&tags)][..],
+        &BINS,
+        &[
+            "--components",
+            "2",
+            "--irf",
+            "gaussian",
+            "--min-photons",
+            "50",
+            "--out",
+            s(&out),
+        ][..],
+    ]
+    .concat();
+    let r = run(&args);
     assert!(r.status.success(), "{}", text(&r));
     let said = text(&r);
     for f in [
@@ -117,7 +106,7 @@ fn a_fit_writes_its_maps_and_figures_and_counts_what_it_masked() {
 #[test]
 fn bad_fits_are_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
-    let tags = mock_recording(dir.path());
+    let tags = mock_tags(dir.path());
     let irf_of = |name: &str, values: &[f64]| {
         let p = dir.path().join(name);
         let mut f = std::fs::File::create(&p).unwrap();
@@ -142,16 +131,9 @@ fn bad_fits_are_refused_by_name() {
         (vec!["--components", "4"], "4"),
         (vec!["--min-photons", "NaN"], "min_photons NaN"),
     ] {
-        let mut a = vec![
-            "fit",
-            s(&tags),
-            "--bin-width",
-            "100ps",
-            "--bins",
-            "125",
-            "--out",
-            s(&out),
-        ];
+        let mut a = vec!["fit", s(&tags)];
+        a.extend(BINS);
+        a.extend(["--out", s(&out)]);
         a.extend(&args);
         let r = run(&a);
         assert!(!r.status.success(), "{args:?}: {}", text(&r));
@@ -333,7 +315,7 @@ fn a_mock_flim_scan_of_known_lifetimes_fits_to_them() {
 #[test]
 fn batch_runs_fits_and_records_them() {
     let dir = tempfile::tempdir().unwrap();
-    let tags = mock_recording(dir.path());
+    let tags = mock_tags(dir.path());
     let manifest = dir.path().join("jobs.toml");
     std::fs::write(
         &manifest,

@@ -14,7 +14,7 @@ mod shared_data;
 
 use std::path::Path;
 
-use command::{SMALL_SENSOR, run, text};
+use command::{mock_tags, run, text};
 use shared_data::shared_data;
 
 fn s(p: &Path) -> &str {
@@ -79,16 +79,7 @@ fn an_sdt_image_maps_block_by_block_as_phasorpy_and_numpy_compute_them() {
 /// Records a mock acquisition's tags, bins them to `.npy`: (the tag
 /// file, the stack).
 fn mock_recording(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
-    let tags = dir.join("run.sstags");
-    let acq = dir.join("acq");
-    let args = [
-        &["acquire", "--device", "mock", "--tags", s(&tags)][..],
-        &SMALL_SENSOR,
-        &["--out", s(&acq)],
-    ]
-    .concat();
-    let r = run(&args);
-    assert!(r.status.success(), "{}", text(&r));
+    let tags = mock_tags(dir);
     let r = run(&[
         "bin",
         s(&tags),

@@ -60,16 +60,19 @@ fn draw(truth: &Truth, photons: f64, pixels: usize, seed: u64) -> Array3<u32> {
 }
 
 /// A measured IRF: 10^6 photons of the truth's IRF alone.
-fn measured_irf(truth: &Truth) -> Vec<f64> {
+fn measured_irf(truth: &Truth) -> IrfSource {
     let irf_only = Truth {
         components: vec![(1e-3, 1.0)],
         background: 0.0,
         fwhm_ps: truth.fwhm_ps,
     };
-    draw(&irf_only, 1e6, 1, 99)
-        .iter()
-        .map(|&v| f64::from(v))
-        .collect()
+    IrfSource::Measured {
+        decay: draw(&irf_only, 1e6, 1, 99)
+            .iter()
+            .map(|&v| f64::from(v))
+            .collect(),
+        what: "the simulated IRF".into(),
+    }
 }
 
 fn fit(counts: &Array3<u32>, options: &FitOptions) -> FitMaps {
@@ -156,10 +159,7 @@ fn single_exponentials_are_unbiased_and_at_the_cramer_rao_bound() {
                 let maps = fit(
                     &counts,
                     &FitOptions {
-                        irf: IrfSource::Measured {
-                            decay: measured_irf(&truth),
-                            what: "the simulated IRF".into(),
-                        },
+                        irf: measured_irf(&truth),
                         ..FitOptions::default()
                     },
                 );
@@ -209,10 +209,7 @@ fn double_exponentials_are_unbiased_and_near_the_cramer_rao_bound() {
                 &counts,
                 &FitOptions {
                     components: 2,
-                    irf: IrfSource::Measured {
-                        decay: measured_irf(&truth),
-                        what: "the simulated IRF".into(),
-                    },
+                    irf: measured_irf(&truth),
                     ..FitOptions::default()
                 },
             );
@@ -275,10 +272,7 @@ fn a_global_fit_shares_the_lifetimes_of_dim_pixels_and_finds_their_fractions() {
         &counts,
         &FitOptions {
             components: 2,
-            irf: IrfSource::Measured {
-                decay: irf,
-                what: "the simulated IRF".into(),
-            },
+            irf,
             global: true,
             ..FitOptions::default()
         },

@@ -44,6 +44,7 @@
 //! notes count them.
 
 pub mod fit;
+mod map_files;
 pub mod recording;
 
 use ndarray::{Array2, ArrayView3, Axis};

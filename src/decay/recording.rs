@@ -17,9 +17,12 @@
 
 use std::path::{Path, PathBuf};
 
-use ndarray::{Array2, Array3, Axis};
+use ndarray::Array2;
 use serde::Serialize;
 
+use super::map_files::{
+    LifetimeImage, draw_lifetime, refuse_inputs, stack_tail, unmasked_finite, write_channels,
+};
 use super::{DecayMaps, DecayOptions, Onset, Reference, decay_maps, decay_phasors};
 use crate::files::input::same_file;
 use crate::plot::quantile;
@@ -306,11 +309,7 @@ fn write_maps(
     input: &Path,
     request: &LifetimeRequest,
 ) -> Result<MapsWritten, StackError> {
-    let tail = if s.of > 1 {
-        format!("_f{:03}", s.index)
-    } else {
-        String::new()
-    };
+    let tail = stack_tail(s);
     let dir = &request.out;
     let tif = dir.join(format!("maps{tail}.ome.tif"));
     let npy = dir.join(format!("maps{tail}.npy"));
@@ -321,42 +320,14 @@ fn write_maps(
     if request.figures {
         files.extend([lifetime_png.clone(), phasor_png.clone()]);
     }
-    let reads = [
-        input.to_owned(),
-        input.with_extension("set"),
-        request
-            .reference
-            .as_ref()
-            .map_or_else(PathBuf::new, |r| r.path().to_owned()),
-    ];
-    if let Some(f) = files.iter().find(|f| reads.iter().any(|r| same_file(f, r))) {
-        return Err(StackError::format(
-            f,
-            "is a file the command reads: writing it would destroy it; choose another --out",
-        ));
-    }
+    let mut reads = vec![input.to_owned(), input.with_extension("set")];
+    reads.extend(request.reference.as_ref().map(|r| r.path().to_owned()));
+    refuse_inputs(&files, &reads)?;
     let chans = channels(maps);
     let (h, w) = maps.intensity.dim();
-    let mut stacked = Array3::<f32>::zeros((chans.len(), h, w));
-    for (mut plane, (_, m)) in stacked.axis_iter_mut(Axis(0)).zip(&chans) {
-        plane.zip_mut_with(m.as_ref(), |p, &v| *p = v as f32);
-    }
-    let pitch = (!s.meta.is_unstated(Unstated::PixelPitch)).then_some(s.meta.pixel_pitch_cm);
-    let named: Vec<(String, ndarray::ArrayView2<f32>)> = chans
-        .iter()
-        .zip(stacked.axis_iter(Axis(0)))
-        .map(|((n, _), p)| (n.clone(), p))
-        .collect();
-    crate::formats::ome_tiff::write_named_images(&named, pitch, &tif)?;
-    {
-        use ndarray_npy::WriteNpyExt;
-        let file = crate::files::AtomicFile::create(&npy).map_err(|e| StackError::io(&npy, e))?;
-        let mut out = std::io::BufWriter::new(file);
-        stacked
-            .write_npy(&mut out)
-            .map_err(|e| StackError::format(&npy, format!("writing .npy: {e}")))?;
-        crate::files::AtomicFile::commit_buffered(out).map_err(|e| StackError::io(&npy, e))?;
-    }
+    let views: Vec<(String, ndarray::ArrayView2<f64>)> =
+        chans.iter().map(|(n, m)| (n.clone(), m.view())).collect();
+    write_channels(&views, s.meta, &tif, &npy)?;
     let sidecar = Sidecar {
         channels: chans.iter().map(|(n, _)| n.as_str()).collect(),
         onset_ps: maps.onset_ps,
@@ -371,13 +342,7 @@ fn write_maps(
     let shown = shown_lifetime(maps);
     // The shown lifetime's unmasked, finite values: the figure's colour
     // range and the printed median.
-    let unmasked: Vec<f64> = shown
-        .1
-        .iter()
-        .zip(&maps.mask)
-        .filter(|(v, m)| !**m && v.is_finite())
-        .map(|(v, _)| *v)
-        .collect();
+    let unmasked = unmasked_finite(shown.1, &maps.mask);
     if request.figures {
         figures(maps, &shown, &unmasked, &lifetime_png, &phasor_png)?;
     }
@@ -414,20 +379,6 @@ fn figures(
     lifetime_png: &Path,
     phasor_png: &Path,
 ) -> Result<(), StackError> {
-    // The colours span the 2nd to 98th percentile of the unmasked pixels;
-    // the brightness, intensity up to its 99th percentile.
-    let range = match (
-        quantile(unmasked.to_vec(), 0.02),
-        quantile(unmasked.to_vec(), 0.98),
-    ) {
-        (Some(a), Some(b)) if b > a => (a, b),
-        (Some(a), _) => (a - 1.0, a + 1.0),
-        _ => (0.0, 1.0),
-    };
-    let top = quantile(maps.intensity.iter().copied().collect(), 0.99)
-        .filter(|t| *t > 0.0)
-        .unwrap_or(1.0);
-    let brightness = maps.intensity.mapv(|n| (n / top).min(1.0));
     let shown = ndarray::Zip::from(*lifetime)
         .and(&maps.mask)
         .map_collect(|&v, &m| if m { f64::NAN } else { v });
@@ -436,17 +387,16 @@ fn figures(
         maps.frequency_hz * 1e-6
     );
     let bar = format!("{name} (ps)");
-    crate::plot::coloured_map(
+    draw_lifetime(
         lifetime_png,
-        &crate::plot::ColouredMap {
+        &LifetimeImage {
             values: shown.view(),
-            brightness: brightness.view(),
-            range,
+            unmasked,
+            photons: &maps.intensity,
             title: &title,
             bar_label: &bar,
         },
-    )
-    .map_err(|e| StackError::format(lifetime_png, format!("drawing: {e}")))?;
+    )?;
     let first = maps.phasors.first().expect("at least one harmonic");
     let (g, s, calibrated) = match &first.calibrated {
         Some(c) => (&c.g, &c.s, true),

@@ -111,3 +111,21 @@ pub fn wait_for_recording(path: &Path) {
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
 }
+
+/// Records a small mock acquisition's tags into `dir/run.sstags` (its
+/// stack in `dir/acq`); the tag file.
+#[allow(dead_code)]
+pub fn mock_tags(dir: &Path) -> std::path::PathBuf {
+    let tags = dir.join("run.sstags");
+    let acq = dir.join("acq");
+    let (t, a) = (tags.to_str().unwrap(), acq.to_str().unwrap());
+    let args = [
+        &["acquire", "--device", "mock", "--tags", t][..],
+        &SMALL_SENSOR,
+        &["--out", a],
+    ]
+    .concat();
+    let r = run(&args);
+    assert!(r.status.success(), "{}", text(&r));
+    tags
+}

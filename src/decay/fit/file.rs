@@ -16,10 +16,13 @@
 
 use std::path::{Path, PathBuf};
 
-use ndarray::{Array2, Array3, Axis};
+use ndarray::Array2;
 use serde::Serialize;
 
 use super::{FitMaps, FitOptions, IrfSource, fit_maps};
+use crate::decay::map_files::{
+    LifetimeImage, draw_lifetime, refuse_inputs, stack_tail, unmasked_finite, write_channels,
+};
 use crate::decay::recording::reference_decay;
 use crate::files::input::same_file;
 use crate::plot::quantile;
@@ -241,11 +244,7 @@ fn write_fit(
     input: &Path,
     request: &FitRequest,
 ) -> Result<FitWritten, StackError> {
-    let tail = if s.of > 1 {
-        format!("_f{:03}", s.index)
-    } else {
-        String::new()
-    };
+    let tail = stack_tail(s);
     let dir = &request.out;
     let tif = dir.join(format!("fit{tail}.ome.tif"));
     let npy = dir.join(format!("fit{tail}.npy"));
@@ -260,34 +259,12 @@ fn write_fit(
     if let IrfRequest::File(irf) = &request.irf {
         reads.push(irf.clone());
     }
-    if let Some(f) = files.iter().find(|f| reads.iter().any(|r| same_file(f, r))) {
-        return Err(StackError::format(
-            f,
-            "is a file the command reads: writing it would destroy it; choose another --out",
-        ));
-    }
+    refuse_inputs(&files, &reads)?;
     let chans = channels(maps);
     let (h, w) = maps.photons.dim();
-    let mut stacked = Array3::<f32>::zeros((chans.len(), h, w));
-    for (mut plane, (_, m)) in stacked.axis_iter_mut(Axis(0)).zip(&chans) {
-        plane.zip_mut_with(m, |p, &v| *p = v as f32);
-    }
-    let pitch = (!s.meta.is_unstated(Unstated::PixelPitch)).then_some(s.meta.pixel_pitch_cm);
-    let named: Vec<(String, ndarray::ArrayView2<f32>)> = chans
-        .iter()
-        .zip(stacked.axis_iter(Axis(0)))
-        .map(|((n, _), p)| (n.clone(), p))
-        .collect();
-    crate::formats::ome_tiff::write_named_images(&named, pitch, &tif)?;
-    {
-        use ndarray_npy::WriteNpyExt;
-        let file = crate::files::AtomicFile::create(&npy).map_err(|e| StackError::io(&npy, e))?;
-        let mut out = std::io::BufWriter::new(file);
-        stacked
-            .write_npy(&mut out)
-            .map_err(|e| StackError::format(&npy, format!("writing .npy: {e}")))?;
-        crate::files::AtomicFile::commit_buffered(out).map_err(|e| StackError::io(&npy, e))?;
-    }
+    let views: Vec<(String, ndarray::ArrayView2<f64>)> =
+        chans.iter().map(|(n, m)| (n.clone(), m.view())).collect();
+    write_channels(&views, s.meta, &tif, &npy)?;
     let mut notes = maps.notes.clone();
     if !request.figures {
         notes.push("figures left out (asked)".into());
@@ -305,13 +282,7 @@ fn write_fit(
     };
     let text = serde_json::to_string_pretty(&sidecar).expect("the sidecar serialises");
     crate::files::write_atomic(&json, text).map_err(|e| StackError::io(&json, e))?;
-    let unmasked: Vec<f64> = maps
-        .tau_intensity_ps
-        .iter()
-        .zip(&maps.mask)
-        .filter(|(v, m)| !**m && v.is_finite())
-        .map(|(v, _)| *v)
-        .collect();
+    let unmasked = unmasked_finite(&maps.tau_intensity_ps, &maps.mask);
     if request.figures {
         figures(maps, &unmasked, &lifetime_png, &decay_png)?;
     }
@@ -332,29 +303,16 @@ fn figures(
     lifetime_png: &Path,
     decay_png: &Path,
 ) -> Result<(), StackError> {
-    let range = match (
-        quantile(unmasked.to_vec(), 0.02),
-        quantile(unmasked.to_vec(), 0.98),
-    ) {
-        (Some(a), Some(b)) if b > a => (a, b),
-        (Some(a), _) => (a - 1.0, a + 1.0),
-        _ => (0.0, 1.0),
-    };
-    let top = quantile(maps.photons.iter().copied().collect(), 0.99)
-        .filter(|t| *t > 0.0)
-        .unwrap_or(1.0);
-    let brightness = maps.photons.mapv(|n| (n / top).min(1.0));
-    crate::plot::coloured_map(
+    draw_lifetime(
         lifetime_png,
-        &crate::plot::ColouredMap {
+        &LifetimeImage {
             values: maps.tau_intensity_ps.view(),
-            brightness: brightness.view(),
-            range,
+            unmasked,
+            photons: &maps.photons,
             title: "intensity-weighted mean lifetime, weighted by photons (masked black)",
             bar_label: "lifetime (ps)",
         },
-    )
-    .map_err(|e| StackError::format(lifetime_png, format!("drawing: {e}")))?;
+    )?;
     let times: Vec<f64> = maps.summed.starts_ps.iter().map(|t| t * 1e-3).collect();
     crate::plot::decay_fit(
         decay_png,

@@ -421,23 +421,12 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
     );
     let mut fitted_sum = vec![0.0; n];
     model.evaluate(&summed_fit.params, &mut fitted_sum, None);
-    let irf_shown = match &model.irf {
-        IrfShape::Tail => Vec::new(),
-        _ => {
-            let mut unit = summed_fit.params.clone();
-            for c in 0..k {
-                unit[2 * c] = 0.0;
-            }
-            unit[model.background()] = 0.0;
-            // The IRF alone: a component of lifetime near zero.
-            unit[0] = 1.0;
-            unit[1] = 1e-3 * width_ps;
-            let mut v = vec![0.0; n];
-            model.evaluate(&unit, &mut v, None);
-            let top = v.iter().cloned().fold(0.0, f64::max).max(1e-300);
-            let peak_y = summed.iter().cloned().fold(0.0, f64::max);
-            v.iter().map(|x| x / top * peak_y).collect()
-        }
+    // The IRF, scaled to the summed decay's peak for the figure.
+    let irf_shown = {
+        let v = model.irf(&summed_fit.params);
+        let top = v.iter().cloned().fold(0.0, f64::max).max(1e-300);
+        let peak_y = summed.iter().cloned().fold(0.0, f64::max);
+        v.iter().map(|x| x / top * peak_y).collect()
     };
     notes.push(format!(
         "summed decay: {}, reduced chi-squared {:.3}",

@@ -84,6 +84,12 @@ impl DecayModel {
         2 * self.components
     }
 
+    /// The IRF on the window's bins at parameters `p` (the model's layout);
+    /// empty for a tail fit.
+    pub fn irf(&self, p: &[f64]) -> Vec<f64> {
+        self.irf_on_bins(&p[self.background() + 1..]).0
+    }
+
     /// The IRF on the window's bins for the IRF's parameters `p`, and its
     /// derivative by each of them.
     fn irf_on_bins(&self, p: &[f64]) -> (Vec<f64>, Vec<Vec<f64>>) {
