@@ -81,6 +81,7 @@ pub mod config;
 pub mod confocal;
 pub mod decay;
 pub mod denoise;
+pub mod embedded;
 pub mod error_text;
 pub mod events;
 pub mod fft2;

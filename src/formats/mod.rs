@@ -19,6 +19,9 @@
 //! Measurements of other instruments:
 //! - [`mat`]: MATLAB v7.3 (HDF5) datasets, e.g. the confocal diffuse
 //!   tomography captures and scans.
+//! - [`mat5`]: MATLAB level 5 MAT-files (MATLAB's default before v7.3),
+//!   e.g. SPAD-camera cubes as labs publish them; and a writer.
+//! - [`lab_array`]: one named numeric array from any of those or `.npy`.
 //!
 //! Which is which: [`detect`], by a file's first bytes, then its extension.
 //!
@@ -30,7 +33,9 @@ pub mod becker_hickl;
 pub mod detect;
 pub mod exr;
 pub mod image;
+pub mod lab_array;
 pub mod mat;
+pub mod mat5;
 pub mod npy;
 pub mod ome_tiff;
 pub mod picoquant;

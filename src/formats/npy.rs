@@ -149,7 +149,7 @@ fn exact_counts(path: &Path, counts: Array3<u64>) -> Result<Array3<u32>, StackEr
 /// anything is allocated for them.
 pub(crate) fn checked_header(path: &Path, ndim: usize) -> Result<(String, Vec<usize>), StackError> {
     let (descr, shape, data_start) = read_header(path)?;
-    check_size(path, &descr, &shape, data_start, ndim)?;
+    check_size(path, &descr, &shape, data_start, Some(ndim))?;
     let item: u64 = descr.get(2..).and_then(|n| n.parse().ok()).unwrap_or(1);
     crate::memory::check(bytes_of(shape.iter().copied(), item + 12), || {
         format!("the {shape:?} array of {}", path.display())
@@ -165,9 +165,11 @@ fn check_size(
     descr: &str,
     shape: &[usize],
     data_start: u64,
-    ndim: usize,
+    ndim: Option<usize>,
 ) -> Result<(), StackError> {
-    if shape.len() != ndim {
+    if let Some(ndim) = ndim
+        && shape.len() != ndim
+    {
         let what = if ndim == 3 {
             "a stack is a 3-D (bins, rows, columns) array"
         } else {
@@ -193,6 +195,57 @@ fn check_size(
             ),
         )),
     }
+}
+
+/// Any numeric `.npy` array (integers of any width and sign, floats,
+/// booleans; either byte order; C or Fortran order) as `f64` in its own
+/// shape, after checking that the file holds every byte its shape needs and
+/// that the array and its conversion fit the memory budget.
+pub fn read_numbers(path: &Path) -> Result<ndarray::ArrayD<f64>, StackError> {
+    use ndarray::ArrayD;
+    let (descr, shape, data_start) = read_header(path)?;
+    check_size(path, &descr, &shape, data_start, None)?;
+    let item: u64 = descr.get(2..).and_then(|n| n.parse().ok()).unwrap_or(1);
+    crate::memory::check(bytes_of(shape.iter().copied(), item + 8), || {
+        format!("the {shape:?} array of {}", path.display())
+    })
+    .map_err(ReadError::from)?;
+    let open = || {
+        File::open(path)
+            .map(BufReader::new)
+            .map_err(|e| StackError::io(path, e))
+    };
+    let npy_err = |e: ndarray_npy::ReadNpyError| StackError::format(path, format!(".npy: {e}"));
+    macro_rules! as_f64 {
+        ($t:ty) => {
+            ArrayD::<$t>::read_npy(open()?)
+                .map_err(npy_err)?
+                .mapv(|v| v as f64)
+        };
+    }
+    Ok(match descr.get(1..).unwrap_or("") {
+        "f8" => ArrayD::<f64>::read_npy(open()?).map_err(npy_err)?,
+        "f4" => as_f64!(f32),
+        "i1" => as_f64!(i8),
+        "u1" => as_f64!(u8),
+        "i2" => as_f64!(i16),
+        "u2" => as_f64!(u16),
+        "i4" => as_f64!(i32),
+        "u4" => as_f64!(u32),
+        "i8" => as_f64!(i64),
+        "u8" => as_f64!(u64),
+        "b1" => ArrayD::<bool>::read_npy(open()?)
+            .map_err(npy_err)?
+            .mapv(|v| f64::from(u8::from(v))),
+        _ => {
+            return Err(StackError::format(
+                path,
+                format!(
+                    "dtype `{descr}` is not a real number type (integers, floats and booleans are read)"
+                ),
+            ));
+        }
+    })
 }
 
 /// The `descr` and `shape` entries of a `.npy` header (e.g. `<f4`,

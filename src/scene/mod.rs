@@ -5,6 +5,8 @@
 mod draw;
 mod patterns;
 
+pub use patterns::text;
+
 use std::path::{Path, PathBuf};
 
 use ndarray::Array2;

@@ -1,0 +1,526 @@
+//! The object inside the medium, lit through it, recorded by a SPAD camera
+//! as labs record it: source -> front slab -> object (a thin mask) ->
+//! back slab -> imaged face (the geometry of time-of-flight diffuse
+//! optical tomography with a SPAD camera).
+//!
+//! One call, [`reconstruct`], takes a recorded [`cube::Cube`] and the
+//! [`Settings`] and returns the object's transmission map with every
+//! choice it made in its notes:
+//!
+//! - [`cube`]: the cube and its pixel positions from the files labs keep
+//!   (MATLAB level 5 or v7.3, `.npy`; any axis order, sign and type);
+//! - [`pixels`]: the pixels left out of the likelihood (a given mask;
+//!   filtered, dead and hot pixels found in the data);
+//! - [`noise`]: the noise measured from the cube and the likelihood that
+//!   matches it;
+//! - [`calibrate`]: the time zero (and the scattering) fitted to the cube's
+//!   own time profile where not stated;
+//! - [`geometry`]: both slabs and the beam: the back slab's kernels with the
+//!   front slab's light as their arrival-time density, and the beam's map;
+//! - [`solve`]: Richardson-Lucy with per-pixel backgrounds over the used
+//!   pixels, stopped by cross-validation over the pixels' parity;
+//! - [`simulate`]: cubes of this geometry with a known truth, written as a
+//!   lab would (the tests' stand-ins).
+
+pub mod calibrate;
+pub mod cube;
+pub mod geometry;
+pub mod noise;
+pub mod pixels;
+pub mod simulate;
+pub mod solve;
+
+use std::path::{Path, PathBuf};
+
+use ndarray::{Array2, Array3, s};
+use scatterscope_physics::{KernelStack, Sampling, Sensor, TimeBins};
+use serde::Serialize;
+
+use crate::forward::{Boundary, ForwardModel};
+use cube::Cube;
+use geometry::Geometry;
+use noise::{NoiseModel, Subtracted};
+use pixels::BadPixels;
+use solve::Fit;
+
+/// The deviance's z above which the notes warn that no transmission
+/// explains the counts under the chosen noise model.
+pub const MISFIT_Z: f64 = 10.0;
+/// Time groups of equal light the bins after the onset are summed into,
+/// unless set.
+pub const DEFAULT_TIME_GROUPS: usize = 8;
+/// The most iterations the parity split searches, unless set.
+pub const DEFAULT_MAX_ITERS: usize = 2000;
+
+/// How to reconstruct a cube.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Both slabs, the beam, the instrument's response.
+    pub geometry: Geometry,
+    /// Width of the cube's bins (ps).
+    pub bin_width_ps: f64,
+    /// The pulse's entry into the front slab on the cube's clock (ps after
+    /// bin 0's start); fitted to the cube's time profile when `None`.
+    pub time_zero_ps: Option<f64>,
+    /// Fit both slabs' reduced scattering (a common factor) with the time
+    /// zero.
+    pub fit_scattering: bool,
+    /// Time groups of equal light (1: the time-summed cube).
+    pub time_groups: usize,
+    /// The most iterations searched.
+    pub max_iters: usize,
+    /// The background the lab subtracted, where stated.
+    pub subtracted: Option<Subtracted>,
+    /// Pixels to use (true) from a mask file.
+    pub mask: Option<Array2<bool>>,
+}
+
+/// Everything a reconstruction found.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// Relative transmission on the camera's pixels (1 at the 99th
+    /// percentile of the used pixels' values).
+    pub transmission: Array2<f64>,
+    /// The beam's light at the object plane on the same pixels.
+    pub beam: Array2<f64>,
+    /// The pixels used.
+    pub used: Array2<bool>,
+    /// The report written beside the images.
+    pub report: Report,
+}
+
+/// What the notes file holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// How the cube was read.
+    pub cube: cube::Provenance,
+    /// Pixels, bins, pitch.
+    pub shape: (usize, usize, usize),
+    /// Pixel pitch x, y (cm).
+    pub pitch_cm: (f64, f64),
+    /// The noise model and its figures.
+    pub noise: NoiseModel,
+    /// Pixels left out.
+    pub bad_pixels: BadPixels,
+    /// The time zero (ps on the cube's clock) and where it came from.
+    pub time_zero_ps: f64,
+    /// The self-calibration, where one ran.
+    pub calibration: Option<calibrate::Calibration>,
+    /// Front and back reduced scattering used (1/cm).
+    pub mu_s_reduced_per_cm: (f64, f64),
+    /// The beam and how separable its light is in space and time.
+    pub beam: geometry::Beam,
+    /// `|| I - b f1 || / || I ||` of the beam's light at the object plane.
+    pub beam_separation_error: f64,
+    /// First bin and bins of each time group.
+    pub time_groups: Vec<(usize, usize)>,
+    /// The fit.
+    pub fit: Fit,
+    /// Values of the transformed counts below 0 set to 0.
+    pub clamped: usize,
+    /// Every note, in order; warnings start with `warning:`.
+    pub notes: Vec<String>,
+}
+
+/// Why a reconstruction could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum EmbeddedError {
+    /// A setting or the data, named.
+    #[error("{0}")]
+    Invalid(String),
+    /// The physics refused a parameter.
+    #[error("{0}")]
+    Physics(#[from] scatterscope_physics::ParamError),
+}
+
+/// Reconstructs the transmission of the object inside the medium from
+/// `cube`.
+pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, EmbeddedError> {
+    let invalid = |e: String| EmbeddedError::Invalid(format!("{}: {e}", cube.provenance.file));
+    settings.geometry.validate()?;
+    if !(settings.bin_width_ps.is_finite() && settings.bin_width_ps > 0.0) {
+        return Err(EmbeddedError::Invalid(format!(
+            "bin width {} ps: must be positive",
+            settings.bin_width_ps
+        )));
+    }
+    if settings.time_groups == 0 || settings.max_iters == 0 {
+        return Err(EmbeddedError::Invalid(
+            "time groups and iterations must be at least 1".into(),
+        ));
+    }
+    let y = &cube.values;
+    let (bins, h, w) = y.dim();
+    let mut notes = Vec::new();
+
+    // Pixels and noise: filtered and dead pixels first (a neighbour mean
+    // has less variance), then hot ones from the dark variance.
+    let (used, _) = pixels::find(y, settings.mask.as_ref(), None);
+    if !used.iter().any(|&u| u) {
+        return Err(invalid("no pixel is left to use (the mask and the pixels found bad leave none)".into()));
+    }
+    let first = noise::measure(y, &used, settings.subtracted.as_ref()).map_err(invalid)?;
+    let (used, bad) = pixels::find(y, settings.mask.as_ref(), Some(&first.dark_variance));
+    let noise = noise::measure(y, &used, settings.subtracted.as_ref()).map_err(invalid)?;
+    notes.push(bad.describe(h * w));
+    notes.push(format!("noise model: {}; {}", noise.kind.name(), noise.reason));
+
+    // Time zero and scattering.
+    let profile: Vec<f64> = (0..bins).map(|k| masked_sum(y.slice(s![k, .., ..]), &used)).collect();
+    let variance: Vec<f64> = (0..bins)
+        .map(|k| {
+            y.slice(s![k, .., ..])
+                .indexed_iter()
+                .filter(|(p, _)| used[*p])
+                .map(|(p, &v)| {
+                    noise.gain * (v - noise.dark_level[p]).max(0.0) + noise.dark_variance[p].max(0.0)
+                })
+                .sum()
+        })
+        .collect();
+    let (time_zero_ps, calibration, geometry) = match settings.time_zero_ps {
+        Some(t0) if !settings.fit_scattering => {
+            notes.push(format!("time zero {t0} ps on the cube's clock, as stated"));
+            (t0, None, settings.geometry.clone())
+        }
+        _ => {
+            let cal = calibrate::fit(
+                &settings.geometry,
+                &profile,
+                &variance,
+                settings.bin_width_ps,
+                settings.fit_scattering,
+            )
+            .map_err(invalid)?;
+            let scale = cal.mu_s_reduced_per_cm.0
+                / (settings.geometry.front.mu_s_per_cm * (1.0 - settings.geometry.front.g));
+            let geometry = calibrate::scaled(&settings.geometry, scale);
+            let t0 = settings.time_zero_ps.unwrap_or(cal.time_zero_ps.0);
+            notes.push(format!(
+                "self-calibration on the summed time profile (reduced chi-square {:.2}): time zero {:.1} +- {:.1} ps{}{}",
+                cal.reduced_chi2,
+                cal.time_zero_ps.0,
+                cal.time_zero_ps.1,
+                if settings.time_zero_ps.is_some() { " (the stated time zero is used)" } else { " (used)" },
+                if cal.scattering_fitted {
+                    format!(
+                        ", reduced scattering {:.2} /cm front and {:.2} /cm back (+- {:.0} %), absorption, index and thicknesses as stated",
+                        cal.mu_s_reduced_per_cm.0,
+                        cal.mu_s_reduced_per_cm.1,
+                        100.0 * cal.mu_s_reduced_per_cm.2
+                    )
+                } else {
+                    String::new()
+                }
+            ));
+            (t0, Some(cal), geometry)
+        }
+    };
+
+    // Time groups: the dark bins alone, then bins of equal light.
+    let onset = noise::light_onset(&profile);
+    let groups = time_groups(&profile, onset, settings.time_groups);
+    notes.push(format!(
+        "time axis: {bins} bins summed into {} groups ({}); the bins' own kernels are summed within each group: the time information finer than a group is left out",
+        groups.len(),
+        groups
+            .iter()
+            .map(|(a, n)| format!("{a}-{}", a + n - 1))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+
+    // The physics on the camera's pixels.
+    let pitch = (cube.pitch_cm.0 * cube.pitch_cm.1).sqrt();
+    let aspect = cube.pitch_cm.1 / cube.pitch_cm.0;
+    if (aspect - 1.0).abs() > 1e-3 {
+        notes.push(format!(
+            "pixels of {:.4} x {:.4} cm ({:+.1} % in y): modelled as squares of their geometric mean, {pitch:.4} cm; at the blur's width this places a kernel's edge {:.2} pixels off at most",
+            cube.pitch_cm.0,
+            cube.pitch_cm.1,
+            100.0 * (aspect - 1.0),
+            0.5 * (aspect - 1.0).abs() * 3.0 * geometry_sigma_px(&geometry, bins, settings.bin_width_ps, time_zero_ps, pitch)
+        ));
+    }
+    let setup = geometry.back_setup(
+        TimeBins {
+            start_ps: -time_zero_ps,
+            width_ps: settings.bin_width_ps,
+            count: bins,
+        },
+        Sensor {
+            fov_cm: pitch * w as f64,
+            width_px: w,
+            height_px: h,
+        },
+    )?;
+    let kernels = KernelStack::build(&setup, Sampling::Integrated)?;
+    let grouped = group_kernels(&kernels, &groups);
+    let model = ForwardModel::new(&grouped, Boundary::Sensor);
+    let (gh, gw) = model.grid_shape();
+    let (oy, ox) = model.sensor_offset();
+    let beam = geometry.beam_map(
+        (gh, gw),
+        (oy as f64 + (h as f64 - 1.0) / 2.0, ox as f64 + (w as f64 - 1.0) / 2.0),
+        pitch,
+    )?;
+
+    // The likelihood's counts.
+    let transformed = noise.transform(y);
+    let counts: Vec<Vec<f64>> = groups
+        .iter()
+        .map(|&(a, n)| {
+            transformed
+                .counts
+                .slice(s![a..a + n, .., ..])
+                .sum_axis(ndarray::Axis(0))
+                .iter()
+                .copied()
+                .collect()
+        })
+        .collect();
+    let problem = solve::Problem {
+        model: &model,
+        counts,
+        group_bins: groups.iter().map(|&(_, n)| n as f64).collect(),
+        offset: transformed.offset.iter().copied().collect(),
+        used: used.iter().copied().collect(),
+        beam: beam.map.iter().copied().collect(),
+        gain: noise.gain,
+    };
+    let fit = problem.solve(settings.max_iters);
+    notes.push(format!(
+        "stop: {} iterations, chosen by two-fold cross-validation over the pixels' parity{}",
+        fit.iterations,
+        if fit.stopped_at_cap {
+            format!(
+                " (warning: the search reached its cap of {} before its best was clear; the held-out likelihood was still improving)",
+                settings.max_iters
+            )
+        } else {
+            String::new()
+        }
+    ));
+    let z = fit.misfit_z();
+    notes.push(format!(
+        "misfit under the {} model: deviance {:.0} against {:.0} +- {:.0} from noise alone (z = {z:.1})",
+        noise.kind.name(),
+        fit.deviance,
+        fit.expected_deviance.0,
+        fit.expected_deviance.1
+    ));
+    if z > MISFIT_Z {
+        notes.push(format!(
+            "warning: no transmission explains the counts under this noise model (z = {z:.1} > {MISFIT_Z}): the media, time zero, beam or noise differ from what was assumed; {}",
+            departure(&problem, &fit)
+        ));
+    }
+    notes.push(format!(
+        "the beam ({}) divided out: its light at the object plane is modelled as a fixed map times the front slab's time profile, {:.1} % from the true time-varying profile",
+        match geometry.beam {
+            geometry::Beam::Plane => "a plane wave".to_string(),
+            geometry::Beam::Gaussian { fwhm_cm, centre_cm } => format!(
+                "Gaussian, FWHM {fwhm_cm} cm at ({}, {}) cm",
+                centre_cm.0, centre_cm.1
+            ),
+        },
+        100.0 * beam.separation_error
+    ));
+    notes.push(
+        "assumed: the object is a thin mask inside a continuous medium (no light reflected back into the front slab), both slabs homogeneous diffusion slabs with extrapolated boundaries".into(),
+    );
+    if transformed.clamped > 0 {
+        notes.push(format!(
+            "{} transformed values below 0 set to 0 ({:.2} % of the cube)",
+            transformed.clamped,
+            100.0 * transformed.clamped as f64 / y.len() as f64
+        ));
+    }
+
+    let object = solve::on_sensor(&model, &fit.object);
+    let scale = percentile(object.iter().zip(used.iter()).filter(|(_, u)| **u).map(|(v, _)| *v), 0.99);
+    let transmission = object.mapv(|v| if scale > 0.0 { v / scale } else { 0.0 });
+    notes.push(
+        "transmission is relative: 1 at the 99th percentile of the used pixels (the beam's power is not known)".into(),
+    );
+    let beam_on_sensor = beam.map.slice(s![oy..oy + h, ox..ox + w]).to_owned();
+    let report = Report {
+        cube: cube.provenance.clone(),
+        shape: (bins, h, w),
+        pitch_cm: cube.pitch_cm,
+        noise,
+        bad_pixels: bad,
+        time_zero_ps,
+        calibration,
+        mu_s_reduced_per_cm: (
+            geometry.front.mu_s_per_cm * (1.0 - geometry.front.g),
+            geometry.back.mu_s_per_cm * (1.0 - geometry.back.g),
+        ),
+        beam: geometry.beam,
+        beam_separation_error: beam.separation_error,
+        time_groups: groups.clone(),
+        fit,
+        clamped: transformed.clamped,
+        notes,
+    };
+    Ok(Outcome {
+        transmission,
+        beam: beam_on_sensor,
+        used,
+        report,
+    })
+}
+
+/// The lateral blur's width (pixels) at the profile's mean arrival.
+fn geometry_sigma_px(g: &Geometry, bins: usize, bin_ps: f64, t0: f64, pitch: f64) -> f64 {
+    let d = scatterscope_physics::Diffusion::new(&g.back).expect("validated");
+    let mid = 0.5 * bins as f64 * bin_ps - t0;
+    d.lateral_sigma_cm(mid.max(0.0)) / pitch
+}
+
+/// Where the counts depart from the fit, by time group: measured over
+/// predicted light in each.
+fn departure(problem: &solve::Problem, fit: &Fit) -> String {
+    let pred = problem.model_counts(fit);
+    let ratios: Vec<String> = problem
+        .counts
+        .iter()
+        .zip(&pred)
+        .map(|(z, m)| {
+            let (a, b) = z
+                .iter()
+                .zip(m)
+                .zip(&problem.used)
+                .filter(|(_, u)| **u)
+                .fold((0.0, 0.0), |(a, b), ((z, m), _)| (a + z, b + m));
+            format!("{:.3}", a / b.max(1e-300))
+        })
+        .collect();
+    format!("counts over prediction by time group: {}", ratios.join(", "))
+}
+
+/// Sum of `plane` over the used pixels.
+fn masked_sum(plane: ndarray::ArrayView2<f64>, used: &Array2<bool>) -> f64 {
+    plane
+        .iter()
+        .zip(used.iter())
+        .filter(|(_, u)| **u)
+        .map(|(v, _)| v)
+        .sum()
+}
+
+/// The `q` quantile of `values`.
+fn percentile(values: impl Iterator<Item = f64>, q: f64) -> f64 {
+    let mut v: Vec<f64> = values.collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    let at = ((v.len() - 1) as f64 * q).round() as usize;
+    *v.select_nth_unstable_by(at, f64::total_cmp).1
+}
+
+/// `(first bin, bins)` of each group: bins before `onset` as one group
+/// (where there are any), the rest split into `n` runs of equal summed
+/// light (fewer where bins run out).
+pub fn time_groups(profile: &[f64], onset: usize, n: usize) -> Vec<(usize, usize)> {
+    let mut groups = Vec::new();
+    if onset > 0 {
+        groups.push((0, onset));
+    }
+    let rest = &profile[onset..];
+    let total: f64 = rest.iter().map(|v| v.max(0.0)).sum();
+    let mut start = onset;
+    let mut acc = 0.0;
+    for (i, v) in rest.iter().enumerate() {
+        acc += v.max(0.0);
+        let k = onset + i;
+        let done = groups.len() - usize::from(onset > 0);
+        if done + 1 < n && acc >= total * (done + 1) as f64 / n as f64 && k + 1 < profile.len() {
+            groups.push((start, k + 1 - start));
+            start = k + 1;
+        }
+    }
+    groups.push((start, profile.len() - start));
+    groups
+}
+
+/// A kernel stack whose kernels are the sums of `kernels`' over each
+/// group's bins.
+fn group_kernels(kernels: &KernelStack, groups: &[(usize, usize)]) -> KernelStack {
+    let (_, h, w) = kernels.kernels.dim();
+    let mut summed = Array3::<f64>::zeros((groups.len(), h, w));
+    let mut bins = Vec::with_capacity(groups.len());
+    for (g, &(a, n)) in groups.iter().enumerate() {
+        let mut slot = summed.slice_mut(s![g, .., ..]);
+        let mut info = kernels.bins[a].clone();
+        info.index = g;
+        info.photons = 0.0;
+        for k in a..a + n {
+            slot += &kernels.kernel(k);
+            info.photons += kernels.bins[k].photons;
+            info.end_ps = kernels.bins[k].end_ps;
+        }
+        info.kept = true;
+        bins.push(info);
+    }
+    KernelStack {
+        setup: kernels.setup.clone(),
+        sampling: kernels.sampling,
+        diffusion: kernels.diffusion.clone(),
+        kernels: summed,
+        bins,
+    }
+}
+
+/// The files [`write`] makes in a folder.
+pub const OUTPUTS: [&str; 6] = [
+    "transmission.npy",
+    "transmission.png",
+    "beam.npy",
+    "used_pixels.npy",
+    "held_out.csv",
+    "report.json",
+];
+
+/// Writes the outcome's files into `dir`, each whole or not at all, after
+/// checking that none of them is one of `inputs`.
+pub fn write(outcome: &Outcome, dir: &Path, inputs: &[&Path]) -> Result<Vec<PathBuf>, String> {
+    let mut plan = crate::files::plan::FilePlan::new();
+    for input in inputs {
+        plan.input("input", input);
+    }
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let paths: Vec<PathBuf> = OUTPUTS.iter().map(|n| dir.join(n)).collect();
+    for p in &paths {
+        plan.output("output", p);
+    }
+    plan.check().map_err(|e| e.to_string())?;
+    let err = |e: String| e;
+    crate::formats::image::write_image(outcome.transmission.view(), &paths[0]).map_err(|e| err(e.to_string()))?;
+    let big = upscaled(&outcome.transmission, 8);
+    crate::formats::image::write_image(big.view(), &paths[1]).map_err(|e| e.to_string())?;
+    crate::formats::image::write_image(outcome.beam.view(), &paths[2]).map_err(|e| e.to_string())?;
+    crate::formats::image::write_image(outcome.used.mapv(|u| f64::from(u8::from(u))).view(), &paths[3])
+        .map_err(|e| e.to_string())?;
+    let csv: String = std::iter::once("iteration,held_out_deviance\n".to_string())
+        .chain(
+            outcome
+                .report
+                .fit
+                .held_out
+                .iter()
+                .enumerate()
+                .map(|(i, d)| format!("{},{d}\n", i + 1)),
+        )
+        .collect();
+    crate::files::write_atomic(&paths[4], csv).map_err(|e| format!("{}: {e}", paths[4].display()))?;
+    let json = serde_json::to_string_pretty(&outcome.report).expect("report serialises");
+    crate::files::write_atomic(&paths[5], json).map_err(|e| format!("{}: {e}", paths[5].display()))?;
+    Ok(paths)
+}
+
+/// `img` with each pixel repeated `k` times on both axes, scaled to [0, 1].
+fn upscaled(img: &Array2<f64>, k: usize) -> Array2<f64> {
+    let (h, w) = img.dim();
+    Array2::from_shape_fn((h * k, w * k), |(i, j)| img[[i / k, j / k]].clamp(0.0, 1.0))
+}
