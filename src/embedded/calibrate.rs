@@ -74,14 +74,25 @@ pub fn fit(
     let mut scale_se = 0.0;
     if fit_scattering {
         // Parabola through the best and its neighbours in log scale.
-        let i = per_scale.iter().position(|p| p.0 == scale).expect("present");
+        let i = per_scale
+            .iter()
+            .position(|p| p.0 == scale)
+            .expect("present");
         if i > 0 && i + 1 < per_scale.len() {
             let (l, c, r) = (per_scale[i - 1].1, per_scale[i].1, per_scale[i + 1].1);
             let h = 1.0 / SCALES_PER_OCTAVE * std::f64::consts::LN_2;
             let curv = (l - 2.0 * c + r) / (h * h);
-            let shift = if curv > 0.0 { 0.5 * h * (l - r) / (l - 2.0 * c + r) } else { 0.0 };
+            let shift = if curv > 0.0 {
+                0.5 * h * (l - r) / (l - 2.0 * c + r)
+            } else {
+                0.0
+            };
             scale *= shift.exp();
-            scale_se = if curv > 0.0 { (2.0 / curv).sqrt() } else { f64::INFINITY };
+            scale_se = if curv > 0.0 {
+                (2.0 / curv).sqrt()
+            } else {
+                f64::INFINITY
+            };
         } else {
             scale_se = f64::INFINITY;
         }
@@ -93,7 +104,11 @@ pub fn fit(
     let curv = (at(t0 - h) - 2.0 * chi2 + at(t0 + h)) / (h * h);
     let dof = (profile.len() as f64 - 4.0).max(1.0);
     let reduced = chi2 / dof;
-    let t0_se = if curv > 0.0 { (2.0 * reduced.max(1.0) / curv).sqrt() } else { f64::INFINITY };
+    let t0_se = if curv > 0.0 {
+        (2.0 * reduced.max(1.0) / curv).sqrt()
+    } else {
+        f64::INFINITY
+    };
     Ok(Calibration {
         time_zero_ps: (t0, t0_se),
         mu_s_reduced_per_cm: (
@@ -134,14 +149,20 @@ fn scan_time_zero(arrival: &IrfTable, profile: &[f64], weights: &[f64], bin_ps: 
     let peak_at = profile
         .iter()
         .enumerate()
-        .fold((0, f64::NEG_INFINITY), |b, (k, &v)| if v > b.1 { (k, v) } else { b })
+        .fold(
+            (0, f64::NEG_INFINITY),
+            |b, (k, &v)| if v > b.1 { (k, v) } else { b },
+        )
         .0;
     let w = arrival.weights();
     let model_peak = arrival.start_ps()
         + arrival.bin_ps()
             * (w.iter()
                 .enumerate()
-                .fold((0, f64::NEG_INFINITY), |b, (k, &v)| if v > b.1 { (k, v) } else { b })
+                .fold(
+                    (0, f64::NEG_INFINITY),
+                    |b, (k, &v)| if v > b.1 { (k, v) } else { b },
+                )
                 .0 as f64
                 + 0.5);
     // The data's peak time less the model's, +- the whole window.
@@ -165,8 +186,15 @@ fn scan_time_zero(arrival: &IrfTable, profile: &[f64], weights: &[f64], bin_ps: 
     }
     let (l, r) = (trials[i - 1].1, trials[i + 1].1);
     let den = l - 2.0 * c + r;
-    let t = if den > 0.0 { t + 0.5 * h * (l - r) / den } else { t };
-    (weighted_fit(arrival, profile, weights, bin_ps, t).0.min(c), t)
+    let t = if den > 0.0 {
+        t + 0.5 * h * (l - r) / den
+    } else {
+        t
+    };
+    (
+        weighted_fit(arrival, profile, weights, bin_ps, t).0.min(c),
+        t,
+    )
 }
 
 /// Weighted residual sum, amplitude and background of the best

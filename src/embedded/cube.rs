@@ -98,7 +98,8 @@ pub fn read(
     positions: &Positions,
 ) -> Result<Cube, String> {
     let named = |e: String| format!("{}: {e}", path.display());
-    let array = lab_array::pick(path, variable, "cube (a 3-D array)", |s| s.len() == 3).map_err(named)?;
+    let array =
+        lab_array::pick(path, variable, "cube (a 3-D array)", |s| s.len() == 3).map_err(named)?;
     if array.values.ndim() != 3 {
         return Err(named(format!(
             "`{}` has shape {:?}: a cube is a 3-D array",
@@ -106,11 +107,7 @@ pub fn read(
             array.values.shape()
         )));
     }
-    if let Some((at, v)) = array
-        .values
-        .indexed_iter()
-        .find(|(_, v)| !v.is_finite())
-    {
+    if let Some((at, v)) = array.values.indexed_iter().find(|(_, v)| !v.is_finite()) {
         return Err(named(format!(
             "`{}` holds {v} at index {:?}: a cube's values must be finite (mark bad pixels with a mask instead)",
             array.name,
@@ -128,7 +125,11 @@ pub fn read(
         .into_owned();
     let (bins, h, w) = values.dim();
     if bins == 0 || h == 0 || w == 0 {
-        return Err(named(format!("`{}` is empty: shape {:?}", array.name, values.dim())));
+        return Err(named(format!(
+            "`{}` is empty: shape {:?}",
+            array.name,
+            values.dim()
+        )));
     }
     if values.iter().all(|&v| v <= 0.0) {
         return Err(named(format!(
@@ -143,10 +144,18 @@ pub fn read(
             }
             ((*px, *py), "stated".to_string(), 0.0)
         }
-        Positions::File { path: p, unit_cm, names } => {
+        Positions::File {
+            path: p,
+            unit_cm,
+            names,
+        } => {
             let (pitch, departure) = pitch_from_positions(p, *unit_cm, names.as_ref(), (h, w))
                 .map_err(|e| format!("{}: {e}", p.display()))?;
-            (pitch, format!("pixel centres in {}", p.display()), departure)
+            (
+                pitch,
+                format!("pixel centres in {}", p.display()),
+                departure,
+            )
         }
     };
     Ok(Cube {
@@ -186,13 +195,20 @@ fn pitch_from_positions(
             .ok_or_else(|| format!("no array `{n}`"))
     };
     let grids: Vec<ndarray::Array2<f64>> = if let Some((xn, yn)) = names {
-        vec![as_grid(&pick(xn)?, shape, true)?, as_grid(&pick(yn)?, shape, false)?]
+        vec![
+            as_grid(&pick(xn)?, shape, true)?,
+            as_grid(&pick(yn)?, shape, false)?,
+        ]
     } else if let Some(one) = arrays.iter().find(|a| {
         let s = a.values.shape();
         s == [h, w, 2] || s == [2, h, w]
     }) {
         let v = &one.values;
-        let along = if v.shape()[0] == 2 && v.shape() != [h, w, 2] { 0 } else { 2 };
+        let along = if v.shape()[0] == 2 && v.shape() != [h, w, 2] {
+            0
+        } else {
+            2
+        };
         (0..2)
             .map(|c| {
                 v.index_axis(Axis(along), c)
@@ -219,7 +235,10 @@ fn pitch_from_positions(
                     .join(", ")
             ));
         }
-        vec![as_grid(fitting[0], shape, true)?, as_grid(fitting[1], shape, false)?]
+        vec![
+            as_grid(fitting[0], shape, true)?,
+            as_grid(fitting[1], shape, false)?,
+        ]
     };
     // Which grid changes along the columns.
     let step = |g: &ndarray::Array2<f64>, axis: usize| -> f64 {
@@ -239,7 +258,11 @@ fn pitch_from_positions(
         return Err(format!("a pixel centre is {v}"));
     }
     let (a, b) = (&grids[0], &grids[1]);
-    let (x, y) = if step(a, 1) >= step(a, 0) { (a, b) } else { (b, a) };
+    let (x, y) = if step(a, 1) >= step(a, 0) {
+        (a, b)
+    } else {
+        (b, a)
+    };
     let (px, py) = (step(x, 1), step(y, 0));
     if w > 1 && px <= 0.0 || h > 1 && py <= 0.0 {
         return Err(format!(
@@ -267,10 +290,18 @@ fn pitch_from_positions(
 
 /// A positions array as a (rows, columns) grid: itself, or a vector
 /// spread along the columns (`is_x`) or the rows.
-fn as_grid(a: &LabArray, (h, w): (usize, usize), is_x: bool) -> Result<ndarray::Array2<f64>, String> {
+fn as_grid(
+    a: &LabArray,
+    (h, w): (usize, usize),
+    is_x: bool,
+) -> Result<ndarray::Array2<f64>, String> {
     let v: &ArrayD<f64> = &a.values;
     if v.shape() == [h, w] {
-        return Ok(v.view().into_dimensionality::<Ix2>().expect("2-D").to_owned());
+        return Ok(v
+            .view()
+            .into_dimensionality::<Ix2>()
+            .expect("2-D")
+            .to_owned());
     }
     let flat: Vec<f64> = v.iter().copied().collect();
     match (is_x, flat.len()) {

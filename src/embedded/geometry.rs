@@ -119,7 +119,10 @@ impl Geometry {
             None => front,
             Some(irf) => convolve(&front, &resample(irf, step)),
         };
-        let start = self.irf.as_ref().map_or(0.0, |irf| snap(irf.start_ps(), step));
+        let start = self
+            .irf
+            .as_ref()
+            .map_or(0.0, |irf| snap(irf.start_ps(), step));
         IrfTable::new(step, start, weights)
     }
 
@@ -337,7 +340,9 @@ mod tests {
         let dens = |t: f64| d.log_temporal_density(t).exp();
         let trap = |a: f64, b: f64| {
             let n = ((b - a) / 1.0) as usize;
-            (0..n).map(|i| 0.5 * (dens(a + i as f64) + dens(a + i as f64 + 1.0))).sum::<f64>()
+            (0..n)
+                .map(|i| 0.5 * (dens(a + i as f64) + dens(a + i as f64 + 1.0)))
+                .sum::<f64>()
         };
         let left_out = trap(end, 10.0 * end) / trap(0.0, 10.0 * end);
         assert!(left_out < 1e-5, "{left_out}");
@@ -367,7 +372,11 @@ mod tests {
         let m = g.beam_map((32, 32), (15.5, 15.5), 0.14).unwrap();
         // Centre 1, corner (2.2 cm out on both axes) lower but lit.
         assert!((m.map[[15, 15]] - 1.0).abs() < 1e-3);
-        assert!(m.map[[0, 0]] < 0.9 && m.map[[0, 0]] > 0.3, "{}", m.map[[0, 0]]);
+        assert!(
+            m.map[[0, 0]] < 0.9 && m.map[[0, 0]] > 0.3,
+            "{}",
+            m.map[[0, 0]]
+        );
         assert!(m.separation_error > 0.0 && m.separation_error < 0.5);
     }
 

@@ -19,6 +19,8 @@
 //!   front slab's light as their arrival-time density, and the beam's map;
 //! - [`solve`]: Richardson-Lucy with per-pixel backgrounds over the used
 //!   pixels, stopped by cross-validation over the pixels' parity;
+//! - [`request`]: the same from files and flags with units (the command
+//!   line's `embedded` and `simulate-embedded`);
 //! - [`simulate`]: cubes of this geometry with a known truth, written as a
 //!   lab would (the tests' stand-ins).
 
@@ -27,6 +29,7 @@ pub mod cube;
 pub mod geometry;
 pub mod noise;
 pub mod pixels;
+pub mod request;
 pub mod simulate;
 pub mod solve;
 
@@ -50,7 +53,7 @@ pub const MISFIT_Z: f64 = 10.0;
 /// unless set.
 pub const DEFAULT_TIME_GROUPS: usize = 8;
 /// The most iterations the parity split searches, unless set.
-pub const DEFAULT_MAX_ITERS: usize = 2000;
+pub const DEFAULT_MAX_ITERS: usize = 5000;
 
 /// How to reconstruct a cube.
 #[derive(Debug, Clone)]
@@ -69,6 +72,8 @@ pub struct Settings {
     pub time_groups: usize,
     /// The most iterations searched.
     pub max_iters: usize,
+    /// Iterations to run instead of searching (a fixed stop).
+    pub iterations: Option<usize>,
     /// The background the lab subtracted, where stated.
     pub subtracted: Option<Subtracted>,
     /// Pixels to use (true) from a mask file.
@@ -144,7 +149,7 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
             settings.bin_width_ps
         )));
     }
-    if settings.time_groups == 0 || settings.max_iters == 0 {
+    if settings.time_groups == 0 || settings.max_iters == 0 || settings.iterations == Some(0) {
         return Err(EmbeddedError::Invalid(
             "time groups and iterations must be at least 1".into(),
         ));
@@ -157,23 +162,32 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
     // has less variance), then hot ones from the dark variance.
     let (used, _) = pixels::find(y, settings.mask.as_ref(), None);
     if !used.iter().any(|&u| u) {
-        return Err(invalid("no pixel is left to use (the mask and the pixels found bad leave none)".into()));
+        return Err(invalid(
+            "no pixel is left to use (the mask and the pixels found bad leave none)".into(),
+        ));
     }
     let first = noise::measure(y, &used, settings.subtracted.as_ref()).map_err(invalid)?;
     let (used, bad) = pixels::find(y, settings.mask.as_ref(), Some(&first.dark_variance));
     let noise = noise::measure(y, &used, settings.subtracted.as_ref()).map_err(invalid)?;
     notes.push(bad.describe(h * w));
-    notes.push(format!("noise model: {}; {}", noise.kind.name(), noise.reason));
+    notes.push(format!(
+        "noise model: {}; {}",
+        noise.kind.name(),
+        noise.reason
+    ));
 
     // Time zero and scattering.
-    let profile: Vec<f64> = (0..bins).map(|k| masked_sum(y.slice(s![k, .., ..]), &used)).collect();
+    let profile: Vec<f64> = (0..bins)
+        .map(|k| masked_sum(y.slice(s![k, .., ..]), &used))
+        .collect();
     let variance: Vec<f64> = (0..bins)
         .map(|k| {
             y.slice(s![k, .., ..])
                 .indexed_iter()
                 .filter(|(p, _)| used[*p])
                 .map(|(p, &v)| {
-                    noise.gain * (v - noise.dark_level[p]).max(0.0) + noise.dark_variance[p].max(0.0)
+                    noise.gain * (v - noise.dark_level[p]).max(0.0)
+                        + noise.dark_variance[p].max(0.0)
                 })
                 .sum()
         })
@@ -261,7 +275,10 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
     let (oy, ox) = model.sensor_offset();
     let beam = geometry.beam_map(
         (gh, gw),
-        (oy as f64 + (h as f64 - 1.0) / 2.0, ox as f64 + (w as f64 - 1.0) / 2.0),
+        (
+            oy as f64 + (h as f64 - 1.0) / 2.0,
+            ox as f64 + (w as f64 - 1.0) / 2.0,
+        ),
         pitch,
     )?;
 
@@ -288,10 +305,15 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
         beam: beam.map.iter().copied().collect(),
         gain: noise.gain,
     };
-    let fit = problem.solve(settings.max_iters);
+    let fit = problem.solve(settings.max_iters, settings.iterations);
     notes.push(format!(
-        "stop: {} iterations, chosen by two-fold cross-validation over the pixels' parity{}",
+        "stop: {} iterations, {}{}",
         fit.iterations,
+        if settings.iterations.is_some() {
+            "as set"
+        } else {
+            "chosen by two-fold cross-validation over the pixels' parity"
+        },
         if fit.stopped_at_cap {
             format!(
                 " (warning: the search reached its cap of {} before its best was clear; the held-out likelihood was still improving)",
@@ -338,7 +360,14 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
     }
 
     let object = solve::on_sensor(&model, &fit.object);
-    let scale = percentile(object.iter().zip(used.iter()).filter(|(_, u)| **u).map(|(v, _)| *v), 0.99);
+    let scale = percentile(
+        object
+            .iter()
+            .zip(used.iter())
+            .filter(|(_, u)| **u)
+            .map(|(v, _)| *v),
+        0.99,
+    );
     let transmission = object.mapv(|v| if scale > 0.0 { v / scale } else { 0.0 });
     notes.push(
         "transmission is relative: 1 at the 99th percentile of the used pixels (the beam's power is not known)".into(),
@@ -396,7 +425,10 @@ fn departure(problem: &solve::Problem, fit: &Fit) -> String {
             format!("{:.3}", a / b.max(1e-300))
         })
         .collect();
-    format!("counts over prediction by time group: {}", ratios.join(", "))
+    format!(
+        "counts over prediction by time group: {}",
+        ratios.join(", ")
+    )
 }
 
 /// Sum of `plane` over the used pixels.
@@ -445,7 +477,7 @@ pub fn time_groups(profile: &[f64], onset: usize, n: usize) -> Vec<(usize, usize
 }
 
 /// A kernel stack whose kernels are the sums of `kernels`' over each
-/// group's bins.
+/// group's bins (of the setup, kept or not).
 fn group_kernels(kernels: &KernelStack, groups: &[(usize, usize)]) -> KernelStack {
     let (_, h, w) = kernels.kernels.dim();
     let mut summed = Array3::<f64>::zeros((groups.len(), h, w));
@@ -456,7 +488,10 @@ fn group_kernels(kernels: &KernelStack, groups: &[(usize, usize)]) -> KernelStac
         info.index = g;
         info.photons = 0.0;
         for k in a..a + n {
-            slot += &kernels.kernel(k);
+            // Bins before any light can arrive carry no kernel.
+            if let Some(at) = kernels.position_of_bin(k) {
+                slot += &kernels.kernel(at);
+            }
             info.photons += kernels.bins[k].photons;
             info.end_ps = kernels.bins[k].end_ps;
         }
@@ -466,7 +501,7 @@ fn group_kernels(kernels: &KernelStack, groups: &[(usize, usize)]) -> KernelStac
     KernelStack {
         setup: kernels.setup.clone(),
         sampling: kernels.sampling,
-        diffusion: kernels.diffusion.clone(),
+        diffusion: kernels.diffusion,
         kernels: summed,
         bins,
     }
@@ -496,12 +531,17 @@ pub fn write(outcome: &Outcome, dir: &Path, inputs: &[&Path]) -> Result<Vec<Path
     }
     plan.check().map_err(|e| e.to_string())?;
     let err = |e: String| e;
-    crate::formats::image::write_image(outcome.transmission.view(), &paths[0]).map_err(|e| err(e.to_string()))?;
+    crate::formats::image::write_image(outcome.transmission.view(), &paths[0])
+        .map_err(|e| err(e.to_string()))?;
     let big = upscaled(&outcome.transmission, 8);
     crate::formats::image::write_image(big.view(), &paths[1]).map_err(|e| e.to_string())?;
-    crate::formats::image::write_image(outcome.beam.view(), &paths[2]).map_err(|e| e.to_string())?;
-    crate::formats::image::write_image(outcome.used.mapv(|u| f64::from(u8::from(u))).view(), &paths[3])
+    crate::formats::image::write_image(outcome.beam.view(), &paths[2])
         .map_err(|e| e.to_string())?;
+    crate::formats::image::write_image(
+        outcome.used.mapv(|u| f64::from(u8::from(u))).view(),
+        &paths[3],
+    )
+    .map_err(|e| e.to_string())?;
     let csv: String = std::iter::once("iteration,held_out_deviance\n".to_string())
         .chain(
             outcome
@@ -513,9 +553,11 @@ pub fn write(outcome: &Outcome, dir: &Path, inputs: &[&Path]) -> Result<Vec<Path
                 .map(|(i, d)| format!("{},{d}\n", i + 1)),
         )
         .collect();
-    crate::files::write_atomic(&paths[4], csv).map_err(|e| format!("{}: {e}", paths[4].display()))?;
+    crate::files::write_atomic(&paths[4], csv)
+        .map_err(|e| format!("{}: {e}", paths[4].display()))?;
     let json = serde_json::to_string_pretty(&outcome.report).expect("report serialises");
-    crate::files::write_atomic(&paths[5], json).map_err(|e| format!("{}: {e}", paths[5].display()))?;
+    crate::files::write_atomic(&paths[5], json)
+        .map_err(|e| format!("{}: {e}", paths[5].display()))?;
     Ok(paths)
 }
 

@@ -255,14 +255,16 @@ pub fn measure(
     let poisson_gain = (measured_gain - 1.0).abs() <= GAIN_TOLERANCE.max(3.0 * gain_se);
     let (kind, gain) = if !poisson_gain {
         (NoiseKind::ScaledPoisson, measured_gain.max(1e-3))
-    } else if integer
-        && (median_dark.1 - median_dark.0).abs() <= 0.3 * median_dark.0.max(1.0)
-    {
+    } else if integer && (median_dark.1 - median_dark.0).abs() <= 0.3 * median_dark.0.max(1.0) {
         (NoiseKind::Poisson, 1.0)
     } else {
         (NoiseKind::PoissonLessBackground, 1.0)
     };
-    let lag_one = if lag_den > 0.0 { lag_num / lag_den } else { 0.0 };
+    let lag_one = if lag_den > 0.0 {
+        lag_num / lag_den
+    } else {
+        0.0
+    };
     let dark_source = if dark_bins > 0 {
         format!("the {dark_bins} bins before the light (onset at bin {onset})")
     } else {
@@ -307,23 +309,35 @@ fn bands_text(bands: &[Band]) -> String {
         .join(", ")
 }
 
-/// The first bin of the light: where the summed `profile` first passes
-/// [`ONSET_SHARE`] of its rise from the median of its first bins (before
-/// its peak) to its peak.
+/// The first bin of the light: the first bin from which three bins of
+/// the summed `profile` stay above its dark level (the median of the bins
+/// before a quarter of the way to its peak) by [`ONSET_SHARE`] of its
+/// rise to the peak, and by four times the dark bins' spread (their median
+/// absolute deviation as a standard deviation), so that noise alone does
+/// not start it.
 pub fn light_onset(profile: &[f64]) -> usize {
     let peak_at = profile
         .iter()
         .enumerate()
-        .fold((0, f64::NEG_INFINITY), |b, (k, &v)| if v > b.1 { (k, v) } else { b })
+        .fold(
+            (0, f64::NEG_INFINITY),
+            |b, (k, &v)| if v > b.1 { (k, v) } else { b },
+        )
         .0;
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
     let head = &profile[..(peak_at / 4).max(1)];
-    let mut sorted = head.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let base = sorted[sorted.len() / 2];
-    let rise = profile[peak_at] - base;
-    profile
-        .iter()
-        .position(|&v| v - base > ONSET_SHARE * rise)
+    let base = median(&mut head.to_vec());
+    let spread = 1.4826 * median(&mut head.iter().map(|v| (v - base).abs()).collect());
+    let threshold = (ONSET_SHARE * (profile[peak_at] - base)).max(4.0 * spread);
+    (0..profile.len())
+        .find(|&k| {
+            profile[k..(k + 3).min(profile.len())]
+                .iter()
+                .all(|&v| v - base > threshold)
+        })
         .unwrap_or(0)
 }
 
@@ -365,7 +379,11 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let mean = Array3::from_shape_fn((60, 12, 12), |(k, i, j)| {
             let t = k as f64 - 20.0;
-            let pulse = if t > 0.0 { 40.0 * (t / 8.0) * (-t / 8.0).exp() * 2.7 } else { 0.0 };
+            let pulse = if t > 0.0 {
+                40.0 * (t / 8.0) * (-t / 8.0).exp() * 2.7
+            } else {
+                0.0
+            };
             pulse * (1.0 + 0.03 * (i + j) as f64)
         });
         let y = mean.mapv(|m| {
@@ -386,7 +404,11 @@ mod tests {
             let (y, _) = raw(gain, 5.0, seed);
             let m = measure(&y, &used, None).unwrap();
             assert_eq!(m.kind, NoiseKind::ScaledPoisson, "{}", m.reason);
-            assert!((m.measured_gain / gain - 1.0).abs() < 0.1, "{} for {gain}", m.measured_gain);
+            assert!(
+                (m.measured_gain / gain - 1.0).abs() < 0.1,
+                "{} for {gain}",
+                m.measured_gain
+            );
             assert!((m.lag_one - WHITE_LAG1).abs() < 0.1, "{}", m.lag_one);
         }
     }
@@ -407,7 +429,10 @@ mod tests {
         let mu = dark.mean_axis(ndarray::Axis(0)).unwrap();
         let var = dark.var_axis(ndarray::Axis(0), 1.0);
         let (mu, var) = (mu.mean().unwrap(), var.mean().unwrap());
-        assert!((var / mu - 1.0).abs() < 0.1 && (mu - 6.0).abs() < 0.5, "{mu} {var}");
+        assert!(
+            (var / mu - 1.0).abs() < 0.1 && (mu - 6.0).abs() < 0.5,
+            "{mu} {var}"
+        );
         assert!((t.offset.mean().unwrap() - 6.0).abs() < 0.6);
         // Light bins: mean z = net mean + offset.
         let k = 28;

@@ -53,7 +53,9 @@ pub fn find(
     dark_variance: Option<&Array2<f64>>,
 ) -> (Array2<bool>, BadPixels) {
     let (_, h, w) = cube.dim();
-    let mut used = given.cloned().unwrap_or_else(|| Array2::from_elem((h, w), true));
+    let mut used = given
+        .cloned()
+        .unwrap_or_else(|| Array2::from_elem((h, w), true));
     let mut bad = BadPixels {
         masked: used.iter().filter(|&&u| !u).count(),
         ..BadPixels::default()
@@ -84,9 +86,7 @@ pub fn find(
             .collect();
         if !seen.is_empty() {
             let mid = seen.len() / 2;
-            let median = *seen
-                .select_nth_unstable_by(mid, f64::total_cmp)
-                .1;
+            let median = *seen.select_nth_unstable_by(mid, f64::total_cmp).1;
             for (u, v) in used.iter_mut().zip(var.iter()) {
                 if *u && *v > HOT_FACTOR * median && median > 0.0 {
                     *u = false;
@@ -132,7 +132,10 @@ fn is_neighbour_mean(cube: &Array3<f64>, i: usize, j: usize, tol: f64) -> bool {
 
 /// A mask file's array as pixels to use: non-zero entries mark bad pixels
 /// (the usual bad-pixel map); `shape` is the cube's (rows, columns).
-pub fn mask_from(values: &ndarray::ArrayD<f64>, shape: (usize, usize)) -> Result<Array2<bool>, String> {
+pub fn mask_from(
+    values: &ndarray::ArrayD<f64>,
+    shape: (usize, usize),
+) -> Result<Array2<bool>, String> {
     let got = values.shape();
     if got != [shape.0, shape.1] {
         return Err(format!(
@@ -141,7 +144,9 @@ pub fn mask_from(values: &ndarray::ArrayD<f64>, shape: (usize, usize)) -> Result
         ));
     }
     if let Some(v) = values.iter().find(|v| !v.is_finite()) {
-        return Err(format!("a bad-pixel mask holds {v}: entries are 0 (use) or 1 (bad)"));
+        return Err(format!(
+            "a bad-pixel mask holds {v}: entries are 0 (use) or 1 (bad)"
+        ));
     }
     Ok(values
         .view()
@@ -164,7 +169,8 @@ mod tests {
     #[test]
     fn filtered_dead_and_hot_pixels_are_found_and_counted() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let mut cube = Array3::from_shape_fn((40, 6, 7), |_| rng.random_range(0.0..50.0f64).round());
+        let mut cube =
+            Array3::from_shape_fn((40, 6, 7), |_| rng.random_range(0.0..50.0f64).round());
         // (2, 3) the mean of its left and right neighbours; (4, 1) of three.
         for t in 0..40 {
             cube[[t, 2, 3]] = (cube[[t, 2, 2]] + cube[[t, 2, 4]]) / 2.0;
@@ -178,7 +184,11 @@ mod tests {
         assert!(!used[[2, 3]] && !used[[4, 1]] && !used[[0, 6]] && !used[[5, 5]]);
         assert_eq!(used_count(&used), 42 - 4);
         // Noise alone is never a neighbour mean.
-        let (_, clean) = find(&Array3::from_shape_fn((40, 6, 7), |_| rng.random_range(0.0..50.0f64).round()), None, None);
+        let (_, clean) = find(
+            &Array3::from_shape_fn((40, 6, 7), |_| rng.random_range(0.0..50.0f64).round()),
+            None,
+            None,
+        );
         assert_eq!(clean.total(), 0);
     }
 
@@ -186,6 +196,13 @@ mod tests {
     fn a_mask_of_the_wrong_shape_is_refused() {
         let m = ndarray::ArrayD::<f64>::zeros(ndarray::IxDyn(&[3, 4]));
         assert!(mask_from(&m, (4, 3)).unwrap_err().contains("[3, 4]"));
-        assert_eq!(mask_from(&m, (3, 4)).unwrap().iter().filter(|&&u| u).count(), 12);
+        assert_eq!(
+            mask_from(&m, (3, 4))
+                .unwrap()
+                .iter()
+                .filter(|&&u| u)
+                .count(),
+            12
+        );
     }
 }

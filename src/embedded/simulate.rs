@@ -35,7 +35,9 @@ impl Target {
         if let Some(l) = s.strip_prefix("letter:") {
             let mut c = l.chars();
             return match (c.next(), c.next()) {
-                (Some(ch), None) if ch.is_ascii_alphanumeric() => Ok(Target::Letter(ch.to_ascii_uppercase())),
+                (Some(ch), None) if ch.is_ascii_alphanumeric() => {
+                    Ok(Target::Letter(ch.to_ascii_uppercase()))
+                }
                 _ => Err(format!("target `{s}`: one letter or digit after letter:")),
             };
         }
@@ -147,13 +149,24 @@ pub fn simulate(
     let beam = geometry
         .beam_map(
             (gh, gw),
-            (oy as f64 + (h as f64 - 1.0) / 2.0, ox as f64 + (w as f64 - 1.0) / 2.0),
+            (
+                oy as f64 + (h as f64 - 1.0) / 2.0,
+                ox as f64 + (w as f64 - 1.0) / 2.0,
+            ),
             pitch_cm,
         )
         .map_err(|e| e.to_string())?;
     // The card is opaque outside the field.
     let lit = model.embed(truth.view(), 0.0) * &beam.map;
-    let mut expected = model.expected(lit.view()).counts;
+    // Every bin of the camera, those before any light can arrive (which
+    // the kernel stack leaves out) at 0.
+    let kept = model.expected(lit.view()).counts;
+    let mut expected = Array3::<f64>::zeros((bins.0, h, w));
+    for (at, info) in kernels.kept_bins().enumerate() {
+        expected
+            .slice_mut(s![info.index, .., ..])
+            .assign(&kept.slice(s![at, .., ..]));
+    }
     let total = expected.sum();
     if total <= 0.0 {
         return Err("the target passes no light to the camera".into());
@@ -161,16 +174,23 @@ pub fn simulate(
     expected *= rec.photons / total;
     let mut rng = ChaCha8Rng::seed_from_u64(rec.seed);
     let mut dark = Array2::from_shape_fn((h, w), |_| rng.random_range(rec.dark.0..=rec.dark.1));
-    let residual = Array2::from_shape_fn((h, w), |_| rng.random_range(rec.residual.0..=rec.residual.1));
+    let residual = Array2::from_shape_fn((h, w), |_| {
+        rng.random_range(rec.residual.0..=rec.residual.1)
+    });
     // Bad pixels away from the edges, none twice.
     let mut bad: Vec<(usize, usize)> = Vec::new();
     let wanted = rec.filtered + rec.hot + rec.dead;
     if wanted > (h.saturating_sub(2)) * (w.saturating_sub(2)) / 2 {
-        return Err(format!("{wanted} bad pixels on a {h} x {w} camera: at most half its inner pixels"));
+        return Err(format!(
+            "{wanted} bad pixels on a {h} x {w} camera: at most half its inner pixels"
+        ));
     }
     while bad.len() < wanted {
         let p = (rng.random_range(1..h - 1), rng.random_range(1..w - 1));
-        if !bad.iter().any(|q| q.0.abs_diff(p.0) <= 1 && q.1.abs_diff(p.1) <= 1) {
+        if !bad
+            .iter()
+            .any(|q| q.0.abs_diff(p.0) <= 1 && q.1.abs_diff(p.1) <= 1)
+        {
             bad.push(p);
         }
     }

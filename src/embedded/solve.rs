@@ -23,6 +23,13 @@ use crate::forward::ForwardModel;
 use crate::reconstruct::discrepancy::ExpectedDeviance;
 use crate::reconstruct::em::CV_PATIENCE;
 
+/// Held-out deviance differences below this are not told apart: the
+/// search keeps the earliest iteration within it of the least.
+pub const RESOLVED_DEVIANCE: f64 = 1.0;
+
+/// The largest extrapolation of an EM step along the last change.
+pub const MAX_PUSH: f64 = 0.9;
+
 /// EM steps of a held-out pixel's background per iteration (warm-started).
 const HELD_OUT_STEPS: usize = 5;
 
@@ -61,7 +68,8 @@ pub struct Fit {
     pub stopped_at_cap: bool,
     /// The fit's deviance over the used pixels and groups.
     pub deviance: f64,
-    /// What Poisson noise alone gives around the same means, and its sd.
+    /// What Poisson noise alone gives around the same means (less one per
+    /// used pixel, for its fitted background), and its sd.
     pub expected_deviance: (f64, f64),
 }
 
@@ -75,7 +83,13 @@ impl Fit {
 
 /// One EM walk over a set of pixels.
 struct Walker {
+    /// The last EM iterate.
     object: Vec<f64>,
+    /// Where the next EM step starts: the last iterate pushed along its
+    /// last change.
+    point: Vec<f64>,
+    /// The last EM step's change, `object - point before it`.
+    change: Option<Vec<f64>>,
     background: Vec<f64>,
     fitted: Vec<bool>,
     sensitivity: Vec<f64>,
@@ -143,15 +157,20 @@ impl Problem<'_> {
         let level = (light / seen.max(1e-300)).max(1e-12);
         Walker {
             object: vec![level; sensitivity.len()],
+            point: vec![level; sensitivity.len()],
+            change: None,
             background: self.offset.clone(),
             fitted: fitted.to_vec(),
             sensitivity,
         }
     }
 
-    /// One EM step of the object and of the fitted pixels' backgrounds.
+    /// One EM step of the object (from the extrapolated point) and of the
+    /// fitted pixels' backgrounds, then the next point: vector
+    /// extrapolation (Biggs and Andrews 1997), `x + a (x - x_prev)` with
+    /// `a` the correlation of the last two changes, in [0, [`MAX_PUSH`]].
     fn step(&self, w: &mut Walker) {
-        let pred = self.predict(&w.object);
+        let pred = self.predict(&w.point);
         let n_all: f64 = self.group_bins.iter().sum();
         let ratios: Vec<Vec<f64>> = (0..self.groups())
             .map(|g| {
@@ -167,10 +186,13 @@ impl Problem<'_> {
                     .collect()
             })
             .collect();
-        let back = self.model.fft().inverse(self.sum_adjoint(|g| ratios[g].clone()));
+        let back = self
+            .model
+            .fft()
+            .inverse(self.sum_adjoint(|g| ratios[g].clone()));
         let seen = 1e-9 * w.sensitivity.iter().fold(0.0f64, |m, &s| m.max(s));
-        for ((o, b), (s, beam)) in w
-            .object
+        let mut next = w.point.clone();
+        for ((o, b), (s, beam)) in next
             .iter_mut()
             .zip(&back)
             .zip(w.sensitivity.iter().zip(&self.beam))
@@ -179,6 +201,25 @@ impl Problem<'_> {
                 *o *= (b * beam / self.gain / s).max(0.0);
             }
         }
+        let change: Vec<f64> = next.iter().zip(&w.point).map(|(a, b)| a - b).collect();
+        let push = w.change.as_ref().map_or(0.0, |last| {
+            let (num, den) = change
+                .iter()
+                .zip(last)
+                .fold((0.0, 0.0), |(n, d), (c, l)| (n + c * l, d + l * l));
+            if den > 0.0 {
+                (num / den).clamp(0.0, MAX_PUSH)
+            } else {
+                0.0
+            }
+        });
+        w.point = next
+            .iter()
+            .zip(&w.object)
+            .map(|(x, prev)| (x + push * (x - prev)).max(0.0))
+            .collect();
+        w.object = next;
+        w.change = Some(change);
         for (p, bg) in w.background.iter_mut().enumerate() {
             if w.fitted[p] {
                 let r: f64 = (0..self.groups())
@@ -215,9 +256,8 @@ impl Problem<'_> {
                     .sum();
                 *bg *= r / n_all;
             }
-            for g in 0..self.groups() {
-                let (dp, ep, vp) =
-                    table.point(self.counts[g][p], pred[g][p] + self.group_bins[g] * *bg);
+            for ((z, m), n) in self.counts.iter().zip(&pred).zip(&self.group_bins) {
+                let (dp, ep, vp) = table.point(z[p], m[p] + n * *bg);
                 d += dp;
                 e += ep;
                 v += vp;
@@ -238,11 +278,15 @@ impl Problem<'_> {
         pred
     }
 
-    /// The transmission, its iterations chosen by the parity split, at most
-    /// `max_iters`.
-    pub fn solve(&self, max_iters: usize) -> Fit {
+    /// The transmission after `fixed` iterations, or else after those
+    /// the parity split chooses, at most `max_iters`.
+    pub fn solve(&self, max_iters: usize, fixed: Option<usize>) -> Fit {
+        if let Some(n) = fixed {
+            return self.run_all(n, Vec::new(), false);
+        }
         let (h, w) = self.model.sensor_shape();
-        let parity = |p: usize, even: bool| self.used[p] && ((p / w + p % w) % 2 == 0) == even;
+        let parity =
+            |p: usize, even: bool| self.used[p] && (p / w + p % w).is_multiple_of(2) == even;
         let halves: [Vec<bool>; 2] = [
             (0..h * w).map(|p| parity(p, true)).collect(),
             (0..h * w).map(|p| parity(p, false)).collect(),
@@ -260,27 +304,36 @@ impl Problem<'_> {
             let db = self.deviance(&walkers[1].object, hb, &halves[0], true).0;
             let total = da + db;
             curve.push(total);
-            if total < best {
-                best = total;
+            // The earliest iteration within one unit of deviance of the
+            // least: the data cannot tell smaller differences apart.
+            if total < best - RESOLVED_DEVIANCE {
                 best_at = it;
+                best = total;
             }
             if it >= best_at + CV_PATIENCE.max(best_at / 4) {
                 stopped_at_cap = false;
                 break;
             }
         }
-        let best_at = best_at.max(1);
+        self.run_all(best_at.max(1), curve, stopped_at_cap)
+    }
+
+    /// `iterations` on every used pixel, with the search's record.
+    fn run_all(&self, iterations: usize, held_out: Vec<f64>, stopped_at_cap: bool) -> Fit {
         let mut all = self.walker(&self.used);
-        for _ in 0..best_at {
+        for _ in 0..iterations {
             self.step(&mut all);
         }
         let mut background = all.background.clone();
         let (deviance, e, v) = self.deviance(&all.object, &mut background, &self.used, false);
+        // Each used pixel's fitted background takes one degree of freedom
+        // from what the noise leaves.
+        let e = e - self.used.iter().filter(|&&u| u).count() as f64;
         Fit {
             object: all.object,
             background: all.background,
-            iterations: best_at,
-            held_out: curve,
+            iterations,
+            held_out,
             stopped_at_cap,
             deviance,
             expected_deviance: (e, v.sqrt()),

@@ -109,12 +109,20 @@ pub fn pick(
             .iter()
             .find(|a| a.name == name)
             .cloned()
-            .ok_or_else(|| format!("no numeric array `{name}` (arrays in the file: {})", listing()));
+            .ok_or_else(|| {
+                format!(
+                    "no numeric array `{name}` (arrays in the file: {})",
+                    listing()
+                )
+            });
     }
     let fitting: Vec<&LabArray> = arrays.iter().filter(|a| fits(a.values.shape())).collect();
     match fitting.as_slice() {
         [one] => Ok((*one).clone()),
-        [] => Err(format!("no array fits a {what} (arrays in the file: {})", listing())),
+        [] => Err(format!(
+            "no array fits a {what} (arrays in the file: {})",
+            listing()
+        )),
         many => Err(format!(
             "{} arrays fit a {what} ({}): name one",
             many.len(),

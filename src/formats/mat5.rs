@@ -117,7 +117,9 @@ pub fn parse(bytes: &[u8]) -> Result<MatContents, String> {
                 let inflated = inflate(data, budget)
                     .map_err(|e| format!("the compressed element at byte {at}: {e}"))?;
                 if inflated.len() < 8 {
-                    return Err(format!("the compressed element at byte {at} inflates to no element"));
+                    return Err(format!(
+                        "the compressed element at byte {at} inflates to no element"
+                    ));
                 }
                 let (inner, m, inner_at) = order.tag(&inflated);
                 let inner_end = inner_at.saturating_add(m);
@@ -269,7 +271,9 @@ fn matrix(data: &[u8], order: Order, contents: &mut MatContents) -> Result<(), S
     let logical = word & 0x0200 != 0;
     let (dims_kind, dims_bytes) = sub.next("dimensions")?;
     if dims_kind != MI_INT32 {
-        return Err(format!("its dimensions are of data type {dims_kind}, not int32"));
+        return Err(format!(
+            "its dimensions are of data type {dims_kind}, not int32"
+        ));
     }
     let dims: Vec<i64> = dims_bytes
         .chunks_exact(4)
@@ -280,7 +284,11 @@ fn matrix(data: &[u8], order: Order, contents: &mut MatContents) -> Result<(), S
     }
     let (_, name_bytes) = sub.next("array name")?;
     let name = String::from_utf8_lossy(name_bytes).into_owned();
-    let class_label = if logical { "logical" } else { class_name(class) };
+    let class_label = if logical {
+        "logical"
+    } else {
+        class_name(class)
+    };
     if !(6..=15).contains(&class) {
         contents.skipped.push(format!("{name} ({class_label})"));
         return Ok(());
@@ -402,7 +410,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("cube.mat");
         let values: Vec<f64> = (0..24).map(|v| v as f64 - 3.5).collect();
-        write(&path, &[("cube", &[2, 3, 4], &values), ("x", &[1, 3], &[1.0, 2.0, 3.0])]).unwrap();
+        write(
+            &path,
+            &[
+                ("cube", &[2, 3, 4], &values),
+                ("x", &[1, 3], &[1.0, 2.0, 3.0]),
+            ],
+        )
+        .unwrap();
         let got = read(&path).unwrap();
         assert_eq!(got.arrays.len(), 2);
         assert_eq!(got.arrays[0].name, "cube");

@@ -8,6 +8,7 @@ mod calibrate_cmd;
 mod calibrate_slab;
 mod denoise;
 mod denoise_bench;
+mod embedded;
 mod fit;
 mod hidden;
 mod hints;
@@ -58,6 +59,8 @@ enum Command {
     Calibrate(calibrate_cmd::CalibrateArgs),
     CalibrateSlab(calibrate_slab::CalibrateSlabArgs),
     Hidden(hidden::HiddenArgs),
+    Embedded(embedded::EmbeddedArgs),
+    SimulateEmbedded(embedded::SimulateEmbeddedArgs),
     Report(report::ReportArgs),
     BenchRecon(Box<bench_recon::BenchReconArgs>),
     BenchHidden(bench_hidden::BenchHiddenArgs),
@@ -190,6 +193,8 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Calibrate(args) => calibrate_cmd::run(&args),
         Command::CalibrateSlab(args) => calibrate_slab::run(&args),
         Command::Hidden(args) => hidden::run(&args),
+        Command::Embedded(args) => embedded::run(&args),
+        Command::SimulateEmbedded(args) => embedded::simulate(&args),
         Command::Report(args) => report::run(&args),
         Command::BenchRecon(args) => bench_recon::run(&args),
         Command::BenchHidden(args) => bench_hidden::run(&args),
