@@ -4,6 +4,9 @@
 # - numpy and h5py, for scripts/cdt_reference.py (the independent numpy
 #   implementation the confocal test compares against) and forged MATLAB
 #   files;
+# - scipy, whose scipy.io reads and writes MATLAB level 5 files
+#   independently of our reader and writer, and whose FFTs make the
+#   independent forward model of scripts/embedded_independent.py;
 # - ptufile, the independent PTU reader our PTU files are decoded with;
 # - OpenEXR, the OpenEXR project's own library, reading our stacks back;
 # - tifffile and ome-types, reading our OME-TIFF files and parsing their
@@ -20,8 +23,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dest=target/pydeps
-packages=(numpy h5py ptufile OpenEXR tifffile ome-types tttrlib sdtfile phasorpy flimlib playwright)
-modules="numpy, h5py, ptufile, OpenEXR, tifffile, ome_types, tttrlib, sdtfile, phasorpy, flimlib, playwright"
+packages=(numpy scipy h5py ptufile OpenEXR tifffile ome-types tttrlib sdtfile phasorpy flimlib playwright)
+modules="numpy, scipy, h5py, ptufile, OpenEXR, tifffile, ome_types, tttrlib, sdtfile, phasorpy, flimlib, playwright"
 if PYTHONPATH="$dest" python3 -c "import $modules" 2>/dev/null; then
     echo "already present under $dest: ${packages[*]}"
     exit 0
