@@ -91,6 +91,24 @@ impl ForwardModel {
     /// the bins present in a measured stack.
     pub fn with_bins(kernels: &KernelStack, bins: &[usize], boundary: Boundary) -> Self {
         let (_, h, w) = kernels.kernels.dim();
+        Self::build(kernels, bins, (h, w), boundary)
+    }
+
+    /// A sensor of `sensor` pixels (rows, columns) with edges
+    /// ([`Boundary::Sensor`]) whose kernels were computed on larger arrays
+    /// than the sensor: blurs wider than half the sensor, whose light from
+    /// an object point reaches past the sensor's half-width.
+    pub fn with_sensor(kernels: &KernelStack, sensor: (usize, usize)) -> Self {
+        let all: Vec<usize> = (0..kernels.len()).collect();
+        Self::build(kernels, &all, sensor, Boundary::Sensor)
+    }
+
+    fn build(
+        kernels: &KernelStack,
+        bins: &[usize],
+        (h, w): (usize, usize),
+        boundary: Boundary,
+    ) -> Self {
         let (margin, grid) = match boundary {
             Boundary::Periodic => (0, (h, w)),
             Boundary::Sensor => {

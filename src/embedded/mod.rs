@@ -39,7 +39,7 @@ use ndarray::{Array2, Array3, s};
 use scatterscope_physics::{KernelStack, Sampling, Sensor, TimeBins};
 use serde::Serialize;
 
-use crate::forward::{Boundary, ForwardModel};
+use crate::forward::ForwardModel;
 use cube::Cube;
 use geometry::Geometry;
 use noise::{NoiseModel, Subtracted};
@@ -113,6 +113,9 @@ pub struct Report {
     pub calibration: Option<calibrate::Calibration>,
     /// Front and back reduced scattering used (1/cm).
     pub mu_s_reduced_per_cm: (f64, f64),
+    /// Full width at half maximum of the back slab's blur summed over the
+    /// cube's bins, along a row (cm).
+    pub blur_fwhm_cm: f64,
     /// The beam and how separable its light is in space and time.
     pub beam: geometry::Beam,
     /// `|| I - b f1 || / || I ||` of the beam's light at the object plane.
@@ -256,21 +259,18 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
             0.5 * (aspect - 1.0).abs() * 3.0 * geometry_sigma_px(&geometry, bins, settings.bin_width_ps, time_zero_ps, pitch)
         ));
     }
-    let setup = geometry.back_setup(
+    let kernels = back_kernels(
+        &geometry,
         TimeBins {
             start_ps: -time_zero_ps,
             width_ps: settings.bin_width_ps,
             count: bins,
         },
-        Sensor {
-            fov_cm: pitch * w as f64,
-            width_px: w,
-            height_px: h,
-        },
+        (h, w),
+        pitch,
     )?;
-    let kernels = KernelStack::build(&setup, Sampling::Integrated)?;
     let grouped = group_kernels(&kernels, &groups);
-    let model = ForwardModel::new(&grouped, Boundary::Sensor);
+    let model = ForwardModel::with_sensor(&grouped, (h, w));
     let (gh, gw) = model.grid_shape();
     let (oy, ox) = model.sensor_offset();
     let beam = geometry.beam_map(
@@ -338,6 +338,11 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
         ));
     }
     notes.push(format!(
+        "blur: the back slab's kernel summed over the bins is {:.2} cm wide at half maximum ({:.1} pixels)",
+        summed_fwhm_px(&grouped) * pitch,
+        summed_fwhm_px(&grouped)
+    ));
+    notes.push(format!(
         "the beam ({}) divided out: its light at the object plane is modelled as a fixed map times the front slab's time profile, {:.1} % from the true time-varying profile",
         match geometry.beam {
             geometry::Beam::Plane => "a plane wave".to_string(),
@@ -385,6 +390,7 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
             geometry.front.mu_s_per_cm * (1.0 - geometry.front.g),
             geometry.back.mu_s_per_cm * (1.0 - geometry.back.g),
         ),
+        blur_fwhm_cm: summed_fwhm_px(&grouped) * pitch,
         beam: geometry.beam,
         beam_separation_error: beam.separation_error,
         time_groups: groups.clone(),
@@ -398,6 +404,41 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
         used,
         report,
     })
+}
+
+/// Standard deviations of the back slab's lateral spread that its kernels
+/// reach.
+pub const KERNEL_SIGMAS: f64 = 4.0;
+/// The widest kernel array (pixels a side).
+pub const MAX_KERNEL_PX: usize = 513;
+
+/// The back slab's kernels for a camera of `sensor` pixels of `pitch_cm`
+/// and `bins` (times from the pulse's entry into the front slab), on
+/// arrays wide enough for [`KERNEL_SIGMAS`] of the spread at the last bin's
+/// end (wider than the camera where the blur is: an object point's light
+/// reaches across it), every bin of the setup described, those before any
+/// light left out of the stack.
+pub fn back_kernels(
+    geometry: &Geometry,
+    bins: TimeBins,
+    sensor: (usize, usize),
+    pitch_cm: f64,
+) -> Result<KernelStack, scatterscope_physics::ParamError> {
+    let d = scatterscope_physics::Diffusion::new(&geometry.back)?;
+    let reach = (KERNEL_SIGMAS * d.lateral_sigma_cm(bins.end_ps()) / pitch_cm).ceil();
+    let side = (2 * reach.min(MAX_KERNEL_PX as f64) as usize + 1)
+        .max(sensor.0)
+        .max(sensor.1)
+        .min(MAX_KERNEL_PX);
+    let setup = geometry.back_setup(
+        bins,
+        Sensor {
+            fov_cm: pitch_cm * side as f64,
+            width_px: side,
+            height_px: side,
+        },
+    )?;
+    KernelStack::build(&setup, Sampling::Integrated)
 }
 
 /// The lateral blur's width (pixels) at the profile's mean arrival.
@@ -474,6 +515,32 @@ pub fn time_groups(profile: &[f64], onset: usize, n: usize) -> Vec<(usize, usize
     }
     groups.push((start, profile.len() - start));
     groups
+}
+
+/// Full width at half maximum (pixels) along the centre row of the sum of
+/// `kernels`' kernels, by linear interpolation between pixels.
+fn summed_fwhm_px(kernels: &KernelStack) -> f64 {
+    let sum = kernels.kernels.sum_axis(ndarray::Axis(0));
+    let (h, w) = sum.dim();
+    let row = sum.row(h / 2);
+    let (cx, top) =
+        row.iter().enumerate().fold(
+            (0, f64::NEG_INFINITY),
+            |b, (j, &v)| if v > b.1 { (j, v) } else { b },
+        );
+    let half = 0.5 * top;
+    let side = |dir: i64| {
+        let mut j = cx as i64;
+        while (0..w as i64).contains(&(j + dir)) && row[(j + dir) as usize] > half {
+            j += dir;
+        }
+        let (a, b) = (
+            row[j as usize],
+            row.get((j + dir) as usize).copied().unwrap_or(0.0),
+        );
+        (j - cx as i64).abs() as f64 + if a > b { (a - half) / (a - b) } else { 0.0 }
+    };
+    side(-1) + side(1)
 }
 
 /// A kernel stack whose kernels are the sums of `kernels`' over each

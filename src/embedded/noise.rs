@@ -446,10 +446,9 @@ mod tests {
         let used = Array2::from_elem((3, 3), true);
         let e = measure(&Array3::zeros((4, 3, 3)), &used, None).unwrap_err();
         assert!(e.contains("at least 5"), "{e}");
-        let mut y = Array3::<f64>::zeros((30, 3, 3));
-        for k in 3..30 {
-            y.slice_mut(s![k, .., ..]).fill(50.0 + k as f64);
-        }
+        // The light 5 bins after the cube's start.
+        let (y, _) = raw(1.0, 5.0, 6);
+        let y = y.slice(s![15.., ..3, ..3]).to_owned();
         let e = measure(&y, &used, None).unwrap_err();
         assert!(e.contains("--subtracted-background"), "{e}");
     }

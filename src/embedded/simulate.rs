@@ -11,10 +11,10 @@ use ndarray::{Array2, Array3, s};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Poisson};
-use scatterscope_physics::{KernelStack, Sampling, Sensor, TimeBins};
+use scatterscope_physics::TimeBins;
 
 use super::geometry::Geometry;
-use crate::forward::{Boundary, ForwardModel};
+use crate::forward::ForwardModel;
 
 /// A transmissive target cut in an opaque card.
 #[derive(Debug, Clone, PartialEq)]
@@ -128,22 +128,14 @@ pub fn simulate(
     rec: &Recording,
 ) -> Result<Simulated, String> {
     let (h, w) = truth.dim();
-    let setup = geometry
-        .back_setup(
-            TimeBins {
-                start_ps: -time_zero_ps,
-                width_ps: bins.1,
-                count: bins.0,
-            },
-            Sensor {
-                fov_cm: pitch_cm * w as f64,
-                width_px: w,
-                height_px: h,
-            },
-        )
+    let bins_on_clock = TimeBins {
+        start_ps: -time_zero_ps,
+        width_ps: bins.1,
+        count: bins.0,
+    };
+    let kernels = super::back_kernels(geometry, bins_on_clock, (h, w), pitch_cm)
         .map_err(|e| e.to_string())?;
-    let kernels = KernelStack::build(&setup, Sampling::Integrated).map_err(|e| e.to_string())?;
-    let model = ForwardModel::new(&kernels, Boundary::Sensor);
+    let model = ForwardModel::with_sensor(&kernels, (h, w));
     let (gh, gw) = model.grid_shape();
     let (oy, ox) = model.sensor_offset();
     let beam = geometry
