@@ -256,7 +256,7 @@ fn bad_cubes_positions_and_masks_are_refused_by_file_and_field_with_nothing_writ
     };
     // NaN in the cube.
     with(&|v| v[777] = f64::NAN);
-    refused(dir.path(), &[], &["cube.mat", "`cube` holds NaN at index"]);
+    refused(dir.path(), &[], &["cube.mat", "`cube` holds NaN at bin"]);
     // All negative.
     with(&|v| v.iter_mut().for_each(|x| *x = -x.abs() - 1.0));
     refused(dir.path(), &[], &["cube.mat", "no positive value"]);

@@ -1073,6 +1073,76 @@ fn calibrate_slab<'py>(
     Ok(out.to_string())
 }
 
+/// Reconstructs an object inside the medium from a SPAD camera's cube
+/// (bins, rows, columns; any sign): (transmission, beam, used pixels,
+/// report JSON), as `scatterscope embedded`.
+#[pyfunction]
+#[pyo3(signature = (cube, pitch_cm, bin_width_ps, front_thickness_cm, back_thickness_cm, mu_s_reduced, mu_a, refractive_index, beam="plane", beam_centre="0cm,0cm", time_zero_ps=None, fit_scattering=false, time_groups=scatterscope::embedded::DEFAULT_TIME_GROUPS, max_iters=scatterscope::embedded::DEFAULT_MAX_ITERS, iterations=None, mask=None, subtracted_background=None))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn reconstruct_embedded<'py>(
+    py: Python<'py>,
+    cube: PyReadonlyArray3<'py, f64>,
+    pitch_cm: (f64, f64),
+    bin_width_ps: f64,
+    front_thickness_cm: f64,
+    back_thickness_cm: f64,
+    mu_s_reduced: f64,
+    mu_a: f64,
+    refractive_index: f64,
+    beam: &str,
+    beam_centre: &str,
+    time_zero_ps: Option<f64>,
+    fit_scattering: bool,
+    time_groups: usize,
+    max_iters: usize,
+    iterations: Option<usize>,
+    mask: Option<PyReadonlyArray2<'py, bool>>,
+    subtracted_background: Option<f64>,
+) -> PyResult<(
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<bool>>,
+    String,
+)> {
+    use scatterscope::embedded::{self, noise::Subtracted, request::GeometryArgs};
+    let geometry = GeometryArgs {
+        front_thickness_cm,
+        back_thickness_cm,
+        mu_s_reduced_per_cm: mu_s_reduced,
+        mu_a_per_cm: mu_a,
+        refractive_index,
+        back_mu_s_reduced_per_cm: None,
+        back_mu_a_per_cm: None,
+        beam: beam.to_string(),
+        beam_centre: beam_centre.to_string(),
+    }
+    .geometry(None)
+    .map_err(msg)?;
+    let cube =
+        embedded::cube::from_values(cube.as_array().to_owned(), pitch_cm, "array").map_err(msg)?;
+    let settings = embedded::Settings {
+        geometry,
+        bin_width_ps,
+        time_zero_ps,
+        fit_scattering,
+        time_groups,
+        max_iters,
+        iterations,
+        subtracted: subtracted_background.map(Subtracted::Level),
+        mask: mask.map(|m| m.as_array().mapv(|bad| !bad)),
+    };
+    let done = py
+        .detach(|| embedded::reconstruct(&cube, &settings))
+        .map_err(err)?;
+    let report = serde_json::to_string(&done.report).map_err(err)?;
+    Ok((
+        done.transmission.into_pyarray(py),
+        done.beam.into_pyarray(py),
+        done.used.into_pyarray(py),
+        report,
+    ))
+}
+
 /// The library's version.
 #[pyfunction]
 fn version() -> &'static str {
@@ -1097,6 +1167,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(acquire, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_slab, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct_embedded, m)?)?;
     m.add_function(wrap_pyfunction!(renamed_parameters, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     Ok(())

@@ -107,13 +107,6 @@ pub fn read(
             array.values.shape()
         )));
     }
-    if let Some((at, v)) = array.values.indexed_iter().find(|(_, v)| !v.is_finite()) {
-        return Err(named(format!(
-            "`{}` holds {v} at index {:?}: a cube's values must be finite (mark bad pixels with a mask instead)",
-            array.name,
-            ndarray::Dimension::slice(&at).to_vec()
-        )));
-    }
     let [t, y, x] = axes.positions();
     let values: Array3<f64> = array
         .values
@@ -123,20 +116,8 @@ pub fn read(
         .expect("3-D")
         .as_standard_layout()
         .into_owned();
-    let (bins, h, w) = values.dim();
-    if bins == 0 || h == 0 || w == 0 {
-        return Err(named(format!(
-            "`{}` is empty: shape {:?}",
-            array.name,
-            values.dim()
-        )));
-    }
-    if values.iter().all(|&v| v <= 0.0) {
-        return Err(named(format!(
-            "`{}` has no positive value: no light was recorded (or the background subtracted is all of it)",
-            array.name
-        )));
-    }
+    check_values(&values, &array.name).map_err(named)?;
+    let (_, h, w) = values.dim();
     let (pitch_cm, pitch_from, grid_departure) = match positions {
         Positions::Pitch(px, py) => {
             if !(px.is_finite() && *px > 0.0 && py.is_finite() && *py > 0.0) {
@@ -169,6 +150,51 @@ pub fn read(
             grid_departure,
         },
     })
+}
+
+/// A cube given as values (bins, rows, columns) with its pitch (x, y in
+/// cm), e.g. from Python; `source` names it in the notes and errors.
+pub fn from_values(
+    values: Array3<f64>,
+    pitch_cm: (f64, f64),
+    source: &str,
+) -> Result<Cube, String> {
+    check_values(&values, "cube").map_err(|e| format!("{source}: {e}"))?;
+    let (px, py) = pitch_cm;
+    if !(px.is_finite() && px > 0.0 && py.is_finite() && py > 0.0) {
+        return Err(format!("pixel pitch {px} x {py} cm: both must be positive"));
+    }
+    Ok(Cube {
+        values,
+        pitch_cm,
+        provenance: Provenance {
+            file: source.to_string(),
+            variable: "cube".into(),
+            axes: "tyx".into(),
+            pitch_from: "stated".into(),
+            grid_departure: 0.0,
+        },
+    })
+}
+
+/// Refuses a cube with a value that is not finite (named by its bin, row
+/// and column), an empty one, or one with no positive value.
+fn check_values(values: &Array3<f64>, name: &str) -> Result<(), String> {
+    if let Some(((k, i, j), v)) = values.indexed_iter().find(|(_, v)| !v.is_finite()) {
+        return Err(format!(
+            "`{name}` holds {v} at bin {k}, row {i}, column {j}: a cube's values must be finite (mark bad pixels with a mask instead)"
+        ));
+    }
+    let (bins, h, w) = values.dim();
+    if bins == 0 || h == 0 || w == 0 {
+        return Err(format!("`{name}` is empty: shape {:?}", values.dim()));
+    }
+    if values.iter().all(|&v| v <= 0.0) {
+        return Err(format!(
+            "`{name}` has no positive value: no light was recorded (or the background subtracted is all of it)"
+        ));
+    }
+    Ok(())
 }
 
 /// The pitch (x, y in cm) of a cube of `shape` (rows, columns) from a file

@@ -57,6 +57,7 @@ __all__ = [
     "acquire",
     "acquire_mock",
     "calibrate_slab",
+    "reconstruct_embedded",
     "__version__",
 ]
 
@@ -496,6 +497,57 @@ def acquire_mock(
         "mock", out, duration_s, scene=scene, rate_hz=float(rate_hz), dark_rate_hz=float(dark_rate_hz),
         seed=int(seed), **physics
     )
+
+
+def reconstruct_embedded(
+    cube: np.ndarray,
+    pitch_cm: Tuple[float, float],
+    bin_width_ps: float,
+    front_thickness_cm: float,
+    back_thickness_cm: float,
+    mu_s_reduced: float,
+    mu_a: float,
+    refractive_index: float,
+    beam: str = "plane",
+    beam_centre: str = "0cm,0cm",
+    time_zero_ps: Optional[float] = None,
+    fit_scattering: bool = False,
+    time_groups: int = 8,
+    max_iters: int = 5000,
+    iterations: Optional[int] = None,
+    mask: Optional[np.ndarray] = None,
+    subtracted_background: Optional[float] = None,
+) -> Tuple[np.ndarray, np.ndarray, np.ndarray, Dict[str, Any]]:
+    """Reconstruct an object inside a scattering medium from a SPAD camera's
+    cube, as ``scatterscope embedded``: the beam crosses the front slab,
+    lights the object (a thin mask), and its light crosses the back slab to
+    the imaged face.
+
+    ``cube`` is (bins, rows, columns), any real type and sign (a subtracted
+    background leaves negatives); ``pitch_cm`` the pixels' (x, y) pitch on
+    the face; lengths in cm, coefficients in 1/cm (both slabs alike),
+    ``beam`` ``"plane"`` or a Gaussian's FWHM with its unit (``"6cm"``).
+    ``time_zero_ps`` (the pulse's entry into the front slab after bin 0's
+    start) is fitted to the cube's time profile when ``None``; ``mask`` (rows,
+    columns) is True at bad pixels (filtered, hot and dead ones are found
+    without it); ``subtracted_background`` (counts per pixel and bin) is
+    needed only where the cube has too few bins before the light.
+
+    Returns the relative transmission (rows, columns), the beam's light at
+    the object plane, the pixels used (bool) and the report (a dict: the
+    noise model chosen and its figures, the pixels left out, the time zero,
+    the fit, and ``notes``, every line the command prints).
+    """
+    trans, beam_map, used, report = _native.reconstruct_embedded(
+        np.ascontiguousarray(cube, dtype=np.float64), tuple(pitch_cm), float(bin_width_ps),
+        float(front_thickness_cm), float(back_thickness_cm), float(mu_s_reduced), float(mu_a),
+        float(refractive_index), beam, beam_centre,
+        None if time_zero_ps is None else float(time_zero_ps), bool(fit_scattering), int(time_groups),
+        int(max_iters), None if iterations is None else int(iterations),
+        None if mask is None else np.ascontiguousarray(mask, dtype=bool),
+        None if subtracted_background is None else float(subtracted_background),
+    )
+    return trans, beam_map, used, json.loads(report)
 
 
 def calibrate_slab(
