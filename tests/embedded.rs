@@ -214,16 +214,6 @@ fn fitting_the_scattering_recovers_the_medium_from_the_cube_alone() {
     assert!((mus / 71.0 - 1.0).abs() < 0.15, "{mus} /cm for 71: {said}");
 }
 
-/// Every output name `embedded` writes.
-const OUTPUTS: [&str; 6] = [
-    "transmission.npy",
-    "transmission.png",
-    "beam.npy",
-    "used_pixels.npy",
-    "held_out.csv",
-    "report.json",
-];
-
 fn refused(dir: &Path, extra: &[&str], words: &[&str]) {
     let out = dir.join("refused");
     let o = reconstruct(dir, &out, extra);
@@ -232,7 +222,7 @@ fn refused(dir: &Path, extra: &[&str], words: &[&str]) {
     for w in words {
         assert!(said.contains(w), "`{w}` not in: {said}");
     }
-    for name in OUTPUTS {
+    for name in scatterscope::embedded::OUTPUTS {
         assert!(!out.join(name).exists(), "{name} written: {said}");
     }
 }
@@ -360,4 +350,89 @@ print("agreed")
         &[s(dir.path())],
     );
     assert!(said.contains("agreed"));
+}
+
+#[test]
+fn an_instrument_response_from_a_csv_is_taken_as_given_and_moves_the_time_zero_by_its_delay() {
+    let dir = tempfile::tempdir().unwrap();
+    simulate(
+        dir.path(),
+        "letter:T",
+        &["--seed", "13", "--photons", "5e5"],
+    );
+    let plain = dir.path().join("plain");
+    let o = reconstruct(dir.path(), &plain, &["--iterations", "20"]);
+    assert!(o.status.success(), "{}", text(&o));
+    // A response that delays every photon by 200-210 ps (a header line,
+    // then one number per line; 20 bins of 10 ps at 0, then one at 1).
+    let irf = dir.path().join("irf.csv");
+    let mut csv = String::from("delay_bin,weight\n");
+    for k in 0..20 {
+        csv.push_str(&format!("{k},0\n"));
+    }
+    csv.push_str("20,1\n");
+    std::fs::write(&irf, csv).unwrap();
+    let delayed = dir.path().join("delayed");
+    let o = reconstruct(
+        dir.path(),
+        &delayed,
+        &[
+            "--iterations",
+            "20",
+            "--irf",
+            s(&irf),
+            "--irf-bin-width",
+            "10ps",
+        ],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let t0 = |d: &Path| {
+        json(&d.join("report.json"))["calibration"]["time_zero_ps"][0]
+            .as_f64()
+            .unwrap()
+    };
+    let shift = t0(&plain) - t0(&delayed);
+    assert!(
+        (shift - 205.0).abs() < 10.0,
+        "time zero moved by {shift} ps"
+    );
+}
+
+#[test]
+fn a_cube_without_dark_bins_needs_its_subtracted_background_stated_as_a_level_or_a_map() {
+    let dir = tempfile::tempdir().unwrap();
+    // The camera's window opens 1 ns after the pulse: the light arrives
+    // within a few bins.
+    simulate(
+        dir.path(),
+        "letter:T",
+        &[
+            "--seed",
+            "14",
+            "--time-zero=-1500ps",
+            "--bins",
+            "120",
+            "--residual",
+            "0,0",
+        ],
+    );
+    refused(dir.path(), &[], &["cube.mat", "--subtracted-background"]);
+    let out = dir.path().join("level");
+    let o = reconstruct(dir.path(), &out, &["--subtracted-background", "20"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("from the stated subtracted background"),
+        "{}",
+        text(&o)
+    );
+    let map = dir.path().join("background.npy");
+    ndarray_npy::write_npy(&map, &Array2::<f64>::from_elem((32, 32), 20.0)).unwrap();
+    let out = dir.path().join("map");
+    let o = reconstruct(dir.path(), &out, &["--subtracted-background", s(&map)]);
+    assert!(o.status.success(), "{}", text(&o));
+    let r = correlation(
+        &read2(&dir.path().join("truth.npy")),
+        &read2(&out.join("transmission.npy")),
+    );
+    assert!(r > 0.5, "correlation {r}");
 }

@@ -1073,6 +1073,20 @@ fn calibrate_slab<'py>(
     Ok(out.to_string())
 }
 
+/// The numeric array `name` (or the only one) of a MATLAB (level 5 or
+/// v7.3) or `.npy` file, in the file's own dimensions.
+#[pyfunction]
+#[pyo3(signature = (path, name=None))]
+fn load_array<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    name: Option<&str>,
+) -> PyResult<Bound<'py, numpy::PyArrayDyn<f64>>> {
+    let a = scatterscope::formats::lab_array::pick(&path, name, "array", |_| true)
+        .map_err(|e| msg(format!("{}: {e}", path.display())))?;
+    Ok(a.values.into_pyarray(py))
+}
+
 /// Reconstructs an object inside the medium from a SPAD camera's cube
 /// (bins, rows, columns; any sign): (transmission, beam, used pixels,
 /// report JSON), as `scatterscope embedded`.
@@ -1168,6 +1182,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(acquire, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_slab, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct_embedded, m)?)?;
+    m.add_function(wrap_pyfunction!(load_array, m)?)?;
     m.add_function(wrap_pyfunction!(renamed_parameters, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     Ok(())

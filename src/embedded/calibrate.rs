@@ -146,25 +146,9 @@ fn arrival(geometry: &Geometry, scale: f64, bin_ps: f64) -> Result<IrfTable, Str
 /// puts the light's peak inside the profile, refined by a parabola; and its
 /// weighted residual sum.
 fn scan_time_zero(arrival: &IrfTable, profile: &[f64], weights: &[f64], bin_ps: f64) -> (f64, f64) {
-    let peak_at = profile
-        .iter()
-        .enumerate()
-        .fold(
-            (0, f64::NEG_INFINITY),
-            |b, (k, &v)| if v > b.1 { (k, v) } else { b },
-        )
-        .0;
-    let w = arrival.weights();
-    let model_peak = arrival.start_ps()
-        + arrival.bin_ps()
-            * (w.iter()
-                .enumerate()
-                .fold(
-                    (0, f64::NEG_INFINITY),
-                    |b, (k, &v)| if v > b.1 { (k, v) } else { b },
-                )
-                .0 as f64
-                + 0.5);
+    let peak_at = super::peak(profile).0;
+    let model_peak =
+        arrival.start_ps() + arrival.bin_ps() * (super::peak(arrival.weights()).0 as f64 + 0.5);
     // The data's peak time less the model's, +- the whole window.
     let centre = (peak_at as f64 + 0.5) * bin_ps - model_peak;
     let span = profile.len() as f64 * bin_ps;

@@ -181,7 +181,7 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
 
     // Time zero and scattering.
     let profile: Vec<f64> = (0..bins)
-        .map(|k| masked_sum(y.slice(s![k, .., ..]), &used))
+        .map(|k| used_values(y.slice(s![k, .., ..]), &used).sum())
         .collect();
     let variance: Vec<f64> = (0..bins)
         .map(|k| {
@@ -365,14 +365,7 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
     }
 
     let object = solve::on_sensor(&model, &fit.object);
-    let scale = percentile(
-        object
-            .iter()
-            .zip(used.iter())
-            .filter(|(_, u)| **u)
-            .map(|(v, _)| *v),
-        0.99,
-    );
+    let scale = percentile(used_values(object.view(), &used), 0.99);
     let transmission = object.mapv(|v| if scale > 0.0 { v / scale } else { 0.0 });
     notes.push(
         "transmission is relative: 1 at the 99th percentile of the used pixels (the beam's power is not known)".into(),
@@ -472,24 +465,33 @@ fn departure(problem: &solve::Problem, fit: &Fit) -> String {
     )
 }
 
-/// Sum of `plane` over the used pixels.
-fn masked_sum(plane: ndarray::ArrayView2<f64>, used: &Array2<bool>) -> f64 {
-    plane
-        .iter()
+/// The values of `a` at the used pixels.
+pub(crate) fn used_values<'a>(
+    a: ndarray::ArrayView2<'a, f64>,
+    used: &'a Array2<bool>,
+) -> impl Iterator<Item = f64> + 'a {
+    a.into_iter()
         .zip(used.iter())
         .filter(|(_, u)| **u)
-        .map(|(v, _)| v)
-        .sum()
+        .map(|(v, _)| *v)
 }
 
-/// The `q` quantile of `values`.
-fn percentile(values: impl Iterator<Item = f64>, q: f64) -> f64 {
+/// The `q` quantile of `values` (0 when there are none).
+pub(crate) fn percentile(values: impl Iterator<Item = f64>, q: f64) -> f64 {
     let mut v: Vec<f64> = values.collect();
     if v.is_empty() {
         return 0.0;
     }
     let at = ((v.len() - 1) as f64 * q).round() as usize;
     *v.select_nth_unstable_by(at, f64::total_cmp).1
+}
+
+/// Where `values` is largest and its value (the first where it ties).
+pub(crate) fn peak<'a>(values: impl IntoIterator<Item = &'a f64>) -> (usize, f64) {
+    values.into_iter().enumerate().fold(
+        (0, f64::NEG_INFINITY),
+        |b, (k, &v)| if v > b.1 { (k, v) } else { b },
+    )
 }
 
 /// `(first bin, bins)` of each group: bins before `onset` as one group
@@ -523,11 +525,7 @@ fn summed_fwhm_px(kernels: &KernelStack) -> f64 {
     let sum = kernels.kernels.sum_axis(ndarray::Axis(0));
     let (h, w) = sum.dim();
     let row = sum.row(h / 2);
-    let (cx, top) =
-        row.iter().enumerate().fold(
-            (0, f64::NEG_INFINITY),
-            |b, (j, &v)| if v > b.1 { (j, v) } else { b },
-        );
+    let (cx, top) = peak(row);
     let half = 0.5 * top;
     let side = |dir: i64| {
         let mut j = cx as i64;

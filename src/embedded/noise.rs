@@ -234,20 +234,7 @@ pub fn measure(
             }
         })
         .collect();
-    let median = |a: &Array2<f64>| {
-        let mut v: Vec<f64> = a
-            .iter()
-            .zip(used.iter())
-            .filter(|(_, u)| **u)
-            .map(|(x, _)| *x)
-            .collect();
-        let mid = v.len() / 2;
-        if v.is_empty() {
-            0.0
-        } else {
-            *v.select_nth_unstable_by(mid, f64::total_cmp).1
-        }
-    };
+    let median = |a: &Array2<f64>| super::percentile(super::used_values(a.view(), used), 0.5);
     let median_dark = (median(&dark_level), median(&dark_variance));
     let negative_share =
         cube.iter().filter(|&&v| v < 0.0).count() as f64 / cube.len().max(1) as f64;
@@ -316,14 +303,7 @@ fn bands_text(bands: &[Band]) -> String {
 /// absolute deviation as a standard deviation), so that noise alone does
 /// not start it.
 pub fn light_onset(profile: &[f64]) -> usize {
-    let peak_at = profile
-        .iter()
-        .enumerate()
-        .fold(
-            (0, f64::NEG_INFINITY),
-            |b, (k, &v)| if v > b.1 { (k, v) } else { b },
-        )
-        .0;
+    let peak_at = super::peak(profile).0;
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]

@@ -3,7 +3,7 @@
 //! software replaced them by the mean of some of their neighbours), dead
 //! (no change in time) and hot (a dark level far above the camera's).
 
-use ndarray::{Array2, Array3, Axis};
+use ndarray::{Array2, Array3};
 use serde::Serialize;
 
 /// A pixel's dark variance above this many times the camera's median marks
@@ -78,20 +78,11 @@ pub fn find(
         }
     }
     if let Some(var) = dark_variance {
-        let mut seen: Vec<f64> = var
-            .iter()
-            .zip(used.iter())
-            .filter(|(_, u)| **u)
-            .map(|(v, _)| *v)
-            .collect();
-        if !seen.is_empty() {
-            let mid = seen.len() / 2;
-            let median = *seen.select_nth_unstable_by(mid, f64::total_cmp).1;
-            for (u, v) in used.iter_mut().zip(var.iter()) {
-                if *u && *v > HOT_FACTOR * median && median > 0.0 {
-                    *u = false;
-                    bad.hot += 1;
-                }
+        let median = super::percentile(super::used_values(var.view(), &used), 0.5);
+        for (u, v) in used.iter_mut().zip(var.iter()) {
+            if *u && median > 0.0 && *v > HOT_FACTOR * median {
+                *u = false;
+                bad.hot += 1;
             }
         }
     }
@@ -155,12 +146,6 @@ pub fn mask_from(
         .mapv(|v| v == 0.0))
 }
 
-/// Pixels used, per row: for notes and tests.
-pub fn used_count(used: &Array2<bool>) -> usize {
-    used.map_axis(Axis(1), |r| r.iter().filter(|&&u| u).count())
-        .sum()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -182,7 +167,7 @@ mod tests {
         let (used, bad) = find(&cube, None, Some(&dark));
         assert_eq!((bad.filtered, bad.dead, bad.hot), (2, 1, 1), "{bad:?}");
         assert!(!used[[2, 3]] && !used[[4, 1]] && !used[[0, 6]] && !used[[5, 5]]);
-        assert_eq!(used_count(&used), 42 - 4);
+        assert_eq!(used.iter().filter(|&&u| u).count(), 42 - 4);
         // Noise alone is never a neighbour mean.
         let (_, clean) = find(
             &Array3::from_shape_fn((40, 6, 7), |_| rng.random_range(0.0..50.0f64).round()),

@@ -58,6 +58,7 @@ __all__ = [
     "acquire_mock",
     "calibrate_slab",
     "reconstruct_embedded",
+    "load_array",
     "__version__",
 ]
 
@@ -497,6 +498,13 @@ def acquire_mock(
         "mock", out, duration_s, scene=scene, rate_hz=float(rate_hz), dark_rate_hz=float(dark_rate_hz),
         seed=int(seed), **physics
     )
+
+
+def load_array(path: "os.PathLike[str] | str", name: Optional[str] = None) -> np.ndarray:
+    """The numeric array ``name`` (or the file's only one) of a MATLAB file
+    (level 5 or v7.3) or an ``.npy`` file, as float64 in the file's own
+    dimensions (MATLAB's rows first)."""
+    return _native.load_array(_path(path), name)
 
 
 def reconstruct_embedded(
