@@ -436,3 +436,52 @@ fn a_cube_without_dark_bins_needs_its_subtracted_background_stated_as_a_level_or
     );
     assert!(r > 0.5, "correlation {r}");
 }
+
+#[test]
+fn rectangular_pixels_are_read_from_one_positions_array_and_said() {
+    let dir = tempfile::tempdir().unwrap();
+    simulate(dir.path(), "letter:T", &["--seed", "15", "--bins", "120"]);
+    // One (rows, cols, 2) array in cm: x along the columns 0.14 cm apart,
+    // y along the rows 0.145 cm apart (3.6 % taller).
+    let positions = ndarray::Array3::from_shape_fn((32, 32, 2), |(i, j, c)| {
+        if c == 0 {
+            0.14 * j as f64
+        } else {
+            0.145 * i as f64
+        }
+    });
+    let file = dir.path().join("centres.npy");
+    ndarray_npy::write_npy(&file, &positions).unwrap();
+    let out = dir.path().join("out");
+    let cube = dir.path().join("cube.mat");
+    let mut args = vec![
+        "embedded",
+        s(&cube),
+        "--positions",
+        s(&file),
+        "--positions-unit",
+        "1cm",
+        "--bin-width",
+        "50ps",
+        "--out",
+        s(&out),
+    ];
+    args.extend(GEOMETRY);
+    let o = run(&args);
+    let said = text(&o);
+    assert!(o.status.success(), "{said}");
+    assert!(
+        said.contains("pixels of 0.1400 x 0.1450 cm (+3.6 % in y)"),
+        "{said}"
+    );
+    let pitch = &json(&out.join("report.json"))["pitch_cm"];
+    assert!((pitch[0].as_f64().unwrap() - 0.14).abs() < 1e-12);
+    assert!((pitch[1].as_f64().unwrap() - 0.145).abs() < 1e-12);
+    // Without a unit the positions are refused by name.
+    let o = run(&args
+        .iter()
+        .filter(|a| **a != "--positions-unit" && **a != "1cm")
+        .copied()
+        .collect::<Vec<_>>());
+    assert!(text(&o).contains("--positions-unit"), "{}", text(&o));
+}

@@ -12,7 +12,7 @@ use super::cube::{Axes, Positions};
 use super::geometry::{Beam, Geometry};
 use super::noise::Subtracted;
 use super::simulate::{Recording, Target};
-use super::{DEFAULT_MAX_ITERS, DEFAULT_TIME_GROUPS, Outcome, Settings};
+use super::{Outcome, Settings};
 use crate::formats::detect::Format;
 use crate::formats::lab_array;
 
@@ -181,10 +181,10 @@ pub struct EmbeddedRequest {
     pub irf_bin_width_ps: Option<f64>,
     /// Time groups of equal light the bins after the light's onset are
     /// summed into (1: the time-summed cube).
-    #[cfg_attr(feature = "cli", arg(long = "time-groups", default_value_t = DEFAULT_TIME_GROUPS))]
+    #[cfg_attr(feature = "cli", arg(long = "time-groups", default_value_t = super::DEFAULT_TIME_GROUPS))]
     pub time_groups: usize,
     /// The most iterations the stop searches.
-    #[cfg_attr(feature = "cli", arg(long = "max-iters", default_value_t = DEFAULT_MAX_ITERS))]
+    #[cfg_attr(feature = "cli", arg(long = "max-iters", default_value_t = super::DEFAULT_MAX_ITERS))]
     pub max_iters: usize,
     /// Run this many iterations instead of choosing them (no search).
     #[cfg_attr(feature = "cli", arg(long))]
