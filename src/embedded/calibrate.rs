@@ -13,8 +13,10 @@
 //! and thicknesses held as stated) and the time zero on a grid of a fifth
 //! of a bin, then refine both by parabolas; standard errors from the
 //! curvature of the weighted residual sum, scaled by its reduced value.
-//! What the sensor's edges and the object do to the summed profile is not
-//! modelled (the light lost off a 32-pixel face grows with time).
+//! The light lost off the camera's face grows with time (the back slab's
+//! spread widens): the model keeps the share a field of the camera's size
+//! catches from sources spread evenly over it (the object is taken to lie
+//! within the field; its shape is not modelled).
 
 use scatterscope_physics::{Diffusion, IrfTable};
 use serde::Serialize;
@@ -46,6 +48,7 @@ pub struct Calibration {
 /// `bin_ps` from 0) with per-bin `variance`.
 pub fn fit(
     geometry: &Geometry,
+    field_cm: (f64, f64),
     profile: &[f64],
     variance: &[f64],
     bin_ps: f64,
@@ -63,7 +66,7 @@ pub fn fit(
     let mut best: Option<(f64, f64, f64)> = None; // (chi2, scale, t0)
     let mut per_scale = Vec::new();
     for &s in &scales {
-        let arrival = arrival(geometry, s, bin_ps)?;
+        let arrival = arrival(geometry, field_cm, s, bin_ps)?;
         let (chi2, t0) = scan_time_zero(&arrival, profile, &weights, bin_ps);
         per_scale.push((s, chi2, t0));
         if best.is_none_or(|b| chi2 < b.0) {
@@ -97,18 +100,40 @@ pub fn fit(
             scale_se = f64::INFINITY;
         }
     }
-    let arrival = arrival(geometry, scale, bin_ps)?;
-    let (chi2, t0) = scan_time_zero(&arrival, profile, &weights, bin_ps);
+    let best = arrival(geometry, field_cm, scale, bin_ps)?;
+    let (chi2, t0) = scan_time_zero(&best, profile, &weights, bin_ps);
     let h = bin_ps / 5.0;
-    let at = |t: f64| weighted_fit(&arrival, profile, &weights, bin_ps, t).0;
+    let at = |t: f64| weighted_fit(&best, profile, &weights, bin_ps, t).0;
     let curv = (at(t0 - h) - 2.0 * chi2 + at(t0 + h)) / (h * h);
     let dof = (profile.len() as f64 - 4.0).max(1.0);
     let reduced = chi2 / dof;
-    let t0_se = if curv > 0.0 {
+    let mut t0_se = if curv > 0.0 {
         (2.0 * reduced.max(1.0) / curv).sqrt()
     } else {
         f64::INFINITY
     };
+    if fit_scattering {
+        // Time zero and scattering trade off: both errors from the 2 x 2
+        // curvature (time, log scattering) of the residual sum.
+        let k = std::f64::consts::LN_2 / SCALES_PER_OCTAVE;
+        let below = arrival(geometry, field_cm, scale * (-k).exp(), bin_ps)?;
+        let above = arrival(geometry, field_cm, scale * k.exp(), bin_ps)?;
+        let f = |table: &IrfTable, dt: f64| {
+            weighted_fit(table, profile, &weights, bin_ps, t0 + dt * h).0
+        };
+        let h_tt = curv;
+        let h_ss = (f(&above, 0.0) - 2.0 * chi2 + f(&below, 0.0)) / (k * k);
+        let h_ts =
+            (f(&above, 1.0) - f(&below, 1.0) - f(&above, -1.0) + f(&below, -1.0)) / (4.0 * h * k);
+        let det = h_tt * h_ss - h_ts * h_ts;
+        let (var_t, var_s) = if det > 0.0 && h_tt > 0.0 {
+            (2.0 * h_ss / det, 2.0 * h_tt / det)
+        } else {
+            (f64::INFINITY, f64::INFINITY)
+        };
+        t0_se = (var_t * reduced.max(1.0)).sqrt();
+        scale_se = var_s.sqrt();
+    }
     Ok(Calibration {
         time_zero_ps: (t0, t0_se),
         mu_s_reduced_per_cm: (
@@ -129,17 +154,44 @@ pub fn scaled(geometry: &Geometry, scale: f64) -> Geometry {
     g
 }
 
-/// The arrival density at the face, summed over it: the front profile
-/// (with the instrument) convolved with the back slab's flux, on the
-/// profile's grid.
-fn arrival(geometry: &Geometry, scale: f64, bin_ps: f64) -> Result<IrfTable, String> {
+/// The arrival density on the camera, summed over it: the front profile
+/// (with the instrument) convolved with the back slab's flux times the
+/// share of that flux the camera's `field_cm` (x, y) catches after each
+/// time in the back slab, on the profile's grid.
+fn arrival(
+    geometry: &Geometry,
+    field_cm: (f64, f64),
+    scale: f64,
+    bin_ps: f64,
+) -> Result<IrfTable, String> {
     let g = scaled(geometry, scale);
     let front = g.arrival_profile(bin_ps).map_err(|e| e.to_string())?;
     let step = front.bin_ps();
     let d = Diffusion::new(&g.back).map_err(|e| e.to_string())?;
-    let back = super::geometry::flux_on(&d, step).map_err(|e| e.to_string())?;
+    let back: Vec<f64> = super::geometry::flux_on(&d, step)
+        .map_err(|e| e.to_string())?
+        .into_iter()
+        .enumerate()
+        .map(|(j, f)| {
+            let sigma = d.lateral_sigma_cm((j as f64 + 0.5) * step);
+            f * caught(field_cm.0, sigma) * caught(field_cm.1, sigma)
+        })
+        .collect();
     let out = super::geometry::convolve(front.weights(), &back);
     IrfTable::new(step, front.start_ps(), out).map_err(|e| e.to_string())
+}
+
+/// The share of light from sources spread evenly over a field `width`
+/// wide (one axis) that lands inside it after a Gaussian spread `sigma`:
+/// `erf(L / (sqrt 2 s)) - sqrt(2 / pi) (s / L) (1 - exp(-L^2 / (2 s^2)))`.
+/// The object is taken to lie within the camera's field.
+fn caught(width: f64, sigma: f64) -> f64 {
+    if sigma <= 0.0 {
+        return 1.0;
+    }
+    let u = width / sigma;
+    libm::erf(u / std::f64::consts::SQRT_2)
+        - (2.0 / std::f64::consts::PI).sqrt() / u * (1.0 - (-0.5 * u * u).exp())
 }
 
 /// The best time zero on a grid of a fifth of a bin over every shift that
@@ -218,4 +270,31 @@ pub fn weighted_fit(
         .map(|((m, y), w)| w * (y - a * m - c).powi(2))
         .sum();
     (chi2, a, c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_caught_share_agrees_with_a_direct_integral() {
+        // Midpoint rule over source positions and the normal cdf.
+        let (width, sigma) = (4.48, 1.3);
+        let n = 4000;
+        let direct: f64 = (0..n)
+            .map(|i| {
+                let x = -width / 2.0 + (i as f64 + 0.5) * width / n as f64;
+                let cdf = |z: f64| 0.5 * libm::erfc(-z / std::f64::consts::SQRT_2);
+                cdf((width / 2.0 - x) / sigma) - cdf((-width / 2.0 - x) / sigma)
+            })
+            .sum::<f64>()
+            / n as f64;
+        assert!(
+            (caught(width, sigma) - direct).abs() < 1e-6,
+            "{} {direct}",
+            caught(width, sigma)
+        );
+        assert_eq!(caught(width, 0.0), 1.0);
+        assert!(caught(width, 100.0) < 0.05);
+    }
 }

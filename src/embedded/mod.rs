@@ -203,6 +203,7 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
         _ => {
             let cal = calibrate::fit(
                 &settings.geometry,
+                (w as f64 * cube.pitch_cm.0, h as f64 * cube.pitch_cm.1),
                 &profile,
                 &variance,
                 settings.bin_width_ps,
@@ -221,7 +222,7 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
                 if settings.time_zero_ps.is_some() { " (the stated time zero is used)" } else { " (used)" },
                 if cal.scattering_fitted {
                     format!(
-                        ", reduced scattering {:.2} /cm front and {:.2} /cm back (+- {:.0} %), absorption, index and thicknesses as stated",
+                        ", reduced scattering {:.2} /cm front and {:.2} /cm back (+- {:.1} %), absorption, index and thicknesses as stated",
                         cal.mu_s_reduced_per_cm.0,
                         cal.mu_s_reduced_per_cm.1,
                         100.0 * cal.mu_s_reduced_per_cm.2
