@@ -341,3 +341,60 @@ fn batch_runs_fits_and_records_them() {
     let log = std::fs::read_to_string(out.join("two").join("job.log")).unwrap();
     assert!(log.contains("global fit: lifetimes shared"), "{log}");
 }
+
+#[test]
+fn a_binning_past_the_image_is_refused_by_name_and_an_irf_fifo_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let tags = mock_tags(dir.path());
+    let out = dir.path().join("fit");
+    // Near 2^64, the pixel ranges wrapped and summed the wrong pixels.
+    let args = [
+        &["fit", s(&tags)][..],
+        &BINS,
+        &["--binning", "18446744073709551615", "--out", s(&out)][..],
+    ]
+    .concat();
+    let r = run(&args);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(
+        text(&r).contains("binning 18446744073709551615: at most"),
+        "{}",
+        text(&r)
+    );
+    assert!(!out.join("fit.json").exists());
+    // An IRF array that is a FIFO: refused at once, not waited on.
+    let fifo = dir.path().join("irf.npy");
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let args = [
+        &["fit", s(&tags)][..],
+        &BINS,
+        &["--irf", s(&fifo), "--out", s(&out)][..],
+    ]
+    .concat();
+    let mut child = command::scatterscope()
+        .args(&args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if start.elapsed() > std::time::Duration::from_secs(60) {
+            child.kill().unwrap();
+            panic!("fit waited on the FIFO for a minute");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("not a regular file"), "{}", text(&o));
+}

@@ -139,7 +139,9 @@ fn irf_decay(
         .is_some_and(|e| e.eq_ignore_ascii_case("npy"))
     {
         use ndarray_npy::ReadNpyExt;
-        let file = std::fs::File::open(path)
+        // The input gate: a FIFO or device is refused at once, not waited
+        // on.
+        let (file, _) = crate::files::input::open_regular(path, "IRF array")
             .map_err(|e| RecordedFileError::Output(StackError::io(path, e)))?;
         let v = ndarray::Array1::<f64>::read_npy(std::io::BufReader::new(file)).map_err(|e| {
             spec_error(

@@ -253,6 +253,16 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
 ) -> Result<FitMaps, DecayError> {
     let (bins, h, w) = counts.dim();
     check_options(options, bins, width_ps, starts_ps)?;
+    // Binning b sums the (2b + 1) x (2b + 1) pixels about each; from
+    // max(h, w) - 1 on, every pixel's sum is the whole image's, and a b
+    // near 2^64 would wrap the pixel ranges.
+    let widest = h.max(w).saturating_sub(1);
+    if options.binning > widest {
+        return Err(input_error(format!(
+            "binning {}: at most {widest} on a {h} x {w} image (binning {widest} already sums the whole image about every pixel)",
+            options.binning
+        )));
+    }
     let k = options.components;
     let mut notes = Vec::new();
     // Per-pixel decays over every bin, binned.
