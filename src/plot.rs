@@ -484,11 +484,14 @@ pub fn decay_fit(path: &Path, plot: &DecayFitPlot) -> Result<(), String> {
             t.first().copied().unwrap_or(0.0),
             t.last().copied().unwrap_or(1.0),
         );
+        // Finite values only: an infinite one made the log axis's ticks
+        // endless.
         let top = plot
             .decay
             .iter()
             .chain(plot.fit)
             .cloned()
+            .filter(|v| v.is_finite())
             .fold(1.0f64, f64::max);
         let mut chart = ChartBuilder::on(&upper)
             .caption(plot.title, ("sans-serif", 20))
@@ -506,7 +509,7 @@ pub fn decay_fit(path: &Path, plot: &DecayFitPlot) -> Result<(), String> {
         let points = |v: &[f64]| -> Vec<(f64, f64)> {
             t.iter()
                 .zip(v)
-                .filter(|(_, y)| **y > 0.5)
+                .filter(|(_, y)| **y > 0.5 && y.is_finite())
                 .map(|(x, y)| (*x, *y))
                 .collect()
         };
@@ -548,6 +551,7 @@ pub fn decay_fit(path: &Path, plot: &DecayFitPlot) -> Result<(), String> {
             .iter()
             .zip(plot.decay.iter().zip(plot.fit))
             .map(|(x, (y, m))| (*x, (y - m) / m.max(1.0).sqrt()))
+            .filter(|(_, r)| r.is_finite())
             .collect();
         let r = residuals
             .iter()

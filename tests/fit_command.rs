@@ -398,3 +398,27 @@ fn a_binning_past_the_image_is_refused_by_name_and_an_irf_fifo_at_once() {
     assert_eq!(status.code(), Some(1), "{}", text(&o));
     assert!(text(&o).contains("not a regular file"), "{}", text(&o));
 }
+
+#[test]
+fn a_four_bin_window_fits_a_finite_background_and_draws_its_figure() {
+    let dir = tempfile::tempdir().unwrap();
+    let tags = mock_tags(dir.path());
+    let out = dir.path().join("fit");
+    // The smallest window a one-component tail fit takes: its background
+    // started at infinity (an empty last fifth), and the decay figure's
+    // log axis then drew ticks for ever.
+    let args = [
+        &["fit", s(&tags)][..],
+        &BINS,
+        &["--window", "0:4", "--irf", "none", "--out", s(&out)][..],
+    ]
+    .concat();
+    let r = run(&args);
+    let said = text(&r);
+    assert!(
+        r.status.code() == Some(0) || r.status.code() == Some(4),
+        "{said}"
+    );
+    assert!(!said.contains("background inf"), "{said}");
+    assert!(out.join("fit_decay.png").exists(), "{said}");
+}

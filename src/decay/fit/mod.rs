@@ -518,14 +518,16 @@ fn fit_summed(
     let n = model.bins;
     let k = model.components;
     let w = model.width_ps;
-    // Background: the mean of the quietest fifth of the bins before the
-    // peak (none before it: the window's last fifth's minimum).
+    // Background: the mean of the bins before the peak (fewer than three
+    // before it: the minimum of the window's last fifth, at least its last
+    // bin; an empty fifth of a 4-bin window started the background at
+    // infinity).
     let peak = argmax(y);
     let before: Vec<f64> = y[..peak.saturating_sub(2)].to_vec();
     let bg = if before.len() >= 3 {
         before.iter().sum::<f64>() / before.len() as f64
     } else {
-        y[n - n / 5..]
+        y[n - (n / 5).max(1)..]
             .iter()
             .cloned()
             .fold(f64::INFINITY, f64::min)
