@@ -267,6 +267,12 @@ fn bad_cubes_positions_and_masks_are_refused_by_file_and_field_with_nothing_writ
     std::fs::write(&positions, kept).unwrap();
     // Too few bins to measure the variance (the small cube: 4 bins).
     refused(&small, &[], &["cube.mat", "4 time bins", "at least 5"]);
+    // Past the memory budget: refused before the work, by what it needed.
+    refused(
+        dir.path(),
+        &["--memory-limit", "1mb"],
+        &["reconstructing a cube of 120 bins x 32 x 32 pixels"],
+    );
     // A mask of every pixel.
     let mask = dir.path().join("mask.npy");
     ndarray_npy::write_npy(&mask, &Array2::<f64>::ones((32, 32))).unwrap();

@@ -10,7 +10,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use ndarray::{Array2, Array3};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3,
+    PyUntypedArrayMethods,
+};
 use pyo3::exceptions::{PyException, PyKeyError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -821,6 +824,16 @@ fn reconstruct<'py>(
     if let Some(cap) = max_iters {
         opts.cap_pnp_iters(cap);
     }
+    // Checked before the copy: an array past the budget is refused, not
+    // copied (the copy alone could end the interpreter).
+    scatterscope::memory::check(
+        scatterscope::memory::bytes_of(
+            data.shape().iter().copied(),
+            4 + scatterscope::memory::PROBLEM_BYTES,
+        ),
+        || format!("reconstructing an array of shape {:?}", data.shape()),
+    )
+    .map_err(err)?;
     let data: Array3<f32> = data.as_array().to_owned();
     let cancel = Arc::new(AtomicBool::new(false));
     let watch = cancel.clone();
@@ -1132,6 +1145,11 @@ fn reconstruct_embedded<'py>(
     }
     .geometry(None)
     .map_err(msg)?;
+    scatterscope::memory::check(
+        scatterscope::memory::bytes_of(cube.shape().iter().copied(), embedded::CUBE_BYTES),
+        || format!("reconstructing a cube of shape {:?}", cube.shape()),
+    )
+    .map_err(err)?;
     let cube =
         embedded::cube::from_values(cube.as_array().to_owned(), pitch_cm, "array").map_err(msg)?;
     let settings = embedded::Settings {

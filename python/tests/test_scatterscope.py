@@ -497,3 +497,17 @@ def test_reconstruct_embedded_equals_the_command_and_names_its_noise_model(tmp_p
         scatterscope.reconstruct_embedded(bad, (0.28, 0.28), 50.0, front_thickness_cm=2.5,
                                           back_thickness_cm=2.5, mu_s_reduced=71.0, mu_a=0.14,
                                           refractive_index=1.0)
+
+
+def test_arrays_past_the_memory_budget_are_refused_before_they_are_copied(monkeypatch):
+    """Under SCATTERSCOPE_MEMORY_LIMIT, reconstruct and reconstruct_embedded
+    refuse an array by its shape before copying it (the copy of a large
+    array alone ended the interpreter)."""
+    monkeypatch.setenv("SCATTERSCOPE_MEMORY_LIMIT", "2mb")
+    big = np.zeros((32, 64, 64), np.float32)
+    with pytest.raises(scatterscope.ScatterscopeError, match=r"reconstructing an array of shape \[32, 64, 64\]"):
+        scatterscope.reconstruct(big, scatterscope.measured_meta(0.0, 4.0, 32))
+    with pytest.raises(scatterscope.ScatterscopeError, match=r"reconstructing a cube of shape \[32, 64, 64\]"):
+        scatterscope.reconstruct_embedded(big, (0.14, 0.14), 50.0, front_thickness_cm=2.5,
+                                          back_thickness_cm=2.5, mu_s_reduced=71.0, mu_a=0.14,
+                                          refractive_index=1.0)

@@ -159,6 +159,10 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
     }
     let y = &cube.values;
     let (bins, h, w) = y.dim();
+    crate::memory::check(crate::memory::bytes_of([bins, h, w], CUBE_BYTES), || {
+        format!("reconstructing a cube of {bins} bins x {h} x {w} pixels")
+    })
+    .map_err(|e| invalid(e.to_string()))?;
     let mut notes = Vec::new();
 
     // Pixels and noise: filtered and dead pixels first (a neighbour mean
@@ -400,6 +404,10 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
     })
 }
 
+/// Bytes per pixel and bin a reconstruction holds besides its kernels:
+/// the cube, its transform, the dark statistics' and pixel checks' views.
+pub const CUBE_BYTES: u64 = 32;
+
 /// Standard deviations of the back slab's lateral spread that its kernels
 /// reach.
 pub const KERNEL_SIGMAS: f64 = 4.0;
@@ -424,6 +432,17 @@ pub fn back_kernels(
         .max(sensor.0)
         .max(sensor.1)
         .min(MAX_KERNEL_PX);
+    // The kernels of every bin, and their local arrays as they are built.
+    crate::memory::check(
+        crate::memory::bytes_of([bins.count, side, side], 16),
+        || {
+            format!(
+                "the back slab's kernels: {} bins of {side} x {side} pixels",
+                bins.count
+            )
+        },
+    )
+    .map_err(|e| scatterscope_physics::ParamError::new("bins", bins.count as f64, e.to_string()))?;
     let setup = geometry.back_setup(
         bins,
         Sensor {
