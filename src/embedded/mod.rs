@@ -130,6 +130,14 @@ pub struct Report {
     pub notes: Vec<String>,
 }
 
+impl Report {
+    /// The notes that are warnings (`warning:` in them): the outputs are
+    /// written, but doubtful.
+    pub fn warnings(&self) -> usize {
+        self.notes.iter().filter(|n| n.contains("warning:")).count()
+    }
+}
+
 /// Why a reconstruction could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum EmbeddedError {

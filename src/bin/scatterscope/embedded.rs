@@ -34,7 +34,7 @@ pub fn run(args: &EmbeddedArgs) -> anyhow::Result<()> {
     }
     let names: Vec<String> = done.files.iter().map(|p| p.display().to_string()).collect();
     println!("wrote {}", names.join(", "));
-    crate::signals::warned(notes.iter().filter(|n| n.contains("warning:")).count())
+    crate::signals::warned(done.outcome.report.warnings())
 }
 
 /// Simulate a SPAD camera's cube of an object inside the medium, written
