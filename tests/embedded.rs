@@ -193,7 +193,7 @@ fn a_wrong_medium_is_warned_of_by_its_misfit() {
 }
 
 #[test]
-fn fitting_the_scattering_recovers_the_medium_from_the_cube_alone() {
+fn fitting_the_scattering_or_the_absorption_recovers_it_from_the_cube_alone() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
     simulate(
@@ -212,6 +212,32 @@ fn fitting_the_scattering_recovers_the_medium_from_the_cube_alone() {
         .as_f64()
         .unwrap();
     assert!((mus / 71.0 - 1.0).abs() < 0.15, "{mus} /cm for 71: {said}");
+    // The absorption alike, told half of it.
+    let mut told = GEOMETRY;
+    told[7] = "0.07";
+    let o = reconstruct_in(dir.path(), &out, &told, &["--fit-absorption"]);
+    let said = text(&o);
+    assert!(o.status.success(), "{said}");
+    let mua = json(&out.join("report.json"))["calibration"]["mu_a_per_cm"][0]
+        .as_f64()
+        .unwrap();
+    assert!(
+        (mua / 0.14 - 1.0).abs() < 0.15,
+        "{mua} /cm for 0.14: {said}"
+    );
+    // Both together trade off with the time zero: refused by name.
+    let o = reconstruct_in(
+        dir.path(),
+        &dir.path().join("both"),
+        &told,
+        &["--fit-absorption", "--fit-scattering"],
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("the scattering and the absorption together"),
+        "{}",
+        text(&o)
+    );
 }
 
 fn refused(dir: &Path, extra: &[&str], words: &[&str]) {

@@ -1104,7 +1104,7 @@ fn load_array<'py>(
 /// (bins, rows, columns; any sign): (transmission, beam, used pixels,
 /// report JSON), as `scatterscope embedded`.
 #[pyfunction]
-#[pyo3(signature = (cube, pitch_cm, bin_width_ps, front_thickness_cm, back_thickness_cm, mu_s_reduced, mu_a, refractive_index, beam="plane", beam_centre="0cm,0cm", time_zero_ps=None, fit_scattering=false, time_groups=scatterscope::embedded::DEFAULT_TIME_GROUPS, max_iters=scatterscope::embedded::DEFAULT_MAX_ITERS, iterations=None, mask=None, subtracted_background=None))]
+#[pyo3(signature = (cube, pitch_cm, bin_width_ps, front_thickness_cm, back_thickness_cm, mu_s_reduced, mu_a, refractive_index, beam="plane", beam_centre="0cm,0cm", time_zero_ps=None, fit_scattering=false, fit_absorption=false, time_groups=scatterscope::embedded::DEFAULT_TIME_GROUPS, max_iters=scatterscope::embedded::DEFAULT_MAX_ITERS, iterations=None, mask=None, subtracted_background=None))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn reconstruct_embedded<'py>(
     py: Python<'py>,
@@ -1120,6 +1120,7 @@ fn reconstruct_embedded<'py>(
     beam_centre: &str,
     time_zero_ps: Option<f64>,
     fit_scattering: bool,
+    fit_absorption: bool,
     time_groups: usize,
     max_iters: usize,
     iterations: Option<usize>,
@@ -1156,7 +1157,10 @@ fn reconstruct_embedded<'py>(
         geometry,
         bin_width_ps,
         time_zero_ps,
-        fit_scattering,
+        fit_media: embedded::calibrate::Free {
+            scattering: fit_scattering,
+            absorption: fit_absorption,
+        },
         time_groups,
         max_iters,
         iterations,

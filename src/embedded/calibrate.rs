@@ -1,7 +1,7 @@
 //! Self-calibration when nothing else was recorded: the time zero (the
 //! pulse's entry into the front slab on the cube's clock) and the slabs'
-//! reduced scattering, fitted to the cube's own time profile summed over
-//! its used pixels.
+//! reduced scattering and absorption, fitted to the cube's own time
+//! profile summed over its used pixels.
 //!
 //! The model of that profile is the light crossing both slabs, summed over
 //! the whole face: the front slab's transmitted flux convolved with the
@@ -9,10 +9,11 @@
 //! times an amplitude, plus a constant background; amplitude and
 //! background are solved for in closed form (weighted least squares, the
 //! weights the measured variance) at each trial. The trials scan the
-//! scattering on a log grid (both slabs scaled alike; absorption, index
-//! and thicknesses held as stated) and the time zero on a grid of a fifth
-//! of a bin, then refine both by parabolas; standard errors from the
-//! curvature of the weighted residual sum, scaled by its reduced value.
+//! fitted media factor (scattering or absorption, not both: one factor on
+//! both slabs; the index and thicknesses held as stated) on a log grid,
+//! and the time zero on a grid of a fifth of a bin, each refined by a
+//! parabola; standard errors from the inverse curvature of the weighted
+//! residual sum over the fitted quantities, scaled by its reduced value.
 //! The light lost off the camera's face grows with time (the back slab's
 //! spread widens): the model keeps the share a field of the camera's size
 //! catches from sources spread evenly over it (the object is taken to lie
@@ -23,134 +24,214 @@ use serde::Serialize;
 
 use super::geometry::Geometry;
 
-/// Scattering trials per factor of 2, and the range scanned (factors of
-/// the stated value).
+/// Trials per factor of 2 of a fitted medium factor, and the range
+/// scanned (factors of the stated value).
 const SCALES_PER_OCTAVE: f64 = 6.0;
 const SCALE_RANGE: (f64, f64) = (0.125, 4.0);
+/// Why scattering and absorption are not fitted together.
+pub const JOINT_REFUSED: &str = "scattering and absorption fitted together trade off with the time zero along a valley the summed time profile does not resolve (on a simulated cube, starts from 0.5x and 2x the truth ended 140 ps apart in time zero at the same chi-square): fit one of them";
 
-/// The fitted time zero and scattering.
+/// Which media factors are fitted beside the time zero (each one factor
+/// on both slabs' value).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Free {
+    /// Reduced scattering.
+    pub scattering: bool,
+    /// Absorption.
+    pub absorption: bool,
+}
+
+/// The fitted time zero and media.
 #[derive(Debug, Clone, Serialize)]
 pub struct Calibration {
     /// Time zero on the cube's clock (ps from bin 0's start) and its
     /// standard error.
     pub time_zero_ps: (f64, f64),
     /// Reduced scattering of the front and back slabs (1/cm) and the
-    /// relative standard error of their common factor.
+    /// relative standard error of their common factor (0 when held).
     pub mu_s_reduced_per_cm: (f64, f64, f64),
+    /// Absorption of the front and back slabs (1/cm) and the relative
+    /// standard error of their common factor (0 when held).
+    pub mu_a_per_cm: (f64, f64, f64),
     /// Reduced chi-square of the summed profile's fit.
     pub reduced_chi2: f64,
     /// Whether the scattering was fitted (else held as stated).
     pub scattering_fitted: bool,
+    /// Whether the absorption was fitted (else held as stated).
+    pub absorption_fitted: bool,
+    /// The factors on the stated scattering and absorption
+    /// ([`scaled`] makes the fitted geometry).
+    pub factors: [f64; 2],
 }
 
-/// Fits the time zero (and, when `fit_scattering`, a common factor on both
-/// slabs' reduced scattering) to `profile` (summed counts per bin, bins of
-/// `bin_ps` from 0) with per-bin `variance`.
+/// Fits the time zero (and the `free` media factors) to `profile` (summed
+/// counts per bin, bins of `bin_ps` from 0) with per-bin `variance`, for
+/// a camera whose field is `field_cm` (x, y).
 pub fn fit(
     geometry: &Geometry,
     field_cm: (f64, f64),
     profile: &[f64],
     variance: &[f64],
     bin_ps: f64,
-    fit_scattering: bool,
+    free: Free,
 ) -> Result<Calibration, String> {
     let weights: Vec<f64> = variance.iter().map(|v| 1.0 / v.max(1.0)).collect();
-    let scales: Vec<f64> = if fit_scattering {
-        let n = ((SCALE_RANGE.1 / SCALE_RANGE.0).log2() * SCALES_PER_OCTAVE).round() as usize;
-        (0..=n)
-            .map(|i| SCALE_RANGE.0 * 2f64.powf(i as f64 / SCALES_PER_OCTAVE))
-            .collect()
-    } else {
-        vec![1.0]
+    let chi2_at = |factors: [f64; 2]| -> Result<(f64, f64), String> {
+        let table = arrival(geometry, field_cm, factors, bin_ps)?;
+        Ok(scan_time_zero(&table, profile, &weights, bin_ps))
     };
-    let mut best: Option<(f64, f64, f64)> = None; // (chi2, scale, t0)
-    let mut per_scale = Vec::new();
-    for &s in &scales {
-        let arrival = arrival(geometry, field_cm, s, bin_ps)?;
-        let (chi2, t0) = scan_time_zero(&arrival, profile, &weights, bin_ps);
-        per_scale.push((s, chi2, t0));
-        if best.is_none_or(|b| chi2 < b.0) {
-            best = Some((chi2, s, t0));
-        }
+    let fitted = [free.scattering, free.absorption];
+    let k = std::f64::consts::LN_2 / SCALES_PER_OCTAVE;
+    let n = ((SCALE_RANGE.1 / SCALE_RANGE.0).log2() * SCALES_PER_OCTAVE).round() as usize;
+    let grid: Vec<f64> = (0..=n)
+        .map(|i| SCALE_RANGE.0 * 2f64.powf(i as f64 / SCALES_PER_OCTAVE))
+        .collect();
+    if fitted.iter().all(|&f| f) {
+        return Err(JOINT_REFUSED.into());
     }
-    let (_, mut scale, _) = best.expect("at least one scale");
-    let mut scale_se = 0.0;
-    if fit_scattering {
-        // Parabola through the best and its neighbours in log scale.
-        let i = per_scale
-            .iter()
-            .position(|p| p.0 == scale)
-            .expect("present");
-        if i > 0 && i + 1 < per_scale.len() {
-            let (l, c, r) = (per_scale[i - 1].1, per_scale[i].1, per_scale[i + 1].1);
-            let h = 1.0 / SCALES_PER_OCTAVE * std::f64::consts::LN_2;
-            let curv = (l - 2.0 * c + r) / (h * h);
-            let shift = if curv > 0.0 {
-                0.5 * h * (l - r) / (l - 2.0 * c + r)
+    let mut factors = [1.0f64, 1.0];
+    for d in (0..2).filter(|&d| fitted[d]) {
+        let mut trials = Vec::with_capacity(grid.len());
+        for &g in &grid {
+            let mut x = factors;
+            x[d] = g;
+            trials.push(chi2_at(x)?.0);
+        }
+        let i = (0..trials.len())
+            .min_by(|&a, &b| trials[a].total_cmp(&trials[b]))
+            .expect("trials");
+        // A parabola through the best and its neighbours, in log scale.
+        let shift = if i > 0 && i + 1 < trials.len() {
+            let (l, c, r) = (trials[i - 1], trials[i], trials[i + 1]);
+            let den = l - 2.0 * c + r;
+            if den > 0.0 {
+                0.5 * k * (l - r) / den
             } else {
                 0.0
-            };
-            scale *= shift.exp();
-            scale_se = if curv > 0.0 {
-                (2.0 / curv).sqrt()
-            } else {
-                f64::INFINITY
-            };
+            }
         } else {
-            scale_se = f64::INFINITY;
+            0.0
+        };
+        factors[d] = grid[i] * shift.exp();
+    }
+    let centre = arrival(geometry, field_cm, factors, bin_ps)?;
+    let (chi2, t0) = scan_time_zero(&centre, profile, &weights, bin_ps);
+    let free_count = fitted.iter().filter(|&&f| f).count() as f64;
+    let dof = (profile.len() as f64 - 3.0 - free_count).max(1.0);
+    let reduced = chi2 / dof;
+    // The curvature of the residual sum over the time zero (ps) and the
+    // fitted factors' logarithms; the errors from its inverse (they trade
+    // off: the time zero's is the marginal one).
+    let h = bin_ps / 5.0;
+    let dims: Vec<usize> = (0..2).filter(|&d| fitted[d]).collect();
+    let at = |steps: [i32; 2], dt: f64| -> Result<f64, String> {
+        let mut x = factors;
+        for (v, s) in x.iter_mut().zip(steps) {
+            *v *= (f64::from(s) * k).exp();
+        }
+        let table = if steps == [0, 0] {
+            centre.clone()
+        } else {
+            arrival(geometry, field_cm, x, bin_ps)?
+        };
+        Ok(weighted_fit(&table, profile, &weights, bin_ps, t0 + dt * h).0)
+    };
+    let steps = |pairs: &[(usize, i32)]| {
+        let mut s = [0, 0];
+        for &(d, v) in pairs {
+            s[d] = v;
+        }
+        s
+    };
+    let m = 1 + dims.len();
+    let mut hess = vec![vec![0.0; m]; m];
+    hess[0][0] = (at([0, 0], -1.0)? - 2.0 * chi2 + at([0, 0], 1.0)?) / (h * h);
+    for (i, &d) in dims.iter().enumerate() {
+        let (up, down) = (steps(&[(d, 1)]), steps(&[(d, -1)]));
+        hess[i + 1][i + 1] = (at(up, 0.0)? - 2.0 * chi2 + at(down, 0.0)?) / (k * k);
+        let cross =
+            (at(up, 1.0)? - at(down, 1.0)? - at(up, -1.0)? + at(down, -1.0)?) / (4.0 * h * k);
+        hess[0][i + 1] = cross;
+        hess[i + 1][0] = cross;
+        for (j, &e) in dims.iter().enumerate().skip(i + 1) {
+            let c = (at(steps(&[(d, 1), (e, 1)]), 0.0)?
+                - at(steps(&[(d, 1), (e, -1)]), 0.0)?
+                - at(steps(&[(d, -1), (e, 1)]), 0.0)?
+                + at(steps(&[(d, -1), (e, -1)]), 0.0)?)
+                / (4.0 * k * k);
+            hess[i + 1][j + 1] = c;
+            hess[j + 1][i + 1] = c;
         }
     }
-    let best = arrival(geometry, field_cm, scale, bin_ps)?;
-    let (chi2, t0) = scan_time_zero(&best, profile, &weights, bin_ps);
-    let h = bin_ps / 5.0;
-    let at = |t: f64| weighted_fit(&best, profile, &weights, bin_ps, t).0;
-    let curv = (at(t0 - h) - 2.0 * chi2 + at(t0 + h)) / (h * h);
-    let dof = (profile.len() as f64 - 4.0).max(1.0);
-    let reduced = chi2 / dof;
-    let mut t0_se = if curv > 0.0 {
-        (2.0 * reduced.max(1.0) / curv).sqrt()
-    } else {
-        f64::INFINITY
-    };
-    if fit_scattering {
-        // Time zero and scattering trade off: both errors from the 2 x 2
-        // curvature (time, log scattering) of the residual sum.
-        let k = std::f64::consts::LN_2 / SCALES_PER_OCTAVE;
-        let below = arrival(geometry, field_cm, scale * (-k).exp(), bin_ps)?;
-        let above = arrival(geometry, field_cm, scale * k.exp(), bin_ps)?;
-        let f = |table: &IrfTable, dt: f64| {
-            weighted_fit(table, profile, &weights, bin_ps, t0 + dt * h).0
-        };
-        let h_tt = curv;
-        let h_ss = (f(&above, 0.0) - 2.0 * chi2 + f(&below, 0.0)) / (k * k);
-        let h_ts =
-            (f(&above, 1.0) - f(&below, 1.0) - f(&above, -1.0) + f(&below, -1.0)) / (4.0 * h * k);
-        let det = h_tt * h_ss - h_ts * h_ts;
-        let (var_t, var_s) = if det > 0.0 && h_tt > 0.0 {
-            (2.0 * h_ss / det, 2.0 * h_tt / det)
+    let variances = inverse_diagonal(&hess).unwrap_or_else(|| vec![f64::INFINITY; m]);
+    let se = |v: f64| {
+        if v > 0.0 && v.is_finite() {
+            (2.0 * v * reduced.max(1.0)).sqrt()
         } else {
-            (f64::INFINITY, f64::INFINITY)
-        };
-        t0_se = (var_t * reduced.max(1.0)).sqrt();
-        scale_se = var_s.sqrt();
-    }
+            f64::INFINITY
+        }
+    };
+    let factor_se = |d: usize| {
+        dims.iter()
+            .position(|&x| x == d)
+            .map_or(0.0, |i| se(variances[i + 1]))
+    };
+    let g = scaled(geometry, factors);
     Ok(Calibration {
-        time_zero_ps: (t0, t0_se),
+        time_zero_ps: (t0, se(variances[0])),
         mu_s_reduced_per_cm: (
-            geometry.front.mu_s_per_cm * (1.0 - geometry.front.g) * scale,
-            geometry.back.mu_s_per_cm * (1.0 - geometry.back.g) * scale,
-            scale_se * reduced.max(1.0).sqrt(),
+            g.front.mu_s_per_cm * (1.0 - g.front.g),
+            g.back.mu_s_per_cm * (1.0 - g.back.g),
+            factor_se(0),
         ),
+        mu_a_per_cm: (g.front.mu_a_per_cm, g.back.mu_a_per_cm, factor_se(1)),
         reduced_chi2: reduced,
-        scattering_fitted: fit_scattering,
+        scattering_fitted: free.scattering,
+        absorption_fitted: free.absorption,
+        factors,
     })
 }
 
-/// The geometry with both slabs' scattering times `scale`.
-pub fn scaled(geometry: &Geometry, scale: f64) -> Geometry {
+/// The diagonal of the inverse of a small matrix (Gauss-Jordan with
+/// partial pivoting); `None` when it is singular.
+fn inverse_diagonal(a: &[Vec<f64>]) -> Option<Vec<f64>> {
+    let n = a.len();
+    let mut m: Vec<Vec<f64>> = a
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            let mut r = row.clone();
+            r.extend((0..n).map(|j| f64::from(u8::from(i == j))));
+            r
+        })
+        .collect();
+    for c in 0..n {
+        let p = (c..n).max_by(|&x, &y| m[x][c].abs().total_cmp(&m[y][c].abs()))?;
+        if !(m[p][c].abs() > 1e-300 && m[p][c].is_finite()) {
+            return None;
+        }
+        m.swap(c, p);
+        let pivot = m[c][c];
+        m[c].iter_mut().for_each(|v| *v /= pivot);
+        let row_c = m[c].clone();
+        for (r, row) in m.iter_mut().enumerate() {
+            if r != c {
+                let f = row[c];
+                row.iter_mut().zip(&row_c).for_each(|(v, w)| *v -= f * w);
+            }
+        }
+    }
+    Some((0..n).map(|i| m[i][n + i]).collect())
+}
+
+/// The geometry with both slabs' scattering and absorption times
+/// `factors`.
+pub fn scaled(geometry: &Geometry, factors: [f64; 2]) -> Geometry {
     let mut g = geometry.clone();
-    g.front.mu_s_per_cm *= scale;
-    g.back.mu_s_per_cm *= scale;
+    g.front.mu_s_per_cm *= factors[0];
+    g.back.mu_s_per_cm *= factors[0];
+    g.front.mu_a_per_cm *= factors[1];
+    g.back.mu_a_per_cm *= factors[1];
     g
 }
 
@@ -161,10 +242,10 @@ pub fn scaled(geometry: &Geometry, scale: f64) -> Geometry {
 fn arrival(
     geometry: &Geometry,
     field_cm: (f64, f64),
-    scale: f64,
+    factors: [f64; 2],
     bin_ps: f64,
 ) -> Result<IrfTable, String> {
-    let g = scaled(geometry, scale);
+    let g = scaled(geometry, factors);
     let front = g.arrival_profile(bin_ps).map_err(|e| e.to_string())?;
     let step = front.bin_ps();
     let d = Diffusion::new(&g.back).map_err(|e| e.to_string())?;

@@ -65,9 +65,9 @@ pub struct Settings {
     /// The pulse's entry into the front slab on the cube's clock (ps after
     /// bin 0's start); fitted to the cube's time profile when `None`.
     pub time_zero_ps: Option<f64>,
-    /// Fit both slabs' reduced scattering (a common factor) with the time
-    /// zero.
-    pub fit_scattering: bool,
+    /// The media factors fitted with the time zero (scattering,
+    /// absorption: one factor each on both slabs).
+    pub fit_media: calibrate::Free,
     /// Time groups of equal light (1: the time-summed cube).
     pub time_groups: usize,
     /// The most iterations searched.
@@ -160,6 +160,12 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
             settings.bin_width_ps
         )));
     }
+    if settings.fit_media.scattering && settings.fit_media.absorption {
+        return Err(EmbeddedError::Invalid(format!(
+            "fitting the scattering and the absorption together: {}",
+            calibrate::JOINT_REFUSED
+        )));
+    }
     if settings.time_groups == 0 || settings.max_iters == 0 || settings.iterations == Some(0) {
         return Err(EmbeddedError::Invalid(
             "time groups and iterations must be at least 1".into(),
@@ -207,8 +213,9 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
                 .sum()
         })
         .collect();
+    let fit_media = settings.fit_media != calibrate::Free::default();
     let (time_zero_ps, calibration, geometry) = match settings.time_zero_ps {
-        Some(t0) if !settings.fit_scattering => {
+        Some(t0) if !fit_media => {
             notes.push(format!("time zero {t0} ps on the cube's clock, as stated"));
             (t0, None, settings.geometry.clone())
         }
@@ -219,28 +226,34 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
                 &profile,
                 &variance,
                 settings.bin_width_ps,
-                settings.fit_scattering,
+                settings.fit_media,
             )
             .map_err(invalid)?;
-            let scale = cal.mu_s_reduced_per_cm.0
-                / (settings.geometry.front.mu_s_per_cm * (1.0 - settings.geometry.front.g));
-            let geometry = calibrate::scaled(&settings.geometry, scale);
+            let geometry = calibrate::scaled(&settings.geometry, cal.factors);
             let t0 = settings.time_zero_ps.unwrap_or(cal.time_zero_ps.0);
+            let medium = |name: &str, (front, back, se): (f64, f64, f64), fitted: bool| {
+                if fitted {
+                    format!(
+                        ", {name} {front:.3} /cm front and {back:.3} /cm back (+- {:.1} %)",
+                        100.0 * se
+                    )
+                } else {
+                    String::new()
+                }
+            };
             notes.push(format!(
-                "self-calibration on the summed time profile (reduced chi-square {:.2}): time zero {:.1} +- {:.1} ps{}{}",
+                "self-calibration on the summed time profile (reduced chi-square {:.2}): time zero {:.1} +- {:.1} ps{}{}{}; {} as stated",
                 cal.reduced_chi2,
                 cal.time_zero_ps.0,
                 cal.time_zero_ps.1,
                 if settings.time_zero_ps.is_some() { " (the stated time zero is used)" } else { " (used)" },
-                if cal.scattering_fitted {
-                    format!(
-                        ", reduced scattering {:.2} /cm front and {:.2} /cm back (+- {:.1} %), absorption, index and thicknesses as stated",
-                        cal.mu_s_reduced_per_cm.0,
-                        cal.mu_s_reduced_per_cm.1,
-                        100.0 * cal.mu_s_reduced_per_cm.2
-                    )
-                } else {
-                    String::new()
+                medium("reduced scattering", cal.mu_s_reduced_per_cm, cal.scattering_fitted),
+                medium("absorption", cal.mu_a_per_cm, cal.absorption_fitted),
+                match (cal.scattering_fitted, cal.absorption_fitted) {
+                    (false, false) => "the media",
+                    (true, false) => "absorption, index and thicknesses",
+                    (false, true) => "scattering, index and thicknesses",
+                    (true, true) => "index and thicknesses",
                 }
             ));
             (t0, Some(cal), geometry)

@@ -156,6 +156,10 @@ pub struct EmbeddedRequest {
     /// time profile, and use it.
     #[cfg_attr(feature = "cli", arg(long = "fit-scattering"))]
     pub fit_scattering: bool,
+    /// Also fit both slabs' absorption (one factor) to the cube's time
+    /// profile, and use it.
+    #[cfg_attr(feature = "cli", arg(long = "fit-absorption"))]
+    pub fit_absorption: bool,
     /// The background the lab subtracted from the counts: counts per pixel
     /// and bin, or a file of them per pixel (rows, cols) or a background
     /// recording (its mean over time per pixel). Needed only where the
@@ -275,7 +279,10 @@ impl EmbeddedRequest {
             geometry: self.geometry.geometry(irf)?,
             bin_width_ps: self.bin_width_ps,
             time_zero_ps: self.time_zero_ps,
-            fit_scattering: self.fit_scattering,
+            fit_media: super::calibrate::Free {
+                scattering: self.fit_scattering,
+                absorption: self.fit_absorption,
+            },
             time_groups: self.time_groups,
             max_iters: self.max_iters,
             iterations: self.iterations,

@@ -520,6 +520,7 @@ def reconstruct_embedded(
     beam_centre: str = "0cm,0cm",
     time_zero_ps: Optional[float] = None,
     fit_scattering: bool = False,
+    fit_absorption: bool = False,
     time_groups: int = 8,
     max_iters: int = 5000,
     iterations: Optional[int] = None,
@@ -536,7 +537,9 @@ def reconstruct_embedded(
     the face; lengths in cm, coefficients in 1/cm (both slabs alike),
     ``beam`` ``"plane"`` or a Gaussian's FWHM with its unit (``"6cm"``).
     ``time_zero_ps`` (the pulse's entry into the front slab after bin 0's
-    start) is fitted to the cube's time profile when ``None``; ``mask`` (rows,
+    start) is fitted to the cube's time profile when ``None`` (with both slabs'
+    scattering or absorption factor too where ``fit_scattering`` or
+    ``fit_absorption``); ``mask`` (rows,
     columns) is True at bad pixels (filtered, hot and dead ones are found
     without it); ``subtracted_background`` (counts per pixel and bin) is
     needed only where the cube has too few bins before the light.
@@ -550,7 +553,8 @@ def reconstruct_embedded(
         np.ascontiguousarray(cube, dtype=np.float64), tuple(pitch_cm), float(bin_width_ps),
         float(front_thickness_cm), float(back_thickness_cm), float(mu_s_reduced), float(mu_a),
         float(refractive_index), beam, beam_centre,
-        None if time_zero_ps is None else float(time_zero_ps), bool(fit_scattering), int(time_groups),
+        None if time_zero_ps is None else float(time_zero_ps), bool(fit_scattering), bool(fit_absorption),
+        int(time_groups),
         int(max_iters), None if iterations is None else int(iterations),
         None if mask is None else np.ascontiguousarray(mask, dtype=bool),
         None if subtracted_background is None else float(subtracted_background),
