@@ -124,46 +124,25 @@ pub fn fit(
     // off: the time zero's is the marginal one).
     let h = bin_ps / 5.0;
     let dims: Vec<usize> = (0..2).filter(|&d| fitted[d]).collect();
-    let at = |steps: [i32; 2], dt: f64| -> Result<f64, String> {
+    // The residual sum over (time zero, the fitted factors' logarithms).
+    let residual = |q: &[f64]| {
         let mut x = factors;
-        for (v, s) in x.iter_mut().zip(steps) {
-            *v *= (f64::from(s) * k).exp();
+        for (&d, l) in dims.iter().zip(&q[1..]) {
+            x[d] *= l.exp();
         }
-        let table = if steps == [0, 0] {
-            centre.clone()
-        } else {
-            arrival(geometry, field_cm, x, bin_ps)?
-        };
-        Ok(weighted_fit(&table, profile, &weights, bin_ps, t0 + dt * h).0)
+        match arrival(geometry, field_cm, x, bin_ps) {
+            Ok(table) => weighted_fit(&table, profile, &weights, bin_ps, t0 + q[0]).0,
+            Err(_) => f64::NAN,
+        }
     };
-    let steps = |pairs: &[(usize, i32)]| {
-        let mut s = [0, 0];
-        for &(d, v) in pairs {
-            s[d] = v;
-        }
-        s
-    };
-    let m = 1 + dims.len();
-    let mut hess = vec![vec![0.0; m]; m];
-    hess[0][0] = (at([0, 0], -1.0)? - 2.0 * chi2 + at([0, 0], 1.0)?) / (h * h);
-    for (i, &d) in dims.iter().enumerate() {
-        let (up, down) = (steps(&[(d, 1)]), steps(&[(d, -1)]));
-        hess[i + 1][i + 1] = (at(up, 0.0)? - 2.0 * chi2 + at(down, 0.0)?) / (k * k);
-        let cross =
-            (at(up, 1.0)? - at(down, 1.0)? - at(up, -1.0)? + at(down, -1.0)?) / (4.0 * h * k);
-        hess[0][i + 1] = cross;
-        hess[i + 1][0] = cross;
-        for (j, &e) in dims.iter().enumerate().skip(i + 1) {
-            let c = (at(steps(&[(d, 1), (e, 1)]), 0.0)?
-                - at(steps(&[(d, 1), (e, -1)]), 0.0)?
-                - at(steps(&[(d, -1), (e, 1)]), 0.0)?
-                + at(steps(&[(d, -1), (e, -1)]), 0.0)?)
-                / (4.0 * k * k);
-            hess[i + 1][j + 1] = c;
-            hess[j + 1][i + 1] = c;
-        }
-    }
-    let variances = inverse_diagonal(&hess).unwrap_or_else(|| vec![f64::INFINITY; m]);
+    let origin = vec![0.0; 1 + dims.len()];
+    let mut steps = vec![k; 1 + dims.len()];
+    steps[0] = h;
+    let hess = crate::calibrate::hessian::numerical_hessian(&residual, &origin, &steps);
+    let inverse = crate::calibrate::hessian::invert(&hess);
+    let variances: Vec<f64> = (0..origin.len())
+        .map(|i| inverse.as_ref().map_or(f64::INFINITY, |m| m[i][i]))
+        .collect();
     let se = |v: f64| {
         if v > 0.0 && v.is_finite() {
             (2.0 * v * reduced.max(1.0)).sqrt()
@@ -190,38 +169,6 @@ pub fn fit(
         absorption_fitted: free.absorption,
         factors,
     })
-}
-
-/// The diagonal of the inverse of a small matrix (Gauss-Jordan with
-/// partial pivoting); `None` when it is singular.
-fn inverse_diagonal(a: &[Vec<f64>]) -> Option<Vec<f64>> {
-    let n = a.len();
-    let mut m: Vec<Vec<f64>> = a
-        .iter()
-        .enumerate()
-        .map(|(i, row)| {
-            let mut r = row.clone();
-            r.extend((0..n).map(|j| f64::from(u8::from(i == j))));
-            r
-        })
-        .collect();
-    for c in 0..n {
-        let p = (c..n).max_by(|&x, &y| m[x][c].abs().total_cmp(&m[y][c].abs()))?;
-        if !(m[p][c].abs() > 1e-300 && m[p][c].is_finite()) {
-            return None;
-        }
-        m.swap(c, p);
-        let pivot = m[c][c];
-        m[c].iter_mut().for_each(|v| *v /= pivot);
-        let row_c = m[c].clone();
-        for (r, row) in m.iter_mut().enumerate() {
-            if r != c {
-                let f = row[c];
-                row.iter_mut().zip(&row_c).for_each(|(v, w)| *v -= f * w);
-            }
-        }
-    }
-    Some((0..n).map(|i| m[i][n + i]).collect())
 }
 
 /// The geometry with both slabs' scattering and absorption times
