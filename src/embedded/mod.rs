@@ -181,14 +181,14 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
 
     // Pixels and noise: filtered and dead pixels first (a neighbour mean
     // has less variance), then hot ones from the dark variance.
-    let (used, _) = pixels::find(y, settings.mask.as_ref(), None);
+    let (mut used, mut bad) = pixels::find(y, settings.mask.as_ref());
     if !used.iter().any(|&u| u) {
         return Err(invalid(
             "no pixel is left to use (the mask and the pixels found bad leave none)".into(),
         ));
     }
     let first = noise::measure(y, &used, settings.subtracted.as_ref()).map_err(invalid)?;
-    let (used, bad) = pixels::find(y, settings.mask.as_ref(), Some(&first.dark_variance));
+    pixels::mark_hot(&mut used, &mut bad, &first.dark_variance);
     let noise = noise::measure(y, &used, settings.subtracted.as_ref()).map_err(invalid)?;
     notes.push(bad.describe(h * w));
     notes.push(format!(
@@ -297,16 +297,8 @@ pub fn reconstruct(cube: &Cube, settings: &Settings) -> Result<Outcome, Embedded
     )?;
     let grouped = group_kernels(&kernels, &groups);
     let model = ForwardModel::with_sensor(&grouped, (h, w));
-    let (gh, gw) = model.grid_shape();
+    let beam = beam_on(&geometry, &model, pitch)?;
     let (oy, ox) = model.sensor_offset();
-    let beam = geometry.beam_map(
-        (gh, gw),
-        (
-            oy as f64 + (h as f64 - 1.0) / 2.0,
-            ox as f64 + (w as f64 - 1.0) / 2.0,
-        ),
-        pitch,
-    )?;
 
     // The likelihood's counts.
     let transformed = noise.transform(y);
@@ -473,6 +465,25 @@ pub fn back_kernels(
         },
     )?;
     KernelStack::build(&setup, Sampling::Integrated)
+}
+
+/// The beam's light on `model`'s object grid of pixels of `pitch_cm`, the
+/// camera's centre at the field's.
+pub fn beam_on(
+    geometry: &Geometry,
+    model: &ForwardModel,
+    pitch_cm: f64,
+) -> Result<geometry::BeamMap, scatterscope_physics::ParamError> {
+    let (h, w) = model.sensor_shape();
+    let (oy, ox) = model.sensor_offset();
+    geometry.beam_map(
+        model.grid_shape(),
+        (
+            oy as f64 + (h as f64 - 1.0) / 2.0,
+            ox as f64 + (w as f64 - 1.0) / 2.0,
+        ),
+        pitch_cm,
+    )
 }
 
 /// The lateral blur's width (pixels) at the profile's mean arrival.

@@ -45,13 +45,9 @@ impl BadPixels {
 }
 
 /// The pixels of `cube` (bins, rows, columns) to use: `given` (true = use)
-/// less the filtered and dead pixels found, and the hot ones among those
-/// whose `dark_variance` is known; the counts by cause.
-pub fn find(
-    cube: &Array3<f64>,
-    given: Option<&Array2<bool>>,
-    dark_variance: Option<&Array2<f64>>,
-) -> (Array2<bool>, BadPixels) {
+/// less the filtered and dead pixels found; the counts by cause (hot
+/// pixels need the dark variance: [`mark_hot`]).
+pub fn find(cube: &Array3<f64>, given: Option<&Array2<bool>>) -> (Array2<bool>, BadPixels) {
     let (_, h, w) = cube.dim();
     let mut used = given
         .cloned()
@@ -77,16 +73,19 @@ pub fn find(
             }
         }
     }
-    if let Some(var) = dark_variance {
-        let median = super::percentile(super::used_values(var.view(), &used), 0.5);
-        for (u, v) in used.iter_mut().zip(var.iter()) {
-            if *u && median > 0.0 && *v > HOT_FACTOR * median {
-                *u = false;
-                bad.hot += 1;
-            }
+    (used, bad)
+}
+
+/// Leaves out of `used` the pixels whose `dark_variance` is over
+/// [`HOT_FACTOR`] times the used pixels' median, counting them in `bad`.
+pub fn mark_hot(used: &mut Array2<bool>, bad: &mut BadPixels, dark_variance: &Array2<f64>) {
+    let median = super::percentile(super::used_values(dark_variance.view(), used), 0.5);
+    for (u, v) in used.iter_mut().zip(dark_variance.iter()) {
+        if *u && median > 0.0 && *v > HOT_FACTOR * median {
+            *u = false;
+            bad.hot += 1;
         }
     }
-    (used, bad)
 }
 
 /// Whether every bin of pixel (i, j) equals the mean of the same 2, 3 or 4
@@ -164,14 +163,14 @@ mod tests {
         }
         let mut dark = Array2::from_elem((6, 7), 4.0);
         dark[[5, 5]] = 60.0;
-        let (used, bad) = find(&cube, None, Some(&dark));
+        let (mut used, mut bad) = find(&cube, None);
+        mark_hot(&mut used, &mut bad, &dark);
         assert_eq!((bad.filtered, bad.dead, bad.hot), (2, 1, 1), "{bad:?}");
         assert!(!used[[2, 3]] && !used[[4, 1]] && !used[[0, 6]] && !used[[5, 5]]);
         assert_eq!(used.iter().filter(|&&u| u).count(), 42 - 4);
         // Noise alone is never a neighbour mean.
         let (_, clean) = find(
             &Array3::from_shape_fn((40, 6, 7), |_| rng.random_range(0.0..50.0f64).round()),
-            None,
             None,
         );
         assert_eq!(clean.total(), 0);

@@ -136,18 +136,7 @@ pub fn simulate(
     let kernels = super::back_kernels(geometry, bins_on_clock, (h, w), pitch_cm)
         .map_err(|e| e.to_string())?;
     let model = ForwardModel::with_sensor(&kernels, (h, w));
-    let (gh, gw) = model.grid_shape();
-    let (oy, ox) = model.sensor_offset();
-    let beam = geometry
-        .beam_map(
-            (gh, gw),
-            (
-                oy as f64 + (h as f64 - 1.0) / 2.0,
-                ox as f64 + (w as f64 - 1.0) / 2.0,
-            ),
-            pitch_cm,
-        )
-        .map_err(|e| e.to_string())?;
+    let beam = super::beam_on(geometry, &model, pitch_cm).map_err(|e| e.to_string())?;
     // The card is opaque outside the field.
     let lit = model.embed(truth.view(), 0.0) * &beam.map;
     // Every bin of the camera, those before any light can arrive (which
@@ -229,24 +218,21 @@ pub fn simulate(
 /// mm for pixels of `pitch_cm`).
 pub fn write_as_lab(cube: &Array3<f64>, pitch_cm: (f64, f64), dir: &Path) -> std::io::Result<()> {
     let (bins, h, w) = cube.dim();
-    // Column-major over (rows, columns, bins): rows fastest.
-    let mut values = Vec::with_capacity(cube.len());
-    for k in 0..bins {
-        for j in 0..w {
-            for i in 0..h {
-                values.push(cube[[k, i, j]]);
-            }
-        }
-    }
+    // Column-major over (rows, columns, bins): rows fastest, which is the
+    // standard order over (bins, columns, rows).
+    let values: Vec<f64> = cube
+        .view()
+        .permuted_axes([0, 2, 1])
+        .iter()
+        .copied()
+        .collect();
     crate::formats::mat5::write(&dir.join("cube.mat"), &[("cube", &[h, w, bins], &values)])?;
-    let column_major = |f: &dyn Fn(usize, usize) -> f64| {
-        let mut v = Vec::with_capacity(h * w);
-        for j in 0..w {
-            for i in 0..h {
-                v.push(f(i, j));
-            }
-        }
-        v
+    let column_major = |f: &dyn Fn(usize, usize) -> f64| -> Vec<f64> {
+        ndarray::Array2::from_shape_fn((h, w), |(i, j)| f(i, j))
+            .t()
+            .iter()
+            .copied()
+            .collect()
     };
     let x = column_major(&|_, j| 10.0 * pitch_cm.0 * j as f64);
     let y = column_major(&|i, _| 10.0 * pitch_cm.1 * i as f64);
