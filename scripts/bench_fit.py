@@ -86,7 +86,7 @@ def main():
         np.save(os.path.join(tmp, "irf.npy"), irf)
         for r in range(rounds):
             cmd = [CLI, "fit", path, "--components", "2", "--irf", os.path.join(tmp, "irf.npy"),
-                   "--irf-shift-fixed", "--binning", str(BINNING), "--min-photons", str(MIN_PHOTONS),
+                   "--binning", str(BINNING), "--min-photons", str(MIN_PHOTONS),
                    "--no-figures", "--out", os.path.join(tmp, f"fit{r}")]
             started = time.perf_counter()
             p = subprocess.run(cmd, capture_output=True, text=True)

@@ -86,7 +86,7 @@ def main():
         np.save(irf_arg, irf)
     out = os.path.join(work, f"fit_{mode}_{k}")
     cmd = [cli, "fit", path, *bin_flags, "--components", str(k), "--binning", str(b), "--min-photons", "1000",
-           "--irf", irf_arg, "--irf-shift-fixed", "--sampled-kernel", "--no-incomplete-decay", "--window", f"{first}:{end}", "--no-figures",
+           "--irf", irf_arg, "--sampled-kernel", "--no-incomplete-decay", "--window", f"{first}:{end}", "--no-figures",
            "--out", out]
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode != 0:

@@ -40,6 +40,7 @@ fn sample_stack(kind: ValueKind) -> Stack {
             unstated: Vec::new(),
             laser_frequency_hz: Some(80e6),
             laser_notes: Vec::new(),
+            recorded_bins: None,
         },
         exact_counts: None,
     }

@@ -642,7 +642,7 @@ fn decay_maps<'py>(
 /// `scatterscope fit` fits them: a dict of float64 maps (NaN where
 /// masked), the mask, the summed decay's fit and the notes.
 #[pyfunction]
-#[pyo3(signature = (counts, bin_starts_ps, bin_width_ps, frequency_hz=None, components=1, irf="edge", irf_decay=None, least_squares=false, binning=0, min_photons=100.0, global_fit=false, window=None, incomplete_decay=true, fit_irf_shift=true))]
+#[pyo3(signature = (counts, bin_starts_ps, bin_width_ps, frequency_hz=None, components=1, irf="edge", irf_decay=None, least_squares=false, binning=0, min_photons=100.0, global_fit=false, window=None, incomplete_decay=true, fit_irf_shift=false, recorded=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit_lifetimes<'py>(
     py: Python<'py>,
@@ -660,6 +660,7 @@ fn fit_lifetimes<'py>(
     window: Option<(usize, usize)>,
     incomplete_decay: bool,
     fit_irf_shift: bool,
+    recorded: Option<(usize, usize)>,
 ) -> PyResult<Bound<'py, PyDict>> {
     use scatterscope::decay::fit::optimise::Objective;
     use scatterscope::decay::fit::{FitOptions, IrfSource, fit_maps};
@@ -699,6 +700,7 @@ fn fit_lifetimes<'py>(
         min_photons,
         global: global_fit,
         window,
+        recorded,
         incomplete_decay,
         fit_irf_shift,
         kernel: Default::default(),

@@ -22,6 +22,26 @@ pub(crate) fn stack_tail(s: &StackCounts<'_>) -> String {
     }
 }
 
+/// The note that says which bins a stack's maps or fit keep by default:
+/// those the instrument recorded whole ([`crate::stack::RecordedBins`]),
+/// or every bin when `all_bins` asks; `None` when the recording states
+/// nothing.
+pub(crate) fn recorded_note(meta: &StackMeta, all_bins: bool) -> Option<String> {
+    let r = meta.recorded_bins.as_ref()?;
+    let bins = meta.bin_starts_ps.len();
+    Some(if all_bins {
+        format!(
+            "every bin kept (asked), also those outside {}",
+            r.describe(bins)
+        )
+    } else {
+        format!(
+            "time window {}; the other bins left out (--all-bins keeps them)",
+            r.describe(bins)
+        )
+    })
+}
+
 /// Refuses to write any of `files` that is one of `reads` (by identity,
 /// not spelling).
 pub(crate) fn refuse_inputs(files: &[PathBuf], reads: &[PathBuf]) -> Result<(), StackError> {

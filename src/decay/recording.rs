@@ -68,6 +68,8 @@ pub struct LifetimeRequest {
     pub out: PathBuf,
     /// Whether to draw `lifetime.png` and `phasor.png`.
     pub figures: bool,
+    /// Keep every bin, also those the instrument did not record whole.
+    pub all_bins: bool,
 }
 
 /// What was written of one stack.
@@ -286,9 +288,16 @@ pub fn lifetime_file(
                 what: format!("the {what} {}", r.path().display()),
             });
         }
+        // The bins the instrument recorded whole: a partial bin's photons
+        // (the sync period's last) would count at a time they were not
+        // recorded over, as SymPhoTime leaves them out.
+        let (first, end) = match &meta.recorded_bins {
+            Some(r) if !request.all_bins => (r.first, r.end),
+            _ => (0, meta.bin_starts_ps.len()),
+        };
         let mut maps = decay_maps(
-            s.counts,
-            &meta.bin_starts_ps,
+            s.counts.bins(first, end),
+            &meta.bin_starts_ps[first..end],
             meta.bin_width_ps,
             frequency,
             &options,
@@ -297,6 +306,8 @@ pub fn lifetime_file(
         if request.frequency_hz.is_none() {
             maps.notes.splice(0..0, meta.laser_notes.iter().cloned());
         }
+        maps.notes
+            .extend(super::map_files::recorded_note(meta, request.all_bins));
         write_maps(&maps, &s, &options, path, request).map_err(RecordedFileError::Output)
     })
 }

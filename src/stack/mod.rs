@@ -99,6 +99,60 @@ pub struct StackMeta {
     /// be, where one was left out or overruled ([`crate::tags::laser`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub laser_notes: Vec<String>,
+    /// The bins the instrument recorded whole, where the recording says
+    /// (an `.sdt` block's TAC limits, a T3 file's sync period): bins
+    /// outside it hold no photon, or a part of a bin's light.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub recorded_bins: Option<RecordedBins>,
+}
+
+/// The bins `[first, end)` of a stack whose whole time span the
+/// instrument recorded, and what says so.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RecordedBins {
+    /// The first bin recorded whole.
+    pub first: usize,
+    /// One past the last bin recorded whole.
+    pub end: usize,
+    /// The recorded span (ps after the sync), `[from, to)`.
+    pub span_ps: (f64, f64),
+    /// What states the span, in words.
+    pub stated_by: String,
+}
+
+impl RecordedBins {
+    /// The bins of `starts_ps` (each `width_ps` wide) that lie whole in
+    /// `[from_ps, to_ps)` (a thousandth of a bin's tolerance for round
+    /// off); `None` when every bin does, or none.
+    pub fn within(
+        starts_ps: &[f64],
+        width_ps: f64,
+        (from_ps, to_ps): (f64, f64),
+        stated_by: String,
+    ) -> Option<Self> {
+        let slack = 1e-3 * width_ps;
+        let whole = |t: f64| t >= from_ps - slack && t + width_ps <= to_ps + slack;
+        let first = starts_ps.iter().position(|&t| whole(t))?;
+        let end = first + starts_ps[first..].iter().take_while(|&&t| whole(t)).count();
+        (first > 0 || end < starts_ps.len()).then(|| Self {
+            first,
+            end,
+            span_ps: (from_ps, to_ps),
+            stated_by,
+        })
+    }
+
+    /// The bins in words, for the notes.
+    pub fn describe(&self, bins: usize) -> String {
+        format!(
+            "bins {} to {} of {bins}: the instrument recorded {:.1} to {:.1} ps ({})",
+            self.first,
+            self.end - 1,
+            self.span_ps.0,
+            self.span_ps.1,
+            self.stated_by
+        )
+    }
 }
 
 /// A quantity a recording did not state.
@@ -151,7 +205,16 @@ pub enum CountsView<'a> {
     U32(ArrayView3<'a, u32>),
 }
 
-impl CountsView<'_> {
+impl<'a> CountsView<'a> {
+    /// The bins `[first, end)` alone.
+    pub fn bins(&self, first: usize, end: usize) -> CountsView<'a> {
+        use ndarray::s;
+        match self {
+            CountsView::U16(c) => CountsView::U16(c.clone().slice_move(s![first..end, .., ..])),
+            CountsView::U32(c) => CountsView::U32(c.clone().slice_move(s![first..end, .., ..])),
+        }
+    }
+
     /// `(bins, rows, columns)`.
     pub fn dim(&self) -> (usize, usize, usize) {
         match self {
@@ -435,6 +498,7 @@ impl StackMeta {
             unstated: Vec::new(),
             laser_frequency_hz: None,
             laser_notes: Vec::new(),
+            recorded_bins: None,
         }
     }
 
@@ -478,6 +542,7 @@ impl StackMeta {
             unstated: vec![Unstated::PixelPitch],
             laser_frequency_hz: None,
             laser_notes: Vec::new(),
+            recorded_bins: None,
         }
     }
 

@@ -325,8 +325,9 @@ def fit_lifetimes(
     global_fit: bool = False,
     window: Optional[Tuple[int, int]] = None,
     incomplete_decay: bool = True,
-    fit_irf_shift: bool = True,
+    fit_irf_shift: bool = False,
     frequency_hz: Optional[float] = None,
+    all_bins: bool = False,
 ) -> Dict[str, Any]:
     """Lifetimes of a stack of counts ``(bins, rows, cols)`` (uint16 or
     uint32, as :func:`bin_file` returns) with its metadata ``meta``, fitted
@@ -340,7 +341,10 @@ def fit_lifetimes(
     ``tau_intensity_ps``, ``background``, ``reduced_chi2``, ``deviance``
     (NaN where ``mask``), ``photons``, the summed decay's fit and ``notes``.
     The frequency (for the earlier pulses' light) defaults to the
-    recording's.
+    recording's; the default window keeps to the bins the instrument
+    recorded whole (``meta["recorded_bins"]``, as ``bin_file`` gives it),
+    unless ``all_bins``. A measured IRF's shift is held at 0 (recorded
+    with the sample) unless ``fit_irf_shift``.
     """
     f = frequency_hz if frequency_hz is not None else meta.get("laser_frequency_hz")
     if counts.dtype not in (np.uint16, np.uint32):
@@ -364,6 +368,8 @@ def fit_lifetimes(
         None if window is None else (int(window[0]), int(window[1])),
         bool(incomplete_decay),
         bool(fit_irf_shift),
+        None if all_bins or not meta.get("recorded_bins") else (
+            int(meta["recorded_bins"]["first"]), int(meta["recorded_bins"]["end"])),
     )
 
 

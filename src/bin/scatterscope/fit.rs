@@ -54,9 +54,15 @@ pub struct FitArgs {
     /// bins.
     #[arg(long)]
     sampled_kernel: bool,
-    /// Hold a measured IRF's shift at 0 instead of fitting it.
+    /// Fit a measured IRF's shift on the summed decay: an IRF recorded at
+    /// another time than the sample (by default it is held at 0, aligned).
     #[arg(long)]
-    irf_shift_fixed: bool,
+    irf_shift_fitted: bool,
+    /// Keep every bin in the default window, also those the instrument
+    /// did not record whole (outside an .sdt's TAC limits, a sync
+    /// period's cut last bin).
+    #[arg(long)]
+    all_bins: bool,
     /// Leave out the light of earlier pulses (the incomplete decay).
     #[arg(long)]
     no_incomplete_decay: bool,
@@ -104,7 +110,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             global: args.global,
             window: args.window,
             incomplete_decay: !args.no_incomplete_decay,
-            fit_irf_shift: !args.irf_shift_fixed,
+            fit_irf_shift: args.irf_shift_fitted,
             kernel: if args.sampled_kernel {
                 Kernel::Sampled
             } else {
@@ -116,6 +122,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         frequency_hz: args.frequency,
         out: args.out.clone(),
         figures: !args.no_figures,
+        all_bins: args.all_bins,
     };
     let done = fit_file(&args.file, &args.spec, &request)?;
     let mut summary = done.summary();

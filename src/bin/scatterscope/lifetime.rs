@@ -46,6 +46,10 @@ pub struct LifetimeArgs {
     /// (lifetime 0) and its barycentre is the onset.
     #[arg(long, conflicts_with = "onset")]
     irf: Option<PathBuf>,
+    /// Keep every bin, also those the instrument did not record whole
+    /// (outside an .sdt's TAC limits, a sync period's cut last bin).
+    #[arg(long)]
+    all_bins: bool,
     /// Write the maps only, without lifetime.png and phasor.png.
     #[arg(long)]
     no_figures: bool,
@@ -74,6 +78,7 @@ pub fn run(args: &LifetimeArgs) -> anyhow::Result<()> {
         reference,
         out: args.out.clone(),
         figures: !args.no_figures,
+        all_bins: args.all_bins,
     };
     let done = lifetime_file(&args.file, &args.spec, &request)?;
     let mut summary = done.summary();

@@ -21,7 +21,8 @@ use serde::Serialize;
 
 use super::{FitMaps, FitOptions, IrfSource, fit_maps};
 use crate::decay::map_files::{
-    LifetimeImage, draw_lifetime, refuse_inputs, stack_tail, unmasked_finite, write_channels,
+    LifetimeImage, draw_lifetime, recorded_note, refuse_inputs, stack_tail, unmasked_finite,
+    write_channels,
 };
 use crate::decay::recording::reference_decay;
 use crate::files::input::same_file;
@@ -56,6 +57,9 @@ pub struct FitRequest {
     pub out: PathBuf,
     /// Whether to draw the figures.
     pub figures: bool,
+    /// Keep every bin in the default window, also those the instrument
+    /// did not record whole.
+    pub all_bins: bool,
 }
 
 /// What was written of one stack.
@@ -225,8 +229,13 @@ pub fn fit_file(
             (IrfRequest::Tail, _) => IrfSource::Tail,
             _ => IrfSource::RisingEdge,
         };
+        if let Some(r) = &meta.recorded_bins
+            && !request.all_bins
+        {
+            options.recorded = Some((r.first, r.end));
+        }
         let frequency = request.frequency_hz.or(meta.laser_frequency_hz);
-        let maps = fit_maps(
+        let mut maps = fit_maps(
             s.counts,
             &meta.bin_starts_ps,
             meta.bin_width_ps,
@@ -234,6 +243,9 @@ pub fn fit_file(
             &options,
         )
         .map_err(|e| spec_error(path, e.to_string()))?;
+        if let Some(note) = recorded_note(meta, request.all_bins) {
+            maps.notes.insert(0, note);
+        }
         write_fit(&maps, &s, frequency, path, request).map_err(RecordedFileError::Output)
     })
 }

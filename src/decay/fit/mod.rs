@@ -7,15 +7,17 @@
 //! ([`global`]).
 //!
 //! The steps, each said in the notes:
-//! 1. The window: every bin with an IRF; a tail fit from the second bin
-//!    after the summed decay's peak (or the bins asked for).
+//! 1. The window: every bin the instrument recorded whole (every bin
+//!    when the file does not say) with an IRF; a tail fit from the second
+//!    bin after the summed decay's peak (or the bins asked for).
 //! 2. The IRF: measured (a decay on the same bins), a Gaussian of fitted
 //!    centre and width, or estimated from the rising edge of the summed
 //!    decay (its rise, mirrored about its steepest point); none for a
 //!    tail fit.
 //! 3. The summed decay of every pixel above the photon threshold is fitted
-//!    first, from guesses made of its moments, its IRF parameters (shift,
-//!    or centre and width) with it; pixels then start from its lifetimes,
+//!    first, from guesses made of its moments, its IRF parameters (an
+//!    estimated IRF's shift, a Gaussian's centre and width, a measured
+//!    IRF's shift only when asked) with it; pixels then start from its lifetimes,
 //!    with its IRF parameters held (as SPCImage holds the shift).
 //! 4. Each pixel (or the global fit): lifetimes, amplitudes, fractions,
 //!    the amplitude- and intensity-weighted mean lifetimes, background,
@@ -78,9 +80,15 @@ pub struct FitOptions {
     pub global: bool,
     /// The fitted window, bins `[first, end)`; `None`: as the module says.
     pub window: Option<(usize, usize)>,
+    /// The bins `[first, end)` the instrument recorded whole (a file's
+    /// [`crate::stack::RecordedBins`]): the default window keeps to them.
+    pub recorded: Option<(usize, usize)>,
     /// Model the light of earlier pulses (when the laser period is known).
     pub incomplete_decay: bool,
-    /// Fit a measured IRF's shift on the summed decay (else hold it at 0).
+    /// Fit a measured IRF's shift on the summed decay: an IRF recorded at
+    /// another time than the sample. Else (the default) it is held at 0,
+    /// as an IRF recorded with the sample is aligned with it. An estimated
+    /// IRF's shift is always fitted.
     pub fit_irf_shift: bool,
     /// How the IRF's exponentials are binned.
     pub kernel: Kernel,
@@ -96,8 +104,9 @@ impl Default for FitOptions {
             min_photons: 100.0,
             global: false,
             window: None,
+            recorded: None,
             incomplete_decay: true,
-            fit_irf_shift: true,
+            fit_irf_shift: false,
             kernel: Kernel::Integrated,
         }
     }
@@ -223,6 +232,13 @@ fn check_options(
             "window bins {a} to {b}: give first < end <= {bins} (the stack's bins)"
         )));
     }
+    if let Some((a, b)) = options.recorded
+        && !(a < b && b <= bins)
+    {
+        return Err(input_error(format!(
+            "recorded bins {a} to {b}: give first < end <= {bins} (the stack's bins)"
+        )));
+    }
     if let IrfSource::Measured { decay, what } = &options.irf {
         if decay.len() != bins {
             return Err(input_error(format!(
@@ -295,10 +311,11 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
             2 * k + 2
         )));
     }
-    let peak = argmax(&total);
+    let (lo, hi) = options.recorded.unwrap_or((0, bins));
+    let peak = lo + argmax(&total[lo..hi]);
     let (first, end) = options.window.unwrap_or(match options.irf {
-        IrfSource::Tail => ((peak + 2).min(bins - 1), bins),
-        _ => (0, bins),
+        IrfSource::Tail => ((peak + 2).min(hi - 1), hi),
+        _ => (lo, hi),
     });
     let n = end - first;
     if n < 2 * k + 2 {
@@ -312,12 +329,14 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
         end - 1,
         starts_ps[first],
         starts_ps[end - 1] + width_ps,
-        if options.window.is_some() {
-            " (asked)"
-        } else if matches!(options.irf, IrfSource::Tail) {
-            " (a tail fit from the second bin after the summed decay's peak)"
-        } else {
-            ""
+        match (options.window.is_some(), &options.irf, options.recorded.is_some()) {
+            (true, _, _) => " (asked)",
+            (false, IrfSource::Tail, false) =>
+                " (a tail fit from the second bin after the summed decay's peak)",
+            (false, IrfSource::Tail, true) =>
+                " (a tail fit from the second bin after the summed decay's peak, to the last bin the instrument recorded whole)",
+            (false, _, true) => " (the bins the instrument recorded whole)",
+            (false, _, false) => "",
         }
     ));
     let decays = Decays {
@@ -328,7 +347,7 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
         bins: n,
     };
     let window_total: Vec<f64> = total[first..end].to_vec();
-    let (irf, irf_note) = irf_shape(&options.irf, &total, first, end);
+    let (irf, irf_note) = irf_shape(&options.irf, &total, first, end, options.fit_irf_shift);
     notes.push(irf_note);
     let period_bins = match (frequency_hz, options.incomplete_decay) {
         (Some(f), true) if f > 0.0 && f.is_finite() => {
@@ -378,10 +397,7 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
     } else {
         window_total.clone()
     };
-    let hold_shift = matches!(model.irf, IrfShape::Measured(_)) && !options.fit_irf_shift;
-    if hold_shift {
-        notes.push("the IRF's shift held at 0 (asked)".into());
-    }
+    let hold_shift = matches!(options.irf, IrfSource::Measured { .. }) && !options.fit_irf_shift;
     let summed_fit = fit_summed(&model, &summed, &bounds, options.objective, hold_shift);
     let mut free = vec![true; np];
     for f in free.iter_mut().skip(model.background() + 1) {
@@ -588,7 +604,13 @@ fn fit_summed(
 
 /// The IRF's shape on the window `[first, end)` and the note that says
 /// where it came from.
-fn irf_shape(source: &IrfSource, total: &[f64], first: usize, end: usize) -> (IrfShape, String) {
+fn irf_shape(
+    source: &IrfSource,
+    total: &[f64],
+    first: usize,
+    end: usize,
+    fit_shift: bool,
+) -> (IrfShape, String) {
     let normalised = |v: &[f64]| {
         let s: f64 = v.iter().sum();
         v.iter().map(|x| x / s).collect::<Vec<f64>>()
@@ -605,8 +627,13 @@ fn irf_shape(source: &IrfSource, total: &[f64], first: usize, end: usize) -> (Ir
         IrfSource::Measured { decay, what } => (
             IrfShape::Measured(normalised(&decay[first..end])),
             format!(
-                "IRF: measured, {what} ({} photons), its shift fitted on the summed decay",
-                decay.iter().sum::<f64>()
+                "IRF: measured, {what} ({} photons), {}",
+                decay.iter().sum::<f64>(),
+                if fit_shift {
+                    "its shift fitted on the summed decay (asked: recorded at another time than the sample)"
+                } else {
+                    "its shift held at 0 (taken as recorded with the sample, aligned with it; --irf-shift-fitted fits it)"
+                }
             ),
         ),
         IrfSource::RisingEdge => {

@@ -86,6 +86,11 @@ pub struct SdtBlock {
     /// and `max_sync_rate`), as the file holds them (unchecked: some
     /// instruments write nonsense there; [`crate::tags::laser`] checks).
     pub sync_rates_hz: SyncRates,
+    /// The TAC's lower and upper limits (`tac_ll`, `tac_lh`), percent of
+    /// the ADC's range, where the measurement states a usable pair
+    /// (`0 <= ll < lh <= 100`, not the whole range): the card recorded
+    /// only photons between them.
+    pub tac_limits_percent: Option<(f64, f64)>,
     /// Counts per curve point, row and column: `(adc_re, rows, columns)`.
     pub counts: BlockCounts,
 }
@@ -278,6 +283,7 @@ struct Measurement {
     sync_rates_hz: SyncRates,
     tac_r: f32,
     tac_g: i16,
+    tac_limits_percent: Option<(f64, f64)>,
     adc_re: usize,
     scan: (usize, usize, usize, usize),
     image: (usize, usize, usize, usize),
@@ -319,6 +325,20 @@ impl Measurement {
             sync_rates_hz,
             tac_r: f.f32(64, "tac_r")?,
             tac_g: f.i16(68, "tac_g")?,
+            tac_limits_percent: {
+                // tac_ll at byte 74 and tac_lh at 78 (float32, percent).
+                let (ll, lh) = (
+                    f64::from(f.f32(74, "tac_ll")?),
+                    f64::from(f.f32(78, "tac_lh")?),
+                );
+                (ll.is_finite()
+                    && lh.is_finite()
+                    && 0.0 <= ll
+                    && ll < lh
+                    && lh <= 100.0
+                    && (ll > 0.0 || lh < 100.0))
+                    .then_some((ll, lh))
+            },
             adc_re,
             scan: dims(173),
             image: dims(309),
@@ -747,6 +767,7 @@ impl SdtReader {
             unit,
             sync_rates_hz: m.sync_rates_hz,
             module: m.module,
+            tac_limits_percent: m.tac_limits_percent,
         }))
     }
 
@@ -864,6 +885,7 @@ impl SdtReader {
             micro_unit_s: b.unit,
             module: b.module,
             sync_rates_hz: b.sync_rates_hz,
+            tac_limits_percent: b.tac_limits_percent,
             counts,
         })
     }
@@ -886,6 +908,7 @@ struct BlockHead {
     unit: Result<f64, String>,
     module: String,
     sync_rates_hz: SyncRates,
+    tac_limits_percent: Option<(f64, f64)>,
 }
 
 /// Why a block's points could not be decoded.

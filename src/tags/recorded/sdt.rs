@@ -10,7 +10,7 @@ use super::RecordedFormat;
 use super::{Handed, RecordedSource};
 use crate::formats::becker_hickl::sdt::{self, BlockCounts};
 use crate::formats::becker_hickl::spc::SpcOptions;
-use crate::stack::{CountsView, StackMeta, Unstated};
+use crate::stack::{CountsView, RecordedBins, StackMeta, Unstated};
 use crate::tags::binned::{
     BinSpec, BinnedFile, Pixels, RecordedFileError, Recording, StackCounts, check_stack_memory,
     spec_error,
@@ -278,6 +278,17 @@ fn sdt_stack(
     ]);
     meta.laser_frequency_hz = laser.hz;
     meta.laser_notes = laser.notes;
+    if let Some((ll, lh)) = b.tac_limits_percent {
+        let range = points as f64 * unit_ps;
+        meta.recorded_bins = RecordedBins::within(
+            &meta.bin_starts_ps,
+            meta.bin_width_ps,
+            (range * ll / 100.0, range * lh / 100.0),
+            format!(
+                "the TAC limits {ll:.2} % to {lh:.2} % of the ADC's range, measurement description's tac_ll and tac_lh"
+            ),
+        );
+    }
     if offset == 0 && width == 1 && bins == points && spec.pixels != Pixels::Single {
         let sum = b.counts.total();
         tally.records += (points * h * w) as u64;

@@ -11,7 +11,7 @@ use ndarray::{Array3, s};
 use rayon::prelude::*;
 
 use crate::formats::becker_hickl::spc::CardFlags;
-use crate::stack::StackMeta;
+use crate::stack::{RecordedBins, StackMeta};
 use crate::tags::binned::{
     BinSpec, BinnedFile, CountStack, RecordedFileError, Recording, check_stack_memory, spec_error,
     window_and_map,
@@ -180,15 +180,26 @@ pub(super) fn bin<F: T3Records>(
     let shape = stacks[0].dim();
     let stacks = stacks
         .into_iter()
-        .map(|counts| CountStack {
-            counts,
-            meta: StackMeta::measured(
+        .map(|counts| {
+            let mut meta = StackMeta::measured(
                 window.start_ps(res_ps),
                 window.width_ps(res_ps),
                 window.bins,
                 source.clone(),
                 None,
-            ),
+            );
+            // Micro times run from the sync to the next one: a bin past
+            // the period's end holds a part of a bin's light, or none.
+            // Photons past the period say the span is wider.
+            if past_photons == 0 {
+                meta.recorded_bins = RecordedBins::within(
+                    &meta.bin_starts_ps,
+                    meta.bin_width_ps,
+                    (0.0, period_ps),
+                    format!("micro times run from the sync to the next, {period_ps:.1} ps later"),
+                );
+            }
+            CountStack { counts, meta }
         })
         .collect();
     let (recording, time_unstated) = file.into_recording(flags);
