@@ -3,6 +3,8 @@
 //! is GPL-3, a Python reference under target/pydeps for tests only) on the
 //! FLIM images instruments wrote (`../shared/data/flim-samples`).
 
+#[path = "common/bh_files.rs"]
+mod bh_files;
 #[path = "common/command.rs"]
 mod command;
 #[path = "common/pydeps.rs"]
@@ -421,4 +423,144 @@ fn a_four_bin_window_fits_a_finite_background_and_draws_its_figure() {
     );
     assert!(!said.contains("background inf"), "{said}");
     assert!(out.join("fit_decay.png").exists(), "{said}");
+}
+
+/// An `.sdt` image of 4 x 4 pixels of a 2 ns decay (a 150 ps IRF at
+/// 2 ns, 1 % background), 5,000 photons each on 256 points of 48.8 ps,
+/// recorded as a card records it between TAC limits of 3.53 % and
+/// 96.47 % of the ADC's range (an instrument's, `SDT_c01.sdt`'s): the
+/// points outside hold no photon. With `limits` 0 and 0 the file states
+/// none (the same counts).
+fn limited_sdt(dir: &Path, limits: (f32, f32)) -> std::path::PathBuf {
+    use rand::{RngExt, SeedableRng};
+    use rand_distr::{Distribution, Exp, Normal};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let (points, width) = (256usize, 12_500.0 / 256.0);
+    let (lo, hi) = (
+        (0.0353 * 256.0_f64).ceil() as usize - 1,
+        (0.9647 * 256.0_f64).floor() as usize + 1,
+    );
+    let (irf, decay) = (
+        Normal::new(2000.0_f64, 150.0 / 2.3548).unwrap(),
+        Exp::new(1.0_f64 / 2000.0).unwrap(),
+    );
+    let mut values = vec![0.0; 16 * points];
+    for p in 0..16 {
+        for _ in 0..5000 {
+            let t: f64 = if rng.random::<f64>() < 0.01 {
+                rng.random::<f64>() * 12_500.0
+            } else {
+                (irf.sample(&mut rng) + decay.sample(&mut rng)).rem_euclid(12_500.0_f64)
+            };
+            let k = ((t / width) as usize).min(points - 1);
+            if (lo..hi).contains(&k) {
+                values[p * points + k] += 1.0;
+            }
+        }
+    }
+    let m = bh_files::SdtMeasurement {
+        tac_limits: limits,
+        ..bh_files::SdtMeasurement::spc150(50e-9, 4, 256, (4, 4))
+    };
+    let block = bh_files::SdtBlock {
+        values,
+        item: 2,
+        zipped: true,
+        contents: 0x60,
+        measurement: 0,
+    };
+    let path = dir.join(format!("limited_{}.sdt", limits.1));
+    std::fs::write(&path, bh_files::sdt_file(&[m], &[block])).unwrap();
+    path
+}
+
+/// The intensity-weighted lifetime of pixel 0 and the window a fit wrote.
+fn lifetime_and_window(out: &Path) -> (f64, (u64, u64)) {
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("fit.json")).unwrap()).unwrap();
+    let w = &json["window_bins"];
+    let channels: Vec<&str> = json["channels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_str().unwrap())
+        .collect();
+    let at = channels
+        .iter()
+        .position(|c| *c == "intensity-weighted mean lifetime (ps)")
+        .unwrap();
+    let maps: ndarray::Array3<f32> = ndarray_npy::read_npy(out.join("fit.npy")).unwrap();
+    (
+        f64::from(maps[[at, 0, 0]]),
+        (w[0].as_u64().unwrap(), w[1].as_u64().unwrap()),
+    )
+}
+
+/// Issue 89: the default window is the bins the instrument recorded
+/// whole: an `.sdt` block's TAC limits (bins 10 to 245 of 256), so the
+/// empty bins outside no longer pin the background at 0. The default
+/// equals a fit over the recorded bins (`--window 9:247`, every bin with
+/// a photon) within 1 %; every bin (`--all-bins`, as before) is off by
+/// more.
+#[test]
+fn an_sdt_fit_keeps_to_the_bins_inside_the_tac_limits() {
+    let dir = tempfile::tempdir().unwrap();
+    let limited = limited_sdt(dir.path(), (3.529_411_8, 96.470_59));
+    let fit = |extra: &[&str], name: &str| {
+        let out = dir.path().join(name);
+        let args = [
+            &["fit", s(&limited), "--no-figures", "--out", s(&out)][..],
+            extra,
+        ]
+        .concat();
+        let r = run(&args);
+        assert!(r.status.success(), "{}", text(&r));
+        (lifetime_and_window(&out), text(&r))
+    };
+    let ((default, window), said) = fit(&[], "default");
+    assert_eq!(window, (10, 246), "{said}");
+    assert!(said.contains("the TAC limits 3.53 % to 96.47 %"), "{said}");
+    let ((recorded, _), _) = fit(&["--window", "9:247"], "recorded");
+    let ((all, all_window), _) = fit(&["--all-bins"], "all");
+    assert_eq!(all_window, (0, 256));
+    eprintln!("default {default:.1} ps, recorded bins {recorded:.1} ps, every bin {all:.1} ps");
+    assert!(
+        (default / recorded - 1.0).abs() < 0.01,
+        "{default} against {recorded}"
+    );
+    assert!(
+        (all / recorded - 1.0).abs() > 0.01,
+        "{all} against {recorded}"
+    );
+    // A file that states no limits: every bin.
+    let unlimited = limited_sdt(dir.path(), (0.0, 0.0));
+    let out = dir.path().join("unlimited");
+    let r = run(&["fit", s(&unlimited), "--no-figures", "--out", s(&out)]);
+    assert!(r.status.success(), "{}", text(&r));
+    assert_eq!(lifetime_and_window(&out).1, (0, 256));
+}
+
+/// The instrument's own `.sdt` (an SPC-150's, `tac_ll` 3.53 %, `tac_lh`
+/// 96.47 %): the bins kept are 10 to 245, and the card left every bin
+/// more than one outside them empty (photons in bins 9 to 246 only).
+#[test]
+#[ignore = "needs ../shared/data/flim-samples"]
+fn the_instruments_sdt_states_the_bins_it_recorded() {
+    use scatterscope::tags::bin_file::{BinSpec, bin_file_counts};
+    let path = shared_data("flim-samples/becker-hickl/SDT_c01.sdt");
+    let binned = bin_file_counts(&path, &BinSpec::default()).unwrap();
+    for stack in &binned.stacks {
+        let r = stack.meta.recorded_bins.as_ref().unwrap();
+        assert_eq!((r.first, r.end), (10, 246));
+        let totals: Vec<u64> = stack
+            .counts
+            .outer_iter()
+            .map(|plane| plane.iter().map(|&v| u64::from(v)).sum())
+            .collect();
+        let used: Vec<usize> = (0..totals.len()).filter(|&k| totals[k] > 0).collect();
+        assert!(
+            used.first() >= Some(&(r.first - 1)) && used.last() < Some(&(r.end + 1)),
+            "{used:?}"
+        );
+    }
 }

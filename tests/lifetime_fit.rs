@@ -300,3 +300,48 @@ fn a_global_fit_shares_the_lifetimes_of_dim_pixels_and_finds_their_fractions() {
         / 200.0;
     assert!(err.sqrt() < 0.08, "rms share error {}: {notes}", err.sqrt());
 }
+
+/// A measured IRF recorded with the sample is aligned with it: the
+/// default holds its shift at 0, and the lifetime of a 0.4 ns decay at
+/// 10,000 photons a pixel is that of maximum likelihood with the true IRF
+/// (unbiased within 0.2 %; its mean over 400 pixels scatters by 0.06 %).
+/// Fitting the shift on the summed decay as well (an IRF recorded at
+/// another time) trades the shift against the lifetime.
+#[test]
+fn an_aligned_recorded_irf_is_held_and_the_lifetime_unbiased() {
+    let tau = 400.0;
+    let truth = Truth {
+        components: vec![(tau, 1.0)],
+        fwhm_ps: 100.0,
+        background: 0.01,
+    };
+    let counts = draw(&truth, 10_000.0, 400, 7);
+    let held = fit(
+        &counts,
+        &FitOptions {
+            irf: measured_irf(&truth),
+            ..FitOptions::default()
+        },
+    );
+    assert!(
+        held.notes.iter().any(|n| n.contains("its shift held at 0")),
+        "{:?}",
+        held.notes
+    );
+    let (mean, _, n) = spread(&held, 0);
+    assert_eq!(n, 400);
+    let fitted = fit(
+        &counts,
+        &FitOptions {
+            irf: measured_irf(&truth),
+            fit_irf_shift: true,
+            ..FitOptions::default()
+        },
+    );
+    let (mean_fitted, _, _) = spread(&fitted, 0);
+    eprintln!("held: {mean:.2} ps; shift fitted: {mean_fitted:.2} ps; truth {tau} ps");
+    assert!(
+        (mean - tau).abs() < 0.002 * tau,
+        "held: {mean:.2} ps for {tau}"
+    );
+}

@@ -203,6 +203,9 @@ pub struct SdtMeasurement {
     /// `StopInfo.min_sync_rate` and `max_sync_rate` (Hz; SPCM writes the
     /// rates the card measured).
     pub sync_rates: (f32, f32),
+    /// `tac_ll` and `tac_lh` (percent of the ADC's range; 0 and 0 as a
+    /// writer that leaves them out).
+    pub tac_limits: (f32, f32),
 }
 
 impl SdtMeasurement {
@@ -217,6 +220,7 @@ impl SdtMeasurement {
             module: b"SPC-150",
             date: b"2019-11-05",
             sync_rates: (80e6, 80e6),
+            tac_limits: (0.0, 0.0),
         }
     }
 }
@@ -270,6 +274,8 @@ pub fn sdt_file_zipped(
         let mut mi = vec![0u8; MEAS_LEN];
         mi[64..68].copy_from_slice(&m.tac_r.to_le_bytes());
         mi[68..70].copy_from_slice(&m.tac_g.to_le_bytes());
+        mi[74..78].copy_from_slice(&m.tac_limits.0.to_le_bytes());
+        mi[78..82].copy_from_slice(&m.tac_limits.1.to_le_bytes());
         mi[82..84].copy_from_slice(&m.adc_re.to_le_bytes());
         mi[9..9 + m.date.len()].copy_from_slice(m.date);
         mi[117..117 + m.module.len()].copy_from_slice(m.module);
