@@ -399,6 +399,12 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
     };
     let hold_shift = matches!(options.irf, IrfSource::Measured { .. }) && !options.fit_irf_shift;
     let summed_fit = fit_summed(&model, &summed, &bounds, options.objective, hold_shift);
+    let no_decay = undetermined_by(&summed_fit, k);
+    if no_decay {
+        notes.push(format!(
+            "the summed decay does not determine its lifetimes (a standard error above {UNDETERMINED_ERROR} times a lifetime, or a component of under one photon): it looks like noise or a flat background, not a decay; no pixel is fitted (every pixel's light together shows none)"
+        ));
+    }
     let mut free = vec![true; np];
     for f in free.iter_mut().skip(model.background() + 1) {
         *f = false;
@@ -412,7 +418,14 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
         s[model.background()] *= scale;
         s
     };
-    let fits: Vec<Option<Fitted>> = if options.global {
+    let fits: Vec<Option<Fitted>> = if no_decay {
+        // Each pixel above the threshold takes the summed decay's
+        // undetermined fit, and is masked and counted with it.
+        photons
+            .iter()
+            .map(|&n| (n >= options.min_photons).then(|| summed_fit.clone()))
+            .collect()
+    } else if options.global {
         let g = global::fit_global(
             &model,
             &decays.values,
@@ -471,6 +484,22 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
         },
         notes,
         ..maps
+    })
+}
+
+/// A fitted lifetime whose standard error passes this multiple of it is
+/// not determined by its decay (pure noise, a flat background, three
+/// components on a few photons): its pixel is masked. A single
+/// exponential of 100 photons has an error near a tenth of its lifetime.
+pub const UNDETERMINED_ERROR: f64 = 1.0;
+
+/// Whether fit `f` of `k` components leaves a lifetime undetermined: its
+/// curvature singular, its standard error above [`UNDETERMINED_ERROR`]
+/// times it, or its component under one photon.
+fn undetermined_by(f: &Fitted, k: usize) -> bool {
+    (0..k).any(|c| {
+        let (photons, tau, error) = (f.params[2 * c], f.params[2 * c + 1], f.errors[2 * c + 1]);
+        !(error.is_finite() && error <= UNDETERMINED_ERROR * tau && photons >= 1.0)
     })
 }
 
@@ -756,8 +785,8 @@ fn assemble(
             continue;
         }
         // A component without photons, or lifetimes the decay cannot tell
-        // apart, leave the curvature singular: no error, no lifetime.
-        if (0..k).any(|c| !f.errors[2 * c + 1].is_finite()) {
+        // apart, leave the curvature singular or nearly so: no lifetime.
+        if undetermined_by(f, k) {
             undetermined += 1;
             continue;
         }
@@ -817,7 +846,7 @@ fn assemble(
         });
     }
     notes.push(format!(
-        "masked: {below} pixels below {} photons, {unconverged} whose fit did not converge, {at_bound} whose lifetime ended at a bound ({:.0} to {:.0} ps), {undetermined} whose lifetimes the decay does not determine (a component without photons: singular curvature); {} of {} fitted",
+        "masked: {below} pixels below {} photons, {unconverged} whose fit did not converge, {at_bound} whose lifetime ended at a bound ({:.0} to {:.0} ps), {undetermined} whose lifetimes the decay does not determine (a standard error above {UNDETERMINED_ERROR} times the lifetime, or a component of under one photon); {} of {} fitted",
         options.min_photons,
         bounds[1].0,
         bounds[1].1,
