@@ -398,5 +398,10 @@ fn lifetimes_the_decay_does_not_determine_are_masked_and_pure_noise_remarked() {
     }
     // A single exponential of 200 photons stays fitted.
     let maps = fit(&counts, &FitOptions::default());
-    assert_eq!(maps.mask.iter().filter(|m| !**m).count(), 64, "{:?}", maps.notes);
+    assert_eq!(
+        maps.mask.iter().filter(|m| !**m).count(),
+        64,
+        "{:?}",
+        maps.notes
+    );
 }

@@ -180,18 +180,6 @@ pub fn fit_maps(
     }
 }
 
-/// Decays (pixels x window bins), binned and cut to the window.
-struct Decays {
-    values: Vec<f64>,
-    bins: usize,
-}
-
-impl Decays {
-    fn pixel(&self, p: usize) -> &[f64] {
-        &self.values[p * self.bins..(p + 1) * self.bins]
-    }
-}
-
 fn input_error(what: impl Into<String>) -> DecayError {
     DecayError::Input(what.into())
 }
@@ -281,17 +269,6 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
     }
     let k = options.components;
     let mut notes = Vec::new();
-    // Per-pixel decays over every bin, binned.
-    let raw: Vec<f64> = {
-        let mut v = vec![0.0; h * w * bins];
-        for (b, plane) in counts.outer_iter().enumerate() {
-            for ((r, c), &x) in plane.indexed_iter() {
-                v[(r * w + c) * bins + b] = x.into();
-            }
-        }
-        v
-    };
-    let binned = bin_neighbours(&raw, (h, w, bins), options.binning);
     if options.binning > 0 {
         let side = 2 * options.binning + 1;
         notes.push(format!(
@@ -299,8 +276,10 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
             options.binning
         ));
     }
-    let total: Vec<f64> = (0..bins)
-        .map(|b| (0..h * w).map(|p| raw[p * bins + b]).sum())
+    let total: Vec<f64> = counts
+        .outer_iter()
+        .into_par_iter()
+        .map(|plane| plane.iter().map(|&v| v.into()).sum())
         .collect();
     if total.iter().sum::<f64>() <= 0.0 {
         return Err(input_error("the stack holds no photon: nothing to fit"));
@@ -339,13 +318,37 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
             (false, _, false) => "",
         }
     ));
-    let decays = Decays {
-        values: binned
-            .chunks_exact(bins)
-            .flat_map(|d| d[first..end].iter().copied())
-            .collect(),
-        bins: n,
+    // The fit's memory, checked before it grows: the maps and their
+    // masked copies and each pixel's fit, held whole; the window's decays
+    // (float64) a band of rows at a time, all at once for a global fit.
+    let budget = crate::memory::budget()
+        .map_err(|e| input_error(e.to_string()))?
+        .bytes;
+    // The stack itself is held too.
+    let stack = crate::memory::bytes_of([bins, h, w], std::mem::size_of::<T>() as u64);
+    let held =
+        crate::memory::bytes_of([h, w], 16 * (5 * k as u64 + 9) + FIT_BYTES).saturating_add(stack);
+    let row_bytes = crate::memory::bytes_of([w, n], 8);
+    let band_rows = if options.global {
+        h
+    } else {
+        (budget.saturating_sub(held) / 2 / row_bytes.max(1)).clamp(1, h as u64) as usize
     };
+    crate::memory::check(
+        held.saturating_add(row_bytes.saturating_mul(band_rows as u64)),
+        || {
+            format!(
+                "a {}fit of {h} x {w} pixels over {n} bins",
+                if options.global { "global " } else { "" }
+            )
+        },
+    )
+    .map_err(|e| input_error(e.to_string()))?;
+    if band_rows < h {
+        notes.push(format!(
+            "the pixels' decays made and fitted {band_rows} rows at a time, within the memory budget"
+        ));
+    }
     let window_total: Vec<f64> = total[first..end].to_vec();
     let (irf, irf_note) = irf_shape(&options.irf, &total, first, end, options.fit_irf_shift);
     notes.push(irf_note);
@@ -382,13 +385,18 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
     let np = model.parameters();
     let bounds = bounds(&model);
     // Which pixels are fitted, and the summed decay of those.
-    let photons: Vec<f64> = (0..h * w).map(|p| decays.pixel(p).iter().sum()).collect();
+    let photons: Vec<f64> = {
+        let window_photons = ndarray::Array3::from_shape_fn((1, h, w), |(_, r, c)| {
+            (first..end).map(|b| counts[[b, r, c]].into()).sum::<f64>()
+        });
+        binned_decays(window_photons.view(), (0, 1), options.binning, 0..h)
+    };
     let below = photons.iter().filter(|&&n| n < options.min_photons).count();
     let summed: Vec<f64> = (0..n)
         .map(|b| {
             (0..h * w)
                 .filter(|&p| photons[p] >= options.min_photons)
-                .map(|p| raw[p * bins + first + b])
+                .map(|p| counts[[first + b, p / w, p % w]].into())
                 .sum()
         })
         .collect();
@@ -426,9 +434,10 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
             .map(|&n| (n >= options.min_photons).then(|| summed_fit.clone()))
             .collect()
     } else if options.global {
+        let decays = binned_decays(counts, (first, end), options.binning, 0..h);
         let g = global::fit_global(
             &model,
-            &decays.values,
+            &decays,
             &photons,
             options.min_photons,
             &summed_fit.params,
@@ -438,15 +447,17 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
         notes.push(g.note);
         g.fits
     } else {
-        (0..h * w)
-            .into_par_iter()
-            .map(|p| {
-                (photons[p] >= options.min_photons).then(|| {
-                    let y = decays.pixel(p);
-                    fit(&model, y, &start_for(y), &free, &bounds, options.objective)
-                })
-            })
-            .collect()
+        let mut fits = Vec::with_capacity(h * w);
+        for r0 in (0..h).step_by(band_rows) {
+            let rows = r0..(r0 + band_rows).min(h);
+            let decays = binned_decays(counts, (first, end), options.binning, rows.clone());
+            let offset = r0 * w;
+            fits.par_extend(decays.par_chunks_exact(n).enumerate().map(|(i, y)| {
+                (photons[offset + i] >= options.min_photons)
+                    .then(|| fit(&model, y, &start_for(y), &free, &bounds, options.objective))
+            }));
+        }
+        fits
     };
     let maps = assemble(
         &model,
@@ -707,24 +718,80 @@ fn argmax(v: &[f64]) -> usize {
         .0
 }
 
-/// Each pixel's decay summed with its neighbours within `b` (a square,
-/// clipped at the edges); `values` is pixels x bins.
-fn bin_neighbours(values: &[f64], (h, w, bins): (usize, usize, usize), b: usize) -> Vec<f64> {
-    if b == 0 {
-        return values.to_vec();
+/// Each pixel's decay over the bins `[first, end)` of `counts`, summed
+/// with its neighbours within `b` (a square, clipped at the edges), for
+/// the pixels of `rows`: pixels x window bins.
+fn binned_decays<T: Copy + Into<f64> + Sync>(
+    counts: ArrayView3<'_, T>,
+    (first, end): (usize, usize),
+    b: usize,
+    rows: std::ops::Range<usize>,
+) -> Vec<f64> {
+    let (_, h, w) = counts.dim();
+    let n = end - first;
+    let mut out = vec![0.0; rows.len() * w * n];
+    if out.is_empty() {
+        return out;
     }
-    let mut out = vec![0.0; values.len()];
-    out.par_chunks_mut(bins).enumerate().for_each(|(p, dst)| {
-        let (r, c) = (p / w, p % w);
-        for rr in r.saturating_sub(b)..(r + b + 1).min(h) {
-            for cc in c.saturating_sub(b)..(c + b + 1).min(w) {
-                let src = &values[(rr * w + cc) * bins..(rr * w + cc + 1) * bins];
-                dst.iter_mut().zip(src).for_each(|(d, s)| *d += s);
+    // Running sums, as a summed-area table gives them: down the rows (the
+    // rows of a band slide one at a time) and along each row, so that a
+    // pixel's sum costs the same at any binning. Counts are integers,
+    // summed exactly in float64.
+    let band = rows.len().div_ceil(4 * rayon::current_num_threads()).max(1);
+    out.par_chunks_mut(band * w * n)
+        .enumerate()
+        .for_each(|(i, chunk)| {
+            let r0 = rows.start + i * band;
+            // Column sums over the rows about the current one: [c * n + k].
+            let mut columns = vec![0.0; w * n];
+            let add_row = |columns: &mut [f64], rr: usize, sign: f64| {
+                for k in 0..n {
+                    let row = counts.slice(ndarray::s![first + k, rr, ..]);
+                    for (c, &v) in row.iter().enumerate() {
+                        columns[c * n + k] += sign * v.into();
+                    }
+                }
+            };
+            for rr in r0.saturating_sub(b)..(r0 + b + 1).min(h) {
+                add_row(&mut columns, rr, 1.0);
             }
-        }
-    });
+            let mut along = vec![0.0; n];
+            for (j, row_out) in chunk.chunks_mut(w * n).enumerate() {
+                let r = r0 + j;
+                if j > 0 {
+                    if r + b < h {
+                        add_row(&mut columns, r + b, 1.0);
+                    }
+                    if r > b {
+                        add_row(&mut columns, r - b - 1, -1.0);
+                    }
+                }
+                along.iter_mut().for_each(|a| *a = 0.0);
+                for cc in 0..(b + 1).min(w) {
+                    along
+                        .iter_mut()
+                        .zip(&columns[cc * n..(cc + 1) * n])
+                        .for_each(|(a, v)| *a += v);
+                }
+                for c in 0..w {
+                    row_out[c * n..(c + 1) * n].copy_from_slice(&along);
+                    if c + b + 1 < w {
+                        let add = &columns[(c + b + 1) * n..(c + b + 2) * n];
+                        along.iter_mut().zip(add).for_each(|(a, v)| *a += v);
+                    }
+                    if c >= b {
+                        let sub = &columns[(c - b) * n..(c - b + 1) * n];
+                        along.iter_mut().zip(sub).for_each(|(a, v)| *a -= v);
+                    }
+                }
+            }
+        });
     out
 }
+
+/// Bytes of one pixel's fit beyond its decay and maps: its parameters,
+/// errors and the fit's fields.
+const FIT_BYTES: u64 = 256;
 
 /// The maps from the pixels' fits, masks counted in the notes.
 #[allow(clippy::too_many_arguments)]
@@ -854,4 +921,40 @@ fn assemble(
         h * w
     ));
     m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::binned_decays;
+    use ndarray::Array3;
+
+    /// The running sums equal the square's sum pixel by pixel, at every
+    /// binning, edges clipped, cut to the window.
+    #[test]
+    fn binned_decays_equal_the_squares_sums() {
+        let (bins, h, w) = (6, 7, 5);
+        let counts = Array3::from_shape_fn((bins, h, w), |(k, r, c)| {
+            ((k * 31 + r * 17 + c * 7) % 11) as u32
+        });
+        for b in 0..7 {
+            let got = binned_decays(counts.view(), (1, 5), b, 0..h);
+            for r in 0..h {
+                for c in 0..w {
+                    for k in 1..5 {
+                        let mut want = 0.0;
+                        for rr in r.saturating_sub(b)..(r + b + 1).min(h) {
+                            for cc in c.saturating_sub(b)..(c + b + 1).min(w) {
+                                want += f64::from(counts[[k, rr, cc]]);
+                            }
+                        }
+                        assert_eq!(
+                            got[(r * w + c) * 4 + k - 1],
+                            want,
+                            "b {b} ({r}, {c}) bin {k}"
+                        );
+                    }
+                }
+            }
+        }
+    }
 }
