@@ -134,7 +134,7 @@ impl RecordedBins {
         let whole = |t: f64| t >= from_ps - slack && t + width_ps <= to_ps + slack;
         let first = starts_ps.iter().position(|&t| whole(t))?;
         let end = first + starts_ps[first..].iter().take_while(|&&t| whole(t)).count();
-        (first > 0 || end < starts_ps.len()).then(|| Self {
+        (first > 0 || end < starts_ps.len()).then_some(Self {
             first,
             end,
             span_ps: (from_ps, to_ps),
@@ -210,8 +210,8 @@ impl<'a> CountsView<'a> {
     pub fn bins(&self, first: usize, end: usize) -> CountsView<'a> {
         use ndarray::s;
         match self {
-            CountsView::U16(c) => CountsView::U16(c.clone().slice_move(s![first..end, .., ..])),
-            CountsView::U32(c) => CountsView::U32(c.clone().slice_move(s![first..end, .., ..])),
+            CountsView::U16(c) => CountsView::U16((*c).slice_move(s![first..end, .., ..])),
+            CountsView::U32(c) => CountsView::U32((*c).slice_move(s![first..end, .., ..])),
         }
     }
 
