@@ -468,6 +468,8 @@ pub struct DecayFitPlot<'a> {
     pub fit: &'a [f64],
     /// The IRF per bin (empty: none).
     pub irf: &'a [f64],
+    /// Lines of text written under the legend (the fitted values).
+    pub values: &'a [String],
 }
 
 /// Draws a [`DecayFitPlot`].
@@ -547,6 +549,15 @@ pub fn decay_fit(path: &Path, plot: &DecayFitPlot) -> Result<(), String> {
             .position(SeriesLabelPosition::UpperRight)
             .draw()
             .map_err(|e| e.to_string())?;
+        for (i, line) in plot.values.iter().enumerate() {
+            upper
+                .draw(&Text::new(
+                    line.as_str(),
+                    (width as i32 - 430, 130 + 18 * i as i32),
+                    ("sans-serif", 14).into_font().color(&BLACK),
+                ))
+                .map_err(|e| e.to_string())?;
+        }
         let residuals: Vec<(f64, f64)> = t
             .iter()
             .zip(plot.decay.iter().zip(plot.fit))

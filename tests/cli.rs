@@ -1636,13 +1636,15 @@ fn a_slab_other_than_stated_is_warned_of_with_its_direction() {
         args.extend_from_slice(&["--out", out.to_str().unwrap()]);
         let o = run_isolated(&args);
         let (stdout, stderr) = streams(&o);
-        assert!(o.status.success(), "{stderr}");
-        format!("{stdout}{stderr}")
+        (o.status.code(), format!("{stdout}{stderr}"))
     };
-    let stated = reconstruct(&[], "stated");
+    let (code, stated) = reconstruct(&[], "stated");
+    assert_eq!(code, Some(0), "{stated}");
     assert!(stated.contains("auto: chose"), "{stated}");
     assert!(!stated.contains("far worse than Poisson noise"), "{stated}");
-    let thicker = reconstruct(&["--thickness", "3.5cm"], "thicker");
+    // The warning is the exit status 4 (a batch records it), not 0.
+    let (code, thicker) = reconstruct(&["--thickness", "3.5cm"], "thicker");
+    assert_eq!(code, Some(4), "{thicker}");
     assert!(
         thicker.contains("far worse than Poisson noise allows")
             && thicker.contains("bins earlier on average than the model predicts"),

@@ -629,3 +629,75 @@ fn a_fit_stays_inside_the_memory_limit() {
         "{said}"
     );
 }
+
+/// Issue 89, outputs: the IRF the fit used is saved (unit sum on the
+/// stack's bins, taken back by `--irf`), the fitted values with their
+/// errors are in `fit.json` (and on the decay figure), a pitch the file
+/// does not state is null, and an output's place that is a folder is
+/// refused before any output is written.
+#[test]
+fn a_fit_saves_its_irf_and_values_and_checks_its_outputs_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let sdt = limited_sdt(dir.path(), (3.529_411_8, 96.470_59));
+    let out = dir.path().join("fit");
+    let r = run(&["fit", s(&sdt), "--irf", "gaussian", "--out", s(&out)]);
+    assert!(r.status.success(), "{}", text(&r));
+    let irf: ndarray::Array1<f64> = ndarray_npy::read_npy(out.join("fit_irf.npy")).unwrap();
+    assert_eq!(irf.len(), 256);
+    assert!((irf.sum() - 1.0).abs() < 1e-9);
+    // The Gaussian found: its peak near the simulated 2 ns (bin 41).
+    let peak = irf
+        .iter()
+        .enumerate()
+        .fold(
+            (0, 0.0),
+            |(i, m), (j, &v)| if v > m { (j, v) } else { (i, m) },
+        )
+        .0;
+    assert!((40..=42).contains(&peak), "{peak}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("fit.json")).unwrap()).unwrap();
+    let values = json["summed_values"].as_array().unwrap();
+    assert!(
+        values[0].as_str().unwrap().starts_with("tau1 = ")
+            && values[0].as_str().unwrap().contains("+-"),
+        "{values:?}"
+    );
+    assert!(
+        json["stack"]["pixel_pitch_cm"].is_null(),
+        "{}",
+        json["stack"]
+    );
+    // The IRF back as --irf: the same lifetimes within 0.5 %; a stack's
+    // output of an earlier run of several stacks is remarked on.
+    let again = dir.path().join("again");
+    std::fs::create_dir_all(&again).unwrap();
+    std::fs::write(again.join("fit_f000.npy"), b"earlier").unwrap();
+    let r = run(&[
+        "fit",
+        s(&sdt),
+        "--irf",
+        s(&out.join("fit_irf.npy")),
+        "--irf-shift-fitted",
+        "--no-figures",
+        "--out",
+        s(&again),
+    ]);
+    assert!(r.status.success(), "{}", text(&r));
+    assert!(
+        text(&r).contains("come from an earlier run"),
+        "{}",
+        text(&r)
+    );
+    let (a, _) = lifetime_and_window(&out);
+    let (b, _) = lifetime_and_window(&again);
+    assert!((a / b - 1.0).abs() < 0.005, "{a} against {b}");
+    // A folder where fit.json goes: refused, nothing written.
+    let blocked = dir.path().join("blocked");
+    std::fs::create_dir_all(blocked.join("fit.json")).unwrap();
+    let r = run(&["fit", s(&sdt), "--out", s(&blocked)]);
+    assert!(!r.status.success());
+    assert!(text(&r).contains("fit.json"), "{}", text(&r));
+    assert!(!blocked.join("fit.ome.tif").exists());
+    assert!(!blocked.join("fit.npy").exists());
+}

@@ -464,6 +464,21 @@ def test_fit_lifetimes_equal_the_command_fit(tmp_path):
         scatterscope.fit_lifetimes(binned["stacks"][0], binned["meta"][0], components=4)
     with pytest.raises(ScatterscopeError, match="holds no photon"):
         scatterscope.fit_lifetimes(binned["stacks"][0], binned["meta"][0], irf=np.zeros(125))
+    # Issue 89: arguments of the wrong kind are refused by name.
+    stack, meta = binned["stacks"][0], binned["meta"][0]
+    for kwargs, words in [
+        (dict(counts=stack.tolist(), meta=meta), "must be a numpy array"),
+        (dict(counts=stack, meta=None), "meta must be the stack's metadata"),
+        (dict(counts=stack, meta=meta, components=2.7), "components 2.7"),
+        (dict(counts=stack, meta=meta, window="0:100"), "window '0:100'"),
+        (dict(counts=stack.astype(np.float32) + 0.5, meta=meta), "give whole photon counts"),
+    ]:
+        with pytest.raises(ScatterscopeError, match=words):
+            scatterscope.fit_lifetimes(**kwargs)
+    # A float32 stack of whole counts (bin_file's other dtype) fits as its
+    # uint32 copy.
+    as_float = scatterscope.fit_lifetimes(stack.astype(np.float32), meta, irf="gaussian", min_photons=20)
+    np.testing.assert_array_equal(as_float["tau1_ps"], maps["tau1_ps"])
 
 
 def test_reconstruct_embedded_equals_the_command_and_names_its_noise_model(tmp_path):

@@ -42,16 +42,57 @@ pub(crate) fn recorded_note(meta: &StackMeta, all_bins: bool) -> Option<String> 
     })
 }
 
+/// A note on outputs of an earlier run left in `dir` beside stack `s`'s
+/// (named `{stem}.npy` or `{stem}_fNNN.npy`): the single stack's name
+/// beside several stacks', or a stack past this run's last. They are left
+/// as they are.
+pub(crate) fn stale_note(dir: &Path, stem: &str, s: &StackCounts<'_>) -> Option<String> {
+    let other = if s.of > 1 {
+        (s.index == 0).then(|| dir.join(format!("{stem}.npy")))
+    } else {
+        Some(dir.join(format!("{stem}_f000.npy")))
+    };
+    let past =
+        (s.index + 1 == s.of && s.of > 1).then(|| dir.join(format!("{stem}_f{:03}.npy", s.of)));
+    let found: Vec<String> = other
+        .into_iter()
+        .chain(past)
+        .filter(|p| p.exists())
+        .map(|p| p.display().to_string())
+        .collect();
+    (!found.is_empty()).then(|| {
+        format!(
+            "{} in the folder come from an earlier run (not this file's stacks): left as they are",
+            found.join(", ")
+        )
+    })
+}
+
 /// Refuses to write any of `files` that is one of `reads` (by identity,
 /// not spelling).
 pub(crate) fn refuse_inputs(files: &[PathBuf], reads: &[PathBuf]) -> Result<(), StackError> {
-    match files.iter().find(|f| reads.iter().any(|r| same_file(f, r))) {
-        Some(f) => Err(StackError::format(
+    if let Some(f) = files.iter().find(|f| reads.iter().any(|r| same_file(f, r))) {
+        return Err(StackError::format(
             f,
             "is a file the command reads: writing it would destroy it; choose another --out",
-        )),
-        None => Ok(()),
+        ));
     }
+    // Each output's place, checked before the first is written (a folder
+    // named as one was found only after the others were written).
+    for f in files {
+        crate::files::output::check_destination(f).map_err(|e| StackError::io(f, e))?;
+    }
+    Ok(())
+}
+
+/// A stack's metadata as a sidecar states it: a pitch the recording did
+/// not state is null, not the placeholder.
+pub(crate) fn stated_meta(meta: &StackMeta) -> serde_json::Value {
+    let mut v = serde_json::to_value(meta).expect("the metadata serialises");
+    if meta.is_unstated(Unstated::PixelPitch) {
+        v["pixel_pitch_cm"] = serde_json::Value::Null;
+    }
+    v
 }
 
 /// Writes the named `channels` (each rows x columns) as float32 planes:

@@ -1027,10 +1027,26 @@ mod tests {
         );
     }
 
-    /// Without an IRF the fast lifetime's time zero is the start of the
-    /// first bin at or above half the image decay's maximum, photons at
-    /// their bins' starts (SymPhoTime); the centred one's the interpolated
-    /// onset, photons at their centres.
+    /// Without an IRF the fast lifetime's time zero is where the line
+    /// through the steepest-rising pair of bins (at their starts) reaches
+    /// the peak, less half a bin, photons at their bins' starts
+    /// (SymPhoTime); the centred one's the interpolated onset, photons at
+    /// their centres.
+    /// The rising flank's line through the steepest pair (30 to 90 at
+    /// bins 2 and 3) reaches the peak (100) 70/60 of a bin after bin 2's
+    /// start; less half a bin. A decay that does not rise has none.
+    #[test]
+    fn the_rising_flanks_time_zero_follows_the_steepest_pair() {
+        let starts = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0];
+        let zero = rising_flank_zero(&[0.0, 10.0, 30.0, 90.0, 100.0, 60.0], &starts, 10.0);
+        assert!((zero.unwrap() - (20.0 + 70.0 / 60.0 * 10.0 - 5.0)).abs() < 1e-12);
+        assert_eq!(
+            rising_flank_zero(&[9.0, 5.0, 2.0, 1.0, 0.0, 0.0], &starts, 10.0),
+            None
+        );
+        assert_eq!(rising_flank_zero(&[0.0; 6], &starts, 10.0), None);
+    }
+
     #[test]
     fn the_fast_lifetime_takes_symphotimes_conventions() {
         let decay = [2.0, 3.0, 40.0, 100.0, 70.0, 50.0, 30.0, 20.0];
@@ -1046,8 +1062,10 @@ mod tests {
         .unwrap();
         let n: f64 = decay.iter().sum();
         let bary_start = starts.iter().zip(&decay).map(|(t, v)| t * v).sum::<f64>() / n;
-        // Bin 3 (100) is the first at or above 50.
-        let want = bary_start - starts[3];
+        // The steepest rise is bins 2 to 3 (40 to 100, against 3 to 40
+        // before): that line reaches the peak, 100, at bin 3's start.
+        let zero = starts[2] + (100.0 - 40.0) / (100.0 - 40.0) * 97.0 - 48.5;
+        let want = bary_start - zero;
         assert!(
             (maps.fast_lifetime_ps[[0, 0]] - want).abs() < 1e-9,
             "{}",

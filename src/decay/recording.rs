@@ -21,7 +21,8 @@ use ndarray::Array2;
 use serde::Serialize;
 
 use super::map_files::{
-    LifetimeImage, draw_lifetime, refuse_inputs, stack_tail, unmasked_finite, write_channels,
+    LifetimeImage, draw_lifetime, refuse_inputs, stack_tail, stale_note, stated_meta,
+    unmasked_finite, write_channels,
 };
 use super::{DecayMaps, DecayOptions, Onset, Reference, decay_maps, decay_phasors};
 use crate::files::input::same_file;
@@ -146,7 +147,7 @@ struct Sidecar<'a> {
     harmonics: &'a [u32],
     min_photons: f64,
     notes: &'a [String],
-    stack: &'a StackMeta,
+    stack: serde_json::Value,
 }
 
 /// A reference's decay: photons per bin, the bins' centres (ps), and the
@@ -346,7 +347,7 @@ fn write_maps(
         harmonics: &options.harmonics,
         min_photons: options.min_photons,
         notes: &maps.notes,
-        stack: s.meta,
+        stack: stated_meta(s.meta),
     };
     let text = serde_json::to_string_pretty(&sidecar).expect("the sidecar serialises");
     crate::files::write_atomic(&json, text).map_err(|e| StackError::io(&json, e))?;
@@ -362,6 +363,7 @@ fn write_maps(
     if !request.figures {
         notes.push("figures left out (asked)".into());
     }
+    notes.extend(stale_note(dir, "maps", s));
     Ok(MapsWritten {
         files,
         pixels: h * w,

@@ -60,6 +60,17 @@ impl Reconstruction {
         Ok(tif)
     }
 
+    /// How many of the run's notes warn (begin `warning:`: an output
+    /// that explains the counts far worse than Poisson noise allows, ...):
+    /// the command's exit status 4 when any.
+    pub fn warnings(&self) -> usize {
+        self.trace
+            .notes
+            .iter()
+            .filter(|n| n.starts_with("warning:"))
+            .count()
+    }
+
     /// What the run did, one line each: the method and prior, iterations
     /// and time, its notes from the `skip`-th on, and with a truth the
     /// output's PSNR and SSIM and the best iteration by truth.

@@ -279,13 +279,14 @@ def decay_maps(
     onset_ps: Optional[float] = None,
     reference_phasors: Optional[List[Tuple[float, float]]] = None,
     reference_lifetime_ps: float = 0.0,
+    all_bins: bool = False,
 ) -> Dict[str, Any]:
     """Per-pixel decay maps of a stack of counts ``(bins, rows, cols)``
     (uint16, uint32 or float32, as :func:`bin_file` returns) with its
     metadata ``meta``, as ``scatterscope lifetime`` computes them:
     ``photons``, ``mean_time_ps`` and ``variance_ps2`` (after the onset),
     ``fast_lifetime_ps`` (SymPhoTime's conventions: photons at their
-    bins' starts, time zero the first bin at half the maximum),
+    bins' starts, time zero on the decay's rising flank),
     ``fast_lifetime_centred_ps`` (bins' centres, the interpolated onset),
     ``g1``, ``s1``, ... per harmonic and, with
     ``reference_phasors`` (one ``(g, s)`` per harmonic, of a reference of
@@ -293,17 +294,24 @@ def decay_maps(
     ``phase_lifetime1_ps``, ``modulation_lifetime1_ps``; ``mask`` (True
     where fewer than ``min_photons``: NaN in the maps), ``onset_ps``,
     ``frequency_hz`` and ``notes``. The frequency defaults to the
-    recording's (``meta["laser_frequency_hz"]``).
+    recording's (``meta["laser_frequency_hz"]``). Only the bins the
+    instrument recorded whole are mapped (``meta["recorded_bins"]``, as
+    the command), unless ``all_bins``.
     """
     f = frequency_hz if frequency_hz is not None else meta.get("laser_frequency_hz")
     if f is None:
         raise ScatterscopeError(
             "decay_maps: the stack's metadata states no laser frequency: give frequency_hz"
         )
+    starts = [float(t) for t in meta["bin_starts_ps"]]
+    recorded = meta.get("recorded_bins")
+    if recorded and not all_bins:
+        first, end = int(recorded["first"]), int(recorded["end"])
+        counts, starts = counts[first:end], starts[first:end]
     array = counts if counts.dtype in (np.uint16, np.uint32, np.float32) else counts.astype(np.float32)
     return _native.decay_maps(
-        array,
-        [float(t) for t in meta["bin_starts_ps"]],
+        np.ascontiguousarray(array),
+        starts,
         float(meta["bin_width_ps"]),
         float(f),
         [int(h) for h in harmonics],
@@ -312,6 +320,37 @@ def decay_maps(
         reference_phasors,
         float(reference_lifetime_ps),
     )
+
+
+def _whole_counts(function: str, counts: Any) -> np.ndarray:
+    """`counts` as uint16 or uint32, as the library takes them: a float32
+    stack (bin_file's other dtype) of whole counts is converted, anything
+    else refused by name."""
+    if not isinstance(counts, np.ndarray):
+        raise ScatterscopeError(
+            f"{function}: counts must be a numpy array (bins, rows, columns), as bin_file returns, "
+            f"not {type(counts).__name__}"
+        )
+    if counts.dtype in (np.uint16, np.uint32):
+        return counts
+    if counts.dtype.kind == "f":
+        bad = ~(np.isfinite(counts) & (counts >= 0) & (counts <= 2**32 - 1) & (counts == np.round(counts)))
+        if bad.any():
+            where = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise ScatterscopeError(
+                f"{function}: counts at {where} hold {counts[where]}: give whole photon counts >= 0"
+            )
+        return counts.astype(np.uint32)
+    raise ScatterscopeError(
+        f"{function}: counts must be uint16, uint32 or whole float counts (bin_file's dtypes), not {counts.dtype}"
+    )
+
+
+def _whole_number(function: str, name: str, value: Any) -> int:
+    """`value` as a whole number >= 0, else an error naming it."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ScatterscopeError(f"{function}: {name} {value!r}: give a whole number >= 0")
+    return int(value)
 
 
 def fit_lifetimes(
@@ -346,9 +385,21 @@ def fit_lifetimes(
     unless ``all_bins``. A measured IRF's shift is held at 0 (recorded
     with the sample) unless ``fit_irf_shift``.
     """
+    counts = _whole_counts("fit_lifetimes", counts)
+    if not isinstance(meta, dict) or "bin_starts_ps" not in meta or "bin_width_ps" not in meta:
+        raise ScatterscopeError(
+            f"fit_lifetimes: meta must be the stack's metadata (a dict with bin_starts_ps and "
+            f"bin_width_ps, as bin_file gives it), not {type(meta).__name__}"
+        )
+    components = _whole_number("fit_lifetimes", "components", components)
+    binning = _whole_number("fit_lifetimes", "binning", binning)
+    if window is not None:
+        if (isinstance(window, (str, bytes)) or len(window) != 2
+                or not all(isinstance(v, (int, np.integer)) for v in window)):
+            raise ScatterscopeError(
+                f"fit_lifetimes: window {window!r}: give (first, end), two whole bin numbers"
+            )
     f = frequency_hz if frequency_hz is not None else meta.get("laser_frequency_hz")
-    if counts.dtype not in (np.uint16, np.uint32):
-        raise ScatterscopeError("fit_lifetimes: counts must be uint16 or uint32 (bin_file's dtype)")
     if isinstance(irf, str):
         kind, decay = irf, None
     else:

@@ -126,5 +126,5 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     }
     let out = args.out.display();
     println!("wrote {out}/{{reconstruction.exr, reconstruction.png{tiff}, trace.csv, trace.json}}");
-    Ok(())
+    crate::signals::warned(result.warnings())
 }

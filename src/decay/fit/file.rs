@@ -21,13 +21,13 @@ use serde::Serialize;
 
 use super::{FitMaps, FitOptions, IrfSource, fit_maps};
 use crate::decay::map_files::{
-    LifetimeImage, draw_lifetime, recorded_note, refuse_inputs, stack_tail, unmasked_finite,
-    write_channels,
+    LifetimeImage, draw_lifetime, recorded_note, refuse_inputs, stack_tail, stale_note,
+    stated_meta, unmasked_finite, write_channels,
 };
 use crate::decay::recording::reference_decay;
 use crate::files::input::same_file;
 use crate::plot::quantile;
-use crate::stack::{StackError, StackMeta, Unstated};
+use crate::stack::{StackError, Unstated};
 use crate::tags::bin_file::bin_file_each;
 use crate::tags::binned::{BinSpec, BinnedFile, RecordedFileError, StackCounts, spec_error};
 
@@ -67,7 +67,8 @@ pub struct FitRequest {
 pub struct FitWritten {
     /// The files, the OME-TIFF first.
     pub files: Vec<PathBuf>,
-    /// Pixels, masked pixels, photons in the window.
+    /// Pixels, masked pixels, photons in the window (each once, binning
+    /// or not).
     pub pixels: usize,
     /// See `pixels`.
     pub masked: usize,
@@ -86,10 +87,11 @@ struct Sidecar<'a> {
     summed_decay: &'a [f64],
     summed_fit: &'a [f64],
     summed_params: &'a [f64],
+    summed_values: &'a [String],
     summed_reduced_chi2: f64,
     laser_frequency_hz: Option<f64>,
     notes: &'a [String],
-    stack: &'a StackMeta,
+    stack: serde_json::Value,
 }
 
 /// The channels of a fit's map file, in order, each with its name.
@@ -265,7 +267,11 @@ fn write_fit(
     let json = crate::formats::npy::sidecar_path(&npy);
     let lifetime_png = dir.join(format!("fit_lifetime{tail}.png"));
     let decay_png = dir.join(format!("fit_decay{tail}.png"));
+    let irf_npy = dir.join(format!("fit_irf{tail}.npy"));
     let mut files = vec![tif.clone(), npy.clone(), json.clone()];
+    if !maps.summed.irf.is_empty() {
+        files.push(irf_npy.clone());
+    }
     if request.figures {
         files.extend([lifetime_png.clone(), decay_png.clone()]);
     }
@@ -280,19 +286,34 @@ fn write_fit(
         chans.iter().map(|(n, m)| (n.clone(), m.view())).collect();
     write_channels(&views, s.meta, &tif, &npy)?;
     let mut notes = maps.notes.clone();
+    if !maps.summed.irf.is_empty() {
+        // The IRF the fit used, on the stack's bins and of unit sum: what
+        // `--irf` takes back.
+        let mut irf = ndarray::Array1::<f64>::zeros(s.meta.bin_starts_ps.len());
+        let (first, end) = maps.summed.window;
+        irf.slice_mut(ndarray::s![first..end])
+            .assign(&ndarray::ArrayView1::from(&maps.summed.irf));
+        write_vector(&irf, &irf_npy)?;
+        notes.push(format!(
+            "the IRF used written to {} (unit sum on the stack's bins; --irf takes it back)",
+            irf_npy.display()
+        ));
+    }
     if !request.figures {
         notes.push("figures left out (asked)".into());
     }
+    notes.extend(stale_note(dir, "fit", s));
     let sidecar = Sidecar {
         channels: chans.iter().map(|(n, _)| n.as_str()).collect(),
         window_bins: maps.summed.window,
         summed_decay: &maps.summed.decay,
         summed_fit: &maps.summed.fit,
         summed_params: &maps.summed.params,
+        summed_values: &maps.summed.values,
         summed_reduced_chi2: maps.summed.reduced_chi2,
         laser_frequency_hz: frequency_hz,
         notes: &notes,
-        stack: s.meta,
+        stack: stated_meta(s.meta),
     };
     let text = serde_json::to_string_pretty(&sidecar).expect("the sidecar serialises");
     crate::files::write_atomic(&json, text).map_err(|e| StackError::io(&json, e))?;
@@ -304,10 +325,23 @@ fn write_fit(
         files,
         pixels: h * w,
         masked: maps.mask.iter().filter(|&&m| m).count(),
-        photons: maps.photons.sum(),
+        // Each photon once: the window's photons of the stack, not of the
+        // binned decays (which count a photon in every square holding it).
+        photons: maps.summed.window_photons,
         median_lifetime_ps: quantile(unmasked, 0.5).unwrap_or(f64::NAN),
         notes,
     })
+}
+
+/// Writes `v` as a float64 `.npy`, whole or not at all.
+fn write_vector(v: &ndarray::Array1<f64>, path: &Path) -> Result<(), StackError> {
+    use ndarray_npy::WriteNpyExt;
+    let file = crate::files::AtomicFile::create(path).map_err(|e| StackError::io(path, e))?;
+    let mut out = std::io::BufWriter::new(file);
+    v.write_npy(&mut out)
+        .map_err(|e| StackError::format(path, format!("writing .npy: {e}")))?;
+    crate::files::AtomicFile::commit_buffered(out).map_err(|e| StackError::io(path, e))?;
+    Ok(())
 }
 
 /// Draws the mean lifetime image and the summed decay's fit.
@@ -328,6 +362,16 @@ fn figures(
         },
     )?;
     let times: Vec<f64> = maps.summed.starts_ps.iter().map(|t| t * 1e-3).collect();
+    // The IRF scaled to the summed decay's peak.
+    let irf_shown: Vec<f64> = {
+        let top = maps.summed.irf.iter().cloned().fold(0.0, f64::max);
+        let peak = maps.summed.decay.iter().cloned().fold(0.0, f64::max);
+        if top > 0.0 {
+            maps.summed.irf.iter().map(|v| v / top * peak).collect()
+        } else {
+            Vec::new()
+        }
+    };
     crate::plot::decay_fit(
         decay_png,
         &crate::plot::DecayFitPlot {
@@ -338,7 +382,8 @@ fn figures(
             times_ns: &times,
             decay: &maps.summed.decay,
             fit: &maps.summed.fit,
-            irf: &maps.summed.irf,
+            irf: &irf_shown,
+            values: &maps.summed.values,
         },
     )
     .map_err(|e| StackError::format(decay_png, format!("drawing: {e}")))

@@ -121,13 +121,18 @@ pub struct SummedFit {
     pub starts_ps: Vec<f64>,
     /// Photons per bin, every unmasked pixel summed.
     pub decay: Vec<f64>,
+    /// The stack's photons in the window, every pixel, each counted once.
+    pub window_photons: f64,
     /// The fit.
     pub fit: Vec<f64>,
-    /// The IRF on the bins, scaled to the decay's peak for a figure (empty
-    /// for a tail fit).
+    /// The IRF the fit used on the window's bins (shifted, or the
+    /// Gaussian fitted), of unit sum (empty for a tail fit).
     pub irf: Vec<f64>,
     /// The fitted parameters (the model's layout).
     pub params: Vec<f64>,
+    /// The fitted values with their standard errors, in words, one per
+    /// line (for the figure and the notes).
+    pub values: Vec<String>,
     /// Its reduced chi-squared.
     pub reduced_chi2: f64,
 }
@@ -407,10 +412,26 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
     };
     let hold_shift = matches!(options.irf, IrfSource::Measured { .. }) && !options.fit_irf_shift;
     let summed_fit = fit_summed(&model, &summed, &bounds, options.objective, hold_shift);
-    let no_decay = undetermined_by(&summed_fit, k);
+    // No component of the summed decay determined: pure noise, a flat
+    // background. (One of several undetermined is a model with more
+    // components than the light shows: its pixels are masked one by one.)
+    // (A singular curvature leaves every error NaN when one component is
+    // empty: only a component's own photons or finite error count here.)
+    let no_decay = (0..k).all(|c| {
+        let (photons, tau, error) = (
+            summed_fit.params[2 * c],
+            summed_fit.params[2 * c + 1],
+            summed_fit.errors[2 * c + 1],
+        );
+        photons < 1.0 || error > UNDETERMINED_ERROR * tau
+    });
     if no_decay {
         notes.push(format!(
-            "the summed decay does not determine its lifetimes (a standard error above {UNDETERMINED_ERROR} times a lifetime, or a component of under one photon): it looks like noise or a flat background, not a decay; no pixel is fitted (every pixel's light together shows none)"
+            "the summed decay determines no lifetime (each a standard error above {UNDETERMINED_ERROR} times it, or a component of under one photon): it looks like noise or a flat background, not a decay; no pixel is fitted (every pixel's light together shows none)"
+        ));
+    } else if undetermined_by(&summed_fit, k) {
+        notes.push(format!(
+            "the summed decay does not determine all {k} components (a standard error above {UNDETERMINED_ERROR} times a lifetime, or a component of under one photon): fewer components may describe it"
         ));
     }
     let mut free = vec![true; np];
@@ -471,12 +492,14 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
     );
     let mut fitted_sum = vec![0.0; n];
     model.evaluate(&summed_fit.params, &mut fitted_sum, None);
-    // The IRF, scaled to the summed decay's peak for the figure.
-    let irf_shown = {
+    let irf_used = {
         let v = model.irf(&summed_fit.params);
-        let top = v.iter().cloned().fold(0.0, f64::max).max(1e-300);
-        let peak_y = summed.iter().cloned().fold(0.0, f64::max);
-        v.iter().map(|x| x / top * peak_y).collect()
+        let total: f64 = v.iter().sum();
+        if total > 0.0 {
+            v.iter().map(|x| x / total).collect()
+        } else {
+            v
+        }
     };
     notes.push(format!(
         "summed decay: {}, reduced chi-squared {:.3}",
@@ -488,8 +511,10 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
             window: (first, end),
             starts_ps: starts_ps[first..end].to_vec(),
             decay: summed,
+            window_photons: total[first..end].iter().sum(),
             fit: fitted_sum,
-            irf: irf_shown,
+            irf: irf_used,
+            values: value_lines(&model, &summed_fit, hold_shift),
             params: summed_fit.params.clone(),
             reduced_chi2: summed_fit.reduced_chi2,
         },
@@ -508,10 +533,59 @@ pub const UNDETERMINED_ERROR: f64 = 1.0;
 /// curvature singular, its standard error above [`UNDETERMINED_ERROR`]
 /// times it, or its component under one photon.
 fn undetermined_by(f: &Fitted, k: usize) -> bool {
-    (0..k).any(|c| {
-        let (photons, tau, error) = (f.params[2 * c], f.params[2 * c + 1], f.errors[2 * c + 1]);
-        !(error.is_finite() && error <= UNDETERMINED_ERROR * tau && photons >= 1.0)
-    })
+    (0..k).any(|c| undetermined_component(f, c))
+}
+
+/// Whether fit `f` leaves component `c`'s lifetime undetermined.
+fn undetermined_component(f: &Fitted, c: usize) -> bool {
+    let (photons, tau, error) = (f.params[2 * c], f.params[2 * c + 1], f.errors[2 * c + 1]);
+    !(error.is_finite() && error <= UNDETERMINED_ERROR * tau && photons >= 1.0)
+}
+
+/// Fit `f`'s values with their standard errors, one per line: each
+/// component, the background, the IRF's parameters (a held shift said
+/// so).
+fn value_lines(model: &DecayModel, f: &Fitted, hold_shift: bool) -> Vec<String> {
+    let (p, e) = (&f.params, &f.errors);
+    let pm = |v: f64, err: f64, digits: usize| {
+        if err.is_finite() {
+            format!("{v:.digits$} +- {err:.digits$}")
+        } else {
+            format!("{v:.digits$} (error undetermined)")
+        }
+    };
+    let mut lines: Vec<String> = (0..model.components)
+        .map(|c| {
+            format!(
+                "tau{} = {} ps ({} photons)",
+                c + 1,
+                pm(p[2 * c + 1], e[2 * c + 1], 1),
+                pm(p[2 * c], e[2 * c], 0)
+            )
+        })
+        .collect();
+    let b = model.background();
+    lines.push(format!("background = {} per bin", pm(p[b], e[b], 3)));
+    let w = model.width_ps;
+    match model.irf {
+        IrfShape::Tail => {}
+        IrfShape::Measured(_) if hold_shift => lines.push("IRF shift held at 0 ps".into()),
+        IrfShape::Measured(_) => lines.push(format!(
+            "IRF shift = {} ps",
+            pm(p[b + 1] * w, e[b + 1] * w, 1)
+        )),
+        IrfShape::Gaussian => lines.push(format!(
+            "IRF centre = {} ps, FWHM = {} ps",
+            pm(p[b + 1] * w, e[b + 1] * w, 1),
+            pm(
+                p[b + 2] * w * 2.354_820_045,
+                e[b + 2] * w * 2.354_820_045,
+                1
+            )
+        )),
+    }
+    lines.push(format!("reduced chi-squared {:.3}", f.reduced_chi2));
+    lines
 }
 
 /// The parameters in words.
@@ -824,9 +898,11 @@ fn assemble(
             window: (0, 0),
             starts_ps: Vec::new(),
             decay: Vec::new(),
+            window_photons: 0.0,
             fit: Vec::new(),
             irf: Vec::new(),
             params: Vec::new(),
+            values: Vec::new(),
             reduced_chi2: f64::NAN,
         },
         notes: Vec::new(),
