@@ -25,6 +25,7 @@ pub mod kernel;
 pub mod params;
 pub mod quadrature;
 pub mod slab;
+pub mod transport;
 pub mod validity;
 
 pub use diffusion::Diffusion;

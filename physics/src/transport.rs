@@ -1,0 +1,476 @@
+//! Monte Carlo photon transport through a slab: the reference the
+//! diffusion approximation is judged against where it fails (thin or
+//! weakly scattering media, early photons).
+//!
+//! The scheme is MCML's (Wang, Jacques and Zheng, Comput. Methods
+//! Programs Biomed. 47, 131 (1995)) with absorption by path length (as
+//! MCX weighs its photons): a photon packet enters the front face at the
+//! origin along the normal (a pencil beam), less the specular reflection
+//! of the index step; it flies exponential free paths of the scattering
+//! coefficient, scatters by the Henyey-Greenstein phase function, and at
+//! a face is reflected with the unpolarised Fresnel probability (all or
+//! nothing, so that each packet leaves once, at one place and time) or
+//! leaves. Its weight on leaving is `exp(-mu_a L)` of its path `L`; the
+//! rest was absorbed. Below a weight of [`ROULETTE_WEIGHT`] a packet
+//! survives a roulette of one in [`ROULETTE_CHANCE`] with its weight
+//! multiplied to match, so no weight is lost on average. With no
+//! absorption a packet that has not left after [`Run::max_path_cm`] is
+//! stopped and its weight counted as cut.
+//!
+//! Every packet's exit through the far face is recorded by time of
+//! flight (`n L / c`) and distance from the beam's axis, with the squared
+//! weights so that every tally carries its standard error. Packets run in
+//! fixed chunks, each from its own seeded generator and summed in chunk
+//! order: a run is the same on any number of cores.
+
+use rand::{Rng, RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use thiserror::Error;
+
+/// Speed of light in vacuum (cm/ps).
+pub const C_CM_PER_PS: f64 = 0.029_979_245_8;
+
+/// Weight below which a packet plays the roulette.
+pub const ROULETTE_WEIGHT: f64 = 1e-4;
+
+/// One in this many packets survives the roulette.
+pub const ROULETTE_CHANCE: f64 = 10.0;
+
+/// Packets per chunk: each chunk has its own generator.
+const CHUNK: u64 = 1 << 14;
+
+/// A homogeneous slab between two half-spaces of index `n_outside`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Slab {
+    /// Absorption coefficient (1/cm), >= 0.
+    pub mu_a_per_cm: f64,
+    /// Scattering coefficient (1/cm), >= 0.
+    pub mu_s_per_cm: f64,
+    /// Henyey-Greenstein anisotropy, in (-1, 1).
+    pub g: f64,
+    /// The slab's refractive index, >= 1.
+    pub n: f64,
+    /// The index outside both faces, >= 1.
+    pub n_outside: f64,
+    /// Thickness (cm), > 0.
+    pub thickness_cm: f64,
+}
+
+/// Where transmitted light is recorded: time bins and radial rings on the
+/// far face.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Grid {
+    /// Start of the first time bin (ps after the packet enters).
+    pub t_start_ps: f64,
+    /// Width of each time bin (ps), > 0.
+    pub bin_width_ps: f64,
+    /// Time bins.
+    pub bins: usize,
+    /// Width of each ring (cm), > 0.
+    pub ring_width_cm: f64,
+    /// Rings, from the beam's axis out.
+    pub rings: usize,
+}
+
+/// How many packets, from which seed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Run {
+    /// Packets launched.
+    pub photons: u64,
+    /// The seed: the same seed gives the same result on any machine.
+    pub seed: u64,
+    /// A packet still inside after this path (cm) is stopped and its
+    /// weight counted as cut: needed without absorption, where nothing
+    /// else ends a packet that keeps reflecting inside.
+    pub max_path_cm: f64,
+}
+
+/// Bad input to a transport run.
+#[derive(Debug, Error, PartialEq)]
+pub enum TransportError {
+    /// A parameter outside its range, named with its value.
+    #[error("{field} = {value}: {why}")]
+    Parameter {
+        /// The parameter.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+        /// What it must be.
+        why: &'static str,
+    },
+}
+
+fn check(
+    field: &'static str,
+    value: f64,
+    ok: bool,
+    why: &'static str,
+) -> Result<(), TransportError> {
+    if ok && value.is_finite() {
+        Ok(())
+    } else {
+        Err(TransportError::Parameter { field, value, why })
+    }
+}
+
+impl Slab {
+    /// Checks every parameter, naming the first out of range.
+    pub fn validate(&self) -> Result<(), TransportError> {
+        check(
+            "mu_a",
+            self.mu_a_per_cm,
+            self.mu_a_per_cm >= 0.0,
+            "give an absorption coefficient >= 0 (1/cm)",
+        )?;
+        check(
+            "mu_s",
+            self.mu_s_per_cm,
+            self.mu_s_per_cm >= 0.0,
+            "give a scattering coefficient >= 0 (1/cm)",
+        )?;
+        check(
+            "g",
+            self.g,
+            self.g > -1.0 && self.g < 1.0,
+            "the anisotropy lies in (-1, 1): at 1 light does not scatter, give mu_s 0 instead",
+        )?;
+        check("n", self.n, self.n >= 1.0, "give a refractive index >= 1")?;
+        check(
+            "n_outside",
+            self.n_outside,
+            self.n_outside >= 1.0,
+            "give a refractive index >= 1",
+        )?;
+        check(
+            "thickness",
+            self.thickness_cm,
+            self.thickness_cm > 0.0,
+            "give a thickness > 0 (cm)",
+        )
+    }
+
+    /// The specular reflection of the front face at normal incidence.
+    pub fn specular(&self) -> f64 {
+        ((self.n_outside - self.n) / (self.n_outside + self.n)).powi(2)
+    }
+}
+
+/// A mean per launched packet and its standard error.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Estimate {
+    /// The mean.
+    pub mean: f64,
+    /// Its standard error.
+    pub error: f64,
+}
+
+/// Sums of weights and squared weights.
+#[derive(Debug, Clone, Default, PartialEq)]
+struct Sums {
+    w: f64,
+    w2: f64,
+}
+
+impl Sums {
+    fn add(&mut self, w: f64) {
+        self.w += w;
+        self.w2 += w * w;
+    }
+
+    fn merge(&mut self, o: &Sums) {
+        self.w += o.w;
+        self.w2 += o.w2;
+    }
+
+    fn estimate(&self, n: f64) -> Estimate {
+        let mean = self.w / n;
+        let var = (self.w2 / n - mean * mean).max(0.0) / (n - 1.0).max(1.0);
+        Estimate {
+            mean,
+            error: var.sqrt(),
+        }
+    }
+}
+
+/// The tallies of a chunk or a run.
+#[derive(Debug, Clone, Default)]
+struct Tally {
+    reflected: Sums,
+    transmitted: Sums,
+    absorbed: Sums,
+    cut: Sums,
+    late: Sums,
+    /// Rings x bins, ring-major.
+    cells: Vec<Sums>,
+    /// Per time bin, the whole face.
+    face: Vec<Sums>,
+}
+
+impl Tally {
+    fn new(grid: &Grid) -> Self {
+        Self {
+            cells: vec![Sums::default(); grid.rings * grid.bins],
+            face: vec![Sums::default(); grid.bins],
+            ..Self::default()
+        }
+    }
+
+    fn merge(&mut self, o: &Tally) {
+        self.reflected.merge(&o.reflected);
+        self.transmitted.merge(&o.transmitted);
+        self.absorbed.merge(&o.absorbed);
+        self.cut.merge(&o.cut);
+        self.late.merge(&o.late);
+        self.cells
+            .iter_mut()
+            .zip(&o.cells)
+            .for_each(|(a, b)| a.merge(b));
+        self.face
+            .iter_mut()
+            .zip(&o.face)
+            .for_each(|(a, b)| a.merge(b));
+    }
+}
+
+/// What a run found, per launched packet.
+#[derive(Debug, Clone)]
+pub struct Transport {
+    /// Packets launched.
+    pub photons: u64,
+    /// The front face's specular reflection (exact).
+    pub specular: f64,
+    /// Light leaving the front face after entering (diffuse reflectance).
+    pub reflected: Estimate,
+    /// Light leaving the far face (total transmittance, ballistic light
+    /// included).
+    pub transmitted: Estimate,
+    /// Light absorbed.
+    pub absorbed: Estimate,
+    /// Light of packets stopped by the path cap.
+    pub cut: Estimate,
+    /// Transmitted light before or after the grid's time bins (light in
+    /// them but past the last ring is in `face`, not in `cells`).
+    pub outside_grid: Estimate,
+    /// The grid transmitted light is recorded on.
+    pub grid: Grid,
+    /// Transmitted light per ring and time bin (ring-major), per packet,
+    /// not yet divided by area or bin width.
+    pub cells: Vec<Estimate>,
+    /// Transmitted light per time bin over the whole face.
+    pub face: Vec<Estimate>,
+}
+
+impl Transport {
+    /// The transmittance's time density over the whole face at bin `k`
+    /// (per ps) and its standard error.
+    pub fn face_density(&self, k: usize) -> Estimate {
+        let e = self.face[k];
+        Estimate {
+            mean: e.mean / self.grid.bin_width_ps,
+            error: e.error / self.grid.bin_width_ps,
+        }
+    }
+}
+
+/// Runs `run` packets through `slab`, recording transmitted light on
+/// `grid`.
+pub fn transport(slab: &Slab, grid: &Grid, run: &Run) -> Result<Transport, TransportError> {
+    slab.validate()?;
+    check(
+        "bin width",
+        grid.bin_width_ps,
+        grid.bin_width_ps > 0.0,
+        "give a bin width > 0 (ps)",
+    )?;
+    check(
+        "ring width",
+        grid.ring_width_cm,
+        grid.ring_width_cm > 0.0,
+        "give a ring width > 0 (cm)",
+    )?;
+    check(
+        "time start",
+        grid.t_start_ps,
+        true,
+        "give a finite start (ps)",
+    )?;
+    check(
+        "photons",
+        run.photons as f64,
+        run.photons >= 2,
+        "give at least 2 packets",
+    )?;
+    check(
+        "max path",
+        run.max_path_cm,
+        run.max_path_cm > 0.0,
+        "give a path cap > 0 (cm)",
+    )?;
+    let chunks = run.photons.div_ceil(CHUNK);
+    let parts: Vec<Tally> = (0..chunks)
+        .into_par_iter()
+        .map(|i| {
+            let n = CHUNK.min(run.photons - i * CHUNK);
+            let mut rng = ChaCha8Rng::seed_from_u64(run.seed);
+            rng.set_stream(i);
+            let mut t = Tally::new(grid);
+            for _ in 0..n {
+                packet(slab, grid, run, &mut rng, &mut t);
+            }
+            t
+        })
+        .collect();
+    let mut total = Tally::new(grid);
+    for p in &parts {
+        total.merge(p);
+    }
+    let n = run.photons as f64;
+    Ok(Transport {
+        photons: run.photons,
+        specular: slab.specular(),
+        reflected: total.reflected.estimate(n),
+        transmitted: total.transmitted.estimate(n),
+        absorbed: total.absorbed.estimate(n),
+        cut: total.cut.estimate(n),
+        outside_grid: total.late.estimate(n),
+        grid: *grid,
+        cells: total.cells.iter().map(|s| s.estimate(n)).collect(),
+        face: total.face.iter().map(|s| s.estimate(n)).collect(),
+    })
+}
+
+/// Unpolarised Fresnel reflectance for a ray meeting a face from index
+/// `n1` into `n2` with direction cosine `cos_i` (> 0) to the normal; 1
+/// past the critical angle.
+fn fresnel(n1: f64, n2: f64, cos_i: f64) -> f64 {
+    if n1 == n2 {
+        return 0.0;
+    }
+    let sin_t = n1 / n2 * (1.0 - cos_i * cos_i).max(0.0).sqrt();
+    if sin_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin_t * sin_t).sqrt();
+    let rs = (n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t);
+    let rp = (n1 * cos_t - n2 * cos_i) / (n1 * cos_t + n2 * cos_i);
+    0.5 * (rs * rs + rp * rp)
+}
+
+/// A new direction after a Henyey-Greenstein scattering of `(ux, uy,
+/// uz)` (MCML's update).
+fn scatter<R: Rng>(g: f64, u: [f64; 3], rng: &mut R) -> [f64; 3] {
+    let xi: f64 = rng.random();
+    let cos_t = if g == 0.0 {
+        2.0 * xi - 1.0
+    } else {
+        let f = (1.0 - g * g) / (1.0 - g + 2.0 * g * xi);
+        ((1.0 + g * g - f * f) / (2.0 * g)).clamp(-1.0, 1.0)
+    };
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let psi = 2.0 * std::f64::consts::PI * rng.random::<f64>();
+    let (sin_p, cos_p) = psi.sin_cos();
+    let [ux, uy, uz] = u;
+    if uz.abs() > 1.0 - 1e-12 {
+        [sin_t * cos_p, sin_t * sin_p, cos_t * uz.signum()]
+    } else {
+        let tmp = (1.0 - uz * uz).sqrt();
+        [
+            sin_t * (ux * uz * cos_p - uy * sin_p) / tmp + ux * cos_t,
+            sin_t * (uy * uz * cos_p + ux * sin_p) / tmp + uy * cos_t,
+            -sin_t * cos_p * tmp + uz * cos_t,
+        ]
+    }
+}
+
+/// One packet, from entry to exit, absorption, the roulette or the cap.
+fn packet<R: Rng>(slab: &Slab, grid: &Grid, run: &Run, rng: &mut R, t: &mut Tally) {
+    let (mu_a, mu_s, d) = (slab.mu_a_per_cm, slab.mu_s_per_cm, slab.thickness_cm);
+    let mut pos = [0.0f64, 0.0, 0.0];
+    let mut u = [0.0f64, 0.0, 1.0];
+    // The weight is `start * exp(-mu_a (path - from))`: `start` the
+    // weight when the roulette last changed it (the entered light at
+    // first), `from` the path then. What it lost since is absorbed.
+    let (mut start, mut from, mut path) = (1.0 - slab.specular(), 0.0f64, 0.0f64);
+    let weight = |path: f64, start: f64, from: f64| start * (-mu_a * (path - from)).exp();
+    loop {
+        let mut step = if mu_s > 0.0 {
+            -(1.0 - rng.random::<f64>()).ln() / mu_s
+        } else {
+            f64::INFINITY
+        };
+        // Fly the step, meeting faces on the way.
+        let left = loop {
+            let to_face = if u[2] > 0.0 {
+                (d - pos[2]) / u[2]
+            } else if u[2] < 0.0 {
+                -pos[2] / u[2]
+            } else {
+                f64::INFINITY
+            };
+            if step < to_face {
+                for i in 0..3 {
+                    pos[i] += step * u[i];
+                }
+                path += step;
+                break false;
+            }
+            for i in 0..3 {
+                pos[i] += to_face * u[i];
+            }
+            path += to_face;
+            step -= to_face;
+            if path > run.max_path_cm {
+                break false;
+            }
+            if rng.random::<f64>() < fresnel(slab.n, slab.n_outside, u[2].abs()) {
+                u[2] = -u[2];
+                continue;
+            }
+            break true;
+        };
+        let w = weight(path, start, from);
+        if left {
+            t.absorbed.add(start - w);
+            if u[2] > 0.0 {
+                t.transmitted.add(w);
+                record(grid, slab, pos, path, w, t);
+            } else {
+                t.reflected.add(w);
+            }
+            return;
+        }
+        if path > run.max_path_cm {
+            t.absorbed.add(start - w);
+            t.cut.add(w);
+            return;
+        }
+        if w < ROULETTE_WEIGHT {
+            t.absorbed.add(start - w);
+            if rng.random::<f64>() * ROULETTE_CHANCE >= 1.0 {
+                // Ended: the survivors carry its weight on average.
+                return;
+            }
+            (start, from) = (w * ROULETTE_CHANCE, path);
+        }
+        u = scatter(slab.g, u, rng);
+    }
+}
+
+/// Records a packet of weight `w` leaving the far face at `pos` after
+/// `path`.
+fn record(grid: &Grid, slab: &Slab, pos: [f64; 3], path: f64, w: f64, t: &mut Tally) {
+    let time = path * slab.n / C_CM_PER_PS;
+    let k = ((time - grid.t_start_ps) / grid.bin_width_ps).floor();
+    let r = (pos[0] * pos[0] + pos[1] * pos[1]).sqrt();
+    let ring = (r / grid.ring_width_cm).floor();
+    if k >= 0.0 && (k as usize) < grid.bins {
+        let k = k as usize;
+        t.face[k].add(w);
+        if (ring as usize) < grid.rings {
+            t.cells[ring as usize * grid.bins + k].add(w);
+        }
+    } else {
+        t.late.add(w);
+    }
+}
