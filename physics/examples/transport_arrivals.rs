@@ -1,18 +1,21 @@
-//! When a pencil beam's light leaves the far face of a slab, by Monte
+//! When a source's light (a pencil beam by default) leaves the far face of a slab, by Monte
 //! Carlo transport: the transmitted fraction, its ballistic part, the
 //! arrival-time quantiles and the light before a given time.
 //!
-//! `cargo run --release -p scatterscope-physics --example transport_arrivals -- MU_A MU_S G N THICKNESS_CM [PACKETS] [BEFORE_PS]`
+//! `cargo run --release -p scatterscope-physics --example transport_arrivals -- MU_A MU_S G N THICKNESS_CM [PACKETS] [BEFORE_PS] [pencil|lambertian|hemisphere]`
 //!
 //! (coefficients in 1/cm; air outside both faces).
 
-use scatterscope_physics::transport::{C_CM_PER_PS, Grid, Run, Slab, transport};
+use scatterscope_physics::transport::{C_CM_PER_PS, Grid, Run, Slab, Source, transport};
 
 fn main() {
-    let a: Vec<f64> = std::env::args()
-        .skip(1)
-        .map(|v| v.parse().expect("numbers"))
-        .collect();
+    let words: Vec<String> = std::env::args().skip(1).collect();
+    let source = match words.last().map(String::as_str) {
+        Some("lambertian") => Source::Lambertian,
+        Some("hemisphere") => Source::Hemisphere,
+        _ => Source::Pencil,
+    };
+    let a: Vec<f64> = words.iter().filter_map(|v| v.parse().ok()).collect();
     assert!(
         a.len() >= 5,
         "give MU_A MU_S G N THICKNESS_CM [PACKETS] [BEFORE_PS]"
@@ -39,7 +42,7 @@ fn main() {
         seed: 1,
         max_path_cm: 1e4,
     };
-    let t = transport(&slab, &grid, &run).unwrap_or_else(|e| panic!("{e}"));
+    let t = transport(&slab, source, &grid, &run).unwrap_or_else(|e| panic!("{e}"));
     let total: f64 = t.face.iter().map(|e| e.mean).sum();
     let quantile = |q: f64| {
         let mut acc = 0.0;
@@ -75,7 +78,7 @@ fn main() {
         let early: f64 = t.face.iter().take(k).map(|e| e.mean).sum();
         println!(
             "light before {before} ps: {:.3} % of the transmitted",
-            100.0 * early / total
+            100.0 * early.max(0.0) / total
         );
     }
 }

@@ -8,7 +8,7 @@
 
 use std::time::Instant;
 
-use scatterscope_physics::transport::{Grid, Run, Slab, transport};
+use scatterscope_physics::transport::{Grid, Run, Slab, Source, transport};
 
 /// The process's user and system CPU seconds so far.
 fn cpu_seconds() -> f64 {
@@ -56,7 +56,8 @@ fn main() {
             seed: round as u64,
             max_path_cm: 1e4,
         };
-        let t = transport(&slab, &grid, &run).expect("van de Hulst's slab is valid");
+        let t =
+            transport(&slab, Source::Pencil, &grid, &run).expect("van de Hulst's slab is valid");
         let (wall, cpu) = (wall.elapsed().as_secs_f64(), cpu_seconds() - cpu);
         println!(
             "round {}: {packets} packets in {wall:.2} s ({cpu:.2} CPU s): {:.2e} per s, {:.2e} per CPU s; R {:.5} +- {:.5}, T {:.5} +- {:.5}",

@@ -23,6 +23,7 @@
 //! fixed chunks, each from its own seeded generator and summed in chunk
 //! order: a run is the same on any number of cores.
 
+use ndarray::Array2;
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -55,6 +56,43 @@ pub struct Slab {
     pub n_outside: f64,
     /// Thickness (cm), > 0.
     pub thickness_cm: f64,
+}
+
+/// Where and how light enters the slab, at the origin of its front face.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// A pencil beam along the normal from outside: the index step's
+    /// specular reflection stays outside.
+    Pencil,
+    /// A point of an object in contact with the face, emitting into the
+    /// slab by Lambert's cosine law (a diffuse reflector or fluorophore
+    /// behind the slab: the object plane of the paper's geometry).
+    Lambertian,
+    /// A point emitting into the slab evenly over the forward hemisphere.
+    Hemisphere,
+}
+
+impl Source {
+    /// The light that enters, of one packet.
+    fn entered(self, slab: &Slab) -> f64 {
+        match self {
+            Source::Pencil => 1.0 - slab.specular(),
+            Source::Lambertian | Source::Hemisphere => 1.0,
+        }
+    }
+
+    /// A first direction.
+    fn direction<R: Rng>(self, rng: &mut R) -> [f64; 3] {
+        let cos_t = match self {
+            Source::Pencil => return [0.0, 0.0, 1.0],
+            // Lambert: cos^2 uniform; the hemisphere: cos uniform.
+            Source::Lambertian => (1.0 - rng.random::<f64>()).sqrt(),
+            Source::Hemisphere => 1.0 - rng.random::<f64>(),
+        };
+        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+        let (s, c) = (2.0 * std::f64::consts::PI * rng.random::<f64>()).sin_cos();
+        [sin_t * c, sin_t * s, cos_t]
+    }
 }
 
 /// Where transmitted light is recorded: time bins and radial rings on the
@@ -238,7 +276,8 @@ impl Tally {
 pub struct Transport {
     /// Packets launched.
     pub photons: u64,
-    /// The front face's specular reflection (exact).
+    /// The front face's specular reflection of the entering light (exact;
+    /// 0 for a source inside the face).
     pub specular: f64,
     /// Light leaving the front face after entering (diffuse reflectance).
     pub reflected: Estimate,
@@ -262,6 +301,54 @@ pub struct Transport {
 }
 
 impl Transport {
+    /// Time bin `k`'s transmitted light on a grid of `h` x `w` square
+    /// pixels of side `pitch_cm`, the beam's axis at the centre of pixel
+    /// `(h / 2, w / 2)`: per packet and pixel, each ring's light spread
+    /// evenly over its area and each pixel sampled at 8 x 8 points; with
+    /// each value's standard error (its rings' errors added as if
+    /// correlated: an upper bound). Light past the last ring is left out.
+    pub fn pixel_kernel(
+        &self,
+        k: usize,
+        pitch_cm: f64,
+        (h, w): (usize, usize),
+    ) -> (Array2<f64>, Array2<f64>) {
+        const SUB: usize = 8;
+        let g = &self.grid;
+        let ring_area = |j: usize| {
+            std::f64::consts::PI * g.ring_width_cm * g.ring_width_cm * (2 * j + 1) as f64
+        };
+        let per_area: Vec<(f64, f64)> = (0..g.rings)
+            .map(|j| {
+                let e = self.cells[j * g.bins + k];
+                (e.mean / ring_area(j), e.error / ring_area(j))
+            })
+            .collect();
+        let (mut values, mut errors) = (Array2::zeros((h, w)), Array2::zeros((h, w)));
+        let cell = pitch_cm * pitch_cm / (SUB * SUB) as f64;
+        for r in 0..h {
+            for c in 0..w {
+                let (mut v, mut e) = (0.0, 0.0);
+                for i in 0..SUB {
+                    for j in 0..SUB {
+                        let y = (r as f64 - (h / 2) as f64 - 0.5 + (i as f64 + 0.5) / SUB as f64)
+                            * pitch_cm;
+                        let x = (c as f64 - (w / 2) as f64 - 0.5 + (j as f64 + 0.5) / SUB as f64)
+                            * pitch_cm;
+                        let ring = ((x * x + y * y).sqrt() / g.ring_width_cm) as usize;
+                        if let Some(&(m, s)) = per_area.get(ring) {
+                            v += m * cell;
+                            e += s * cell;
+                        }
+                    }
+                }
+                values[(r, c)] = v;
+                errors[(r, c)] = e;
+            }
+        }
+        (values, errors)
+    }
+
     /// The transmittance's time density over the whole face at bin `k`
     /// (per ps) and its standard error.
     pub fn face_density(&self, k: usize) -> Estimate {
@@ -273,9 +360,14 @@ impl Transport {
     }
 }
 
-/// Runs `run` packets through `slab`, recording transmitted light on
-/// `grid`.
-pub fn transport(slab: &Slab, grid: &Grid, run: &Run) -> Result<Transport, TransportError> {
+/// Runs `run` packets from `source` through `slab`, recording
+/// transmitted light on `grid`.
+pub fn transport(
+    slab: &Slab,
+    source: Source,
+    grid: &Grid,
+    run: &Run,
+) -> Result<Transport, TransportError> {
     slab.validate()?;
     check(
         "bin width",
@@ -316,7 +408,7 @@ pub fn transport(slab: &Slab, grid: &Grid, run: &Run) -> Result<Transport, Trans
             rng.set_stream(i);
             let mut t = Tally::new(grid);
             for _ in 0..n {
-                packet(slab, grid, run, &mut rng, &mut t);
+                packet(slab, source, grid, run, &mut rng, &mut t);
             }
             t
         })
@@ -328,7 +420,7 @@ pub fn transport(slab: &Slab, grid: &Grid, run: &Run) -> Result<Transport, Trans
     let n = run.photons as f64;
     Ok(Transport {
         photons: run.photons,
-        specular: slab.specular(),
+        specular: 1.0 - source.entered(slab),
         reflected: total.reflected.estimate(n),
         transmitted: total.transmitted.estimate(n),
         absorbed: total.absorbed.estimate(n),
@@ -384,14 +476,14 @@ fn scatter<R: Rng>(g: f64, u: [f64; 3], rng: &mut R) -> [f64; 3] {
 }
 
 /// One packet, from entry to exit, absorption, the roulette or the cap.
-fn packet<R: Rng>(slab: &Slab, grid: &Grid, run: &Run, rng: &mut R, t: &mut Tally) {
+fn packet<R: Rng>(slab: &Slab, source: Source, grid: &Grid, run: &Run, rng: &mut R, t: &mut Tally) {
     let (mu_a, mu_s, d) = (slab.mu_a_per_cm, slab.mu_s_per_cm, slab.thickness_cm);
     let mut pos = [0.0f64, 0.0, 0.0];
-    let mut u = [0.0f64, 0.0, 1.0];
+    let mut u = source.direction(rng);
     // The weight is `start * exp(-mu_a (path - from))`: `start` the
     // weight when the roulette last changed it (the entered light at
     // first), `from` the path then. What it lost since is absorbed.
-    let (mut start, mut from, mut path) = (1.0 - slab.specular(), 0.0f64, 0.0f64);
+    let (mut start, mut from, mut path) = (source.entered(slab), 0.0f64, 0.0f64);
     let weight = |path: f64, start: f64, from: f64| start * (-mu_a * (path - from)).exp();
     loop {
         let mut step = if mu_s > 0.0 {
