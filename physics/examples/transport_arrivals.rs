@@ -78,7 +78,11 @@ fn main() {
         let early: f64 = t.face.iter().take(k).map(|e| e.mean).sum();
         println!(
             "light before {before} ps: {:.3} % of the transmitted",
-            100.0 * early.max(0.0) / total
+            if early > 0.0 {
+                100.0 * early / total
+            } else {
+                0.0
+            }
         );
     }
 }
