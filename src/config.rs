@@ -138,8 +138,10 @@ pub struct PhysicsOverrides {
     /// Slab thickness z0 between object and sensor (default unit cm; e.g. 30mm).
     #[cfg_attr(feature = "cli", arg(long, value_name = "LENGTH", value_parser = parse_cm_or_bare, allow_negative_numbers = true))]
     pub thickness: Option<f64>,
-    /// The medium: infinite (the paper's Eq. 6) or slab (extrapolated
-    /// boundaries, image sources; transmitted flux).
+    /// The medium: infinite (the paper's Eq. 6), slab (extrapolated
+    /// boundaries, image sources; transmitted flux) or monte-carlo (light
+    /// as it travels: photon transport through the slab, where diffusion
+    /// fails).
     #[cfg_attr(feature = "cli", arg(long, value_name = "MODEL", value_parser = parse_medium))]
     pub medium: Option<MediumModel>,
     /// Horizontal field of view (default unit cm).

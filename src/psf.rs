@@ -56,8 +56,11 @@ impl PsfReport {
             Ok((k, t.elapsed().as_secs_f64()))
         };
         let (integrated, t_int) = timed(Sampling::Integrated)?;
+        let monte_carlo = setup.medium.model == scatterscope_physics::MediumModel::MonteCarlo;
         let point = match (&setup.irf, sampling) {
             (Some(_), Sampling::Integrated) => None,
+            // Transport records each bin's light whole: no point samples.
+            (None, Sampling::Integrated) if monte_carlo => None,
             _ => Some(timed(Sampling::Point)?),
         };
         Ok(Self {
@@ -91,10 +94,10 @@ impl PsfReport {
     /// bin) and as CSV.
     pub fn table(&self) -> (Vec<String>, String) {
         let mut csv = String::from(
-            "bin,start_ps,end_ps,photons,kept,sigma_px,peak,support_radius_px,time_nodes,point_vs_integrated_rel_l1\n",
+            "bin,start_ps,end_ps,photons,kept,sigma_px,peak,support_radius_px,time_nodes,point_vs_integrated_rel_l1,monte_carlo_relative_error\n",
         );
         let mut lines = vec![format!(
-            "{:>3} {:>13} {:>10} {:>5} {:>8} {:>10} {:>7} {:>5} {:>10}",
+            "{:>3} {:>13} {:>10} {:>5} {:>8} {:>10} {:>7} {:>5} {:>10} {:>8}",
             "bin",
             "time ps",
             "photons",
@@ -103,12 +106,13 @@ impl PsfReport {
             "peak",
             "support",
             "nodes",
-            "point-int"
+            "point-int",
+            "MC error"
         )];
         for b in &self.chosen().bins {
             let diff = self.difference(b.index);
             lines.push(format!(
-                "{:>3} {:>6.1}-{:<6.1} {:>10.4} {:>5} {:>8.3} {:>10.3e} {:>7} {:>5} {:>10}",
+                "{:>3} {:>6.1}-{:<6.1} {:>10.4} {:>5} {:>8.3} {:>10.3e} {:>7} {:>5} {:>10} {:>8}",
                 b.index,
                 b.start_ps,
                 b.end_ps,
@@ -118,11 +122,13 @@ impl PsfReport {
                 b.peak,
                 b.support_radius_px,
                 b.time_nodes,
-                diff.map_or("-".to_string(), |d| format!("{d:.2e}"))
+                diff.map_or("-".to_string(), |d| format!("{d:.2e}")),
+                b.relative_error
+                    .map_or("-".to_string(), |e| format!("{:.2} %", 100.0 * e))
             ));
             writeln!(
                 csv,
-                "{},{},{},{},{},{},{},{},{},{}",
+                "{},{},{},{},{},{},{},{},{},{},{}",
                 b.index,
                 b.start_ps,
                 b.end_ps,
@@ -132,7 +138,8 @@ impl PsfReport {
                 b.peak,
                 b.support_radius_px,
                 b.time_nodes,
-                diff.map_or(String::new(), |d| d.to_string())
+                diff.map_or(String::new(), |d| d.to_string()),
+                b.relative_error.map_or(String::new(), |e| e.to_string())
             )
             .expect("writing to a String");
         }
@@ -143,8 +150,15 @@ impl PsfReport {
     pub fn comparison(&self) -> Vec<String> {
         let t_int = self.seconds.0;
         let Some(point) = &self.point else {
+            let why = if self.integrated.setup.medium.model
+                == scatterscope_physics::MediumModel::MonteCarlo
+            {
+                "transport records each bin's light whole"
+            } else {
+                "it cannot model the instrument response"
+            };
             return vec![format!(
-                "run time: integrated {:.1} ms; point sampling not compared (it cannot model the instrument response); written: integrated",
+                "run time: integrated {:.1} ms; point sampling not compared ({why}); written: integrated",
                 t_int * 1e3
             )];
         };

@@ -53,7 +53,9 @@ impl Diffusion {
         let d_cm = diffusion_coefficient_cm(medium.mu_a_per_cm, mu_s_reduced);
         let c_cm_per_ps = light_speed_cm_per_ps(medium.refractive_index);
         let slab = match medium.model {
-            MediumModel::Infinite => None,
+            // The Monte Carlo medium keeps the infinite medium's
+            // constants for its diagnostics (spreads, peak time).
+            MediumModel::Infinite | MediumModel::MonteCarlo => None,
             MediumModel::Slab => {
                 // validate() has checked that the slab is thicker than this.
                 let source_depth_cm = 3.0 * d_cm;

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::diffusion::{Diffusion, gaussian_interval_fraction};
 use crate::error::ParamError;
 use crate::irf::{InstrumentResponse, Irf, IrfTable};
-use crate::params::Setup;
+use crate::params::{MediumModel, Setup};
 use crate::quadrature::adaptive_nodes;
 
 /// Lateral support radius in standard deviations: the per-axis tail beyond it
@@ -79,6 +79,10 @@ pub struct BinInfo {
     pub support_radius_px: usize,
     /// Time quadrature nodes used (after skipping zero weights).
     pub time_nodes: usize,
+    /// The relative standard error of the bin's light, for kernels made
+    /// by Monte Carlo transport.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relative_error: Option<f64>,
 }
 
 /// The ST-PSF kernels of all kept bins, normalised to the setup's light budget.
@@ -121,19 +125,53 @@ impl KernelStack {
             ));
         }
         let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
-        let locals: Vec<Option<LocalKernel>> = match &setup.irf {
-            Some(InstrumentResponse::Measured(table)) => measured_bins(&diffusion, setup, table),
-            irf => {
-                let irf = irf.as_ref().and_then(InstrumentResponse::parametric);
-                (0..setup.bins.count)
-                    .map(|k| {
-                        let (ta, tb) = setup.bins.edges_ps(k);
-                        match sampling {
-                            Sampling::Integrated => integrated_bin(&diffusion, setup, irf, ta, tb),
-                            Sampling::Point => point_bin(&diffusion, setup, ta, tb),
-                        }
+        let mut relative_errors = vec![None; setup.bins.count];
+        let locals: Vec<Option<LocalKernel>> = if setup.medium.model == MediumModel::MonteCarlo {
+            if sampling == Sampling::Point {
+                return Err(ParamError::new(
+                    "sampling",
+                    "point",
+                    "the Monte Carlo medium records each bin's light whole: use integrated sampling",
+                ));
+            }
+            let mc = crate::transport::setup_kernels(
+                setup,
+                crate::transport::SETUP_PACKETS,
+                crate::transport::SETUP_SEED,
+            )?;
+            for (e, r) in relative_errors.iter_mut().zip(&mc.relative_errors) {
+                *e = Some(*r);
+            }
+            mc.kernels
+                .into_iter()
+                .map(|k| {
+                    k.map(|values| LocalKernel {
+                        values,
+                        log_scale: 0.0,
+                        radius: (h / 2, w / 2),
+                        nodes: 0,
                     })
-                    .collect()
+                })
+                .collect()
+        } else {
+            match &setup.irf {
+                Some(InstrumentResponse::Measured(table)) => {
+                    measured_bins(&diffusion, setup, table)
+                }
+                irf => {
+                    let irf = irf.as_ref().and_then(InstrumentResponse::parametric);
+                    (0..setup.bins.count)
+                        .map(|k| {
+                            let (ta, tb) = setup.bins.edges_ps(k);
+                            match sampling {
+                                Sampling::Integrated => {
+                                    integrated_bin(&diffusion, setup, irf, ta, tb)
+                                }
+                                Sampling::Point => point_bin(&diffusion, setup, ta, tb),
+                            }
+                        })
+                        .collect()
+                }
             }
         };
         let log_masses: Vec<f64> = locals
@@ -151,11 +189,19 @@ impl KernelStack {
                     "{} x {} ps from {} ps",
                     setup.bins.count, setup.bins.width_ps, setup.bins.start_ps
                 ),
-                format!(
-                    "the ST-PSF carries no photons before {} ps (light reaches the sensor around {:.1} ps)",
-                    setup.bins.end_ps(),
-                    diffusion.peak_time_ps()
-                ),
+                if setup.medium.model == MediumModel::MonteCarlo {
+                    format!(
+                        "Monte Carlo transport records no light in these bins: the first light crosses the slab at n d / c = {:.1} ps (give bins from there, --t-start)",
+                        setup.medium.thickness_cm * setup.medium.refractive_index
+                            / crate::transport::C_CM_PER_PS
+                    )
+                } else {
+                    format!(
+                        "the ST-PSF carries no photons before {} ps (light reaches the sensor around {:.1} ps)",
+                        setup.bins.end_ps(),
+                        diffusion.peak_time_ps()
+                    )
+                },
             ));
         }
         let log_budget = setup.total_photons.ln() - log_total;
@@ -176,6 +222,7 @@ impl KernelStack {
                 peak: 0.0,
                 support_radius_px: 0,
                 time_nodes: 0,
+                relative_error: relative_errors[k],
             };
             if let Some(local) = local {
                 let factor = (local.log_scale + log_budget).exp();

@@ -40,17 +40,29 @@ pub enum MediumModel {
     /// 1997): transmitted flux through the far face, with the boundary
     /// reflection from the refractive-index mismatch to air.
     Slab,
+    /// Light as it travels: Monte Carlo transport through the slab
+    /// ([`crate::transport`]), each point of the object emitting into it
+    /// by Lambert's law, Fresnel faces against air; where the diffusion
+    /// approximation fails (thin or weakly scattering media, early
+    /// photons).
+    #[serde(rename = "monte-carlo")]
+    MonteCarlo,
 }
 
 impl MediumModel {
-    /// Both models, for help texts.
-    pub const ALL: [MediumModel; 2] = [MediumModel::Infinite, MediumModel::Slab];
+    /// Every model, for help texts.
+    pub const ALL: [MediumModel; 3] = [
+        MediumModel::Infinite,
+        MediumModel::Slab,
+        MediumModel::MonteCarlo,
+    ];
 
     /// The model's name in configuration files and on the command line.
     pub fn name(self) -> &'static str {
         match self {
             MediumModel::Infinite => "infinite",
             MediumModel::Slab => "slab",
+            MediumModel::MonteCarlo => "monte-carlo",
         }
     }
 }
@@ -299,6 +311,11 @@ impl Setup {
             MediumModel::Slab => format!(
                 "finite slab with extrapolated boundaries (n = {})",
                 self.medium.refractive_index
+            ),
+            MediumModel::MonteCarlo => format!(
+                "Monte Carlo transport through the slab (n = {} in air; each object point emitting by Lambert's law; {} packets)",
+                self.medium.refractive_index,
+                crate::transport::SETUP_PACKETS
             ),
         };
         let timing = match &self.irf {

@@ -303,50 +303,25 @@ pub struct Transport {
 impl Transport {
     /// Time bin `k`'s transmitted light on a grid of `h` x `w` square
     /// pixels of side `pitch_cm`, the beam's axis at the centre of pixel
-    /// `(h / 2, w / 2)`: per packet and pixel, each ring's light spread
-    /// evenly over its area and each pixel sampled at 8 x 8 points; with
+    /// `(h / 2, w / 2)`, per packet and pixel ([`rings_to_pixels`]), with
     /// each value's standard error (its rings' errors added as if
     /// correlated: an upper bound). Light past the last ring is left out.
     pub fn pixel_kernel(
         &self,
         k: usize,
         pitch_cm: f64,
-        (h, w): (usize, usize),
+        shape: (usize, usize),
     ) -> (Array2<f64>, Array2<f64>) {
-        const SUB: usize = 8;
         let g = &self.grid;
-        let ring_area = |j: usize| {
-            std::f64::consts::PI * g.ring_width_cm * g.ring_width_cm * (2 * j + 1) as f64
+        let ring = |f: fn(&Estimate) -> f64| -> Vec<f64> {
+            (0..g.rings)
+                .map(|j| f(&self.cells[j * g.bins + k]))
+                .collect()
         };
-        let per_area: Vec<(f64, f64)> = (0..g.rings)
-            .map(|j| {
-                let e = self.cells[j * g.bins + k];
-                (e.mean / ring_area(j), e.error / ring_area(j))
-            })
-            .collect();
-        let (mut values, mut errors) = (Array2::zeros((h, w)), Array2::zeros((h, w)));
-        let cell = pitch_cm * pitch_cm / (SUB * SUB) as f64;
-        for r in 0..h {
-            for c in 0..w {
-                let (mut v, mut e) = (0.0, 0.0);
-                for i in 0..SUB {
-                    for j in 0..SUB {
-                        let y = (r as f64 - (h / 2) as f64 - 0.5 + (i as f64 + 0.5) / SUB as f64)
-                            * pitch_cm;
-                        let x = (c as f64 - (w / 2) as f64 - 0.5 + (j as f64 + 0.5) / SUB as f64)
-                            * pitch_cm;
-                        let ring = ((x * x + y * y).sqrt() / g.ring_width_cm) as usize;
-                        if let Some(&(m, s)) = per_area.get(ring) {
-                            v += m * cell;
-                            e += s * cell;
-                        }
-                    }
-                }
-                values[(r, c)] = v;
-                errors[(r, c)] = e;
-            }
-        }
-        (values, errors)
+        (
+            rings_to_pixels(&ring(|e| e.mean), g.ring_width_cm, pitch_cm, shape),
+            rings_to_pixels(&ring(|e| e.error), g.ring_width_cm, pitch_cm, shape),
+        )
     }
 
     /// The transmittance's time density over the whole face at bin `k`
@@ -359,6 +334,173 @@ impl Transport {
         }
     }
 }
+
+/// Light per ring (rings of `ring_width_cm` about the axis) spread
+/// evenly over each ring's area onto `h` x `w` square pixels of side
+/// `pitch_cm`, the axis at the centre of pixel `(h / 2, w / 2)`: each
+/// pixel sampled at 8 x 8 points. Light past the last ring is left out.
+pub fn rings_to_pixels(
+    per_ring: &[f64],
+    ring_width_cm: f64,
+    pitch_cm: f64,
+    (h, w): (usize, usize),
+) -> Array2<f64> {
+    const SUB: usize = 8;
+    let per_area: Vec<f64> = per_ring
+        .iter()
+        .enumerate()
+        .map(|(j, v)| {
+            v / (std::f64::consts::PI * ring_width_cm * ring_width_cm * (2 * j + 1) as f64)
+        })
+        .collect();
+    let cell = pitch_cm * pitch_cm / (SUB * SUB) as f64;
+    let offset = |i: usize, centre: usize, sub: usize| {
+        (i as f64 - centre as f64 - 0.5 + (sub as f64 + 0.5) / SUB as f64) * pitch_cm
+    };
+    Array2::from_shape_fn((h, w), |(r, c)| {
+        let mut v = 0.0;
+        for i in 0..SUB {
+            let y = offset(r, h / 2, i);
+            for j in 0..SUB {
+                let x = offset(c, w / 2, j);
+                let ring = ((x * x + y * y).sqrt() / ring_width_cm) as usize;
+                if let Some(d) = per_area.get(ring) {
+                    v += d * cell;
+                }
+            }
+        }
+        v
+    })
+}
+
+/// The Monte Carlo kernels of a setup's time bins.
+#[derive(Debug, Clone)]
+pub struct SetupKernels {
+    /// Per bin of the setup: its kernel on the sensor (centred: the
+    /// object point under pixel `(h / 2, w / 2)`), photons per emitted
+    /// packet; `None` where no light was recorded.
+    pub kernels: Vec<Option<Array2<f64>>>,
+    /// Per bin: the relative standard error of its light.
+    pub relative_errors: Vec<f64>,
+    /// Packets run.
+    pub packets: u64,
+    /// The light that left the far face, per packet.
+    pub transmitted: Estimate,
+}
+
+/// Kernels of `setup`'s bins by Monte Carlo transport: `packets` packets
+/// from a point of the object at the slab's back face, emitting into it
+/// by Lambert's law (air outside both faces); a parametric instrument
+/// response spreads each arrival over the bins (arrivals tallied in
+/// eighths of a bin). A measured response table is refused.
+pub fn setup_kernels(
+    setup: &crate::params::Setup,
+    packets: u64,
+    seed: u64,
+) -> Result<SetupKernels, crate::error::ParamError> {
+    use crate::error::ParamError;
+    let m = &setup.medium;
+    let slab = Slab {
+        mu_a_per_cm: m.mu_a_per_cm,
+        mu_s_per_cm: m.mu_s_per_cm,
+        g: m.g,
+        n: m.refractive_index,
+        n_outside: 1.0,
+        thickness_cm: m.thickness_cm,
+    };
+    let as_param = |e: TransportError| match e {
+        TransportError::Parameter { field, value, why } => {
+            ParamError::new(field, value, format!("Monte Carlo transport: {why}"))
+        }
+    };
+    slab.validate().map_err(as_param)?;
+    let irf = match &setup.irf {
+        None => None,
+        Some(crate::irf::InstrumentResponse::Parametric(p)) => Some(*p),
+        Some(crate::irf::InstrumentResponse::Measured(t)) => {
+            return Err(ParamError::new(
+                "irf_table_weights",
+                t.weights().len() as f64,
+                "the Monte Carlo medium takes a parametric instrument response (a FWHM and tail), not yet a measured table",
+            ));
+        }
+    };
+    let bins = &setup.bins;
+    let sub = if irf.is_some() { 8 } else { 1 };
+    let fine = bins.width_ps / sub as f64;
+    let (lo, hi) = irf.map_or((0.0, 0.0), |i| i.support_ps());
+    // Arrivals from the earliest that the response can carry into the
+    // first bin to the latest it can carry into the last.
+    let start = if irf.is_some() {
+        bins.start_ps - hi - fine
+    } else {
+        bins.start_ps
+    };
+    let end = bins.end_ps() - lo;
+    let steps = ((end - start) / fine).ceil().max(1.0) as usize;
+    let pitch = setup.sensor.pixel_pitch_cm();
+    let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
+    let half_diagonal = 0.5 * pitch * ((h * h + w * w) as f64).sqrt() + pitch;
+    let ring_width = pitch / 2.0;
+    let grid = Grid {
+        t_start_ps: start,
+        bin_width_ps: fine,
+        bins: steps,
+        ring_width_cm: ring_width,
+        rings: (half_diagonal / ring_width).ceil() as usize,
+    };
+    let run = Run {
+        photons: packets,
+        seed,
+        // Light later than the grid's end reaches no bin.
+        max_path_cm: (end + fine) * C_CM_PER_PS / m.refractive_index,
+    };
+    let t = transport(&slab, Source::Lambertian, &grid, &run).map_err(as_param)?;
+    let mut kernels = Vec::with_capacity(bins.count);
+    let mut relative_errors = Vec::with_capacity(bins.count);
+    for k in 0..bins.count {
+        let (ta, tb) = bins.edges_ps(k);
+        // Each fine arrival bin's chance of being recorded in bin k.
+        let chance: Vec<f64> = (0..steps)
+            .map(|f| {
+                let centre = start + (f as f64 + 0.5) * fine;
+                match irf {
+                    Some(i) => i.bin_weight(ta, tb, centre),
+                    None => f64::from(u8::from(centre >= ta && centre < tb)),
+                }
+            })
+            .collect();
+        let (mut rings, mut var) = (vec![0.0; grid.rings], 0.0);
+        for (j, r) in rings.iter_mut().enumerate() {
+            for (f, &p) in chance.iter().enumerate() {
+                if p > 0.0 {
+                    let e = t.cells[j * steps + f];
+                    *r += p * e.mean;
+                    var += (p * e.error).powi(2);
+                }
+            }
+        }
+        let light: f64 = rings.iter().sum();
+        relative_errors.push(if light > 0.0 {
+            var.sqrt() / light
+        } else {
+            f64::INFINITY
+        });
+        kernels.push((light > 0.0).then(|| rings_to_pixels(&rings, ring_width, pitch, (h, w))));
+    }
+    Ok(SetupKernels {
+        kernels,
+        relative_errors,
+        packets,
+        transmitted: t.transmitted,
+    })
+}
+
+/// Packets a setup's kernels are made of by default.
+pub const SETUP_PACKETS: u64 = 4_000_000;
+
+/// The seed of a setup's kernels: the same setup gives the same kernels.
+pub const SETUP_SEED: u64 = 0x5ca7_7e25;
 
 /// Runs `run` packets from `source` through `slab`, recording
 /// transmitted light on `grid`.

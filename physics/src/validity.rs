@@ -75,21 +75,36 @@ pub fn diagnose(setup: &Setup, diffusion: &Diffusion) -> Vec<Diagnostic> {
 pub fn describe_setup(setup: &Setup, kernels: &crate::KernelStack) -> Vec<String> {
     let m = &setup.medium;
     let d = &kernels.diffusion;
-    let mut lines = vec![format!(
-        "medium: mu_a {} /cm, mu_s {} /cm, g {}, n {}, thickness {} cm (D = {:.4} cm, light arrives from ~{:.0} ps, peak {:.1} ps)",
-        m.mu_a_per_cm,
-        m.mu_s_per_cm,
-        m.g,
-        m.refractive_index,
-        m.thickness_cm,
-        d.d_cm,
-        kernels
-            .bins
-            .iter()
-            .find(|b| b.photons >= 0.01)
-            .map_or(f64::NAN, |b| b.start_ps),
-        d.peak_time_ps(),
-    )];
+    let monte_carlo = m.model == crate::params::MediumModel::MonteCarlo;
+    let first_bin = kernels
+        .bins
+        .iter()
+        .find(|b| b.photons >= 0.01)
+        .map_or(f64::NAN, |b| b.start_ps);
+    let mut lines = vec![if monte_carlo {
+        format!(
+            "medium: mu_a {} /cm, mu_s {} /cm, g {}, n {}, thickness {} cm (the first light crosses at n d / c = {:.1} ps; light in the bins from ~{:.0} ps)",
+            m.mu_a_per_cm,
+            m.mu_s_per_cm,
+            m.g,
+            m.refractive_index,
+            m.thickness_cm,
+            m.thickness_cm * m.refractive_index / crate::transport::C_CM_PER_PS,
+            first_bin,
+        )
+    } else {
+        format!(
+            "medium: mu_a {} /cm, mu_s {} /cm, g {}, n {}, thickness {} cm (D = {:.4} cm, light arrives from ~{:.0} ps, peak {:.1} ps)",
+            m.mu_a_per_cm,
+            m.mu_s_per_cm,
+            m.g,
+            m.refractive_index,
+            m.thickness_cm,
+            d.d_cm,
+            first_bin,
+            d.peak_time_ps(),
+        )
+    }];
     lines.push(format!("model: {}", setup.model_summary()));
     if let Some(s) = &d.slab {
         lines.push(format!(
@@ -108,10 +123,17 @@ pub fn describe_setup(setup: &Setup, kernels: &crate::KernelStack) -> Vec<String
         setup.bins.start_ps,
         setup.total_photons
     ));
+    // Diffusion's regime does not bind light as it travels: said, not
+    // warned.
+    let prefix = if monte_carlo {
+        "note (diffusion would not hold; Monte Carlo transport is used)"
+    } else {
+        "warning"
+    };
     lines.extend(
         diagnose(setup, d)
             .into_iter()
-            .map(|w| format!("warning [{}]: {}", w.code, w.message)),
+            .map(|w| format!("{prefix} [{}]: {}", w.code, w.message)),
     );
     let dropped: Vec<_> = kernels.dropped_bins().collect();
     if !dropped.is_empty() {
@@ -128,6 +150,20 @@ pub fn describe_setup(setup: &Setup, kernels: &crate::KernelStack) -> Vec<String
             photons,
             100.0 * photons / setup.total_photons
         ));
+    }
+    if monte_carlo {
+        let (worst, light) = kernels.kept_bins().fold((0.0f64, 0.0), |(w, l), b| {
+            let e = b.relative_error.unwrap_or(0.0);
+            (w.max(e), l + e * b.photons)
+        });
+        let kept: f64 = kernels.kept_bins().map(|b| b.photons).sum();
+        lines.push(format!(
+            "left out: light leaving the far face past the sensor's corners; the kernels' relative standard error: {:.2} % light-weighted, {:.2} % at worst ({} packets)",
+            100.0 * light / kept.max(f64::MIN_POSITIVE),
+            100.0 * worst,
+            crate::transport::SETUP_PACKETS
+        ));
+        return lines;
     }
     let full = (setup.sensor.height_px * setup.sensor.width_px) as f64;
     let evaluated: f64 = kernels
