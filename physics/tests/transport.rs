@@ -17,6 +17,19 @@ fn grid() -> Grid {
     }
 }
 
+/// A medium where diffusion holds: mu_s' 10 /cm against mu_a 0.1 /cm,
+/// 1 cm (ten transport lengths), faces matched (n 1).
+fn diffusive() -> Slab {
+    Slab {
+        mu_a_per_cm: 0.1,
+        mu_s_per_cm: 10.0,
+        g: 0.0,
+        n: 1.0,
+        n_outside: 1.0,
+        thickness_cm: 1.0,
+    }
+}
+
 fn run(photons: u64, seed: u64) -> Run {
     Run {
         photons,
@@ -82,14 +95,7 @@ fn light_is_conserved_with_mismatched_faces() {
 /// journal of 2026-12-07 has the numbers.)
 #[test]
 fn a_diffusive_slab_transmits_as_diffusion_says_at_late_times() {
-    let slab = Slab {
-        mu_a_per_cm: 0.1,
-        mu_s_per_cm: 10.0,
-        g: 0.0,
-        n: 1.0,
-        n_outside: 1.0,
-        thickness_cm: 1.0,
-    };
+    let slab = diffusive();
     let grid = Grid {
         t_start_ps: 0.0,
         bin_width_ps: 25.0,
@@ -278,14 +284,7 @@ fn sources_inside_the_face_follow_their_angular_laws() {
 /// beam's axis within its errors.
 #[test]
 fn a_pixel_kernel_holds_its_rings_light() {
-    let slab = Slab {
-        mu_a_per_cm: 0.1,
-        mu_s_per_cm: 10.0,
-        g: 0.0,
-        n: 1.0,
-        n_outside: 1.0,
-        thickness_cm: 1.0,
-    };
+    let slab = diffusive();
     let grid = Grid {
         t_start_ps: 0.0,
         bin_width_ps: 50.0,
