@@ -17,9 +17,10 @@ Per stack, over the pixels the maps do not mask:
 - mean arrival time after the onset and the centred fast lifetime:
   numpy, the onset found here as the half-maximum crossing of the summed
   decay's rising edge, to 1e-6 relative; the fast lifetime in
-  SymPhoTime's conventions (photons at their bins' starts, time zero the
-  start of the first bin of the summed decay at or above half its
-  maximum), to 1e-6 relative;
+  SymPhoTime's conventions (photons at their bins' starts, time zero on
+  the summed decay's rising flank, as `rising_flank_zero` here), to 1e-6
+  relative; only the bins the instrument recorded whole (the reader's
+  fields say which);
 - the mask: fewer photons than the threshold, none at or after the
   onset, or a calibrated phasor without a finite apparent lifetime
   (PhasorPy's);
@@ -41,7 +42,11 @@ from phasorpy.phasor import phasor_from_signal
 
 
 def stacks_of(kind, path):
-    """(stacks (rows, cols, bins) float64, bin starts ps, width ps, Hz)."""
+    """(stacks (rows, cols, bins) float64, bin starts ps, width ps, Hz,
+    the bins recorded whole [first, end)), each from the reader: a PTU's
+    bins ending within its sync period (MeasDesc_GlobalResolution), an
+    .sdt's bins within its TAC limits (measure_info tac_ll, tac_lh,
+    percent of the ADC's range)."""
     if kind == "ptu":
         import ptufile
 
@@ -49,8 +54,11 @@ def stacks_of(kind, path):
             d = f.decode_image(dtype="uint32")
             res = f.tags["MeasDesc_Resolution"] * 1e12
             freq = float(f.tags["TTResult_SyncRate"])
+            period = f.tags["MeasDesc_GlobalResolution"] * 1e12
         stack = d.sum(axis=0)[:, :, 0, :].astype(np.float64)
-        return [stack], np.arange(stack.shape[-1]) * res, res, freq
+        n = stack.shape[-1]
+        end = min(n, int(np.floor(period / res + 1e-3)))
+        return [stack], np.arange(n) * res, res, freq, (0, end)
     if kind == "sdt":
         import sdtfile
 
@@ -58,14 +66,32 @@ def stacks_of(kind, path):
         starts = np.asarray(f.times[0], np.float64) * 1e12
         for t in f.times[1:]:
             assert np.allclose(np.asarray(t) * 1e12, starts), "blocks of other times"
-        freq = float(np.ravel(f.measure_info[0]["StopInfo"]["max_sync_rate"])[0])
-        return [a.astype(np.float64) for a in f.data], starts, starts[1] - starts[0], freq
+        info = f.measure_info[0]
+        freq = float(np.ravel(info["StopInfo"]["max_sync_rate"])[0])
+        ll, lh = float(np.ravel(info["tac_ll"])[0]), float(np.ravel(info["tac_lh"])[0])
+        n = len(starts)
+        recorded = (0, n)
+        if 0 <= ll < lh <= 100 and (ll > 0 or lh < 100):
+            recorded = (int(np.ceil(ll / 100 * n - 1e-3)), int(np.floor(lh / 100 * n + 1e-3)))
+        return [a.astype(np.float64) for a in f.data], starts, starts[1] - starts[0], freq, recorded
     if kind == "npy":
         meta = json.load(open(path[: -len(".npy")] + ".json"))
         stack = np.moveaxis(np.load(path).astype(np.float64), 0, -1)
         starts = np.asarray(meta["bin_starts_ps"], np.float64)
-        return [stack], starts, float(meta["bin_width_ps"]), float(meta["laser_frequency_hz"])
+        r = meta.get("recorded_bins")
+        recorded = (r["first"], r["end"]) if r else (0, len(starts))
+        return [stack], starts, float(meta["bin_width_ps"]), float(meta["laser_frequency_hz"]), recorded
     raise SystemExit(f"unknown kind {kind}")
+
+
+def rising_flank_zero(summed, starts, width):
+    """SymPhoTime's time zero: the line through the steepest-rising pair
+    of bins before the peak (at their starts), extended to the peak's
+    count, less half a bin."""
+    peak = int(np.argmax(summed))
+    rises = np.diff(summed[: peak + 1])
+    k = int(np.argmax(rises))
+    return starts[k] + (summed[peak] - summed[k]) / rises[k] * width - width / 2.0
 
 
 def onset_of(summed, centres):
@@ -94,7 +120,7 @@ def check(name, ours, theirs, rtol, atol, failures):
 
 def main():
     kind, path, out, tau_ref_ps = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
-    stacks, starts, width, freq = stacks_of(kind, path)
+    stacks, starts, width, freq, (first_bin, end_bin) = stacks_of(kind, path)
     # The reader's time axis and ours agree to float32's digits; the
     # phasors are compared on the same stacks, so on ours (scatterscope
     # keeps the 7 digits a float32 TAC range carries, sdtfile its binary
@@ -108,6 +134,14 @@ def main():
     if not np.isclose(stated["laser_frequency_hz"], freq, rtol=1e-9):
         raise SystemExit(f"laser frequency {stated['laser_frequency_hz']} vs {freq}")
     starts, width = ours, float(stated["bin_width_ps"])
+    # The maps keep the bins the instrument recorded whole, found here
+    # from the reader's fields.
+    theirs = stated.get("recorded_bins")
+    stated_bins = (theirs["first"], theirs["end"]) if theirs else (0, len(starts))
+    if stated_bins != (first_bin, end_bin):
+        raise SystemExit(f"recorded bins: ours {theirs}, the reader's fields {first_bin}:{end_bin}")
+    stacks = [s[..., first_bin:end_bin] for s in stacks]
+    starts = starts[first_bin:end_bin]
     centres = starts + width / 2.0
     harmonics = (1, 2)
     phases = {h: 2 * np.pi * h * freq * centres * 1e-12 for h in harmonics}
@@ -167,7 +201,7 @@ def main():
             mean = (after * (centres[first:] - onset)).sum(axis=-1) / n_after
             barycentre = (stack * centres).sum(axis=-1) / photons
         centred = barycentre - onset
-        zero_start = starts[int(np.nonzero(summed >= summed.max() / 2.0)[0][0])]
+        zero_start = rising_flank_zero(summed, starts, width)
         fast = barycentre - width / 2.0 - zero_start
         check(f"stack {i} mean arrival time", ch["mean arrival time after onset (ps)"][keep], mean[keep], 1e-6, 1e-3, failures)
         check(f"stack {i} fast lifetime", ch["fast lifetime (ps)"][keep], fast[keep], 1e-6, 1e-3, failures)

@@ -1611,7 +1611,8 @@ fn old_flag_names_of_the_command_given_are_rewritten_with_a_note() {
 /// Rule R82c's warning: the paper's 3 cm slab reconstructed as 3.5 cm is
 /// explained far worse than Poisson noise allows, and the warning says the
 /// counts come earlier than the model predicts (a thinner slab); the
-/// stated slab draws no warning.
+/// stated slab draws no warning, one stated 100 cm thick a warning that
+/// the bins before its first light are not flat.
 #[test]
 fn a_slab_other_than_stated_is_warned_of_with_its_direction() {
     let dir = tempfile::tempdir().unwrap();
@@ -1642,6 +1643,15 @@ fn a_slab_other_than_stated_is_warned_of_with_its_direction() {
     assert_eq!(code, Some(0), "{stated}");
     assert!(stated.contains("auto: chose"), "{stated}");
     assert!(!stated.contains("far worse than Poisson noise"), "{stated}");
+    // A slab stated far thicker (100 cm for 3 cm): the model puts no
+    // light where the counts rise, and the bins taken for background are
+    // not flat: warned (issue 89's round six had no warning).
+    let (code, far) = reconstruct(&["--thickness", "100cm", "--method", "rl-sum"], "far");
+    assert_eq!(code, Some(4), "{far}");
+    assert!(
+        far.contains("are not flat") && far.contains("light arrives earlier"),
+        "{far}"
+    );
     // The warning is the exit status 4 (a batch records it), not 0.
     let (code, thicker) = reconstruct(&["--thickness", "3.5cm"], "thicker");
     assert_eq!(code, Some(4), "{thicker}");

@@ -65,7 +65,9 @@ fn a_ptu_image_maps_as_phasorpy_and_numpy_compute_them() {
         "ptu",
         &shared_data("flim-samples/picoquant/hazelnut_flim_z1.ptu"),
     );
-    assert_eq!(got.trim(), "stack 0: 39305 pixels agree");
+    // 39,304: one pixel's only photon lay in the bin the sync period
+    // cuts, which the maps leave out (issue 89).
+    assert_eq!(got.trim(), "stack 0: 39304 pixels agree");
 }
 
 #[test]

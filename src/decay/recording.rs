@@ -263,7 +263,20 @@ pub fn lifetime_file(
             ));
         }
         let frequency = frequency_of(path, meta, request.frequency_hz)?;
+        // The bins the instrument recorded whole: a partial bin's photons
+        // (the sync period's last) would count at a time they were not
+        // recorded over, as SymPhoTime leaves them out. A reference on
+        // the same bins is cut alike.
+        let (first, end) = match &meta.recorded_bins {
+            Some(r) if !request.all_bins => (r.first, r.end),
+            _ => (0, meta.bin_starts_ps.len()),
+        };
         if let Some((r, (decay, centres, f_ref))) = &reference {
+            let (decay, centres) = if decay.len() == meta.bin_starts_ps.len() {
+                (&decay[first..end], &centres[first..end])
+            } else {
+                (&decay[..], &centres[..])
+            };
             if let Some(f) = f_ref.filter(|f| (f - frequency).abs() > 1e-3 * frequency) {
                 return Err(spec_error(
                     r.path(),
@@ -289,13 +302,6 @@ pub fn lifetime_file(
                 what: format!("the {what} {}", r.path().display()),
             });
         }
-        // The bins the instrument recorded whole: a partial bin's photons
-        // (the sync period's last) would count at a time they were not
-        // recorded over, as SymPhoTime leaves them out.
-        let (first, end) = match &meta.recorded_bins {
-            Some(r) if !request.all_bins => (r.first, r.end),
-            _ => (0, meta.bin_starts_ps.len()),
-        };
         let mut maps = decay_maps(
             s.counts.bins(first, end),
             &meta.bin_starts_ps[first..end],

@@ -217,6 +217,7 @@ pub fn prepare(
         );
     }
     assumed.push(format!("background: {background}"));
+    assumed.extend(problem.early_light().map(|w| format!("warning: {w}")));
     if let (Some(first), Some(last)) = (problem.left_out.first(), problem.left_out.last()) {
         let counts: f64 = problem.left_out.iter().map(|(_, c)| c).sum();
         assumed.push(format!(

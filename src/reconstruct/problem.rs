@@ -41,6 +41,10 @@ impl BackgroundChoice {
     }
 }
 
+/// Pearson dispersion z of the bins before the first light above which
+/// they are taken to hold light.
+pub const EARLY_LIGHT_Z: f64 = 10.0;
+
 /// The background measured in the bins before the first light.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BackgroundEstimate {
@@ -205,21 +209,7 @@ impl Problem {
     /// their counts (at most down to 0). `None` when there is no such bin.
     pub fn estimate_background(&self) -> Option<BackgroundEstimate> {
         let (_, h, w) = self.counts.dim();
-        let total_mass: f64 = (0..self.model.bins()).map(|k| self.model.mass(k)).sum();
-        let total: f64 = self.counts.sum();
-        let mut dark: Vec<(f64, f64)> = self.left_out.clone();
-        // The light the kernels still put in the kept dark bins, for an
-        // object explaining every count: taken off, so that the earliest
-        // photons of the signal do not pass for background.
-        let mut their_light = 0.0;
-        for k in 0..self.model.bins() {
-            let most_signal = total * self.model.mass(k) / total_mass;
-            if most_signal < DARK_COUNTS_PER_PIXEL * (h * w) as f64 {
-                let counts = self.counts.index_axis(ndarray::Axis(0), k).sum();
-                dark.push((self.bin_starts_ps[k], counts));
-                their_light += most_signal;
-            }
-        }
+        let (dark, their_light) = self.dark_bins();
         if dark.is_empty() {
             return None;
         }
@@ -236,6 +226,61 @@ impl Problem {
             standard_error: held.sqrt() / cells,
             bins: dark.len(),
             span_ps: (first, last + self.setup.bins.width_ps),
+        })
+    }
+
+    /// The bins before the first light, `(start ps, counts)`: stack bins
+    /// where the ST-PSF puts no light and kept bins where it puts under
+    /// [`DARK_COUNTS_PER_PIXEL`] per pixel; and the light the kernels
+    /// still put in the kept ones, for an object explaining every count
+    /// (taken off, so that the earliest photons of the signal do not pass
+    /// for background).
+    fn dark_bins(&self) -> (Vec<(f64, f64)>, f64) {
+        let (_, h, w) = self.counts.dim();
+        let total_mass: f64 = (0..self.model.bins()).map(|k| self.model.mass(k)).sum();
+        let total: f64 = self.counts.sum();
+        let mut dark: Vec<(f64, f64)> = self.left_out.clone();
+        let mut their_light = 0.0;
+        for k in 0..self.model.bins() {
+            let most_signal = total * self.model.mass(k) / total_mass;
+            if most_signal < DARK_COUNTS_PER_PIXEL * (h * w) as f64 {
+                let counts = self.counts.index_axis(ndarray::Axis(0), k).sum();
+                dark.push((self.bin_starts_ps[k], counts));
+                their_light += most_signal;
+            }
+        }
+        (dark, their_light)
+    }
+
+    /// A warning when the bins before the model's first light are not
+    /// flat: their counts vary across the bins far beyond Poisson noise
+    /// (Pearson's dispersion, z above [`EARLY_LIGHT_Z`]) and by more than
+    /// a fifth of their mean. Then light arrives before the model says
+    /// (a thinner slab, a lower index, an earlier time zero), and the
+    /// background estimated from those bins holds signal.
+    pub fn early_light(&self) -> Option<String> {
+        let (mut dark, _) = self.dark_bins();
+        if dark.len() < 3 {
+            return None;
+        }
+        dark.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let n = dark.len() as f64;
+        let mean = dark.iter().map(|(_, c)| c).sum::<f64>() / n;
+        if mean <= 0.0 {
+            return None;
+        }
+        let chi2: f64 = dark.iter().map(|(_, c)| (c - mean).powi(2) / mean).sum();
+        let z = (chi2 - (n - 1.0)) / (2.0 * (n - 1.0)).sqrt();
+        let (lo, hi) = dark.iter().fold((f64::INFINITY, 0.0f64), |(l, h), (_, c)| {
+            (l.min(*c), h.max(*c))
+        });
+        (z > EARLY_LIGHT_Z && (hi - lo) > 0.2 * mean).then(|| {
+            format!(
+                "the {} bins before the model's first light ({} to {} ps) are not flat (their counts range {lo:.0} to {hi:.0} per bin, dispersion z = {z:.0}): light arrives earlier than the model says (a thinner slab, a lower index or an earlier time zero than stated), and the background taken from them holds signal",
+                dark.len(),
+                dark[0].0,
+                dark[dark.len() - 1].0 + self.setup.bins.width_ps
+            )
         })
     }
 
