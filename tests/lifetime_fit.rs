@@ -404,4 +404,15 @@ fn lifetimes_the_decay_does_not_determine_are_masked_and_pure_noise_remarked() {
         "{:?}",
         maps.notes
     );
+    // A rising ramp (1 to 20 photons per bin) is remarked on: it does not
+    // decay, and the model describes it poorly.
+    let mut rng = ChaCha8Rng::seed_from_u64(8);
+    let ramp = Array3::from_shape_fn((BINS, 1, 16), |(k, _, _)| {
+        let mean = 1.0 + 19.0 * k as f64 / (BINS - 1) as f64;
+        rand_distr::Poisson::new(mean).unwrap().sample(&mut rng) as u32
+    });
+    let maps = fit(&ramp, &FitOptions::default());
+    let said = maps.notes.join("\n");
+    assert!(said.contains("it rises instead of decaying"), "{said}");
+    assert!(said.contains("explains the summed decay poorly"), "{said}");
 }

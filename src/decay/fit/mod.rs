@@ -506,6 +506,19 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
         describe_params(&model, &summed_fit.params),
         summed_fit.reduced_chi2
     ));
+    // A decay that does not fall: its peak in the window's last fifth.
+    if !matches!(options.irf, IrfSource::Tail) && argmax(&summed) * 5 >= 4 * n {
+        notes.push(format!(
+            "the summed decay peaks at bin {} of the window's {n}: it rises instead of decaying (a ramp, or a window that ends before the decay): its lifetimes describe no decay",
+            argmax(&summed)
+        ));
+    }
+    if summed_fit.reduced_chi2 > POOR_FIT_CHI2 {
+        notes.push(format!(
+            "the model explains the summed decay poorly (reduced chi-squared {:.1}, above {POOR_FIT_CHI2}): more components, another IRF or a window that keeps only the decay may describe it; see fit_decay.png",
+            summed_fit.reduced_chi2
+        ));
+    }
     Ok(FitMaps {
         summed: SummedFit {
             window: (first, end),
@@ -522,6 +535,11 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
         ..maps
     })
 }
+
+/// A summed decay's reduced chi-squared above this is remarked on as a
+/// poor description (at the hundreds of thousands of photons of a summed
+/// decay, small departures of shape already raise it past 1).
+pub const POOR_FIT_CHI2: f64 = 5.0;
 
 /// A fitted lifetime whose standard error passes this multiple of it is
 /// not determined by its decay (pure noise, a flat background, three
