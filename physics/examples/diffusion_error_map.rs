@@ -1,0 +1,142 @@
+//! How far diffusion's transmittance is from light as it travels, over
+//! media: the infinite medium (the paper's Eq. 6) and the slab with
+//! extrapolated boundaries against Monte Carlo transport, for a point of
+//! the object emitting by Lambert's law into a slab in air.
+//!
+//! `cargo run --release -p scatterscope-physics --example diffusion_error_map -- [PACKETS]`
+//!
+//! mu_s' 10 /cm (g 0: diffusion depends on mu_s' alone), mu_s'/mu_a 1,
+//! 10, 100, thickness 2, 5, 10, 20 transport lengths, n 1 and 1.4. For
+//! each, over the time profile of the light through the whole far face
+//! (2,000 bins from 0 to the ballistic time plus eight diffusion times
+//! `3 mu_s' d^2 n / (pi^2 c)`): the shape error (half the L1 distance of
+//! the two profiles, each scaled to unit sum: 0 equal, 1 disjoint) and the
+//! median arrival's error; for the slab model also the ratio of its
+//! transmitted light to the Monte Carlo's.
+
+use scatterscope_physics::diffusion::Diffusion;
+use scatterscope_physics::params::{Medium, MediumModel};
+use scatterscope_physics::transport::{C_CM_PER_PS, Grid, Run, Slab, Source, transport};
+
+const BINS: usize = 2000;
+
+fn median(p: &[f64], width: f64) -> f64 {
+    let total: f64 = p.iter().sum();
+    let mut acc = 0.0;
+    for (k, v) in p.iter().enumerate() {
+        acc += v;
+        if acc >= total / 2.0 {
+            return (k as f64 + 0.5) * width;
+        }
+    }
+    f64::NAN
+}
+
+/// Half the L1 distance of `a` and `b`, each scaled to unit sum.
+fn shape_error(a: &[f64], b: &[f64]) -> f64 {
+    let (sa, sb): (f64, f64) = (a.iter().sum(), b.iter().sum());
+    0.5 * a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x / sa - y / sb).abs())
+        .sum::<f64>()
+}
+
+fn main() {
+    let packets: u64 = std::env::args()
+        .nth(1)
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(200_000);
+    let mu_s_reduced = 10.0;
+    println!(
+        "| n | mu_s'/mu_a | mu_s' d | infinite: shape, median | slab: shape, median, light | MC light (+- SE) |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- |");
+    for n in [1.0, 1.4] {
+        for ratio in [1.0, 10.0, 100.0] {
+            for lengths in [2.0, 5.0, 10.0, 20.0] {
+                let mu_a = mu_s_reduced / ratio;
+                let d = lengths / mu_s_reduced;
+                let ballistic = d * n / C_CM_PER_PS;
+                let t_diff =
+                    3.0 * mu_s_reduced * d * d * n / (std::f64::consts::PI.powi(2) * C_CM_PER_PS);
+                let width = (ballistic + 8.0 * t_diff) / BINS as f64;
+                let slab = Slab {
+                    mu_a_per_cm: mu_a,
+                    mu_s_per_cm: mu_s_reduced,
+                    g: 0.0,
+                    n,
+                    n_outside: 1.0,
+                    thickness_cm: d,
+                };
+                let grid = Grid {
+                    t_start_ps: 0.0,
+                    bin_width_ps: width,
+                    bins: BINS,
+                    ring_width_cm: d,
+                    rings: 1,
+                };
+                let run = Run {
+                    photons: packets,
+                    seed: 1,
+                    max_path_cm: (BINS as f64 + 1.0) * width * C_CM_PER_PS / n,
+                };
+                let t = transport(&slab, Source::Lambertian, &grid, &run).expect("valid media");
+                let mc: Vec<f64> = t.face.iter().map(|e| e.mean).collect();
+                if mc.iter().sum::<f64>() <= 0.0 {
+                    println!("| {n} | {ratio} | {lengths} | - | - | no packet crossed |");
+                    continue;
+                }
+                let profile = |model: MediumModel| -> Option<Vec<f64>> {
+                    let medium = Medium {
+                        mu_a_per_cm: mu_a,
+                        mu_s_per_cm: mu_s_reduced,
+                        g: 0.0,
+                        refractive_index: n,
+                        thickness_cm: d,
+                        model,
+                    };
+                    let diff = Diffusion::new(&medium).ok()?;
+                    Some(
+                        (0..BINS)
+                            .map(|k| {
+                                (0..8)
+                                    .map(|j| {
+                                        let s = (k as f64 + (j as f64 + 0.5) / 8.0) * width;
+                                        diff.log_temporal_density(s).exp()
+                                    })
+                                    .sum::<f64>()
+                                    * width
+                                    / 8.0
+                            })
+                            .collect(),
+                    )
+                };
+                let m_mc = median(&mc, width);
+                let cell = |p: Option<Vec<f64>>, light: bool| match p {
+                    None => "refused".to_string(),
+                    Some(p) => {
+                        let m = median(&p, width);
+                        let mut s = format!(
+                            "{:.3}, {:+.0} %",
+                            shape_error(&mc, &p),
+                            100.0 * (m - m_mc) / m_mc
+                        );
+                        if light {
+                            let total: f64 = p.iter().sum();
+                            s.push_str(&format!(", {:.2}", total / t.transmitted.mean));
+                        }
+                        s
+                    }
+                };
+                println!(
+                    "| {n} | {ratio} | {lengths} | {} | {} | {:.3e} (+- {:.1e}) |",
+                    cell(profile(MediumModel::Infinite), false),
+                    cell(profile(MediumModel::Slab), true),
+                    t.transmitted.mean,
+                    t.transmitted.error
+                );
+            }
+        }
+    }
+}
