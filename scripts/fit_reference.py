@@ -52,7 +52,9 @@ def binned(stack, b):
 def main():
     cli, kind, path, work, mode, binning, components = sys.argv[1:8]
     b, k = int(binning), int(components)
-    stacks, starts, width, _ = stacks_of(kind, path)
+    # The window is given to both below (--window): the recorded bins the
+    # reader states are not needed.
+    stacks, starts, width, _, _ = stacks_of(kind, path)
     # The stack with the most photons (an .sdt's blocks may be near empty).
     index = int(np.argmax([s.sum() for s in stacks]))
     stack = stacks[index]
