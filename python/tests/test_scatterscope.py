@@ -455,6 +455,10 @@ def test_fit_lifetimes_equal_the_command_fit(tmp_path):
     maps = scatterscope.fit_lifetimes(binned["stacks"][0], binned["meta"][0], irf="gaussian", min_photons=20)
     side = json.loads((tmp_path / "fit" / "fit.json").read_text())
     ours = np.load(tmp_path / "fit" / "fit.npy")
+    # The IRF the fit used, as numpy reads it: unit sum on the stack's bins.
+    irf = np.load(tmp_path / "fit" / "fit_irf.npy")
+    assert irf.shape == (125,) and irf.dtype == np.float64 and abs(irf.sum() - 1.0) < 1e-9
+    assert side["summed_values"][0].startswith("tau1 = ")
     by_name = dict(zip(side["channels"], ours))
     np.testing.assert_array_equal(by_name["tau1 (ps)"], maps["tau1_ps"].astype(np.float32))
     np.testing.assert_array_equal(by_name["mask"] > 0.5, maps["mask"])
