@@ -1,6 +1,6 @@
-//! Monte Carlo photon transport through a slab: the reference the
-//! diffusion approximation is judged against where it fails (thin or
-//! weakly scattering media, early photons).
+//! Monte Carlo photon transport through a slab or a semi-infinite
+//! medium: the reference the diffusion approximation is judged against
+//! where it fails (thin or weakly scattering media, early photons).
 //!
 //! The scheme is MCML's (Wang, Jacques and Zheng, Comput. Methods
 //! Programs Biomed. 47, 131 (1995)) with absorption by path length (as
@@ -54,7 +54,8 @@ pub struct Slab {
     pub n: f64,
     /// The index outside both faces, >= 1.
     pub n_outside: f64,
-    /// Thickness (cm), > 0.
+    /// Thickness (cm), > 0; infinite for a semi-infinite medium (light
+    /// leaves by the front face only).
     pub thickness_cm: f64,
 }
 
@@ -180,11 +181,15 @@ impl Slab {
             self.n_outside >= 1.0,
             "give a refractive index >= 1",
         )?;
+        if self.thickness_cm == f64::INFINITY {
+            // A semi-infinite medium: light leaves by the front face only.
+            return Ok(());
+        }
         check(
             "thickness",
             self.thickness_cm,
             self.thickness_cm > 0.0,
-            "give a thickness > 0 (cm)",
+            "give a thickness > 0 (cm), or infinity for a semi-infinite medium",
         )
     }
 

@@ -360,3 +360,36 @@ fn the_papers_preset_as_light_travels() {
     }
     assert!(KernelStack::build(&setup, Sampling::Point).is_err());
 }
+
+/// A semi-infinite medium (thickness infinite) transmits nothing, its
+/// light is conserved, and it reflects as a slab a hundred transport
+/// lengths thick does, within their standard errors.
+#[test]
+fn a_semi_infinite_medium_reflects_as_a_thick_slab() {
+    let half = Slab {
+        mu_a_per_cm: 0.1,
+        mu_s_per_cm: 10.0,
+        g: 0.8,
+        n: 1.4,
+        n_outside: 1.0,
+        thickness_cm: f64::INFINITY,
+    };
+    let t = transport(&half, Source::Pencil, &grid(), &run(100_000, 11)).unwrap();
+    assert_eq!(t.transmitted.mean, 0.0);
+    let sum = t.specular + t.reflected.mean + t.absorbed.mean + t.cut.mean;
+    let error = (t.reflected.error.powi(2) + t.absorbed.error.powi(2)).sqrt();
+    assert!((sum - 1.0).abs() < 3.0 * error, "{sum} +- {error}");
+    let thick = Slab {
+        thickness_cm: 50.0,
+        ..half
+    };
+    let s = transport(&thick, Source::Pencil, &grid(), &run(100_000, 12)).unwrap();
+    let both = (t.reflected.error.powi(2) + s.reflected.error.powi(2)).sqrt();
+    assert!(
+        (t.reflected.mean - s.reflected.mean).abs() < 3.0 * both,
+        "{} against {} +- {both}",
+        t.reflected.mean,
+        s.reflected.mean
+    );
+    assert!(s.transmitted.mean < 1e-6);
+}
