@@ -15,8 +15,9 @@
 //! transmitted light to the Monte Carlo's.
 
 use scatterscope_physics::diffusion::Diffusion;
+use scatterscope_physics::diffusion::light_speed_cm_per_ps;
 use scatterscope_physics::params::{Medium, MediumModel};
-use scatterscope_physics::transport::{C_CM_PER_PS, Grid, Run, Slab, Source, transport};
+use scatterscope_physics::transport::{Grid, Run, Slab, Source, transport};
 
 const BINS: usize = 2000;
 
@@ -57,9 +58,9 @@ fn main() {
             for lengths in [2.0, 5.0, 10.0, 20.0] {
                 let mu_a = mu_s_reduced / ratio;
                 let d = lengths / mu_s_reduced;
-                let ballistic = d * n / C_CM_PER_PS;
-                let t_diff =
-                    3.0 * mu_s_reduced * d * d * n / (std::f64::consts::PI.powi(2) * C_CM_PER_PS);
+                let speed = light_speed_cm_per_ps(n);
+                let ballistic = d / speed;
+                let t_diff = 3.0 * mu_s_reduced * d * d / (std::f64::consts::PI.powi(2) * speed);
                 let width = (ballistic + 8.0 * t_diff) / BINS as f64;
                 let slab = Slab {
                     mu_a_per_cm: mu_a,
@@ -79,7 +80,7 @@ fn main() {
                 let run = Run {
                     photons: packets,
                     seed: 1,
-                    max_path_cm: (BINS as f64 + 1.0) * width * C_CM_PER_PS / n,
+                    max_path_cm: (BINS as f64 + 1.0) * width * speed,
                 };
                 let t = transport(&slab, Source::Lambertian, &grid, &run).expect("valid media");
                 let mc: Vec<f64> = t.face.iter().map(|e| e.mean).collect();

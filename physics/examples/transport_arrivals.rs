@@ -6,7 +6,8 @@
 //!
 //! (coefficients in 1/cm; air outside both faces).
 
-use scatterscope_physics::transport::{C_CM_PER_PS, Grid, Run, Slab, Source, transport};
+use scatterscope_physics::diffusion::light_speed_cm_per_ps;
+use scatterscope_physics::transport::{Grid, Run, Slab, Source, transport};
 
 fn main() {
     let words: Vec<String> = std::env::args().skip(1).collect();
@@ -29,7 +30,7 @@ fn main() {
         thickness_cm: a[4],
     };
     let packets = a.get(5).map_or(10_000_000, |v| *v as u64);
-    let ballistic_ps = slab.thickness_cm * slab.n / C_CM_PER_PS;
+    let ballistic_ps = slab.thickness_cm / light_speed_cm_per_ps(slab.n);
     let grid = Grid {
         t_start_ps: ballistic_ps.floor() - 1.0,
         bin_width_ps: 0.5,

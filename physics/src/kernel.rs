@@ -192,8 +192,7 @@ impl KernelStack {
                 if setup.medium.model == MediumModel::MonteCarlo {
                     format!(
                         "Monte Carlo transport records no light in these bins: the first light crosses the slab at n d / c = {:.1} ps (give bins from there, --t-start)",
-                        setup.medium.thickness_cm * setup.medium.refractive_index
-                            / crate::transport::C_CM_PER_PS
+                        setup.medium.first_light_ps()
                     )
                 } else {
                     format!(

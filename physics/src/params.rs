@@ -185,6 +185,12 @@ impl Preset {
 }
 
 impl Medium {
+    /// When the first light can cross the slab: straight through at the
+    /// speed of light in the medium, `n d / c` (ps).
+    pub fn first_light_ps(&self) -> f64 {
+        self.thickness_cm / crate::diffusion::light_speed_cm_per_ps(self.refractive_index)
+    }
+
     /// Checks every field; the error names the first invalid one.
     pub fn validate(&self) -> Result<(), ParamError> {
         non_negative("mu_a_per_cm", self.mu_a_per_cm)?;

@@ -74,11 +74,22 @@ pub fn effective_reflection(n: f64) -> f64 {
 /// Unpolarised Fresnel reflectance from inside a medium of index `n` into
 /// air at incidence angle `theta` (1 beyond the critical angle).
 pub fn fresnel_unpolarised(n: f64, theta: f64) -> f64 {
-    let sin_t = n * theta.sin();
+    fresnel_unpolarised_sin_cos(n, theta.sin(), theta.cos())
+}
+
+/// [`fresnel_unpolarised`] for `n` the ratio of the index the light comes
+/// from to the one it meets, given the incidence angle's sine and cosine
+/// (transport meets faces with a direction cosine, not an angle); 0 for
+/// `n` 1.
+pub fn fresnel_unpolarised_sin_cos(n: f64, sin_i: f64, cos_i: f64) -> f64 {
+    if n == 1.0 {
+        return 0.0;
+    }
+    let sin_t = n * sin_i;
     if sin_t >= 1.0 {
         return 1.0;
     }
-    let (ci, ct) = (theta.cos(), (1.0 - sin_t * sin_t).sqrt());
+    let (ci, ct) = (cos_i, (1.0 - sin_t * sin_t).sqrt());
     let rs = (n * ci - ct) / (n * ci + ct);
     let rp = (n * ct - ci) / (n * ct + ci);
     0.5 * (rs * rs + rp * rp)

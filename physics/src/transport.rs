@@ -29,8 +29,8 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use thiserror::Error;
 
-/// Speed of light in vacuum (cm/ps).
-pub const C_CM_PER_PS: f64 = 0.029_979_245_8;
+use crate::diffusion::light_speed_cm_per_ps;
+use crate::slab::fresnel_unpolarised_sin_cos;
 
 /// Weight below which a packet plays the roulette.
 pub const ROULETTE_WEIGHT: f64 = 1e-4;
@@ -387,10 +387,6 @@ pub struct SetupKernels {
     pub kernels: Vec<Option<Array2<f64>>>,
     /// Per bin: the relative standard error of its light.
     pub relative_errors: Vec<f64>,
-    /// Packets run.
-    pub packets: u64,
-    /// The light that left the far face, per packet.
-    pub transmitted: Estimate,
 }
 
 /// Kernels of `setup`'s bins by Monte Carlo transport: `packets` packets
@@ -458,7 +454,7 @@ pub fn setup_kernels(
         photons: packets,
         seed,
         // Light later than the grid's end reaches no bin.
-        max_path_cm: (end + fine) * C_CM_PER_PS / m.refractive_index,
+        max_path_cm: (end + fine) * light_speed_cm_per_ps(m.refractive_index),
     };
     let t = transport(&slab, Source::Lambertian, &grid, &run).map_err(as_param)?;
     let mut kernels = Vec::with_capacity(bins.count);
@@ -496,8 +492,6 @@ pub fn setup_kernels(
     Ok(SetupKernels {
         kernels,
         relative_errors,
-        packets,
-        transmitted: t.transmitted,
     })
 }
 
@@ -579,23 +573,6 @@ pub fn transport(
     })
 }
 
-/// Unpolarised Fresnel reflectance for a ray meeting a face from index
-/// `n1` into `n2` with direction cosine `cos_i` (> 0) to the normal; 1
-/// past the critical angle.
-fn fresnel(n1: f64, n2: f64, cos_i: f64) -> f64 {
-    if n1 == n2 {
-        return 0.0;
-    }
-    let sin_t = n1 / n2 * (1.0 - cos_i * cos_i).max(0.0).sqrt();
-    if sin_t >= 1.0 {
-        return 1.0;
-    }
-    let cos_t = (1.0 - sin_t * sin_t).sqrt();
-    let rs = (n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t);
-    let rp = (n1 * cos_t - n2 * cos_i) / (n1 * cos_t + n2 * cos_i);
-    0.5 * (rs * rs + rp * rp)
-}
-
 /// A new direction after a Henyey-Greenstein scattering of `(ux, uy,
 /// uz)` (MCML's update).
 fn scatter<R: Rng>(g: f64, u: [f64; 3], rng: &mut R) -> [f64; 3] {
@@ -662,7 +639,13 @@ fn packet<R: Rng>(slab: &Slab, source: Source, grid: &Grid, run: &Run, rng: &mut
             if path > run.max_path_cm {
                 break false;
             }
-            if rng.random::<f64>() < fresnel(slab.n, slab.n_outside, u[2].abs()) {
+            let cos_i = u[2].abs();
+            let reflected = fresnel_unpolarised_sin_cos(
+                slab.n / slab.n_outside,
+                (1.0 - cos_i * cos_i).max(0.0).sqrt(),
+                cos_i,
+            );
+            if rng.random::<f64>() < reflected {
                 u[2] = -u[2];
                 continue;
             }
@@ -699,7 +682,7 @@ fn packet<R: Rng>(slab: &Slab, source: Source, grid: &Grid, run: &Run, rng: &mut
 /// Records a packet of weight `w` leaving the far face at `pos` after
 /// `path`.
 fn record(grid: &Grid, slab: &Slab, pos: [f64; 3], path: f64, w: f64, t: &mut Tally) {
-    let time = path * slab.n / C_CM_PER_PS;
+    let time = path / light_speed_cm_per_ps(slab.n);
     let k = ((time - grid.t_start_ps) / grid.bin_width_ps).floor();
     let r = (pos[0] * pos[0] + pos[1] * pos[1]).sqrt();
     let ring = (r / grid.ring_width_cm).floor();

@@ -81,30 +81,22 @@ pub fn describe_setup(setup: &Setup, kernels: &crate::KernelStack) -> Vec<String
         .iter()
         .find(|b| b.photons >= 0.01)
         .map_or(f64::NAN, |b| b.start_ps);
-    let mut lines = vec![if monte_carlo {
+    let arrival = if monte_carlo {
         format!(
-            "medium: mu_a {} /cm, mu_s {} /cm, g {}, n {}, thickness {} cm (the first light crosses at n d / c = {:.1} ps; light in the bins from ~{:.0} ps)",
-            m.mu_a_per_cm,
-            m.mu_s_per_cm,
-            m.g,
-            m.refractive_index,
-            m.thickness_cm,
-            m.thickness_cm * m.refractive_index / crate::transport::C_CM_PER_PS,
-            first_bin,
+            "the first light crosses at n d / c = {:.1} ps; light in the bins from ~{first_bin:.0} ps",
+            m.first_light_ps()
         )
     } else {
         format!(
-            "medium: mu_a {} /cm, mu_s {} /cm, g {}, n {}, thickness {} cm (D = {:.4} cm, light arrives from ~{:.0} ps, peak {:.1} ps)",
-            m.mu_a_per_cm,
-            m.mu_s_per_cm,
-            m.g,
-            m.refractive_index,
-            m.thickness_cm,
+            "D = {:.4} cm, light arrives from ~{first_bin:.0} ps, peak {:.1} ps",
             d.d_cm,
-            first_bin,
-            d.peak_time_ps(),
+            d.peak_time_ps()
         )
-    }];
+    };
+    let mut lines = vec![format!(
+        "medium: mu_a {} /cm, mu_s {} /cm, g {}, n {}, thickness {} cm ({arrival})",
+        m.mu_a_per_cm, m.mu_s_per_cm, m.g, m.refractive_index, m.thickness_cm,
+    )];
     lines.push(format!("model: {}", setup.model_summary()));
     if let Some(s) = &d.slab {
         lines.push(format!(

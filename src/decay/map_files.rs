@@ -117,14 +117,7 @@ pub(crate) fn write_channels(
         .map(|((n, _), p)| (n.clone(), p))
         .collect();
     crate::formats::ome_tiff::write_named_images(&named, pitch, tif)?;
-    use ndarray_npy::WriteNpyExt;
-    let file = crate::files::AtomicFile::create(npy).map_err(|e| StackError::io(npy, e))?;
-    let mut out = std::io::BufWriter::new(file);
-    stacked
-        .write_npy(&mut out)
-        .map_err(|e| StackError::format(npy, format!("writing .npy: {e}")))?;
-    crate::files::AtomicFile::commit_buffered(out).map_err(|e| StackError::io(npy, e))?;
-    Ok(())
+    crate::formats::npy::write_array(&stacked, npy)
 }
 
 /// The finite values of `values` where `mask` is false.

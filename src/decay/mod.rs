@@ -1027,11 +1027,6 @@ mod tests {
         );
     }
 
-    /// Without an IRF the fast lifetime's time zero is where the line
-    /// through the steepest-rising pair of bins (at their starts) reaches
-    /// the peak, less half a bin, photons at their bins' starts
-    /// (SymPhoTime); the centred one's the interpolated onset, photons at
-    /// their centres.
     /// The rising flank's line through the steepest pair (30 to 90 at
     /// bins 2 and 3) reaches the peak (100) 70/60 of a bin after bin 2's
     /// start; less half a bin. A decay that does not rise has none.
@@ -1047,6 +1042,11 @@ mod tests {
         assert_eq!(rising_flank_zero(&[0.0; 6], &starts, 10.0), None);
     }
 
+    /// Without an IRF the fast lifetime's time zero is where the line
+    /// through the steepest-rising pair of bins (at their starts) reaches
+    /// the peak, less half a bin, photons at their bins' starts
+    /// (SymPhoTime); the centred one's the interpolated onset, photons at
+    /// their centres.
     #[test]
     fn the_fast_lifetime_takes_symphotimes_conventions() {
         let decay = [2.0, 3.0, 40.0, 100.0, 70.0, 50.0, 30.0, 20.0];

@@ -267,10 +267,9 @@ pub fn lifetime_file(
         // (the sync period's last) would count at a time they were not
         // recorded over, as SymPhoTime leaves them out. A reference on
         // the same bins is cut alike.
-        let (first, end) = match &meta.recorded_bins {
-            Some(r) if !request.all_bins => (r.first, r.end),
-            _ => (0, meta.bin_starts_ps.len()),
-        };
+        let (first, end) = meta
+            .recorded_window(request.all_bins)
+            .unwrap_or((0, meta.bin_starts_ps.len()));
         if let Some((r, (decay, centres, f_ref))) = &reference {
             let (decay, centres) = if decay.len() == meta.bin_starts_ps.len() {
                 (&decay[first..end], &centres[first..end])

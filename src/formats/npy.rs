@@ -25,6 +25,17 @@ pub fn sidecar_path(npy: &Path) -> PathBuf {
     npy.with_extension("json")
 }
 
+/// Writes `array` as a bare `.npy` (no sidecar), whole or not at all.
+pub fn write_array<A: WriteNpyExt + ?Sized>(array: &A, path: &Path) -> Result<(), StackError> {
+    let file = crate::files::AtomicFile::create(path).map_err(|e| StackError::io(path, e))?;
+    let mut out = BufWriter::new(file);
+    array
+        .write_npy(&mut out)
+        .map_err(|e| StackError::format(path, format!("writing .npy: {e}")))?;
+    crate::files::AtomicFile::commit_buffered(out).map_err(|e| StackError::io(path, e))?;
+    Ok(())
+}
+
 /// Writes `stack` as `.npy` plus the JSON sidecar.
 pub fn write(stack: &Stack, path: &Path) -> Result<(), StackError> {
     let file = crate::files::AtomicFile::create(path).map_err(|e| StackError::io(path, e))?;

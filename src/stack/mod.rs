@@ -467,6 +467,16 @@ impl Stack {
 }
 
 impl StackMeta {
+    /// The bins `[first, end)` a fit or map keeps by default: those the
+    /// instrument recorded whole; `None` when the recording states none or
+    /// `all_bins` asks for every bin.
+    pub fn recorded_window(&self, all_bins: bool) -> Option<(usize, usize)> {
+        self.recorded_bins
+            .as_ref()
+            .filter(|_| !all_bins)
+            .map(|r| (r.first, r.end))
+    }
+
     /// Metadata of data produced from `kernels` (simulated counts, expected
     /// counts, the kernels themselves): the kept bins, the physics, the
     /// sampling and the bins left out with their light.

@@ -304,9 +304,9 @@ def decay_maps(
             "decay_maps: the stack's metadata states no laser frequency: give frequency_hz"
         )
     starts = [float(t) for t in meta["bin_starts_ps"]]
-    recorded = meta.get("recorded_bins")
-    if recorded and not all_bins:
-        first, end = int(recorded["first"]), int(recorded["end"])
+    recorded = _recorded_window(meta, all_bins)
+    if recorded is not None:
+        first, end = recorded
         counts, starts = counts[first:end], starts[first:end]
     array = counts if counts.dtype in (np.uint16, np.uint32, np.float32) else counts.astype(np.float32)
     return _native.decay_maps(
@@ -320,6 +320,16 @@ def decay_maps(
         reference_phasors,
         float(reference_lifetime_ps),
     )
+
+
+def _recorded_window(meta: Dict[str, Any], all_bins: bool) -> Optional[Tuple[int, int]]:
+    """The bins ``(first, end)`` the instrument recorded whole, as the
+    stack's metadata states them; None when it states none or
+    ``all_bins`` asks for every bin."""
+    recorded = meta.get("recorded_bins")
+    if all_bins or not recorded:
+        return None
+    return int(recorded["first"]), int(recorded["end"])
 
 
 def _whole_counts(function: str, counts: Any) -> np.ndarray:
@@ -419,8 +429,7 @@ def fit_lifetimes(
         None if window is None else (int(window[0]), int(window[1])),
         bool(incomplete_decay),
         bool(fit_irf_shift),
-        None if all_bins or not meta.get("recorded_bins") else (
-            int(meta["recorded_bins"]["first"]), int(meta["recorded_bins"]["end"])),
+        _recorded_window(meta, all_bins),
     )
 
 

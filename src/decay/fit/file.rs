@@ -231,11 +231,7 @@ pub fn fit_file(
             (IrfRequest::Tail, _) => IrfSource::Tail,
             _ => IrfSource::RisingEdge,
         };
-        if let Some(r) = &meta.recorded_bins
-            && !request.all_bins
-        {
-            options.recorded = Some((r.first, r.end));
-        }
+        options.recorded = meta.recorded_window(request.all_bins);
         let frequency = request.frequency_hz.or(meta.laser_frequency_hz);
         let mut maps = fit_maps(
             s.counts,
@@ -293,7 +289,7 @@ fn write_fit(
         let (first, end) = maps.summed.window;
         irf.slice_mut(ndarray::s![first..end])
             .assign(&ndarray::ArrayView1::from(&maps.summed.irf));
-        write_vector(&irf, &irf_npy)?;
+        crate::formats::npy::write_array(&irf, &irf_npy)?;
         notes.push(format!(
             "the IRF used written to {} (unit sum on the stack's bins; --irf takes it back)",
             irf_npy.display()
@@ -331,17 +327,6 @@ fn write_fit(
         median_lifetime_ps: quantile(unmasked, 0.5).unwrap_or(f64::NAN),
         notes,
     })
-}
-
-/// Writes `v` as a float64 `.npy`, whole or not at all.
-fn write_vector(v: &ndarray::Array1<f64>, path: &Path) -> Result<(), StackError> {
-    use ndarray_npy::WriteNpyExt;
-    let file = crate::files::AtomicFile::create(path).map_err(|e| StackError::io(path, e))?;
-    let mut out = std::io::BufWriter::new(file);
-    v.write_npy(&mut out)
-        .map_err(|e| StackError::format(path, format!("writing .npy: {e}")))?;
-    crate::files::AtomicFile::commit_buffered(out).map_err(|e| StackError::io(path, e))?;
-    Ok(())
 }
 
 /// Draws the mean lifetime image and the summed decay's fit.

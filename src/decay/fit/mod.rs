@@ -390,18 +390,23 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
     let np = model.parameters();
     let bounds = bounds(&model);
     // Which pixels are fitted, and the summed decay of those.
+    let window = counts.slice(ndarray::s![first..end, .., ..]);
     let photons: Vec<f64> = {
-        let window_photons = ndarray::Array3::from_shape_fn((1, h, w), |(_, r, c)| {
-            (first..end).map(|b| counts[[b, r, c]].into()).sum::<f64>()
-        });
-        binned_decays(window_photons.view(), (0, 1), options.binning, 0..h)
+        let mut plane = ndarray::Array3::<f64>::zeros((1, h, w));
+        for bin in window.outer_iter() {
+            plane.zip_mut_with(&bin, |a, &v| *a += v.into());
+        }
+        binned_decays(plane.view(), (0, 1), options.binning, 0..h)
     };
     let below = photons.iter().filter(|&&n| n < options.min_photons).count();
-    let summed: Vec<f64> = (0..n)
-        .map(|b| {
-            (0..h * w)
-                .filter(|&p| photons[p] >= options.min_photons)
-                .map(|p| counts[[first + b, p / w, p % w]].into())
+    // Planes iterate in row-major order: pixel p at row p / w, column p % w.
+    let summed: Vec<f64> = window
+        .outer_iter()
+        .map(|bin| {
+            bin.iter()
+                .zip(&photons)
+                .filter(|(_, n)| **n >= options.min_photons)
+                .map(|(&v, _)| v.into())
                 .sum()
         })
         .collect();
@@ -414,8 +419,8 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
     let summed_fit = fit_summed(&model, &summed, &bounds, options.objective, hold_shift);
     // No component of the summed decay determined: pure noise, a flat
     // background. (One of several undetermined is a model with more
-    // components than the light shows: its pixels are masked one by one.)
-    // (A singular curvature leaves every error NaN when one component is
+    // components than the light shows: its pixels are masked one by one.
+    // A singular curvature leaves every error NaN when one component is
     // empty: only a component's own photons or finite error count here.)
     let no_decay = (0..k).all(|c| {
         let (photons, tau, error) = (
@@ -507,10 +512,10 @@ fn fit_counts<T: Copy + Into<f64> + Sync>(
         summed_fit.reduced_chi2
     ));
     // A decay that does not fall: its peak in the window's last fifth.
-    if !matches!(options.irf, IrfSource::Tail) && argmax(&summed) * 5 >= 4 * n {
+    let summed_peak = argmax(&summed);
+    if !matches!(options.irf, IrfSource::Tail) && summed_peak * 5 >= 4 * n {
         notes.push(format!(
-            "the summed decay peaks at bin {} of the window's {n}: it rises instead of decaying (a ramp, or a window that ends before the decay): its lifetimes describe no decay",
-            argmax(&summed)
+            "the summed decay peaks at bin {summed_peak} of the window's {n}: it rises instead of decaying (a ramp, or a window that ends before the decay): its lifetimes describe no decay"
         ));
     }
     if summed_fit.reduced_chi2 > POOR_FIT_CHI2 {
