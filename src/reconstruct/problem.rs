@@ -236,47 +236,73 @@ impl Problem {
     /// (taken off, so that the earliest photons of the signal do not pass
     /// for background).
     fn dark_bins(&self) -> (Vec<(f64, f64)>, f64) {
+        let dark = self.dark_bins_with_light();
+        let their_light = dark.iter().map(|&(_, _, s)| s).sum();
+        (
+            dark.into_iter().map(|(t, c, _)| (t, c)).collect(),
+            their_light,
+        )
+    }
+
+    /// The bins before the first light as `(start ps, counts, the light
+    /// the kernels put there for an object explaining every count)`.
+    fn dark_bins_with_light(&self) -> Vec<(f64, f64, f64)> {
         let (_, h, w) = self.counts.dim();
         let total_mass: f64 = (0..self.model.bins()).map(|k| self.model.mass(k)).sum();
         let total: f64 = self.counts.sum();
-        let mut dark: Vec<(f64, f64)> = self.left_out.clone();
-        let mut their_light = 0.0;
+        let mut dark: Vec<(f64, f64, f64)> =
+            self.left_out.iter().map(|&(t, c)| (t, c, 0.0)).collect();
         for k in 0..self.model.bins() {
             let most_signal = total * self.model.mass(k) / total_mass;
             if most_signal < DARK_COUNTS_PER_PIXEL * (h * w) as f64 {
                 let counts = self.counts.index_axis(ndarray::Axis(0), k).sum();
-                dark.push((self.bin_starts_ps[k], counts));
-                their_light += most_signal;
+                dark.push((self.bin_starts_ps[k], counts, most_signal));
             }
         }
-        (dark, their_light)
+        dark
     }
 
     /// A warning when the bins before the model's first light are not
-    /// flat: their counts vary across the bins far beyond Poisson noise
-    /// (Pearson's dispersion, z above [`EARLY_LIGHT_Z`]) and by more than
-    /// a fifth of their mean. Then light arrives before the model says
-    /// (a thinner slab, a lower index, an earlier time zero), and the
-    /// background estimated from those bins holds signal.
+    /// flat: their counts, less the faint light the kernels themselves put
+    /// there, vary across the bins far beyond Poisson noise (Pearson's
+    /// dispersion, z above [`EARLY_LIGHT_Z`]) and by more than a fifth of
+    /// their mean. Then light arrives before the model says (a thinner
+    /// slab, a lower index, an earlier time zero), and the background
+    /// estimated from those bins holds signal.
     pub fn early_light(&self) -> Option<String> {
-        let (mut dark, _) = self.dark_bins();
+        let mut dark = self.dark_bins_with_light();
         if dark.len() < 3 {
             return None;
         }
         dark.sort_by(|a, b| a.0.total_cmp(&b.0));
         let n = dark.len() as f64;
-        let mean = dark.iter().map(|(_, c)| c).sum::<f64>() / n;
+        // The background level the bins share once the model's own light
+        // is taken off; each bin is expected to hold it plus that light.
+        let background = (dark.iter().map(|(_, c, s)| c - s).sum::<f64>() / n).max(0.0);
+        let mean = dark.iter().map(|(_, c, _)| c).sum::<f64>() / n;
         if mean <= 0.0 {
             return None;
         }
-        let chi2: f64 = dark.iter().map(|(_, c)| (c - mean).powi(2) / mean).sum();
+        let chi2: f64 = dark
+            .iter()
+            .map(|(_, c, s)| {
+                let expected = background + s;
+                (c - expected).powi(2) / expected.max(1.0)
+            })
+            .sum();
         let z = (chi2 - (n - 1.0)) / (2.0 * (n - 1.0)).sqrt();
-        let (lo, hi) = dark.iter().fold((f64::INFINITY, 0.0f64), |(l, h), (_, c)| {
-            (l.min(*c), h.max(*c))
-        });
-        (z > EARLY_LIGHT_Z && (hi - lo) > 0.2 * mean).then(|| {
+        let widest = dark
+            .iter()
+            .map(|(_, c, s)| (c - background - s).abs())
+            .fold(0.0f64, f64::max);
+        let (lo, hi) = dark
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(l, h), (_, c, _)| {
+                (l.min(*c), h.max(*c))
+            });
+        (z > EARLY_LIGHT_Z && widest > 0.1 * mean).then(|| {
             format!(
-                "the {} bins before the model's first light ({} to {} ps) are not flat (their counts range {lo:.0} to {hi:.0} per bin, dispersion z = {z:.0}): light arrives earlier than the model says (a thinner slab, a lower index or an earlier time zero than stated), and the background taken from them holds signal",
+                "the {} bins before the model's first light ({} to {} ps) are not flat (their counts range {lo:.0} to {hi:.0} per bin, dispersion z = {z:.0} after the model's own light there): light arrives earlier than the model says (a thinner slab, a lower index or an earlier time zero than stated), and the background taken from them holds signal",
                 dark.len(),
                 dark[0].0,
                 dark[dark.len() - 1].0 + self.setup.bins.width_ps
