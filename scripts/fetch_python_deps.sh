@@ -17,14 +17,17 @@
 # - flimlib (GPL-3), the lifetime-fitting reference `scatterscope fit` is
 #   held to (scripts/fit_reference.py): installed here for tests only,
 #   never linked, copied or shipped;
+# - iadpython (MIT), Prahl's adding-doubling: the slab's total reflection
+#   and transmission with mismatched faces, the reference the Monte Carlo
+#   transport is held to (scripts/adding_doubling_reference.py);
 # - playwright, which drives the system's Chromium (Debian's package; its
 #   own browser download is never used) in the live view's browser test.
 # Nothing is installed system-wide; the tests set PYTHONPATH to that folder.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dest=target/pydeps
-packages=(numpy scipy h5py ptufile OpenEXR tifffile ome-types tttrlib sdtfile phasorpy flimlib playwright)
-modules="numpy, scipy, h5py, ptufile, OpenEXR, tifffile, ome_types, tttrlib, sdtfile, phasorpy, flimlib, playwright"
+packages=(numpy scipy h5py ptufile OpenEXR tifffile ome-types tttrlib sdtfile phasorpy flimlib iadpython playwright)
+modules="numpy, scipy, h5py, ptufile, OpenEXR, tifffile, ome_types, tttrlib, sdtfile, phasorpy, flimlib, iadpython, playwright"
 if PYTHONPATH="$dest" python3 -c "import $modules" 2>/dev/null; then
     echo "already present under $dest: ${packages[*]}"
     exit 0
