@@ -242,8 +242,8 @@ impl PhysicsOverrides {
     /// Like [`Self::resolve_over`], with what an instrument response taken
     /// from a reference recording turned out to be, one line each.
     pub fn resolve_noted(&self, base: Option<Setup>) -> Result<(Setup, Vec<String>), ConfigError> {
-        let mut setup = self.resolve_flags(base)?;
-        let mut notes = Vec::new();
+        let (mut setup, moved) = self.resolve_flags(base)?;
+        let mut notes: Vec<String> = moved.into_iter().collect();
         let Some(reference) = &self.irf_from else {
             return Ok((setup, notes));
         };
@@ -290,8 +290,9 @@ impl PhysicsOverrides {
         Ok((setup, notes))
     }
 
-    /// Preset, file and the overrides other than the reference recording.
-    fn resolve_flags(&self, base: Option<Setup>) -> Result<Setup, ConfigError> {
+    /// Preset, file and the overrides other than the reference recording;
+    /// with a note when a preset's bins were moved to the first light.
+    fn resolve_flags(&self, base: Option<Setup>) -> Result<(Setup, Option<String>), ConfigError> {
         let file = match &self.config {
             Some(path) => Some((path.as_path(), read_file(path)?)),
             None => None,
@@ -303,15 +304,22 @@ impl PhysicsOverrides {
             },
             None => None,
         };
-        let mut s = match (self.preset.or(file_preset), base) {
-            (Some(p), _) => p.setup(),
-            (None, Some(b)) => b,
-            (None, None) => Preset::Paper.setup(),
+        let (preset, mut s) = match (self.preset.or(file_preset), base) {
+            (Some(p), _) => (Some(p), p.setup()),
+            (None, Some(b)) => (None, b),
+            (None, None) => (Some(Preset::Paper), Preset::Paper.setup()),
         };
+        let mut start_given = self.t_start.is_some();
         if let Some((path, f)) = &file {
-            file_as_overrides(path, f)?.apply(&mut s);
+            let from_file = file_as_overrides(path, f)?;
+            start_given |= from_file.t_start.is_some();
+            from_file.apply(&mut s);
         }
         self.apply(&mut s);
+        let moved = match preset {
+            Some(p) if !start_given => bins_to_first_light(p, &mut s),
+            _ => None,
+        };
         s.validate().map_err(|error| {
             let key = key_of(error.field);
             ConfigError::Param {
@@ -320,7 +328,7 @@ impl PhysicsOverrides {
                 config: self.config.clone(),
             }
         })?;
-        Ok(s)
+        Ok((s, moved))
     }
 
     fn apply(&self, s: &mut Setup) {
@@ -361,6 +369,31 @@ impl PhysicsOverrides {
             (None, None) => {}
         }
     }
+}
+
+/// A preset's bins under Monte Carlo transport, when every one of them
+/// ends before light can cross the slab (`n d / c`; the paper's preset
+/// bins 0-120 ps, its light arrives from 140.1 ps): moved to start one
+/// bin before the first light, on the preset's bin grid, and said. Bins a
+/// user gave (`--t-start`, `t_start` in a file) or a stack recorded are
+/// never moved.
+fn bins_to_first_light(preset: Preset, s: &mut Setup) -> Option<String> {
+    let first = s.medium.first_light_ps();
+    let width = s.bins.width_ps;
+    let end = s.bins.start_ps + s.bins.count as f64 * width;
+    if s.medium.model != MediumModel::MonteCarlo
+        || !(width > 0.0 && first.is_finite() && end <= first)
+    {
+        return None;
+    }
+    let from = s.bins.start_ps;
+    s.bins.start_ps = ((first / width).floor() - 1.0).max(0.0) * width;
+    Some(format!(
+        "bins: the {} preset's bins ({from}-{end} ps) end before light can cross the slab (n d / c = {first:.1} ps); with the monte-carlo medium its {} bins of {width} ps start at {} ps instead (--t-start chooses)",
+        preset.name(),
+        s.bins.count,
+        s.bins.start_ps
+    ))
 }
 
 /// The TOML key (and override) that sets a [`Setup`] field.

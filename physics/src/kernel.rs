@@ -71,7 +71,8 @@ pub struct BinInfo {
     pub photons: f64,
     /// Whether the bin carries at least `min_bin_photons` and is kept.
     pub kept: bool,
-    /// Lateral standard deviation at the bin centre (pixels).
+    /// Lateral standard deviation at the bin centre (pixels): diffusion's,
+    /// or measured from the kernel's light under Monte Carlo transport.
     pub sigma_px: f64,
     /// Largest kernel value (photons per pixel).
     pub peak: f64,
@@ -83,6 +84,24 @@ pub struct BinInfo {
     /// by Monte Carlo transport.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub relative_error: Option<f64>,
+}
+
+/// A kernel's lateral standard deviation along one axis (pixels), from
+/// its light: the root mean square distance from its centre over the
+/// square root of 2 (a Gaussian's sigma, for kernels that are not).
+fn measured_sigma_px(local: &LocalKernel) -> f64 {
+    let (ry, rx) = local.radius;
+    let (mut mass, mut second) = (0.0, 0.0);
+    for ((y, x), &v) in local.values.indexed_iter() {
+        let (dy, dx) = (y as f64 - ry as f64, x as f64 - rx as f64);
+        mass += v;
+        second += v * (dy * dy + dx * dx);
+    }
+    if mass > 0.0 {
+        (second / (2.0 * mass)).sqrt()
+    } else {
+        0.0
+    }
 }
 
 /// The ST-PSF kernels of all kept bins, normalised to the setup's light budget.
@@ -217,13 +236,22 @@ impl KernelStack {
                 end_ps,
                 photons,
                 kept,
-                sigma_px: diffusion.lateral_sigma_cm(0.5 * (start_ps + end_ps)) / pitch,
+                // Transport's is measured from the kernel's light below
+                // (0 where a bin has none).
+                sigma_px: if setup.medium.model == MediumModel::MonteCarlo {
+                    0.0
+                } else {
+                    diffusion.lateral_sigma_cm(0.5 * (start_ps + end_ps)) / pitch
+                },
                 peak: 0.0,
                 support_radius_px: 0,
                 time_nodes: 0,
-                relative_error: relative_errors[k],
+                relative_error: relative_errors[k].filter(|e| e.is_finite()),
             };
             if let Some(local) = local {
+                if setup.medium.model == MediumModel::MonteCarlo {
+                    info.sigma_px = measured_sigma_px(&local);
+                }
                 let factor = (local.log_scale + log_budget).exp();
                 info.peak = local.values.iter().fold(0.0f64, |m, &v| m.max(v)) * factor;
                 info.support_radius_px = local.radius.0.max(local.radius.1);
