@@ -75,6 +75,7 @@
 
 pub mod acquire;
 pub mod batch;
+pub mod cache;
 pub mod calibrate;
 pub mod cnn;
 pub mod config;

@@ -117,6 +117,8 @@ pub struct KernelStack {
     pub kernels: Array3<f64>,
     /// One entry per bin of the setup, kept or not.
     pub bins: Vec<BinInfo>,
+    /// For kernels made by Monte Carlo transport: what the run cache did.
+    pub transport_cache: Option<crate::transport_cache::CacheUse>,
 }
 
 /// A bin's kernel on its support, scaled by `exp(-log_scale)`.
@@ -145,6 +147,7 @@ impl KernelStack {
         }
         let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
         let mut relative_errors = vec![None; setup.bins.count];
+        let mut transport_cache = None;
         let locals: Vec<Option<LocalKernel>> = if setup.medium.model == MediumModel::MonteCarlo {
             if sampling == Sampling::Point {
                 return Err(ParamError::new(
@@ -161,6 +164,7 @@ impl KernelStack {
             for (e, r) in relative_errors.iter_mut().zip(&mc.relative_errors) {
                 *e = Some(*r);
             }
+            transport_cache = Some(mc.cache);
             mc.kernels
                 .into_iter()
                 .map(|k| {
@@ -279,6 +283,7 @@ impl KernelStack {
             diffusion,
             kernels,
             bins,
+            transport_cache,
         })
     }
 

@@ -26,6 +26,7 @@ pub mod params;
 pub mod quadrature;
 pub mod slab;
 pub mod transport;
+pub mod transport_cache;
 pub mod validity;
 
 pub use diffusion::Diffusion;

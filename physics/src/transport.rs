@@ -387,6 +387,8 @@ pub struct SetupKernels {
     pub kernels: Vec<Option<Array2<f64>>>,
     /// Per bin: the relative standard error of its light.
     pub relative_errors: Vec<f64>,
+    /// What the run cache did ([`crate::transport_cache`]).
+    pub cache: crate::transport_cache::CacheUse,
 }
 
 /// Kernels of `setup`'s bins by Monte Carlo transport: `packets` packets
@@ -456,7 +458,9 @@ pub fn setup_kernels(
         // Light later than the grid's end reaches no bin.
         max_path_cm: (end + fine) * light_speed_cm_per_ps(m.refractive_index),
     };
-    let t = transport(&slab, Source::Lambertian, &grid, &run).map_err(as_param)?;
+    let (t, cache) =
+        crate::transport_cache::transport_cached(&slab, Source::Lambertian, &grid, &run)
+            .map_err(as_param)?;
     let mut kernels = Vec::with_capacity(bins.count);
     let mut relative_errors = Vec::with_capacity(bins.count);
     for k in 0..bins.count {
@@ -492,6 +496,7 @@ pub fn setup_kernels(
     Ok(SetupKernels {
         kernels,
         relative_errors,
+        cache,
     })
 }
 

@@ -155,6 +155,9 @@ pub fn describe_setup(setup: &Setup, kernels: &crate::KernelStack) -> Vec<String
             100.0 * worst,
             crate::transport::SETUP_PACKETS
         ));
+        if let Some(cache) = &kernels.transport_cache {
+            lines.push(format!("transport run: {cache}"));
+        }
         return lines;
     }
     let full = (setup.sensor.height_px * setup.sensor.width_px) as f64;

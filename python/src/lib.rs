@@ -1189,6 +1189,7 @@ fn version() -> &'static str {
 
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    scatterscope::cache::use_default();
     m.add("ScatterscopeError", m.py().get_type::<ScatterscopeError>())?;
     m.add_function(wrap_pyfunction!(read_tags, m)?)?;
     m.add_function(wrap_pyfunction!(bin_file, m)?)?;

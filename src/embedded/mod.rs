@@ -621,6 +621,7 @@ fn group_kernels(kernels: &KernelStack, groups: &[(usize, usize)]) -> KernelStac
         diffusion: kernels.diffusion,
         kernels: summed,
         bins,
+        transport_cache: kernels.transport_cache.clone(),
     }
 }
 

@@ -26,7 +26,7 @@ pub fn run<S: AsRef<OsStr>>(args: &[S]) -> Output {
 
 /// Runs the program with `args` apart from the user's set-up: no weights
 /// variable and an empty data directory (so the prior is the embedded
-/// one), no backtraces in its errors.
+/// one), no cache folder, no backtraces in its errors.
 #[allow(dead_code)]
 pub fn run_isolated<S: AsRef<OsStr>>(args: &[S]) -> Output {
     run_with_data_dir(args, Path::new("/nonexistent/scatterscope-test-data"))
@@ -39,6 +39,7 @@ pub fn run_with_data_dir<S: AsRef<OsStr>>(args: &[S], data_dir: &Path) -> Output
         .args(args)
         .env_remove("SCATTERSCOPE_FFDNET_WEIGHTS")
         .env("SCATTERSCOPE_DATA_DIR", data_dir)
+        .env("SCATTERSCOPE_CACHE_DIR", "")
         .env("RUST_BACKTRACE", "0")
         .output()
         .expect("binary runs")

@@ -159,6 +159,7 @@ fn main() -> std::process::ExitCode {
         args.forwarded = bench_recon::forwarded(m);
     }
     scatterscope::memory::set_limit(cli.memory_limit);
+    scatterscope::cache::use_default();
     // One command per process: no output may replace a file it read.
     scatterscope::files::input::remember_inputs();
     let run = signals::install().and_then(|()| dispatch(cli.command));
