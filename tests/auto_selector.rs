@@ -12,7 +12,7 @@ use scatterscope::physics::Preset;
 use scatterscope::reconstruct::Reconstruction;
 use scatterscope::reconstruct::auto::chosen;
 use scatterscope::reconstruct::method::{Method, MethodOptions, run_method};
-use scatterscope::report::bench::{BenchImage, level_setup, simulate_case};
+use scatterscope::report::bench::{BenchImage, CaseSimulation, level_setup, simulate_case};
 
 /// The benchmark's simulation of scene `name` at `level` times the
 /// paper's light, its pixels `pitch` times the paper's.
@@ -26,7 +26,7 @@ fn case(name: &str, level: f64, pitch: f64) -> Problem {
     };
     let mut setup = level_setup(&Preset::Paper.setup(), level).unwrap();
     setup.sensor.fov_cm *= pitch;
-    simulate_case(&image, &setup, 384, 0).unwrap().problem
+    simulate_case(&image, &setup, 384, 0, &CaseSimulation::default()).unwrap().problem
 }
 
 fn run(problem: &Problem, method: Method) -> Reconstruction {
@@ -193,9 +193,9 @@ fn a_growing_acquisitions_check_keeps_each_photon_in_its_half_and_carries_its_se
         split: "tuning".into(),
     };
     let setup = level_setup(&Preset::Paper.setup(), 0.5).unwrap();
-    let first = simulate_case(&image, &setup, 384, 0).unwrap();
-    let later = simulate_case(&image, &setup, 384, 1).unwrap();
-    let mut grown = simulate_case(&image, &setup, 384, 0).unwrap().problem;
+    let first = simulate_case(&image, &setup, 384, 0, &CaseSimulation::default()).unwrap();
+    let later = simulate_case(&image, &setup, 384, 1, &CaseSimulation::default()).unwrap();
+    let mut grown = simulate_case(&image, &setup, 384, 0, &CaseSimulation::default()).unwrap().problem;
     grown.counts += &later.problem.counts;
     let carried = CarriedSearch::new(CarriedSearch::LIVE_STEPS);
     let opts = MethodOptions::default();

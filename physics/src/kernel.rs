@@ -86,6 +86,37 @@ pub struct BinInfo {
     pub relative_error: Option<f64>,
 }
 
+/// A Monte Carlo kernel on the sensor (centred at `(h / 2, w / 2)`) cut
+/// to the square that holds all its light: light travels no farther
+/// sideways than its path allows, so late bins reach farther than early
+/// ones. Kept whole when its light reaches the sensor's edge.
+fn lit_support(values: Array2<f64>, (h, w): (usize, usize)) -> LocalKernel {
+    let (cy, cx) = (h / 2, w / 2);
+    let reach = values
+        .indexed_iter()
+        .filter(|&(_, &v)| v > 0.0)
+        .map(|((y, x), _)| y.abs_diff(cy).max(x.abs_diff(cx)))
+        .max()
+        .unwrap_or(0);
+    let whole = reach > (h - 1 - cy).min(w - 1 - cx).min(cy).min(cx);
+    if whole {
+        return LocalKernel {
+            values,
+            log_scale: 0.0,
+            radius: (cy, cx),
+            nodes: 0,
+        };
+    }
+    LocalKernel {
+        values: values
+            .slice(s![cy - reach..=cy + reach, cx - reach..=cx + reach])
+            .to_owned(),
+        log_scale: 0.0,
+        radius: (reach, reach),
+        nodes: 0,
+    }
+}
+
 /// A kernel's lateral standard deviation along one axis (pixels), from
 /// its light: the root mean square distance from its centre over the
 /// square root of 2 (a Gaussian's sigma, for kernels that are not).
@@ -167,14 +198,7 @@ impl KernelStack {
             transport_cache = Some(mc.cache);
             mc.kernels
                 .into_iter()
-                .map(|k| {
-                    k.map(|values| LocalKernel {
-                        values,
-                        log_scale: 0.0,
-                        radius: (h / 2, w / 2),
-                        nodes: 0,
-                    })
-                })
+                .map(|k| k.map(|values| lit_support(values, (h, w))))
                 .collect()
         } else {
             match &setup.irf {

@@ -159,13 +159,15 @@ pub struct BenchCase {
     pub problem: Problem,
 }
 
-/// Simulates `image` through `setup`: the object on a square grid of side
-/// `object_px` (>= the sensor), the sensor seeing its centre.
+/// Simulates `image` through `setup` as `how` says: the object on a
+/// square grid of side `object_px` (>= the sensor), the sensor seeing its
+/// centre.
 pub fn simulate_case(
     image: &BenchImage,
     setup: &Setup,
     object_px: usize,
     seed: u64,
+    how: &CaseSimulation,
 ) -> Result<BenchCase, ReportError> {
     let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
     if object_px < h.max(w) {
@@ -183,7 +185,7 @@ pub fn simulate_case(
             full
         }
     };
-    simulate_object(object, setup, seed, &CaseSimulation::default())
+    simulate_object(object, setup, seed, how)
 }
 
 /// How a simulated case discretises the ST-PSF. The benchmark simulates
@@ -995,6 +997,12 @@ pub struct BenchConfig {
     /// The physics at level 1.
     #[cfg_attr(feature = "cli", arg(skip = crate::physics::Preset::Paper.setup()))]
     pub setup: Setup,
+    /// The medium model the light is simulated with, when it is not the
+    /// one the methods reconstruct with (`--medium`): e.g. stacks of light
+    /// as it travels (`monte-carlo`) reconstructed with diffusion's
+    /// kernels.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "MODEL", value_parser = crate::config::parse_medium))]
+    pub simulate_medium: Option<crate::physics::MediumModel>,
     /// The methods' settings.
     #[cfg_attr(feature = "cli", arg(skip))]
     pub opts: MethodOptions,
@@ -1075,7 +1083,14 @@ pub fn run_benchmark(
             {
                 continue;
             }
-            let case = simulate_case(image, setup, cfg.object_px, cfg.seed)?;
+            let how = CaseSimulation {
+                true_medium: cfg.simulate_medium.map(|model| crate::physics::Medium {
+                    model,
+                    ..setup.medium
+                }),
+                ..CaseSimulation::default()
+            };
+            let case = simulate_case(image, setup, cfg.object_px, cfg.seed, &how)?;
             let mut trace_error = None;
             let new = run_case(
                 image,
@@ -1125,7 +1140,13 @@ fn write_summary(
     headline: &str,
     cfg: &BenchConfig,
 ) -> Result<String, ReportError> {
-    let mut md = summary_markdown(rows, headline, &rl_default_label(&cfg.opts));
+    let model = cfg.setup.medium.model;
+    let mut md = format!(
+        "Light simulated with the {} medium, reconstructed with the {} medium.\n",
+        cfg.simulate_medium.unwrap_or(model).name(),
+        model.name()
+    );
+    md.push_str(&summary_markdown(rows, headline, &rl_default_label(&cfg.opts)));
     md.push_str("\n### Every method against RL's best iteration chosen with the truth\n\n");
     md.push_str(&verdict_markdown(rows));
     write_time_figure(rows, &cfg.out.join("psnr_vs_time.png"))?;
