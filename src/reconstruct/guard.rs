@@ -162,6 +162,11 @@ pub struct Verdict {
     pub fallback: Estimate,
     /// Its estimate on the model's grid (the halves' sum).
     pub fallback_grid: Array2<f64>,
+    /// Each half's Richardson-Lucy estimate at its stop, on the model's
+    /// grid.
+    pub rl_points: Vec<Vec<f64>>,
+    /// Each half's network estimate, on the model's grid.
+    pub network_points: [Vec<f64>; 2],
 }
 
 impl Verdict {
@@ -182,20 +187,22 @@ impl Verdict {
 /// starts from the search's own iterates where its steps are plain.
 /// `rl-sum`'s search up to
 /// `max_iters` steps of `acceleration` writing its rows and notes to
-/// `run`.
+/// `run`. The halves are `given` (two halves of the time-summed counts,
+/// and how they were made), else carried or thinned here.
 pub fn check(
     net: &LearnedNet,
     data: &Data<'_>,
     (max_iters, acceleration): (usize, Acceleration),
     carried: Option<&CarriedSearch>,
+    given: Option<([Array2<f64>; 2], String)>,
     run: &mut Run<'_>,
 ) -> Result<Option<Verdict>, ReconstructError> {
     let model = data.model;
     let rl = RlOperator::new(model, data.bins);
     let summed = data.counts.sum_axis(Axis(0));
-    let grown = match carried {
-        Some(c) => c.grow(&summed, rl.len())?,
-        None => None,
+    let grown = match (carried, &given) {
+        (Some(c), None) => c.grow(&summed, rl.len())?,
+        _ => None,
     };
     let (halves, how, start, before, max_iters) = match grown {
         Some(g) => (
@@ -206,7 +213,10 @@ pub fn check(
             carried.map_or(0, |c| c.steps),
         ),
         None => {
-            let (halves, how) = thinned_halves(&summed)?;
+            let (halves, how) = match given {
+                Some(g) => g,
+                None => thinned_halves(&summed)?,
+            };
             let most = carried.map_or(max_iters, |c| c.steps.min(max_iters));
             (halves, how, None, 0, most)
         }
@@ -250,8 +260,9 @@ pub fn check(
         run_stages(net, model, &rl, &inputs)
     };
     let (first, second) = rayon::join(|| network_on(0), || network_on(1));
+    let nets = [first, second];
     let (mut network, mut richardson_lucy, mut variance) = (0.0, 0.0, 0.0);
-    for (fold, net_estimate) in [first, second].iter().enumerate() {
+    for (fold, net_estimate) in nets.iter().enumerate() {
         let other: Vec<f64> = halves[1 - fold].iter().copied().collect();
         let y_net = rl.apply(net_estimate);
         let y_rl = rl.apply(&best.points[fold]);
@@ -272,7 +283,7 @@ pub fn check(
     if let Some(c) = carried {
         c.keep(Carried {
             halves,
-            points: best.points,
+            points: best.points.clone(),
             iterations: before + best.iteration,
         });
     }
@@ -285,5 +296,7 @@ pub fn check(
             iteration: before + best.iteration,
         },
         fallback_grid: Array2::from_shape_vec(model.grid_shape(), grid).expect("the model's grid"),
+        rl_points: best.points,
+        network_points: nets,
     }))
 }

@@ -23,6 +23,9 @@
 //!   corrected by a small CNN trained here on the project's own
 //!   simulations.
 //!
+//! - [`time_axis`]: what the time axis adds, and when the default weighs
+//!   whole-stack Richardson-Lucy.
+//!
 //! What they share sits beside them: [`em`] (the Richardson-Lucy step and
 //! its stopping), [`likelihood`], [`discrepancy`] and [`operator`]; what
 //! they share with the hidden-volume methods ([`crate::confocal`]) sits
@@ -47,6 +50,7 @@ pub mod rl_sum;
 pub mod run;
 pub mod scaled_counts;
 pub mod split;
+pub mod time_axis;
 pub mod trace;
 
 pub use data::Data;

@@ -15,7 +15,8 @@ use rayon::prelude::*;
 
 use super::data::{Data, flat_level};
 use super::em::{
-    Acceleration, DENOMINATOR_GUARD, Keep, RlStop, cv_search, em_multiply, fixed_steps, half_scores,
+    Acceleration, CvBest, DENOMINATOR_GUARD, Keep, RlStop, cv_search, em_multiply, fixed_steps,
+    half_scores,
 };
 use super::error::ReconstructError;
 use super::run::{Estimate, Reconstructor, Run, WorkShape, grid_note};
@@ -109,15 +110,26 @@ fn cross_validated(
     run: &mut Run<'_>,
 ) -> Result<Estimate, ReconstructError> {
     let (model, counts, bins) = (data.model, data.counts, data.bins);
-    let em = StackEm::new(model, bins);
-    let (h, w) = model.sensor_shape();
     let total: f64 = counts.sum();
-    if total == 0.0 || em.mass <= 0.0 {
-        return Ok(run.no_photons((h, w)));
+    if total == 0.0 || bins.iter().map(|&k| model.mass(k)).sum::<f64>() <= 0.0 {
+        return Ok(run.no_photons(model.sensor_shape()));
     }
-    let mut firsts = Vec::with_capacity(bins.len());
-    let mut seconds = Vec::with_capacity(bins.len());
-    for (k, img) in counts.axis_iter(Axis(0)).enumerate() {
+    let halves = stack_halves(data)?;
+    let best = search_stack(data, &halves, (max_iters, acceleration), Keep::NOTHING, run);
+    Ok(Estimate {
+        image: best.image,
+        iteration: best.iteration,
+    })
+}
+
+/// Each bin's counts thinned into two independent halves (binomial
+/// thinning, seed [`THINNING_SEED`] plus the bin's index): per half, one
+/// row-major image per bin. Summed over the bins, each half is a thinned
+/// half of the time-summed counts.
+pub(crate) fn stack_halves(data: &Data<'_>) -> Result<[Vec<Vec<f64>>; 2], ReconstructError> {
+    let mut firsts = Vec::with_capacity(data.bins.len());
+    let mut seconds = Vec::with_capacity(data.bins.len());
+    for (k, img) in data.counts.axis_iter(Axis(0)).enumerate() {
         let (a, b) = thin_halves(
             &img.to_owned(),
             THINNING_SEED.wrapping_add(k as u64),
@@ -126,7 +138,25 @@ fn cross_validated(
         firsts.push(a.iter().copied().collect::<Vec<f64>>());
         seconds.push(b.iter().copied().collect::<Vec<f64>>());
     }
-    let halves = [firsts, seconds];
+    Ok([firsts, seconds])
+}
+
+/// Whole-stack RL's cross-validated search on the per-bin `halves`
+/// ([`stack_halves`]): the iteration run on each half from the flat
+/// object, each scored on the other's counts in every bin, up to
+/// `max_iters` steps of `acceleration`; with what `keep` asks for. The
+/// data hold photons.
+pub(crate) fn search_stack(
+    data: &Data<'_>,
+    halves: &[Vec<Vec<f64>>; 2],
+    (max_iters, acceleration): (usize, Acceleration),
+    keep: Keep<'_>,
+    run: &mut Run<'_>,
+) -> CvBest {
+    let (model, counts, bins) = (data.model, data.counts, data.bins);
+    let em = StackEm::new(model, bins);
+    let (h, w) = model.sensor_shape();
+    let total: f64 = counts.sum();
     let halves_log = halves.each_ref().map(|h| {
         h.iter()
             .map(|m| m.iter().map(|&x| m_log_m(x)).collect())
@@ -148,12 +178,12 @@ fn cross_validated(
     ));
     run.note(em.note(model, guard));
     run.note_background(model);
-    let best = cv_search(
+    cv_search(
         model,
         o,
         max_iters,
         acceleration,
-        Keep::NOTHING,
+        keep,
         run,
         |x| em.forward(x),
         |y, half| {
@@ -172,11 +202,7 @@ fn cross_validated(
             // this likelihood: its logarithms are left out.
             em.update(x, y, &halves[half], bg, guard, false);
         },
-    );
-    Ok(Estimate {
-        image: best.image,
-        iteration: best.iteration,
-    })
+    )
 }
 
 /// The whole-stack EM operator: every kept bin's kernel (through a
