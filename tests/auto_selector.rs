@@ -26,7 +26,9 @@ fn case(name: &str, level: f64, pitch: f64) -> Problem {
     };
     let mut setup = level_setup(&Preset::Paper.setup(), level).unwrap();
     setup.sensor.fov_cm *= pitch;
-    simulate_case(&image, &setup, 384, 0, &CaseSimulation::default()).unwrap().problem
+    simulate_case(&image, &setup, 384, 0, &CaseSimulation::default())
+        .unwrap()
+        .problem
 }
 
 fn run(problem: &Problem, method: Method) -> Reconstruction {
@@ -195,7 +197,9 @@ fn a_growing_acquisitions_check_keeps_each_photon_in_its_half_and_carries_its_se
     let setup = level_setup(&Preset::Paper.setup(), 0.5).unwrap();
     let first = simulate_case(&image, &setup, 384, 0, &CaseSimulation::default()).unwrap();
     let later = simulate_case(&image, &setup, 384, 1, &CaseSimulation::default()).unwrap();
-    let mut grown = simulate_case(&image, &setup, 384, 0, &CaseSimulation::default()).unwrap().problem;
+    let mut grown = simulate_case(&image, &setup, 384, 0, &CaseSimulation::default())
+        .unwrap()
+        .problem;
     grown.counts += &later.problem.counts;
     let carried = CarriedSearch::new(CarriedSearch::LIVE_STEPS);
     let opts = MethodOptions::default();

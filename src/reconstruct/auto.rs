@@ -23,8 +23,8 @@ use super::error::ReconstructError;
 use super::guard::{self, CarriedSearch, GUARD_TAU};
 use super::learned::Learned;
 use super::rl_stack::{self, RlStack};
-use super::time_axis;
 use super::run::{Estimate, Reconstructor, Run, WorkShape};
+use super::time_axis;
 use super::trace::Trace;
 use crate::poisson::thinning::THINNING_SEED;
 
@@ -224,8 +224,14 @@ impl Reconstructor for Auto<'_> {
             );
             (summed, how)
         });
-        let Some(verdict) =
-            guard::check(self.learned.net, data, self.search, self.carried, given, run)?
+        let Some(verdict) = guard::check(
+            self.learned.net,
+            data,
+            self.search,
+            self.carried,
+            given,
+            run,
+        )?
         else {
             run.note("auto: a thinned half of the counts holds no photon: nothing to check the network against; Richardson-Lucy with its cross-validated stop instead");
             let out = self.learned.outside.reconstruct(data, run)?;

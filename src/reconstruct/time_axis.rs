@@ -22,8 +22,8 @@
 //! standard deviations.
 
 use ndarray::Array2;
-use rustfft::num_complex::Complex64;
 use rayon::prelude::*;
+use rustfft::num_complex::Complex64;
 
 use super::em::DENOMINATOR_GUARD;
 use crate::forward::ForwardModel;
@@ -167,4 +167,88 @@ pub fn summed_halves(halves: &[Vec<Vec<f64>>; 2], shape: (usize, usize)) -> [Arr
         }
         Array2::from_shape_vec(shape, sum).expect("the sensor's shape")
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use ndarray::{Array3, s};
+
+    use super::*;
+    use crate::forward::Boundary;
+    use crate::physics::{KernelStack, Preset, Sampling};
+
+    /// The paper's setup on a 64-pixel sensor (Eq. 6).
+    fn paper(size: usize) -> KernelStack {
+        let mut setup = Preset::Paper.setup();
+        setup.sensor.width_px = size;
+        setup.sensor.height_px = size;
+        setup.sensor.fov_cm = 50.0 * size as f64 / 256.0;
+        KernelStack::build(&setup, Sampling::Integrated).unwrap()
+    }
+
+    /// Kernels that are one shape scaled carry no more than their sum:
+    /// the gain is 1 (Cauchy-Schwarz's equality); the paper's preset by
+    /// Eq. 6 gains little (under rule R90a's bound); a first bin that is
+    /// a point (ballistic light) beside a blurred one gains far more.
+    #[test]
+    fn the_gain_is_one_for_one_shape_and_large_for_a_ballistic_bin() {
+        let mut kernels = paper(64);
+        let bins: Vec<usize> = (0..kernels.kernels.dim().0).collect();
+        let eq6 =
+            information_gain(&ForwardModel::new(&kernels, Boundary::Periodic), &bins).unwrap();
+        assert!(eq6 > 1.0 && eq6 < MIN_GAIN, "{eq6}");
+
+        let summed = kernels.kernels.sum_axis(ndarray::Axis(0));
+        let k = kernels.kernels.dim().0;
+        let mut same = Array3::<f64>::zeros(kernels.kernels.dim());
+        for i in 0..k {
+            same.slice_mut(s![i, .., ..])
+                .assign(&(&summed * (1.0 + i as f64)));
+        }
+        kernels.kernels = same;
+        let one =
+            information_gain(&ForwardModel::new(&kernels, Boundary::Periodic), &bins).unwrap();
+        assert!((one - 1.0).abs() < 1e-9, "{one}");
+
+        // Bin 0 a point at the centre holding 8 % of the light, the
+        // others as before: where the sum passes 8-12 %, the point
+        // carries most of it, and G = 0.08 / t^2 lies in 5.6-12.5 (most
+        // such frequencies lie far out, where the sum passes 8 %).
+        let mut ballistic = kernels.kernels.clone();
+        ballistic.slice_mut(s![0, .., ..]).fill(0.0);
+        let others = ballistic.sum();
+        ballistic[[0, 32, 32]] = others * 0.08 / 0.92;
+        kernels.kernels = ballistic;
+        let gain =
+            information_gain(&ForwardModel::new(&kernels, Boundary::Periodic), &bins).unwrap();
+        assert!(gain > MIN_GAIN && gain < 12.5 + 1e-6, "{gain}");
+        assert_eq!(
+            information_gain(&ForwardModel::new(&kernels, Boundary::Periodic), &bins[..1]),
+            None
+        );
+    }
+
+    /// The same estimates score the same (difference 0, no noise); an
+    /// estimate of the truth predicts a held-back half better than a
+    /// flat one, by many noise standard deviations.
+    #[test]
+    fn held_back_prefers_the_truth_and_ties_itself() {
+        let kernels = paper(32);
+        let model = ForwardModel::new(&kernels, Boundary::Periodic);
+        let bins: Vec<usize> = (0..model.bins()).collect();
+        let truth = crate::scene::Scene::parse("disks").render(32, 32).unwrap();
+        let expected = model.expected(truth.view());
+        let counts = crate::forward::poisson_counts(&(&expected.counts * 50.0), 3);
+        let data = super::super::data::Data::new(&model, &counts, &bins).unwrap();
+        let halves = super::super::rl_stack::stack_halves(&data).unwrap();
+        let t: Vec<f64> = truth.iter().map(|v| v * 25.0).collect();
+        let flat = vec![t.iter().sum::<f64>() / t.len() as f64; t.len()];
+        let tie = held_back(&model, &bins, &halves, [&t, &t], [&t, &t]);
+        assert_eq!(tie.stack, tie.other);
+        assert_eq!(tie.sigma, 0.0);
+        let h = held_back(&model, &bins, &halves, [&t, &t], [&flat, &flat]);
+        assert!(h.stack_wins(STACK_TAU), "{h:?}");
+        let summed = summed_halves(&halves, (32, 32));
+        assert_eq!(summed[0].sum() + summed[1].sum(), counts.sum());
+    }
 }

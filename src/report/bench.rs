@@ -1146,7 +1146,11 @@ fn write_summary(
         cfg.simulate_medium.unwrap_or(model).name(),
         model.name()
     );
-    md.push_str(&summary_markdown(rows, headline, &rl_default_label(&cfg.opts)));
+    md.push_str(&summary_markdown(
+        rows,
+        headline,
+        &rl_default_label(&cfg.opts),
+    ));
     md.push_str("\n### Every method against RL's best iteration chosen with the truth\n\n");
     md.push_str(&verdict_markdown(rows));
     write_time_figure(rows, &cfg.out.join("psnr_vs_time.png"))?;
