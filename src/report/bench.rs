@@ -306,17 +306,20 @@ fn expected_window(
     crate::memory::check_setup(&wide, crate::memory::SIMULATE_BYTES, "a benchmark case")
         .map_err(|e| ReportError::Input(e.to_string()))?;
     let sim_kernels = KernelStack::build(&wide, sampling)?;
-    let bins: Vec<usize> = kernels
+    // Per bin the model keeps: the simulation's kernel of it, or none
+    // where the simulated medium puts no light in it (light as it travels
+    // arrives no earlier than it can cross the slab; the model's medium
+    // may say otherwise): those bins' counts are zero.
+    let lit: Vec<Option<usize>> = kernels
         .kept_bins()
-        .map(|b| {
-            sim_kernels.position_of_bin(b.index).ok_or_else(|| {
-                ReportError::Input(format!(
-                    "bin {} carries no light in the simulation's medium",
-                    b.index
-                ))
-            })
-        })
-        .collect::<Result<_, _>>()?;
+        .map(|b| sim_kernels.position_of_bin(b.index))
+        .collect();
+    if lit.iter().all(Option::is_none) {
+        return Err(ReportError::Input(
+            "no bin the model keeps carries light in the simulation's medium".into(),
+        ));
+    }
+    let bins: Vec<usize> = lit.iter().flatten().copied().collect();
     let reach = bins
         .iter()
         .map(|&k| sim_kernels.kept_bins().nth(k))
@@ -353,7 +356,19 @@ fn expected_window(
         }
         sum
     };
-    let window = Array3::from_shape_fn((bins.len(), h, w), |(k, r, c)| block(r, c, Some(k)));
+    let mut at = 0;
+    let rows: Vec<Option<usize>> = lit
+        .iter()
+        .map(|l| {
+            l.map(|_| {
+                at += 1;
+                at - 1
+            })
+        })
+        .collect();
+    let window = Array3::from_shape_fn((lit.len(), h, w), |(k, r, c)| {
+        rows[k].map_or(0.0, |j| block(r, c, Some(j)))
+    });
     let cells = (factor * factor) as f64;
     let truth = Array2::from_shape_fn((h, w), |(r, c)| block(r, c, None) / cells);
     Ok((window, truth))
