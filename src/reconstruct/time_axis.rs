@@ -48,7 +48,7 @@ pub fn information_gain(model: &ForwardModel, bins: &[usize]) -> Option<f64> {
     }
     let masses: Vec<f64> = bins.iter().map(|&k| model.mass(k)).collect();
     let total: f64 = masses.iter().sum();
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return None;
     }
     let len = model.spectrum(bins[0]).len();
