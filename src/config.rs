@@ -11,7 +11,7 @@
 
 use std::path::{Path, PathBuf};
 
-use scatterscope_physics::{InstrumentResponse, Irf, MediumModel, Preset, Setup};
+use scatterscope_physics::{InstrumentResponse, Irf, MediumModel, ParamError, Preset, Setup};
 use serde::Deserialize;
 
 use crate::units::{parse_cm_or_bare, parse_ps};
@@ -139,11 +139,12 @@ pub struct PhysicsOverrides {
     #[cfg_attr(feature = "cli", arg(long, value_name = "LENGTH", value_parser = parse_cm_or_bare, allow_negative_numbers = true))]
     pub thickness: Option<f64>,
     /// The medium: infinite (the paper's Eq. 6), slab (extrapolated
-    /// boundaries, image sources; transmitted flux) or monte-carlo (light
+    /// boundaries, image sources; transmitted flux), monte-carlo (light
     /// as it travels: photon transport through the slab, where diffusion
-    /// fails).
+    /// fails) or auto (slab where its measured error against transport
+    /// is within a tenth of the light, else monte-carlo; said).
     #[cfg_attr(feature = "cli", arg(long, value_name = "MODEL", value_parser = parse_medium))]
-    pub medium: Option<MediumModel>,
+    pub medium: Option<MediumChoice>,
     /// Horizontal field of view (default unit cm).
     #[cfg_attr(feature = "cli", arg(long, value_name = "LENGTH", value_parser = parse_cm_or_bare, allow_negative_numbers = true))]
     pub fov: Option<f64>,
@@ -242,8 +243,7 @@ impl PhysicsOverrides {
     /// Like [`Self::resolve_over`], with what an instrument response taken
     /// from a reference recording turned out to be, one line each.
     pub fn resolve_noted(&self, base: Option<Setup>) -> Result<(Setup, Vec<String>), ConfigError> {
-        let (mut setup, moved) = self.resolve_flags(base)?;
-        let mut notes: Vec<String> = moved.into_iter().collect();
+        let (mut setup, mut notes) = self.resolve_flags(base)?;
         let Some(reference) = &self.irf_from else {
             return Ok((setup, notes));
         };
@@ -291,8 +291,9 @@ impl PhysicsOverrides {
     }
 
     /// Preset, file and the overrides other than the reference recording;
-    /// with a note when a preset's bins were moved to the first light.
-    fn resolve_flags(&self, base: Option<Setup>) -> Result<(Setup, Option<String>), ConfigError> {
+    /// with notes on `auto`'s medium and on a preset's bins moved to the
+    /// first light.
+    fn resolve_flags(&self, base: Option<Setup>) -> Result<(Setup, Vec<String>), ConfigError> {
         let file = match &self.config {
             Some(path) => Some((path.as_path(), read_file(path)?)),
             None => None,
@@ -310,25 +311,32 @@ impl PhysicsOverrides {
             (None, None) => (Some(Preset::Paper), Preset::Paper.setup()),
         };
         let mut start_given = self.t_start.is_some();
+        let mut medium = self.medium;
         if let Some((path, f)) = &file {
             let from_file = file_as_overrides(path, f)?;
             start_given |= from_file.t_start.is_some();
+            medium = medium.or(from_file.medium);
             from_file.apply(&mut s);
         }
         self.apply(&mut s);
-        let moved = match preset {
-            Some(p) if !start_given => bins_to_first_light(p, &mut s),
-            _ => None,
-        };
-        s.validate().map_err(|error| {
+        let as_config = |error: ParamError| {
             let key = key_of(error.field);
             ConfigError::Param {
                 error,
                 key,
                 config: self.config.clone(),
             }
-        })?;
-        Ok((s, moved))
+        };
+        let mut notes = Vec::new();
+        if medium == Some(MediumChoice::Auto) {
+            s.validate().map_err(as_config)?;
+            notes.push(choose_medium(&mut s).map_err(as_config)?);
+        }
+        if let Some(p) = preset.filter(|_| !start_given) {
+            notes.extend(bins_to_first_light(p, &mut s));
+        }
+        s.validate().map_err(as_config)?;
+        Ok((s, notes))
     }
 
     fn apply(&self, s: &mut Setup) {
@@ -338,7 +346,9 @@ impl PhysicsOverrides {
         set(&mut m.g, self.g);
         set(&mut m.refractive_index, self.n);
         set(&mut m.thickness_cm, self.thickness);
-        set(&mut m.model, self.medium);
+        if let Some(MediumChoice::Model(model)) = self.medium {
+            m.model = model;
+        }
         set(&mut s.sensor.fov_cm, self.fov);
         if let Some(size) = self.size {
             s.sensor.width_px = size;
@@ -428,9 +438,74 @@ pub fn parse_preset(name: &str) -> Result<Preset, String> {
     parse_by_name(name, &Preset::ALL, Preset::name, "preset")
 }
 
-/// Parses a medium model name (`infinite` or `slab`).
-pub fn parse_medium(name: &str) -> Result<MediumModel, String> {
+/// A medium model as users give it: one of the models, or `auto`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MediumChoice {
+    /// This model.
+    Model(MediumModel),
+    /// The slab diffusion model where its error against Monte Carlo
+    /// transport, measured for the setup, is within
+    /// [`crate::physics::diffusion_error::AUTO_BOUND`]; else transport.
+    Auto,
+}
+
+/// Parses a medium model name (`infinite`, `slab`, `monte-carlo`).
+pub fn parse_medium_model(name: &str) -> Result<MediumModel, String> {
     parse_by_name(name, &MediumModel::ALL, MediumModel::name, "medium model")
+}
+
+/// Parses a medium as users give it: a model's name or `auto`.
+pub fn parse_medium(name: &str) -> Result<MediumChoice, String> {
+    if name.trim().eq_ignore_ascii_case("auto") {
+        return Ok(MediumChoice::Auto);
+    }
+    parse_medium_model(name)
+        .map(MediumChoice::Model)
+        .map_err(|e| format!("{e} (or auto)"))
+}
+
+/// `auto`'s choice for the resolved setup `s` (its model set), and the
+/// sentence saying why.
+fn choose_medium(s: &mut Setup) -> Result<String, ParamError> {
+    use crate::physics::diffusion_error::{AUTO_BOUND, diffusion_error};
+    // Where diffusion's regime holds (scattering dominant, every bin past
+    // a few transport times, a slab of several transport lengths),
+    // transport is left unmeasured: there it is slow (thousands of
+    // scatterings per packet) and the slab model holds.
+    let mut slab = s.medium;
+    slab.model = MediumModel::Slab;
+    if let Ok(d) = crate::physics::Diffusion::new(&slab)
+        && crate::physics::validity::diagnose(s, &d).is_empty()
+    {
+        s.medium.model = MediumModel::Slab;
+        return Ok("medium auto: diffusion's regime holds for this medium and these bins (scattering dominant, every bin past 3 transport times, a slab of 3 transport lengths or more): the slab model is used, not measured against transport".into());
+    }
+    let cost = crate::physics::diffusion_error::quick_scatterings(s);
+    if cost > crate::physics::diffusion_error::MAX_QUICK_SCATTERINGS {
+        s.medium.model = MediumModel::Slab;
+        return Ok(format!(
+            "medium auto: diffusion's regime does not hold everywhere, but transport was not measured (a packet could meet {cost:.0} scatterings in these bins): the slab model is used"
+        ));
+    }
+    let (model, why) = match diffusion_error(s, MediumModel::Slab) {
+        Ok(e) if e.transport_light > 0.0 && e.shape <= AUTO_BOUND => (
+            MediumModel::Slab,
+            format!("{e}: within {AUTO_BOUND}, the slab model is used"),
+        ),
+        Ok(e) => (
+            MediumModel::MonteCarlo,
+            format!("{e}: above {AUTO_BOUND}, Monte Carlo transport is used"),
+        ),
+        Err(e) if e.field == "thickness_cm" || e.field == "bins" => (
+            MediumModel::MonteCarlo,
+            format!(
+                "the slab model cannot describe this setup ({e}): Monte Carlo transport is used"
+            ),
+        ),
+        Err(e) => return Err(e),
+    };
+    s.medium.model = model;
+    Ok(format!("medium auto: {why}"))
 }
 
 /// The value of `all` called `name`, or an error listing the known names.
@@ -625,6 +700,69 @@ mod tests {
         std::fs::write(&path, "mu_z = 1\n").unwrap();
         let e = args.resolve().unwrap_err().to_string();
         assert!(e.contains("lab.toml") && e.contains("mu_z"), "{e}");
+    }
+
+    /// `--medium auto` (or `medium = "auto"` in a file) picks the model
+    /// and says why: the paper's preset, whose own bins hold no light as
+    /// it travels, gets Monte Carlo transport (and its bins moved to the
+    /// first light); a medium and bins inside diffusion's regime get the
+    /// slab model without a transport run; a slab of two transport
+    /// lengths in bins from its first light gets transport, measured.
+    #[test]
+    fn auto_picks_the_medium_and_says_why() {
+        assert_eq!(parse_medium("Auto"), Ok(MediumChoice::Auto));
+        assert_eq!(
+            parse_medium("slab"),
+            Ok(MediumChoice::Model(MediumModel::Slab))
+        );
+        assert!(parse_medium("slap").unwrap_err().contains("(or auto)"));
+        let args = PhysicsOverrides {
+            medium: Some(MediumChoice::Auto),
+            ..Default::default()
+        };
+        let (s, notes) = args.resolve_noted(None).unwrap();
+        assert_eq!(s.medium.model, MediumModel::MonteCarlo);
+        assert_eq!(s.bins.start_ps, 136.0);
+        assert!(
+            notes[0].starts_with("medium auto:") && notes[0].contains("put no light in these bins"),
+            "{notes:?}"
+        );
+        assert!(notes[1].starts_with("bins:"), "{notes:?}");
+
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("lab.toml");
+        std::fs::write(
+            &path,
+            "medium = \"auto\"\nmu_s = 100\ng = 0\nmu_a = 0.1\nthickness = 2\nt_start = 2000\nbin_width = 500\n",
+        )
+        .unwrap();
+        let args = PhysicsOverrides {
+            config: Some(path.clone()),
+            ..Default::default()
+        };
+        let (s, notes) = args.resolve_noted(None).unwrap();
+        assert_eq!(s.medium.model, MediumModel::Slab);
+        assert!(notes[0].contains("regime holds"), "{notes:?}");
+
+        let args = PhysicsOverrides {
+            medium: Some(MediumChoice::Auto),
+            mu_s: Some(10.0),
+            g: Some(0.0),
+            mu_a: Some(0.1),
+            thickness: Some(0.2),
+            t_start: Some(0.0),
+            bin_width: Some(5.0),
+            bins: Some(40),
+            fov: Some(10.0),
+            size: Some(32),
+            ..Default::default()
+        };
+        let (s, notes) = args.resolve_noted(None).unwrap();
+        assert_eq!(s.medium.model, MediumModel::MonteCarlo);
+        assert!(
+            notes[0].contains("the slab model puts") && notes[0].contains("above 0.1"),
+            "{notes:?}"
+        );
     }
 
     #[test]

@@ -19,6 +19,7 @@
 #![warn(missing_docs)]
 
 pub mod diffusion;
+pub mod diffusion_error;
 pub mod error;
 pub mod irf;
 pub mod kernel;

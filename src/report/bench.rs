@@ -1016,7 +1016,7 @@ pub struct BenchConfig {
     /// one the methods reconstruct with (`--medium`): e.g. stacks of light
     /// as it travels (`monte-carlo`) reconstructed with diffusion's
     /// kernels.
-    #[cfg_attr(feature = "cli", arg(long, value_name = "MODEL", value_parser = crate::config::parse_medium))]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "MODEL", value_parser = crate::config::parse_medium_model))]
     pub simulate_medium: Option<crate::physics::MediumModel>,
     /// The methods' settings.
     #[cfg_attr(feature = "cli", arg(skip))]
