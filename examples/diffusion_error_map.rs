@@ -3,7 +3,7 @@
 //! extrapolated boundaries against Monte Carlo transport, for a point of
 //! the object emitting by Lambert's law into a slab in air.
 //!
-//! `cargo run --release -p scatterscope-physics --example diffusion_error_map -- [PACKETS]`
+//! `cargo run --release --example diffusion_error_map -- [PACKETS] [FIGURE.png]`
 //!
 //! mu_s' 10 /cm (g 0: diffusion depends on mu_s' alone), mu_s'/mu_a 1,
 //! 10, 100, thickness 2, 5, 10, 20 transport lengths, n 1 and 1.4. For
@@ -12,12 +12,15 @@
 //! `3 mu_s' d^2 n / (pi^2 c)`): the shape error (half the L1 distance of
 //! the two profiles, each scaled to unit sum: 0 equal, 1 disjoint) and the
 //! median arrival's error; for the slab model also the ratio of its
-//! transmitted light to the Monte Carlo's.
+//! transmitted light to the Monte Carlo's. With FIGURE, the shape errors
+//! against thickness are drawn there: lines for the slab model, markers
+//! for the infinite medium, one per mu_s'/mu_a and n.
 
-use scatterscope_physics::diffusion::Diffusion;
-use scatterscope_physics::diffusion::light_speed_cm_per_ps;
-use scatterscope_physics::params::{Medium, MediumModel};
-use scatterscope_physics::transport::{Grid, Run, Slab, Source, transport};
+use scatterscope::physics::diffusion::Diffusion;
+use scatterscope::physics::diffusion::light_speed_cm_per_ps;
+use scatterscope::physics::params::{Medium, MediumModel};
+use scatterscope::physics::transport::{Grid, Run, Slab, Source, transport};
+use scatterscope::plot::{Series, chart};
 
 const BINS: usize = 2000;
 
@@ -48,6 +51,8 @@ fn main() {
         .nth(1)
         .and_then(|v| v.parse().ok())
         .unwrap_or(200_000);
+    let figure = std::env::args().nth(2);
+    let (mut slab_lines, mut infinite_points) = (Vec::new(), Vec::new());
     let mu_s_reduced = 10.0;
     println!(
         "| n | mu_s'/mu_a | mu_s' d | infinite: shape, median | slab: shape, median, light | MC light (+- SE) |"
@@ -55,6 +60,15 @@ fn main() {
     println!("| --- | --- | --- | --- | --- | --- |");
     for n in [1.0, 1.4] {
         for ratio in [1.0, 10.0, 100.0] {
+            let label = format!("mu_s'/mu_a {ratio}, n {n}");
+            let mut slab_series = Series {
+                label: format!("slab, {label}"),
+                points: Vec::new(),
+            };
+            let mut infinite_series = Series {
+                label: format!("infinite (Eq. 6), {label}"),
+                points: Vec::new(),
+            };
             for lengths in [2.0, 5.0, 10.0, 20.0] {
                 let mu_a = mu_s_reduced / ratio;
                 let d = lengths / mu_s_reduced;
@@ -130,14 +144,37 @@ fn main() {
                         s
                     }
                 };
+                let (infinite, slab_model) =
+                    (profile(MediumModel::Infinite), profile(MediumModel::Slab));
+                if let Some(p) = &infinite {
+                    infinite_series.points.push((lengths, shape_error(&mc, p)));
+                }
+                if let Some(p) = &slab_model {
+                    slab_series.points.push((lengths, shape_error(&mc, p)));
+                }
                 println!(
                     "| {n} | {ratio} | {lengths} | {} | {} | {:.3e} (+- {:.1e}) |",
-                    cell(profile(MediumModel::Infinite), false),
-                    cell(profile(MediumModel::Slab), true),
+                    cell(infinite, false),
+                    cell(slab_model, true),
                     t.transmitted.mean,
                     t.transmitted.error
                 );
             }
+            slab_lines.push(slab_series);
+            infinite_points.push(infinite_series);
         }
+    }
+    if let Some(path) = figure {
+        chart(
+            std::path::Path::new(&path),
+            "Diffusion's shape error against Monte Carlo transport (Lambertian point, slab in air)",
+            "slab thickness (transport lengths, mu_s' d)",
+            "shape error (half the L1 distance of the time profiles)",
+            &infinite_points,
+            &slab_lines,
+            true,
+        )
+        .expect("the figure is written");
+        println!("wrote {path}");
     }
 }
