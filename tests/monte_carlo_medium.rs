@@ -16,15 +16,8 @@ use command::{run_isolated, streams};
 fn the_papers_preset_as_light_travels() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("psf");
-    let o = run_isolated(&[
-        "psf",
-        "--preset",
-        "paper",
-        "--medium",
-        "monte-carlo",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let psf = ["psf", "--preset", "paper", "--medium", "monte-carlo"];
+    let o = run_isolated(&[&psf[..], &["--out", out.to_str().unwrap()]].concat());
     let (stdout, stderr) = streams(&o);
     assert!(o.status.success(), "{stdout}{stderr}");
     assert!(
@@ -70,17 +63,14 @@ fn the_papers_preset_as_light_travels() {
     let (first, last) = (num(kept[0], 5), num(kept[kept.len() - 1], 5));
     assert!(first > 0.5 && first < 3.0 && last > 2.0 * first, "{csv}");
 
-    let o = run_isolated(&[
-        "psf",
-        "--preset",
-        "paper",
-        "--medium",
-        "monte-carlo",
-        "--t-start",
-        "0",
-        "--out",
-        dir.path().join("given").to_str().unwrap(),
-    ]);
+    let given = dir.path().join("given");
+    let o = run_isolated(
+        &[
+            &psf[..],
+            &["--t-start", "0", "--out", given.to_str().unwrap()],
+        ]
+        .concat(),
+    );
     let (stdout, stderr) = streams(&o);
     assert!(!o.status.success(), "{stdout}");
     assert!(

@@ -101,14 +101,7 @@ pub fn diffusion_error(setup: &Setup, model: MediumModel) -> Result<DiffusionErr
     let kernels = KernelStack::build(&coarse, Sampling::Integrated)?;
     let diffusion: Vec<f64> = kernels.bins.iter().map(|b| b.photons).collect();
     let m = &setup.medium;
-    let slab = Slab {
-        mu_a_per_cm: m.mu_a_per_cm,
-        mu_s_per_cm: m.mu_s_per_cm,
-        g: m.g,
-        n: m.refractive_index,
-        n_outside: 1.0,
-        thickness_cm: m.thickness_cm,
-    };
+    let slab = Slab::in_air(m);
     let pitch = setup.sensor.pixel_pitch_cm();
     let half_diagonal = 0.5
         * pitch
@@ -127,11 +120,7 @@ pub fn diffusion_error(setup: &Setup, model: MediumModel) -> Result<DiffusionErr
         max_path_cm: (bins.end_ps() + bins.width_ps)
             * crate::diffusion::light_speed_cm_per_ps(m.refractive_index),
     };
-    let t = transport(&slab, Source::Lambertian, &grid, &run).map_err(|e| match e {
-        crate::transport::TransportError::Parameter { field, value, why } => {
-            ParamError::new(field, value, format!("Monte Carlo transport: {why}"))
-        }
-    })?;
+    let t = transport(&slab, Source::Lambertian, &grid, &run)?;
     let light: Vec<f64> = (0..bins.count).map(|k| t.cells[k].mean).collect();
     let transport_light: f64 = light.iter().sum();
     let total: f64 = diffusion.iter().sum();

@@ -125,6 +125,16 @@ pub struct Run {
     pub max_path_cm: f64,
 }
 
+impl From<TransportError> for crate::error::ParamError {
+    fn from(e: TransportError) -> Self {
+        match e {
+            TransportError::Parameter { field, value, why } => {
+                Self::new(field, value, format!("Monte Carlo transport: {why}"))
+            }
+        }
+    }
+}
+
 /// Bad input to a transport run.
 #[derive(Debug, Error, PartialEq)]
 pub enum TransportError {
@@ -154,6 +164,18 @@ fn check(
 }
 
 impl Slab {
+    /// The slab of a setup's medium, in air on both sides.
+    pub fn in_air(m: &crate::params::Medium) -> Self {
+        Self {
+            mu_a_per_cm: m.mu_a_per_cm,
+            mu_s_per_cm: m.mu_s_per_cm,
+            g: m.g,
+            n: m.refractive_index,
+            n_outside: 1.0,
+            thickness_cm: m.thickness_cm,
+        }
+    }
+
     /// Checks every parameter, naming the first out of range.
     pub fn validate(&self) -> Result<(), TransportError> {
         check(
@@ -403,20 +425,8 @@ pub fn setup_kernels(
 ) -> Result<SetupKernels, crate::error::ParamError> {
     use crate::error::ParamError;
     let m = &setup.medium;
-    let slab = Slab {
-        mu_a_per_cm: m.mu_a_per_cm,
-        mu_s_per_cm: m.mu_s_per_cm,
-        g: m.g,
-        n: m.refractive_index,
-        n_outside: 1.0,
-        thickness_cm: m.thickness_cm,
-    };
-    let as_param = |e: TransportError| match e {
-        TransportError::Parameter { field, value, why } => {
-            ParamError::new(field, value, format!("Monte Carlo transport: {why}"))
-        }
-    };
-    slab.validate().map_err(as_param)?;
+    let slab = Slab::in_air(m);
+    slab.validate()?;
     let irf = match &setup.irf {
         None => None,
         Some(crate::irf::InstrumentResponse::Parametric(p)) => Some(*p),
@@ -459,8 +469,7 @@ pub fn setup_kernels(
         max_path_cm: (end + fine) * light_speed_cm_per_ps(m.refractive_index),
     };
     let (t, cache) =
-        crate::transport_cache::transport_cached(&slab, Source::Lambertian, &grid, &run)
-            .map_err(as_param)?;
+        crate::transport_cache::transport_cached(&slab, Source::Lambertian, &grid, &run)?;
     let mut kernels = Vec::with_capacity(bins.count);
     let mut relative_errors = Vec::with_capacity(bins.count);
     for k in 0..bins.count {

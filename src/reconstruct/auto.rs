@@ -176,15 +176,7 @@ impl Auto<'_> {
                 "auto: whole-stack Richardson-Lucy predicts counts it was not given clearly better, and is returned: {figures}"
             )],
         );
-        run.note(format!(
-            "rl-stack: output deviance {:.1}, Poisson noise alone {:.1} +- {:.1} (z = {:.1})",
-            check.deviance,
-            check.expected,
-            check.sd,
-            check.z()
-        ));
-        warn_unexplained(&check, run);
-        run.note(format!("{CHOSE}rl-stack"));
+        chose("rl-stack", &check, run);
         Ok(Some(Estimate {
             image: best.image,
             iteration: best.iteration,
@@ -280,15 +272,7 @@ impl Reconstructor for Auto<'_> {
             data.bins,
             verdict.fallback_grid.view(),
         );
-        run.note(format!(
-            "rl-sum: output deviance {:.1}, Poisson noise alone {:.1} +- {:.1} (z = {:.1})",
-            check.deviance,
-            check.expected,
-            check.sd,
-            check.z()
-        ));
-        warn_unexplained(&check, run);
-        run.note(format!("{CHOSE}rl-sum"));
+        chose("rl-sum", &check, run);
         Ok(verdict.fallback)
     }
 
@@ -305,6 +289,21 @@ impl Reconstructor for Auto<'_> {
         };
         one.saturating_add(one / 2).max(stack.working_bytes(shape))
     }
+}
+
+/// The chosen Richardson-Lucy's output deviance against Poisson noise's,
+/// the warning when it is far worse ([`warn_unexplained`]), and the
+/// choice, in the notes.
+fn chose(method: &str, check: &DevianceCheck, run: &mut Run<'_>) {
+    run.note(format!(
+        "{method}: output deviance {:.1}, Poisson noise alone {:.1} +- {:.1} (z = {:.1})",
+        check.deviance,
+        check.expected,
+        check.sd,
+        check.z()
+    ));
+    warn_unexplained(check, run);
+    run.note(format!("{CHOSE}{method}"));
 }
 
 /// A warning when `check` says the output explains the stack far worse
