@@ -60,11 +60,20 @@ pub struct Slab {
 }
 
 /// Where and how light enters the slab, at the origin of its front face.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Source {
     /// A pencil beam along the normal from outside: the index step's
     /// specular reflection stays outside.
     Pencil,
+    /// A collimated beam along the normal from outside whose irradiance on
+    /// the face is Gaussian about the origin, falling to `1/e^2` at
+    /// `radius_cm` (a laser beam's waist at the face; for the object inside
+    /// the medium, lit through the front slab); the specular reflection
+    /// stays outside.
+    GaussianBeam {
+        /// The `1/e^2` radius of the irradiance (cm), > 0.
+        radius_cm: f64,
+    },
     /// A point of an object in contact with the face, emitting into the
     /// slab by Lambert's cosine law (a diffuse reflector or fluorophore
     /// behind the slab: the object plane of the paper's geometry).
@@ -77,15 +86,28 @@ impl Source {
     /// The light that enters, of one packet.
     fn entered(self, slab: &Slab) -> f64 {
         match self {
-            Source::Pencil => 1.0 - slab.specular(),
+            Source::Pencil | Source::GaussianBeam { .. } => 1.0 - slab.specular(),
             Source::Lambertian | Source::Hemisphere => 1.0,
+        }
+    }
+
+    /// Where a packet enters: the origin, or for a Gaussian beam a point
+    /// drawn from its irradiance (`r = w sqrt(-ln(1 - u) / 2)`).
+    fn start<R: Rng>(self, rng: &mut R) -> [f64; 3] {
+        match self {
+            Source::GaussianBeam { radius_cm } => {
+                let r = radius_cm * (-(1.0 - rng.random::<f64>()).ln() / 2.0).sqrt();
+                let (s, c) = (2.0 * std::f64::consts::PI * rng.random::<f64>()).sin_cos();
+                [r * c, r * s, 0.0]
+            }
+            _ => [0.0; 3],
         }
     }
 
     /// A first direction.
     fn direction<R: Rng>(self, rng: &mut R) -> [f64; 3] {
         let cos_t = match self {
-            Source::Pencil => return [0.0, 0.0, 1.0],
+            Source::Pencil | Source::GaussianBeam { .. } => return [0.0, 0.0, 1.0],
             // Lambert: cos^2 uniform; the hemisphere: cos uniform.
             Source::Lambertian => (1.0 - rng.random::<f64>()).sqrt(),
             Source::Hemisphere => 1.0 - rng.random::<f64>(),
@@ -554,6 +576,14 @@ pub fn transport(
         run.max_path_cm > 0.0,
         "give a path cap > 0 (cm)",
     )?;
+    if let Source::GaussianBeam { radius_cm } = source {
+        check(
+            "beam radius",
+            radius_cm,
+            radius_cm > 0.0,
+            "give the beam's 1/e^2 radius > 0 (cm); a pencil beam for none",
+        )?;
+    }
     let chunks = run.photons.div_ceil(CHUNK);
     let parts: Vec<Tally> = (0..chunks)
         .into_par_iter()
@@ -616,7 +646,7 @@ fn scatter<R: Rng>(g: f64, u: [f64; 3], rng: &mut R) -> [f64; 3] {
 /// One packet, from entry to exit, absorption, the roulette or the cap.
 fn packet<R: Rng>(slab: &Slab, source: Source, grid: &Grid, run: &Run, rng: &mut R, t: &mut Tally) {
     let (mu_a, mu_s, d) = (slab.mu_a_per_cm, slab.mu_s_per_cm, slab.thickness_cm);
-    let mut pos = [0.0f64, 0.0, 0.0];
+    let mut pos = source.start(rng);
     let mut u = source.direction(rng);
     // The weight is `start * exp(-mu_a (path - from))`: `start` the
     // weight when the roulette last changed it (the entered light at

@@ -463,3 +463,74 @@ fn a_semi_infinite_medium_reflects_as_a_thick_slab() {
     );
     assert!(s.transmitted.mean < 1e-6);
 }
+
+/// A Gaussian beam of `1/e^2` radius `w` enters as the pencil beam does,
+/// only spread over the face: the slab is the same everywhere, so it
+/// transmits the same light (within 3 standard errors of the two runs)
+/// and its transmitted light's mean squared distance from the axis is
+/// the pencil's plus the beam's own, `w^2 / 2` (within 1 %). A radius of
+/// 0 or less is refused by name.
+#[test]
+fn a_gaussian_beam_spreads_the_pencils_light_by_its_own_width() {
+    let slab = Slab {
+        mu_a_per_cm: 1.0,
+        mu_s_per_cm: 50.0,
+        g: 0.8,
+        n: 1.4,
+        n_outside: 1.0,
+        thickness_cm: 0.1,
+    };
+    let grid = Grid {
+        t_start_ps: 0.0,
+        bin_width_ps: 10.0,
+        bins: 100,
+        ring_width_cm: 0.005,
+        rings: 600,
+    };
+    let w = 0.3;
+    let pencil = transport(&slab, Source::Pencil, &grid, &run(400_000, 5)).unwrap();
+    let beam = transport(
+        &slab,
+        Source::GaussianBeam { radius_cm: w },
+        &grid,
+        &run(400_000, 6),
+    )
+    .unwrap();
+    let se = (pencil.transmitted.error.powi(2) + beam.transmitted.error.powi(2)).sqrt();
+    assert!(
+        (pencil.transmitted.mean - beam.transmitted.mean).abs() < 3.0 * se,
+        "{} against {} +- {se}",
+        beam.transmitted.mean,
+        pencil.transmitted.mean
+    );
+    assert_eq!(beam.specular, pencil.specular);
+    let mean_r2 = |t: &scatterscope_physics::transport::Transport| {
+        let (mut light, mut second) = (0.0, 0.0);
+        for j in 0..grid.rings {
+            let r = (j as f64 + 0.5) * grid.ring_width_cm;
+            let ring: f64 = (0..grid.bins)
+                .map(|k| t.cells[j * grid.bins + k].mean)
+                .sum();
+            light += ring;
+            second += ring * r * r;
+        }
+        second / light
+    };
+    let (p, b) = (mean_r2(&pencil), mean_r2(&beam));
+    eprintln!(
+        "<r^2> pencil {p:.5}, beam {b:.5}, difference {:.5} (w^2/2 = {:.5})",
+        b - p,
+        w * w / 2.0
+    );
+    assert!(((b - p) / (w * w / 2.0) - 1.0).abs() < 0.01, "{p} {b}");
+    for radius_cm in [0.0, -1.0, f64::NAN] {
+        let e = transport(
+            &slab,
+            Source::GaussianBeam { radius_cm },
+            &grid,
+            &run(10, 1),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("beam radius"), "{e}");
+    }
+}
