@@ -142,3 +142,34 @@ fn the_default_weighs_the_time_axis_where_light_travels() {
         assert!(text.contains("the time axis carries"), "{text}");
     }
 }
+
+/// Bad input to the Monte Carlo medium is refused by name before
+/// anything is written: no scattering (g 1, mu_s 0: ballistic light only
+/// is not modelled), an index below 1, a slab of no thickness.
+#[test]
+fn bad_input_to_the_monte_carlo_medium_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    for (flag, value, says) in [
+        ("--g", "1", "ballistic light only"),
+        ("--mu-s", "0", "ballistic light only"),
+        ("--n", "0.9", "refractive index below 1"),
+        ("--thickness", "0", "give a thickness > 0"),
+    ] {
+        let out = dir.path().join(flag.trim_start_matches('-'));
+        let o = run_isolated(&[
+            "psf",
+            "--preset",
+            "paper",
+            "--medium",
+            "monte-carlo",
+            flag,
+            value,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let (stdout, stderr) = streams(&o);
+        assert!(!o.status.success(), "{flag} {value}: {stdout}");
+        assert!(stderr.contains(says), "{flag} {value}: {stderr}");
+        assert!(!out.exists(), "{flag} {value}: {} written", out.display());
+    }
+}
