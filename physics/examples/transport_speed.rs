@@ -34,14 +34,7 @@ fn main() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(10_000_000);
     let rounds: usize = args.get(2).and_then(|v| v.parse().ok()).unwrap_or(3);
-    let slab = Slab {
-        mu_a_per_cm: 10.0,
-        mu_s_per_cm: 90.0,
-        g: 0.75,
-        n: 1.0,
-        n_outside: 1.0,
-        thickness_cm: 0.02,
-    };
+    let slab = Slab::VAN_DE_HULST;
     let grid = Grid {
         t_start_ps: 0.0,
         bin_width_ps: 0.1,

@@ -186,6 +186,19 @@ fn check(
 }
 
 impl Slab {
+    /// van de Hulst's slab, MCML's check case (Wang, Jacques and Zheng
+    /// 1995): mu_a 10 /cm, mu_s 90 /cm, g 0.75, n 1 inside and out,
+    /// 0.02 cm; a pencil beam's diffuse reflectance is 0.09739 and its
+    /// total transmittance 0.66096.
+    pub const VAN_DE_HULST: Slab = Slab {
+        mu_a_per_cm: 10.0,
+        mu_s_per_cm: 90.0,
+        g: 0.75,
+        n: 1.0,
+        n_outside: 1.0,
+        thickness_cm: 0.02,
+    };
+
     /// The slab of a setup's medium, in air on both sides.
     pub fn in_air(m: &crate::params::Medium) -> Self {
         Self {

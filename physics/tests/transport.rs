@@ -45,14 +45,7 @@ fn run(photons: u64, seed: u64) -> Run {
 /// errors.
 #[test]
 fn van_de_hulsts_slab_within_three_standard_errors() {
-    let slab = Slab {
-        mu_a_per_cm: 10.0,
-        mu_s_per_cm: 90.0,
-        g: 0.75,
-        n: 1.0,
-        n_outside: 1.0,
-        thickness_cm: 0.02,
-    };
+    let slab = Slab::VAN_DE_HULST;
     let t = transport(&slab, Source::Pencil, &grid(), &run(1_000_000, 1)).unwrap();
     eprintln!(
         "R {:.5} +- {:.5}, T {:.5} +- {:.5}",

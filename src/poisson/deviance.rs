@@ -18,6 +18,25 @@ pub fn m_log_m(m: f64) -> f64 {
     if m > 0.0 { m * m.ln() } else { 0.0 }
 }
 
+/// Two predictions `a` and `b` (plus `bg`, guarded below by `guard`) of
+/// the same `counts`: their Poisson deviances and the sum of `n (ln a -
+/// ln b)^2`, the variance of their log-likelihood difference under
+/// Poisson noise (twice its root is the noise sd of the deviances'
+/// difference). What a paired check of two estimates on held-back counts
+/// sums.
+pub fn paired_deviances(counts: &[f64], a: &[f64], b: &[f64], bg: f64, guard: f64) -> [f64; 3] {
+    let mut sums = [0.0; 3];
+    for ((&n, &ya), &yb) in counts.iter().zip(a).zip(b) {
+        let (ma, mb) = ((ya + bg).max(guard), (yb + bg).max(guard));
+        let (la, lb) = (ma.ln(), mb.ln());
+        let nl = m_log_m(n);
+        sums[0] += point_deviance(n, nl, ma, la);
+        sums[1] += point_deviance(n, nl, mb, lb);
+        sums[2] += n * (la - lb) * (la - lb);
+    }
+    sums
+}
+
 /// The deviance of a volume of `counts` (bins first) under `means` over
 /// the bins from `onset`, each point as `m log(m/y)` in one logarithm;
 /// means below 1e-300 count as 1e-300.

@@ -16,8 +16,6 @@
 
 use super::data::Data;
 use super::discrepancy::{DevianceCheck, ExpectedDeviance};
-use ndarray::Array2;
-
 use super::em::{Acceleration, Keep, RlStop};
 use super::error::ReconstructError;
 use super::guard::{self, CarriedSearch, GUARD_TAU};
@@ -162,12 +160,7 @@ impl Auto<'_> {
             ));
             return Ok(None);
         }
-        let grid: Vec<f64> = best.points[0]
-            .iter()
-            .zip(&best.points[1])
-            .map(|(a, b)| a + b)
-            .collect();
-        let grid = Array2::from_shape_vec(data.model.grid_shape(), grid).expect("the model's grid");
+        let grid = best.grid(data.model.grid_shape());
         let check =
             ExpectedDeviance::shared().check(data.model, data.counts, data.bins, grid.view());
         run.adopt(

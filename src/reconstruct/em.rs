@@ -392,6 +392,19 @@ pub(crate) struct CvBest {
     pub last: Vec<Vec<f64>>,
 }
 
+impl CvBest {
+    /// The sum of the halves' estimates on the model's grid of `shape`
+    /// (the points kept).
+    pub fn grid(&self, shape: (usize, usize)) -> Array2<f64> {
+        let sum: Vec<f64> = self.points[0]
+            .iter()
+            .zip(&self.points[1])
+            .map(|(a, b)| a + b)
+            .collect();
+        Array2::from_shape_vec(shape, sum).expect("the model's grid")
+    }
+}
+
 /// The two scores of one half's prediction `y + bg` (guarded below by
 /// `guard`), from one logarithm per point: the Poisson deviance of the
 /// other half's counts `other` (with `m log m` per point, computed once),

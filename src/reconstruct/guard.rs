@@ -34,7 +34,7 @@ use super::learned::net::LearnedNet;
 use super::learned::stages::run_stages;
 use super::rl_sum::{RlOperator, search_halves, thinned_halves};
 use super::run::{Estimate, Run};
-use crate::poisson::deviance::{m_log_m, point_deviance};
+use crate::poisson::deviance::paired_deviances;
 use crate::poisson::thinning::{THINNING_SEED, thin_halves};
 
 /// How many noise standard deviations worse than Richardson-Lucy's the
@@ -266,20 +266,12 @@ pub fn check(
         let other: Vec<f64> = halves[1 - fold].iter().copied().collect();
         let y_net = rl.apply(net_estimate);
         let y_rl = rl.apply(&best.points[fold]);
-        for ((&n, &a), &b) in other.iter().zip(&y_net).zip(&y_rl) {
-            let (a, b) = ((a + bg).max(guard), (b + bg).max(guard));
-            let (la, lb) = (a.ln(), b.ln());
-            let nl = m_log_m(n);
-            network += point_deviance(n, nl, a, la);
-            richardson_lucy += point_deviance(n, nl, b, lb);
-            variance += n * (la - lb) * (la - lb);
-        }
+        let [a, b, v] = paired_deviances(&other, &y_net, &y_rl, bg, guard);
+        network += a;
+        richardson_lucy += b;
+        variance += v;
     }
-    let grid: Vec<f64> = best.points[0]
-        .iter()
-        .zip(&best.points[1])
-        .map(|(a, b)| a + b)
-        .collect();
+    let fallback_grid = best.grid(model.grid_shape());
     if let Some(c) = carried {
         c.keep(Carried {
             halves,
@@ -295,7 +287,7 @@ pub fn check(
             image: best.image,
             iteration: before + best.iteration,
         },
-        fallback_grid: Array2::from_shape_vec(model.grid_shape(), grid).expect("the model's grid"),
+        fallback_grid,
         rl_points: best.points,
         network_points: nets,
     }))

@@ -27,7 +27,7 @@ use rustfft::num_complex::Complex64;
 
 use super::em::DENOMINATOR_GUARD;
 use crate::forward::ForwardModel;
-use crate::poisson::deviance::{m_log_m, point_deviance};
+use crate::poisson::deviance::paired_deviances;
 
 /// The summed kernel's transfer (its light at a spatial frequency over
 /// its light at zero) at which the gain is taken; frequencies within a
@@ -127,7 +127,7 @@ pub fn held_back(
     let total: f64 = halves.iter().flatten().flatten().sum();
     let bg = model.background() / 2.0;
     let guard = DENOMINATOR_GUARD * total / 2.0 / (bins.len() * h * w) as f64;
-    let parts: Vec<(f64, f64, f64)> = (0..2)
+    let parts: Vec<[f64; 3]> = (0..2)
         .flat_map(|fold| (0..bins.len()).map(move |j| (fold, j)))
         .collect::<Vec<_>>()
         .into_par_iter()
@@ -135,21 +135,12 @@ pub fn held_back(
             let counts = &halves[1 - fold][j];
             let a = model.apply(bins[j], stack[fold]);
             let b = model.apply(bins[j], other[fold]);
-            let mut sums = (0.0, 0.0, 0.0);
-            for ((&n, &ya), &yb) in counts.iter().zip(&a).zip(&b) {
-                let (ma, mb) = ((ya + bg).max(guard), (yb + bg).max(guard));
-                let (la, lb) = (ma.ln(), mb.ln());
-                let nl = m_log_m(n);
-                sums.0 += point_deviance(n, nl, ma, la);
-                sums.1 += point_deviance(n, nl, mb, lb);
-                sums.2 += n * (la - lb) * (la - lb);
-            }
-            sums
+            paired_deviances(counts, &a, &b, bg, guard)
         })
         .collect();
-    let (stack, other, variance) = parts
+    let [stack, other, variance] = parts
         .iter()
-        .fold((0.0, 0.0, 0.0), |s, p| (s.0 + p.0, s.1 + p.1, s.2 + p.2));
+        .fold([0.0; 3], |s, p| [s[0] + p[0], s[1] + p[1], s[2] + p[2]]);
     HeldBack {
         stack,
         other,
