@@ -1,10 +1,13 @@
 //! Packets per second of Monte Carlo transport on van de Hulst's slab
-//! (mu_a 10 /cm, mu_s 90 /cm, g 0.75, n 1, 0.02 cm), MCML's check case:
+//! (mu_a 10 /cm, mu_s 90 /cm, g 0.75, n 1, 0.02 cm), MCML's check case,
+//! or on a slab in air given as MU_A MU_S G N THICKNESS_CM:
 //!
-//! `cargo run --release -p scatterscope-physics --example transport_speed -- [PACKETS] [ROUNDS]`
+//! `cargo run --release -p scatterscope-physics --example transport_speed -- [PACKETS] [ROUNDS] [MU_A MU_S G N THICKNESS_CM]`
 //!
 //! Prints each round's wall time, the process's CPU time, packets per
-//! second and per CPU second, and the reflectance and transmittance.
+//! second and per CPU second, the specular reflection, and the diffuse
+//! reflectance and transmittance with their standard errors
+//! (`scripts/mcml_side_by_side.py` reads these lines).
 
 use std::time::Instant;
 
@@ -34,7 +37,23 @@ fn main() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(10_000_000);
     let rounds: usize = args.get(2).and_then(|v| v.parse().ok()).unwrap_or(3);
-    let slab = Slab::VAN_DE_HULST;
+    let slab = match args.get(3..8) {
+        Some(v) => {
+            let v: Vec<f64> = v
+                .iter()
+                .map(|x| x.parse().expect("slab parameters are numbers"))
+                .collect();
+            Slab {
+                mu_a_per_cm: v[0],
+                mu_s_per_cm: v[1],
+                g: v[2],
+                n: v[3],
+                n_outside: 1.0,
+                thickness_cm: v[4],
+            }
+        }
+        None => Slab::VAN_DE_HULST,
+    };
     let grid = Grid {
         t_start_ps: 0.0,
         bin_width_ps: 0.1,
@@ -50,13 +69,14 @@ fn main() {
             max_path_cm: 1e4,
         };
         let t =
-            transport(&slab, Source::Pencil, &grid, &run).expect("van de Hulst's slab is valid");
+            transport(&slab, Source::Pencil, &grid, &run).expect("the slab is a valid medium");
         let (wall, cpu) = (wall.elapsed().as_secs_f64(), cpu_seconds() - cpu);
         println!(
-            "round {}: {packets} packets in {wall:.2} s ({cpu:.2} CPU s): {:.2e} per s, {:.2e} per CPU s; R {:.5} +- {:.5}, T {:.5} +- {:.5}",
+            "round {}: {packets} packets in {wall:.2} s ({cpu:.2} CPU s): {:.2e} per s, {:.2e} per CPU s; specular {:.6}, R {:.6} +- {:.6}, T {:.6} +- {:.6}",
             round + 1,
             packets as f64 / wall,
             packets as f64 / cpu,
+            t.specular,
             t.reflected.mean,
             t.reflected.error,
             t.transmitted.mean,
