@@ -25,6 +25,17 @@ images of `--tuning`, and those only scored):
   the pitch whose 2 x 2 blocks the sensor sums, half a pixel off or not,
   in 30 % (IRF cases are integrated: point sampling has no IRF).
 
+`--medium monte-carlo` trains on light as it travels instead: every case
+(and the tuning set) simulated and modelled with the library's Monte Carlo
+medium (`physics::transport`, kernels cached on disk by physics), the
+preset's bins moved to where its light arrives. So that the kernels can
+be reused, the medium is drawn from a lattice (mu_a x0.7/1/1.4, mu_s
+x0.8/1/1.25, thickness x0.9/1/1.1; an IRF of 20, 40 or 60 ps; the
+mismatched medium one of four corners of the jitter box) rather than
+continuously, and every case is integrated over pixel and bin (the
+transport's tallies are; point sampling does not apply). The work folder
+records its medium and refuses to mix cases of two.
+
 Training: Adam (5e-4, gradients clipped at norm 10), one-cycle cosine
 schedule, batches of 8 with random flips and quarter turns of the object
 and the counts together (the kernels are radially symmetric), loss the
@@ -52,6 +63,17 @@ PAPER_FOV_CM = 50.0
 PAPER_PHOTONS = 450.0
 PAPER = {"mu_a": 1.0, "mu_s": 5.0, "thickness_cm": 3.0}
 LEVELS = (0.02, 20.0)
+# The medium every case is simulated and modelled with: None for the
+# preset's own (Eq. 6), or a `--medium` name; set once in `main` before the
+# workers fork.
+MEDIUM = None
+MONTE_CARLO = "monte-carlo"
+# Under the Monte Carlo medium: the jitter's lattice (factors on the
+# preset), the IRFs, and the mismatched media's factors (mu_a, mu_s,
+# thickness), so that the transport cache serves most cases.
+LATTICE = {"mu_a": (0.7, 1.0, 1.4), "mu_s": (0.8, 1.0, 1.25), "thickness_cm": (0.9, 1.0, 1.1)}
+LATTICE_IRF_PS = (20.0, 40.0, 60.0)
+LATTICE_MISMATCH = ((0.9, 0.93, 0.97), (1.1, 1.07, 1.03), (0.9, 1.07, 1.03), (1.1, 0.93, 0.97))
 SKIMAGE_TRAIN = [
     "clock_motion.png", "color.png", "grass.png", "gravel.png", "ihc.png",
     "microaneurysms.png", "motorcycle_left.png", "motorcycle_right.png",
@@ -358,34 +380,50 @@ def load_skimage():
 # ----------------------------------------------------------- simulation
 
 
+def medium_of():
+    """The physics keyword naming the medium, if `--medium` gave one."""
+    return {} if MEDIUM is None else {"medium": MEDIUM}
+
+
 def physics_of(rng):
     level = math.exp(rng.uniform(math.log(LEVELS[0]), math.log(LEVELS[1])))
-    p = {
-        "mu_a": PAPER["mu_a"] * rng.uniform(0.7, 1.4),
-        "mu_s": PAPER["mu_s"] * rng.uniform(0.8, 1.25),
-        "thickness_cm": PAPER["thickness_cm"] * rng.uniform(0.9, 1.1),
-        "photons": PAPER_PHOTONS * level,
-        "fov_cm": PAPER_FOV_CM * SENSOR_PX / 256,
-    }
+    lattice = MEDIUM == MONTE_CARLO
+    jitter = {"mu_a": (0.7, 1.4), "mu_s": (0.8, 1.25), "thickness_cm": (0.9, 1.1)}
+
+    def factor(key):
+        lo, hi = jitter[key]
+        u = rng.uniform(lo, hi)
+        return LATTICE[key][rng.integers(3)] if lattice else u
+
+    p = {key: PAPER[key] * factor(key) for key in ("mu_a", "mu_s", "thickness_cm")}
+    p["photons"] = PAPER_PHOTONS * level
+    p["fov_cm"] = PAPER_FOV_CM * SENSOR_PX / 256
+    p.update(medium_of())
     background = 0.0
     irf = rng.random() < 0.25
     if irf:
-        p["irf_fwhm_ps"] = rng.uniform(15.0, 60.0)
+        fwhm = rng.uniform(15.0, 60.0)
+        p["irf_fwhm_ps"] = LATTICE_IRF_PS[rng.integers(3)] if lattice else fwhm
         background = rng.uniform(0.0, 0.3)
     how = {"discretisation": "integrated"}
+    # Draws in the order the embedded weights' run made them: the default
+    # reproduces its cases exactly.
     u = rng.random()
-    if not irf and u < 0.3:
+    if not irf and not lattice and u < 0.3:
         how = {"discretisation": "point"}
-    elif not irf and u < 0.6:
+    elif not irf and not lattice and u < 0.6:
         how = {"discretisation": "half-pitch", "offset": tuple(int(v) for v in rng.integers(0, 2, 2))}
     if rng.random() < 0.2:
+        off = (rng.uniform(0.9, 1.1), rng.uniform(0.93, 1.07), rng.uniform(0.97, 1.03))
+        fa, fs, ft = LATTICE_MISMATCH[rng.integers(4)] if lattice else off
         how["true_physics"] = {
             "preset": "paper",
-            "mu_a": p["mu_a"] * rng.uniform(0.9, 1.1),
-            "mu_s": p["mu_s"] * rng.uniform(0.93, 1.07),
-            "thickness_cm": p["thickness_cm"] * rng.uniform(0.97, 1.03),
+            "mu_a": p["mu_a"] * fa,
+            "mu_s": p["mu_s"] * fs,
+            "thickness_cm": p["thickness_cm"] * ft,
             "fov_cm": p["fov_cm"],
             "photons": p["photons"],
+            **medium_of(),
         }
     return p, level, background, how
 
@@ -486,7 +524,7 @@ def simulate(work, total, threads, say):
 def tuning_cases(folder, levels):
     """The benchmark's tuning images (split == tuning, nothing else read)
     as the benchmark simulates them: 256-pixel sensor on a 384 grid, paper
-    preset, seed 0."""
+    preset (in `--medium`'s medium when given), seed 0."""
     import scatterscope
     from PIL import Image
     rows = list(csv.DictReader(open(os.path.join(folder, "manifest.csv"))))
@@ -496,7 +534,9 @@ def tuning_cases(folder, levels):
             continue
         img = np.asarray(Image.open(os.path.join(folder, r["file"])).convert("L"), dtype=np.float64) / 255.0
         for level in levels:
-            c = scatterscope.learned_case(img, 256, seed=0, preset="paper", photons=PAPER_PHOTONS * level)
+            c = scatterscope.learned_case(
+                img, 256, seed=0, preset="paper", photons=PAPER_PHOTONS * level, **medium_of()
+            )
             cases.append((r["name"], level, c))
     return cases
 
@@ -574,7 +614,14 @@ def main():
     ap.add_argument("--tuning", help="folder of scripts/bench_images.py (only its tuning split is read)")
     ap.add_argument("--eval-every", type=int, default=1000)
     ap.add_argument("--checkpoint-every", type=int, default=200)
+    ap.add_argument(
+        "--medium",
+        choices=(MONTE_CARLO,),
+        help="simulate and model every case in this medium instead of the preset's (Eq. 6)",
+    )
     args = ap.parse_args()
+    global MEDIUM
+    MEDIUM = args.medium
 
     import torch
     import unrolled_model as um
@@ -588,6 +635,21 @@ def main():
         log.write(json.dumps(record) + "\n")
         log.flush()
 
+    # The cases of one work folder share one medium: resuming with another
+    # would mix them.
+    medium_file = os.path.join(args.work, "medium.json")
+    medium_name = args.medium or "the preset's (Eq. 6)"
+    if os.path.exists(medium_file):
+        with open(medium_file) as f:
+            recorded = json.load(f)["medium"]
+        if recorded != medium_name:
+            raise SystemExit(
+                f"{args.work} holds cases simulated in {recorded}, not {medium_name}: use another --work folder"
+            )
+    else:
+        with open(medium_file + ".tmp", "w") as f:
+            json.dump({"medium": medium_name}, f)
+        os.replace(medium_file + ".tmp", medium_file)
     say({"start": time.strftime("%Y-%m-%d %H:%M:%S"), "args": vars(args)})
     t0 = time.time()
     data = simulate(args.work, args.cases + args.validation, args.threads, say)
@@ -717,6 +779,7 @@ def main():
         "trained": (
             f"trained here: {args.steps} steps of {args.batch} cases ({args.steps * args.batch} seen), "
             f"{args.cases} simulated stacks, {total_minutes:.0f} min on {args.threads} CPU threads"
+            + (f", light by {args.medium} transport" if args.medium else "")
         ),
         "data": json.dumps({
             "cases": args.cases,
@@ -725,9 +788,21 @@ def main():
             "pitch_cm": PAPER_FOV_CM / 256,
             "levels": list(LEVELS),
             "paper": PAPER,
-            "jitter": {"mu_a": [0.7, 1.4], "mu_s": [0.8, 1.25], "thickness_cm": [0.9, 1.1]},
-            "instrument": "a quarter of the cases with an IRF of 15-60 ps FWHM and a background of 0-0.3 of the mean count",
-            "mismatch": "a fifth of the cases through a medium off the stated one (mu_a x0.9-1.1, mu_s x0.93-1.07, thickness x0.97-1.03)",
+            "medium": medium_name,
+            "jitter": (
+                {"lattice": LATTICE} if args.medium == MONTE_CARLO
+                else {"mu_a": [0.7, 1.4], "mu_s": [0.8, 1.25], "thickness_cm": [0.9, 1.1]}
+            ),
+            "instrument": (
+                "a quarter of the cases with an IRF of "
+                + ("20, 40 or 60" if args.medium == MONTE_CARLO else "15-60")
+                + " ps FWHM and a background of 0-0.3 of the mean count"
+            ),
+            "mismatch": (
+                f"a fifth of the cases through a medium off the stated one by one of {LATTICE_MISMATCH} (mu_a, mu_s, thickness)"
+                if args.medium == MONTE_CARLO
+                else "a fifth of the cases through a medium off the stated one (mu_a x0.9-1.1, mu_s x0.93-1.07, thickness x0.97-1.03)"
+            ),
             "discretisations": kinds,
             "skimage": SKIMAGE_TRAIN,
             "generators": [g.__name__ for g in OLD + NEW],

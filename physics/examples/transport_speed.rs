@@ -68,8 +68,7 @@ fn main() {
             seed: round as u64,
             max_path_cm: 1e4,
         };
-        let t =
-            transport(&slab, Source::Pencil, &grid, &run).expect("the slab is a valid medium");
+        let t = transport(&slab, Source::Pencil, &grid, &run).expect("the slab is a valid medium");
         let (wall, cpu) = (wall.elapsed().as_secs_f64(), cpu_seconds() - cpu);
         println!(
             "round {}: {packets} packets in {wall:.2} s ({cpu:.2} CPU s): {:.2e} per s, {:.2e} per CPU s; specular {:.6}, R {:.6} +- {:.6}, T {:.6} +- {:.6}",

@@ -781,7 +781,7 @@ fn simulate_scene<'py>(
 
 /// Reconstructs counts: (image, trace JSON, notes).
 #[pyfunction]
-#[pyo3(signature = (data, meta_json=None, method="auto", bin=None, boundary=None, background="auto", denoiser="ffdnet", weights=None, tv_gain=0.5, solver="split", max_iters=None, **physics))]
+#[pyo3(signature = (data, meta_json=None, method="auto", bin=None, boundary=None, background="auto", denoiser="ffdnet", weights=None, tv_gain=0.5, solver="split", max_iters=None, learned_weights=None, **physics))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn reconstruct<'py>(
     py: Python<'py>,
@@ -796,6 +796,7 @@ fn reconstruct<'py>(
     tv_gain: f64,
     solver: &str,
     max_iters: Option<usize>,
+    learned_weights: Option<PathBuf>,
     physics: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, String, Vec<String>)> {
     let meta: Option<StackMeta> = meta_json
@@ -821,6 +822,10 @@ fn reconstruct<'py>(
     };
     let mut opts = MethodOptions {
         solver: named::<Solver>("solver", solver)?,
+        learned: learned_weights
+            .map(|p| scatterscope::reconstruct::learned::from_file(&p))
+            .transpose()
+            .map_err(|e| msg(e.to_string()))?,
         ..MethodOptions::default()
     };
     if let Some(cap) = max_iters {

@@ -217,6 +217,28 @@ def test_reconstruct_equals_the_command_bit_for_bit(tmp_path, method, extra):
     assert notes[-len(record["notes"]) :] == record["notes"]
 
 
+def test_learned_weights_from_a_file_equal_the_command(tmp_path):
+    # The paper's pitch (50 cm over 256 pixels): inside the network's
+    # trained blur widths, so the network runs.
+    cli("simulate", "--scene", "disks", "--size", "32", "--fov", "6.25", "--seed", "4", "--out", str(tmp_path / "sim"))
+    counts, meta = scatterscope.load_stack(tmp_path / "sim" / "counts.exr")
+    small = REPO / "tests" / "fixtures" / "learned" / "small.safetensors"
+    cli(
+        "reconstruct", str(tmp_path / "sim" / "counts.exr"), "--method", "learned",
+        "--learned-weights", str(small), "--out", str(tmp_path / "rec"),
+    )
+    image, _, notes = scatterscope.reconstruct(counts, meta, method="learned", learned_weights=small)
+    theirs = scatterscope.load_image(tmp_path / "rec" / "reconstruction.exr")
+    np.testing.assert_array_equal(image.astype(np.float32).astype(np.float64), theirs)
+    embedded, _, _ = scatterscope.reconstruct(counts, meta, method="learned")
+    assert not np.array_equal(image, embedded)
+    assert any("outside what the network was trained on" in n for n in notes)
+    cut = tmp_path / "cut.safetensors"
+    cut.write_bytes(small.read_bytes()[:100])
+    with pytest.raises(ScatterscopeError, match="cut.safetensors"):
+        scatterscope.reconstruct(counts, meta, method="learned", learned_weights=cut)
+
+
 def test_calibrate_slab_equals_the_command_from_files_and_from_arrays(tmp_path):
     cal = SHARED / "cdt-calibration"
     if not cal.exists():

@@ -20,6 +20,7 @@ use super::em::{Acceleration, Keep, RlStop};
 use super::error::ReconstructError;
 use super::guard::{self, CarriedSearch, GUARD_TAU};
 use super::learned::Learned;
+use super::method::MethodOptions;
 use super::rl_stack::{self, RlStack};
 use super::run::{Estimate, Reconstructor, Run, WorkShape};
 use super::time_axis;
@@ -41,14 +42,15 @@ pub struct Auto<'a> {
 }
 
 impl<'a> Auto<'a> {
-    /// The default with the embedded network, its check searching as the
-    /// cross-validated `stop` does (`rl-sum`'s default search when `stop`
-    /// is a fixed count), `rl-stack` with `stop` outside the trained
-    /// ranges; `carried` carries the search between snapshots.
-    pub fn new(stop: RlStop, carried: Option<&'a CarriedSearch>) -> Self {
+    /// The default with the network `opts` choose, its check searching as
+    /// the cross-validated stop of `opts` does (`rl-sum`'s default search
+    /// when the stop is a fixed count), `rl-stack` with that stop outside
+    /// the trained ranges; `carried` carries the search between snapshots.
+    pub fn new(opts: &MethodOptions, carried: Option<&'a CarriedSearch>) -> Self {
+        let stop = opts.rl_stop;
         Self {
             learned: Learned {
-                net: super::learned::embedded(),
+                net: opts.learned_net(),
                 outside: Box::new(RlStack { stop }),
             },
             search: match stop {

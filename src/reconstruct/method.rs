@@ -8,6 +8,7 @@ use super::auto::Auto;
 use super::data::Data;
 pub use super::em::{Acceleration, RlStop};
 use super::guard::CarriedSearch;
+use super::learned::net::LearnedNet;
 use super::learned::{Learned, RL_SUM_CV};
 use super::problem::Problem;
 use super::rl_stack::RlStack;
@@ -97,6 +98,9 @@ pub struct MethodOptions {
     pub admm_lbfgs: AdmmLbfgsOptions,
     /// When Richardson-Lucy stops.
     pub rl_stop: RlStop,
+    /// The network of `learned` and `auto`: weights a user trained
+    /// ([`super::learned::from_file`]), or `None` for the embedded ones.
+    pub learned: Option<&'static LearnedNet>,
 }
 
 impl Default for MethodOptions {
@@ -113,6 +117,7 @@ impl Default for MethodOptions {
             split: SplitOptions::default(),
             admm_lbfgs: AdmmLbfgsOptions::default(),
             rl_stop: RlStop::CROSS_VALIDATED,
+            learned: None,
         }
     }
 }
@@ -188,6 +193,11 @@ impl MethodOptions {
         Ok(())
     }
 
+    /// The network these options choose: a user's, else the embedded.
+    pub fn learned_net(&self) -> &'static LearnedNet {
+        self.learned.unwrap_or_else(super::learned::embedded)
+    }
+
     /// The PnP-ADMM solver these options choose, with `denoiser` as its
     /// prior.
     pub fn pnp<'a>(&self, denoiser: &'a dyn Denoiser) -> Box<dyn Reconstructor + 'a> {
@@ -255,7 +265,7 @@ impl<'a> MethodPlan<'a> {
         let rl = RlSum { stop: opts.rl_stop };
         let rl_stack = RlStack { stop: opts.rl_stop };
         let (algorithm, view): (Box<dyn Reconstructor + 'a>, View) = match method {
-            Method::Auto => (Box::new(Auto::new(opts.rl_stop, None)), View::Whole),
+            Method::Auto => (Box::new(Auto::new(opts, None)), View::Whole),
             Method::Pnp => (opts.pnp(denoiser), View::Whole),
             Method::PnpSlice => (opts.pnp(denoiser), one_bin()?),
             Method::PnpSum => (opts.pnp(denoiser), View::Summed),
@@ -265,7 +275,7 @@ impl<'a> MethodPlan<'a> {
             Method::ScaledCounts => (Box::new(ScaledCounts), bin.map_or(View::Whole, View::Bin)),
             Method::Learned => (
                 Box::new(Learned {
-                    net: super::learned::embedded(),
+                    net: opts.learned_net(),
                     outside: Box::new(RL_SUM_CV),
                 }),
                 View::Whole,
@@ -283,7 +293,7 @@ impl<'a> MethodPlan<'a> {
     /// live view's).
     pub fn auto_carrying(opts: &MethodOptions, carried: &'a CarriedSearch) -> Self {
         Self {
-            algorithm: Box::new(Auto::new(opts.rl_stop, Some(carried))),
+            algorithm: Box::new(Auto::new(opts, Some(carried))),
             view: View::Whole,
             method: Method::Auto,
         }

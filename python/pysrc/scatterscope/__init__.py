@@ -454,6 +454,7 @@ def reconstruct(
     tv_gain: float = 0.5,
     solver: str = "split",
     max_iters: Optional[int] = None,
+    learned_weights: "os.PathLike[str] | str | None" = None,
     **physics: Any,
 ) -> Tuple[np.ndarray, Dict[str, Any], List[str]]:
     """Reconstruct the object from counts, as ``scatterscope reconstruct``.
@@ -470,7 +471,10 @@ def reconstruct(
     methods need ``bin``). ``denoiser`` (``ffdnet``, ``tv``, ``identity``),
     ``weights``, ``tv_gain`` and ``solver`` (``split``, ``admm-lbfgs``) are
     the CLI's flags of the same names; ``background`` is ``auto``, ``none``
-    or counts per pixel and bin.
+    or counts per pixel and bin; ``learned_weights`` is a learned network's
+    weights file (``training/train_unrolled.py``'s, e.g. trained with
+    ``--medium monte-carlo``) for ``learned`` and ``auto`` instead of the
+    embedded one, as ``--learned-weights``.
 
     Returns ``(image, trace, notes)``: the float64 image, the trace
     (``method``, ``prior``, ``wall_s`` and ``rows``: per-iteration arrays
@@ -493,6 +497,7 @@ def reconstruct(
         float(tv_gain),
         solver,
         max_iters,
+        None if learned_weights is None else _path(learned_weights),
         **physics,
     )
     return image, _trace(json.loads(trace)), list(notes)

@@ -37,6 +37,12 @@ pub struct ReconArgs {
     /// (vector extrapolation, the likelihood never going up).
     #[arg(long, value_parser = choice::<Acceleration>(), default_value = Acceleration::default().name())]
     pub rl_acceleration: Acceleration,
+    /// Weights of the learned network (`learned`, and `auto`'s network)
+    /// that `training/train_unrolled.py` wrote, instead of the embedded
+    /// ones (`scatterscope weights show FILE` says what they were trained
+    /// on).
+    #[arg(long, value_name = "FILE")]
+    pub learned_weights: Option<std::path::PathBuf>,
     #[command(flatten)]
     pub split: SplitOptions,
     #[command(flatten)]
@@ -59,6 +65,10 @@ impl ReconArgs {
                 self.rl_max_iters,
                 self.rl_acceleration,
             ),
+            learned: match &self.learned_weights {
+                Some(path) => Some(scatterscope::reconstruct::learned::from_file(path)?),
+                None => None,
+            },
         };
         if let Some(cap) = self.max_iters {
             opts.cap_pnp_iters(cap);

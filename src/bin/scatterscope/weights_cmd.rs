@@ -1,8 +1,10 @@
-//! `scatterscope weights`: import and inspect FFDNet weights.
+//! `scatterscope weights`: import and inspect FFDNet weights, and inspect
+//! the learned network's.
 
 use std::path::PathBuf;
 
 use scatterscope::denoise::ffdnet::source;
+use scatterscope::reconstruct::learned::{self, net::LearnedNet};
 
 /// Manage the FFDNet weights used by the learned prior.
 #[derive(Debug, clap::Args)]
@@ -23,10 +25,12 @@ enum Action {
         #[arg(long)]
         out: Option<PathBuf>,
     },
-    /// Show which weights the prior would use and what they are.
+    /// Show which weights the prior would use and what they are, or what
+    /// a learned network's weights file (`--learned-weights`) holds.
     Show {
-        /// A weight file to inspect instead of the default choice, or
-        /// `embedded` for the built-in weights.
+        /// A weight file to inspect instead of the default choice (FFDNet's
+        /// or the learned network's), or `embedded` for the built-in
+        /// FFDNet weights.
         path: Option<PathBuf>,
     },
 }
@@ -40,7 +44,11 @@ pub fn run(args: &WeightsArgs) -> anyhow::Result<()> {
             Ok(())
         }
         Action::Show { path } => {
-            for line in source::load(path.as_deref())?.describe() {
+            let lines = match path.as_deref() {
+                Some(p) if LearnedNet::is_file_of_format(p) => learned::from_file(p)?.describe(),
+                _ => source::load(path.as_deref())?.describe(),
+            };
+            for line in lines {
                 println!("{line}");
             }
             Ok(())

@@ -7,7 +7,8 @@
 //! operator follow each correction, so the output is an EM iterate of the
 //! counts. The network was trained here, on a 2-core CPU, on stacks
 //! simulated with more than one discretisation of the physics
-//! (`training/train_unrolled.py`); its weights are embedded. A stack
+//! (`training/train_unrolled.py`); its weights are embedded, and weights a
+//! user trained are read by [`from_file`]. A stack
 //! outside the ranges it was trained on is reconstructed by the method it
 //! is given for them, and the notes say why. The output's Poisson
 //! deviance under the forward model is in the trace.
@@ -16,12 +17,15 @@ pub mod inputs;
 pub mod net;
 pub mod stages;
 
-use std::sync::OnceLock;
+use std::collections::HashMap;
+use std::hash::{Hash, Hasher};
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, OnceLock};
 
 use ndarray::Array2;
 
 use self::inputs::{CHECKPOINTS, LearnedInputs, kernel_rms_radius, learned_inputs};
-use self::net::LearnedNet;
+use self::net::{LearnedNet, NetError};
 use super::data::Data;
 use super::discrepancy::{DevianceCheck, ExpectedDeviance};
 use super::em::RlStop;
@@ -40,6 +44,35 @@ pub fn embedded() -> &'static LearnedNet {
         LearnedNet::from_bytes(EMBEDDED, "the embedded learned weights")
             .expect("the embedded weights are checked by the tests")
     })
+}
+
+/// The network in the weights file at `path` (as
+/// `training/train_unrolled.py` writes it), read once per process and
+/// content: reading a file whose bytes are unchanged returns the network
+/// read before, and a rewritten file is read anew. Every network read is
+/// kept until the process ends (a few hundred kilobytes each), so that
+/// [`super::method::MethodOptions`] can hold it.
+pub fn from_file(path: &Path) -> Result<&'static LearnedNet, NetError> {
+    type Registry = Mutex<HashMap<(PathBuf, u64), &'static LearnedNet>>;
+    static READ: OnceLock<Registry> = OnceLock::new();
+    let origin = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| NetError {
+        origin: origin.clone(),
+        problem: format!("cannot be read: {e}"),
+    })?;
+    let mut hasher = std::hash::DefaultHasher::new();
+    bytes.hash(&mut hasher);
+    let key = (path.to_path_buf(), hasher.finish());
+    let mut read = READ
+        .get_or_init(Registry::default)
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some(net) = read.get(&key) {
+        return Ok(net);
+    }
+    let net: &'static LearnedNet = Box::leak(Box::new(LearnedNet::from_bytes(&bytes, &origin)?));
+    read.insert(key, net);
+    Ok(net)
 }
 
 /// The learned reconstruction with `net`, and `outside` for stacks outside

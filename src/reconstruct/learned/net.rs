@@ -276,6 +276,31 @@ impl LearnedNet {
         self.metadata.get(name).map(String::as_str)
     }
 
+    /// Its architecture, then every metadata entry (what it was trained
+    /// on, how, and its ranges), a line each.
+    pub fn describe(&self) -> Vec<String> {
+        let mut lines = vec![format!(
+            "learned network: {ARCHITECTURE}, {} stages of a shared CNN (channels {:?}) each followed by {} EM steps",
+            self.stages, self.channels, self.em_steps
+        )];
+        lines.extend(self.metadata.iter().map(|(k, v)| format!("  {k}: {v}")));
+        lines
+    }
+
+    /// Whether the file at `path` is a safetensors file of this format
+    /// (read for its header only; `false` when it cannot be read).
+    pub fn is_file_of_format(path: &std::path::Path) -> bool {
+        std::fs::read(path).is_ok_and(|bytes| {
+            SafeTensors::read_metadata(&bytes).is_ok_and(|(_, header)| {
+                header
+                    .metadata()
+                    .as_ref()
+                    .and_then(|m| m.get("format"))
+                    .is_some_and(|f| f == FORMAT)
+            })
+        })
+    }
+
     /// Why a stack of `photons_per_pixel`, `kernel_width_px` and
     /// `background_share` lies outside what the network was trained on
     /// (each bound widened by [`RANGE_SLACK`]), by name; `None` inside.
