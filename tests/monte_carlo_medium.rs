@@ -173,3 +173,77 @@ fn bad_input_to_the_monte_carlo_medium_is_refused_by_name() {
         assert!(!out.exists(), "{flag} {value}: {} written", out.display());
     }
 }
+
+/// A response measured from a reference recording (`--irf-from`) is taken
+/// by the Monte Carlo medium as a table (its zero at the reference's
+/// peak): the output says so, and the 20 ps response spreads light into
+/// the bins before it can cross the slab (n d / c = 140.1 ps), where
+/// without it there is none.
+#[test]
+fn a_measured_response_is_taken_by_the_monte_carlo_medium() {
+    use scatterscope::physics::{Irf, Preset};
+    use scatterscope::stack::{Stack, StackMeta, ValueKind};
+    let dir = tempfile::tempdir().unwrap();
+    // One pixel, 100 bins of 4 ps from 0: a 20 ps Gaussian at 100 ps.
+    let response = Irf {
+        fwhm_ps: 20.0,
+        tail_ps: 0.0,
+    };
+    let mut s = Preset::Paper.setup();
+    (s.sensor.width_px, s.sensor.height_px, s.bins.count) = (1, 1, 100);
+    s.bins.start_ps = 0.0;
+    let meta = StackMeta::consecutive(&s, 100, ValueKind::Counts, "reference".into()).unwrap();
+    let data = ndarray::Array3::from_shape_fn((100, 1, 1), |(k, _, _)| {
+        let a = k as f64 * 4.0;
+        (1e6 * response.bin_weight(a, a + 4.0, 100.0)).round() as f32
+    });
+    let reference = dir.path().join("reference.exr");
+    Stack::new(data, meta).save(&reference).unwrap();
+    // Light in the bins before 140 ps, as a share of all, with and
+    // without the response.
+    let early_share = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args = vec![
+            "psf",
+            "--preset",
+            "paper",
+            "--medium",
+            "monte-carlo",
+            "--size",
+            "32",
+            "--fov",
+            "6.25",
+            "--t-start",
+            "120ps",
+            "--bins",
+            "30",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = run_isolated(&args);
+        let (stdout, stderr) = streams(&o);
+        assert!(o.status.success(), "{stderr}");
+        // psf_bins.csv: bin, start_ps, end_ps, photons, ...
+        let csv = std::fs::read_to_string(out.join("psf_bins.csv")).unwrap();
+        let light: Vec<(f64, f64)> = csv
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<f64> = l.split(',').take(4).map(|v| v.parse().unwrap()).collect();
+                (f[2], f[3])
+            })
+            .collect();
+        let total: f64 = light.iter().map(|l| l.1).sum();
+        let early: f64 = light.iter().filter(|l| l.0 <= 140.0).map(|l| l.1).sum();
+        (stdout, early / total)
+    };
+    let (_, without) = early_share("plain", &[]);
+    assert_eq!(without, 0.0);
+    let (stdout, with) = early_share("measured", &["--irf-from", reference.to_str().unwrap()]);
+    assert!(
+        stdout.contains("instrument response measured in"),
+        "{stdout}"
+    );
+    assert!(with > 0.01, "{with} of the light before 140 ps");
+}

@@ -450,31 +450,27 @@ pub struct SetupKernels {
 
 /// Kernels of `setup`'s bins by Monte Carlo transport: `packets` packets
 /// from a point of the object at the slab's back face, emitting into it
-/// by Lambert's law (air outside both faces); a parametric instrument
-/// response spreads each arrival over the bins (arrivals tallied in
-/// eighths of a bin). A measured response table is refused.
+/// by Lambert's law (air outside both faces); an instrument response,
+/// parametric or a measured table, spreads each arrival over the bins
+/// (arrivals tallied in eighths of a bin, or finer to the table's own bins,
+/// at most 32 to a bin).
 pub fn setup_kernels(
     setup: &crate::params::Setup,
     packets: u64,
     seed: u64,
 ) -> Result<SetupKernels, crate::error::ParamError> {
-    use crate::error::ParamError;
     let m = &setup.medium;
     let slab = Slab::in_air(m);
     slab.validate()?;
-    let irf = match &setup.irf {
-        None => None,
-        Some(crate::irf::InstrumentResponse::Parametric(p)) => Some(*p),
+    let irf = setup.irf.as_ref();
+    let bins = &setup.bins;
+    let sub = match irf {
+        None => 1,
+        Some(crate::irf::InstrumentResponse::Parametric(_)) => 8,
         Some(crate::irf::InstrumentResponse::Measured(t)) => {
-            return Err(ParamError::new(
-                "irf_table_weights",
-                t.weights().len() as f64,
-                "the Monte Carlo medium takes a parametric instrument response (a FWHM and tail), not yet a measured table",
-            ));
+            ((bins.width_ps / t.bin_ps()).ceil() as usize).clamp(8, 32)
         }
     };
-    let bins = &setup.bins;
-    let sub = if irf.is_some() { 8 } else { 1 };
     let fine = bins.width_ps / sub as f64;
     let (lo, hi) = irf.map_or((0.0, 0.0), |i| i.support_ps());
     // Arrivals from the earliest that the response can carry into the
