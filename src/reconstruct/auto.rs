@@ -20,7 +20,7 @@ use super::em::{Acceleration, Keep, RlStop};
 use super::error::ReconstructError;
 use super::guard::{self, CarriedSearch, GUARD_TAU};
 use super::learned::Learned;
-use super::method::MethodOptions;
+use super::learned::net::LearnedNet;
 use super::rl_stack::{self, RlStack};
 use super::run::{Estimate, Reconstructor, Run, WorkShape};
 use super::time_axis;
@@ -42,15 +42,14 @@ pub struct Auto<'a> {
 }
 
 impl<'a> Auto<'a> {
-    /// The default with the network `opts` choose, its check searching as
-    /// the cross-validated stop of `opts` does (`rl-sum`'s default search
-    /// when the stop is a fixed count), `rl-stack` with that stop outside
-    /// the trained ranges; `carried` carries the search between snapshots.
-    pub fn new(opts: &MethodOptions, carried: Option<&'a CarriedSearch>) -> Self {
-        let stop = opts.rl_stop;
+    /// The default with `net`, its check searching as the cross-validated
+    /// `stop` does (`rl-sum`'s default search when `stop` is a fixed
+    /// count), `rl-stack` with `stop` outside the trained ranges;
+    /// `carried` carries the search between snapshots.
+    pub fn new(stop: RlStop, net: &'a LearnedNet, carried: Option<&'a CarriedSearch>) -> Self {
         Self {
             learned: Learned {
-                net: opts.learned_net(),
+                net,
                 outside: Box::new(RlStack { stop }),
             },
             search: match stop {

@@ -265,7 +265,10 @@ impl<'a> MethodPlan<'a> {
         let rl = RlSum { stop: opts.rl_stop };
         let rl_stack = RlStack { stop: opts.rl_stop };
         let (algorithm, view): (Box<dyn Reconstructor + 'a>, View) = match method {
-            Method::Auto => (Box::new(Auto::new(opts, None)), View::Whole),
+            Method::Auto => (
+                Box::new(Auto::new(opts.rl_stop, opts.learned_net(), None)),
+                View::Whole,
+            ),
             Method::Pnp => (opts.pnp(denoiser), View::Whole),
             Method::PnpSlice => (opts.pnp(denoiser), one_bin()?),
             Method::PnpSum => (opts.pnp(denoiser), View::Summed),
@@ -293,7 +296,7 @@ impl<'a> MethodPlan<'a> {
     /// live view's).
     pub fn auto_carrying(opts: &MethodOptions, carried: &'a CarriedSearch) -> Self {
         Self {
-            algorithm: Box::new(Auto::new(opts, Some(carried))),
+            algorithm: Box::new(Auto::new(opts.rl_stop, opts.learned_net(), Some(carried))),
             view: View::Whole,
             method: Method::Auto,
         }
