@@ -376,6 +376,20 @@ fn a_pixel_kernel_holds_its_rings_light() {
     }
 }
 
+/// The paper's preset with the Monte Carlo medium on a sensor of `size`
+/// pixels at the preset's pitch (50 cm over 256), in 30 bins of 4 ps from
+/// 130 ps, where its light arrives.
+fn preset_as_light_travels(size: usize) -> scatterscope_physics::params::Setup {
+    let mut setup = scatterscope_physics::params::Preset::Paper.setup();
+    setup.medium.model = MediumModel::MonteCarlo;
+    setup.bins.start_ps = 130.0;
+    setup.bins.count = 30;
+    setup.sensor.width_px = size;
+    setup.sensor.height_px = size;
+    setup.sensor.fov_cm = 50.0 * size as f64 / 256.0;
+    setup
+}
+
 /// Issue 90: the paper's preset with the Monte Carlo medium, in bins
 /// where its light arrives (4 ps from 130 ps): under 1 % of its light
 /// before 136 ps (none can cross 3 cm at n 1.4 before 140.1 ps) and the
@@ -384,14 +398,7 @@ fn a_pixel_kernel_holds_its_rings_light() {
 #[test]
 fn the_papers_preset_as_light_travels() {
     use scatterscope_physics::kernel::{KernelStack, Sampling};
-    use scatterscope_physics::params::Preset;
-    let mut setup = Preset::Paper.setup();
-    setup.medium.model = MediumModel::MonteCarlo;
-    setup.bins.start_ps = 130.0;
-    setup.bins.count = 30;
-    setup.sensor.width_px = 64;
-    setup.sensor.height_px = 64;
-    setup.sensor.fov_cm = 12.5;
+    let setup = preset_as_light_travels(64);
     let k = KernelStack::build(&setup, Sampling::Integrated).unwrap();
     let light: Vec<f64> = k.bins.iter().map(|b| b.photons).collect();
     let total: f64 = light.iter().sum();
@@ -434,14 +441,7 @@ fn the_papers_preset_as_light_travels() {
 fn a_measured_response_spreads_transported_light() {
     use scatterscope_physics::irf::{InstrumentResponse, Irf, IrfTable};
     use scatterscope_physics::kernel::{KernelStack, Sampling};
-    use scatterscope_physics::params::Preset;
-    let mut setup = Preset::Paper.setup();
-    setup.medium.model = MediumModel::MonteCarlo;
-    setup.bins.start_ps = 130.0;
-    setup.bins.count = 30;
-    setup.sensor.width_px = 48;
-    setup.sensor.height_px = 48;
-    setup.sensor.fov_cm = 9.375;
+    let mut setup = preset_as_light_travels(48);
     setup.min_bin_photons = 0.0;
     let build = |irf: Option<InstrumentResponse>| {
         let mut s = setup.clone();
