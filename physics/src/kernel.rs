@@ -464,9 +464,19 @@ impl<'a> BinTime<'a> {
 
 /// Share of the light in each bin of `setup` over the whole sensor plane
 /// (no pixels, no sensor edges): the time profile that `calibrate` fits.
-/// Sums to 1 over the bins; an error when no bin has light.
+/// Sums to 1 over the bins; an error when no bin has light. Under the
+/// Monte Carlo medium, by transport
+/// ([`crate::transport::setup_profile`], [`crate::transport::PROFILE_PACKETS`]
+/// packets from the kernels' seed).
 pub fn bin_profile(setup: &Setup) -> Result<Vec<f64>, ParamError> {
     setup.validate()?;
+    if setup.medium.model == MediumModel::MonteCarlo {
+        return crate::transport::setup_profile(
+            setup,
+            crate::transport::PROFILE_PACKETS,
+            crate::transport::SETUP_SEED,
+        );
+    }
     let d = Diffusion::new(&setup.medium)?;
     let logs: Vec<f64> = match &setup.irf {
         Some(InstrumentResponse::Measured(table)) => {

@@ -448,6 +448,88 @@ pub struct SetupKernels {
     pub cache: crate::transport_cache::CacheUse,
 }
 
+/// The arrivals a setup's bins record: a fine time grid from the earliest
+/// arrival an instrument response can carry into the first bin to the
+/// latest it can carry into the last (tallied in eighths of a bin with a
+/// response, or finer to a measured table's own bins, at most 32 to a
+/// bin), and each bin's chance of recording each fine step.
+struct Arrivals {
+    start_ps: f64,
+    /// The latest arrival the last bin can record.
+    end_ps: f64,
+    fine_ps: f64,
+    steps: usize,
+}
+
+impl Arrivals {
+    fn of(setup: &crate::params::Setup) -> Self {
+        let irf = setup.irf.as_ref();
+        let bins = &setup.bins;
+        let sub = match irf {
+            None => 1,
+            Some(crate::irf::InstrumentResponse::Parametric(_)) => 8,
+            Some(crate::irf::InstrumentResponse::Measured(t)) => {
+                ((bins.width_ps / t.bin_ps()).ceil() as usize).clamp(8, 32)
+            }
+        };
+        let fine_ps = bins.width_ps / sub as f64;
+        let (lo, hi) = irf.map_or((0.0, 0.0), |i| i.support_ps());
+        let start_ps = if irf.is_some() {
+            bins.start_ps - hi - fine_ps
+        } else {
+            bins.start_ps
+        };
+        let end_ps = bins.end_ps() - lo;
+        let steps = ((end_ps - start_ps) / fine_ps).ceil().max(1.0) as usize;
+        Self {
+            start_ps,
+            end_ps,
+            fine_ps,
+            steps,
+        }
+    }
+
+    /// The transport grid of these arrivals with `rings` rings of
+    /// `ring_width_cm`, and the run of `packets` from `seed` (light later
+    /// than the grid's end reaches no bin: the path cap).
+    fn grid_and_run(
+        &self,
+        setup: &crate::params::Setup,
+        (ring_width_cm, rings): (f64, usize),
+        packets: u64,
+        seed: u64,
+    ) -> (Grid, Run) {
+        let grid = Grid {
+            t_start_ps: self.start_ps,
+            bin_width_ps: self.fine_ps,
+            bins: self.steps,
+            ring_width_cm,
+            rings,
+        };
+        let run = Run {
+            photons: packets,
+            seed,
+            max_path_cm: (self.end_ps + self.fine_ps)
+                * light_speed_cm_per_ps(setup.medium.refractive_index),
+        };
+        (grid, run)
+    }
+
+    /// Each fine step's chance of being recorded in bin `k` of `setup`.
+    fn chance(&self, setup: &crate::params::Setup, k: usize) -> Vec<f64> {
+        let (ta, tb) = setup.bins.edges_ps(k);
+        (0..self.steps)
+            .map(|f| {
+                let centre = self.start_ps + (f as f64 + 0.5) * self.fine_ps;
+                match &setup.irf {
+                    Some(i) => i.bin_weight(ta, tb, centre),
+                    None => f64::from(u8::from(centre >= ta && centre < tb)),
+                }
+            })
+            .collect()
+    }
+}
+
 /// Kernels of `setup`'s bins by Monte Carlo transport: `packets` packets
 /// from a point of the object at the slab's back face, emitting into it
 /// by Lambert's law (air outside both faces); an instrument response,
@@ -459,62 +541,22 @@ pub fn setup_kernels(
     packets: u64,
     seed: u64,
 ) -> Result<SetupKernels, crate::error::ParamError> {
-    let m = &setup.medium;
-    let slab = Slab::in_air(m);
+    let slab = Slab::in_air(&setup.medium);
     slab.validate()?;
-    let irf = setup.irf.as_ref();
-    let bins = &setup.bins;
-    let sub = match irf {
-        None => 1,
-        Some(crate::irf::InstrumentResponse::Parametric(_)) => 8,
-        Some(crate::irf::InstrumentResponse::Measured(t)) => {
-            ((bins.width_ps / t.bin_ps()).ceil() as usize).clamp(8, 32)
-        }
-    };
-    let fine = bins.width_ps / sub as f64;
-    let (lo, hi) = irf.map_or((0.0, 0.0), |i| i.support_ps());
-    // Arrivals from the earliest that the response can carry into the
-    // first bin to the latest it can carry into the last.
-    let start = if irf.is_some() {
-        bins.start_ps - hi - fine
-    } else {
-        bins.start_ps
-    };
-    let end = bins.end_ps() - lo;
-    let steps = ((end - start) / fine).ceil().max(1.0) as usize;
+    let arrivals = Arrivals::of(setup);
     let pitch = setup.sensor.pixel_pitch_cm();
     let (h, w) = (setup.sensor.height_px, setup.sensor.width_px);
     let half_diagonal = 0.5 * pitch * ((h * h + w * w) as f64).sqrt() + pitch;
     let ring_width = pitch / 2.0;
-    let grid = Grid {
-        t_start_ps: start,
-        bin_width_ps: fine,
-        bins: steps,
-        ring_width_cm: ring_width,
-        rings: (half_diagonal / ring_width).ceil() as usize,
-    };
-    let run = Run {
-        photons: packets,
-        seed,
-        // Light later than the grid's end reaches no bin.
-        max_path_cm: (end + fine) * light_speed_cm_per_ps(m.refractive_index),
-    };
+    let rings = (half_diagonal / ring_width).ceil() as usize;
+    let (grid, run) = arrivals.grid_and_run(setup, (ring_width, rings), packets, seed);
     let (t, cache) =
         crate::transport_cache::transport_cached(&slab, Source::Lambertian, &grid, &run)?;
-    let mut kernels = Vec::with_capacity(bins.count);
-    let mut relative_errors = Vec::with_capacity(bins.count);
-    for k in 0..bins.count {
-        let (ta, tb) = bins.edges_ps(k);
-        // Each fine arrival bin's chance of being recorded in bin k.
-        let chance: Vec<f64> = (0..steps)
-            .map(|f| {
-                let centre = start + (f as f64 + 0.5) * fine;
-                match irf {
-                    Some(i) => i.bin_weight(ta, tb, centre),
-                    None => f64::from(u8::from(centre >= ta && centre < tb)),
-                }
-            })
-            .collect();
+    let steps = arrivals.steps;
+    let mut kernels = Vec::with_capacity(setup.bins.count);
+    let mut relative_errors = Vec::with_capacity(setup.bins.count);
+    for k in 0..setup.bins.count {
+        let chance = arrivals.chance(setup, k);
         let (mut rings, mut var) = (vec![0.0; grid.rings], 0.0);
         for (j, r) in rings.iter_mut().enumerate() {
             for (f, &p) in chance.iter().enumerate() {
@@ -539,6 +581,46 @@ pub fn setup_kernels(
         cache,
     })
 }
+
+/// Share of the light in each bin of `setup` over the whole far face (no
+/// pixels, no sensor edges) by Monte Carlo transport of `packets` packets
+/// from `seed`, as [`setup_kernels`] launches them: the time profile
+/// `calibrate` fits under the Monte Carlo medium (the same seed for every
+/// medium, so nearby media share their packets' random numbers). Not
+/// cached: a fit asks for many media once each.
+pub fn setup_profile(
+    setup: &crate::params::Setup,
+    packets: u64,
+    seed: u64,
+) -> Result<Vec<f64>, crate::error::ParamError> {
+    let slab = Slab::in_air(&setup.medium);
+    slab.validate()?;
+    let arrivals = Arrivals::of(setup);
+    let (grid, run) = arrivals.grid_and_run(setup, (1.0, 1), packets, seed);
+    let t = transport(&slab, Source::Lambertian, &grid, &run)?;
+    let light: Vec<f64> = (0..setup.bins.count)
+        .map(|k| {
+            let chance = arrivals.chance(setup, k);
+            chance.iter().zip(&t.face).map(|(p, e)| p * e.mean).sum()
+        })
+        .collect();
+    let total: f64 = light.iter().sum();
+    if !(total > 0.0) {
+        return Err(crate::error::ParamError::new(
+            "bins",
+            setup.bins.end_ps(),
+            format!(
+                "Monte Carlo transport records no light in these bins: the first light crosses the slab at n d / c = {:.1} ps",
+                setup.medium.first_light_ps()
+            ),
+        ));
+    }
+    Ok(light.iter().map(|l| l / total).collect())
+}
+
+/// Packets of the time profile a fit evaluates per medium
+/// ([`setup_profile`]): a twentieth of the kernels'.
+pub const PROFILE_PACKETS: u64 = 200_000;
 
 /// Packets a setup's kernels are made of by default.
 pub const SETUP_PACKETS: u64 = 4_000_000;

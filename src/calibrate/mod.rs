@@ -167,6 +167,13 @@ impl Calibration {
             self.chi2_per_dof, self.dof
         ));
         lines.extend(self.undetermined.iter().map(|u| format!("  note: {u}")));
+        if self.setup.medium.model == scatterscope_physics::MediumModel::MonteCarlo {
+            lines.push(format!(
+                "  note: the fitted profile is Monte Carlo transport's ({} packets per evaluation, one seed for every medium); the medium's standard errors are taken over {:.0} % steps and leave out that profile's own Monte Carlo error",
+                scatterscope_physics::transport::PROFILE_PACKETS,
+                100.0 * MONTE_CARLO_STEP
+            ));
+        }
         lines
     }
 }
@@ -426,6 +433,11 @@ pub fn calibrate(
     })
 }
 
+/// The relative step over which the medium's standard errors are taken
+/// under the Monte Carlo medium (a fixed-seed run's profile moves in small
+/// jumps with the medium; over this step the jumps average out).
+pub const MONTE_CARLO_STEP: f64 = 0.02;
+
 /// Standard errors of the free parameters from the inverse Hessian of the
 /// negative log-likelihood in natural parameters, and the indices (into
 /// the free list) of those the data do not determine.
@@ -439,10 +451,16 @@ fn standard_errors(model: &Model, p: &[f64; 6]) -> (Vec<Option<f64>>, Vec<usize>
         model.nll(&q)
     };
     let x: Vec<f64> = free.iter().map(|&i| p[i]).collect();
+    // Transport's profile is a fixed-seed Monte Carlo run: smooth in the
+    // signal and background, but its packets' paths change in steps with
+    // the medium, so the medium's curvature is taken over steps of
+    // [`MONTE_CARLO_STEP`] rather than at a point.
+    let monte_carlo = model.setup.medium.model == scatterscope_physics::MediumModel::MonteCarlo;
     let steps: Vec<f64> = free
         .iter()
         .map(|&i| match i {
             2 => 1e-3 * model.setup.bins.width_ps,
+            0 | 1 if monte_carlo => MONTE_CARLO_STEP * p[i].abs().max(1e-12),
             _ => 1e-4 * p[i].abs().max(1e-12),
         })
         .collect();
