@@ -605,7 +605,7 @@ pub fn setup_profile(
         })
         .collect();
     let total: f64 = light.iter().sum();
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return Err(crate::error::ParamError::new(
             "bins",
             setup.bins.end_ps(),
