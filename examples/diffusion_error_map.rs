@@ -18,6 +18,7 @@
 
 use scatterscope::physics::diffusion::Diffusion;
 use scatterscope::physics::diffusion::light_speed_cm_per_ps;
+use scatterscope::physics::diffusion_error::shape_error;
 use scatterscope::physics::params::{Medium, MediumModel};
 use scatterscope::physics::transport::{Grid, Run, Slab, Source, transport};
 use scatterscope::plot::{Series, chart};
@@ -34,16 +35,6 @@ fn median(p: &[f64], width: f64) -> f64 {
         }
     }
     f64::NAN
-}
-
-/// Half the L1 distance of `a` and `b`, each scaled to unit sum.
-fn shape_error(a: &[f64], b: &[f64]) -> f64 {
-    let (sa, sb): (f64, f64) = (a.iter().sum(), b.iter().sum());
-    0.5 * a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| (x / sa - y / sb).abs())
-        .sum::<f64>()
 }
 
 fn main() {

@@ -11,7 +11,7 @@ use std::fmt;
 use crate::error::ParamError;
 use crate::kernel::{KernelStack, Sampling};
 use crate::params::{MediumModel, Setup};
-use crate::transport::{Grid, Run, SETUP_SEED, Slab, Source, transport};
+use crate::transport::{SETUP_SEED, setup_light};
 
 /// Packets of the quick run: its shape error's noise is about a
 /// hundredth where the light spreads over tens of bins.
@@ -52,6 +52,17 @@ pub fn measured_line(setup: &Setup) -> String {
     }
 }
 
+/// [`measured_line`] where the validity notes need it: `outside` holds
+/// diffusion's diagnostics for `setup` and a diffusion model is used
+/// (transport is not measured against itself); `None` otherwise.
+pub fn measured_line_where_outside(
+    setup: &Setup,
+    outside: &[crate::validity::Diagnostic],
+) -> Option<String> {
+    (setup.medium.model != MediumModel::MonteCarlo && !outside.is_empty())
+        .then(|| measured_line(setup))
+}
+
 /// A diffusion model's error against transport over a setup's bins.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DiffusionError {
@@ -85,6 +96,20 @@ impl fmt::Display for DiffusionError {
     }
 }
 
+/// Half the L1 distance of the profiles `a` and `b`, each scaled to unit
+/// sum: 0 the same shape, 1 disjoint, and 1 where either holds no light.
+pub fn shape_error(a: &[f64], b: &[f64]) -> f64 {
+    let (sa, sb): (f64, f64) = (a.iter().sum(), b.iter().sum());
+    if !(sa > 0.0 && sb > 0.0) {
+        return 1.0;
+    }
+    0.5 * a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x / sa - y / sb).abs())
+        .sum::<f64>()
+}
+
 /// Measures `model`'s error (a diffusion model) against transport over
 /// `setup`'s bins and sensor.
 pub fn diffusion_error(setup: &Setup, model: MediumModel) -> Result<DiffusionError, ParamError> {
@@ -100,44 +125,24 @@ pub fn diffusion_error(setup: &Setup, model: MediumModel) -> Result<DiffusionErr
         setup.sensor.fov_cm * coarse.sensor.width_px as f64 / setup.sensor.width_px.max(1) as f64;
     let kernels = KernelStack::build(&coarse, Sampling::Integrated)?;
     let diffusion: Vec<f64> = kernels.bins.iter().map(|b| b.photons).collect();
-    let m = &setup.medium;
-    let slab = Slab::in_air(m);
     let pitch = setup.sensor.pixel_pitch_cm();
     let half_diagonal = 0.5
         * pitch
         * ((setup.sensor.width_px.pow(2) + setup.sensor.height_px.pow(2)) as f64).sqrt();
-    let bins = &setup.bins;
-    let grid = Grid {
-        t_start_ps: bins.start_ps,
-        bin_width_ps: bins.width_ps,
-        bins: bins.count,
-        ring_width_cm: half_diagonal.max(f64::MIN_POSITIVE),
-        rings: 1,
-    };
-    let run = Run {
-        photons: QUICK_PACKETS,
-        seed: SETUP_SEED,
-        max_path_cm: (bins.end_ps() + bins.width_ps)
-            * crate::diffusion::light_speed_cm_per_ps(m.refractive_index),
-    };
-    let t = transport(&slab, Source::Lambertian, &grid, &run)?;
-    let light: Vec<f64> = (0..bins.count).map(|k| t.cells[k].mean).collect();
+    // Transport with ideal timing (`coarse` has no response), over the
+    // sensor's circle.
+    let light = setup_light(
+        &coarse,
+        Some(half_diagonal.max(f64::MIN_POSITIVE)),
+        QUICK_PACKETS,
+        SETUP_SEED,
+    )?;
     let transport_light: f64 = light.iter().sum();
-    let total: f64 = diffusion.iter().sum();
-    let shape = if transport_light > 0.0 && total > 0.0 {
-        0.5 * diffusion
-            .iter()
-            .zip(&light)
-            .map(|(d, l)| (d / total - l / transport_light).abs())
-            .sum::<f64>()
-    } else {
-        1.0
-    };
     Ok(DiffusionError {
         model,
-        shape,
+        shape: shape_error(&diffusion, &light),
         transport_light,
-        first_light_ps: m.first_light_ps(),
+        first_light_ps: setup.medium.first_light_ps(),
     })
 }
 

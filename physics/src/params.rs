@@ -221,17 +221,15 @@ impl Medium {
             return Err(ParamError::new(
                 field,
                 value,
-                if self.model == MediumModel::MonteCarlo {
-                    format!(
-                        "the reduced scattering (1 - g) mu_s = {} /cm: light crossing without scattering (ballistic light only, g = 1 or mu_s = 0) is not modelled, by Monte Carlo transport either; give g < 1 and mu_s > 0",
-                        self.mu_s_per_cm * (1.0 - self.g)
-                    )
-                } else {
-                    format!(
-                        "the reduced scattering (1 - g) mu_s = {} /cm: a medium that does not scatter has no diffusion; the model describes scattering media",
-                        self.mu_s_per_cm * (1.0 - self.g)
-                    )
-                },
+                format!(
+                    "the reduced scattering (1 - g) mu_s = {} /cm: {}",
+                    self.mu_s_per_cm * (1.0 - self.g),
+                    if self.model == MediumModel::MonteCarlo {
+                        "light crossing without scattering (ballistic light only, g = 1 or mu_s = 0) is not modelled, by Monte Carlo transport either; give g < 1 and mu_s > 0"
+                    } else {
+                        "a medium that does not scatter has no diffusion; the model describes scattering media"
+                    }
+                ),
             ));
         }
         let attenuation = self.mu_a_per_cm + (1.0 - self.g) * self.mu_s_per_cm;

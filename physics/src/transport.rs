@@ -582,28 +582,46 @@ pub fn setup_kernels(
     })
 }
 
-/// Share of the light in each bin of `setup` over the whole far face (no
-/// pixels, no sensor edges) by Monte Carlo transport of `packets` packets
-/// from `seed`, as [`setup_kernels`] launches them: the time profile
-/// `calibrate` fits under the Monte Carlo medium (the same seed for every
-/// medium, so nearby media share their packets' random numbers). Not
-/// cached: a fit asks for many media once each.
-pub fn setup_profile(
+/// Light in each bin of `setup` per packet by Monte Carlo transport of
+/// `packets` packets from `seed`, launched as [`setup_kernels`] launches
+/// them and recorded through the setup's instrument response: within
+/// `radius_cm` of the axis, or over the whole far face (`None`). Not
+/// cached: its callers ask for many media, or few packets, once each.
+pub fn setup_light(
     setup: &crate::params::Setup,
+    radius_cm: Option<f64>,
     packets: u64,
     seed: u64,
 ) -> Result<Vec<f64>, crate::error::ParamError> {
     let slab = Slab::in_air(&setup.medium);
     slab.validate()?;
     let arrivals = Arrivals::of(setup);
-    let (grid, run) = arrivals.grid_and_run(setup, (1.0, 1), packets, seed);
+    let ring = radius_cm.unwrap_or(1.0);
+    let (grid, run) = arrivals.grid_and_run(setup, (ring, 1), packets, seed);
     let t = transport(&slab, Source::Lambertian, &grid, &run)?;
-    let light: Vec<f64> = (0..setup.bins.count)
+    // One ring: its cells are the light within it, per fine step.
+    let recorded = match radius_cm {
+        Some(_) => &t.cells,
+        None => &t.face,
+    };
+    Ok((0..setup.bins.count)
         .map(|k| {
             let chance = arrivals.chance(setup, k);
-            chance.iter().zip(&t.face).map(|(p, e)| p * e.mean).sum()
+            chance.iter().zip(recorded).map(|(p, e)| p * e.mean).sum()
         })
-        .collect();
+        .collect())
+}
+
+/// Share of the light in each bin of `setup` over the whole far face (no
+/// pixels, no sensor edges) by [`setup_light`]: the time profile
+/// `calibrate` fits under the Monte Carlo medium (the same seed for every
+/// medium, so nearby media share their packets' random numbers).
+pub fn setup_profile(
+    setup: &crate::params::Setup,
+    packets: u64,
+    seed: u64,
+) -> Result<Vec<f64>, crate::error::ParamError> {
+    let light = setup_light(setup, None, packets, seed)?;
     let total: f64 = light.iter().sum();
     if total.is_nan() || total <= 0.0 {
         return Err(crate::error::ParamError::new(

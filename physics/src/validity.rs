@@ -123,15 +123,13 @@ pub fn describe_setup(setup: &Setup, kernels: &crate::KernelStack) -> Vec<String
         "warning"
     };
     let warnings = diagnose(setup, d);
-    let measure = !monte_carlo && !warnings.is_empty();
+    let measured = crate::diffusion_error::measured_line_where_outside(setup, &warnings);
     lines.extend(
         warnings
             .into_iter()
             .map(|w| format!("{prefix} [{}]: {}", w.code, w.message)),
     );
-    if measure {
-        lines.push(crate::diffusion_error::measured_line(setup));
-    }
+    lines.extend(measured);
     let dropped: Vec<_> = kernels.dropped_bins().collect();
     if !dropped.is_empty() {
         let photons: f64 = dropped.iter().map(|b| b.photons).sum();

@@ -5,7 +5,9 @@
 
 use scatterscope_physics::diffusion::Diffusion;
 use scatterscope_physics::params::{Medium, MediumModel};
-use scatterscope_physics::transport::{Grid, Run, Slab, Source, TransportError, transport};
+use scatterscope_physics::transport::{
+    Estimate, Grid, Run, Slab, Source, TransportError, transport,
+};
 
 fn grid() -> Grid {
     Grid {
@@ -36,6 +38,18 @@ fn run(photons: u64, seed: u64) -> Run {
         seed,
         max_path_cm: 1e4,
     }
+}
+
+/// Two runs' estimates `a` and `b` of one quantity agree within 3
+/// standard errors of their difference.
+fn assert_agree(a: Estimate, b: Estimate, what: &str) {
+    let se = (a.error.powi(2) + b.error.powi(2)).sqrt();
+    assert!(
+        (a.mean - b.mean).abs() < 3.0 * se,
+        "{what}: {} against {} +- {se}",
+        a.mean,
+        b.mean
+    );
 }
 
 /// van de Hulst's slab (mu_a 10 /cm, mu_s 90 /cm, g 0.75, n 1 inside
@@ -520,13 +534,7 @@ fn a_semi_infinite_medium_reflects_as_a_thick_slab() {
         ..half
     };
     let s = transport(&thick, Source::Pencil, &grid(), &run(100_000, 12)).unwrap();
-    let both = (t.reflected.error.powi(2) + s.reflected.error.powi(2)).sqrt();
-    assert!(
-        (t.reflected.mean - s.reflected.mean).abs() < 3.0 * both,
-        "{} against {} +- {both}",
-        t.reflected.mean,
-        s.reflected.mean
-    );
+    assert_agree(t.reflected, s.reflected, "reflected");
     assert!(s.transmitted.mean < 1e-6);
 }
 
@@ -562,13 +570,7 @@ fn a_gaussian_beam_spreads_the_pencils_light_by_its_own_width() {
         &run(400_000, 6),
     )
     .unwrap();
-    let se = (pencil.transmitted.error.powi(2) + beam.transmitted.error.powi(2)).sqrt();
-    assert!(
-        (pencil.transmitted.mean - beam.transmitted.mean).abs() < 3.0 * se,
-        "{} against {} +- {se}",
-        beam.transmitted.mean,
-        pencil.transmitted.mean
-    );
+    assert_agree(beam.transmitted, pencil.transmitted, "transmitted");
     assert_eq!(beam.specular, pencil.specular);
     let mean_r2 = |t: &scatterscope_physics::transport::Transport| {
         let (mut light, mut second) = (0.0, 0.0);

@@ -211,17 +211,14 @@ pub fn prepare(
     assumed.push(format!("model: {}", setup.model_summary()));
     if let Ok(diffusion) = crate::physics::Diffusion::new(&setup.medium) {
         let outside = crate::physics::validity::diagnose(&setup, &diffusion);
-        let measure =
-            !outside.is_empty() && setup.medium.model != crate::physics::MediumModel::MonteCarlo;
+        let measured =
+            crate::physics::diffusion_error::measured_line_where_outside(&setup, &outside);
         assumed.extend(
             outside
                 .into_iter()
                 .map(|d| format!("model: {} ({})", d.message, d.code)),
         );
-        if measure {
-            let line = crate::physics::diffusion_error::measured_line(&setup);
-            assumed.push(format!("model: {line}"));
-        }
+        assumed.extend(measured.map(|line| format!("model: {line}")));
     }
     assumed.push(format!("background: {background}"));
     assumed.extend(problem.early_light().map(|w| format!("warning: {w}")));
